@@ -1,0 +1,1 @@
+"""Sub-commands of ``uav-el``, one module each (see ``assurance.cli``)."""

@@ -1,0 +1,212 @@
+"""Pinhole camera over a flat ground plane: pixel footprints, safety radius in pixels, pixel <-> ground.
+
+DESIGN section 4. World frame: origin on the ground below the camera, x to the right of the
+image, y forward (the direction the camera looks), z up. Image rows count from the top,
+columns from the left; pixel centres sit at half-integers of the sensor grid.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+UNREACHABLE_STRIPES = 2  # the top 2 of 10 horizontal stripes are never landing targets
+NUM_STRIPES = 10
+
+
+@dataclass(frozen=True, kw_only=True)
+class Intrinsics:
+    """Lens and sensor. Defaults: DJI Phantom 4 (13.2 mm wide sensor, 8.8 mm focal length)."""
+
+    sensor_width_mm: float = 13.2
+    focal_mm: float = 8.8
+    name: str = "phantom4"
+
+    def __post_init__(self) -> None:
+        for attr in ("sensor_width_mm", "focal_mm"):
+            value = getattr(self, attr)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{attr} must be a positive finite number, got {value!r}")
+
+
+PHANTOM4 = Intrinsics()
+PHANTOM3_PRO = Intrinsics(sensor_width_mm=6.17, focal_mm=3.61, name="phantom3pro")
+CAMERAS: dict[str, Intrinsics] = {c.name: c for c in (PHANTOM4, PHANTOM3_PRO)}
+
+
+@dataclass(frozen=True, kw_only=True)
+class Pose:
+    """Camera height above the ground (m) and pitch below the horizon (degrees)."""
+
+    height_m: float = 50.0
+    pitch_deg: float = 45.0
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.height_m) and 1.0 <= self.height_m <= 500.0):
+            raise ValueError(f"height_m must lie in [1, 500] m, got {self.height_m!r}")
+        if not (math.isfinite(self.pitch_deg) and 5.0 <= self.pitch_deg <= 90.0):
+            raise ValueError(f"pitch_deg must lie in [5, 90] degrees, got {self.pitch_deg!r}")
+
+
+@dataclass(frozen=True, kw_only=True)
+class SafetyParams:
+    """Safety radius R (m) and the coefficient beta that absorbs pose errors."""
+
+    radius_m: float = 2.0
+    beta: float = 1.7
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.radius_m) and self.radius_m > 0):
+            raise ValueError(f"radius_m must be positive, got {self.radius_m!r}")
+        if not (math.isfinite(self.beta) and self.beta >= 1.0):
+            raise ValueError(f"beta must be >= 1, got {self.beta!r}")
+
+
+@dataclass(frozen=True, kw_only=True)
+class CameraGeometry:
+    """The camera model for one image size: per-row pixel footprint and pixel <-> ground maps."""
+
+    width: int
+    height: int
+    intrinsics: Intrinsics = field(default_factory=Intrinsics)
+    pose: Pose = field(default_factory=Pose)
+
+    def __post_init__(self) -> None:
+        if self.width < 8 or self.height < 8:
+            raise ValueError(f"image size must be at least 8x8, got {self.width}x{self.height}")
+
+    # -- basic quantities -------------------------------------------------------------------
+    @property
+    def f_px(self) -> float:
+        """Focal length in pixels."""
+        return self.intrinsics.focal_mm * self.width / self.intrinsics.sensor_width_mm
+
+    @property
+    def theta(self) -> float:
+        return math.radians(self.pose.pitch_deg)
+
+    def row_phi(self, rows: np.ndarray | float) -> np.ndarray:
+        """Angle (rad) of the row's ray below the optical axis (negative above the centre)."""
+        v = np.asarray(rows, dtype=np.float64) - self.height / 2 + 0.5
+        return np.arctan(v / self.f_px)
+
+    def depression(self, rows: np.ndarray | float) -> np.ndarray:
+        """Angle (rad) of the row's ray below the horizon."""
+        return self.theta + self.row_phi(rows)
+
+    def pixel_size(self, rows: np.ndarray | float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Ground size (m) of a centre-column pixel per row: (across, along, delta = min of both).
+
+        Rows whose ray does not reach the ground (at or above the horizon) get +inf.
+        """
+        if rows is None:
+            rows = np.arange(self.height)
+        phi = self.row_phi(rows)
+        dep = self.theta + phi
+        s = np.sin(dep)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            across = np.where(s > 0, self.pose.height_m * np.cos(phi) / (self.f_px * s), np.inf)
+            along = np.where(s > 0, self.pose.height_m * np.cos(phi) ** 2 / (self.f_px * s**2), np.inf)
+        return across, along, np.minimum(across, along)
+
+    def radius_px(self, rows: np.ndarray | float | None = None, safety: SafetyParams | None = None) -> np.ndarray:
+        """Safety radius in pixels per row, ``beta * R / delta_i``."""
+        safety = safety or SafetyParams()
+        _, _, delta = self.pixel_size(rows)
+        return safety.beta * safety.radius_m / delta
+
+    # -- stripes and reachable rows ---------------------------------------------------------
+    def stripe_edges(self) -> np.ndarray:
+        """Row boundaries of the 10 horizontal stripes, shape (11,)."""
+        return np.round(np.linspace(0, self.height, NUM_STRIPES + 1)).astype(int)
+
+    @property
+    def first_reachable_row(self) -> int:
+        """Rows above this one (the top 2 of 10 stripes) are never landing targets."""
+        return int(self.stripe_edges()[UNREACHABLE_STRIPES])
+
+    def reachable_rows(self) -> np.ndarray:
+        """Boolean (height,) mask of rows where a landing point may lie."""
+        mask = np.zeros(self.height, dtype=bool)
+        mask[self.first_reachable_row :] = True
+        return mask
+
+    # -- pixel <-> ground -------------------------------------------------------------------
+    def pixel_to_ground(self, cols: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Where the rays of pixels (cols, rows) meet the ground: (x right, y forward) in metres.
+
+        Rays at or above the horizon give NaN.
+        """
+        h = np.asarray(cols, dtype=np.float64) - self.width / 2 + 0.5
+        v = np.asarray(rows, dtype=np.float64) - self.height / 2 + 0.5
+        st, ct = math.sin(self.theta), math.cos(self.theta)
+        denom = v * ct + self.f_px * st
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where(denom > 0, self.pose.height_m / denom, np.nan)
+        return t * h, t * (self.f_px * ct - v * st)
+
+    def ground_to_pixel(self, x: np.ndarray, y: np.ndarray, z: np.ndarray | float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """Project world points (x, y, z) in metres to (col, row) pixel coordinates.
+
+        Points behind the camera give NaN.
+        """
+        x = np.asarray(x, dtype=np.float64)
+        y = np.asarray(y, dtype=np.float64)
+        dz = np.asarray(z, dtype=np.float64) - self.pose.height_m
+        st, ct = math.sin(self.theta), math.cos(self.theta)
+        zc = y * ct - dz * st
+        yc = -y * st - dz * ct
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv = np.where(zc > 1e-9, self.f_px / zc, np.nan)
+        return x * inv + self.width / 2 - 0.5, yc * inv + self.height / 2 - 0.5
+
+    def camera_to_point_distance(self, x: np.ndarray, y: np.ndarray, z: np.ndarray | float = 0.0) -> np.ndarray:
+        """Depth of world points along the optical axis (m): used to order drawing far to near."""
+        st, ct = math.sin(self.theta), math.cos(self.theta)
+        dz = np.asarray(z, dtype=np.float64) - self.pose.height_m
+        return np.asarray(y, dtype=np.float64) * ct - dz * st
+
+    def scaled(self, width: int, height: int) -> CameraGeometry:
+        """The same camera and pose for another image size of the same aspect ratio."""
+        return CameraGeometry(width=width, height=height, intrinsics=self.intrinsics, pose=self.pose)
+
+
+def working_size(width: int, height: int, working_width: int = 1024) -> tuple[int, int]:
+    """Working (low) resolution that keeps the aspect ratio: (1024, round(1024 * H / W))."""
+    return working_width, int(round(working_width * height / width))
+
+
+def required_beta(
+    geometry: CameraGeometry,
+    *,
+    height_error: float = 0.2,
+    pitch_error: float = 0.2,
+    steps: int = 21,
+) -> float:
+    """Smallest beta that keeps the true safety radius >= R for pose errors in the given box.
+
+    Planning uses the nominal pose; the true height and pitch are each off by up to the given
+    relative error. The radius in metres actually covered is ``beta R delta_true / delta_nominal``,
+    so beta must reach the worst ratio ``delta_nominal / delta_true`` over the reachable rows and
+    the error box (searched on a ``steps x steps`` grid that includes its corners).
+    """
+    if not (0 <= height_error < 1 and 0 <= pitch_error < 1):
+        raise ValueError("relative errors must lie in [0, 1)")
+    rows = np.arange(geometry.first_reachable_row, geometry.height)
+    _, _, nominal = geometry.pixel_size(rows)
+    worst = 1.0
+    for hf in np.linspace(1 - height_error, 1 + height_error, steps):
+        for pf in np.linspace(1 - pitch_error, 1 + pitch_error, steps):
+            pitch = min(geometry.pose.pitch_deg * pf, 90.0)
+            true_geo = CameraGeometry(
+                width=geometry.width,
+                height=geometry.height,
+                intrinsics=geometry.intrinsics,
+                pose=Pose(height_m=geometry.pose.height_m * hf, pitch_deg=pitch),
+            )
+            _, _, true_delta = true_geo.pixel_size(rows)
+            ratio = nominal / true_delta
+            worst = max(worst, float(np.nanmax(ratio)))
+    return worst
