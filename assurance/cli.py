@@ -42,8 +42,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``uav-el``; returns the exit code."""
-    from el.uavid import DataError
     from el.labels import LabelColourError
+    from el.uavid import DataError
 
     parser = build_parser()
     args = parser.parse_args(argv)

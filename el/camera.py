@@ -137,6 +137,9 @@ class CameraGeometry:
     def pixel_to_ground(self, cols: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Where the rays of pixels (cols, rows) meet the ground: (x right, y forward) in metres.
 
+        ``cols`` and ``rows`` are pixel indices whose integer values are pixel centres; a point in
+        continuous image coordinates (as in decisions, where pixel c spans [c, c+1)) is index x - 0.5.
+
         Rays at or above the horizon give NaN.
         """
         h = np.asarray(cols, dtype=np.float64) - self.width / 2 + 0.5
@@ -147,8 +150,10 @@ class CameraGeometry:
             t = np.where(denom > 0, self.pose.height_m / denom, np.nan)
         return t * h, t * (self.f_px * ct - v * st)
 
-    def ground_to_pixel(self, x: np.ndarray, y: np.ndarray, z: np.ndarray | float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-        """Project world points (x, y, z) in metres to (col, row) pixel coordinates.
+    def ground_to_pixel(
+        self, x: np.ndarray, y: np.ndarray, z: np.ndarray | float = 0.0
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Project world points (x, y, z) in metres to (col, row) pixel indices (see pixel_to_ground).
 
         Points behind the camera give NaN.
         """

@@ -1,0 +1,92 @@
+"""``uav-el model-card``: print a weights file's model card, or verify its figures (``--verify``)."""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import json
+from pathlib import Path
+from typing import Any
+
+from assurance.progress import progress
+
+HELP = "print the segmentation model card; --verify recomputes its figures from the weights and data"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--weights", type=Path, help="weights file (default: the shipped el/segmentation/weights/model.pt)")
+    parser.add_argument("--verify", action="store_true",
+                        help="check the SHA-256, recompute IoU / confusion on the validation data, compare")
+    parser.add_argument("--data", type=Path, help="validation set for --verify (default: the folder in the card)")
+    parser.add_argument("--train", type=Path, help="training set: with --verify, also refit and check the baseline")
+    parser.add_argument("--tolerance", type=float, default=0.002, help="IoU tolerance of --verify (default 0.002)")
+    parser.add_argument("--threads", type=int, help="torch CPU threads")
+    parser.add_argument("--json", action="store_true", help="print the card (or the verification) as JSON")
+    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+
+
+def _fmt(value: Any) -> str:
+    return "-" if value is None else f"{value:.4f}"
+
+
+def _print_card(card: dict[str, Any], path: Path) -> None:
+    from el.labels import CLASS_NAMES
+
+    print(f"weights:      {path}")
+    print(f"sha256:       {card['weights_sha256']}")
+    print(f"parameters:   {card.get('parameters')}")
+    arch = card["architecture"]
+    print("architecture: " + ", ".join(f"{k}={v}" for k, v in arch.items()))
+    training = card.get("training") or {}
+    for split, ident in (training.get("data") or {}).items():
+        if ident:
+            print(f"{split + ' data:':<14}{ident['path']} ({ident['images']} images, sha256 {ident['sha256'][:16]}...)")
+    if training:
+        print(f"training:     seed {training.get('seed')}, {training.get('steps')} steps, best step "
+              f"{training.get('best_step')}, {training.get('train_seconds')} s "
+              f"({training.get('seconds_per_step')} s/step, {training.get('threads')} threads)")
+    ev = card.get("evaluation")
+    if not ev:
+        print("evaluation:   none (trained without validation data)")
+        return
+    wr, hd = ev["working_resolution"], ev["hd_patches"]
+    print(f"evaluation:   {ev['frames']} frames at working resolution, {ev['patches']} HD patches "
+          f"({ev['protocol']['hd_patch_size']} px)")
+    print(f"  {'class':<16}{'IoU working':>12}{'IoU HD':>10}")
+    for name in CLASS_NAMES:
+        print(f"  {name:<16}{_fmt(wr['per_class_iou'].get(name)):>12}{_fmt(hd['per_class_iou'].get(name)):>10}")
+    print(f"  {'mIoU':<16}{_fmt(wr['miou']):>12}{_fmt(hd['miou']):>10}")
+    base = card.get("baseline")
+    if base:
+        print(f"baseline:     {base['name']}: mIoU {_fmt(base['miou'])} "
+              f"(CNN - baseline = {_fmt(base.get('miou_gap_to_cnn'))})")
+
+
+def run(args: argparse.Namespace) -> int:
+    from el.segmentation.card import verify_card
+    from el.segmentation.weights import DEFAULT_WEIGHTS, read_card
+
+    path = args.weights or DEFAULT_WEIGHTS
+    if not args.verify:
+        if not path.exists():
+            from el.segmentation.weights import WeightsError
+
+            raise WeightsError(f"{path}: weights file not found")
+        card = read_card(path)
+        if args.json:
+            print(json.dumps(card, indent=2))
+        else:
+            _print_card(card, path)
+        return 0
+    result = verify_card(path, val_dir=args.data, train_dir=args.train, threads=args.threads,
+                         iou_tol=args.tolerance, progress=functools.partial(progress, enabled=not args.quiet))
+    if args.json:
+        print(json.dumps({"weights": str(path), "ok": result.ok, "checks": result.checks,
+                          "problems": result.problems}, indent=2))
+    else:
+        for line in result.checks:
+            print(f"ok        {line}")
+        for line in result.problems:
+            print(f"MISMATCH  {line}")
+        print("model card verified" if result.ok else f"model card NOT verified: {len(result.problems)} problem(s)")
+    return 0 if result.ok else 1

@@ -1,0 +1,107 @@
+"""``uav-el train``: train the segmentation network and write its weights and model card."""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import sys
+from pathlib import Path
+
+from assurance.cli import CommandError
+from assurance.progress import progress
+
+HELP = "train the segmentation network (seeded, resumable) and write its weights and model card"
+
+
+def _widths(text: str) -> tuple[int, int, int]:
+    try:
+        values = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected three integers like 24,48,96, got {text!r}") from None
+    if len(values) != 3:
+        raise argparse.ArgumentTypeError(f"expected three integers like 24,48,96, got {text!r}")
+    return values  # type: ignore[return-value]
+
+
+def _range(text: str) -> tuple[int, int]:
+    try:
+        lo, hi = (int(v) for v in text.split("-"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected MIN-MAX like 192-448, got {text!r}") from None
+    return lo, hi
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--data", required=True, type=Path, help="training set (UAVid layout)")
+    parser.add_argument("--val", type=Path, help="validation set: model selection and the card's figures")
+    parser.add_argument("--out", required=True, type=Path,
+                        help="weights file to write, e.g. el/segmentation/weights/model.pt (card: .json beside it)")
+    length = parser.add_mutually_exclusive_group()
+    length.add_argument("--steps", type=int, help="optimisation steps (default 1200)")
+    length.add_argument("--epochs", type=int, help="passes over the training images (ceil(images / batch) steps each)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of everything random (default 0)")
+    parser.add_argument("--resume", action="store_true", help="continue from <out>.ckpt")
+    parser.add_argument("--threads", type=int, help="torch CPU threads (default: torch's choice)")
+    parser.add_argument("--batch", type=int, default=4, help="working-resolution crops per step (default 4)")
+    parser.add_argument("--crop", type=int, default=256, help="side of the working-resolution crops (default 256)")
+    parser.add_argument("--hd-crops", type=float, default=4.0,
+                        help="full-resolution pixels per step, in 256x256 crops (default 4; 0: none)")
+    parser.add_argument("--hd-crop", type=_range, default=(192, 448), metavar="MIN-MAX",
+                        help="side range of the full-resolution crops (default 192-448)")
+    parser.add_argument("--lr", type=float, default=2e-3, help="peak learning rate (default 2e-3)")
+    parser.add_argument("--eval-every", type=int, default=0, help="steps between evaluations (default: 4 per run)")
+    parser.add_argument("--checkpoint-every", type=int, default=25, help="steps between checkpoints (default 25)")
+    parser.add_argument("--widths", type=_widths, help="channels at 1/2, 1/4, 1/8 resolution (default 24,48,96)")
+    parser.add_argument("--dropout", type=float, help="training drop probability of the dropout layers (default 0.2)")
+    parser.add_argument("--working-width", type=int, default=1024, help="working resolution width (default 1024)")
+    parser.add_argument("--hd-eval-size", type=int, default=384, help="side of the HD validation patches (default 384)")
+    parser.add_argument("--cache-dir", type=Path, help="prepared-data cache (default ~/.cache/uav-el/segmentation)")
+    parser.add_argument("--no-cache", action="store_true", help="do not cache prepared data")
+    parser.add_argument("--no-baseline", action="store_true", help="skip the per-pixel baseline")
+    parser.add_argument("--quiet", action="store_true", help="no progress bars or log lines")
+
+
+def run(args: argparse.Namespace) -> int:
+    from el.segmentation import data as D
+    from el.segmentation.evaluation import EvalProtocol
+    from el.segmentation.model import ArchConfig
+    from el.segmentation.training import TrainConfig, steps_for_epochs, train
+    from el.uavid import iter_samples
+
+    if args.threads is not None and args.threads < 1:
+        raise CommandError(f"--threads must be >= 1, got {args.threads}")
+    steps = args.steps if args.steps is not None else 1200
+    if args.epochs is not None:
+        images = sum(1 for _ in iter_samples(args.data))
+        steps = steps_for_epochs(images, args.epochs, args.batch)
+    arch_kwargs = {}
+    if args.widths is not None:
+        arch_kwargs["widths"] = args.widths
+    if args.dropout is not None:
+        arch_kwargs["dropout"] = args.dropout
+    try:
+        config = TrainConfig(
+            steps=steps, batch=args.batch, crop=args.crop, hd_pixels=int(round(args.hd_crops * 256 * 256)),
+            hd_crop_min=args.hd_crop[0], hd_crop_max=args.hd_crop[1], lr=args.lr, eval_every=args.eval_every,
+            checkpoint_every=args.checkpoint_every, seed=args.seed, working_width=args.working_width,
+            arch=ArchConfig(**arch_kwargs), baseline_pixels=0 if args.no_baseline else 200_000,
+            eval_protocol=EvalProtocol(working_width=args.working_width, hd_patch_size=args.hd_eval_size),
+        )
+    except ValueError as exc:
+        raise CommandError(str(exc)) from exc
+    cache_dir = None if args.no_cache else (args.cache_dir or D.default_cache_dir())
+    log = None if args.quiet else (lambda msg: print(msg, file=sys.stderr, flush=True))
+    card = train(args.data, args.out, val_dir=args.val, config=config, resume=args.resume, cache_dir=cache_dir,
+                 threads=args.threads, progress=functools.partial(progress, enabled=not args.quiet), log=log)
+    training = card["training"]
+    print(f"weights: {args.out} (sha256 {card['weights_sha256']})")
+    print(f"steps: {config.steps}, best step: {training.get('best_step')}, "
+          f"{training['seconds_per_step']:.2f} s/step, training {training['train_seconds']:.0f} s")
+    ev = card.get("evaluation")
+    if ev:
+        wr, hd = ev["working_resolution"]["miou"], ev["hd_patches"]["miou"]
+        print(f"validation mIoU: working resolution {wr:.4f}, HD patches {hd if hd is None else f'{hd:.4f}'}")
+    if card.get("baseline"):
+        print(f"per-pixel baseline mIoU: {card['baseline']['miou']:.4f} "
+              f"(CNN - baseline = {card['baseline']['miou_gap_to_cnn']:.4f})")
+    return 0

@@ -1,0 +1,242 @@
+"""The core model (CM) after segmentation: class probabilities -> ranked, pruned landing candidates.
+
+``run_core`` takes the softmax of the segmentation at working resolution, (8, h, w) float, and
+returns the candidates in **full-resolution** pixel coordinates of the input image, ranked by
+increasing hazard (DESIGN section 5, steps 2-4).
+
+Coordinates: continuous image coordinates; the full-resolution pixel at (row r, col c) covers
+[c, c+1) x [r, r+1), so its centre is (c + 0.5, r + 0.5) and the image spans [0, W] x [0, H].
+A working pixel (i, j) maps to the centre ((j + 0.5) W / w, (i + 0.5) H / h); a working radius
+R maps to R * min(W / w, H / h) (the disc stays inside the scaled working disc).
+
+Guarantee (EL-R01, with correct segmentation): no point of any forbidden full-resolution pixel
+lies inside a candidate's disc, the disc lies inside the image, and the centre's full-resolution
+row is reachable. Input that is not a finite probability map raises ValueError: the decision loop
+turns it into the default action, never into candidates.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from el import candidates as cand
+from el import ranking
+from el.camera import working_size
+from el.config import CoreConfig
+from el.decision import Candidate, Disc
+from el.labels import NUM_CLASSES
+
+PROB_TOLERANCE = 1e-3  # how far a probability may stray from [0, 1], and a pixel's sum from 1
+
+
+@dataclass(frozen=True)
+class CoreResult:
+    """What the CM found.
+
+    candidates : ranked (rank 0 = least hazardous), pruned, full-resolution coordinates, no verdicts.
+    default_area : the default action's proxy landing area (full resolution).
+    timings : seconds per stage: "valid_s", "regions_s", "representatives_s", "ranking_s", "total_s".
+    stats : counts: valid pixels, regions, representatives before pruning, candidates.
+    working_size, input_size : (width, height) of the working map and of the input image.
+    first_reachable_row : first reachable full-resolution row.
+    valid : (h, w) bool working-resolution valid pixels (for drawing and analysis).
+    """
+
+    candidates: list[Candidate]
+    default_area: Disc
+    timings: dict[str, float]
+    stats: dict[str, int]
+    working_size: tuple[int, int]
+    input_size: tuple[int, int]
+    first_reachable_row: int
+    valid: np.ndarray = field(repr=False)
+
+
+def check_probs(probs: np.ndarray, input_size: tuple[int, int], working_width: int | None = None) -> None:
+    """ValueError unless ``probs`` is a finite (8, h, w) probability map whose size keeps the aspect
+    ratio of ``input_size = (W, H)`` (and, if given, has width ``working_width``)."""
+    if not isinstance(probs, np.ndarray):
+        raise ValueError(f"class probabilities must be a numpy array, got {type(probs).__name__}")
+    if probs.ndim != 3 or probs.shape[0] != NUM_CLASSES:
+        raise ValueError(f"class probabilities must have shape ({NUM_CLASSES}, h, w), got {probs.shape}")
+    if not np.issubdtype(probs.dtype, np.floating):
+        raise ValueError(f"class probabilities must be floating point, got {probs.dtype}")
+    W, H = _check_size(input_size)
+    _, h, w = probs.shape
+    if working_width is not None and w != working_width:
+        raise ValueError(f"class probabilities are {w} px wide, the working width is {working_width}")
+    if (w, h) != working_size(W, H, w):
+        raise ValueError(f"class probabilities of {w}x{h} do not keep the aspect ratio of the {W}x{H} input "
+                         f"(expected {working_size(W, H, w)[0]}x{working_size(W, H, w)[1]})")
+    if h < 8 or w < 8:
+        raise ValueError(f"working map must be at least 8x8, got {w}x{h}")
+    lo, hi = float(probs.min()), float(probs.max())
+    if not (math.isfinite(lo) and math.isfinite(hi)):
+        raise ValueError("class probabilities contain NaN or infinite values")
+    if lo < -PROB_TOLERANCE or hi > 1 + PROB_TOLERANCE:
+        raise ValueError(f"class probabilities must lie in [0, 1], got [{lo:.4g}, {hi:.4g}] (logits?)")
+    total = probs.sum(axis=0, dtype=np.float32)
+    worst = float(np.abs(total - 1).max())
+    if worst > PROB_TOLERANCE * NUM_CLASSES:
+        raise ValueError(f"class probabilities must sum to 1 per pixel, off by up to {worst:.4g}")
+
+
+def _check_size(input_size: tuple[int, int]) -> tuple[int, int]:
+    try:
+        W, H = (int(v) for v in input_size)
+    except (TypeError, ValueError):
+        raise ValueError(f"input_size must be (width, height), got {input_size!r}") from None
+    if W < 8 or H < 8:
+        raise ValueError(f"input image must be at least 8x8, got {W}x{H}")
+    return W, H
+
+
+def reachable_working_row(
+    input_size: tuple[int, int], working: tuple[int, int], config: CoreConfig
+) -> tuple[int, int]:
+    """(first reachable working row, first reachable full-resolution row).
+
+    A working row counts only when it is reachable at working resolution and its centre maps to a
+    reachable full-resolution row, so the rule holds in both grids.
+    """
+    W, H = input_size
+    w, h = working
+    full_first = config.geometry(W, H).first_reachable_row
+    work_first = config.geometry(w, h).first_reachable_row
+    sy = H / h
+    # smallest i with floor((i + 0.5) * sy) >= full_first
+    i = max(0, int(math.ceil(full_first / sy - 0.5)))
+    while i > 0 and math.floor((i - 1 + 0.5) * sy) >= full_first:
+        i -= 1
+    while math.floor((i + 0.5) * sy) < full_first:
+        i += 1
+    return max(work_first, i), full_first
+
+
+def run_core(
+    probs: np.ndarray,
+    input_size: tuple[int, int],
+    config: CoreConfig | None = None,
+    *,
+    clock: Callable[[], float] = time.perf_counter,
+) -> CoreResult:
+    """The CM post-processing: class probabilities (8, h, w) at working resolution -> candidates.
+
+    Parameters
+    ----------
+    probs : ndarray of shape (8, h, w), float
+        Per-pixel class probabilities (softmax) at working resolution; (w, h) must keep the aspect
+        ratio of the input (``el.camera.working_size``) and w must equal ``config.working_width``.
+    input_size : (W, H)
+        Size of the full-resolution input image, in pixels.
+    config : CoreConfig
+        Parameters; defaults to ``CoreConfig()``.
+    clock : callable
+        Time source for the stage timings (injectable for tests).
+
+    Returns
+    -------
+    CoreResult
+        Candidates ranked by increasing hazard, in full-resolution coordinates.
+
+    Raises
+    ------
+    ValueError
+        Shape, type, finiteness or normalisation problems: never candidates from bad input.
+    """
+    config = config or CoreConfig()
+    t0 = clock()
+    check_probs(probs, input_size, config.working_width)
+    W, H = _check_size(input_size)
+    _, h, w = probs.shape
+    geo = config.geometry(w, h)
+    min_row, full_first = reachable_working_row((W, H), (w, h), config)
+
+    radii = cand.row_radii(geo, config.safety, config.mode)
+    forbidden = cand.forbidden_from_probs(probs)
+    vp = cand.valid_pixels(forbidden, radii, mode=config.mode, min_row=min_row)
+    t1 = clock()
+
+    region_fn = cand.regions_fast if config.region_method == "fast" else cand.regions_dbscan
+    regions = region_fn(vp.valid, eps=config.dbscan_eps, min_samples=config.dbscan_min_samples)
+    t2 = clock()
+
+    rows, cols, _ = cand.representatives(
+        regions, n_star=config.n_star, max_points=config.kmeans_max_points,
+        seed=config.kmeans_seed, n_init=config.kmeans_n_init,
+    )
+    t3 = clock()
+
+    r = vp.radii[rows]
+    h_s = ranking.semantic_hazard(probs, rows, cols, r)
+    h_d = ranking.distance_hazard(vp.clearance[rows, cols], r, config.d_max_factor)
+    hazard = ranking.combined_hazard(h_s, h_d, config.alpha)
+    order = ranking.rank_order(hazard, rows, cols)
+    kept = cand.prune_overlaps(rows, cols, r, order, config.overlap_max)
+    sx, sy = W / w, H / h
+    scale = min(sx, sy)
+    out = [
+        Candidate(
+            rank=rank,
+            x=float((cols[k] + 0.5) * sx),
+            y=float((rows[k] + 0.5) * sy),
+            radius_px=float(r[k] * scale),
+            hazard=float(hazard[k]),
+            hazard_semantic=float(h_s[k]),
+            hazard_distance=float(h_d[k]),
+        )
+        for rank, k in enumerate(kept)
+    ]
+    t4 = clock()
+    return CoreResult(
+        candidates=out,
+        default_area=default_area(W, H, config),
+        timings={"valid_s": t1 - t0, "regions_s": t2 - t1, "representatives_s": t3 - t2,
+                 "ranking_s": t4 - t3, "total_s": t4 - t0},
+        stats={"valid_pixels": int(vp.valid.sum()), "regions": int(regions.n_regions),
+               "representatives": int(len(rows)), "candidates": len(out)},
+        working_size=(w, h),
+        input_size=(W, H),
+        first_reachable_row=full_first,
+        valid=vp.valid,
+    )
+
+
+def default_area(width: int, height: int, config: CoreConfig | None = None) -> Disc:
+    """The default action's proxy landing area: the disc at the bottom centre of the image, tangent
+    to the bottom edge, with the R_px of its centre row (full-resolution geometry)."""
+    config = config or CoreConfig()
+    W, H = _check_size((width, height))
+    geo = config.geometry(W, H)
+    r = float(geo.radius_px(np.array([H - 1.0]), config.safety)[0])
+    for _ in range(50):  # r = R_px(row of the centre), the centre at y = H - r: a fixed point
+        row = min(max(H - r - 0.5, 0.0), H - 1.0)
+        new = float(geo.radius_px(np.array([row]), config.safety)[0])
+        if abs(new - r) < 1e-9:
+            break
+        r = new
+    r = min(r, W / 2.0, H / 2.0)
+    return Disc(x=W / 2.0, y=H - r, radius_px=r)
+
+
+def probs_from_labels(ids: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """One-hot class probabilities (8, h, w) float32 at ``size = (w, h)`` from full-resolution ids.
+
+    Conservative pooling: a working pixel that any forbidden source pixel overlaps takes a
+    forbidden class (the most frequent forbidden one); the others take the most frequent class.
+    """
+    ids = np.asarray(ids)
+    if ids.ndim != 2:
+        raise ValueError(f"label map must be 2-D class ids, got shape {ids.shape}")
+    if not np.issubdtype(ids.dtype, np.integer):
+        raise ValueError(f"label map must hold integer class ids, got {ids.dtype}")
+    pooled = cand.pooled_label_ids(ids, size)
+    w, h = size
+    probs = np.zeros((NUM_CLASSES, h, w), dtype=np.float32)
+    np.put_along_axis(probs, pooled[None].astype(np.intp), 1.0, axis=0)
+    return probs

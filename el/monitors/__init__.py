@@ -1,0 +1,53 @@
+"""Runtime monitors (DESIGN section 6): LHD, CH and MCD on HD patches around landing candidates.
+
+What the decision loop calls::
+
+    monitor = build_monitor("lhd+ch:tau=0.25", margin=0.25, max_side=None)   # None for "none"
+    verdict = monitor.check(hd_image, candidate, segmenter, seed=seed)       # MonitorVerdict
+
+What a campaign calls to segment a patch once and judge it with many configurations::
+
+    patch = extract_patch(hd_image, candidate, margin=0.25)
+    softmax = segmenter.predict_patch(patch.rgb)                    # LHD, LHD+CH
+    samples = segmenter.mc_dropout(patch.rgb, 30, rho, seed)        # every MCD config with this rho
+    verdict = monitor.check_scores(softmax or samples, patch.disc_mask)
+"""
+
+from el.monitors.base import Monitor, PatchSegmenter
+from el.monitors.build import build_monitor
+from el.monitors.ch import CHMonitor, ch_rule, rejected_label_counts
+from el.monitors.hierarchy import ClassHierarchy, default_hierarchy
+from el.monitors.lhd import LHDMonitor, forbidden_counts, forbidden_pixels, lhd_rule
+from el.monitors.mcd import MCDMonitor, mcd_score
+from el.monitors.patches import Patch, extract_patch
+from el.monitors.spec import (
+    DEMO_GRID,
+    PAPER_GRID,
+    MonitorSpec,
+    monitor_name,
+    parse_monitor_spec,
+)
+
+__all__ = [
+    "DEMO_GRID",
+    "PAPER_GRID",
+    "CHMonitor",
+    "ClassHierarchy",
+    "LHDMonitor",
+    "MCDMonitor",
+    "Monitor",
+    "MonitorSpec",
+    "Patch",
+    "PatchSegmenter",
+    "build_monitor",
+    "ch_rule",
+    "default_hierarchy",
+    "extract_patch",
+    "forbidden_counts",
+    "forbidden_pixels",
+    "lhd_rule",
+    "mcd_score",
+    "monitor_name",
+    "parse_monitor_spec",
+    "rejected_label_counts",
+]

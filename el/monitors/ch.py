@@ -1,0 +1,74 @@
+"""CH (classification hierarchy, on top of LHD): reject a disc holding an uncertain or unsafe pixel.
+
+Each pixel is labelled with the closest common ancestor of its classes scoring above tau
+(``hierarchy.yaml``); the disc is rejected if a pixel's label has a forbidden class under it
+(``any``, ``unsafe`` or a forbidden class) or if LHD rejects it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from el.labels import NUM_CLASSES
+from el.monitors.base import format_counts
+from el.monitors.hierarchy import ClassHierarchy, default_hierarchy
+from el.monitors.lhd import EMPTY_DISC, LHDMonitor, forbidden_counts, lhd_reason
+from el.monitors.spec import MonitorSpec, validate_tau
+
+
+def rejected_label_counts(pixel_scores: np.ndarray, tau: float, hierarchy: ClassHierarchy) -> dict[str, int]:
+    """Count of pixels per rejected hierarchy label, for pixel scores (8, m).
+
+    Only inner nodes are counted (``any``, ``unsafe``): a pixel labelled with a forbidden class
+    has that class as its only one above tau, hence as its top class, and LHD already counts it.
+    """
+    labels = hierarchy.label(pixel_scores, tau)
+    bad = labels[hierarchy.rejected[labels] & (labels >= NUM_CLASSES)]
+    if bad.size == 0:
+        return {}
+    ids, counts = np.unique(bad, return_counts=True)
+    return {hierarchy.nodes[i]: int(c) for i, c in zip(ids, counts, strict=True)}
+
+
+def ch_rule(pixel_scores: np.ndarray, tau: float, hierarchy: ClassHierarchy) -> tuple[bool, str]:
+    """LHD + CH on the disc's pixel scores (8, m): ``(accepted, reason)``."""
+    m = pixel_scores.shape[1]
+    if m == 0:
+        return False, EMPTY_DISC
+    parts = []
+    forbidden = forbidden_counts(pixel_scores)
+    if forbidden:
+        parts.append(lhd_reason(forbidden))
+    uncertain = rejected_label_counts(pixel_scores, tau, hierarchy)
+    if uncertain:
+        parts.append(f"rejected hierarchy labels in disc (tau={tau!r}): {format_counts(uncertain)}")
+    if parts:
+        return False, "; ".join(parts)
+    return True, f"no forbidden, unsafe or uncertain pixel in disc ({m} px)"
+
+
+class CHMonitor(LHDMonitor):
+    """LHD + CH with threshold ``tau`` (keyword-only), on the softmax of the HD patch.
+
+    Parameters
+    ----------
+    tau : float in (0, 1)
+        A class takes part in a pixel's label when its score is strictly above tau.
+    hierarchy : ClassHierarchy, optional
+        Defaults to the shipped ``hierarchy.yaml``.
+    margin, max_side, clock
+        See ``Monitor``.
+    """
+
+    def __init__(self, *, tau: float, hierarchy: ClassHierarchy | None = None, **kwargs):
+        super().__init__(**kwargs)
+        self.tau = validate_tau(tau)
+        self.hierarchy = hierarchy if hierarchy is not None else default_hierarchy()
+
+    @property
+    def spec(self) -> MonitorSpec:
+        return MonitorSpec(tau=self.tau)
+
+    def judge_pixels(self, pixel_scores: np.ndarray) -> tuple[bool, str]:
+        return ch_rule(pixel_scores, self.tau, self.hierarchy)
+

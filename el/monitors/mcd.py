@@ -1,0 +1,96 @@
+"""MCD (Monte-Carlo dropout, on top of LHD or LHD+CH): judge the disc on ``S = mu + 3 sigma``.
+
+The HD patch runs ``n`` times with dropout active (keep probability rho), as one batch; per pixel
+and class, ``mu`` and ``sigma`` are the empirical mean and standard deviation (``ddof=0``, as
+``numpy.std``) of the softmax samples. ``S`` replaces the softmax in the wrapped rule: argmax for
+LHD+MCD, the tau rule for LHD+CH+MCD.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Hashable
+from dataclasses import replace
+
+import numpy as np
+
+from el.monitors.base import Monitor, PatchSegmenter, validate_mask, validate_samples
+from el.monitors.lhd import LHDMonitor, take_disc
+from el.monitors.spec import MonitorSpec, validate_n, validate_rho
+
+MCD_SIGMAS = 3.0
+
+
+def mcd_score(samples: np.ndarray, k: float = MCD_SIGMAS) -> np.ndarray:
+    """``S = mu + k sigma`` over the sample axis.
+
+    Parameters
+    ----------
+    samples : ndarray of shape (n, 8, ...), float
+        Softmax samples with dropout active.
+    k : float, default 3.0
+
+    Returns
+    -------
+    ndarray of shape (8, ...), same float dtype
+    """
+    n = samples.shape[0]
+    if n < 1:
+        raise ValueError("mcd_score needs at least one sample")
+    # Two passes over the samples, one (8, ...) slice at a time: the same numbers as
+    # ``mean(0) + k * std(0)`` at a fraction of numpy's time and memory for a reduction on axis 0.
+    mu = np.array(samples[0], copy=True)
+    for i in range(1, n):
+        mu += samples[i]
+    mu /= n
+    var = np.zeros_like(mu)
+    d = np.empty_like(mu)
+    for i in range(n):
+        np.subtract(samples[i], mu, out=d)
+        d *= d
+        var += d
+    var /= n
+    return mu + k * np.sqrt(var)
+
+
+class MCDMonitor(Monitor):
+    """Wraps an LHD or LHD+CH monitor and feeds it the MCD score instead of the softmax.
+
+    Parameters
+    ----------
+    rule : LHDMonitor or CHMonitor
+        The rule applied to ``S``; its ``margin``, ``max_side`` and ``clock`` are used.
+    n : int
+        MC-dropout samples (keyword-only).
+    rho : float
+        Dropout keep probability (keyword-only).
+
+    ``features`` asks the segmenter for ``n`` samples in one batch, seeded with ``seed``.
+    ``check_scores``/``decide`` take samples (n', 8, h, w) with ``n' >= n`` and use the first
+    ``n``: a campaign draws 30 samples once and serves the n = 10 configurations their prefix
+    (equal to a 10-sample draw with the same seed, by the ``PatchSegmenter`` contract).
+    """
+
+    def __init__(self, rule: LHDMonitor, *, n: int, rho: float):
+        if not isinstance(rule, LHDMonitor):
+            raise ValueError(f"MCD wraps an LHD or LHD+CH monitor, got {type(rule).__name__}")
+        super().__init__(margin=rule.margin, max_side=rule.max_side, clock=rule.clock)
+        self.rule = rule
+        self.n = validate_n(n)
+        self.rho = validate_rho(rho)
+
+    @property
+    def spec(self) -> MonitorSpec:
+        return replace(self.rule.spec, n=self.n, rho=self.rho)
+
+    @property
+    def feature_key(self) -> Hashable:
+        return ("mc_dropout", self.rho)
+
+    def features(self, rgb_patch: np.ndarray, segmenter: PatchSegmenter, *, seed: int = 0) -> np.ndarray:
+        return segmenter.mc_dropout(rgb_patch, self.n, self.rho, seed)
+
+    def decide(self, scores: np.ndarray, disc_mask: np.ndarray) -> tuple[bool, str]:
+        validate_mask(disc_mask)
+        validate_samples(scores, disc_mask.shape, self.n)
+        pixel_samples = take_disc(scores[: self.n], disc_mask)  # (n, 8, m): only the disc's pixels
+        return self.rule.judge_pixels(mcd_score(pixel_samples))

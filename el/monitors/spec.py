@@ -1,0 +1,205 @@
+"""Monitor configurations by name: ``lhd``, ``lhd+ch:tau=0.25``, ``lhd+mcd:n=10,rho=0.9``, ...
+
+A ``MonitorSpec`` is a frozen, validated value with a canonical ``name`` that round-trips through
+``parse_monitor_spec``. ``"none"`` (no runtime monitor) parses to ``None``: the decision loop then
+lands on the top-ranked candidate and records ``"monitor": null`` for it, rather than a verdict
+that looks like a check that never happened.
+
+The paper's 21 configurations are ``PAPER_GRID``; ``DEMO_GRID`` holds one of each kind.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from itertools import product
+
+NONE = "none"
+PAPER_TAUS: tuple[float, ...] = (0.25, 0.125)
+PAPER_NS: tuple[int, ...] = (10, 30)
+PAPER_RHOS: tuple[float, ...] = (0.5, 0.75, 0.9)
+MAX_MC_SAMPLES = 1000
+
+VALID_FORMS = (
+    "valid forms: none | lhd | lhd+ch:tau=T | lhd+mcd:n=N,rho=R | lhd+ch+mcd:tau=T,n=N,rho=R, "
+    "with T the CH threshold in (0, 1) (paper: 0.25, 0.125), N the number of MC-dropout samples, "
+    f"an integer in [2, {MAX_MC_SAMPLES}] (paper: 10, 30), and R the dropout keep probability in (0, 1] "
+    "(paper: 0.5, 0.75, 0.9); e.g. 'lhd+ch+mcd:tau=0.25,n=10,rho=0.9'"
+)
+
+
+def validate_tau(tau: object) -> float:
+    """CH threshold: a real number in (0, 1)."""
+    if isinstance(tau, bool) or not isinstance(tau, int | float) or not (0.0 < float(tau) < 1.0):
+        raise ValueError(f"tau must be a number in (0, 1), got {tau!r}")
+    return float(tau)
+
+
+def validate_n(n: object) -> int:
+    """Number of MC-dropout samples: an integer in [2, MAX_MC_SAMPLES] (a deviation needs two)."""
+    if isinstance(n, bool) or not isinstance(n, int) or not (2 <= n <= MAX_MC_SAMPLES):
+        raise ValueError(f"n (MC-dropout samples) must be an integer in [2, {MAX_MC_SAMPLES}], got {n!r}")
+    return int(n)
+
+
+def validate_rho(rho: object) -> float:
+    """Dropout keep probability rho: a real number in (0, 1] (drop probability ``1 - rho``)."""
+    if isinstance(rho, bool) or not isinstance(rho, int | float) or not (0.0 < float(rho) <= 1.0):
+        raise ValueError(f"rho (dropout keep probability) must be a number in (0, 1], got {rho!r}")
+    return float(rho)
+
+
+@dataclass(frozen=True, kw_only=True)
+class MonitorSpec:
+    """One monitor configuration. LHD is always on; CH when ``tau`` is set; MCD when ``n`` and ``rho`` are.
+
+    Parameters
+    ----------
+    tau : float in (0, 1) or None
+        CH threshold.
+    n : int in [2, 1000] or None
+        MC-dropout samples.
+    rho : float in (0, 1] or None
+        MC-dropout keep probability (set together with ``n``).
+
+    Examples
+    --------
+    >>> MonitorSpec(tau=0.25, n=10, rho=0.9).name
+    'lhd+ch+mcd:tau=0.25,n=10,rho=0.9'
+    >>> parse_monitor_spec("lhd+mcd:rho=0.5,n=30") == MonitorSpec(n=30, rho=0.5)
+    True
+    """
+
+    tau: float | None = None
+    n: int | None = None
+    rho: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.tau is not None:
+            object.__setattr__(self, "tau", validate_tau(self.tau))
+        if (self.n is None) != (self.rho is None):
+            raise ValueError(f"MCD needs both n and rho, got n={self.n!r}, rho={self.rho!r}")
+        if self.n is not None:
+            object.__setattr__(self, "n", validate_n(self.n))
+            object.__setattr__(self, "rho", validate_rho(self.rho))
+
+    @property
+    def uses_ch(self) -> bool:
+        return self.tau is not None
+
+    @property
+    def uses_mcd(self) -> bool:
+        return self.n is not None
+
+    @property
+    def kind(self) -> str:
+        """``lhd``, ``lhd+ch``, ``lhd+mcd`` or ``lhd+ch+mcd``."""
+        return "lhd" + ("+ch" if self.uses_ch else "") + ("+mcd" if self.uses_mcd else "")
+
+    @property
+    def name(self) -> str:
+        """Canonical name; ``parse_monitor_spec(spec.name) == spec``."""
+        params = []
+        if self.tau is not None:
+            params.append(f"tau={self.tau!r}")
+        if self.n is not None:
+            params += [f"n={self.n}", f"rho={self.rho!r}"]
+        return self.kind + (":" + ",".join(params) if params else "")
+
+    def __str__(self) -> str:
+        return self.name
+
+    @classmethod
+    def from_paper_row(cls, samples: float, threshold: float, dropout_rate: float) -> MonitorSpec:
+        """The spec of a row of the paper's results CSV (``Samples MCD``, ``Threshold``,
+        ``Dropout rate``; ``-1`` means not used)."""
+        tau = None if threshold == -1 else float(threshold)
+        if (samples == -1) != (dropout_rate == -1):
+            raise ValueError(f"samples and dropout rate: both used or both -1, got {samples}, {dropout_rate}")
+        if samples == -1:
+            return cls(tau=tau)
+        if float(samples) != int(samples):
+            raise ValueError(f"samples must be an integer, got {samples!r}")
+        return cls(tau=tau, n=int(samples), rho=float(dropout_rate))
+
+
+_PARAMS = {"lhd": (), "lhd+ch": ("tau",), "lhd+mcd": ("n", "rho"), "lhd+ch+mcd": ("tau", "n", "rho")}
+
+
+def _bad(text: str, why: str) -> ValueError:
+    return ValueError(f"bad monitor spec {text!r}: {why}; {VALID_FORMS}")
+
+
+def parse_monitor_spec(text: str | MonitorSpec | None) -> MonitorSpec | None:
+    """Parse a monitor name; ``"none"`` (or None) gives None (no runtime monitor).
+
+    Case and spaces are ignored, the components may come in any order (``lhd`` first in the
+    canonical name), the parameters too, but every parameter of the kind is required.
+
+    Raises
+    ------
+    ValueError
+        With the reason and the valid forms.
+    """
+    if text is None or isinstance(text, MonitorSpec):
+        return text
+    if not isinstance(text, str):
+        raise ValueError(f"a monitor spec must be a string, got {type(text).__name__}; {VALID_FORMS}")
+    clean = "".join(text.split()).lower()
+    if clean == NONE:
+        return None
+    head, sep, tail = clean.partition(":")
+    parts = head.split("+")
+    if "lhd" not in parts or len(set(parts)) != len(parts) or not set(parts) <= {"lhd", "ch", "mcd"}:
+        raise _bad(text, f"unknown monitor {head!r}")
+    kind = "lhd" + ("+ch" if "ch" in parts else "") + ("+mcd" if "mcd" in parts else "")
+    expected = _PARAMS[kind]
+    values: dict[str, str] = {}
+    if sep:
+        for item in tail.split(","):
+            key, eq, value = item.partition("=")
+            if not eq or not key or not value:
+                raise _bad(text, f"parameter {item!r} is not key=value")
+            if key not in expected:
+                raise _bad(text, f"{kind} takes no parameter {key!r}")
+            if key in values:
+                raise _bad(text, f"parameter {key!r} given twice")
+            values[key] = value
+    missing = [k for k in expected if k not in values]
+    if missing:
+        raise _bad(text, f"{kind} needs {', '.join(missing)}")
+    try:
+        tau = float(values["tau"]) if "tau" in values else None
+        rho = float(values["rho"]) if "rho" in values else None
+        n = int(values["n"]) if "n" in values else None
+        if (tau is not None and not math.isfinite(tau)) or (rho is not None and not math.isfinite(rho)):
+            raise ValueError("parameters must be finite")
+        return MonitorSpec(tau=tau, n=n, rho=rho)
+    except ValueError as err:
+        raise _bad(text, str(err)) from None
+
+
+def monitor_name(spec: str | MonitorSpec | None) -> str:
+    """Canonical name of a spec, ``"none"`` for no monitor."""
+    parsed = parse_monitor_spec(spec)
+    return NONE if parsed is None else parsed.name
+
+
+PAPER_GRID: tuple[str, ...] = (
+    MonitorSpec().name,
+    *(MonitorSpec(tau=t).name for t in PAPER_TAUS),
+    *(MonitorSpec(n=n, rho=r).name for n, r in product(PAPER_NS, PAPER_RHOS)),
+    *(MonitorSpec(tau=t, n=n, rho=r).name for t, n, r in product(PAPER_TAUS, PAPER_NS, PAPER_RHOS)),
+)
+"""The paper's 21 configurations: LHD; LHD+CH (tau); LHD+MCD (n x rho); LHD+CH+MCD (tau x n x rho).
+(The paper's CSV lists the MCD rows grouped by n first; ``MonitorSpec.from_paper_row`` maps them.)"""
+
+DEMO_GRID: tuple[str, ...] = (
+    "lhd",
+    "lhd+ch:tau=0.25",
+    "lhd+mcd:n=10,rho=0.9",
+    "lhd+ch+mcd:tau=0.25,n=10,rho=0.9",
+)
+"""One configuration per kind, with the parameters the paper shows in its Table I because they
+"always perform better or similar to other values" (tau = 0.25, N = 10, rho = 0.9); n = 10 is also
+the cheaper MCD batch (overhead grows linearly with n)."""

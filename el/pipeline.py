@@ -1,0 +1,323 @@
+"""The monitored emergency-landing decision loop (DESIGN sections 5-6): the function a flight computer calls.
+
+image -> segmentation (working resolution) -> CM candidates ranked by hazard -> runtime monitor on the
+HD image, candidate by candidate -> the first accepted candidate, else the default action (parachute).
+
+Fail safe (EL-R03, EL-R06, EL-R07): ``EmergencyLanding.decide`` never raises. An unreadable or
+malformed image, missing or altered weights, non-finite scores, an exception in the CM or a monitor,
+or a time budget exceeded (read from an injectable clock) all end in the default action, with the
+reason recorded in ``Decision.reason``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from el.camera import working_size
+from el.config import CoreConfig
+from el.core import default_area, probs_from_labels, run_core
+from el.decision import Candidate, Decision, Disc, MonitorVerdict
+from el.monitors import Monitor, build_monitor, monitor_name, parse_monitor_spec
+from el.uavid import read_image
+
+Clock = Callable[[], float]
+DEFAULT_TIME_BUDGET_S = 10.0
+
+
+class BudgetExceeded(Exception):
+    """The decision's time budget ran out (turned into the default action with reason 'timeout')."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class PipelineConfig:
+    """Everything that shapes a decision besides the image and the model weights.
+
+    Parameters
+    ----------
+    core : CoreConfig
+        CM parameters (geometry, safety radius, candidates, ranking).
+    monitor : str or None
+        Monitor spec (``"lhd"``, ``"lhd+ch:tau=0.25"``, ``"lhd+mcd:n=10,rho=0.9"``, ...); None or
+        ``"none"``: no runtime monitor (the CM's top candidate is taken).
+    time_budget_s : float or None
+        Seconds from the call to the decision; past it, the default action with reason "timeout".
+        10 s by default: the slowest shipped configuration (MC dropout, n = 30) needs a few seconds
+        per examined candidate on a laptop CPU. None disables the budget (evaluation campaigns,
+        whose readouts must not depend on the machine's speed).
+    evaluate_all : bool
+        Evaluation mode: every candidate gets a monitor verdict (readouts for the metrics); the
+        decision still follows the ranked walk, and the walk's own monitoring time is reported
+        as ``timings["overhead_s"]``.
+    seed : int
+        Seed of MC dropout (candidate k uses ``seed + k``).
+    patch_margin : float
+        Context around a candidate's disc in the monitor's HD patch, as a fraction of its radius.
+    patch_max_side : int or None
+        Downscale HD patches whose side exceeds this (None: native resolution).
+    nominal_size : (int, int)
+        Input size assumed for the default area when the image cannot be read.
+    """
+
+    core: CoreConfig = field(default_factory=CoreConfig)
+    monitor: str | None = "lhd"
+    time_budget_s: float | None = DEFAULT_TIME_BUDGET_S
+    evaluate_all: bool = False
+    seed: int = 0
+    patch_margin: float = 0.25
+    patch_max_side: int | None = None
+    nominal_size: tuple[int, int] = (3840, 2160)
+
+    def __post_init__(self) -> None:
+        parse_monitor_spec(self.monitor)  # a bad spec fails here, before any image
+        if self.time_budget_s is not None and not (math.isfinite(self.time_budget_s) and self.time_budget_s > 0):
+            raise ValueError(f"time_budget_s must be a positive number of seconds or None, got {self.time_budget_s!r}")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
+            raise ValueError(f"seed must be a non-negative integer, got {self.seed!r}")
+
+    @property
+    def monitor_name(self) -> str:
+        return monitor_name(self.monitor)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "pipeline": "model",
+            "monitor": self.monitor_name,
+            "time_budget_s": self.time_budget_s,
+            "evaluate_all": self.evaluate_all,
+            "seed": self.seed,
+            "patch_margin": self.patch_margin,
+            "patch_max_side": self.patch_max_side,
+            "core": self.core.to_dict(),
+        }
+
+
+class _Budget:
+    """Elapsed time against the budget, read from the injected clock."""
+
+    def __init__(self, clock: Clock, budget_s: float | None) -> None:
+        self.clock, self.budget_s, self.start = clock, budget_s, clock()
+
+    def elapsed(self) -> float:
+        return self.clock() - self.start
+
+    def check(self, stage: str) -> None:
+        if self.budget_s is not None and self.elapsed() > self.budget_s:
+            raise BudgetExceeded(f"time budget of {self.budget_s:g} s exceeded after {stage}")
+
+
+def _sha256(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+class EmergencyLanding:
+    """The EL system around one segmentation model and one runtime monitor.
+
+    Construction never raises for a model or monitor problem: the fault is kept and every
+    decision is then the default action with that fault as its reason.
+
+    Parameters
+    ----------
+    config : PipelineConfig
+    segmenter : object with ``predict_frame``, ``predict_patch`` and ``mc_dropout``
+        (``el.segmentation.Segmenter``); loaded from ``weights`` (or the shipped weights) if None.
+    weights : path, optional
+        Weights file to load when no segmenter is given.
+    clock : callable returning seconds
+        Time source of the budget and the timings (inject a fake one in tests).
+    """
+
+    def __init__(
+        self,
+        config: PipelineConfig | None = None,
+        *,
+        segmenter: Any = None,
+        weights: str | Path | None = None,
+        clock: Clock = time.perf_counter,
+    ) -> None:
+        self.config = config or PipelineConfig()
+        self.clock = clock
+        self.fault: str | None = None
+        self.segmenter = segmenter
+        self.monitor: Monitor | None = None
+        if segmenter is None:
+            try:
+                from el.segmentation import Segmenter
+
+                self.segmenter = Segmenter.load(weights)
+            except Exception as exc:  # missing/altered weights: every decision is the default action
+                self.fault = f"fault: model: {type(exc).__name__}: {exc}"
+        try:
+            self.monitor = build_monitor(
+                self.config.monitor, margin=self.config.patch_margin, max_side=self.config.patch_max_side,
+                clock=clock,
+            )
+        except Exception as exc:
+            self.fault = self.fault or f"fault: monitor: {type(exc).__name__}: {exc}"
+
+    # -- the decision ----------------------------------------------------------------------------
+    def decide(self, image: np.ndarray | str | Path, *, labels: np.ndarray | None = None) -> Decision:
+        """Decide where to land for one frame (an RGB uint8 array or an image file); never raises.
+
+        ``labels`` (full-resolution class ids) replaces the model's segmentation by a perfect one
+        (the ground-truth pipeline); the monitor still sees the image.
+        """
+        cfg = self.config
+        budget = _Budget(self.clock, cfg.time_budget_s)
+        timings: dict[str, float] = {}
+        info: dict[str, Any] = {}
+        size = cfg.nominal_size
+        stage = "read"
+        candidates: list[Candidate] = []
+        try:
+            t = self.clock()
+            rgb = self._read(image, info)
+            size = (rgb.shape[1], rgb.shape[0])
+            timings["read_s"] = self.clock() - t
+            if self.fault:
+                return self._default(self.fault, candidates, size, timings, info, budget)
+            budget.check(stage)
+
+            stage = "segmentation"
+            t = self.clock()
+            probs = self._segment(rgb, labels)
+            timings["segmentation_s"] = self.clock() - t
+            budget.check(stage)
+
+            stage = "candidates"
+            t = self.clock()
+            core = run_core(probs, size, cfg.core, clock=self.clock)
+            candidates = core.candidates
+            timings["candidates_s"] = self.clock() - t
+            budget.check(stage)
+
+            stage = "monitoring"
+            t = self.clock()
+            candidates, selected, overhead = self._walk(rgb, candidates, budget)
+            timings["monitoring_s"] = self.clock() - t
+            timings["overhead_s"] = overhead
+            budget.check(stage)
+        except BudgetExceeded:
+            return self._default("timeout", candidates, size, timings, info, budget)
+        except Exception as exc:
+            reason = f"fault: {stage}: {type(exc).__name__}: {exc}"
+            return self._default(reason, candidates, size, timings, info, budget)
+
+        if not candidates:
+            return self._default("no_candidate", candidates, size, timings, info, budget)
+        if selected is None:
+            return self._default("all_rejected", candidates, size, timings, info, budget)
+        timings["total_s"] = budget.elapsed()
+        return Decision(action="land", reason="accepted", selected=selected, candidates=candidates,
+                        default_area=default_area(*size, cfg.core), timings=timings, input=info,
+                        config=cfg.to_dict())
+
+    # -- stages ----------------------------------------------------------------------------------
+    def _read(self, image: np.ndarray | str | Path, info: dict[str, Any]) -> np.ndarray:
+        if isinstance(image, str | Path):
+            path = Path(image)
+            info["path"] = str(path)
+            rgb = read_image(path)
+            info["sha256"] = _sha256(path.read_bytes())
+        else:
+            rgb = image
+            if not isinstance(rgb, np.ndarray):
+                raise ValueError(f"image must be a numpy array or a path, got {type(rgb).__name__}")
+            info["path"] = "<array>"
+            if rgb.ndim != 3 or rgb.shape[2] != 3:
+                raise ValueError(f"image must have shape (H, W, 3), got {rgb.shape}")
+            if rgb.dtype != np.uint8:
+                raise ValueError(f"image must be uint8, got {rgb.dtype}")
+            info["sha256"] = _sha256(np.ascontiguousarray(rgb).tobytes())
+        info["width"], info["height"] = int(rgb.shape[1]), int(rgb.shape[0])
+        if rgb.shape[0] < 16 or rgb.shape[1] < 16:
+            raise ValueError(f"image of {rgb.shape[1]}x{rgb.shape[0]} px is too small")
+        return rgb
+
+    def _segment(self, rgb: np.ndarray, labels: np.ndarray | None) -> np.ndarray:
+        W, H = rgb.shape[1], rgb.shape[0]
+        if labels is not None:
+            if labels.shape != (H, W):
+                raise ValueError(f"labels {labels.shape} and image {(H, W)} differ in size")
+            return probs_from_labels(labels, working_size(W, H, self.config.core.working_width))
+        probs = self.segmenter.predict_frame(rgb)
+        if not isinstance(probs, np.ndarray) or not np.isfinite(probs).all():
+            raise ValueError("segmentation returned non-finite scores")
+        return probs
+
+    def _walk(
+        self, rgb: np.ndarray, candidates: list[Candidate], budget: _Budget
+    ) -> tuple[list[Candidate], int | None, float]:
+        """Monitor candidates in rank order; returns (candidates with verdicts, selected, overhead s).
+
+        Normal mode stops at the first accepted candidate (later ones stay unmonitored). Evaluation
+        mode judges every candidate; the overhead is the time the real walk would have spent.
+        """
+        if self.monitor is None:  # no runtime monitor: the CM's top candidate
+            return candidates, (0 if candidates else None), 0.0
+        out: list[Candidate] = []
+        selected: int | None = None
+        overhead = 0.0
+        for k, cand in enumerate(candidates):
+            if selected is not None and not self.config.evaluate_all:
+                out.append(cand)
+                continue
+            verdict = self.monitor.check(rgb, cand, self.segmenter, seed=self.config.seed + k)
+            if not isinstance(verdict, MonitorVerdict):
+                raise ValueError(f"monitor returned {type(verdict).__name__}, not a MonitorVerdict")
+            out.append(replace(cand, monitor=verdict))
+            if selected is None:
+                overhead += verdict.seconds
+                if verdict.accepted:
+                    selected = k
+                # the budget binds the real walk; evaluation-only checks past the decision do not count
+                budget_left = self.config.time_budget_s
+                if budget_left is not None and budget.elapsed() - _extra(out, selected) > budget_left:
+                    raise BudgetExceeded("time budget exceeded during monitoring")
+        return out, selected, overhead
+
+    def _default(
+        self,
+        reason: str,
+        candidates: list[Candidate],
+        size: tuple[int, int],
+        timings: dict[str, float],
+        info: dict[str, Any],
+        budget: _Budget,
+    ) -> Decision:
+        try:
+            area = default_area(*size, self.config.core)
+        except Exception:  # the default area of the nominal frame: the decision itself must not fail
+            area = default_area(*self.config.nominal_size, self.config.core)
+        timings = dict(timings)
+        timings["total_s"] = budget.elapsed()
+        return Decision(action="default", reason=reason, selected=None, candidates=list(candidates),
+                        default_area=area, timings=timings, input=info, config=self.config.to_dict())
+
+
+def _extra(done: list[Candidate], selected: int | None) -> float:
+    """Monitoring time spent on candidates after the selected one (evaluation mode only)."""
+    if selected is None:
+        return 0.0
+    return sum(c.monitor.seconds for c in done[selected + 1 :] if c.monitor is not None)
+
+
+def decide(image: np.ndarray | str | Path, config: PipelineConfig | None = None, **kwargs: Any) -> Decision:
+    """One-shot convenience: build an ``EmergencyLanding`` and decide for one frame; never raises."""
+    return EmergencyLanding(config, **kwargs).decide(image)
+
+
+__all__ = [
+    "DEFAULT_TIME_BUDGET_S",
+    "Disc",
+    "EmergencyLanding",
+    "PipelineConfig",
+    "decide",
+]

@@ -1,0 +1,25 @@
+"""Semantic segmentation: the network, weights with model cards, inference, training.
+
+Public entry points::
+
+    from el.segmentation import Segmenter, WeightsError, mc_dropout_stats
+    seg = Segmenter.load()                 # shipped weights, SHA-256 checked
+    probs = seg.predict_frame(rgb)         # (8, h, w) softmax at working resolution
+"""
+
+from el.segmentation.inference import MIN_SIZE, Segmenter, mc_dropout_stats
+from el.segmentation.model import ArchConfig, MSDLite, build_model
+from el.segmentation.weights import DEFAULT_WEIGHTS, WeightsError, load_weights, save_weights
+
+__all__ = [
+    "DEFAULT_WEIGHTS",
+    "MIN_SIZE",
+    "ArchConfig",
+    "MSDLite",
+    "Segmenter",
+    "WeightsError",
+    "build_model",
+    "load_weights",
+    "mc_dropout_stats",
+    "save_weights",
+]

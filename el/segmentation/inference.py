@@ -1,0 +1,274 @@
+"""Segmentation inference: softmax maps for working-resolution frames and full-resolution patches.
+
+The one class here, :class:`Segmenter`, wraps any segmentation network and gives the core model
+and the runtime monitors what they need (DESIGN sections 5.1 and 6):
+
+- :meth:`Segmenter.predict_frame`: the HD frame resized (``cv2.INTER_AREA``) to the working
+  resolution of :func:`el.camera.working_size` -> softmax (8, h, w);
+- :meth:`Segmenter.predict_patch` / :meth:`Segmenter.predict_patches`: a full-resolution crop
+  segmented at its own resolution (the LHD monitor);
+- :meth:`Segmenter.mc_dropout`: N softmax samples with dropout active (the MCD monitor).
+
+Inputs are RGB uint8 arrays (H, W, 3); anything else, or an output that is not finite, raises
+ValueError, which the decision loop turns into the default action.
+
+Plugging in another network::
+
+    seg = Segmenter(my_module)          # any torch.nn.Module with the contract below
+
+The contract: ``my_module(x)`` maps float RGB images ``x`` of shape (B, 3, H, W), values in
+[0, 1], to logits (B, 8, H, W) for any H, W >= 16 (normalisation and padding are the module's
+business). If the module has ``supports_mc_spec = True`` and ``trunk(x)`` / ``head(features, mc)``
+methods (as :class:`el.segmentation.model.MSDLite`), MC dropout computes the trunk once and runs
+the head as one batch of N. Otherwise MC dropout falls back to N full passes with the module's
+dropout layers (``nn.Dropout``, ``nn.Dropout2d``, ... ) switched to train mode at the requested drop
+probability, everything else (BatchNorm included) in eval mode, seeded inside ``torch.random.fork_rng``
+so the global RNG is left untouched.
+"""
+
+from __future__ import annotations
+
+import threading
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import torch
+from torch import nn
+
+from el.camera import working_size
+from el.labels import NUM_CLASSES
+from el.segmentation.model import MCDropout, MCSpec
+from el.segmentation.weights import load_weights
+
+MIN_SIZE = 16  # smallest patch side (px) a Segmenter accepts
+
+
+def _check_rgb(rgb: Any, what: str) -> np.ndarray:
+    if not isinstance(rgb, np.ndarray):
+        raise ValueError(f"{what}: expected a numpy array, got {type(rgb).__name__}")
+    if rgb.dtype != np.uint8:
+        raise ValueError(f"{what}: expected dtype uint8, got {rgb.dtype}")
+    if rgb.ndim != 3 or rgb.shape[2] != 3:
+        raise ValueError(f"{what}: expected shape (H, W, 3) RGB, got {rgb.shape}")
+    if rgb.shape[0] < MIN_SIZE or rgb.shape[1] < MIN_SIZE:
+        raise ValueError(f"{what}: image must be at least {MIN_SIZE}x{MIN_SIZE} px, got "
+                         f"{rgb.shape[1]}x{rgb.shape[0]}")
+    return rgb
+
+
+def _check_finite(probs: np.ndarray, what: str) -> np.ndarray:
+    if not np.isfinite(probs).all():
+        bad = int((~np.isfinite(probs)).sum())
+        raise ValueError(f"{what}: segmentation output has {bad} non-finite values (NaN or inf)")
+    return probs
+
+
+def _is_dropout(module: nn.Module) -> bool:
+    return isinstance(module, (nn.modules.dropout._DropoutNd, MCDropout))
+
+
+def mc_dropout_stats(samples: np.ndarray, *, ddof: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Per-pixel mean and standard deviation of MC-dropout softmax samples.
+
+    Parameters
+    ----------
+    samples : ndarray of shape (N, C, H, W), float
+        Softmax samples from :meth:`Segmenter.mc_dropout`.
+    ddof : int
+        Delta degrees of freedom of the standard deviation (0: the empirical, population one).
+
+    Returns
+    -------
+    (mean, std) : two float32 ndarrays of shape (C, H, W).
+    """
+    samples = np.asarray(samples)
+    if samples.ndim != 4 or samples.shape[0] < 1:
+        raise ValueError(f"samples must have shape (N, C, H, W) with N >= 1, got {samples.shape}")
+    if samples.shape[0] <= ddof:
+        raise ValueError(f"need more than ddof={ddof} samples, got {samples.shape[0]}")
+    mean = samples.mean(axis=0, dtype=np.float64)
+    std = samples.std(axis=0, ddof=ddof, dtype=np.float64)
+    return mean.astype(np.float32), std.astype(np.float32)
+
+
+class Segmenter:
+    """Softmax segmentation of frames and patches, with MC dropout, around one network.
+
+    Parameters
+    ----------
+    model : torch.nn.Module
+        The network (see the module docstring for the contract). Put in eval mode here.
+    threads : int, optional
+        CPU threads for torch (``torch.set_num_threads``; process-wide). None leaves torch's setting.
+    device : str
+        Torch device, ``"cpu"`` by default.
+    card : dict, optional
+        The model card of the weights (identity for reports).
+    working_width : int
+        Width of the working resolution (1024; the height keeps the aspect ratio).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from el.segmentation.model import ArchConfig, build_model
+    >>> seg = Segmenter(build_model(ArchConfig(widths=(8, 8, 8))), working_width=64)
+    >>> seg.predict_frame(np.zeros((72, 128, 3), np.uint8)).shape
+    (8, 36, 64)
+    """
+
+    def __init__(self, model: nn.Module, *, threads: int | None = None, device: str | torch.device = "cpu",
+                 card: dict[str, Any] | None = None, working_width: int = 1024) -> None:
+        if not isinstance(model, nn.Module):
+            raise ValueError(f"model must be a torch.nn.Module, got {type(model).__name__}")
+        if threads is not None:
+            if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
+                raise ValueError(f"threads must be a positive integer, got {threads!r}")
+            torch.set_num_threads(threads)
+        if working_width < MIN_SIZE:
+            raise ValueError(f"working_width must be >= {MIN_SIZE}, got {working_width!r}")
+        self.device = torch.device(device)
+        self.model = model.to(self.device).eval()
+        self.card = dict(card or {})
+        self.working_width = int(working_width)
+        self.fast_mc = bool(getattr(model, "supports_mc_spec", False)
+                            and callable(getattr(model, "trunk", None)) and callable(getattr(model, "head", None)))
+        self._lock = threading.Lock()  # the fallback MC path mutates dropout modules
+
+    @classmethod
+    def load(cls, weights_path: str | Path | None = None, *, threads: int | None = None,
+             device: str | torch.device = "cpu") -> Segmenter:
+        """The shipped network (``el/segmentation/weights/model.pt``) or another weights file.
+
+        The file's SHA-256 is checked against its model card before ``torch.load(weights_only=True)``;
+        a missing or altered file raises :class:`el.segmentation.weights.WeightsError`.
+        """
+        model, card = load_weights(weights_path, device=device)
+        return cls(model, threads=threads, device=device, card=card)
+
+    @property
+    def weights_sha256(self) -> str | None:
+        return self.card.get("weights_sha256")
+
+    # -- helpers -------------------------------------------------------------------------------
+    def _to_tensor(self, images: list[np.ndarray]) -> torch.Tensor:
+        batch = np.stack(images).astype(np.float32) / np.float32(255.0)
+        return torch.from_numpy(batch).permute(0, 3, 1, 2).contiguous().to(self.device)
+
+    def _probs(self, logits: torch.Tensor, shape: tuple[int, ...], what: str) -> np.ndarray:
+        if not isinstance(logits, torch.Tensor) or tuple(logits.shape) != shape:
+            got = tuple(logits.shape) if isinstance(logits, torch.Tensor) else type(logits).__name__
+            raise ValueError(f"{what}: model returned {got}, expected logits of shape {shape}")
+        probs = torch.softmax(logits.float(), dim=1).cpu().numpy()
+        return _check_finite(probs, what)
+
+    def working_size(self, width: int, height: int) -> tuple[int, int]:
+        """(width, height) of the working resolution for a frame of the given size."""
+        return working_size(width, height, self.working_width)
+
+    # -- prediction ----------------------------------------------------------------------------
+    def predict_frame(self, rgb: np.ndarray) -> np.ndarray:
+        """Softmax of a frame at the working resolution.
+
+        Parameters
+        ----------
+        rgb : ndarray of shape (H, W, 3), uint8
+            The full-resolution frame.
+
+        Returns
+        -------
+        ndarray of shape (8, h, w), float32, with ``(w, h) = working_size(W, H)``.
+        """
+        _check_rgb(rgb, "frame")
+        w, h = self.working_size(rgb.shape[1], rgb.shape[0])
+        if (rgb.shape[1], rgb.shape[0]) != (w, h):
+            rgb = cv2.resize(rgb, (w, h), interpolation=cv2.INTER_AREA)
+        _check_rgb(rgb, "frame at working resolution")
+        return self._predict([rgb], "frame")[0]
+
+    def predict_patch(self, rgb_patch: np.ndarray) -> np.ndarray:
+        """Softmax of a patch at its own resolution: ndarray (8, h, w) float32 for a (h, w, 3) uint8 patch."""
+        _check_rgb(rgb_patch, "patch")
+        return self._predict([rgb_patch], "patch")[0]
+
+    def predict_patches(self, patches: list[np.ndarray]) -> list[np.ndarray]:
+        """Softmax of several patches; patches of the same size run as one batch. Order is kept."""
+        for i, p in enumerate(patches):
+            _check_rgb(p, f"patch {i}")
+        out: list[np.ndarray | None] = [None] * len(patches)
+        groups: dict[tuple[int, int], list[int]] = {}
+        for i, p in enumerate(patches):
+            groups.setdefault(p.shape[:2], []).append(i)
+        for idx in groups.values():
+            probs = self._predict([patches[i] for i in idx], "patches")
+            for j, i in enumerate(idx):
+                out[i] = probs[j]
+        return out  # type: ignore[return-value]
+
+    def _predict(self, images: list[np.ndarray], what: str) -> np.ndarray:
+        h, w = images[0].shape[:2]
+        with torch.inference_mode():
+            logits = self.model(self._to_tensor(images))
+            return self._probs(logits, (len(images), NUM_CLASSES, h, w), what)
+
+    # -- Monte-Carlo dropout -------------------------------------------------------------------
+    def mc_dropout(self, rgb_patch: np.ndarray, n: int, keep_prob: float, seed: int) -> np.ndarray:
+        """N softmax samples of a patch with dropout active (drop probability ``1 - keep_prob``).
+
+        The trunk runs once and the head once on a batch of ``n`` (fast path), BatchNorm in eval
+        mode. The result depends only on the inputs and ``seed`` (a private torch.Generator; the
+        global RNG is not touched).
+
+        Parameters
+        ----------
+        rgb_patch : ndarray of shape (h, w, 3), uint8
+        n : int
+            Number of samples, >= 1.
+        keep_prob : float
+            The paper's rho, in (0, 1]; 1 means no dropout (all samples equal).
+        seed : int
+            Seed of the dropout masks.
+
+        Returns
+        -------
+        ndarray of shape (n, 8, h, w), float32.
+        """
+        _check_rgb(rgb_patch, "patch")
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+            raise ValueError(f"n must be a positive integer, got {n!r}")
+        if not (isinstance(keep_prob, (int, float, np.floating)) and 0.0 < float(keep_prob) <= 1.0):
+            raise ValueError(f"keep_prob must lie in (0, 1], got {keep_prob!r}")
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
+            raise ValueError(f"seed must be an integer, got {seed!r}")
+        n, p, seed = int(n), 1.0 - float(keep_prob), int(seed)
+        h, w = rgb_patch.shape[:2]
+        x = self._to_tensor([rgb_patch])
+        shape = (n, NUM_CLASSES, h, w)
+        if self.fast_mc:
+            gen = torch.Generator(device="cpu")
+            gen.manual_seed(seed)
+            with torch.inference_mode():
+                features = self.model.trunk(x)
+                logits = self.model.head(features.repeat(n), MCSpec(p=p, generator=gen))
+                return self._probs(logits, shape, "MC dropout")
+        return self._mc_fallback(x, n, p, seed, shape)
+
+    def _mc_fallback(self, x: torch.Tensor, n: int, p: float, seed: int, shape: tuple[int, ...]) -> np.ndarray:
+        drops = [m for m in self.model.modules() if _is_dropout(m)]
+        if not drops:
+            raise ValueError("MC dropout: the model has no dropout layers")
+        with self._lock:
+            saved = [(m, m.p, m.training) for m in drops]
+            try:
+                with torch.random.fork_rng(devices=[]), torch.inference_mode():
+                    torch.manual_seed(seed)
+                    for m in drops:
+                        m.p = p
+                        m.train()
+                    logits = torch.cat([self.model(x) for _ in range(n)], dim=0)
+            finally:
+                for m, old_p, training in saved:
+                    m.p = old_p
+                    m.train(training)
+        return self._probs(logits, shape, "MC dropout")

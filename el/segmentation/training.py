@@ -1,0 +1,370 @@
+"""Train the segmentation network at both scales it meets in use; keep the best model on validation.
+
+Each step draws (seeded by ``(seed, step)``, so a resumed run follows the same path):
+
+- ``batch`` random square crops of ``crop`` px from working-resolution frames (the core model's view);
+- full-resolution crops of a side drawn in ``[hd_crop_min, hd_crop_max]`` (the LHD monitor's view of a
+  candidate), as many as fit ``hd_pixels`` pixels, cut from seeded full-resolution regions.
+
+Loss: class-weighted cross-entropy (inverse square root of the class frequency, see
+:func:`el.segmentation.data.class_weights`), the mean of both scales. Optimiser: AdamW, linear warm-up
+then cosine decay. Augmentation: :data:`el.segmentation.data.AUGMENTATIONS` only; none of the
+evaluation perturbations (brightness, fog, motion blur, shifted rows, dead rows).
+
+Every ``checkpoint_every`` steps the model, optimiser, scheduler and step are written atomically to
+``<weights>.ckpt``; ``resume=True`` continues from there. With validation data the network is evaluated
+every ``eval_every`` steps (mIoU at working resolution and on HD patches) and the best one is written
+to the weights file with its model card; the card is completed at the end (data hashes, seeds, timing,
+figures, confusion matrices and the per-pixel baseline).
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from el.segmentation import data as D
+from el.segmentation.baseline import evaluate_baseline
+from el.segmentation.evaluation import EvalProtocol, evaluate, selection_score
+from el.segmentation.inference import Segmenter
+from el.segmentation.model import ArchConfig, MSDLite, build_model, count_parameters
+from el.segmentation.weights import read_card, save_weights, write_card
+from el.uavid import atomic_write_bytes
+
+Progress = Callable[..., Iterable]
+Log = Callable[[str], None]
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrainConfig:
+    """Everything that shapes a training run (recorded in the checkpoint and the model card)."""
+
+    steps: int = 1200
+    batch: int = 4  # working-resolution crops per step
+    crop: int = 256  # their side (px)
+    hd_pixels: int = 4 * 256 * 256  # full-resolution crop pixels per step
+    hd_crop_min: int = 192
+    hd_crop_max: int = 448
+    hd_regions: int = 4  # full-resolution regions kept per training image
+    lr: float = 2e-3
+    weight_decay: float = 1e-4
+    warmup: int = 50
+    eval_every: int = 0  # 0: evaluate 4 times, evenly spaced
+    checkpoint_every: int = 25
+    seed: int = 0
+    working_width: int = 1024
+    arch: ArchConfig = field(default_factory=ArchConfig)
+    augment: D.AugmentParams = field(default_factory=D.AugmentParams)
+    eval_protocol: EvalProtocol = field(default_factory=EvalProtocol)
+    baseline_pixels: int = 200_000  # 0: skip the per-pixel baseline
+
+    def __post_init__(self) -> None:
+        positive = ("steps", "batch", "crop", "hd_crop_min", "hd_crop_max", "checkpoint_every")
+        for name in positive:
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise ValueError(f"{name} must be a positive integer, got {value!r}")
+        if self.crop < 16 or self.hd_crop_min < 16:
+            raise ValueError("crop and hd_crop_min must be >= 16 px")
+        if self.hd_crop_max < self.hd_crop_min:
+            raise ValueError(f"hd_crop_max ({self.hd_crop_max}) must be >= hd_crop_min ({self.hd_crop_min})")
+        for name in ("hd_pixels", "hd_regions", "warmup", "eval_every", "baseline_pixels"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
+        if not (self.lr > 0 and math.isfinite(self.lr)):
+            raise ValueError(f"lr must be positive, got {self.lr!r}")
+        if self.working_width != self.eval_protocol.working_width:
+            raise ValueError("working_width and eval_protocol.working_width must agree")
+
+    @property
+    def region_size(self) -> int:
+        """Side of the kept full-resolution regions: room for the largest crop after scale jitter."""
+        return int(math.ceil(self.hd_crop_max * (1 + self.augment.scale_jitter)))
+
+    @property
+    def evaluation_interval(self) -> int:
+        return self.eval_every or max(1, math.ceil(self.steps / 4))
+
+    def prep_params(self) -> D.PrepParams:
+        return D.PrepParams(working_width=self.working_width, regions=self.hd_regions if self.hd_pixels else 0,
+                            region_size=self.region_size, seed=self.seed)
+
+    def to_dict(self) -> dict[str, Any]:
+        out = asdict(self)
+        out["arch"] = self.arch.to_dict()
+        return out
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> TrainConfig:
+        data = dict(data)
+        arch = ArchConfig.from_dict(data.pop("arch"))
+        augment = D.AugmentParams(**data.pop("augment"))
+        protocol = EvalProtocol.from_dict(data.pop("eval_protocol"))
+        return cls(arch=arch, augment=augment, eval_protocol=protocol, **data)
+
+
+def steps_for_epochs(images: int, epochs: int, batch: int) -> int:
+    """Steps for ``epochs`` passes, one pass = every training image once as a working-resolution crop."""
+    if images < 1 or epochs < 1 or batch < 1:
+        raise ValueError(f"images, epochs and batch must be positive, got {images}, {epochs}, {batch}")
+    return epochs * math.ceil(images / batch)
+
+
+def checkpoint_path(weights_path: str | Path) -> Path:
+    """Where training keeps its resumable state: ``<weights>.ckpt``."""
+    return Path(weights_path).with_suffix(".ckpt")
+
+
+def _lr_factor(step: int, config: TrainConfig) -> float:
+    if step < config.warmup:
+        return (step + 1) / config.warmup
+    span = max(1, config.steps - config.warmup)
+    t = min(1.0, (step - config.warmup) / span)
+    return 0.05 + 0.95 * 0.5 * (1 + math.cos(math.pi * t))
+
+
+def _to_tensor(images: list[np.ndarray]) -> torch.Tensor:
+    batch = np.stack(images).astype(np.float32) / np.float32(255.0)
+    return torch.from_numpy(batch).permute(0, 3, 1, 2).contiguous()
+
+
+def _labels_tensor(labels: list[np.ndarray]) -> torch.Tensor:
+    return torch.from_numpy(np.stack(labels).astype(np.int64))
+
+
+def sample_batch(samples: list[D.Prepared], config: TrainConfig, step: int
+                 ) -> tuple[tuple[torch.Tensor, torch.Tensor], tuple[torch.Tensor, torch.Tensor] | None]:
+    """The two mini-batches of a step (working resolution, HD or None), a pure function of ``(seed, step)``."""
+    rng = np.random.default_rng([config.seed, 1, step])
+    imgs, labs = [], []
+    for _ in range(config.batch):
+        s = samples[int(rng.integers(len(samples)))]
+        img, lab = D.random_crop(s.image, s.labels, config.crop, rng, config.augment)
+        imgs.append(img)
+        labs.append(lab)
+    working = (_to_tensor(imgs), _labels_tensor(labs))
+    with_regions = [s for s in samples if len(s.regions)]
+    if not config.hd_pixels or not with_regions:
+        return working, None
+    side = D.hd_crop_side(rng, config.hd_crop_min, config.hd_crop_max)
+    imgs, labs = [], []
+    for _ in range(D.hd_crop_count(side, config.hd_pixels)):
+        s = with_regions[int(rng.integers(len(with_regions)))]
+        k = int(rng.integers(len(s.regions)))
+        img, lab = D.random_crop(s.regions[k], s.region_labels[k], side, rng, config.augment)
+        imgs.append(img)
+        labs.append(lab)
+    return working, (_to_tensor(imgs), _labels_tensor(labs))
+
+
+def training_loss(model: torch.nn.Module, batches: tuple, weights: torch.Tensor) -> torch.Tensor:
+    """Class-weighted cross-entropy, mean over the scales present in the step."""
+    losses = [F.cross_entropy(model(x), y, weight=weights) for x, y in (b for b in batches if b is not None)]
+    return torch.stack(losses).mean()
+
+
+def _save_checkpoint(path: Path, state: dict[str, Any]) -> None:
+    buf = io.BytesIO()
+    torch.save(state, buf)
+    atomic_write_bytes(path, buf.getvalue())
+
+
+def load_checkpoint(path: str | Path) -> dict[str, Any]:
+    """A training checkpoint (``weights_only`` loading); ValueError naming the file if unusable."""
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"{path}: no checkpoint to resume from")
+    try:
+        state = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # corrupt or foreign file
+        raise ValueError(f"{path}: unreadable checkpoint: {exc}") from exc
+    for key in ("step", "model", "optimizer", "scheduler", "config", "data"):
+        if key not in state:
+            raise ValueError(f"{path}: checkpoint has no {key!r}")
+    return state
+
+
+def _diff_config(old: dict[str, Any], new: dict[str, Any]) -> list[str]:
+    keys = sorted(set(old) | set(new))
+    return [f"{k}: {old.get(k)!r} -> {new.get(k)!r}" for k in keys
+            if k not in ("checkpoint_every",) and old.get(k) != new.get(k)]
+
+
+def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Path | None = None,
+          config: TrainConfig | None = None, resume: bool = False, cache_dir: str | Path | None = None,
+          threads: int | None = None, progress: Progress | None = None,
+          log: Log | None = None) -> dict[str, Any]:
+    """Train on a UAVid-layout folder, write the weights and their model card; returns the card.
+
+    Parameters
+    ----------
+    train_dir, val_dir : folder
+        UAVid-layout datasets (labels required). Without ``val_dir`` no model selection happens: the
+        final network is written and the card has no evaluation.
+    weights_path : file
+        The weights file to write (its card goes next to it, the checkpoint to ``<weights>.ckpt``).
+    resume : bool
+        Continue from the checkpoint (same configuration and data required). Without it, an existing
+        checkpoint is an error rather than silently overwritten.
+    cache_dir : folder, optional
+        Where prepared samples are cached (None: no cache).
+    threads : int, optional
+        torch CPU threads (also the data-preparation threads).
+    progress : callable, optional
+        ``progress(iterable, total=..., desc=...)`` wrapper (a progress bar).
+    log : callable, optional
+        Receives one-line messages.
+    """
+    config = config or TrainConfig()
+    weights_path = Path(weights_path)
+    say = log or (lambda _msg: None)
+    if threads is not None:
+        torch.set_num_threads(threads)
+    io_threads = threads or torch.get_num_threads()
+    ckpt_path = checkpoint_path(weights_path)
+    if ckpt_path.exists() and not resume:
+        raise ValueError(f"{ckpt_path}: a checkpoint exists; resume it (--resume) or delete it")
+
+    started = time.perf_counter()
+    say(f"hashing {train_dir}" + (f" and {val_dir}" if val_dir else ""))
+    train_manifest = D.dataset_manifest(train_dir, threads=io_threads)
+    val_manifest = D.dataset_manifest(val_dir, threads=io_threads) if val_dir is not None else None
+    data_ids = {"train": train_manifest.describe(), "val": val_manifest.describe() if val_manifest else None}
+
+    state = None
+    if resume:
+        state = load_checkpoint(ckpt_path)
+        changes = _diff_config(state["config"], config.to_dict())
+        if changes:
+            raise ValueError(f"{ckpt_path}: the checkpoint was made with another configuration: " + "; ".join(changes))
+        for split in ("train", "val"):
+            old, new = state["data"].get(split), data_ids[split]
+            if (old or {}).get("sha256") != (new or {}).get("sha256"):
+                raise ValueError(f"{ckpt_path}: the {split} data changed since the checkpoint "
+                                 f"({(old or {}).get('sha256')} -> {(new or {}).get('sha256')})")
+
+    train_set = D.load_dataset(train_manifest, config.prep_params(), cache_dir=cache_dir, threads=io_threads,
+                               progress=progress)
+    val_set = (D.load_dataset(val_manifest, config.eval_protocol.prep_params(), cache_dir=cache_dir,
+                              threads=io_threads, progress=progress) if val_manifest else [])
+    prep_seconds = time.perf_counter() - started
+    freq = D.class_frequencies(train_set)
+    weights = torch.from_numpy(D.class_weights(freq))
+
+    torch.manual_seed(config.seed)
+    model = build_model(config.arch)
+    optimizer = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
+    scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, lambda s: _lr_factor(s, config))
+    start_step, best_score, best_step = 0, -math.inf, None
+    history: list[dict[str, Any]] = []
+    train_seconds = 0.0
+    if state is not None:
+        model.load_state_dict(state["model"])
+        optimizer.load_state_dict(state["optimizer"])
+        scheduler.load_state_dict(state["scheduler"])
+        start_step = int(state["step"])
+        best_score = float(state.get("best_score", -math.inf))
+        best_step = state.get("best_step")
+        history = list(state.get("history", []))
+        train_seconds = float(state.get("train_seconds", 0.0))
+        say(f"resuming from step {start_step} of {config.steps}")
+
+    def checkpoint(step: int) -> None:
+        _save_checkpoint(ckpt_path, {
+            "step": step, "model": model.state_dict(), "optimizer": optimizer.state_dict(),
+            "scheduler": scheduler.state_dict(), "config": config.to_dict(), "data": data_ids,
+            "best_score": best_score, "best_step": best_step, "history": history,
+            "train_seconds": train_seconds,
+        })
+
+    def card_base() -> dict[str, Any]:
+        return {"training": {
+            "data": data_ids, "seed": config.seed, "config": config.to_dict(), "steps": config.steps,
+            "augmentations": list(D.AUGMENTATIONS),
+            "not_used_augmentations": ["brightness", "fog", "motion_blur", "shifted_pixels", "dead_rows"],
+            "loss": "class-weighted cross-entropy (inverse sqrt frequency), mean of working and HD scales",
+            "class_frequencies": [float(f) for f in freq], "class_weights": [float(w) for w in weights],
+            "torch_version": torch.__version__,
+        }}
+
+    interval = config.evaluation_interval
+    window: list[float] = []
+    steps = range(start_step, config.steps)
+    iterator = progress(steps, total=len(steps), desc="train") if progress is not None else steps
+    model.train()
+    for step in iterator:
+        tick = time.perf_counter()
+        torch.manual_seed(int(np.random.default_rng([config.seed, 2, step]).integers(2**62)))  # dropout masks
+        batches = sample_batch(train_set, config, step)
+        loss = training_loss(model, batches, weights)
+        if not torch.isfinite(loss):
+            raise ValueError(f"training diverged at step {step}: loss is {float(loss)}")
+        optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(model.parameters(), 5.0)
+        optimizer.step()
+        scheduler.step()
+        train_seconds += time.perf_counter() - tick
+        window.append(loss.item())
+        done = step + 1
+        last = done == config.steps
+        improved = False
+        if done % interval == 0 or last:
+            entry: dict[str, Any] = {"step": done, "loss": float(np.mean(window)),
+                                     "seconds_per_step": train_seconds / done}
+            window = []
+            if val_set:
+                tick = time.perf_counter()
+                model.eval()
+                figures = evaluate(Segmenter(model, working_width=config.working_width), val_set)
+                model.train()
+                score = selection_score(figures)
+                entry.update({"val_miou_working": figures["working_resolution"]["miou"],
+                              "val_miou_hd": figures["hd_patches"]["miou"], "score": score,
+                              "eval_seconds": time.perf_counter() - tick})
+                if score > best_score:
+                    improved, best_score, best_step = True, score, done
+                    save_weights(model, weights_path, card={**card_base(), "evaluation": {
+                        "data": data_ids["val"], "protocol": config.eval_protocol.to_dict(),
+                        "step": done, **figures}})
+            history.append(entry)
+            say(" ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in entry.items()))
+        if improved or done % config.checkpoint_every == 0 or last:
+            checkpoint(done)
+
+    if not val_set:
+        card = save_weights(model, weights_path, card={**card_base(), "evaluation": None})
+    else:
+        card = read_card(weights_path)
+    card["training"].update({
+        "best_step": best_step, "history": history, "train_seconds": round(train_seconds, 1),
+        "seconds_per_step": round(train_seconds / max(1, config.steps), 3),
+        "prepare_seconds": round(prep_seconds, 1), "threads": torch.get_num_threads(),
+        "parameters": count_parameters(model),
+    })
+    if config.baseline_pixels and val_set:
+        say("fitting the per-pixel baseline")
+        card["baseline"] = evaluate_baseline(
+            [s.image for s in train_set], [s.labels for s in train_set],
+            [s.image for s in val_set], [s.labels for s in val_set],
+            max_pixels=config.baseline_pixels, seed=config.seed)
+        cnn = card["evaluation"]["working_resolution"]["miou"]
+        base = card["baseline"]["miou"]
+        card["baseline"]["miou_gap_to_cnn"] = None if cnn is None or base is None else cnn - base
+    write_card(weights_path, card)
+    return card
+
+
+def init_untrained(arch: ArchConfig | None = None, seed: int = 0) -> MSDLite:
+    """A seeded, randomly initialised network (benchmarks and tests)."""
+    torch.manual_seed(seed)
+    return build_model(arch).eval()

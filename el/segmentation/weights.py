@@ -1,0 +1,151 @@
+"""Weights files and their model cards: save atomically, check the SHA-256 before loading.
+
+A weights file ``NAME.pt`` is a float32 ``state_dict`` written with ``torch.save``. Next to it,
+``NAME.json`` is its model card: the file's SHA-256, the architecture hyper-parameters needed to
+rebuild the network, and (after training) the data hashes, seeds and validation figures.
+
+Loading reads the file once, checks its SHA-256 against the card, and only then deserialises it with
+``torch.load(..., weights_only=True)`` (no pickled code is ever executed). Every problem raises
+:class:`WeightsError` naming the file.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from el.segmentation.model import MSDLite, build_model, count_parameters
+from el.uavid import atomic_write_bytes
+
+WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
+DEFAULT_WEIGHTS = WEIGHTS_DIR / "model.pt"
+CARD_FORMAT = "uav-el-segmentation-card/1"
+
+
+class WeightsError(ValueError):
+    """A weights file or its model card is missing, altered or unusable; the message names it."""
+
+
+def card_path(weights_path: str | Path) -> Path:
+    """The model card (JSON sidecar) of a weights file: same name, ``.json`` suffix."""
+    return Path(weights_path).with_suffix(".json")
+
+
+def sha256_bytes(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+def sha256_file(path: str | Path, *, chunk: int = 1 << 22) -> str:
+    """SHA-256 (hex) of a file, read in chunks."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        while block := f.read(chunk):
+            h.update(block)
+    return h.hexdigest()
+
+
+def state_dict_bytes(model: torch.nn.Module) -> bytes:
+    """The model's float32 CPU state dict, serialised as ``torch.save`` writes it."""
+    state = {k: (v.detach().to("cpu", torch.float32) if v.is_floating_point() else v.detach().cpu())
+             for k, v in model.state_dict().items()}
+    buf = io.BytesIO()
+    torch.save(state, buf)
+    return buf.getvalue()
+
+
+def write_card(weights_path: str | Path, card: dict[str, Any]) -> Path:
+    """Write the model card next to the weights (atomically); returns its path."""
+    path = card_path(weights_path)
+    text = json.dumps(card, indent=2, allow_nan=False) + "\n"
+    atomic_write_bytes(path, text.encode("utf-8"))
+    return path
+
+
+def save_weights(model: MSDLite, weights_path: str | Path, card: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Write the weights file and its card; returns the card as written.
+
+    The card gets ``format``, ``weights_file``, ``weights_sha256``, ``architecture`` and
+    ``parameters`` filled in from the model; other keys of ``card`` are kept as given.
+    """
+    weights_path = Path(weights_path)
+    data = state_dict_bytes(model)
+    atomic_write_bytes(weights_path, data)
+    full = {
+        "format": CARD_FORMAT,
+        "weights_file": weights_path.name,
+        "weights_sha256": sha256_bytes(data),
+        "weights_bytes": len(data),
+        "architecture": model.config.to_dict(),
+        "parameters": count_parameters(model),
+    }
+    for key, value in (card or {}).items():
+        if key not in full:
+            full[key] = value
+    write_card(weights_path, full)
+    return full
+
+
+def read_card(weights_path: str | Path) -> dict[str, Any]:
+    """The model card of a weights file; WeightsError if missing or malformed."""
+    path = card_path(weights_path)
+    if not path.is_file():
+        raise WeightsError(f"{path}: model card not found (expected next to {Path(weights_path).name})")
+    try:
+        card = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise WeightsError(f"{path}: unreadable model card: {exc}") from exc
+    if not isinstance(card, dict):
+        raise WeightsError(f"{path}: model card must be a JSON object")
+    if card.get("format") != CARD_FORMAT:
+        raise WeightsError(f"{path}: unknown model card format {card.get('format')!r} (expected {CARD_FORMAT!r})")
+    for key in ("weights_sha256", "architecture"):
+        if key not in card:
+            raise WeightsError(f"{path}: model card has no {key!r}")
+    return card
+
+
+def load_weights(weights_path: str | Path | None = None, *, device: str | torch.device = "cpu"
+                 ) -> tuple[MSDLite, dict[str, Any]]:
+    """Rebuild the network from a weights file after checking its SHA-256 against its card.
+
+    Returns ``(model in eval mode, card)``. Raises WeightsError when the weights file or its card
+    is missing, the hash does not match, or the state dict does not fit the recorded architecture.
+    """
+    path = Path(weights_path) if weights_path is not None else DEFAULT_WEIGHTS
+    if not path.exists():
+        hint = " (train one with `uav-el train`)" if weights_path is None else ""
+        raise WeightsError(f"{path}: weights file not found{hint}")
+    if not path.is_file():
+        raise WeightsError(f"{path}: not a file")
+    card = read_card(path)
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise WeightsError(f"{path}: cannot read weights: {exc}") from exc
+    digest = sha256_bytes(data)
+    if digest != card["weights_sha256"]:
+        raise WeightsError(
+            f"{path}: SHA-256 mismatch: file has {digest}, {card_path(path).name} records "
+            f"{card['weights_sha256']} (the weights were altered or replaced)"
+        )
+    try:
+        state = torch.load(io.BytesIO(data), map_location=device, weights_only=True)
+    except Exception as exc:  # torch raises several types for corrupt or unsafe files
+        raise WeightsError(f"{path}: cannot load the state dict (weights_only): {exc}") from exc
+    if not isinstance(state, dict):
+        raise WeightsError(f"{path}: expected a state dict, got {type(state).__name__}")
+    try:
+        model = build_model(card["architecture"])
+    except (TypeError, ValueError) as exc:
+        raise WeightsError(f"{card_path(path)}: invalid architecture: {exc}") from exc
+    try:
+        model.load_state_dict(state, strict=True)
+    except RuntimeError as exc:
+        first = str(exc).splitlines()[0]
+        raise WeightsError(f"{path}: state dict does not fit the recorded architecture: {first}") from exc
+    return model.to(device).eval(), card

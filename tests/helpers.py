@@ -1,0 +1,72 @@
+"""Shared test doubles: a perfect segmenter on colour-coded label images, and a fake clock."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from el.camera import working_size
+from el.core import probs_from_labels
+from el.labels import NUM_CLASSES, colors_to_ids, ids_to_colors
+
+
+class OracleSegmenter:
+    """Segments a colour-coded label image perfectly (colour -> class), at frame and patch level.
+
+    MC dropout returns ``n`` copies of the one-hot (no uncertainty). Fault knobs let tests break it.
+    """
+
+    def __init__(self, working_width: int, *, nan: bool = False) -> None:
+        self.working_width = working_width
+        self.nan = nan
+        self.patch_calls = 0
+
+    def _onehot(self, ids: np.ndarray) -> np.ndarray:
+        probs = np.zeros((NUM_CLASSES, *ids.shape), np.float32)
+        np.put_along_axis(probs, ids[None].astype(np.intp), 1.0, axis=0)
+        if self.nan:
+            probs[:] = np.nan
+        return probs
+
+    def predict_frame(self, rgb: np.ndarray) -> np.ndarray:
+        ids = colors_to_ids(rgb)
+        probs = probs_from_labels(ids, working_size(rgb.shape[1], rgb.shape[0], self.working_width))
+        if self.nan:
+            probs[:] = np.nan
+        return probs
+
+    def predict_patch(self, rgb_patch: np.ndarray) -> np.ndarray:
+        self.patch_calls += 1
+        return self._onehot(colors_to_ids(rgb_patch))
+
+    def mc_dropout(self, rgb_patch: np.ndarray, n: int, keep_prob: float, seed: int) -> np.ndarray:
+        return np.repeat(self.predict_patch(rgb_patch)[None], n, axis=0)
+
+
+class FakeClock:
+    """A clock that advances by ``step`` seconds at each reading (and can jump)."""
+
+    def __init__(self, step: float = 0.0, start: float = 0.0) -> None:
+        self.t, self.step = start, step
+
+    def __call__(self) -> float:
+        self.t += self.step
+        return self.t
+
+
+def scene_ids(width: int = 256, height: int = 144, *, road_col: int | None = None, seed: int = 0) -> np.ndarray:
+    """A small label map: low vegetation with a vertical road, a building block and a few trees."""
+    rng = np.random.default_rng(seed)
+    ids = np.full((height, width), 5, np.uint8)  # low vegetation
+    rc = road_col if road_col is not None else width // 3
+    ids[:, rc : rc + max(2, width // 40)] = 2  # road
+    bx = int(rng.integers(width // 2, width - width // 6))
+    ids[: height // 3, bx : bx + width // 8] = 1  # building
+    for _ in range(4):
+        y, x = int(rng.integers(height // 3, height - 5)), int(rng.integers(0, width - 5))
+        ids[y : y + 4, x : x + 4] = 4  # tree
+    return ids
+
+
+def scene_image(ids: np.ndarray) -> np.ndarray:
+    """The colour-coded label image that OracleSegmenter reads back."""
+    return ids_to_colors(ids)

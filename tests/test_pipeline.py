@@ -1,0 +1,161 @@
+"""The monitored decision loop: fail-safe default action, time budget, monitor coverage (EL-R03/04/06/07)."""
+
+from __future__ import annotations
+
+import json
+
+import jsonschema
+import numpy as np
+import pytest
+from helpers import FakeClock, OracleSegmenter, scene_ids, scene_image
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from el.config import CoreConfig
+from el.gt_pipeline import decision_schema
+from el.pipeline import EmergencyLanding, PipelineConfig
+from el.uavid import write_image
+
+W, H, WW = 256, 144, 128
+
+
+def make(monitor="lhd", *, segmenter=None, clock=None, budget=10.0, evaluate_all=False, **kw):
+    cfg = PipelineConfig(core=CoreConfig(working_width=WW), monitor=monitor, time_budget_s=budget,
+                         evaluate_all=evaluate_all)
+    seg = segmenter if segmenter is not None else OracleSegmenter(WW, **kw)
+    kwargs = {"clock": clock} if clock is not None else {}
+    return EmergencyLanding(cfg, segmenter=seg, **kwargs)
+
+
+@pytest.mark.requirements("EL-R04")
+def test_lands_on_an_accepted_candidate():
+    d = make().decide(scene_image(scene_ids()))
+    assert d.action == "land" and d.reason == "accepted"
+    chosen = d.candidates[d.selected]
+    assert chosen.monitor is not None and chosen.monitor.accepted
+    assert all(c.monitor is None for c in d.candidates[d.selected + 1 :])  # the walk stopped there
+    jsonschema.validate(json.loads(d.to_json()), decision_schema())
+
+
+@pytest.mark.requirements("EL-R03")
+def test_no_candidate_gives_default_action():
+    ids = np.full((H, W), 2, np.uint8)  # all road
+    d = make().decide(scene_image(ids))
+    assert (d.action, d.reason, d.selected) == ("default", "no_candidate", None)
+    assert d.default_area.y + d.default_area.radius_px == pytest.approx(H)
+
+
+@pytest.mark.requirements("EL-R03", "EL-R04")
+def test_all_rejected_gives_default_action():
+    # The patch segmentation sees road everywhere: the monitor rejects every candidate.
+    seg = OracleSegmenter(WW)
+    road = np.eye(8, dtype=np.float32)[2][:, None, None]
+    seg.predict_patch = lambda rgb: road * np.ones((1, *rgb.shape[:2]), np.float32)
+    d = make(segmenter=seg).decide(scene_image(scene_ids()))
+    assert (d.action, d.reason) == ("default", "all_rejected")
+    assert d.candidates and all(c.monitor is not None and not c.monitor.accepted for c in d.candidates)
+
+
+@pytest.mark.requirements("EL-R06")
+def test_nan_scores_give_default_action():
+    d = make(nan=True).decide(scene_image(scene_ids()))
+    assert d.action == "default" and d.reason.startswith("fault: segmentation")
+
+
+@pytest.mark.requirements("EL-R06")
+def test_monitor_exception_gives_default_action():
+    seg = OracleSegmenter(WW)
+
+    def boom(rgb):
+        raise RuntimeError("monitor crashed")
+
+    seg.predict_patch = boom
+    d = make(segmenter=seg).decide(scene_image(scene_ids()))
+    assert d.action == "default" and "fault: monitoring" in d.reason and "monitor crashed" in d.reason
+
+
+@pytest.mark.requirements("EL-R06")
+def test_corrupt_image_file_gives_default_action(tmp_path):
+    good = tmp_path / "frame.png"
+    write_image(good, scene_image(scene_ids()))
+    bad = tmp_path / "cut.png"
+    bad.write_bytes(good.read_bytes()[: len(good.read_bytes()) // 2])
+    d = make().decide(bad)
+    assert d.action == "default" and d.reason.startswith("fault: read") and "cut.png" in d.reason
+    assert make().decide(tmp_path / "missing.png").reason.startswith("fault: read")
+    assert make().decide(good).action == "land"
+
+
+@pytest.mark.requirements("EL-R06")
+@pytest.mark.parametrize("shape,dtype", [((H, W, 4), np.uint8), ((H, W), np.uint8), ((H, W, 3), np.float32)])
+def test_malformed_arrays_give_default_action(shape, dtype):
+    d = make().decide(np.zeros(shape, dtype))
+    assert d.action == "default" and d.reason.startswith("fault: read")
+
+
+@pytest.mark.requirements("EL-R06")
+def test_missing_weights_give_default_action(tmp_path):
+    el = EmergencyLanding(PipelineConfig(core=CoreConfig(working_width=WW)), weights=tmp_path / "none.pt")
+    d = el.decide(scene_image(scene_ids()))
+    assert d.action == "default" and d.reason.startswith("fault: model") and "none.pt" in d.reason
+
+
+@pytest.mark.requirements("EL-R07")
+def test_budget_already_spent_gives_timeout():
+    clock = FakeClock(step=100.0)  # every reading of the clock costs 100 s
+    d = make(clock=clock, budget=1.0).decide(scene_image(scene_ids()))
+    assert (d.action, d.reason) == ("default", "timeout")
+
+
+@pytest.mark.requirements("EL-R07")
+def test_budget_exceeded_during_monitoring():
+    clock = FakeClock()
+    seg = OracleSegmenter(WW)
+    real = seg.predict_patch
+
+    def slow(rgb):
+        clock.t += 4.0  # each patch costs 4 s on the injected clock
+        return real(rgb)
+
+    seg.predict_patch = slow
+    d = make(segmenter=seg, clock=clock, budget=3.0).decide(scene_image(scene_ids()))
+    assert (d.action, d.reason) == ("default", "timeout")
+    d2 = make(segmenter=seg, clock=clock, budget=30.0).decide(scene_image(scene_ids()))
+    assert d2.action == "land"
+
+
+def test_no_monitor_lands_on_top_candidate():
+    d = make(monitor="none").decide(scene_image(scene_ids()))
+    assert d.action == "land" and d.selected == 0 and d.candidates[0].monitor is None
+
+
+def test_evaluation_mode_judges_every_candidate_and_keeps_the_walk():
+    img = scene_image(scene_ids())
+    walk = make().decide(img)
+    ev = make(evaluate_all=True).decide(img)
+    assert ev.selected == walk.selected and ev.action == walk.action
+    assert all(c.monitor is not None for c in ev.candidates)
+    assert 0 <= ev.timings["overhead_s"] <= ev.timings["monitoring_s"]
+
+
+@pytest.mark.requirements("EL-R04", "EL-R11")
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 10_000), road=st.integers(10, 200), monitor=st.sampled_from(
+    ["lhd", "lhd+ch:tau=0.25", "lhd+mcd:n=10,rho=0.9", "lhd+ch+mcd:tau=0.125,n=10,rho=0.5"]))
+def test_every_landing_is_on_a_monitor_accepted_candidate(seed, road, monitor):
+    img = scene_image(scene_ids(road_col=road, seed=seed))
+    d = make(monitor).decide(img)
+    if d.action == "land":
+        c = d.candidates[d.selected]
+        assert c.monitor is not None and c.monitor.accepted
+        assert all(p.monitor is not None and not p.monitor.accepted for p in d.candidates[: d.selected])
+    else:
+        assert d.selected is None
+    again = make(monitor).decide(img)
+    strip = lambda dec: [(c.x, c.y, c.radius_px, c.hazard, c.monitor and c.monitor.accepted) for c in dec.candidates]  # noqa: E731
+    assert (again.action, again.reason, again.selected, strip(again)) == (d.action, d.reason, d.selected, strip(d))
+
+
+def test_bad_monitor_spec_fails_at_configuration():
+    with pytest.raises(ValueError, match="lhd"):
+        PipelineConfig(monitor="lhd+foo")
