@@ -6,7 +6,13 @@ import numpy as np
 
 from el.camera import working_size
 from el.core import probs_from_labels
-from el.labels import NUM_CLASSES, colors_to_ids, ids_to_colors
+from el.labels import NUM_CLASSES, PALETTE, ids_to_colors
+
+
+def nearest_class(rgb: np.ndarray) -> np.ndarray:
+    """Class ids of the nearest label colour per pixel (exact on clean label images)."""
+    d = ((rgb[..., None, :].astype(np.int32) - PALETTE.astype(np.int32)) ** 2).sum(-1)
+    return d.argmin(-1).astype(np.uint8)
 
 
 class OracleSegmenter:
@@ -28,7 +34,7 @@ class OracleSegmenter:
         return probs
 
     def predict_frame(self, rgb: np.ndarray) -> np.ndarray:
-        ids = colors_to_ids(rgb)
+        ids = nearest_class(rgb)
         probs = probs_from_labels(ids, working_size(rgb.shape[1], rgb.shape[0], self.working_width))
         if self.nan:
             probs[:] = np.nan
@@ -36,10 +42,17 @@ class OracleSegmenter:
 
     def predict_patch(self, rgb_patch: np.ndarray) -> np.ndarray:
         self.patch_calls += 1
-        return self._onehot(colors_to_ids(rgb_patch))
+        return self._onehot(nearest_class(rgb_patch))
 
     def mc_dropout(self, rgb_patch: np.ndarray, n: int, keep_prob: float, seed: int) -> np.ndarray:
-        return np.repeat(self.predict_patch(rgb_patch)[None], n, axis=0)
+        """Noisy copies of the one-hot, drawn sample by sample (prefix-consistent for a seed)."""
+        base = self.predict_patch(rgb_patch)
+        rng = np.random.default_rng(seed)
+        out = np.empty((n, *base.shape), np.float32)
+        for i in range(n):
+            noisy = base + (1.0 - keep_prob) * rng.random(base.shape, dtype=np.float32)
+            out[i] = noisy / noisy.sum(axis=0, keepdims=True)
+        return out
 
 
 class FakeClock:

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from scipy.spatial import cKDTree
 
 from el import candidates as cand
 from el.camera import CameraGeometry, working_size
@@ -116,6 +117,38 @@ def assert_candidates_safe_at_full_resolution(ids: np.ndarray, candidates: list[
             assert dmin >= c.radius_px - 1e-6, (c, dmin)
 
 
+def assert_valid_pixels_safe_at_full_resolution(ids: np.ndarray, cfg: CoreConfig) -> int:
+    """EL-R01 for every potential candidate: each valid working pixel, with its disc mapped to full
+    resolution, holds no point of a forbidden full-resolution pixel. Returns the number checked."""
+    H, W = ids.shape
+    w, h = working_size(W, H, cfg.working_width)
+    probs = probs_from_labels(ids, (w, h))
+    min_row, _ = reachable_working_row((W, H), (w, h), cfg)
+    radii = cand.row_radii(cfg.geometry(w, h), cfg.safety, cfg.mode)
+    vp = cand.valid_pixels(cand.forbidden_from_probs(probs), radii, mode=cfg.mode, min_row=min_row)
+    rows, cols = np.nonzero(vp.valid)
+    if rows.size == 0:
+        return 0
+    sx, sy = W / w, H / h
+    xs, ys = (cols + 0.5) * sx, (rows + 0.5) * sy
+    rs = radii[rows] * min(sx, sy)
+    assert (xs - rs >= -1e-9).all() and (xs + rs <= W + 1e-9).all()
+    assert (ys - rs >= -1e-9).all() and (ys + rs <= H + 1e-9).all()
+    assert (np.floor(ys) >= CameraGeometry(width=W, height=H).first_reachable_row).all()
+    fy, fx = np.nonzero(forbidden_mask(ids))
+    if fy.size == 0:
+        return rows.size
+    tree = cKDTree(np.stack([fx + 0.5, fy + 0.5], axis=1))
+    near = tree.query_ball_point(np.stack([xs, ys], axis=1), rs + math.sqrt(2) / 2 + 1e-6)
+    for k, idx in enumerate(near):
+        if idx:
+            idx = np.asarray(idx)
+            dx = np.maximum(np.abs(fx[idx] + 0.5 - xs[k]) - 0.5, 0.0)
+            dy = np.maximum(np.abs(fy[idx] + 0.5 - ys[k]) - 0.5, 0.0)
+            assert float(np.sqrt(dx * dx + dy * dy).min()) >= rs[k] - 1e-6, (rows[k], cols[k])
+    return rows.size
+
+
 def assert_ranked(candidates: list[Candidate], alpha: float = 0.5) -> None:
     """EL-R05: ranks 0..n-1, hazards non-decreasing, every term in [0, 1] and H = alpha H_s + (1-alpha) H_d."""
     assert [c.rank for c in candidates] == list(range(len(candidates)))
@@ -146,6 +179,14 @@ def test_no_candidate_disc_holds_a_forbidden_full_resolution_pixel(case):
         assert decision.action == "land" and decision.selected == 0
     else:
         assert decision.action == "default" and decision.reason == "no_candidate"
+
+
+@pytest.mark.requirements("EL-R01")
+@SETTINGS
+@given(label_maps(), st.sampled_from(["exact", "paper"]))
+def test_every_valid_pixel_is_safe_at_full_resolution(case, mode):
+    ids, ww = case
+    assert_valid_pixels_safe_at_full_resolution(ids, CoreConfig(working_width=ww, mode=mode))
 
 
 @pytest.mark.requirements("EL-R01")
@@ -223,9 +264,11 @@ def test_a_thin_diagonal_road_is_never_inside_a_disc():
     ids = np.full((216, 384), CLASS_IDS["low_vegetation"], dtype=np.uint8)
     cv2.line(ids, (0, 60), (383, 215), CLASS_IDS["road"], 1)
     cv2.line(ids, (383, 50), (100, 215), CLASS_IDS["road"], 2)
-    decision = decide_from_labels(ids, config=CoreConfig(working_width=192))
+    cfg = CoreConfig(working_width=192)
+    decision = decide_from_labels(ids, config=cfg)
     assert decision.candidates
     assert_candidates_safe_at_full_resolution(ids, decision.candidates)
+    assert assert_valid_pixels_safe_at_full_resolution(ids, cfg) > 1000
 
 
 @pytest.mark.requirements("EL-R03")

@@ -1,0 +1,36 @@
+"""``uav-el table``: the results table of a campaign run (CSV + Markdown, optionally beside the paper's)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from assurance.table import compare, compare_markdown, results_table, to_markdown, write_csv
+from el.uavid import atomic_write_bytes
+
+HELP = "print and write the results table of a campaign run (CSV and Markdown, paper's Table I layout)"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("run", help="campaign run folder")
+    p.add_argument("--out", help="folder for results.csv and results.md (default: the run folder)")
+    p.add_argument("--compare", action="store_true",
+                   help="also put the figures beside the published ones (Guerin et al., ICRA 2022)")
+    p.add_argument("--no-intervals", action="store_true", help="print point values only")
+    p.add_argument("--boot", type=int, default=2000, help="bootstrap resamples (default 2000)")
+
+
+def run(args: argparse.Namespace) -> int:
+    df = results_table(args.run, n_boot=args.boot)
+    out = Path(args.out or args.run)
+    write_csv(df, out / "results.csv")
+    md = to_markdown(df, intervals=not args.no_intervals)
+    if args.compare:
+        merged = compare(df)
+        write_csv(merged, out / "comparison.csv")
+        md += "\n### Beside the published results (Guerin et al., ICRA 2022)\n\n" + compare_markdown(merged)
+    atomic_write_bytes(out / "results.md", md.encode())
+    print(md)
+    written = [out / "results.csv", out / "results.md"] + ([out / "comparison.csv"] if args.compare else [])
+    print("written: " + ", ".join(map(str, written)))
+    return 0

@@ -1,0 +1,144 @@
+"""Campaign runner: shards, resume after interruption, recorded faults, shared vs single-configuration runs."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+import torch
+from helpers import OracleSegmenter, scene_ids
+
+from assurance import readouts
+from assurance.campaign import CampaignConfig, plan, run_campaign
+from assurance.cli import main
+from assurance.table import results_table
+from el.config import CoreConfig
+from el.labels import ids_to_colors
+from el.pipeline import EmergencyLanding, PipelineConfig
+from el.segmentation.model import ArchConfig, build_model
+from el.segmentation.weights import save_weights
+from el.uavid import read_image, write_sample
+
+W, H = 512, 288
+MONITORS = ("lhd", "lhd+ch:tau=0.25", "lhd+mcd:n=10,rho=0.9", "lhd+mcd:n=30,rho=0.9")
+TIMING = {"overhead_s", "overhead_s_lo95", "overhead_s_hi95"}
+
+
+@pytest.fixture(scope="module")
+def weights(tmp_path_factory):
+    torch.manual_seed(0)
+    model = build_model(ArchConfig(widths=(8, 8, 8), skip_channels=8, decoder_channels=8))
+    path = tmp_path_factory.mktemp("w") / "tiny.pt"
+    save_weights(model, path)
+    return str(path)
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    root = tmp_path_factory.mktemp("scenes")
+    rng = np.random.default_rng(0)
+    for i in range(3):
+        ids = scene_ids(W, H, seed=i, road_col=60 + 90 * i)
+        img = ids_to_colors(ids).astype(np.int16) + rng.integers(-20, 20, (H, W, 3))
+        write_sample(root, "seq00", f"{i:06d}", np.clip(img, 0, 255).astype(np.uint8), ids)
+    return root
+
+
+ORACLE = OracleSegmenter(256)  # perfect on clean label-coloured scenes, wrong where perturbations recolour them
+
+
+def config(weights, **kw):
+    base = dict(perturbations=("none", "fog"), monitors=MONITORS, weights=weights,
+                core=CoreConfig(n_star=6, working_width=256))
+    base.update(kw)
+    return CampaignConfig(**base)
+
+
+def test_campaign_writes_one_shard_per_task_and_a_table(tmp_path, data, weights):
+    cfg = config(weights)
+    summary = run_campaign(data, tmp_path / "run", cfg, progress=False, segmenter=ORACLE)
+    assert summary["done"] == 6 and summary["faults"] == []
+    df = results_table(tmp_path / "run", n_boot=200)
+    assert len(df) == 2 * len(MONITORS)
+    assert (df["images"] == 3).all()
+    cands = readouts.load_table(tmp_path / "run", "candidates")
+    assert set(cands["monitor"]) == set(MONITORS)
+    # gains add up per scenario, hazards in [0, 1]
+    np.testing.assert_allclose(df["g_star"], df["g_cm"] + df["g_rm"], atol=1e-12)
+    assert cands["true_hazard"].between(0, 1).all() and cands["hazard"].between(0, 1).all()
+
+
+def test_interrupted_run_resumes_to_the_same_table(tmp_path, data, weights):
+    cfg = config(weights)
+    full = tmp_path / "full"
+    run_campaign(data, full, cfg, progress=False, segmenter=ORACLE)
+
+    part = tmp_path / "part"
+    seen = []
+
+    def stop_after_two(res):
+        seen.append(res)
+        if len(seen) == 2:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_campaign(data, part, cfg, progress=False, on_result=stop_after_two, segmenter=ORACLE)
+    shards = [p for p in (part / readouts.SHARDS).iterdir() if not p.name.startswith(".")]
+    assert len(shards) == 2
+    again = run_campaign(data, part, cfg, progress=False, segmenter=ORACLE)
+    assert again["skipped"] == 2 and again["done"] == 4
+    a, b = results_table(full, n_boot=200), results_table(part, n_boot=200)
+    cols = [c for c in a.columns if c not in TIMING]
+    pd.testing.assert_frame_equal(a[cols], b[cols])
+
+
+def test_bad_image_is_a_recorded_fault(tmp_path, data, weights):
+    bad = tmp_path / "bad"
+    import shutil
+
+    shutil.copytree(data, bad)
+    img = bad / "seq00" / "Images" / "000001.png"
+    img.write_bytes(img.read_bytes()[:500])
+    summary = run_campaign(bad, tmp_path / "run", config(weights, perturbations=("none",)), progress=False,
+                           segmenter=ORACLE)
+    assert len(summary["faults"]) == 1 and "000001" in summary["faults"][0]
+    df = results_table(tmp_path / "run", n_boot=100)
+    assert (df["images"] == 2).all() and (df["faults"] == 1).all()
+
+
+def test_other_campaign_in_same_folder_is_refused(tmp_path, data, weights):
+    run_campaign(data, tmp_path / "run", config(weights, perturbations=("none",)), progress=False, segmenter=ORACLE)
+    with pytest.raises(readouts.RunError, match="another campaign"):
+        run_campaign(data, tmp_path / "run", config(weights, perturbations=("fog",)), progress=False,
+                     segmenter=ORACLE)
+
+
+def test_shared_grid_equals_single_configuration_runs(tmp_path, data, weights):
+    """Work sharing changes nothing but timings: verdicts equal the monitored pipeline's, config by config."""
+    cfg = config(weights, perturbations=("none",))
+    seg = ORACLE
+    run_campaign(data, tmp_path / "run", cfg, progress=False, segmenter=seg)
+    cands = readouts.load_table(tmp_path / "run", "candidates")
+    sample = plan(data, cfg)[0].sample
+    rgb = read_image(sample.image_path)
+    for mon in MONITORS:
+        el = EmergencyLanding(PipelineConfig(core=cfg.core, monitor=mon, time_budget_s=None, evaluate_all=True),
+                              segmenter=seg)
+        d = el.decide(rgb)
+        mine = cands[(cands["key"] == sample.key) & (cands["monitor"] == mon)].sort_values("rank")
+        assert len(mine) == len(d.candidates) > 0
+        assert mine["accepted"].tolist() == [c.monitor.accepted for c in d.candidates], mon
+        assert mine["x"].tolist() == [c.x for c in d.candidates]
+
+
+def test_cli_campaign_and_table(tmp_path, data, weights, capsys):
+    run = tmp_path / "run"
+    code = main(["campaign", "--data", str(data), "--out", str(run), "--perturbations", "none", "pixel_trap",
+                 "--monitors", "lhd", "--weights", weights, "--images", "2", "--quiet"])
+    assert code == 0
+    assert main(["table", str(run), "--compare", "--boot", "100"]) == 0
+    out = capsys.readouterr().out
+    assert "pixel_trap" in out and "ours / paper" in out
+    assert (run / "results.csv").is_file() and (run / "results.md").is_file()
+    assert main(["campaign", "--data", str(data), "--out", str(tmp_path / "r2"), "--perturbations", "smoke"]) == 2
+    assert "unknown perturbation" in capsys.readouterr().err
