@@ -51,7 +51,7 @@ def draw_decision(
     canvas = _background(d, image, labels, labels_alpha)
     H, W = canvas.shape[:2]
     s = max(W, H) / 1024.0
-    thick = max(1, int(round(2 * s)))
+    thick = max(2, int(round(2 * s)))
 
     first = CameraGeometry(width=W, height=H).first_reachable_row if W >= 8 and H >= 8 else 0
     if first > 0:

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import cv2
 import numpy as np
@@ -40,6 +41,8 @@ from el.labels import FORBIDDEN_IDS, NUM_CLASSES, SAFE_IDS
 CELL_MARGIN = math.sqrt(2.0) / 2.0 + 1e-4
 # The same for the Chebyshev (square) distance of paper mode.
 SQUARE_MARGIN = 0.5 + 1e-4
+# Distances are capped here (px): far beyond any safety radius or d_max at practical working sizes.
+DIST_CAP = 1024.0
 
 
 # ----------------------------------------------------------------------------------------------
@@ -207,10 +210,9 @@ def valid_pixels(
     border = border_distance(h, w)
     free = np.ascontiguousarray((~forbidden).view(np.uint8))
     if forbidden.any():
-        edt = cv2.distanceTransform(free, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
-        clearance = edt - np.float32(CELL_MARGIN)
+        clearance = _exact_edt(free) - np.float32(CELL_MARGIN)
         if mode == "paper":
-            cheb = cv2.distanceTransform(free, cv2.DIST_C, 3) - np.float32(SQUARE_MARGIN)
+            cheb = np.rint(cv2.distanceTransform(free, cv2.DIST_C, 3)) - np.float32(SQUARE_MARGIN)
             np.maximum(clearance, cheb, out=clearance)  # both are lower bounds of the true distance
     else:
         clearance = np.full((h, w), np.inf, dtype=np.float32)
@@ -223,6 +225,21 @@ def valid_pixels(
         valid = (cheb > r) & (border > r)
     valid[: max(0, min(int(min_row), h))] = False
     return ValidPixels(valid=valid, clearance=clearance, radii=radii, min_row=int(min_row))
+
+
+def _exact_edt(free: np.ndarray) -> np.ndarray:
+    """Euclidean distance (float32) from each non-zero pixel to the nearest zero pixel, capped at
+    DIST_CAP, bit-reproducible.
+
+    OpenCV's precise transform is not bit-reproducible from call to call (1-ulp differences were
+    seen on identical input), and a decision must be. The true distance is the square root of an
+    integer: round the square (exact below the cap in float32) and take the root again.
+    """
+    edt = cv2.distanceTransform(free, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    np.minimum(edt, np.float32(DIST_CAP), out=edt)
+    np.multiply(edt, edt, out=edt)
+    np.rint(edt, out=edt)
+    return np.sqrt(edt, out=edt)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -238,19 +255,24 @@ class Regions:
     n_regions: int
 
 
+@lru_cache(maxsize=16)
 def eps_offsets(eps: float) -> np.ndarray:
-    """(m, 2) integer offsets (dy, dx) with dy^2 + dx^2 <= eps^2, the centre included."""
+    """(m, 2) integer offsets (dy, dx) with dy^2 + dx^2 <= eps^2, the centre included (read-only)."""
     n = int(math.floor(eps))
     yy, xx = np.mgrid[-n : n + 1, -n : n + 1]
     keep = (yy * yy + xx * xx) <= eps * eps
-    return np.stack([yy[keep], xx[keep]], axis=1)
+    out = np.stack([yy[keep], xx[keep]], axis=1)
+    out.flags.writeable = False
+    return out
 
 
+@lru_cache(maxsize=16)
 def _eps_kernel(eps: float) -> np.ndarray:
     n = int(math.floor(eps))
     k = np.zeros((2 * n + 1, 2 * n + 1), dtype=np.uint8)
     off = eps_offsets(eps)
     k[off[:, 0] + n, off[:, 1] + n] = 1
+    k.flags.writeable = False
     return k
 
 
@@ -283,6 +305,9 @@ def regions_fast(valid: np.ndarray, *, eps: float = 3.0, min_samples: int = 5) -
        over the half-plane of eps offsets;
     4. border points (valid, not core, a core point within eps) join one adjacent region (the
        highest label within eps; DBSCAN itself assigns them by visiting order). The rest is noise.
+
+    Regions are numbered 1..n by the raster order of their first core point, whatever the
+    connected-components implementation does, so the result is reproducible.
     """
     valid = np.asarray(valid, dtype=bool)
     if valid.ndim != 2:
@@ -300,6 +325,7 @@ def regions_fast(valid: np.ndarray, *, eps: float = 3.0, min_samples: int = 5) -
     n_lab, lab = cv2.connectedComponents(core.view(np.uint8), connectivity=connectivity, ltype=cv2.CV_32S)
     if n_lab > 2:
         lab, n_lab = _merge_within_eps(lab, n_lab, core, eps, connectivity)
+        lab = _first_appearance_order(lab, lab, n_lab)
     n_regions = n_lab - 1
     if n_regions > 0:
         border = v & ~core
@@ -340,6 +366,22 @@ def _merge_within_eps(lab: np.ndarray, n_lab: int, core: np.ndarray, eps: float,
     return comp.astype(np.int32)[lab], n_comp
 
 
+def _first_appearance_order(lab: np.ndarray, core_lab: np.ndarray, n_lab: int) -> np.ndarray:
+    """Renumber ``lab`` (0 = none, labels < n_lab) as 1..n in the raster order of the first pixel
+    of each label in ``core_lab``; linear time (runs of equal labels, then a small unique)."""
+    flat = core_lab.ravel()
+    nz = flat[flat > 0]
+    if nz.size == 0:
+        return lab
+    starts = np.concatenate([[0], np.flatnonzero(np.diff(nz)) + 1])
+    run_labels = nz[starts]
+    _, first = np.unique(run_labels, return_index=True)
+    order = run_labels[np.sort(first)]
+    mapping = np.zeros(max(n_lab, int(lab.max()) + 1), dtype=np.int32)
+    mapping[order] = np.arange(1, len(order) + 1, dtype=np.int32)
+    return mapping[lab]
+
+
 def regions_dbscan(valid: np.ndarray, *, eps: float = 3.0, min_samples: int = 5) -> Regions:
     """The reference: scikit-learn's DBSCAN on the (row, col) coordinates of the valid pixels."""
     from sklearn.cluster import DBSCAN
@@ -356,7 +398,9 @@ def regions_dbscan(valid: np.ndarray, *, eps: float = 3.0, min_samples: int = 5)
     labels[coords[:, 0], coords[:, 1]] = lab
     ci = model.core_sample_indices_
     core[coords[ci, 0], coords[ci, 1]] = True
-    return Regions(labels, core, int(lab.max()))
+    n = int(lab.max())
+    labels = _first_appearance_order(labels, np.where(core, labels, 0), n + 1)
+    return Regions(labels, core, n)
 
 
 def same_partition(a: np.ndarray, b: np.ndarray) -> bool:
@@ -390,23 +434,27 @@ def kmeans(points: np.ndarray, k: int, *, seed: int = 0, n_init: int = 1, max_it
     if not 1 <= k <= len(pts):
         raise ValueError(f"k must lie in [1, {len(pts)}], got {k}")
     rng = np.random.default_rng(seed)
-    cols = [np.ascontiguousarray(pts[:, j]) for j in range(pts.shape[1])]
+    d = pts.shape[1]
+    cols = [np.ascontiguousarray(pts[:, j]) for j in range(d)]
     abs_tol = tol * float(np.mean(np.var(pts, axis=0)))
     best, best_inertia = None, np.inf
     for _ in range(n_init):
         centres = _kmeans_pp(pts, k, rng)
         assign = None
         for _ in range(max_iter):
-            d2 = _sq_dist(cols, centres)
-            new_assign = d2.argmin(axis=1)
+            new_assign = _sq_dist(cols, centres).argmin(axis=1)
             if assign is not None and np.array_equal(new_assign, assign):
                 break
             assign = new_assign
-            counts = np.bincount(assign, minlength=k).astype(np.float64)
-            new = np.stack([np.bincount(assign, weights=c, minlength=k) for c in cols], axis=1)
+            counts = np.bincount(assign, minlength=k)
+            new = np.empty_like(centres)
+            for j in range(d):
+                new[:, j] = np.bincount(assign, weights=cols[j], minlength=k)
             empty = counts == 0
-            new[~empty] /= counts[~empty, None]
-            new[empty] = centres[empty]
+            if empty.any():
+                new[empty] = centres[empty]
+                counts = np.where(empty, 1, counts)
+            new /= counts[:, None]
             shift = float(((new - centres) ** 2).sum())
             centres = new
             if shift <= abs_tol:
@@ -470,7 +518,7 @@ def representatives(
     regions: Regions,
     *,
     n_star: int = 20,
-    max_points: int = 2000,
+    max_points: int = 500,
     seed: int = 0,
     n_init: int = 1,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

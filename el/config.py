@@ -62,7 +62,7 @@ class CoreConfig:
     dbscan_eps: float = 3.0
     dbscan_min_samples: int = 5
     region_method: str = "fast"
-    kmeans_max_points: int = 2000
+    kmeans_max_points: int = 500
     kmeans_seed: int = 0
     kmeans_n_init: int = 1
     overlap_max: float = 0.25
@@ -87,7 +87,7 @@ class CoreConfig:
         _float_in("dbscan_eps", self.dbscan_eps, 1.0, 50.0)
         _float_in("overlap_max", self.overlap_max, 0.0, 1.0)
         _float_in("alpha", self.alpha, 0.0, 1.0)
-        _float_in("d_max_factor", self.d_max_factor, 1.0 + 1e-9, 100.0)
+        _float_in("d_max_factor", self.d_max_factor, 1.0 + 1e-9, 10.0)
         for name, cls in (("safety", SafetyParams), ("pose", Pose), ("intrinsics", Intrinsics)):
             if not isinstance(getattr(self, name), cls):
                 raise ValueError(f"{name} must be a {cls.__name__}, got {type(getattr(self, name)).__name__}")

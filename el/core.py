@@ -75,15 +75,18 @@ def check_probs(probs: np.ndarray, input_size: tuple[int, int], working_width: i
                          f"(expected {working_size(W, H, w)[0]}x{working_size(W, H, w)[1]})")
     if h < 8 or w < 8:
         raise ValueError(f"working map must be at least 8x8, got {w}x{h}")
-    lo, hi = float(probs.min()), float(probs.max())
-    if not (math.isfinite(lo) and math.isfinite(hi)):
-        raise ValueError("class probabilities contain NaN or infinite values")
-    if lo < -PROB_TOLERANCE or hi > 1 + PROB_TOLERANCE:
-        raise ValueError(f"class probabilities must lie in [0, 1], got [{lo:.4g}, {hi:.4g}] (logits?)")
+    # Two passes: the minimum and the per-pixel sum. NaN and inf propagate into both; with every
+    # value >= 0 and every sum ~1, every value is <= 1 too.
+    lo = float(probs.min())
     total = probs.sum(axis=0, dtype=np.float32)
-    worst = float(np.abs(total - 1).max())
+    lo_sum, hi_sum = float(total.min()), float(total.max())
+    if not (math.isfinite(lo) and math.isfinite(lo_sum) and math.isfinite(hi_sum)):
+        raise ValueError("class probabilities contain NaN or infinite values")
+    if lo < -PROB_TOLERANCE:
+        raise ValueError(f"class probabilities must lie in [0, 1], got a value of {lo:.4g} (logits?)")
+    worst = max(abs(lo_sum - 1), abs(hi_sum - 1))
     if worst > PROB_TOLERANCE * NUM_CLASSES:
-        raise ValueError(f"class probabilities must sum to 1 per pixel, off by up to {worst:.4g}")
+        raise ValueError(f"class probabilities must sum to 1 per pixel, off by up to {worst:.4g} (logits?)")
 
 
 def _check_size(input_size: tuple[int, int]) -> tuple[int, int]:

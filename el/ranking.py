@@ -83,7 +83,8 @@ def distance_hazard(clearance: np.ndarray, radii: np.ndarray, d_max_factor: floa
     d_max = d_max_factor * r
     with np.errstate(divide="ignore", invalid="ignore"):
         h = np.where(d < d_max, (d - d_max) / (r - d_max), 0.0)
-    return np.clip(np.nan_to_num(h, nan=1.0), 0.0, 1.0)
+    h = np.where(np.isnan(h), 1.0, h)  # a degenerate radius counts as the worst case
+    return np.clip(h, 0.0, 1.0)
 
 
 def combined_hazard(h_s: np.ndarray, h_d: np.ndarray, alpha: float = 0.5) -> np.ndarray:

@@ -3,7 +3,12 @@
 Two pipelines (DESIGN section 5):
 - ground truth: ``uav-el land --labels LABELS.png [--image IMAGE.png]`` runs the CM on the label
   map (a perfect segmentation), without a monitor; the image is only for drawing;
-- model: ``uav-el land IMAGE.png [--monitor SPEC]`` segments the image first (not available yet).
+- model: ``uav-el land IMAGE.png [--monitor SPEC]`` segments the image with the shipped CNN (or
+  ``--weights``), ranks the candidates and walks them with the runtime monitor (el.pipeline).
+
+Exit codes: 0 a decision was made (land or default action); 2 bad input or options (one line naming
+the file and the problem); 3 the flight path hit a fault (e.g. missing weights) and took the
+default action, which is still written and drawn.
 """
 
 from __future__ import annotations
@@ -15,9 +20,10 @@ from assurance.cli import CommandError
 from el.camera import CAMERAS, Pose
 from el.config import MODES, CoreConfig, camera_intrinsics
 from el.decision import Decision
+from el.pipeline import DEFAULT_TIME_BUDGET_S
 from el.uavid import atomic_write_bytes, read_image, write_image
 
-HELP = "Decide where to land for one frame (ground-truth labels now; the model pipeline later)."
+HELP = "decide where to land for one frame (model pipeline, or the ground-truth pipeline with --labels)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -40,7 +46,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--working-width", type=int, default=CoreConfig().working_width, metavar="PX",
                         help="working resolution width (default: %(default)s)")
-    # The lead adds the model pipeline here: --monitor SPEC (runtime monitor), --weights, ...
+    parser.add_argument("--monitor", default="lhd", metavar="SPEC",
+                        help="runtime monitor: none, lhd, 'lhd+ch:tau=0.25', 'lhd+mcd:n=10,rho=0.9', "
+                             "'lhd+ch+mcd:tau=0.125,n=30,rho=0.5' (default: %(default)s; model pipeline)")
+    parser.add_argument("--weights", type=Path, help="segmentation weights (default: the shipped model)")
+    parser.add_argument("--budget", type=float, default=DEFAULT_TIME_BUDGET_S, metavar="S",
+                        help="time budget in seconds; past it, the default action (default: %(default)s)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of MC dropout (default: %(default)s)")
+    parser.add_argument("--threads", type=int, help="CPU threads for the CNN (default: torch's choice)")
+    parser.add_argument("--all", action="store_true", dest="evaluate_all",
+                        help="evaluation mode: run the monitor on every candidate (the decision is unchanged)")
 
 
 def config_from_args(args: argparse.Namespace) -> CoreConfig:
@@ -59,8 +74,7 @@ def run(args: argparse.Namespace) -> int:
     if args.labels is None:
         if args.image_arg is None:
             raise CommandError("give an IMAGE (model pipeline) or --labels LABELS.png (ground truth)")
-        # --- model pipeline: the lead plugs `decide(image, model, monitor, ...)` in here. ---
-        raise CommandError("model pipeline not available yet (use --labels LABELS.png)")
+        return run_model(args)
     image_path = args.image
     if args.image_arg is not None:
         if image_path is not None and Path(args.image_arg) != image_path:
@@ -71,22 +85,47 @@ def run(args: argparse.Namespace) -> int:
     decision, ids = decide_from_label_file(args.labels, image_path=image_path, config=config)
     image = read_image(image_path) if image_path is not None else None  # a bad image is an error too
 
+    _write_outputs(args, decision, image=image, labels=ids)
+    print(summary(decision))
+    return 0
+
+
+def run_model(args: argparse.Namespace) -> int:
+    """The model pipeline: segmentation -> candidates -> monitored walk (el.pipeline)."""
+    from el.pipeline import EmergencyLanding, PipelineConfig
+    from el.segmentation import Segmenter
+
+    if args.image is not None:
+        raise CommandError("--image is for the ground-truth pipeline; give the image as IMAGE")
+    image_path = Path(args.image_arg)
+    read_image(image_path)  # bad input is a usage error here (in flight it is the default action)
+    config = PipelineConfig(core=config_from_args(args), monitor=args.monitor, time_budget_s=args.budget,
+                            seed=args.seed, evaluate_all=args.evaluate_all)
+    segmenter = None
+    if args.threads is not None or args.weights is not None:
+        try:
+            segmenter = Segmenter.load(args.weights, threads=args.threads)
+        except ValueError as exc:  # WeightsError: a clear one-line error at the command line
+            raise CommandError(str(exc)) from None
+    decision = EmergencyLanding(config, segmenter=segmenter).decide(image_path)
+    _write_outputs(args, decision, image=read_image(image_path) if args.overlay else None, labels=None)
+    print(summary(decision))
+    return 3 if decision.reason.startswith("fault") else 0
+
+
+def _write_outputs(args: argparse.Namespace, decision: Decision, *, image, labels) -> None:
     try:
         if args.json is not None:
             atomic_write_bytes(args.json, (decision.to_json() + "\n").encode("utf-8"))
+            print(f"decision written to {args.json}")
         if args.overlay is not None:
             from assurance.overlay import draw_decision
 
-            write_image(args.overlay, draw_decision(decision, image=image, labels=ids))
+            write_image(args.overlay, draw_decision(decision, image=image, labels=labels))
+            print(f"overlay written to {args.overlay}")
     except OSError as exc:
         where = exc.filename or args.json or args.overlay
         raise CommandError(f"{where}: cannot write: {exc.strerror or exc}") from None
-    print(summary(decision))
-    if args.json is not None:
-        print(f"decision written to {args.json}")
-    if args.overlay is not None:
-        print(f"overlay written to {args.overlay}")
-    return 0
 
 
 def summary(decision: Decision) -> str:

@@ -37,7 +37,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, type=Path,
                         help="weights file to write, e.g. el/segmentation/weights/model.pt (card: .json beside it)")
     length = parser.add_mutually_exclusive_group()
-    length.add_argument("--steps", type=int, help="optimisation steps (default 1200)")
+    length.add_argument("--steps", type=int, help="optimisation steps (default 1500)")
     length.add_argument("--epochs", type=int, help="passes over the training images (ceil(images / batch) steps each)")
     parser.add_argument("--seed", type=int, default=0, help="seed of everything random (default 0)")
     parser.add_argument("--resume", action="store_true", help="continue from <out>.ckpt")
@@ -70,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.threads is not None and args.threads < 1:
         raise CommandError(f"--threads must be >= 1, got {args.threads}")
-    steps = args.steps if args.steps is not None else 1200
+    steps = args.steps if args.steps is not None else 1500
     if args.epochs is not None:
         images = sum(1 for _ in iter_samples(args.data))
         steps = steps_for_epochs(images, args.epochs, args.batch)

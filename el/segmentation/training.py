@@ -48,7 +48,7 @@ Log = Callable[[str], None]
 class TrainConfig:
     """Everything that shapes a training run (recorded in the checkpoint and the model card)."""
 
-    steps: int = 1200
+    steps: int = 1500
     batch: int = 4  # working-resolution crops per step
     crop: int = 256  # their side (px)
     hd_pixels: int = 4 * 256 * 256  # full-resolution crop pixels per step

@@ -40,6 +40,11 @@ def ellipse(cx: float, cy: float, rx: float, ry: float, angle: float = 0.0, n: i
 def clip_to_box(poly: np.ndarray, xmin: float, xmax: float, ymin: float, ymax: float) -> np.ndarray:
     """Sutherland-Hodgman clip of a polygon to an axis-aligned box; may return an empty (0, 2) array."""
     out = np.asarray(poly, dtype=np.float64)
+    lo, hi = out.min(axis=0), out.max(axis=0)
+    if lo[0] >= xmin and hi[0] <= xmax and lo[1] >= ymin and hi[1] <= ymax:
+        return out
+    if hi[0] < xmin or lo[0] > xmax or hi[1] < ymin or lo[1] > ymax:
+        return np.zeros((0, 2))
     for axis, bound, keep_greater in ((0, xmin, True), (0, xmax, False), (1, ymin, True), (1, ymax, False)):
         if len(out) == 0:
             break

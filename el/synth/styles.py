@@ -193,10 +193,10 @@ def choose_style(rng: np.random.Generator, split: str | None) -> Style:
 
 def jitter_rgb(rng: np.random.Generator, rgb: RGB, brightness: float = 0.12, hue: float = 0.03) -> RGB:
     """A colour near ``rgb``: random brightness scale and a small per-channel shift."""
-    scale = 1.0 + rng.uniform(-brightness, brightness)
-    shift = rng.uniform(-hue, hue, 3)
-    out = np.clip(np.asarray(rgb) * scale + shift, 0.02, 0.98)
-    return (float(out[0]), float(out[1]), float(out[2]))
+    r = rng.random(4)
+    scale = 1.0 + brightness * (2 * r[0] - 1)
+    return tuple(min(0.98, max(0.02, c * scale + hue * (2 * x - 1)))  # type: ignore[return-value]
+                 for c, x in zip(rgb, r[1:], strict=True))
 
 
 def pick(rng: np.random.Generator, choices: tuple[RGB, ...], brightness: float = 0.12, hue: float = 0.03) -> RGB:
