@@ -16,11 +16,14 @@ from assurance import __version__
 
 # Sub-command name -> module under assurance.commands. Order is the order of `uav-el --help`.
 COMMANDS: dict[str, str] = {
+    "synth": "synth",
+    "preview": "preview",
     "land": "land",
     "train": "train",
     "model-card": "model_card",
     "campaign": "campaign",
     "table": "table",
+    "evidence": "evidence",
 }
 
 

@@ -16,7 +16,7 @@ from el.synth.generate import (
     scene_seed,
     write_dataset,
 )
-from el.synth.render import Rendered, render
+from el.synth.renderer import Rendered, render
 from el.synth.styles import HELD_OUT_STYLES, STYLES
 from el.synth.world import World, pixel_clearance_m
 

@@ -20,6 +20,7 @@ from el.synth.world import Look
 
 CLUTTER = CLASS_IDS["clutter"]
 LOW_VEG = CLASS_IDS["low_vegetation"]
+ROAD = CLASS_IDS["road"]
 
 Filler = Callable[[Builder, float, float, float, float], None]
 
@@ -186,10 +187,66 @@ def _row_of_buildings(b: Builder, a0: float, a1: float, b0: float, b1: float, *,
         s += ln
 
 
+def _paving_bands(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
+    """Contrasting paving: a border band and sometimes a grid of bands across the square (clutter)."""
+    rng = b.rng
+    look = _paved_look(b)
+    bw = float(rng.uniform(1.0, 2.5))
+    bands = [b.rect(a0, a1, b0, b0 + bw), b.rect(a0, a1, b1 - bw, b1),
+             b.rect(a0, a0 + bw, b0, b1), b.rect(a1 - bw, a1, b0, b1)]
+    if rng.random() < 0.5:
+        step, w = float(rng.uniform(7, 16)), float(rng.uniform(0.5, 1.2))
+        bands += [b.rect(a, a + w, b0, b1) for a in np.arange(a0 + step, a1 - step / 2, step)]
+        bands += [b.rect(a0, a1, c, c + w) for c in np.arange(b0 + step, b1 - step / 2, step)]
+    b.world.add_region(bands, CLUTTER, look, L_DETAIL)
+
+
+def _tree_rows(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
+    """One or two straight rows of evenly spaced trees (squares and forecourts)."""
+    rng = b.rng
+    spacing = float(rng.uniform(5.5, 9.0))
+    radius = float(rng.uniform(*b.style.tree_size))
+    for _ in range(int(rng.integers(1, 3))):
+        if rng.random() < 0.5:
+            c = float(rng.uniform(b0 + 3, b1 - 3))
+            for a in np.arange(a0 + spacing / 2, a1 - 1, spacing):
+                b.tree_at_local(float(a), c, radius * float(rng.uniform(0.85, 1.15)))
+        else:
+            c = float(rng.uniform(a0 + 3, a1 - 3))
+            for bb in np.arange(b0 + spacing / 2, b1 - 1, spacing):
+                b.tree_at_local(c, float(bb), radius * float(rng.uniform(0.85, 1.15)))
+
+
+def _service_road(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
+    """A narrow asphalt lane across the block (road: a thin forbidden strip, often under trees)."""
+    rng, pal = b.rng, b.palette
+    width = float(rng.uniform(3.0, 4.5))
+    look = Look(str(rng.choice(["asphalt", "asphalt_worn"])), pick(rng, pal.asphalt + pal.lot_asphalt, 0.08, 0.015))
+    if rng.random() < 0.5:
+        c = float(rng.uniform(b0 + width, b1 - width))
+        poly = b.rect(a0, a1, c - width / 2, c + width / 2)
+        trees = [(float(a), c + (width / 2 + 1.5) * float(rng.choice([-1, 1])))
+                 for a in np.arange(a0 + 4, a1 - 2, float(rng.uniform(8, 14)))]
+    else:
+        c = float(rng.uniform(a0 + width, a1 - width))
+        poly = b.rect(c - width / 2, c + width / 2, b0, b1)
+        trees = [(c + (width / 2 + 1.5) * float(rng.choice([-1, 1])), float(bb))
+                 for bb in np.arange(b0 + 4, b1 - 2, float(rng.uniform(8, 14)))]
+    b.world.add_region(poly, ROAD, look, L_DETAIL2)
+    loc = (poly - b.origin) @ np.stack([b.ea, b.eb], axis=1)
+    lo, hi = loc.min(axis=0), loc.max(axis=0)
+    b.occupy_local(float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1]))
+    for a, bb in trees:
+        if rng.random() < 0.6:
+            b.tree_at_local(a, bb)
+
+
 def towers(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
     """One to three large buildings on a paved plaza with planters, trees, furniture and people."""
     rng, st = b.rng, b.style
     _ground(b, a0, a1, b0, b1, CLUTTER, _paved_look(b))
+    if rng.random() < 0.6:
+        _paving_bands(b, a0, a1, b0, b1)
     n = int(rng.integers(1, 4))
     for _ in range(n * 3):
         if n == 0:
@@ -207,6 +264,8 @@ def towers(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
         props.add_building(b, x, y, w, l, b.phi, h)
         n -= 1
     _planters(b, a0, a1, b0, b1, int(rng.integers(2, 8)))
+    if rng.random() < 0.4:
+        _tree_rows(b, a0, a1, b0, b1)
     _scatter_clutter(b, a0, a1, b0, b1, int(rng.integers(2, 8)), ["bench", "bin", "bollard", "kiosk", "umbrella"])
     b.people_in_local(a0, a1, b0, b1, st.people_per_100m2)
     if rng.random() < 0.4:
@@ -288,12 +347,13 @@ def _house_lot(b: Builder, s0: float, s1: float, t0: float, t1: float, facing: i
         bw, bl, ang = hd, hw, ang + math.pi / 2
     props.add_building(b, x, y, bw, bl, ang, h, pitched=pitched, equipment=rng.random() < 0.3)
     # hedges on the lot sides, trees and extras in the back
-    if rng.random() < 0.5:
+    if rng.random() < 0.2:
+        side_len = min(depth - 2, setback + hd + float(rng.uniform(0, 8)))
         for s_edge in (s0 + 0.5, s1 - 0.5):
-            ca, cb = loc(s_edge, (t0 + t1) / 2)
+            ca, cb = loc(s_edge, front + facing * side_len / 2)
             x, y = b.to_world(ca, cb)
-            props.add_hedge(b, x, y, depth - 2, ang + math.pi / 2 if bw == hw else ang)
-    if rng.random() < 0.4:
+            props.add_hedge(b, x, y, side_len, (b.phi + math.pi / 2) if along_a else b.phi)
+    if rng.random() < 0.3:
         ca, cb = loc((s0 + s1) / 2, front + facing * 0.6)
         x, y = b.to_world(ca, cb)
         props.add_hedge(b, x, y, s1 - s0 - 4, b.phi if along_a else b.phi + math.pi / 2)
@@ -347,6 +407,8 @@ def park(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
             c = float(rng.uniform(a0 + 5, a1 - 5))
             paths.append(b.rect(c - width / 2, c + width / 2, b0, b1))
     w.add_region(paths, CLUTTER, path_look, L_DETAIL2)
+    if rng.random() < 0.3 and min(a1 - a0, b1 - b0) > 25:
+        _service_road(b, a0, a1, b0, b1)
     if rng.random() < 0.35:
         ca, cb = float(rng.uniform(a0 + 12, a1 - 12)), float(rng.uniform(b0 + 10, b1 - 10))
         if b.free_local(ca, cb, 6):
@@ -369,14 +431,18 @@ def lawn(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
     """An open lawn with scattered trees, a path, sometimes a small building."""
     rng, st, pal = b.rng, b.style, b.palette
     _ground(b, a0, a1, b0, b1, LOW_VEG, _lawn_look(b))
-    if rng.random() < 0.5 and b1 - b0 > 10:
+    if rng.random() < 0.3 and min(a1 - a0, b1 - b0) > 25:
+        _service_road(b, a0, a1, b0, b1)
+    elif rng.random() < 0.5 and b1 - b0 > 10:
         c = float(rng.uniform(b0 + 3, b1 - 3))
         _ground(b, a0, a1, c - 1.5, c + 1.5, CLUTTER, _paved_look(b), L_DETAIL2)
     if rng.random() < 0.3 and min(a1 - a0, b1 - b0) > 25:
         ca, cb = (a0 + a1) / 2, (b0 + b1) / 2
-        x, y = b.to_world(ca, cb)
-        props.add_building(b, x, y, float(rng.uniform(8, 16)), float(rng.uniform(8, 14)), b.phi,
-                           float(rng.uniform(4, 9)), pitched=rng.random() < st.pitched_prob)
+        bw, bl = float(rng.uniform(8, 16)), float(rng.uniform(8, 14))
+        if not b.solid[b._cells(ca - bw / 2 - 1, ca + bw / 2 + 1, cb - bl / 2 - 1, cb + bl / 2 + 1)].any():
+            x, y = b.to_world(ca, cb)
+            props.add_building(b, x, y, bw, bl, b.phi, float(rng.uniform(4, 9)),
+                               pitched=rng.random() < st.pitched_prob)
     if rng.random() < 0.4:
         _blob_region(b, float(rng.uniform(a0, a1)), float(rng.uniform(b0, b1)), float(rng.uniform(3, 10)),
                      float(rng.uniform(2, 6)), CLUTTER, Look("soil", pick(rng, pal.soil, 0.1)))
@@ -389,6 +455,10 @@ def plaza(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
     """A paved square: fountain, planters with trees, umbrellas, kiosks, benches and crowds."""
     rng, st, pal = b.rng, b.style, b.palette
     _ground(b, a0, a1, b0, b1, CLUTTER, _paved_look(b))
+    if rng.random() < 0.7:
+        _paving_bands(b, a0, a1, b0, b1)
+    if rng.random() < 0.5:
+        _tree_rows(b, a0, a1, b0, b1)
     if rng.random() < 0.5:
         inner = _paved_look(b)
         m = float(rng.uniform(3, 8))

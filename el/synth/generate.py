@@ -15,16 +15,18 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import cv2
 import numpy as np
 
 from el.camera import CameraGeometry, Intrinsics, Pose
-from el.labels import CLASS_NAMES, NUM_CLASSES
+from el.labels import CLASS_NAMES, NUM_CLASSES, PALETTE
 from el.synth.layout import Builder, build_city
-from el.synth.render import render
+from el.synth.rand import Rand
+from el.synth.renderer import render
 from el.synth.styles import ALL_STYLES, HELD_OUT_STYLES, LIGHTINGS, Style, choose_style, get_style
 from el.synth.view import coverage_domain, visible_ground
 from el.synth.world import Sun, World
-from el.uavid import atomic_write_bytes, sample_paths, write_image, write_labels
+from el.uavid import atomic_write_bytes, sample_paths, write_image
 
 GENERATOR_VERSION = "1.0"
 SPLIT_BASE: dict[str, int] = {"train": 0, "val": 1_000_000, "test": 2_000_000}
@@ -81,7 +83,7 @@ def generate_world(seed: int, *, style: str | Style | None = None, split: str | 
     world.grade = _grade(rng, lighting)
     domain = coverage_domain(geometry)
     world.domain = domain
-    build_city(Builder(world, rng, st, domain))
+    build_city(Builder(world, Rand(int(rng.integers(2**62))), st, domain))
     return world
 
 
@@ -153,15 +155,27 @@ def scene_complete(root: str | Path, index: int) -> bool:
 
 
 def write_scene(root: str | Path, index: int, seed: int, split: str, size: tuple[int, int],
-                compression: int = 2) -> str:
+                compression: int = 1) -> str:
     """Generate scene ``seed`` and write it as item ``index`` (image, labels, then meta); returns its key."""
     seq, frame = frame_location(index)
     img_path, lab_path, meta_path = sample_paths(root, seq, frame)
     scene = generate_scene(seed, size=size, split=split)
     write_image(img_path, scene.image, compression=compression)
-    write_labels(lab_path, scene.labels)
+    atomic_write_bytes(lab_path, encode_labels(scene.labels))
     atomic_write_bytes(meta_path, (json.dumps(scene.meta, separators=(",", ":")) + "\n").encode())
     return f"{seq}/{frame}"
+
+
+def encode_labels(ids: np.ndarray) -> bytes:
+    """Class ids (H, W) as a colour-coded UAVid label PNG (RGB), run-length encoded: fast and small."""
+    lut = np.zeros((256, 3), np.uint8)
+    lut[: len(PALETTE)] = PALETTE
+    bgr = cv2.merge([cv2.LUT(ids, lut[:, c].copy()) for c in (2, 1, 0)])
+    ok, buf = cv2.imencode(".png", bgr, [cv2.IMWRITE_PNG_COMPRESSION, 1,
+                                         cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_RLE])
+    if not ok:
+        raise RuntimeError("could not encode the label PNG")
+    return buf.tobytes()
 
 
 def _write_job(args: tuple[str, int, int, str, tuple[int, int]]) -> str:

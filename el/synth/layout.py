@@ -15,7 +15,8 @@ import numpy as np
 
 from el.labels import CLASS_IDS
 from el.synth import props
-from el.synth.geom import PolygonSet, frame_rect
+from el.synth.geom import PolygonSet, ellipse, frame_rect
+from el.synth.rand import Rand
 from el.synth.styles import Style, pick
 from el.synth.world import Look, World
 
@@ -83,7 +84,7 @@ class Road:
 class Builder:
     """Generation state: the world being built, the RNG, the style, the local frame and occupancy."""
 
-    def __init__(self, world: World, rng: np.random.Generator, style: Style, domain: np.ndarray) -> None:
+    def __init__(self, world: World, rng: Rand, style: Style, domain: np.ndarray) -> None:
         self.world, self.rng, self.style, self.palette = world, rng, style, style.palette
         self.domain = domain
         self._domain_set = PolygonSet([domain])
@@ -286,7 +287,7 @@ def _pieces(s0: float, s1: float, zones: list[tuple[float, float]]) -> list[tupl
 
 def _street(b: Builder, road: Road, s0: float, s1: float, zones: list[tuple[float, float]]) -> None:
     """Sidewalks, curbs, verges, carriageway, markings, cars, trees, furniture and people of a street."""
-    rng, pal, st = b.rng, b.palette, b.style
+    rng, pal = b.rng, b.palette
     w = b.world
     sw_look = Look(str(rng.choice(["slabs", "pavers", "curb"], p=[0.5, 0.3, 0.2])), pick(rng, pal.sidewalk, 0.08))
     w.add_region(_strip(b, road, s0, s1, road.outer_lo, road.outer_hi), CLUTTER, sw_look, L_SIDEWALK)
@@ -366,17 +367,57 @@ def _markings(b: Builder, road: Road, p0: float, p1: float, out: list[np.ndarray
 
 
 def _patches(b: Builder, road: Road, p0: float, p1: float) -> None:
-    """Repaired asphalt patches and manholes (still road)."""
+    """Road wear, all still road: repaired patches, darker tyre tracks, sealed cracks and manholes."""
     rng, w = b.rng, b.world
-    n = int(rng.poisson((p1 - p0) / 60))
-    for _ in range(n):
+    base = road.look.rgb
+
+    def tone(k: float) -> tuple[float, float, float]:
+        return tuple(float(np.clip(c * k, 0, 1)) for c in base)  # type: ignore[return-value]
+
+    for _ in range(int(rng.poisson((p1 - p0) / 60))):
         ln = float(rng.uniform(1.5, 12))
         s = float(rng.uniform(p0, max(p0, p1 - ln)))
         t0 = float(rng.uniform(road.edge_lo, road.edge_hi - 1))
         t1 = min(road.edge_hi, t0 + float(rng.uniform(0.8, 3.5)))
-        shade = float(rng.uniform(0.8, 1.15))
-        rgb = tuple(float(np.clip(c * shade, 0, 1)) for c in road.look.rgb)
-        w.add_region(_strip(b, road, s, s + ln, t0, t1), ROAD, Look("asphalt", rgb), L_PATCH, footprint=False)
+        w.add_region(_strip(b, road, s, s + ln, t0, t1), ROAD, Look("asphalt", tone(float(rng.uniform(0.8, 1.15)))),
+                     L_PATCH, footprint=False)
+    if road.look.material != "concrete_slab" and rng.random() < 0.7:
+        tracks = []
+        for lane in range(road.lanes):
+            tc = road.lanes_lo + (lane + 0.5) * road.lane_w
+            for off in (-0.85, 0.85):
+                t = tc + off + float(rng.normal(0, 0.08))
+                tracks.append(_strip(b, road, p0, p1, t - 0.3, t + 0.3))
+        w.add_region(tracks, ROAD, Look("asphalt", tone(float(rng.uniform(0.88, 0.95)))), L_PATCH, footprint=False)
+    cracks = []
+    for _ in range(int(rng.poisson((p1 - p0) / 25))):
+        s, t = float(rng.uniform(p0, p1)), float(rng.uniform(road.edge_lo + 0.3, road.edge_hi - 0.3))
+        ang = float(rng.uniform(0, 2 * math.pi))
+        for _ in range(int(rng.integers(3, 12))):
+            ang += float(rng.normal(0, 0.5))
+            ln = float(rng.uniform(0.3, 1.2))
+            s2, t2 = s + ln * math.cos(ang), t + ln * math.sin(ang)
+            if not (p0 < s2 < p1 and road.edge_lo < t2 < road.edge_hi):
+                break
+            cracks.append(_segment(b, road, s, t, s2, t2, float(rng.uniform(0.03, 0.07))))
+            s, t = s2, t2
+    if cracks:
+        w.add_region(cracks, ROAD, Look("asphalt", tone(0.55)), L_PATCH, footprint=False)
+    holes = []
+    for _ in range(int(rng.poisson((p1 - p0) / 45))):
+        x, y = _point(b, road, float(rng.uniform(p0, p1)), float(rng.uniform(road.lanes_lo + 1, road.lanes_hi - 1)))
+        holes.append(ellipse(x, y, 0.33, 0.33, 0.0, n=12))
+    if holes:
+        w.add_region(holes, ROAD, Look("metal", tone(0.7)), L_PATCH, footprint=False)
+
+
+def _segment(b: Builder, road: Road, s0: float, t0: float, s1: float, t1: float, width: float) -> np.ndarray:
+    """A thin quad from (s0, t0) to (s1, t1) in the road frame, in world coordinates."""
+    p = np.array(_point(b, road, s0, t0))
+    q = np.array(_point(b, road, s1, t1))
+    d = q - p
+    n = np.array([-d[1], d[0]]) / max(float(np.hypot(*d)), 1e-9) * (width / 2)
+    return np.array([p - n, q - n, q + n, p + n])
 
 
 def _parked_cars(b: Builder, road: Road, p0: float, p1: float, heading: float) -> None:
@@ -450,7 +491,8 @@ def _street_side(b: Builder, road: Road, p0: float, p1: float, heading: float) -
             s = float(rng.uniform(p0 + 1, p1 - 1))
             x, y = _point(b, road, s, t_in)
             if b.free_world(x, y, 1.2):
-                kind = str(rng.choice(["bench", "bin", "bollard", "kiosk", "dumpster"], p=[0.35, 0.3, 0.15, 0.08, 0.12]))
+                kind = str(rng.choice(["bench", "bin", "bollard", "kiosk", "dumpster"],
+                                      p=[0.35, 0.3, 0.15, 0.08, 0.12]))
                 props.add_clutter(b, x, y, heading, kind)
         area = (p1 - p0) * sw
         n_groups = int(rng.poisson(st.people_per_100m2 * area / 100 * 1.5))

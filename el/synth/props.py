@@ -78,9 +78,26 @@ def add_building(b: Builder, cx: float, cy: float, w: float, l: float, angle: fl
                                     roof_look(b, pitched=pitched, industrial=industrial),
                                     facade_look(b, industrial=industrial, height=h), gable=gable, kind="building"))
     b.occupy_rect_world(cx, cy, w, l, angle, building=True)
+    if not pitched and w > 6 and l > 6 and rng.random() < 0.6:
+        add_parapet(b, block)
     if equipment and not pitched and w * l > 60:
         add_roof_equipment(b, block)
     return block
+
+
+def add_parapet(b: Builder, bld: Block) -> None:
+    """A low wall along the roof edge (building): a bright or dark rim with a thin shadow line."""
+    rng = b.rng
+    t = float(rng.uniform(0.25, 0.45))
+    h = float(rng.uniform(0.4, 1.1))
+    k = float(rng.uniform(0.8, 1.25))
+    rgb = tuple(min(0.95, c * k) for c in bld.side.rgb)
+    look = Look("roof_concrete", rgb)  # type: ignore[arg-type]
+    for du, dv, w, l in ((0.0, -(bld.l - t) / 2, bld.w, t), (0.0, (bld.l - t) / 2, bld.w, t),
+                         (-(bld.w - t) / 2, 0.0, t, bld.l - 2 * t), ((bld.w - t) / 2, 0.0, t, bld.l - 2 * t)):
+        dx, dy = _rot(du, dv, bld.angle)
+        b.world.add_block(Block(bld.cx + dx, bld.cy + dy, w, l, bld.angle, bld.h, h, BUILDING, look, look,
+                                kind="equipment"))
 
 
 def add_roof_equipment(b: Builder, bld: Block) -> None:
@@ -91,7 +108,10 @@ def add_roof_equipment(b: Builder, bld: Block) -> None:
     n = int(rng.poisson(area / 140))
     for _ in range(min(n, 10)):
         big = rng.random() < 0.2
-        ew, el = (rng.uniform(2.5, 5.0), rng.uniform(2.5, 4.5)) if big else (rng.uniform(0.8, 2.6), rng.uniform(0.8, 2.0))
+        if big:
+            ew, el = rng.uniform(2.5, 5.0), rng.uniform(2.5, 4.5)
+        else:
+            ew, el = rng.uniform(0.8, 2.6), rng.uniform(0.8, 2.0)
         eh = rng.uniform(2.2, 3.2) if big else rng.uniform(0.5, 1.8)
         if ew > bld.w - 2 * margin or el > bld.l - 2 * margin:
             continue
@@ -146,11 +166,15 @@ def add_car(b: Builder, x: float, y: float, heading: float, *, moving: bool, kin
     length, width, bh, cl, ch, coff = CAR_TYPES[kind]
     length *= rng.uniform(0.94, 1.06)
     width *= rng.uniform(0.96, 1.04)
-    b.world.add_block(Block(x, y, length, width, heading, 0.0, bh, label, body_look, body_look, kind="car"))
+    dark = Look("car_paint", (0.07, 0.07, 0.08))
+    b.world.add_block(Block(x, y, 0.9 * length, 0.94 * width, heading, 0.0, 0.42, label, dark, dark, kind="car"),
+                      register=False)
+    b.world.add_block(Block(x, y, length, width, heading, 0.3, bh - 0.3, label, body_look, body_look, kind="car",
+                            taper=(0.96, 0.9)), register=True)
     dx, dy = _rot(-coff * length, 0.0, heading)
-    b.world.add_block(Block(x + dx, y + dy, cl * length, 0.86 * width, heading, bh, ch, label,
-                            body_look if rng.random() < 0.85 else Look("car_glass", pick(rng, pal.glass)),
-                            glass, kind="cabin"))
+    roof = body_look if rng.random() < 0.85 else Look("car_glass", pick(rng, pal.glass))
+    b.world.add_block(Block(x + dx, y + dy, cl * length, 0.82 * width, heading, bh, ch, label, roof, glass,
+                            kind="cabin", taper=(float(rng.uniform(0.6, 0.75)), 0.82)))
     b.occupy_rect_world(x, y, length, width, heading)
 
 
@@ -180,24 +204,23 @@ def add_people(b: Builder, x: float, y: float, n: int, spread: float = 1.2) -> N
 # -- vegetation -------------------------------------------------------------------------------
 def add_tree(b: Builder, x: float, y: float, radius: float, *, trunk_h: float | None = None,
              colour: tuple[float, float, float] | None = None) -> None:
-    """A tree: trunk block and a crown of 3-7 ellipsoid blobs (radius = crown radius in metres)."""
+    """A tree: trunk block and a crown of 5-10 ellipsoid blobs (radius = crown radius in metres)."""
     rng, pal = b.rng, b.palette
     if trunk_h is None:
-        trunk_h = rng.uniform(1.8, 3.5) + 0.3 * radius
-    rz_scale = rng.uniform(0.7, 1.0)
-    centre_z = trunk_h + radius * rz_scale * 0.9
-    n = int(rng.integers(3, 8))
-    blobs = [(x, y, centre_z, radius * 0.72, radius * 0.72 * rz_scale)]
+        trunk_h = rng.uniform(1.2, 2.4) + 0.08 * radius
+    rz_scale = rng.uniform(0.65, 0.95)
+    centre_z = trunk_h + radius * rz_scale * 0.75
+    n = int(rng.integers(5, 11))
+    blobs = [(x, y, centre_z, radius * 0.62, radius * 0.62 * rz_scale)]
     for _ in range(n - 1):
         ang = rng.uniform(0, 2 * math.pi)
-        d = rng.uniform(0.25, 0.55) * radius
-        r = radius * rng.uniform(0.38, 0.6)
-        blobs.append((x + d * math.cos(ang), y + d * math.sin(ang), centre_z + rng.uniform(-0.3, 0.35) * radius,
-                      r, r * rz_scale))
+        d = rng.uniform(0.2, 0.62) * radius
+        r = radius * rng.uniform(0.3, 0.5)
+        dz = rng.uniform(-0.4, 0.45) * radius * rz_scale
+        blobs.append((x + d * math.cos(ang), y + d * math.sin(ang), centre_z + dz, r, r * rz_scale * 1.1))
     look = Look("foliage", colour or pick(rng, pal.tree, 0.14, 0.035))
-    trunk_w = float(np.clip(0.12 * radius, 0.2, 0.55))
-    b.world.add_block(Block(x, y, trunk_w, trunk_w, rng.uniform(0, math.pi), 0.0,
-                            max(0.5, centre_z - 0.5 * radius * rz_scale), TREE,
+    trunk_w = float(np.clip(0.1 * radius, 0.2, 0.5))
+    b.world.add_block(Block(x, y, trunk_w, trunk_w, rng.uniform(0, math.pi), 0.0, centre_z, TREE,
                             Look("bark", (0.32, 0.27, 0.22)), Look("bark", (0.30, 0.25, 0.2)), kind="trunk"))
     b.world.add_crown(Crown(np.array(blobs, dtype=np.float64), TREE, look))
     b.occupy_circle_world(x, y, max(0.5, trunk_w))

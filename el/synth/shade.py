@@ -34,6 +34,7 @@ class ShadeInputs:
     hard: np.ndarray  # uint8 ground shadows of solids
     soft: np.ndarray  # uint8 ground shadows of foliage
     roof: np.ndarray  # uint8 shadows on flat roofs
+    ao: np.ndarray | None = None  # uint8 contact darkening near building bases (blurred here)
 
 
 def shade(face_map: np.ndarray, faces: FaceArrays, inp: ShadeInputs) -> np.ndarray:
@@ -69,6 +70,11 @@ class _Context:
         W = self.W
         self.soft = cv2.GaussianBlur(inp.soft, (0, 0), max(0.6, 1.6 * W / 3840))
         self.hard = cv2.GaussianBlur(inp.hard, (0, 0), max(0.5, 1.2 * W / 3840))
+        self.contact = None
+        if inp.ao is not None and inp.ao.any():
+            small = cv2.resize(inp.ao, (max(1, W // 4), max(1, g.height // 4)), interpolation=cv2.INTER_AREA)
+            small = cv2.GaussianBlur(small, (0, 0), max(0.8, 3.0 * W / 3840))
+            self.contact = cv2.resize(small, (W, g.height), interpolation=cv2.INTER_LINEAR)
         phi = math.radians(inp.world.grid_angle_deg)
         cols = np.arange(W, dtype=np.float32) - W / 2 + 0.5
         self.h = cols
@@ -76,7 +82,10 @@ class _Context:
         self.h_ms = _f32(-cols * math.sin(phi))
         self.cphi, self.sphi = math.cos(phi), math.sin(phi)
         # lights (white balance and exposure folded in)
-        exposure = float(grade.get("exposure", 1.0))
+        # auto-exposure: a mid-grey lit ground reads the same under every light, then the grade varies it
+        lum = np.array([0.299, 0.587, 0.114])
+        ref = float(lum @ light.ambient + (lum @ light.sun) * max(float(inp.sun[2]), 0.0))
+        exposure = float(grade.get("exposure", 1.0)) * 1.1 / max(ref, 0.3)
         wb = np.array(grade.get("white_balance", (1.0, 1.0, 1.0)), np.float32)
         self.sun_rgb = np.array(light.sun, np.float32) * wb * exposure
         self.amb_rgb = np.array(light.ambient, np.float32) * wb * exposure
@@ -120,7 +129,7 @@ class _Context:
         self.roof = faces.roof.astype(np.uint8)
         self.has_cell = (faces.cell[:, 0] > 0).astype(np.uint8)
         self.plane_cols = [_f32(faces.plane[:, k]) for k in range(12)]
-        self.tint = np.array([0.8, 0.1, -0.9], np.float32)
+        self.tint = np.array([0.4, 0.15, -0.45], np.float32)
         # textures and screen grain
         seed = int(inp.world.seed)
         rs = np.random.default_rng(seed + 99)
@@ -138,6 +147,7 @@ class _Context:
         self.sun_cam = np.array([sun @ x_c, sun @ y_c, sun @ z_c], np.float32)
 
     def band(self, fm: np.ndarray, r0: int, r1: int) -> np.ndarray:
+        fm = fm.astype(np.intp)  # numpy's take converts indices to intp on every call otherwise
         nrows, W = fm.shape
         rows = np.arange(r0, r1, dtype=np.float32)
         v = rows - self.H / 2 + 0.5
@@ -203,7 +213,12 @@ class _Context:
         g_sh = self.soft[r0:r1] * np.float32(1 / 255)
         g_sh *= dapple
         np.maximum(g_sh, self.hard[r0:r1] * np.float32(1 / 255), out=g_sh)
-        shadow = np.where(kind == GROUND, g_sh, shadow)
+        ground = kind == GROUND
+        shadow = np.where(ground, g_sh, shadow)
+        if self.contact is not None:
+            dark = self.contact[r0:r1] * np.float32(-0.35 / 255)
+            dark += 1
+            ao = np.where(ground, ao * dark, ao)
         roof = self.roof.take(fm)
         if roof.any():
             shadow = np.where(roof > 0, self.inp.roof[r0:r1] * np.float32(1 / 255), shadow)
@@ -306,11 +321,11 @@ class _Context:
         fid = fm.ravel()[idx]
         cp = self.faces.canopy[fid]
         rr, cc = np.divmod(idx, self.W)
-        dx = (cc - cp[:, 0]) / cp[:, 2]
-        dy = (rr + r0 - cp[:, 1]) / cp[:, 3]
+        dx = (cc - cp[:, 0]) / cp[:, 2] * np.float32(0.8)
+        dy = (rr + r0 - cp[:, 1]) / cp[:, 3] * np.float32(0.8)
         r2 = np.clip(dx * dx + dy * dy, 0, 1)
         nz = np.sqrt(1 - r2)
         s = self.sun_cam
         ndots = dx * s[0] + dy * s[1] - nz * s[2]
         direct.ravel()[idx] = np.clip((ndots + 0.3) / 1.3, 0, 1)
-        ao.ravel()[idx] = 0.55 + 0.45 * nz
+        ao.ravel()[idx] = 0.7 + 0.3 * nz

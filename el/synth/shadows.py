@@ -42,7 +42,7 @@ class Casters:
     @classmethod
     def from_world(cls, world: World, bbox: tuple[float, float, float, float], *, min_height: float = 2.5,
                    crown_labels: tuple[int, ...] = ()) -> Casters:
-        """Solids taller than ``min_height`` and crowns with the given labels, near ``bbox`` (xmin, xmax, ymin, ymax)."""
+        """Solids taller than ``min_height`` and crowns with the given labels near ``bbox`` (xmin, xmax, ymin, ymax)."""
         xmin, xmax, ymin, ymax = bbox
         rows, owners = [], []
         for i, b in enumerate(world.blocks):

@@ -9,6 +9,7 @@ so that colour alone cannot tell the classes apart.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -30,16 +31,16 @@ class Lighting:
 LIGHTINGS: dict[str, Lighting] = {
     lt.name: lt
     for lt in (
-        Lighting(name="noon", elevation_deg=(52, 72), sun=(0.78, 0.76, 0.70), ambient=(0.40, 0.43, 0.50)),
-        Lighting(name="morning", elevation_deg=(24, 40), sun=(0.80, 0.72, 0.58), ambient=(0.36, 0.40, 0.50),
+        Lighting(name="noon", elevation_deg=(52, 72), sun=(0.78, 0.76, 0.70), ambient=(0.42, 0.44, 0.48)),
+        Lighting(name="morning", elevation_deg=(24, 40), sun=(0.80, 0.72, 0.58), ambient=(0.38, 0.41, 0.47),
                  haze=0.07),
-        Lighting(name="afternoon", elevation_deg=(32, 50), sun=(0.80, 0.75, 0.64), ambient=(0.38, 0.41, 0.48)),
+        Lighting(name="afternoon", elevation_deg=(32, 50), sun=(0.80, 0.75, 0.64), ambient=(0.40, 0.42, 0.46)),
         Lighting(name="overcast", elevation_deg=(40, 65), sun=(0.22, 0.22, 0.23), ambient=(0.78, 0.80, 0.82),
                  haze=0.08, exposure=(0.9, 1.05)),
         Lighting(name="hazy", elevation_deg=(35, 60), sun=(0.55, 0.54, 0.50), ambient=(0.58, 0.60, 0.64),
                  haze=0.14),
         # held out: low golden sun with long shadows
-        Lighting(name="golden", elevation_deg=(14, 24), sun=(0.86, 0.64, 0.40), ambient=(0.34, 0.37, 0.48),
+        Lighting(name="golden", elevation_deg=(14, 24), sun=(0.86, 0.64, 0.40), ambient=(0.36, 0.38, 0.46),
                  haze=0.08, exposure=(1.0, 1.15)),
     )
 }
@@ -191,14 +192,12 @@ def choose_style(rng: np.random.Generator, split: str | None) -> Style:
     return train[int(rng.integers(len(train)))]
 
 
-def jitter_rgb(rng: np.random.Generator, rgb: RGB, brightness: float = 0.12, hue: float = 0.03) -> RGB:
+def jitter_rgb(rng: Any, rgb: RGB, brightness: float = 0.12, hue: float = 0.03) -> RGB:
     """A colour near ``rgb``: random brightness scale and a small per-channel shift."""
-    r = rng.random(4)
-    scale = 1.0 + brightness * (2 * r[0] - 1)
-    return tuple(min(0.98, max(0.02, c * scale + hue * (2 * x - 1)))  # type: ignore[return-value]
-                 for c, x in zip(rgb, r[1:], strict=True))
+    scale = 1.0 + brightness * (2 * rng.random() - 1)
+    return tuple(min(0.98, max(0.02, c * scale + hue * (2 * rng.random() - 1))) for c in rgb)  # type: ignore
 
 
-def pick(rng: np.random.Generator, choices: tuple[RGB, ...], brightness: float = 0.12, hue: float = 0.03) -> RGB:
+def pick(rng: Any, choices: tuple[RGB, ...], brightness: float = 0.12, hue: float = 0.03) -> RGB:
     """One palette colour, jittered."""
     return jitter_rgb(rng, choices[int(rng.integers(len(choices)))], brightness, hue)

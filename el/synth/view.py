@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import math
 
 import numpy as np
 
@@ -32,14 +33,24 @@ def coverage_domain(geometry: CameraGeometry, *, rel: float = 0.2, margin_m: flo
     """Convex polygon holding the ground seen from every pose with height and pitch within +-rel.
 
     The world is generated over this domain so that the same world can be rendered from perturbed
-    poses (the requirement tests use +-20%) with every visible pixel modelled.
+    poses (the requirement tests use +-20%) with every visible pixel modelled (ranges are capped
+    at twice the nominal view's; beyond, only the base ground). ValueError when the nominal pose
+    sees the horizon.
     """
     pose = geometry.pose
+    top_depression = math.degrees(float(geometry.depression(-0.5)))
+    if top_depression < 3.0:
+        raise ValueError(f"pose height {pose.height_m} m, pitch {pose.pitch_deg} deg sees the horizon (top edge "
+                         f"{top_depression:.1f} deg below it); the generator models the ground only: raise the pitch")
+    nominal = visible_ground(geometry)
+    far = 2.0 * float(np.hypot(nominal[:, 0], nominal[:, 1]).max())
     pts = []
     for hf, pf in itertools.product((1 - rel, 1.0, 1 + rel), repeat=2):
         g = CameraGeometry(width=geometry.width, height=geometry.height, intrinsics=geometry.intrinsics,
                            pose=Pose(height_m=pose.height_m * hf, pitch_deg=min(90.0, pose.pitch_deg * pf)))
-        pts.append(visible_ground(g))
+        v = visible_ground(g)
+        r = np.hypot(v[:, 0], v[:, 1])
+        pts.append(v * np.minimum(1.0, far / np.maximum(r, 1e-9))[:, None])
     hull = convex_hull(np.concatenate(pts))
     centre = hull.mean(axis=0)
     d = hull - centre

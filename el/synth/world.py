@@ -1,7 +1,7 @@
 """The metric world model of a synthetic scene: ground regions, solids, tree crowns, sun, footprints.
 
 World frame of ``el.camera``: metres, x right, y forward, z up, the camera above the origin.
-The world does not depend on the camera pose: ``el.synth.render.render(world, geometry)`` draws it
+The world does not depend on the camera pose: ``el.synth.renderer.render(world, geometry)`` draws it
 from any pose. The forbidden ground footprints (roads, cars, buildings) are kept as polygons so
 that the true metric clearance of any ground point can be computed, from the world or from the
 scene's meta file alone, including the parts hidden under trees.
@@ -67,6 +67,7 @@ class Block:
     side: Look
     gable: float = 0.0
     kind: str = "solid"
+    taper: tuple[float, float] = (1.0, 1.0)  # top size relative to the base, along w and l
 
     @property
     def top_z(self) -> float:
@@ -137,11 +138,13 @@ class World:
             self.footprints["road"].extend(polys)
         self._clearance_sets.clear()
 
-    def add_block(self, block: Block) -> Block:
-        """Add a solid; a forbidden one standing on the ground adds its footprint."""
+    def add_block(self, block: Block, *, register: bool | None = None) -> Block:
+        """Add a solid; a forbidden one standing on the ground adds its footprint (``register`` forces it)."""
         self.blocks.append(block)
         name = _LABEL_NAMES.get(block.label)
-        if name in self.footprints and block.z0 <= 0.05:
+        if register is None:
+            register = block.z0 <= 0.05
+        if name in self.footprints and register:
             self.footprints[name].append(block.footprint())
             self._clearance_sets.clear()
         return block
