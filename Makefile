@@ -5,8 +5,11 @@ PY     := $(VENV)/bin/python
 DATA   ?= data
 DEMO_SCENES ?= 10
 DEMO_SIZE   ?= 3840x2160
+RUN    ?= runs/demo
+REPORTS ?= reports
+JOBS   ?= 2
 
-.PHONY: setup demo test test-all requirements bench lint clean
+.PHONY: setup demo scenes campaign requirements evidence test test-all bench lint clean
 
 setup: $(VENV)/.installed
 
@@ -16,11 +19,27 @@ $(VENV)/.installed: pyproject.toml constraints.txt
 	$(VENV)/bin/pip install -q -c constraints.txt -e ".[dev,pdf,distributed]"
 	touch $@
 
-## The main job on the embedded default: synthetic test scenes -> preview.
-demo: setup
-	$(PY) -m assurance synth --out $(DATA)/test --split test --scenes $(DEMO_SCENES) --size $(DEMO_SIZE) --jobs 2
-	$(PY) -m assurance preview --data $(DATA)/test --count 3 --out reports/preview.png
-	@echo "Preview written to reports/preview.png"
+## The main job on the embedded default: synthetic test scenes -> shipped model -> demo campaign
+## -> requirement tests -> evidence report (reports/evidence.html and .pdf).
+demo: setup scenes campaign evidence
+	@echo "Evidence report: $(REPORTS)/evidence.html and $(REPORTS)/evidence.pdf"
+
+scenes: setup
+	$(PY) -m assurance synth --out $(DATA)/test --split test --scenes $(DEMO_SCENES) --size $(DEMO_SIZE) --jobs $(JOBS)
+	$(PY) -m assurance preview --data $(DATA)/test --count 3 --out $(REPORTS)/preview.png
+
+campaign: setup
+	$(PY) -m assurance campaign --preset demo --data $(DATA)/test --out $(RUN) --images $(DEMO_SCENES) --jobs $(JOBS)
+	$(PY) -m assurance table $(RUN) --compare --out $(REPORTS)
+
+## Requirement tests against the campaign run; their results feed the evidence gate.
+requirements: setup
+	$(PY) -m pytest -q -m requirements --run $(RUN) --requirements-report $(REPORTS)/requirements.json
+
+## The evidence step (also run by CI): requirement tests (a failure is reported by the gate), then the report.
+evidence: setup
+	-$(PY) -m pytest -q -m requirements --run $(RUN) --requirements-report $(REPORTS)/requirements.json
+	$(PY) -m assurance evidence --run $(RUN) --out $(REPORTS)
 
 ## The test suite (fast; long campaigns and training are marked slow and excluded).
 test: setup
@@ -28,9 +47,6 @@ test: setup
 
 test-all: setup
 	$(PY) -m pytest -q
-
-requirements: setup
-	$(PY) -m pytest -q -m requirements
 
 bench: setup
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(PY) $$b || exit 1; done

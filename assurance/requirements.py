@@ -23,6 +23,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import os
 import re
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -345,7 +346,8 @@ def results_document(registry: Registry, results: Mapping[str, RequirementResult
 
 
 def load_results(path: str | Path, registry: Registry) -> tuple[dict[str, RequirementResult], dict[str, Any]]:
-    """Read a results JSON written by the plugin; returns (results for every registry id, the document).
+    """Read a results JSON written by the plugin (or an ``evidence.json``, which carries the same states);
+    returns (results for every registry id, the document).
 
     Requirements of the registry absent from the file are "not verified" ("not in the test results");
     ids in the file that the registry lacks are ignored (listed in ``doc['ignored_ids']``).
@@ -357,8 +359,9 @@ def load_results(path: str | Path, registry: Registry) -> tuple[dict[str, Requir
         raise FileNotFoundError(f"{path}: requirement results not found (run: pytest -m requirements)") from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ValueError(f"{path}: unreadable requirement results ({exc})") from None
-    if not isinstance(doc, dict) or doc.get("format") != RESULTS_FORMAT:
-        raise ValueError(f"{path}: not a requirement results file (format must be {RESULTS_FORMAT!r})")
+    if not isinstance(doc, dict) or doc.get("format") not in (RESULTS_FORMAT, "uav-el-evidence/1"):
+        raise ValueError(f"{path}: not a requirement results file (format must be {RESULTS_FORMAT!r}, "
+                         "or an evidence.json)")
     given = doc.get("requirements") or {}
     out: dict[str, RequirementResult] = {}
     for req in registry:
@@ -650,7 +653,8 @@ def check_pose_margin(core: Mapping[str, Any], size: tuple[int, int], pose_error
     row = {"working_size": f"{w}x{h}", "height_m": cfg.pose.height_m, "pitch_deg": cfg.pose.pitch_deg,
            "height_error": he, "pitch_error": pe, "beta": beta, "required_beta": round(need, 4)}
     cols = tuple(row)
-    verdict = f"beta {beta:g} {'>=' if beta >= need else '<'} required {need:.3f} for +-{he:.0%} height, +-{pe:.0%} pitch"
+    rel = ">=" if beta >= need else "<"
+    verdict = f"beta {beta:g} {rel} required {need:.3f} for +-{he:.0%} height, +-{pe:.0%} pitch"
     return Evidence("EL-R14", "pose-error margin of beta", PASS if beta >= need else FAIL, verdict, (row,), cols)
 
 
@@ -762,7 +766,8 @@ def check_rerun(run: str | Path, *, shards: int = 1, work_dir: str | Path, threa
         from el.segmentation.weights import sha256_file
 
         if not weights or not Path(weights).is_file():
-            return Evidence("EL-R11", name, INSUFFICIENT, f"insufficient evidence: the run's weights {weights} are gone")
+            return Evidence("EL-R11", name, INSUFFICIENT,
+                            f"insufficient evidence: the run's weights {weights} are gone")
         if sha256_file(weights) != man["weights"].get("sha256"):
             return Evidence("EL-R11", name, INSUFFICIENT,
                             f"insufficient evidence: the weights file {weights} changed since the run")
@@ -774,7 +779,8 @@ def check_rerun(run: str | Path, *, shards: int = 1, work_dir: str | Path, threa
     except Exception as exc:  # the data folder no longer reads as the campaign's data set
         return Evidence("EL-R11", name, INSUFFICIENT, f"insufficient evidence: cannot re-plan the run on {data}: {exc}")
     if data_sha != man["data"]["sha256"]:
-        return Evidence("EL-R11", name, INSUFFICIENT, f"insufficient evidence: the data in {data} changed since the run")
+        return Evidence("EL-R11", name, INSUFFICIENT,
+                        f"insufficient evidence: the data in {data} changed since the run")
     tasks = {t.shard_name: t for t in planned}
     done = sorted(n for n in tasks if readouts.shard_done(run, n))
     if not done:
@@ -784,15 +790,18 @@ def check_rerun(run: str | Path, *, shards: int = 1, work_dir: str | Path, threa
     work = Path(work_dir)
     (work / readouts.SHARDS).mkdir(parents=True, exist_ok=True)
     rows = []
-    for shard in pick:
-        execute(tasks[shard], config, str(work), threads or 1, segmenter)
+    for shard in pick:  # as many threads as a one-job campaign on this machine
+        execute(tasks[shard], config, str(work), threads or os.cpu_count() or 1, segmenter)
         for table in readouts.TABLES:
             a = pd.read_parquet(run / readouts.SHARDS / shard / f"{table}.parquet")
             b = pd.read_parquet(work / readouts.SHARDS / shard / f"{table}.parquet")
             cols = [c for c in a.columns if c not in TIMING_COLUMNS and c != "traceback"]
-            same = list(a.columns) == list(b.columns) and len(a) == len(b)
-            diff = [] if same else ["(columns or rows)"]
-            if same:
+            diff = []
+            if list(a.columns) != list(b.columns):
+                diff = ["(the columns differ)"]
+            elif len(a) != len(b):
+                diff = [f"(rows: {len(a)} stored, {len(b)} re-run)"]
+            else:
                 for c in cols:
                     x, y = a[c].to_numpy(), b[c].to_numpy()
                     if x.dtype.kind == "f":
@@ -804,7 +813,8 @@ def check_rerun(run: str | Path, *, shards: int = 1, work_dir: str | Path, threa
     cols = ("shard", "table", "rows", "differing_columns")
     bad = [r for r in rows if r["differing_columns"] != "-"]
     if bad:
-        return Evidence("EL-R11", name, FAIL, f"re-running {len(pick)} shard(s) changed the readouts", tuple(rows), cols)
+        return Evidence("EL-R11", name, FAIL, f"re-running {len(pick)} shard(s) changed the readouts",
+                        tuple(rows), cols)
     return Evidence("EL-R11", name, PASS, f"re-running {len(pick)} shard(s) gave identical readouts (timings aside)",
                     tuple(rows), cols)
 

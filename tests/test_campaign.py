@@ -27,7 +27,7 @@ TIMING = {"overhead_s", "overhead_s_lo95", "overhead_s_hi95"}
 @pytest.fixture(scope="module")
 def weights(tmp_path_factory):
     torch.manual_seed(0)
-    model = build_model(ArchConfig(widths=(8, 8, 8), skip_channels=8, decoder_channels=8))
+    model = build_model(ArchConfig(widths=(8, 8, 8), ms_channels=8, decoder_channels=8))
     path = tmp_path_factory.mktemp("w") / "tiny.pt"
     save_weights(model, path)
     return str(path)

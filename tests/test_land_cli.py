@@ -169,7 +169,7 @@ def test_model_pipeline_with_weights(main, scene, tmp_path, capsys, monkeypatch)
 
     torch.manual_seed(0)
     weights = tmp_path / "tiny.pt"
-    save_weights(build_model(ArchConfig(widths=(8, 8, 8), skip_channels=8, decoder_channels=8)), weights)
+    save_weights(build_model(ArchConfig(widths=(8, 8, 8), ms_channels=8, decoder_channels=8)), weights)
     _, image = scene
     out, ov = tmp_path / "d.json", tmp_path / "ov.png"
     code = main(["land", str(image), "--weights", str(weights), "--monitor", "lhd+ch:tau=0.25", "--json", str(out),

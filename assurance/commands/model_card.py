@@ -14,7 +14,8 @@ HELP = "print the segmentation model card; --verify recomputes its figures from 
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--weights", type=Path, help="weights file (default: the shipped el/segmentation/weights/model.pt)")
+    parser.add_argument("--weights", type=Path,
+                        help="weights file (default: the shipped el/segmentation/weights/model.pt)")
     parser.add_argument("--verify", action="store_true",
                         help="check the SHA-256, recompute IoU / confusion on the validation data, compare")
     parser.add_argument("--data", type=Path, help="validation set for --verify (default: the folder in the card)")

@@ -7,6 +7,8 @@ import functools
 import sys
 from pathlib import Path
 
+from tqdm import tqdm
+
 from assurance.cli import CommandError
 from assurance.progress import progress
 
@@ -40,7 +42,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     length.add_argument("--steps", type=int, help="optimisation steps (default 1500)")
     length.add_argument("--epochs", type=int, help="passes over the training images (ceil(images / batch) steps each)")
     parser.add_argument("--seed", type=int, default=0, help="seed of everything random (default 0)")
-    parser.add_argument("--resume", action="store_true", help="continue from <out>.ckpt")
+    parser.add_argument("--resume", action="store_true", help="continue from the checkpoint")
+    parser.add_argument("--checkpoint", type=Path, help="resumable training state (default: <out> with suffix .ckpt)")
     parser.add_argument("--threads", type=int, help="torch CPU threads (default: torch's choice)")
     parser.add_argument("--batch", type=int, default=4, help="working-resolution crops per step (default 4)")
     parser.add_argument("--crop", type=int, default=256, help="side of the working-resolution crops (default 256)")
@@ -90,9 +93,11 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise CommandError(str(exc)) from exc
     cache_dir = None if args.no_cache else (args.cache_dir or D.default_cache_dir())
-    log = None if args.quiet else (lambda msg: print(msg, file=sys.stderr, flush=True))
+    # tqdm.write keeps log lines apart from a progress bar on the same stream.
+    log = None if args.quiet else (lambda msg: tqdm.write(msg, file=sys.stderr))
+    bar = functools.partial(progress, enabled=not args.quiet)
     card = train(args.data, args.out, val_dir=args.val, config=config, resume=args.resume, cache_dir=cache_dir,
-                 threads=args.threads, progress=functools.partial(progress, enabled=not args.quiet), log=log)
+                 checkpoint_file=args.checkpoint, threads=args.threads, progress=bar, log=log)
     training = card["training"]
     print(f"weights: {args.out} (sha256 {card['weights_sha256']})")
     print(f"steps: {config.steps}, best step: {training.get('best_step')}, "

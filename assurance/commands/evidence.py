@@ -1,0 +1,60 @@
+"""``uav-el evidence``: the evidence report of a campaign run, and the gate on the requirement states."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from assurance.cli import CommandError
+
+HELP = ("write the evidence report (HTML, PDF, JSON) of a campaign run; exit 1 when a requirement failed "
+        "(with --strict also when one is not verified)")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--run", required=True, help="campaign run folder (uav-el campaign --out)")
+    p.add_argument("--out", default="reports", help="output folder (default: reports/)")
+    p.add_argument("--requirements", metavar="JSON",
+                   help="requirement results of `pytest -m requirements --run RUN` (default: OUT/requirements.json "
+                        "if present; without one every requirement is 'not verified')")
+    p.add_argument("--baseline", metavar="RUN0", help="an earlier run: adds a 'what changed' section")
+    p.add_argument("--baseline-requirements", metavar="JSON", help="the baseline's requirement results")
+    p.add_argument("--registry", metavar="YAML", help="requirement registry (default: assurance/requirements.yaml)")
+    p.add_argument("--strict", action="store_true",
+                   help="also exit 1 when a requirement is not verified or the PDF cannot be written")
+    p.add_argument("--no-pdf", action="store_true", help="write the HTML and JSON only")
+    p.add_argument("--boot", type=int, default=2000, help="bootstrap resamples of the results table (default 2000)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from assurance.evidence import generate
+    from assurance.readouts import RunError
+    from assurance.requirements import RegistryError
+
+    if args.baseline_requirements and not args.baseline:
+        raise CommandError("--baseline-requirements needs --baseline")
+    for flag, value in (("--run", args.run), ("--baseline", args.baseline)):
+        if value and not (Path(value) / "manifest.json").is_file():
+            raise CommandError(f"{flag} {value}: not a campaign run (no manifest.json)")
+    if args.boot < 1:
+        raise CommandError("--boot must be >= 1")
+    try:
+        report = generate(args.run, args.out, requirements=args.requirements, baseline=args.baseline,
+                          baseline_requirements=args.baseline_requirements, registry=args.registry,
+                          strict=args.strict, pdf=not args.no_pdf, n_boot=args.boot)
+    except (RegistryError, RunError) as exc:
+        raise CommandError(str(exc)) from None
+    for w in report.warnings:
+        print(f"warning: {w}", file=sys.stderr)
+    for line in report.summary_lines():
+        print(line)
+    if report.exit_code:
+        why = "requirement(s) failed" if report.ids("failed") else "--strict: not everything verified"
+        if not report.ids("failed") and report.pdf_error and not report.ids("not verified"):
+            why = "--strict: no PDF"
+        print(f"gate: FAILED ({why})")
+    else:
+        print("gate: passed" + (" (not everything verified; --strict would fail)" if report.ids("not verified")
+                                 else ""))
+    return report.exit_code

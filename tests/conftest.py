@@ -1,0 +1,186 @@
+"""Shared options and fixtures of the test suite.
+
+``--run RUN`` (or the environment variable ``UAV_EL_RUN``) names the campaign run that the campaign
+requirement tests (``tests/requirements``) read; the default is the README's demo run ``runs/demo``
+under the rootdir. Without a run those tests skip, so their requirements end "not verified", never
+"failed".
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # tests/helpers.py for tests in sub-folders
+
+DEFAULT_RUN = Path("runs") / "demo"
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption("--run", dest="uav_el_run", metavar="RUN", default=None,
+                     help=f"campaign run folder for the campaign requirement tests "
+                          f"(default: $UAV_EL_RUN, else {DEFAULT_RUN} under the rootdir)")
+
+
+def campaign_run_path(config: pytest.Config) -> Path:
+    """The campaign run the requirement tests read: --run, else $UAV_EL_RUN, else runs/demo (rootdir)."""
+    given = config.getoption("uav_el_run") or os.environ.get("UAV_EL_RUN")
+    if given:
+        return Path(given).resolve()
+    return (config.rootpath / DEFAULT_RUN).resolve()
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    from assurance.pytest_plugin import set_context
+
+    run = campaign_run_path(config)
+    set_context(config, run=str(run), run_exists=(run / "manifest.json").is_file())
+
+
+@pytest.fixture(scope="session")
+def requirement_registry(pytestconfig: pytest.Config):
+    """The session's validated requirement registry (the plugin's; --requirements-registry to change it)."""
+    from assurance.pytest_plugin import registry
+
+    return registry(pytestconfig)
+
+
+@pytest.fixture(scope="session")
+def campaign_run(pytestconfig: pytest.Config) -> Path:
+    """The campaign run folder; skips (requirement not verified) when there is none."""
+    run = campaign_run_path(pytestconfig)
+    if not (run / "manifest.json").is_file():
+        pytest.skip(f"not verified: no campaign run at {run} (pass --run RUN or set UAV_EL_RUN; make the demo run "
+                    f"with: uav-el campaign --data data/test --out {DEFAULT_RUN})")
+    return run
+
+
+# ------------------------------------------------------------------------------------------------
+# Tiny campaign runs for the tests of the requirement plugin and the evidence report
+# ------------------------------------------------------------------------------------------------
+TINY_W, TINY_H, TINY_WW = 256, 144, 128
+TINY_IMAGES = 10  # the registry's minimum per perturbation (EL-R08)
+
+
+def tiny_scene(i: int):
+    """Label map: clutter on the left, low vegetation on the right, a road under the default area (so the
+    default action is hazardous and the system's gain measurable), a building block and a few trees."""
+    import numpy as np
+
+    rng = np.random.default_rng(i)
+    ids = np.zeros((TINY_H, TINY_W), np.uint8)
+    ids[:, TINY_W // 2:] = 5
+    c = TINY_W // 2 + int(rng.integers(-6, 7))
+    ids[:, c - 4:c + 4] = 2
+    ids[: TINY_H // 3, 10:60] = 1
+    for _ in range(3):
+        y, x = int(rng.integers(TINY_H // 3, TINY_H - 6)), int(rng.integers(0, TINY_W - 6))
+        ids[y:y + 5, x:x + 5] = 4
+    return ids
+
+
+class GrassIsRoadOracle:
+    """A perfect frame segmenter whose HD patches see low vegetation as road: the monitor rejects every
+    candidate on grass (deterministic rejections, for tests of the monitor-coverage check)."""
+
+    def __init__(self, working_width: int) -> None:
+        from helpers import OracleSegmenter
+
+        self._oracle = OracleSegmenter(working_width)
+
+    def predict_frame(self, rgb):
+        return self._oracle.predict_frame(rgb)
+
+    def predict_patch(self, rgb):
+        import numpy as np
+        from helpers import nearest_class
+
+        ids = nearest_class(rgb)
+        ids[ids == 5] = 2
+        probs = np.zeros((8, *ids.shape), np.float32)
+        np.put_along_axis(probs, ids[None].astype(np.intp), 1.0, axis=0)
+        return probs
+
+    def mc_dropout(self, rgb, n, keep_prob, seed):
+        import numpy as np
+
+        return np.repeat(self.predict_patch(rgb)[None], n, axis=0)
+
+
+@pytest.fixture(scope="session")
+def tiny_campaign(tmp_path_factory):
+    """A finished campaign on tiny label-coloured scenes: the six perturbations x 10 images x 2 monitors,
+    perfect segmentation (tests/helpers.OracleSegmenter). Returns a dict: data, weights, run."""
+    import torch
+    from helpers import OracleSegmenter
+
+    from assurance.campaign import CampaignConfig, run_campaign
+    from assurance.perturbations import PAPER_PERTURBATIONS
+    from el.config import CoreConfig
+    from el.labels import ids_to_colors
+    from el.segmentation.model import ArchConfig, build_model
+    from el.segmentation.weights import save_weights
+    from el.uavid import write_sample
+
+    root = tmp_path_factory.mktemp("tiny_campaign")
+    for i in range(TINY_IMAGES):
+        ids = tiny_scene(i)
+        write_sample(root / "data", "seq00", f"{i:06d}", ids_to_colors(ids), ids)
+    torch.manual_seed(0)
+    weights = root / "tiny.pt"
+    save_weights(build_model(ArchConfig(widths=(8, 8, 8), decoder_channels=8)), weights)
+    config = CampaignConfig(perturbations=PAPER_PERTURBATIONS, monitors=("lhd", "lhd+ch:tau=0.25"),
+                            core=CoreConfig(n_star=6, working_width=TINY_WW), weights=str(weights))
+    summary = run_campaign(root / "data", root / "run", config, progress=False, segmenter=OracleSegmenter(TINY_WW))
+    assert summary["faults"] == []
+    return {"data": root / "data", "weights": weights, "run": root / "run", "config": config}
+
+
+@pytest.fixture(scope="session")
+def tiny_run_without(tiny_campaign, tmp_path_factory):
+    """``tiny_run_without(name)``: a copy of the tiny campaign run without one perturbation (its shards
+    removed and the manifest's configuration updated), as if the campaign had never evaluated it."""
+    import json
+    import shutil
+
+    made = {}
+
+    def make(perturbation: str):
+        if perturbation in made:
+            return made[perturbation]
+        run = tmp_path_factory.mktemp(f"without_{perturbation}") / "run"
+        shutil.copytree(tiny_campaign["run"], run)
+        for shard in (run / "shards").iterdir():
+            if shard.name.startswith(f"{perturbation}-s"):
+                shutil.rmtree(shard)
+        man = json.loads((run / "manifest.json").read_text())
+        man["config"]["perturbations"] = [p for p in man["config"]["perturbations"] if p != perturbation]
+        (run / "manifest.json").write_text(json.dumps(man, indent=2, sort_keys=True))
+        made[perturbation] = run
+        return run
+
+    return make
+
+
+@pytest.fixture(scope="session")
+def monitor_runs(tiny_campaign, tmp_path_factory):
+    """Two small runs whose monitor rejects every candidate on grass: 'good' (the real decision loop)
+    and 'broken' (a pipeline variant that ignores the monitor and lands on rank 0 regardless)."""
+    from assurance import campaign
+    from assurance.campaign import CampaignConfig, run_campaign
+
+    root = tmp_path_factory.mktemp("monitor_runs")
+    config = CampaignConfig(perturbations=("none",), monitors=("lhd",), images=3,
+                            core=tiny_campaign["config"].core, weights=tiny_campaign["config"].weights)
+    seg = GrassIsRoadOracle(TINY_WW)
+    run_campaign(tiny_campaign["data"], root / "good", config, progress=False, segmenter=seg)
+    real_walk = campaign.walk
+    campaign.walk = lambda verdicts: 0 if len(verdicts) else None  # lands on the top candidate, accepted or not
+    try:
+        run_campaign(tiny_campaign["data"], root / "broken", config, progress=False, segmenter=seg)
+    finally:
+        campaign.walk = real_walk
+    return {"good": root / "good", "broken": root / "broken"}

@@ -1,0 +1,75 @@
+"""Requirement tests that need no campaign: the pose-error margin (EL-R14) and weights integrity (EL-R15)."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+from helpers import scene_ids, scene_image
+
+from assurance import requirements as rq
+from el.config import CoreConfig
+from el.pipeline import EmergencyLanding, PipelineConfig
+from el.segmentation import Segmenter
+from el.segmentation.model import ArchConfig, build_model
+from el.segmentation.weights import WeightsError, load_weights, save_weights
+
+
+@pytest.mark.requirements("EL-R14")
+@pytest.mark.parametrize("size", [(3840, 2160), (4096, 2160)])
+def test_shipped_beta_covers_the_declared_pose_error_box(size, requirement_registry):
+    ev = rq.check_pose_margin(CoreConfig(), size, requirement_registry.parameters["pose_error"])
+    assert ev.status == rq.PASS, ev.summary
+    need = ev.rows[0]["required_beta"]
+    assert 1.5 < need < CoreConfig().safety.beta  # DESIGN section 4: about 1.56 for +-20%, so 1.7 has margin
+
+
+@pytest.mark.requirements("EL-R14")
+def test_a_too_small_beta_is_caught():
+    from el.camera import SafetyParams
+
+    ev = rq.check_pose_margin(CoreConfig(safety=SafetyParams(beta=1.2)), (3840, 2160), {"height": 0.2, "pitch": 0.2})
+    assert ev.status == rq.FAIL and "1.2 <" in ev.summary
+
+
+@pytest.fixture(scope="module")
+def tiny_weights(tmp_path_factory):
+    torch.manual_seed(0)
+    model = build_model(ArchConfig(widths=(8, 8, 8), decoder_channels=8))
+    path = tmp_path_factory.mktemp("weights") / "tiny.pt"
+    save_weights(model, path)
+    return path
+
+
+def _altered(src, dst):
+    data = bytearray(src.read_bytes())
+    data[len(data) // 2] ^= 0x01  # one flipped bit in the middle of the tensors
+    dst.write_bytes(bytes(data))
+    dst.with_suffix(".json").write_bytes(src.with_suffix(".json").read_bytes())  # the original card
+    return dst
+
+
+@pytest.mark.requirements("EL-R15")
+def test_altered_weights_are_refused_before_use(tiny_weights, tmp_path):
+    load_weights(tiny_weights)  # the intact file loads
+    bad = _altered(tiny_weights, tmp_path / "altered.pt")
+    with pytest.raises(WeightsError, match="SHA-256 mismatch") as exc:
+        load_weights(bad)
+    assert "altered.pt" in str(exc.value)
+    with pytest.raises(WeightsError, match="SHA-256 mismatch"):
+        Segmenter.load(bad)
+
+
+@pytest.mark.requirements("EL-R15")
+def test_weights_without_their_card_are_refused(tiny_weights, tmp_path):
+    lone = tmp_path / "lone.pt"
+    lone.write_bytes(tiny_weights.read_bytes())
+    with pytest.raises(WeightsError, match="model card not found"):
+        load_weights(lone)
+
+
+@pytest.mark.requirements("EL-R15", "EL-R06")
+def test_pipeline_with_altered_weights_takes_the_default_action(tiny_weights, tmp_path):
+    bad = _altered(tiny_weights, tmp_path / "altered.pt")
+    el = EmergencyLanding(PipelineConfig(core=CoreConfig(working_width=128)), weights=bad)
+    d = el.decide(scene_image(scene_ids()))
+    assert d.action == "default" and d.reason.startswith("fault: model") and "SHA-256 mismatch" in d.reason

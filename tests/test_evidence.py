@@ -1,0 +1,209 @@
+"""The evidence report and its gate: files, identity by SHA-256 (EL-R12), escaping, states, baseline, PDF."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import shutil
+import sys
+from pathlib import Path
+
+import hypothesis  # noqa: F401  # imported once here: pytester's in-process runs would re-import it every time
+import pandas as pd
+import pytest
+
+from assurance import cli, readouts
+from assurance import requirements as rq
+from assurance.evidence import generate
+
+pytest_plugins = ["pytester"]
+
+CAMPAIGN_TESTS = Path(__file__).resolve().parent / "requirements" / "test_campaign_requirements.py"
+SCRIPT = "<script>alert('x')</script>"
+WEIRD_WEIGHTS = '/models/w<b>"&\'.pt'
+
+
+def sha(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def weasyprint_ok() -> bool:
+    try:
+        import weasyprint  # noqa: F401
+    except Exception:
+        return False
+    return True
+
+
+def pytest_results(pytester, run, out, *args) -> Path:
+    """Run the real campaign requirement tests on ``run`` and return the results JSON."""
+    path = out / "requirements.json"
+    pytester.runpytest(str(CAMPAIGN_TESTS), "-p", "no:cacheprovider", "--run", str(run),
+                       "--requirements-report", str(path), *args)
+    return path
+
+
+@pytest.fixture(scope="module")
+def hostile_run(tiny_campaign, tmp_path_factory):
+    """A copy of the tiny run in a folder named with HTML specials, a monitor reason holding a script tag
+    and a weights path full of specials in its manifest."""
+    run = tmp_path_factory.mktemp("hostile") / 'run<&>"x'
+    shutil.copytree(tiny_campaign["run"], run)
+    for shard in (run / "shards").iterdir():
+        if shard.name.startswith("none-s"):
+            path = shard / "candidates.parquet"
+            cands = pd.read_parquet(path)
+            cands["reason"] = SCRIPT
+            cands.to_parquet(path, index=False)
+    man = json.loads((run / "manifest.json").read_text())
+    man["weights"]["path"] = WEIRD_WEIGHTS
+    (run / "manifest.json").write_text(json.dumps(man, indent=2, sort_keys=True))
+    return run
+
+
+@pytest.fixture(scope="module")
+def report(hostile_run, tiny_run_without, tmp_path_factory):
+    """The full report (PDF included) of the hostile run, with a baseline that lacks pixel_trap."""
+    out = tmp_path_factory.mktemp("report") / "reports"
+    baseline = tiny_run_without("pixel_trap")
+    rep = generate(hostile_run, out, baseline=baseline, n_boot=200)
+    return rep, json.loads(rep.json.read_text()), rep.html.read_text(encoding="utf-8")
+
+
+@pytest.mark.requirements("EL-R12")
+def test_report_identifies_every_artefact_by_sha256(report, hostile_run):
+    rep, doc, html = report
+    ident = doc["identity"]
+    man = readouts.read_manifest(hostile_run)
+    assert ident["weights_sha256"] == man["weights"]["sha256"] and len(ident["weights_sha256"]) == 64
+    assert ident["data_sha256"] == man["data"]["sha256"] and len(ident["data_sha256"]) == 64
+    assert ident["config_sha256"] == rq.config_sha256(man["config"])
+    assert ident["registry_sha256"] == sha(rq.default_registry_path())
+    assert ident["results_csv_sha256"] == sha(rep.out / "results.csv")
+    assert ident["manifest_sha256"] == sha(hostile_run / "manifest.json")
+    assert len(ident["code_sha256"]) == 64 and len(ident["templates_sha256"]) == 64
+    for key in ("weights_sha256", "data_sha256", "config_sha256", "registry_sha256", "code_sha256"):
+        assert ident[key] in html, key
+    sums = dict(line.split("  ")[::-1] for line in (rep.out / "SHA256SUMS").read_text().splitlines())
+    for name, digest in sums.items():
+        assert sha(rep.out / name) == digest
+    assert {"evidence.html", "evidence.json", "results.csv"} <= set(sums)
+
+
+def test_report_files_html_json_pdf(report):
+    rep, doc, html = report
+    assert rep.html.is_file() and rep.json.is_file() and html.startswith("<!DOCTYPE html>")
+    assert "<style>" in html and "<link" not in html  # self-contained: CSS inline ...
+    assert 'src="data:image/png;base64,' in html and 'src="data:image/jpeg;base64,' in html  # ... images embedded
+    assert "http://" not in html and "https://" not in html
+    if not weasyprint_ok():
+        pytest.skip("WeasyPrint cannot be imported here: the PDF is not checked")
+    assert rep.pdf is not None and rep.pdf.read_bytes()[:4] == b"%PDF" and rep.pdf_error is None
+
+
+def test_html_escapes_everything_user_controlled(report):
+    _, doc, html = report
+    assert SCRIPT not in html and "<script" not in html
+    assert "&lt;script&gt;alert(&#39;x&#39;)&lt;/script&gt;" in html  # the monitor reason, escaped
+    assert 'run&lt;&amp;&gt;&#34;x' in html and 'run<&>"x' not in html  # the run folder name
+    assert "w&lt;b&gt;&#34;&amp;&#39;.pt" in html and WEIRD_WEIGHTS not in html  # a configuration value
+    assert doc["identity"]["weights_path"] == WEIRD_WEIGHTS  # JSON keeps the raw value
+
+
+def test_report_contents(report):
+    rep, doc, html = report
+    for section in ("What was assessed", "Operating domain and assumptions", "Traceability", "Results table",
+                    "What the sample size can and cannot show", "Plots", "Perturbations", "Every unsafe landing",
+                    "What changed since the baseline", "Limitations", "Requirements (full text)", "Reproduce"):
+        assert section in html, section
+    assert "0 unsafe landings in 10 images the rate can still be as high as 25.9%" in html
+    assert "Required beta" in html and "1.56" in html
+    # every requirement of the registry in the matrix, with a state
+    for rid in rq.load_registry().ids:
+        assert f"<strong>{rid}</strong>" in html
+    assert set(doc["requirements"]) == set(rq.load_registry().ids)
+    # no requirement results given: every requirement is open, and the report says why
+    assert doc["gate"]["counts"] == {rq.VERIFIED: 0, rq.FAILED: 0, rq.NOT_VERIFIED: 15}
+    assert any("no requirement test results" in w for w in doc["warnings"])
+    # the results table of the JSON is the run's table
+    assert len(doc["results"]) == 12 and {r["perturbation"] for r in doc["results"]} >= {"fog", "pixel_trap"}
+    # the baseline lacks pixel_trap: its rows are new, and the identity is unchanged
+    base = doc["baseline"]
+    assert {r["status"] for r in base["rows"] if r["scenario"].startswith("pixel_trap")} == {"new"}
+    changed = {r["item"]: r["changed"] for r in base["identity"]}
+    assert changed["Weights SHA-256"] == changed["Data SHA-256"] == "same"
+    assert changed["Configuration SHA-256"] == "changed"  # one perturbation fewer
+    # the gallery: one picture per perturbation
+    assert html.count("severity 3</figcaption>") == 5 and "none (unperturbed)</figcaption>" in html
+
+
+def test_every_unsafe_landing_is_drawn(report, hostile_run):
+    _, doc, html = report
+    images = readouts.load_table(hostile_run, "images")
+    unsafe = images[images["decision_unsafe"].astype(bool)]
+    assert doc["unsafe_landings"] == len(unsafe) > 0  # fog fools the oracle: some landings are unsafe
+    groups = {(r.perturbation, r.key, r.selected) for r in unsafe.itertuples()}
+    assert html.count('class="example unsafe compact"') == len(groups)
+
+
+# ------------------------------------------------------------------------------------------------
+# The gate
+# ------------------------------------------------------------------------------------------------
+@pytest.fixture
+def evidence_cli(monkeypatch):
+    """``uav-el evidence`` in-process (registered here in case the command table does not list it yet)."""
+    monkeypatch.setitem(cli.COMMANDS, "evidence", "evidence")
+    return lambda *args: cli.main(["evidence", *map(str, args)])
+
+
+def test_gate_turns_red_for_exactly_the_broken_requirement(pytester, monitor_runs, evidence_cli, tmp_path, capsys):
+    """A pipeline variant that ignores the monitor (lands on rank 0 regardless) fails EL-R04, and only EL-R04."""
+    bad_json = pytest_results(pytester, monitor_runs["broken"], tmp_path / "bad", "-k", "monitor_coverage")
+    bad = json.loads(bad_json.read_text())
+    assert bad["requirements"]["EL-R04"]["state"] == rq.FAILED
+    assert "which the monitor rejected" in bad["requirements"]["EL-R04"]["tests"][0]["message"]
+    capsys.readouterr()
+    code = evidence_cli("--run", monitor_runs["broken"], "--out", tmp_path / "bad", "--no-pdf", "--boot", 100)
+    out = capsys.readouterr().out
+    assert code == 1
+    assert "failed:         1  EL-R04" in out and "gate: FAILED" in out
+    doc = json.loads((tmp_path / "bad" / "evidence.json").read_text())
+    assert doc["gate"]["failed"] == ["EL-R04"] and doc["gate"]["exit_code"] == 1
+
+    good_json = pytest_results(pytester, monitor_runs["good"], tmp_path / "good", "-k", "monitor_coverage")
+    assert json.loads(good_json.read_text())["requirements"]["EL-R04"]["state"] == rq.VERIFIED
+    capsys.readouterr()
+    assert evidence_cli("--run", monitor_runs["good"], "--out", tmp_path / "good", "--no-pdf", "--boot", 100) == 0
+    out = capsys.readouterr().out
+    assert "failed:         0" in out and "not verified:  14  EL-R01, EL-R02" in out
+    assert f"report: {tmp_path / 'good' / 'evidence.html'}" in out
+    # --strict: not verified is red too
+    assert evidence_cli("--run", monitor_runs["good"], "--out", tmp_path / "good", "--no-pdf", "--strict",
+                        "--boot", 100) == 1
+    assert "--strict" in capsys.readouterr().out
+
+
+def test_missing_weasyprint_keeps_the_html_and_says_what_to_install(monitor_runs, tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "weasyprint", None)  # import weasyprint -> ImportError
+    out = tmp_path / "r"
+    (out).mkdir()
+    (out / "evidence.pdf").write_bytes(b"%PDF old report")
+    rep = generate(monitor_runs["good"], out, n_boot=100)
+    assert rep.html.is_file() and rep.pdf is None and not (out / "evidence.pdf").exists()
+    assert "pip install weasyprint" in rep.pdf_error and "libpango" in rep.pdf_error
+    assert rep.exit_code == 0  # the PDF counts only with --strict
+    assert generate(monitor_runs["good"], out, n_boot=100, strict=True).exit_code == 1
+    assert any("pip install weasyprint" in line for line in rep.summary_lines())
+
+
+def test_results_of_another_run_are_flagged(pytester, monitor_runs, tmp_path):
+    results = pytest_results(pytester, monitor_runs["good"], tmp_path, "-k", "monitor_coverage")
+    rep = generate(monitor_runs["broken"], tmp_path / "r", requirements=results, pdf=False, n_boot=100)
+    assert any("produced on run" in w for w in rep.warnings)
+    # and the campaign check on this run contradicts the verified state
+    assert any(w.startswith("EL-R04: the test results (verified) disagree") for w in rep.warnings)
+
+
+def test_cli_errors(evidence_cli, tmp_path, capsys):
+    assert evidence_cli("--run", tmp_path / "nothing", "--out", tmp_path / "o") == 2
+    assert "not a campaign run" in capsys.readouterr().err

@@ -1,0 +1,365 @@
+"""Segmentation network and inference API: shapes, determinism, MC dropout, weights hashing."""
+
+from __future__ import annotations
+
+import doctest
+import json
+
+import numpy as np
+import pytest
+import torch
+from torch import nn
+
+import el.segmentation.inference as inference_module
+from el.labels import NUM_CLASSES
+from el.segmentation import (
+    ArchConfig,
+    Segmenter,
+    WeightsError,
+    build_model,
+    load_weights,
+    mc_dropout_stats,
+    save_weights,
+)
+from el.segmentation.model import MCSpec, count_parameters
+from el.segmentation.weights import card_path, read_card, sha256_file, state_dict_bytes
+
+TINY = ArchConfig(widths=(8, 8, 16), ms_channels=8, decoder_channels=8)
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _one_thread():
+    """Tiny tensors: one torch thread is faster, and immune to a busy shared CPU."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
+@pytest.fixture(scope="module")
+def model() -> nn.Module:
+    torch.manual_seed(0)
+    m = build_model(TINY)
+    # Non-trivial BatchNorm statistics, so that eval-mode BN differs from train-mode BN.
+    m.train()
+    with torch.no_grad():
+        for _ in range(3):
+            m(torch.rand(2, 3, 40, 48))
+    return m.eval()
+
+
+@pytest.fixture(scope="module")
+def seg(model: nn.Module) -> Segmenter:
+    return Segmenter(model, working_width=64)
+
+
+def _rgb(h: int, w: int, seed: int = 0) -> np.ndarray:
+    return np.random.default_rng(seed).integers(0, 256, (h, w, 3), dtype=np.uint8)
+
+
+# -- model contract ---------------------------------------------------------------------------------
+@pytest.mark.parametrize(("h", "w"), [(16, 16), (17, 23), (33, 50), (64, 40)])
+def test_forward_gives_logits_at_input_size(model: nn.Module, h: int, w: int) -> None:
+    with torch.inference_mode():
+        out = model(torch.rand(2, 3, h, w))
+    assert out.shape == (2, NUM_CLASSES, h, w)
+    assert torch.isfinite(out).all()
+
+
+def test_trunk_then_head_is_forward(model: nn.Module) -> None:
+    x = torch.rand(1, 3, 37, 29)
+    with torch.inference_mode():
+        assert torch.equal(model.head(model.trunk(x)), model(x))
+
+
+def test_default_architecture_is_compact() -> None:
+    m = build_model()
+    params = count_parameters(m)
+    assert 200_000 <= params <= 1_000_000
+    assert len(state_dict_bytes(m)) < 5_000_000
+    assert len(m.dropout_layers()) >= 2
+
+
+def test_arch_config_validates_and_round_trips() -> None:
+    assert ArchConfig.from_dict(TINY.to_dict()) == TINY
+    with pytest.raises(ValueError, match="dropout"):
+        ArchConfig(dropout=1.0)
+    with pytest.raises(ValueError, match="unknown architecture fields"):
+        ArchConfig.from_dict({**TINY.to_dict(), "depth": 3})
+    with pytest.raises(ValueError, match="drop probability"):
+        build_model(TINY).set_dropout(1.5)
+
+
+def test_set_dropout_changes_training_noise() -> None:
+    m = build_model(TINY).train()
+    m.set_dropout(0.0)
+    x = torch.rand(1, 3, 32, 32)
+    torch.manual_seed(1)
+    a = m(x)
+    torch.manual_seed(2)
+    b = m(x)
+    assert torch.allclose(a, b)  # same BN batch statistics, no dropout
+    m.set_dropout(0.5)
+    assert all(d.p == 0.5 for d in m.dropout_layers())
+
+
+# -- Segmenter predictions ---------------------------------------------------------------------------
+@pytest.mark.parametrize(("h", "w"), [(16, 16), (21, 37), (50, 33)])
+def test_predict_patch_shape_and_softmax(seg: Segmenter, h: int, w: int) -> None:
+    probs = seg.predict_patch(_rgb(h, w))
+    assert probs.shape == (NUM_CLASSES, h, w) and probs.dtype == np.float32
+    np.testing.assert_allclose(probs.sum(0), 1.0, atol=1e-5)
+    assert (probs >= 0).all()
+
+
+def test_predict_frame_resizes_to_working_resolution(seg: Segmenter) -> None:
+    probs = seg.predict_frame(_rgb(72, 128))
+    assert probs.shape == (NUM_CLASSES, 36, 64)
+    odd = seg.predict_frame(_rgb(91, 150))  # working size (64, round(64 * 91 / 150) = 39)
+    assert odd.shape == (NUM_CLASSES, 39, 64)
+
+
+def test_predict_frame_at_working_size_equals_patch(seg: Segmenter) -> None:
+    rgb = _rgb(36, 64)
+    np.testing.assert_array_equal(seg.predict_frame(rgb), seg.predict_patch(rgb))
+
+
+def test_eval_mode_is_deterministic(seg: Segmenter) -> None:
+    rgb = _rgb(40, 40, seed=3)
+    np.testing.assert_array_equal(seg.predict_patch(rgb), seg.predict_patch(rgb))
+
+
+def test_predict_patches_keeps_order_and_batches(seg: Segmenter) -> None:
+    patches = [_rgb(24, 24, 1), _rgb(32, 20, 2), _rgb(24, 24, 3)]
+    out = seg.predict_patches(patches)
+    assert [o.shape for o in out] == [(NUM_CLASSES, 24, 24), (NUM_CLASSES, 32, 20), (NUM_CLASSES, 24, 24)]
+    for o, p in zip(out, patches, strict=True):
+        np.testing.assert_allclose(o, seg.predict_patch(p), atol=1e-5)
+
+
+@pytest.mark.parametrize(
+    ("bad", "match"),
+    [
+        (np.zeros((32, 32, 3), np.float32), "uint8"),
+        (np.zeros((32, 32), np.uint8), "shape"),
+        (np.zeros((32, 32, 4), np.uint8), "shape"),
+        (np.zeros((8, 32, 3), np.uint8), "at least"),
+        ([[0, 0, 0]], "numpy array"),
+    ],
+)
+def test_bad_inputs_raise_value_error(seg: Segmenter, bad: object, match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        seg.predict_patch(bad)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match=match):
+        seg.mc_dropout(bad, 2, 0.5, 0)  # type: ignore[arg-type]
+
+
+class _NaNModel(nn.Module):
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        out = torch.zeros(x.shape[0], NUM_CLASSES, x.shape[2], x.shape[3])
+        out[:, :, 0, 0] = float("nan")
+        return out
+
+
+class _WrongShape(nn.Module):
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return torch.zeros(x.shape[0], 3, x.shape[2], x.shape[3])
+
+
+def test_non_finite_output_raises() -> None:
+    with pytest.raises(ValueError, match="non-finite"):
+        Segmenter(_NaNModel()).predict_patch(_rgb(20, 20))
+
+
+def test_wrong_output_shape_raises() -> None:
+    with pytest.raises(ValueError, match="expected logits of shape"):
+        Segmenter(_WrongShape()).predict_patch(_rgb(20, 20))
+
+
+def test_segmenter_rejects_bad_arguments(model: nn.Module) -> None:
+    with pytest.raises(ValueError, match="torch.nn.Module"):
+        Segmenter(object())  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="threads"):
+        Segmenter(model, threads=0)
+
+
+# -- Monte-Carlo dropout -------------------------------------------------------------------------------
+def test_mc_dropout_shape_and_variability(seg: Segmenter) -> None:
+    rgb = _rgb(40, 48)
+    samples = seg.mc_dropout(rgb, 6, 0.5, seed=0)
+    assert samples.shape == (6, NUM_CLASSES, 40, 48) and samples.dtype == np.float32
+    np.testing.assert_allclose(samples.sum(1), 1.0, atol=1e-5)
+    mean, std = mc_dropout_stats(samples)
+    assert mean.shape == std.shape == (NUM_CLASSES, 40, 48)
+    assert std.max() > 1e-4
+
+
+def test_mc_dropout_keep_prob_one_has_zero_std(seg: Segmenter) -> None:
+    rgb = _rgb(40, 48)
+    samples = seg.mc_dropout(rgb, 5, 1.0, seed=0)
+    assert mc_dropout_stats(samples)[1].max() == 0.0
+    np.testing.assert_array_equal(samples[0], seg.predict_patch(rgb))
+
+
+def test_mc_dropout_reproducible_and_seed_dependent(seg: Segmenter) -> None:
+    rgb = _rgb(33, 35)
+    a = seg.mc_dropout(rgb, 4, 0.75, seed=7)
+    np.testing.assert_array_equal(a, seg.mc_dropout(rgb, 4, 0.75, seed=7))
+    assert not np.array_equal(a, seg.mc_dropout(rgb, 4, 0.75, seed=8))
+
+
+def test_mc_dropout_is_prefix_consistent(seg: Segmenter) -> None:
+    rgb = _rgb(32, 32)
+    np.testing.assert_allclose(seg.mc_dropout(rgb, 3, 0.5, 11), seg.mc_dropout(rgb, 8, 0.5, 11)[:3], atol=1e-6)
+
+
+def test_mc_dropout_leaves_global_rng_and_bn_alone(seg: Segmenter, model: nn.Module) -> None:
+    rng_state = torch.get_rng_state()
+    buffers = {k: v.clone() for k, v in model.state_dict().items()}
+    seg.mc_dropout(_rgb(32, 32), 4, 0.5, seed=1)
+    assert torch.equal(rng_state, torch.get_rng_state())
+    assert not model.training
+    for k, v in model.state_dict().items():
+        assert torch.equal(v, buffers[k]), k
+
+
+def test_trunk_once_batch_equals_separate_passes(model: nn.Module) -> None:
+    """The batched head gives each sample what a full forward pass with the same masks gives."""
+    x = torch.rand(1, 3, 30, 26)
+    n = 5
+    spec = model.mc_spec(n, 0.5, seed=3)
+    with torch.inference_mode():
+        batched = model.head(model.trunk(x).repeat(n), spec)
+        for i in range(n):
+            single = model.head(model.trunk(x), MCSpec([m[i:i + 1] for m in spec.masks]))
+            torch.testing.assert_close(batched[i:i + 1], single, atol=1e-5, rtol=1e-5)
+    masks = spec.masks[0].flatten(1)
+    assert set(torch.unique(masks).tolist()) <= {0.0, 2.0}  # kept channels scaled by 1 / keep_prob
+    assert not all(torch.equal(masks[0], masks[i]) for i in range(1, n))
+
+
+def test_mc_dropout_stats_and_validation(seg: Segmenter) -> None:
+    samples = np.stack([np.full((2, 3, 3), v, np.float32) for v in (0.0, 1.0)])
+    mean, std = mc_dropout_stats(samples)
+    np.testing.assert_allclose(mean, 0.5)
+    np.testing.assert_allclose(std, 0.5)
+    np.testing.assert_allclose(mc_dropout_stats(samples, ddof=1)[1], np.sqrt(0.5))
+    with pytest.raises(ValueError):
+        mc_dropout_stats(np.zeros((3, 3)))
+    for n, keep in [(0, 0.5), (2, 0.0), (2, 1.5), (True, 0.5)]:
+        with pytest.raises(ValueError):
+            seg.mc_dropout(_rgb(20, 20), n, keep, 0)
+    with pytest.raises(ValueError, match="seed"):
+        seg.mc_dropout(_rgb(20, 20), 2, 0.5, 1.5)  # type: ignore[arg-type]
+
+
+class _PlainNet(nn.Module):
+    """Any module with the contract: MC dropout falls back to N passes with its dropout layers on."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.conv1 = nn.Conv2d(3, 8, 3, padding=1)
+        self.bn = nn.BatchNorm2d(8)
+        self.drop = nn.Dropout2d(0.1)
+        self.conv2 = nn.Conv2d(8, NUM_CLASSES, 1)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.conv2(self.drop(torch.relu(self.bn(self.conv1(x)))))
+
+
+def test_plugged_in_module_mc_fallback() -> None:
+    torch.manual_seed(0)
+    net = _PlainNet()
+    seg = Segmenter(net)
+    assert not seg.fast_mc
+    rgb = _rgb(24, 24)
+    a = seg.mc_dropout(rgb, 4, 0.5, seed=2)
+    assert a.shape == (4, NUM_CLASSES, 24, 24)
+    assert mc_dropout_stats(a)[1].max() > 0
+    np.testing.assert_array_equal(a, seg.mc_dropout(rgb, 4, 0.5, seed=2))
+    np.testing.assert_allclose(a[:2], seg.mc_dropout(rgb, 2, 0.5, seed=2), atol=1e-6)
+    assert net.drop.p == 0.1 and not net.drop.training and not net.bn.training  # restored / untouched
+
+
+def test_mc_fallback_without_dropout_layers_raises() -> None:
+    net = nn.Conv2d(3, NUM_CLASSES, 1)
+    with pytest.raises(ValueError, match="no dropout layers"):
+        Segmenter(net).mc_dropout(_rgb(20, 20), 3, 0.5, 0)
+
+
+# -- weights and model cards ---------------------------------------------------------------------------
+def test_weights_round_trip(tmp_path, model: nn.Module) -> None:
+    path = tmp_path / "model.pt"
+    card = save_weights(model, path, card={"note": "test"})
+    assert card["weights_sha256"] == sha256_file(path) == read_card(path)["weights_sha256"]
+    assert card["architecture"] == TINY.to_dict() and card["note"] == "test"
+    seg = Segmenter.load(path)
+    assert seg.weights_sha256 == card["weights_sha256"]
+    rgb = _rgb(30, 30)
+    np.testing.assert_array_equal(Segmenter(model).predict_patch(rgb), seg.predict_patch(rgb))
+
+
+def test_tampered_weights_raise(tmp_path, model: nn.Module) -> None:
+    path = tmp_path / "model.pt"
+    save_weights(model, path)
+    data = bytearray(path.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    path.write_bytes(bytes(data))
+    with pytest.raises(WeightsError, match="SHA-256 mismatch") as exc:
+        Segmenter.load(path)
+    assert str(path) in str(exc.value)
+
+
+def test_missing_weights_or_card_raise(tmp_path, model: nn.Module) -> None:
+    with pytest.raises(WeightsError, match="not found"):
+        Segmenter.load(tmp_path / "nope.pt")
+    path = tmp_path / "model.pt"
+    save_weights(model, path)
+    card_path(path).unlink()
+    with pytest.raises(WeightsError, match="model card not found"):
+        load_weights(path)
+    card_path(path).write_text("{not json")
+    with pytest.raises(WeightsError, match="unreadable model card"):
+        load_weights(path)
+    card_path(path).write_text(json.dumps({"format": "other"}))
+    with pytest.raises(WeightsError, match="format"):
+        load_weights(path)
+
+
+class _Evil:
+    def __reduce__(self):  # pragma: no cover - never called when loading with weights_only
+        return (print, ("code ran",))
+
+
+def test_weights_only_refuses_pickled_objects(tmp_path, model: nn.Module) -> None:
+    """Even with a matching hash, a file holding arbitrary objects is refused (weights_only)."""
+    path = tmp_path / "model.pt"
+    card = save_weights(model, path)
+    torch.save({"payload": _Evil()}, path)
+    card["weights_sha256"] = sha256_file(path)
+    card_path(path).write_text(json.dumps(card))
+    with pytest.raises(WeightsError, match="weights_only"):
+        load_weights(path)
+
+
+def test_state_dict_of_another_architecture_raises(tmp_path, model: nn.Module) -> None:
+    path = tmp_path / "model.pt"
+    card = save_weights(model, path)
+    card["architecture"] = ArchConfig(widths=(8, 8, 24), ms_channels=8, decoder_channels=8).to_dict()
+    card_path(path).write_text(json.dumps(card))
+    with pytest.raises(WeightsError, match="does not fit"):
+        load_weights(path)
+
+
+def test_segmenter_pickles(seg: Segmenter) -> None:
+    import pickle
+
+    clone = pickle.loads(pickle.dumps(seg))
+    rgb = _rgb(24, 24)
+    np.testing.assert_array_equal(clone.predict_patch(rgb), seg.predict_patch(rgb))
+    np.testing.assert_array_equal(clone.mc_dropout(rgb, 3, 0.5, 1), seg.mc_dropout(rgb, 3, 0.5, 1))
+
+
+def test_docstring_examples() -> None:
+    result = doctest.testmod(inference_module, optionflags=doctest.ELLIPSIS)
+    assert result.failed == 0 and result.attempted > 0

@@ -1,0 +1,293 @@
+"""Training, data preparation, checkpoints/resume, model-card verification and the CLI, on tiny data."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+import assurance.cli as cli
+from el.labels import NUM_CLASSES, PALETTE
+from el.segmentation import data as D
+from el.segmentation.card import verify_card
+from el.segmentation.evaluation import EvalProtocol, compare_figures, confusion, summarise
+from el.segmentation.model import ArchConfig, build_model
+from el.segmentation.training import (
+    TrainConfig,
+    checkpoint_path,
+    load_checkpoint,
+    sample_batch,
+    steps_for_epochs,
+    train,
+    training_loss,
+)
+from el.segmentation.weights import card_path, read_card
+from el.uavid import write_sample
+
+TINY_ARCH = ArchConfig(widths=(8, 8, 16), ms_channels=8, decoder_channels=8)
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _one_thread():
+    """Tiny tensors: one torch thread is faster, and immune to a busy shared CPU."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
+def tiny_config(**overrides) -> TrainConfig:
+    base = dict(
+        steps=6, batch=2, crop=32, hd_pixels=2 * 32 * 32, hd_crop_min=32, hd_crop_max=48, hd_regions=2,
+        warmup=2, checkpoint_every=3, working_width=64, arch=TINY_ARCH, baseline_pixels=2000, lr=5e-3,
+        eval_protocol=EvalProtocol(working_width=64, hd_patches=1, hd_patch_size=48),
+    )
+    base.update(overrides)
+    return TrainConfig(**base)
+
+
+def fake_scene(rng: np.random.Generator, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+    """Rectangles of random classes on low vegetation, each class with its own colour and stripes."""
+    ids = np.full((height, width), 5, np.uint8)
+    for _ in range(int(rng.integers(3, 7))):
+        k = int(rng.integers(0, NUM_CLASSES))
+        h, w = int(rng.integers(height // 6, height // 2)), int(rng.integers(width // 6, width // 2))
+        y, x = int(rng.integers(0, height - h)), int(rng.integers(0, width - w))
+        ids[y:y + h, x:x + w] = k
+    xx = np.arange(width)[None, :]
+    texture = np.sin(xx * (0.3 + 0.1 * ids)) * 20
+    img = PALETTE[ids] * 0.6 + 50 + texture[..., None] + rng.normal(0, 8, (height, width, 3))
+    return np.clip(img, 0, 255).astype(np.uint8), ids
+
+
+def fake_dataset(root: Path, n: int, *, seed: int, width: int = 128, height: int = 72) -> Path:
+    rng = np.random.default_rng(seed)
+    for i in range(n):
+        write_sample(root, f"seq{i % 2 + 1:02d}", f"{i:06d}", *fake_scene(rng, width, height))
+    return root
+
+
+@pytest.fixture(scope="module")
+def datasets(tmp_path_factory) -> tuple[Path, Path]:
+    base = tmp_path_factory.mktemp("segdata")
+    return fake_dataset(base / "train", 4, seed=1), fake_dataset(base / "val", 2, seed=2)
+
+
+# -- data preparation ---------------------------------------------------------------------------------
+def test_downsample_labels_takes_the_majority() -> None:
+    ids = np.zeros((4, 8), np.uint8)
+    ids[:, :3] = 2  # 3 of 4 columns of the left output pixel are road
+    ids[0, 4:] = 7  # 1 of 4 rows of the right output pixel is a moving car
+    out = D.downsample_labels(ids, (2, 1))
+    assert out.tolist() == [[2, 0]]
+
+
+def test_class_weights_are_balanced_and_bounded() -> None:
+    freq = np.array([0.5, 0.3, 0.15, 0.04, 0.01, 0.0, 0.0, 0.0])
+    w = D.class_weights(freq)
+    assert w.shape == (NUM_CLASSES,) and np.isfinite(w).all()
+    assert np.isclose((freq * w).sum(), 1.0)
+    assert w[4] > w[3] > w[2] > w[1] > w[0]
+    assert np.all(w[5:] == w[:5].max())
+
+
+def test_patch_positions_are_seeded_and_reachable() -> None:
+    a = D.patch_positions("seq01/000001", 3840, 2160, count=3, size=384, seed=5)
+    assert a == D.patch_positions("seq01/000001", 3840, 2160, count=3, size=384, seed=5)
+    assert a != D.patch_positions("seq01/000002", 3840, 2160, count=3, size=384, seed=5)
+    side, corners = a
+    assert side == 384
+    for x, y in corners:
+        assert 0 <= x <= 3840 - 384 and 432 <= y <= 2160 - 384  # below the top 2 of 10 stripes
+    assert D.patch_positions("k", 100, 60, count=1, size=384, seed=0)[0] == 60
+
+
+def test_augmentations_exclude_evaluation_perturbations() -> None:
+    banned = {"brightness", "fog", "motion_blur", "shifted_pixels", "dead_rows", "pixel_trap"}
+    assert not banned & set(D.AUGMENTATIONS)
+
+
+def test_prepared_data_are_cached(datasets, tmp_path) -> None:
+    train_dir, _ = datasets
+    manifest = D.dataset_manifest(train_dir)
+    params = tiny_config().prep_params()
+    first = D.load_dataset(manifest, params, cache_dir=tmp_path)
+    assert len(list(tmp_path.glob("*.npz"))) == len(manifest.samples)
+    again = D.load_dataset(manifest, params, cache_dir=tmp_path)
+    for a, b in zip(first, again, strict=True):
+        assert a.key == b.key
+        np.testing.assert_array_equal(a.image, b.image)
+        np.testing.assert_array_equal(a.region_labels, b.region_labels)
+    assert first[0].image.shape == (36, 64, 3) and first[0].regions.shape == (2, 56, 56, 3)
+
+
+def test_metrics_summary() -> None:
+    truth = np.array([0, 0, 1, 1])
+    pred = np.array([0, 1, 1, 1])
+    s = summarise(confusion(truth, pred))
+    assert s["per_class_iou"]["clutter"] == 0.5 and abs(s["per_class_iou"]["building"] - 2 / 3) < 1e-12
+    assert s["per_class_iou"]["road"] is None  # absent from truth and prediction: undefined, not 0
+    assert abs(s["miou"] - (0.5 + 2 / 3) / 2) < 1e-12
+    figures = {"working_resolution": s, "hd_patches": s}
+    assert compare_figures(figures, figures) == []
+    other = summarise(confusion(truth, np.array([0, 0, 1, 1])))
+    assert compare_figures(figures, {"working_resolution": other, "hd_patches": s})
+
+
+# -- training ------------------------------------------------------------------------------------------
+def test_a_few_steps_lower_the_loss(datasets) -> None:
+    train_dir, _ = datasets
+    config = tiny_config()
+    samples = D.load_dataset(D.dataset_manifest(train_dir), config.prep_params())
+    batches = sample_batch(samples, config, step=0)
+    assert batches[0][0].shape == (2, 3, 32, 32) and batches[1] is not None
+    torch.manual_seed(0)
+    model = build_model(TINY_ARCH).train()
+    model.set_dropout(0.0)
+    opt = torch.optim.Adam(model.parameters(), lr=1e-2)
+    weights = torch.ones(NUM_CLASSES)
+    losses = []
+    for _ in range(15):
+        loss = training_loss(model, batches, weights)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        losses.append(loss.item())
+    assert losses[-1] < 0.7 * losses[0]
+
+
+def test_batches_are_a_function_of_seed_and_step(datasets) -> None:
+    train_dir, _ = datasets
+    config = tiny_config()
+    samples = D.load_dataset(D.dataset_manifest(train_dir), config.prep_params())
+    a, b = sample_batch(samples, config, 3), sample_batch(samples, config, 3)
+    assert torch.equal(a[0][0], b[0][0]) and torch.equal(a[1][1], b[1][1])
+    assert not torch.equal(a[0][0], sample_batch(samples, config, 4)[0][0])
+
+
+def test_train_config_round_trips_and_validates() -> None:
+    config = tiny_config()
+    assert TrainConfig.from_dict(config.to_dict()) == config
+    assert config.region_size >= config.hd_crop_max
+    with pytest.raises(ValueError, match="hd_crop_max"):
+        tiny_config(hd_crop_min=64, hd_crop_max=32)
+    with pytest.raises(ValueError, match="working_width"):
+        tiny_config(working_width=128)
+
+
+def test_steps_for_epochs() -> None:
+    assert steps_for_epochs(200, 3, 4) == 150
+    assert steps_for_epochs(5, 1, 4) == 2
+    with pytest.raises(ValueError):
+        steps_for_epochs(0, 1, 4)
+
+
+def _stop_after(k: int):
+    """A progress wrapper that interrupts the training loop after k steps (a crash)."""
+
+    def wrapper(items, total=None, desc=""):
+        if desc != "train":
+            yield from items
+            return
+        for i, item in enumerate(items):
+            if i == k:
+                raise KeyboardInterrupt
+            yield item
+
+    return wrapper
+
+
+def test_resume_continues_and_matches_an_uninterrupted_run(datasets, tmp_path) -> None:
+    train_dir, val_dir = datasets
+    config = tiny_config(baseline_pixels=0)
+    full = tmp_path / "full" / "model.pt"
+    card_full = train(train_dir, full, val_dir=val_dir, config=config)
+
+    part = tmp_path / "part" / "model.pt"
+    with pytest.raises(KeyboardInterrupt):
+        train(train_dir, part, val_dir=val_dir, config=config, progress=_stop_after(4))
+    assert load_checkpoint(checkpoint_path(part))["step"] in (3, 4)
+    with pytest.raises(ValueError, match="checkpoint exists"):
+        train(train_dir, part, val_dir=val_dir, config=config)
+    with pytest.raises(ValueError, match="another configuration"):
+        train(train_dir, part, val_dir=val_dir, config=tiny_config(baseline_pixels=0, lr=1e-3), resume=True)
+    messages: list[str] = []
+    card_part = train(train_dir, part, val_dir=val_dir, config=config, resume=True, log=messages.append)
+    assert any(m.startswith("resuming from step") for m in messages)
+    assert load_checkpoint(checkpoint_path(part))["step"] == config.steps
+
+    full_state = load_checkpoint(checkpoint_path(full))["model"]
+    part_state = load_checkpoint(checkpoint_path(part))["model"]
+    for k, v in full_state.items():
+        torch.testing.assert_close(part_state[k], v, atol=1e-5, rtol=1e-4)
+    assert card_part["training"]["best_step"] == card_full["training"]["best_step"]
+    assert card_full["training"]["steps"] == config.steps
+
+
+def test_resume_without_checkpoint_is_an_error(datasets, tmp_path) -> None:
+    train_dir, _ = datasets
+    with pytest.raises(ValueError, match="no checkpoint"):
+        train(train_dir, tmp_path / "model.pt", config=tiny_config(), resume=True)
+
+
+# -- the command line ----------------------------------------------------------------------------------
+@pytest.fixture()
+def uav_el(monkeypatch):
+    monkeypatch.setattr(cli, "COMMANDS", {"train": "train", "model-card": "model_card"})
+    return cli.main
+
+
+def test_train_and_model_card_cli(datasets, tmp_path, uav_el, capsys) -> None:
+    train_dir, val_dir = datasets
+    out = tmp_path / "w" / "model.pt"
+    rc = uav_el([
+        "train", "--data", str(train_dir), "--val", str(val_dir), "--out", str(out), "--steps", "4",
+        "--batch", "2", "--crop", "32", "--hd-crops", "0.03", "--hd-crop", "32-48", "--widths", "8,8,16",
+        "--working-width", "64", "--hd-eval-size", "48", "--cache-dir", str(tmp_path / "cache"), "--quiet",
+        "--seed", "3",
+    ])
+    captured = capsys.readouterr()
+    assert rc == 0, captured.err
+    assert "validation mIoU" in captured.out and "baseline" in captured.out
+    card = read_card(out)
+    assert card["training"]["seed"] == 3 and card["training"]["steps"] == 4
+    assert card["training"]["data"]["train"]["images"] == 4
+    assert set(card["evaluation"]) >= {"working_resolution", "hd_patches", "protocol", "data"}
+    assert len(card["evaluation"]["working_resolution"]["confusion"]) == NUM_CLASSES
+    assert card["baseline"]["miou"] is not None and "miou_gap_to_cnn" in card["baseline"]
+
+    assert uav_el(["model-card", "--weights", str(out)]) == 0
+    assert "mIoU" in capsys.readouterr().out
+    assert uav_el(["model-card", "--weights", str(out), "--verify", "--quiet", "--train", str(train_dir)]) == 0
+    assert "model card verified" in capsys.readouterr().out
+
+    # A figure that does not match the weights: verification fails with exit code 1.
+    card["evaluation"]["working_resolution"]["miou"] += 0.05
+    card_path(out).write_text(json.dumps(card))
+    assert uav_el(["model-card", "--weights", str(out), "--verify", "--quiet", "--data", str(val_dir)]) == 1
+    assert "MISMATCH" in capsys.readouterr().out
+    # Altered weights: a one-line error naming the file, exit code 2.
+    out.write_bytes(out.read_bytes() + b"\0")
+    assert uav_el(["model-card", "--weights", str(out), "--verify", "--quiet"]) == 2
+    assert "SHA-256 mismatch" in capsys.readouterr().err
+
+
+def test_train_cli_rejects_bad_options(datasets, tmp_path, uav_el, capsys) -> None:
+    train_dir, _ = datasets
+    rc = uav_el(["train", "--data", str(train_dir), "--out", str(tmp_path / "m.pt"), "--hd-crop", "64-32"])
+    assert rc == 2 and "hd_crop_max" in capsys.readouterr().err
+    rc = uav_el(["train", "--data", str(tmp_path / "missing"), "--out", str(tmp_path / "m.pt")])
+    assert rc == 2 and "not found" in capsys.readouterr().err
+
+
+def test_verify_reports_changed_validation_data(datasets, tmp_path) -> None:
+    train_dir, val_dir = datasets
+    out = tmp_path / "model.pt"
+    train(train_dir, out, val_dir=val_dir, config=tiny_config(steps=2, baseline_pixels=0))
+    other = fake_dataset(tmp_path / "other_val", 2, seed=9)
+    result = verify_card(out, val_dir=other)
+    assert not result.ok
+    assert any("validation data hash differs" in p for p in result.problems)
