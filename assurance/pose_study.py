@@ -27,9 +27,9 @@ import pandas as pd
 from el.camera import Pose
 from el.config import CoreConfig
 from el.gt_pipeline import decide_from_labels
+from el.labels import FORBIDDEN_LUT
 from el.synth.generate import default_geometry, generate_world, scene_seed
 from el.synth.renderer import render
-from el.labels import FORBIDDEN_LUT
 from el.synth.world import World, pixel_clearance_m
 
 POSE_ERRORS = (-0.2, 0.0, 0.2)

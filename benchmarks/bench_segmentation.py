@@ -15,6 +15,7 @@ working-resolution frame < 0.5 s median; MC dropout n = 10 < 5x one HD patch for
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import multiprocessing as mp
 import resource
@@ -95,21 +96,22 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", type=Path, help="also write the results as JSON")
     args = parser.parse_args(argv)
 
-    from el.segmentation.weights import DEFAULT_WEIGHTS
-
-    weights = args.weights or (DEFAULT_WEIGHTS if DEFAULT_WEIGHTS.exists() else None)
+    # The shipped weights' path, found without importing torch: the memory cases run in fresh
+    # processes, which inherit this process's resident-set high-water mark, so it must stay small.
+    spec = importlib.util.find_spec("el.segmentation")
+    shipped = Path(spec.submodule_search_locations[0]) / "weights" / "model.pt"
+    weights = args.weights or (shipped if shipped.exists() else None)
     source = f"weights {weights}" if weights else "randomly initialised weights (no shipped weights found)"
     print(f"segmentation benchmark: {source}; {args.threads} threads, {args.repeats} repeats per case")
     ctx = mp.get_context("spawn")
     wname = str(weights) if weights else None
-    times = _timings(wname, args.threads, args.repeats)
-    rows = []
-    for name, kind, h, w, n in CASES:
+    peaks = {}
+    for name, kind, h, w, n in CASES:  # first, while this process is small (see above)
         with ctx.Pool(1) as pool:  # a fresh process per case: its own memory high-water mark
-            peak = pool.apply(_peak_memory, ((kind, h, w, n, wname, args.threads),))
-        t = times[name]
-        rows.append({"case": name, "median_s": statistics.median(t), "p95_s": float(np.percentile(t, 95)),
-                     "peak_mb": peak})
+            peaks[name] = pool.apply(_peak_memory, ((kind, h, w, n, wname, args.threads),))
+    times = _timings(wname, args.threads, args.repeats)
+    rows = [{"case": name, "median_s": statistics.median(times[name]),
+             "p95_s": float(np.percentile(times[name], 95)), "peak_mb": peaks[name]} for name, *_ in CASES]
     print(f"\n| {'case':<34} | {'median s':>9} | {'p95 s':>8} | {'peak MB':>8} |")
     print(f"|{'-' * 36}|{'-' * 11}|{'-' * 10}|{'-' * 10}|")
     for r in rows:

@@ -7,11 +7,13 @@ issue: at least 0.2 mIoU below), otherwise the scenes are too easy for the campa
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from typing import Any
 
 import cv2
 import numpy as np
+from sklearn.exceptions import ConvergenceWarning
 from sklearn.linear_model import LogisticRegression
 from sklearn.pipeline import make_pipeline
 from sklearn.preprocessing import StandardScaler
@@ -48,13 +50,19 @@ class PixelBaseline:
         Training pixels sampled (uniformly, seeded) over all training images.
     seed : int
         Seed of the pixel sample.
+    max_iter : int
+        L-BFGS iterations; ``converged_`` says whether the solver converged within them (the fit is
+        deterministic either way).
     """
 
-    def __init__(self, *, max_pixels: int = 200_000, seed: int = 0) -> None:
+    def __init__(self, *, max_pixels: int = 200_000, seed: int = 0, max_iter: int = 500) -> None:
         if max_pixels < NUM_CLASSES:
             raise ValueError(f"max_pixels must be >= {NUM_CLASSES}, got {max_pixels!r}")
+        if max_iter < 1:
+            raise ValueError(f"max_iter must be >= 1, got {max_iter!r}")
         self.max_pixels = int(max_pixels)
         self.seed = int(seed)
+        self.max_iter = int(max_iter)
 
     def fit(self, images: Sequence[np.ndarray], labels: Sequence[np.ndarray]) -> PixelBaseline:
         if len(images) != len(labels) or not images:
@@ -70,8 +78,12 @@ class PixelBaseline:
         x, y = np.concatenate(xs), np.concatenate(ys)
         if len(np.unique(y)) < 2:
             raise ValueError("the baseline needs at least two classes in the training pixels")
-        self.model_ = make_pipeline(StandardScaler(), LogisticRegression(max_iter=300, class_weight="balanced"))
-        self.model_.fit(x, y)
+        self.model_ = make_pipeline(StandardScaler(),
+                                    LogisticRegression(max_iter=self.max_iter, class_weight="balanced"))
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", ConvergenceWarning)
+            self.model_.fit(x, y)
+        self.converged_ = not any(issubclass(w.category, ConvergenceWarning) for w in caught)
         return self
 
     def predict(self, rgb: np.ndarray) -> np.ndarray:
@@ -90,5 +102,6 @@ def evaluate_baseline(train_images: Sequence[np.ndarray], train_labels: Sequence
         conf += confusion(lab, model.predict(img))
     result = summarise(conf)
     result.update({"name": "logistic regression on RGB + 5x5/15x15 local mean and variance",
-                   "features": list(FEATURE_NAMES), "max_pixels": max_pixels, "seed": seed})
+                   "features": list(FEATURE_NAMES), "max_pixels": max_pixels, "seed": seed,
+                   "max_iter": model.max_iter, "converged": model.converged_})
     return result

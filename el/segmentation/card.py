@@ -59,7 +59,8 @@ def verify_card(weights_path: str | Path | None = None, *, val_dir: str | Path |
     workers = threads or 2
     manifest = D.dataset_manifest(val_root, threads=workers)
     if manifest.sha256 == recorded_data.get("sha256"):
-        result.checks.append(f"validation data hash matches ({manifest.sha256[:16]}..., {len(manifest.samples)} images)")
+        result.checks.append(f"validation data hash matches ({manifest.sha256[:16]}..., "
+                             f"{len(manifest.samples)} images)")
     else:
         result.problems.append(f"validation data hash differs: recorded {recorded_data.get('sha256')}, "
                                f"{val_root} has {manifest.sha256}")

@@ -18,12 +18,12 @@ Plugging in another network::
 
 The contract: ``my_module(x)`` maps float RGB images ``x`` of shape (B, 3, H, W), values in
 [0, 1], to logits (B, 8, H, W) for any H, W >= 16 (normalisation and padding are the module's
-business). If the module has ``supports_mc_spec = True`` and ``trunk(x)`` / ``head(features, mc)``
-methods (as :class:`el.segmentation.model.MSDLite`), MC dropout computes the trunk once and runs
-the head as one batch of N. Otherwise MC dropout falls back to N full passes with the module's
-dropout layers (``nn.Dropout``, ``nn.Dropout2d``, ... ) switched to train mode at the requested drop
-probability, everything else (BatchNorm included) in eval mode, seeded inside ``torch.random.fork_rng``
-so the global RNG is left untouched.
+business). If the module has ``supports_mc_spec = True`` and ``trunk(x)``, ``head(features, mc)``
+and ``mc_spec(n, keep_prob, seed)`` methods (as :class:`el.segmentation.model.MSDLite`), MC dropout
+computes the trunk once and runs the head as one batch of N. Otherwise MC dropout falls back to N
+full passes with the module's dropout layers (``nn.Dropout``, ``nn.Dropout2d``, ...) switched to
+train mode at the requested drop probability, everything else (BatchNorm included) in eval mode,
+seeded inside ``torch.random.fork_rng`` so that the global RNG is left untouched.
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ from torch import nn
 
 from el.camera import working_size
 from el.labels import NUM_CLASSES
-from el.segmentation.model import MCDropout, MCSpec
+from el.segmentation.model import MCDropout
 from el.segmentation.weights import load_weights
 
 MIN_SIZE = 16  # smallest patch side (px) a Segmenter accepts
@@ -59,7 +59,8 @@ def _check_rgb(rgb: Any, what: str) -> np.ndarray:
 
 
 def _check_finite(probs: np.ndarray, what: str) -> np.ndarray:
-    if not np.isfinite(probs).all():
+    # One summing pass: NaN and inf propagate through a sum of values in [0, 1] (or NaN/inf).
+    if not np.isfinite(probs.sum(dtype=np.float64)):
         bad = int((~np.isfinite(probs)).sum())
         raise ValueError(f"{what}: segmentation output has {bad} non-finite values (NaN or inf)")
     return probs
@@ -133,7 +134,7 @@ class Segmenter:
         self.card = dict(card or {})
         self.working_width = int(working_width)
         self.fast_mc = bool(getattr(model, "supports_mc_spec", False)
-                            and callable(getattr(model, "trunk", None)) and callable(getattr(model, "head", None)))
+                            and all(callable(getattr(model, a, None)) for a in ("trunk", "head", "mc_spec")))
         self._lock = threading.Lock()  # the fallback MC path mutates dropout modules
 
     @classmethod
@@ -146,6 +147,15 @@ class Segmenter:
         """
         model, card = load_weights(weights_path, device=device)
         return cls(model, threads=threads, device=device, card=card)
+
+    def __getstate__(self) -> dict[str, Any]:  # picklable (for worker processes): the lock is recreated
+        state = self.__dict__.copy()
+        del state["_lock"]
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._lock = threading.Lock()
 
     @property
     def weights_sha256(self) -> str | None:
@@ -217,8 +227,11 @@ class Segmenter:
         """N softmax samples of a patch with dropout active (drop probability ``1 - keep_prob``).
 
         The trunk runs once and the head once on a batch of ``n`` (fast path), BatchNorm in eval
-        mode. The result depends only on the inputs and ``seed`` (a private torch.Generator; the
-        global RNG is not touched).
+        mode. The masks are drawn sample by sample from a private generator seeded with ``seed``
+        (torch's global RNG is not touched), so the result is deterministic for a seed and
+        prefix-consistent: the first k samples of an n-sample call are the k-sample call (up to the
+        float rounding of batched convolutions, ~1e-7). ``keep_prob = 1`` returns ``n`` copies of
+        :meth:`predict_patch` (standard deviation exactly 0).
 
         Parameters
         ----------
@@ -241,18 +254,20 @@ class Segmenter:
             raise ValueError(f"keep_prob must lie in (0, 1], got {keep_prob!r}")
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
             raise ValueError(f"seed must be an integer, got {seed!r}")
-        n, p, seed = int(n), 1.0 - float(keep_prob), int(seed)
+        n, keep, seed = int(n), float(keep_prob), int(seed)
         h, w = rgb_patch.shape[:2]
-        x = self._to_tensor([rgb_patch])
         shape = (n, NUM_CLASSES, h, w)
+        if keep == 1.0:  # no dropout: every sample is the deterministic softmax (exactly, std 0)
+            probs = self._predict([rgb_patch], "MC dropout")
+            return np.repeat(probs, n, axis=0)
+        x = self._to_tensor([rgb_patch])
         if self.fast_mc:
-            gen = torch.Generator(device="cpu")
-            gen.manual_seed(seed)
+            spec = self.model.mc_spec(n, keep, seed)
             with torch.inference_mode():
                 features = self.model.trunk(x)
-                logits = self.model.head(features.repeat(n), MCSpec(p=p, generator=gen))
+                logits = self.model.head(features.repeat(n), spec)
                 return self._probs(logits, shape, "MC dropout")
-        return self._mc_fallback(x, n, p, seed, shape)
+        return self._mc_fallback(x, n, 1.0 - keep, seed, shape)
 
     def _mc_fallback(self, x: torch.Tensor, n: int, p: float, seed: int, shape: tuple[int, ...]) -> np.ndarray:
         drops = [m for m in self.model.modules() if _is_dropout(m)]

@@ -12,10 +12,11 @@ then cosine decay. Augmentation: :data:`el.segmentation.data.AUGMENTATIONS` only
 evaluation perturbations (brightness, fog, motion blur, shifted rows, dead rows).
 
 Every ``checkpoint_every`` steps the model, optimiser, scheduler and step are written atomically to
-``<weights>.ckpt``; ``resume=True`` continues from there. With validation data the network is evaluated
-every ``eval_every`` steps (mIoU at working resolution and on HD patches) and the best one is written
-to the weights file with its model card; the card is completed at the end (data hashes, seeds, timing,
-figures, confusion matrices and the per-pixel baseline).
+the checkpoint file (default ``<weights>.ckpt``); ``resume=True`` continues from there. With
+validation data the network is evaluated every ``eval_every`` steps (mIoU at working resolution and
+on HD patches) and the best one is written to the weights file with its model card; the card is
+completed at the end (data hashes, seeds, timing, figures, confusion matrices and the per-pixel
+baseline).
 """
 
 from __future__ import annotations
@@ -201,8 +202,8 @@ def _diff_config(old: dict[str, Any], new: dict[str, Any]) -> list[str]:
 
 def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Path | None = None,
           config: TrainConfig | None = None, resume: bool = False, cache_dir: str | Path | None = None,
-          threads: int | None = None, progress: Progress | None = None,
-          log: Log | None = None) -> dict[str, Any]:
+          checkpoint_file: str | Path | None = None, threads: int | None = None,
+          progress: Progress | None = None, log: Log | None = None) -> dict[str, Any]:
     """Train on a UAVid-layout folder, write the weights and their model card; returns the card.
 
     Parameters
@@ -211,12 +212,14 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
         UAVid-layout datasets (labels required). Without ``val_dir`` no model selection happens: the
         final network is written and the card has no evaluation.
     weights_path : file
-        The weights file to write (its card goes next to it, the checkpoint to ``<weights>.ckpt``).
+        The weights file to write (its card goes next to it).
     resume : bool
         Continue from the checkpoint (same configuration and data required). Without it, an existing
         checkpoint is an error rather than silently overwritten.
     cache_dir : folder, optional
         Where prepared samples are cached (None: no cache).
+    checkpoint_file : file, optional
+        The resumable state (default ``<weights>.ckpt``, see :func:`checkpoint_path`).
     threads : int, optional
         torch CPU threads (also the data-preparation threads).
     progress : callable, optional
@@ -230,7 +233,7 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
     if threads is not None:
         torch.set_num_threads(threads)
     io_threads = threads or torch.get_num_threads()
-    ckpt_path = checkpoint_path(weights_path)
+    ckpt_path = Path(checkpoint_file) if checkpoint_file is not None else checkpoint_path(weights_path)
     if ckpt_path.exists() and not resume:
         raise ValueError(f"{ckpt_path}: a checkpoint exists; resume it (--resume) or delete it")
 
