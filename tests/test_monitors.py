@@ -556,8 +556,6 @@ def test_project_segmenter_implements_the_protocol(project_segmenter):
         assert verdict.name == name and isinstance(verdict.accepted, bool)
 
 
-@pytest.mark.xfail(reason="el.segmentation's mc_dropout draws each dropout layer's masks for the whole "
-                   "batch in turn, so n=10 is not the prefix of n=30 (PatchSegmenter contract)", strict=False)
 def test_project_segmenter_mc_dropout_is_prefix_consistent(project_segmenter):
     rgb = np.random.default_rng(5).integers(0, 256, (32, 32, 3), dtype=np.uint8)
     s30 = project_segmenter.mc_dropout(rgb, 30, 0.5, 3)

@@ -55,7 +55,7 @@ class PixelBaseline:
         deterministic either way).
     """
 
-    def __init__(self, *, max_pixels: int = 200_000, seed: int = 0, max_iter: int = 500) -> None:
+    def __init__(self, *, max_pixels: int = 200_000, seed: int = 0, max_iter: int = 300) -> None:
         if max_pixels < NUM_CLASSES:
             raise ValueError(f"max_pixels must be >= {NUM_CLASSES}, got {max_pixels!r}")
         if max_iter < 1:
@@ -94,9 +94,9 @@ class PixelBaseline:
 
 def evaluate_baseline(train_images: Sequence[np.ndarray], train_labels: Sequence[np.ndarray],
                       val_images: Sequence[np.ndarray], val_labels: Sequence[np.ndarray], *,
-                      max_pixels: int = 200_000, seed: int = 0) -> dict[str, Any]:
+                      max_pixels: int = 200_000, seed: int = 0, max_iter: int = 300) -> dict[str, Any]:
     """Fit on the training frames, score the validation frames (working resolution) as :func:`summarise`."""
-    model = PixelBaseline(max_pixels=max_pixels, seed=seed).fit(train_images, train_labels)
+    model = PixelBaseline(max_pixels=max_pixels, seed=seed, max_iter=max_iter).fit(train_images, train_labels)
     conf = np.zeros((NUM_CLASSES, NUM_CLASSES), np.int64)
     for img, lab in zip(val_images, val_labels, strict=True):
         conf += confusion(lab, model.predict(img))

@@ -91,7 +91,8 @@ def verify_card(weights_path: str | Path | None = None, *, val_dir: str | Path |
                                    cache_dir=None, threads=workers, progress=progress)
         recomputed = evaluate_baseline([s.image for s in train_set], [s.labels for s in train_set],
                                        [s.image for s in val_set], [s.labels for s in val_set],
-                                       max_pixels=int(baseline["max_pixels"]), seed=int(baseline["seed"]))
+                                       max_pixels=int(baseline["max_pixels"]), seed=int(baseline["seed"]),
+                                       max_iter=int(baseline.get("max_iter", 300)))
         result.recomputed["baseline"] = recomputed
         if abs(recomputed["miou"] - baseline["miou"]) > iou_tol:
             result.problems.append(f"baseline mIoU: recorded {baseline['miou']}, recomputed {recomputed['miou']}")
