@@ -142,3 +142,16 @@ def test_cli_campaign_and_table(tmp_path, data, weights, capsys):
     assert (run / "results.csv").is_file() and (run / "results.md").is_file()
     assert main(["campaign", "--data", str(data), "--out", str(tmp_path / "r2"), "--perturbations", "smoke"]) == 2
     assert "unknown perturbation" in capsys.readouterr().err
+
+
+def test_dask_local_cluster_gives_the_same_readouts(tmp_path, data, weights):
+    """The same tasks on a real dask.distributed LocalCluster: same readouts as the in-process run."""
+    pytest.importorskip("dask.distributed")
+    cfg = config(weights, perturbations=("none",), monitors=("lhd",), core=CoreConfig(n_star=6))
+    run_campaign(data, tmp_path / "local", cfg, progress=False)
+    summary = run_campaign(data, tmp_path / "dask", cfg, progress=False, jobs=2, backend="dask")
+    assert summary["done"] == 3 and not summary["faults"]
+    a = readouts.load_table(tmp_path / "local", "images").sort_values("key").reset_index(drop=True)
+    b = readouts.load_table(tmp_path / "dask", "images").sort_values("key").reset_index(drop=True)
+    keep = [c for c in a.columns if not c.endswith("_s")]
+    pd.testing.assert_frame_equal(a[keep], b[keep])
