@@ -15,7 +15,6 @@ import resource
 import statistics
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
@@ -67,7 +66,7 @@ def main(argv: list[str] | None = None) -> int:
 
     lhd_over = next(r[3] for r in rows if r[0] == LABELS["lhd"])
     print(f"decision latency, {len(samples)} frames of {args.data}, {args.threads} torch thread(s)\n")
-    print(f"| configuration | median s | p95 s | monitoring median s | x LHD overhead | candidates examined"
+    print("| configuration | median s | p95 s | monitoring median s | x LHD overhead | candidates examined"
           " | peak RSS growth MB |")
     print("|---|---|---|---|---|---|---|")
     for name, med, p95, mo, ex, rss in rows:
