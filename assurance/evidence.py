@@ -36,6 +36,7 @@ from assurance import __version__, readouts
 from assurance import requirements as rq
 from assurance.metrics import clopper_pearson_upper
 from assurance.table import results_table, write_csv
+from el.hashing import sha256_file
 
 EVIDENCE_FORMAT = "uav-el-evidence/1"
 ROOT = Path(__file__).resolve().parent.parent
@@ -109,12 +110,6 @@ def _ci(row: Mapping[str, Any], name: str, digits: int) -> str:
     return f"[{lo:.{digits}f}, {hi:.{digits}f}]"
 
 
-def sha256_file(path: str | Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        while block := f.read(1 << 22):
-            h.update(block)
-    return h.hexdigest()
 
 
 def tree_sha256(roots: Sequence[Path], *, suffixes: Sequence[str] = (".py", ".yaml", ".yml", ".j2", ".css"),

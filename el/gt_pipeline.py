@@ -10,7 +10,6 @@ the CM ends in the default action with reason ``"fault: ..."`` (EL-R06).
 
 from __future__ import annotations
 
-import hashlib
 import json
 import time
 from collections.abc import Callable
@@ -24,6 +23,7 @@ from el.camera import working_size
 from el.config import CoreConfig
 from el.core import default_area, probs_from_labels, run_core
 from el.decision import Decision
+from el.hashing import sha256_file
 from el.labels import NUM_CLASSES
 from el.uavid import DataError, check_same_size, read_labels
 
@@ -36,13 +36,6 @@ def decision_schema() -> dict[str, Any]:
     return json.loads(text)
 
 
-def sha256_file(path: str | Path) -> str:
-    """Hex SHA-256 of a file's bytes."""
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def _check_ids(ids: np.ndarray) -> tuple[int, int]:

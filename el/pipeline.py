@@ -11,7 +11,6 @@ reason recorded in ``Decision.reason``.
 
 from __future__ import annotations
 
-import hashlib
 import math
 import time
 from collections.abc import Callable
@@ -25,6 +24,7 @@ from el.camera import working_size
 from el.config import CoreConfig
 from el.core import default_area, probs_from_labels, run_core
 from el.decision import Candidate, Decision, Disc, MonitorVerdict
+from el.hashing import sha256_bytes
 from el.monitors import Monitor, build_monitor, monitor_name, parse_monitor_spec
 from el.uavid import read_image
 
@@ -111,10 +111,6 @@ class _Budget:
     def check(self, stage: str) -> None:
         if self.budget_s is not None and self.elapsed() > self.budget_s:
             raise BudgetExceeded(f"time budget of {self.budget_s:g} s exceeded after {stage}")
-
-
-def _sha256(data: bytes) -> str:
-    return hashlib.sha256(data).hexdigest()
 
 
 class EmergencyLanding:
@@ -225,7 +221,7 @@ class EmergencyLanding:
             path = Path(image)
             info["path"] = str(path)
             rgb = read_image(path)
-            info["sha256"] = _sha256(path.read_bytes())
+            info["sha256"] = sha256_bytes(path.read_bytes())
         else:
             rgb = image
             if not isinstance(rgb, np.ndarray):
@@ -235,7 +231,7 @@ class EmergencyLanding:
                 raise ValueError(f"image must have shape (H, W, 3), got {rgb.shape}")
             if rgb.dtype != np.uint8:
                 raise ValueError(f"image must be uint8, got {rgb.dtype}")
-            info["sha256"] = _sha256(np.ascontiguousarray(rgb).tobytes())
+            info["sha256"] = sha256_bytes(np.ascontiguousarray(rgb).tobytes())
         info["width"], info["height"] = int(rgb.shape[1]), int(rgb.shape[0])
         if rgb.shape[0] < 16 or rgb.shape[1] < 16:
             raise ValueError(f"image of {rgb.shape[1]}x{rgb.shape[0]} px is too small")

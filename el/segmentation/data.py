@@ -28,6 +28,7 @@ import cv2
 import numpy as np
 
 from el.camera import NUM_STRIPES, UNREACHABLE_STRIPES, working_size
+from el.hashing import sha256_file
 from el.labels import NUM_CLASSES
 from el.uavid import DataError, Sample, atomic_write_bytes, iter_samples, read_image, read_labels
 
@@ -82,11 +83,7 @@ def default_cache_dir() -> Path:
 
 # -- hashing ------------------------------------------------------------------------------------
 def _file_sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        while block := f.read(1 << 22):
-            h.update(block)
-    return h.hexdigest()
+    return sha256_file(path)
 
 
 @dataclass(frozen=True)

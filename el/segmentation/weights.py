@@ -11,7 +11,6 @@ Loading reads the file once, checks its SHA-256 against the card, and only then 
 
 from __future__ import annotations
 
-import hashlib
 import io
 import json
 from pathlib import Path
@@ -19,6 +18,7 @@ from typing import Any
 
 import torch
 
+from el.hashing import sha256_bytes, sha256_file  # noqa: F401  (re-exported)
 from el.segmentation.model import MSDLite, build_model, count_parameters
 from el.uavid import atomic_write_bytes
 
@@ -36,17 +36,6 @@ def card_path(weights_path: str | Path) -> Path:
     return Path(weights_path).with_suffix(".json")
 
 
-def sha256_bytes(data: bytes) -> str:
-    return hashlib.sha256(data).hexdigest()
-
-
-def sha256_file(path: str | Path, *, chunk: int = 1 << 22) -> str:
-    """SHA-256 (hex) of a file, read in chunks."""
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        while block := f.read(chunk):
-            h.update(block)
-    return h.hexdigest()
 
 
 def state_dict_bytes(model: torch.nn.Module) -> bytes:
