@@ -331,8 +331,13 @@ def plan(data: str | Path, config: CampaignConfig) -> list[Task]:
     return [Task(p, s, sample) for p, s in config.scenarios() for sample in samples]
 
 
-def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task]) -> dict[str, Any]:
-    """Identity of a campaign: config, seeds, versions, git commit, hashes of weights and data."""
+def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *, threads: int | None = None,
+             segmenter: str = "weights") -> dict[str, Any]:
+    """Identity of a campaign: config, seeds, versions, git commit, hashes of weights and data.
+
+    ``threads`` (torch threads per worker) is recorded because floating-point sums, hence the
+    readouts' last digits, depend on it: a re-run reproduces the readouts with the same count.
+    """
     import torch
 
     from el.segmentation.weights import DEFAULT_WEIGHTS, sha256_file
@@ -349,6 +354,8 @@ def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task]) ->
                  "sha256": h.hexdigest()},
         "weights": {"path": str(weights), "sha256": sha256_file(weights) if weights.is_file() else None},
         "tasks": len(tasks),
+        "threads_per_worker": threads,
+        "segmenter": segmenter,
         "code": {"version": _version(), "git_commit": git_commit()},
         "versions": {"python": sys.version.split()[0], "numpy": np.__version__, "torch": torch.__version__,
                      "platform": platform.platform()},
@@ -398,12 +405,13 @@ def run_campaign(
     tasks = plan(data, config)
     if not tasks:
         raise ValueError(f"{data}: no images to evaluate")
-    man = manifest(data, config, tasks)
+    threads = max(1, (os.cpu_count() or 1) // max(1, jobs))
+    man = manifest(data, config, tasks, threads=threads,
+                   segmenter="weights" if segmenter is None else type(segmenter).__name__)
     readouts.init_run(run_dir, man)
     todo = [t for t in tasks if not readouts.shard_done(run_dir, t.shard_name)]
     t0 = time.perf_counter()
     results: list[dict[str, Any]] = []
-    threads = max(1, (os.cpu_count() or 1) // max(1, jobs))
     for res in _dispatch(todo, config, run_dir, jobs=jobs, backend=backend, scheduler=scheduler,
                          threads=threads, progress=progress, segmenter=segmenter):
         results.append(res)

@@ -591,6 +591,26 @@ def _write(path: Path, text: str) -> None:
     atomic_write_bytes(path, text.encode("utf-8"))
 
 
+def load_waivers(path: str | Path) -> dict[str, dict[str, str]]:
+    """Accepted deviations: requirement id -> {reason, tracked_by} (``assurance/waivers.yaml``).
+
+    ValueError naming the file for a malformed file or an entry without a reason or tracker.
+    """
+    import yaml
+
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+    except (OSError, yaml.YAMLError) as exc:
+        raise ValueError(f"{path}: unreadable waivers file: {exc}") from None
+    out: dict[str, dict[str, str]] = {}
+    for i, w in enumerate(data.get("waivers") or []):
+        if not isinstance(w, dict) or not all(str(w.get(k) or "").strip() for k in ("id", "reason", "tracked_by")):
+            raise ValueError(f"{path}: waiver {i + 1} needs an id, a reason and tracked_by")
+        out[str(w["id"])] = {"reason": " ".join(str(w["reason"]).split()), "tracked_by": str(w["tracked_by"])}
+    return out
+
+
 def generate(
     run: str | Path,
     out: str | Path,
@@ -600,6 +620,7 @@ def generate(
     baseline_requirements: str | Path | None = None,
     registry: str | Path | None = None,
     strict: bool = False,
+    waivers: str | Path | None = None,
     pdf: bool = True,
     n_boot: int = 2000,
     templates: str | Path | None = None,
@@ -673,12 +694,16 @@ def generate(
     counts = rq.summary_counts(states.values())
     failed = [rid for rid, s in states.items() if s == rq.FAILED]
     not_verified = [rid for rid, s in states.items() if s == rq.NOT_VERIFIED]
+    waiver_list = load_waivers(waivers) if waivers else {}
+    waived = [rid for rid in failed if rid in waiver_list and not strict]
     base = (_baseline(Path(baseline), man, ident, table, results, reg,
                       Path(baseline_requirements) if baseline_requirements else None, n_boot)
             if baseline else None)
     created = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
-    gate = "FAILED" if failed else ("INCOMPLETE" if not_verified else "PASSED")
-    gate_text = (f"{len(failed)} requirement(s) failed" if failed else
+    blocking = [rid for rid in failed if rid not in waived]
+    gate = "FAILED" if blocking else ("WAIVED" if waived else "INCOMPLETE" if not_verified else "PASSED")
+    gate_text = (f"{len(failed)} requirement(s) failed" + (f", {len(waived)} waived" if waived else "")
+                 if failed else
                  f"{len(not_verified)} requirement(s) not verified" if not_verified else
                  "every requirement verified")
     cfg = man["config"]
@@ -694,8 +719,11 @@ def generate(
     context = {
         "title": "Evidence report: UAV emergency landing",
         "run_name": run.name, "run": str(run), "created": created,
-        "gate": gate, "gate_class": {"FAILED": "failed", "INCOMPLETE": "not-verified", "PASSED": "verified"}[gate],
+        "gate": gate, "gate_class": {"FAILED": "failed", "WAIVED": "failed", "INCOMPLETE": "not-verified",
+                                     "PASSED": "verified"}[gate],
         "gate_text": gate_text,
+        "waivers": [{"id": rid, "reason": waiver_list[rid]["reason"], "tracked_by": waiver_list[rid]["tracked_by"]}
+                    for rid in waived],
         "counts": [{"state": s, "n": counts[s], "cls": STATE_CLASS[s],
                     "ids": ", ".join(rid for rid, st in states.items() if st == s)} for s in rq.STATES],
         "warnings": warnings,
@@ -733,11 +761,11 @@ def generate(
         pdf_error = "PDF not written (--no-pdf)"
     if pdf_error and pdf_path.exists():
         pdf_path.unlink()  # never leave a PDF of an earlier report beside this one
-    exit_code = 1 if failed or (strict and (not_verified or pdf_error)) else 0
+    exit_code = 1 if blocking or (strict and (not_verified or pdf_error)) else 0
     doc = {
         "format": EVIDENCE_FORMAT, "created": created, "run": str(run), "strict": strict,
         "gate": {"result": gate, "exit_code": exit_code, "counts": counts, "failed": failed,
-                 "not_verified": not_verified},
+                 "waived": {rid: waiver_list[rid] for rid in waived}, "not_verified": not_verified},
         "identity": ident,
         "parameters": params,
         "requirements": {rid: {**results[rid].to_dict(), "text": reg[rid].text, "source": list(reg[rid].source),

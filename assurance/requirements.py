@@ -790,8 +790,9 @@ def check_rerun(run: str | Path, *, shards: int = 1, work_dir: str | Path, threa
     work = Path(work_dir)
     (work / readouts.SHARDS).mkdir(parents=True, exist_ok=True)
     rows = []
-    for shard in pick:  # as many threads as a one-job campaign on this machine
-        execute(tasks[shard], config, str(work), threads or os.cpu_count() or 1, segmenter)
+    threads = threads or man.get("threads_per_worker") or os.cpu_count() or 1
+    for shard in pick:  # the campaign's own thread count: float sums depend on it
+        execute(tasks[shard], config, str(work), threads, segmenter)
         for table in readouts.TABLES:
             a = pd.read_parquet(run / readouts.SHARDS / shard / f"{table}.parquet")
             b = pd.read_parquet(work / readouts.SHARDS / shard / f"{table}.parquet")

@@ -19,12 +19,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))  # tests/helpers.py for
 DEFAULT_RUN = Path("runs") / "demo"
 
 
-def pytest_addoption(parser: pytest.Parser) -> None:
-    parser.addoption("--run", dest="uav_el_run", metavar="RUN", default=None,
-                     help=f"campaign run folder for the campaign requirement tests "
-                          f"(default: $UAV_EL_RUN, else {DEFAULT_RUN} under the rootdir)")
-
-
 def campaign_run_path(config: pytest.Config) -> Path:
     """The campaign run the requirement tests read: --run, else $UAV_EL_RUN, else runs/demo (rootdir)."""
     given = config.getoption("uav_el_run") or os.environ.get("UAV_EL_RUN")

@@ -21,6 +21,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--baseline", metavar="RUN0", help="an earlier run: adds a 'what changed' section")
     p.add_argument("--baseline-requirements", metavar="JSON", help="the baseline's requirement results")
     p.add_argument("--registry", metavar="YAML", help="requirement registry (default: assurance/requirements.yaml)")
+    p.add_argument("--waivers", help="accepted deviations (e.g. assurance/waivers.yaml): a failed requirement "
+                   "listed there does not fail the gate; ignored with --strict")
     p.add_argument("--strict", action="store_true",
                    help="also exit 1 when a requirement is not verified or the PDF cannot be written")
     p.add_argument("--no-pdf", action="store_true", help="write the HTML and JSON only")
@@ -42,8 +44,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         report = generate(args.run, args.out, requirements=args.requirements, baseline=args.baseline,
                           baseline_requirements=args.baseline_requirements, registry=args.registry,
-                          strict=args.strict, pdf=not args.no_pdf, n_boot=args.boot)
-    except (RegistryError, RunError) as exc:
+                          strict=args.strict, pdf=not args.no_pdf, n_boot=args.boot, waivers=args.waivers)
+    except (RegistryError, RunError, ValueError) as exc:
         raise CommandError(str(exc)) from None
     for w in report.warnings:
         print(f"warning: {w}", file=sys.stderr)
@@ -55,6 +57,7 @@ def run(args: argparse.Namespace) -> int:
             why = "--strict: no PDF"
         print(f"gate: FAILED ({why})")
     else:
-        print("gate: passed" + (" (not everything verified; --strict would fail)" if report.ids("not verified")
-                                 else ""))
+        waived = " (failed but waived: " + ", ".join(report.ids("failed")) + ")" if report.ids("failed") else ""
+        print("gate: passed" + waived + (" (not everything verified; --strict would fail)"
+                                         if report.ids("not verified") else ""))
     return report.exit_code
