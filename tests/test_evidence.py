@@ -183,6 +183,29 @@ def test_gate_turns_red_for_exactly_the_broken_requirement(pytester, monitor_run
     assert "--strict" in capsys.readouterr().out
 
 
+def test_waiver_accepts_a_listed_failure_but_not_under_strict(pytester, monitor_runs, evidence_cli, tmp_path, capsys):
+    """A failed requirement listed in a waivers file stays "failed" in the report but does not fail the gate;
+    --strict (a certification release) ignores waivers; an unlisted failure still fails."""
+    pytest_results(pytester, monitor_runs["broken"], tmp_path / "bad", "-k", "monitor_coverage")
+    waivers = tmp_path / "waivers.yaml"
+    waivers.write_text("waivers:\n  - id: EL-R04\n    reason: known <bad> variant\n    tracked_by: issue 0\n")
+    args = ("--run", monitor_runs["broken"], "--out", tmp_path / "bad", "--no-pdf", "--boot", 100)
+    capsys.readouterr()
+    assert evidence_cli(*args, "--waivers", waivers) == 0
+    assert "failed but waived: EL-R04" in capsys.readouterr().out
+    doc = json.loads((tmp_path / "bad" / "evidence.json").read_text())
+    assert doc["gate"]["failed"] == ["EL-R04"] and "EL-R04" in doc["gate"]["waived"]
+    assert "known &lt;bad&gt; variant" in (tmp_path / "bad" / "evidence.html").read_text()
+    assert evidence_cli(*args, "--waivers", waivers, "--strict") == 1
+    other = tmp_path / "other.yaml"
+    other.write_text("waivers:\n  - id: EL-R09\n    reason: r\n    tracked_by: t\n")
+    assert evidence_cli(*args, "--waivers", other) == 1
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("waivers:\n  - id: EL-R04\n")
+    assert evidence_cli(*args, "--waivers", bad) == 2
+    assert "needs an id, a reason and tracked_by" in capsys.readouterr().err
+
+
 def test_missing_weasyprint_keeps_the_html_and_says_what_to_install(monitor_runs, tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "weasyprint", None)  # import weasyprint -> ImportError
     out = tmp_path / "r"
