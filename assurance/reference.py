@@ -29,6 +29,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from assurance.metrics import RESULT_COLUMNS
+
 __all__ = [
     "PERTURBATION_NAMES",
     "REFERENCE_CSV",
@@ -67,20 +69,7 @@ _COLUMNS = {  # published column -> project column
 }
 
 _ORDER = (
-    "perturbation",
-    "severity",
-    "monitor",
-    "images",
-    "candidates",
-    "g_cm",
-    "mcc",
-    "f1",
-    "precision",
-    "recall",
-    "fp_rate",
-    "g_rm",
-    "overhead_s",
-    "g_star",
+    *RESULT_COLUMNS[: RESULT_COLUMNS.index("unsafe_landing_rate")],  # the results table's figures, same order
     "fn_rate",
     "kind",
     "tau",

@@ -178,3 +178,14 @@ def monitor_runs(tiny_campaign, tmp_path_factory):
     finally:
         campaign.walk = real_walk
     return {"good": root / "good", "broken": root / "broken"}
+
+
+@pytest.fixture(scope="module")
+def one_torch_thread():
+    """Tiny tensors: one torch thread is faster, and immune to a busy shared CPU."""
+    import torch
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
