@@ -13,7 +13,6 @@ an interrupted campaign resumes where it stopped, and a bad image is a recorded 
 from __future__ import annotations
 
 import hashlib
-import json
 import os
 import platform
 import subprocess
@@ -239,7 +238,7 @@ def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Calla
 
     cands = core.candidates
     truth = [true_hazard(ids, c.disc) for c in cands]
-    clearance = _clearance(world_clearance, s, (W, H), cands, config)
+    clearance = _clearance(world_clearance, s, (W, H), cands)
     h_default = true_hazard(ids, core.default_area)
     image_rows, cand_rows = [], []
     for j, name in enumerate(config.monitors):
@@ -276,13 +275,13 @@ def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Calla
     return {"images": image_rows, "candidates": cand_rows}
 
 
-def _clearance(fn: Callable[..., Any] | None, sample: Sample, size: tuple[int, int], cands: Sequence[Candidate],
-               config: CampaignConfig) -> list[float]:
+def _clearance(fn: Callable[..., Any] | None, sample: Sample, size: tuple[int, int],
+               cands: Sequence[Candidate]) -> list[float]:
     """Metric clearance (m) of each candidate's centre from the scene's world model, NaN without one."""
     if fn is None or not cands:
         return [float("nan")] * len(cands)
     try:
-        vals = fn(sample, size, np.array([c.x for c in cands]), np.array([c.y for c in cands]), config.core)
+        vals = fn(sample, size, np.array([c.x for c in cands]), np.array([c.y for c in cands]))
         return [float(v) for v in vals]
     except Exception:  # no meta or no world model: the readout says NaN
         return [float("nan")] * len(cands)
@@ -305,19 +304,14 @@ def _worker_segmenter(weights: str | None, threads: int) -> Any:
     return _WORKER_STATE["segmenter"]
 
 
-def _scene_clearance(sample: Sample, size: tuple[int, int], xs: np.ndarray, ys: np.ndarray,
-                     core: CoreConfig) -> np.ndarray:
-    from assurance.clearance import sample_clearance_m
-
-    return sample_clearance_m(sample, size, xs, ys, core)
-
-
 def execute(task: Task, config: CampaignConfig, run_dir: str, threads: int, segmenter: Any = None) -> dict[str, Any]:
     """Worker entry point: run one task and write its shard; returns a small summary."""
     if segmenter is None:
         segmenter = _worker_segmenter(config.weights, threads)
     t = time.perf_counter()
-    rows = run_task(task, config, segmenter, world_clearance=_scene_clearance)
+    from assurance.clearance import sample_clearance_m
+
+    rows = run_task(task, config, segmenter, world_clearance=sample_clearance_m)
     readouts.write_shard(Path(run_dir), task.shard_name, rows)
     faults = [r["fault"] for r in rows["images"] if r.get("fault")]
     return {"shard": task.shard_name, "seconds": time.perf_counter() - t, "fault": faults[0] if faults else ""}
@@ -479,6 +473,3 @@ def describe(summary: dict[str, Any]) -> str:
         lines += [f"  {f}" for f in summary["faults"][:10]]
     return "\n".join(lines)
 
-
-def dumps(obj: Any) -> str:
-    return json.dumps(obj, indent=2, sort_keys=True, default=str)

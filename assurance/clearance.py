@@ -13,7 +13,6 @@ from pathlib import Path
 import numpy as np
 
 from el.camera import CameraGeometry, Intrinsics, Pose
-from el.config import CoreConfig
 from el.synth.world import World, pixel_clearance_m
 from el.uavid import Sample
 
@@ -54,7 +53,6 @@ def clearance_at(meta_path: str | Path, size: tuple[int, int], xs: np.ndarray, y
     return pixel_clearance_m(world, geo, np.asarray(xs, float) - 0.5, np.asarray(ys, float) - 0.5)
 
 
-def sample_clearance_m(sample: Sample, size: tuple[int, int], xs: np.ndarray, ys: np.ndarray,
-                       core: CoreConfig | None = None) -> np.ndarray:
+def sample_clearance_m(sample: Sample, size: tuple[int, int], xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
     """Clearance (m) of candidate centres of a UAVid-layout sample that has a meta file."""
     return clearance_at(sample.meta_path(), size, xs, ys)

@@ -89,16 +89,7 @@ RESULT_COLUMNS: tuple[str, ...] = (
     "monitor",
     "images",
     "candidates",
-    "g_cm",
-    "mcc",
-    "f1",
-    "precision",
-    "recall",
-    "fp_rate",
-    "g_rm",
-    "overhead_s",
-    "g_star",
-    "unsafe_landing_rate",
+    *CI_METRICS,  # the figures, in the paper's Table I order
     "unsafe_landing_ub95",
 ) + tuple(f"{name}_{side}95" for name in CI_METRICS for side in ("lo", "hi"))
 """The CSV columns of the results table (DESIGN section 7), the keys of ``ScenarioMetrics.compute``."""

@@ -20,9 +20,8 @@ from typing import Any
 
 import numpy as np
 
-from el.camera import working_size
 from el.config import CoreConfig
-from el.core import default_area, probs_from_labels, run_core
+from el.core import default_area, run_core
 from el.decision import Candidate, Decision, Disc, MonitorVerdict
 from el.hashing import sha256_bytes
 from el.monitors import Monitor, build_monitor, monitor_name, parse_monitor_spec
@@ -159,11 +158,10 @@ class EmergencyLanding:
             self.fault = self.fault or f"fault: monitor: {type(exc).__name__}: {exc}"
 
     # -- the decision ----------------------------------------------------------------------------
-    def decide(self, image: np.ndarray | str | Path, *, labels: np.ndarray | None = None) -> Decision:
+    def decide(self, image: np.ndarray | str | Path) -> Decision:
         """Decide where to land for one frame (an RGB uint8 array or an image file); never raises.
 
-        ``labels`` (full-resolution class ids) replaces the model's segmentation by a perfect one
-        (the ground-truth pipeline); the monitor still sees the image.
+        (The ground-truth pipeline, with a label map instead of the model, is ``el.gt_pipeline``.)
         """
         cfg = self.config
         budget = _Budget(self.clock, cfg.time_budget_s)
@@ -183,7 +181,7 @@ class EmergencyLanding:
 
             stage = "segmentation"
             t = self.clock()
-            probs = self._segment(rgb, labels)
+            probs = self._segment(rgb)
             timings["segmentation_s"] = self.clock() - t
             budget.check(stage)
 
@@ -237,12 +235,7 @@ class EmergencyLanding:
             raise ValueError(f"image of {rgb.shape[1]}x{rgb.shape[0]} px is too small")
         return rgb
 
-    def _segment(self, rgb: np.ndarray, labels: np.ndarray | None) -> np.ndarray:
-        W, H = rgb.shape[1], rgb.shape[0]
-        if labels is not None:
-            if labels.shape != (H, W):
-                raise ValueError(f"labels {labels.shape} and image {(H, W)} differ in size")
-            return probs_from_labels(labels, working_size(W, H, self.config.core.working_width))
+    def _segment(self, rgb: np.ndarray) -> np.ndarray:
         probs = self.segmenter.predict_frame(rgb)
         if not isinstance(probs, np.ndarray) or not np.isfinite(probs).all():
             raise ValueError("segmentation returned non-finite scores")
