@@ -11,6 +11,7 @@ from helpers import OracleSegmenter, scene_ids
 from assurance import readouts
 from assurance.campaign import CampaignConfig, plan, run_campaign
 from assurance.cli import main
+from assurance.stages import stage_table, wall_seconds
 from assurance.table import results_table
 from el.config import CoreConfig
 from el.labels import ids_to_colors
@@ -139,7 +140,14 @@ def test_cli_campaign_and_table(tmp_path, data, weights, capsys):
     assert main(["table", str(run), "--compare", "--boot", "100"]) == 0
     out = capsys.readouterr().out
     assert "pixel_trap" in out and "ours / paper" in out
+    assert "Does the core model beat the default action" in out and "Where the time went" in out
     assert (run / "results.csv").is_file() and (run / "results.md").is_file()
+    stages = stage_table(run)
+    assert stages["tasks"].eq(4).all()  # 2 perturbations x 2 images, one row per task not per monitor
+    parts = stages[stages["stage"] != "task total"]
+    assert parts["seconds"].sum() == pytest.approx(stages["seconds"].iloc[-1], rel=1e-9)
+    assert (stages.loc[stages["stage"] == "segment frame", "seconds"] > 0).all()
+    assert wall_seconds(run) > 0
     assert main(["campaign", "--data", str(data), "--out", str(tmp_path / "r2"), "--perturbations", "smoke"]) == 2
     assert "unknown perturbation" in capsys.readouterr().err
 

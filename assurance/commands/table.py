@@ -5,6 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from assurance.findings import findings, findings_markdown
+from assurance.reference import load_reference
+from assurance.stages import stage_table, stages_markdown, wall_seconds
 from assurance.table import compare, compare_markdown, results_table, to_markdown, write_csv
 from el.uavid import atomic_write_bytes
 
@@ -15,7 +18,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("run", help="campaign run folder")
     p.add_argument("--out", help="folder for results.csv and results.md (default: the run folder)")
     p.add_argument("--compare", action="store_true",
-                   help="also put the figures beside the published ones (Guerin et al., ICRA 2022)")
+                   help="also put the figures beside the published ones (Guerin et al., ICRA 2022) and ask "
+                        "the paper's findings of both")
     p.add_argument("--no-intervals", action="store_true", help="print point values only")
     p.add_argument("--boot", type=int, default=2000, help="bootstrap resamples (default 2000)")
 
@@ -29,6 +33,8 @@ def run(args: argparse.Namespace) -> int:
         merged = compare(df)
         write_csv(merged, out / "comparison.csv")
         md += "\n### Beside the published results (Guerin et al., ICRA 2022)\n\n" + compare_markdown(merged)
+        md += "\n### The paper's findings, asked of both tables\n\n" + findings_markdown(findings(df, load_reference()))
+    md += "\n### Where the time went\n\n" + stages_markdown(stage_table(args.run), wall_seconds(args.run))
     atomic_write_bytes(out / "results.md", md.encode())
     print(md)
     written = [out / "results.csv", out / "results.md"] + ([out / "comparison.csv"] if args.compare else [])
