@@ -120,7 +120,8 @@ def _mcd_effect(ours: pd.DataFrame, paper: pd.DataFrame | None) -> Finding:
         rows.append(row)
     t = pd.DataFrame(rows)
     if t.empty:
-        return Finding("mcd", "What does MC dropout change, and at what cost?", "no LHD+MCD configuration in this run.", t)
+        return Finding("mcd", "What does MC dropout change, and at what cost?",
+                       "no LHD+MCD configuration in this run.", t)
     verdict = (f"over {len(mcd)} MCD settings: mean change of G* {_fmt(_nanmean(list(t['d_g_star_mean'])))} "
                f"(paper {_fmt(_nanmean(list(t['d_g_star_mean_paper'])))}), of MCC "
                f"{_fmt(_nanmean(list(t['d_mcc_mean'])))} (paper {_fmt(_nanmean(list(t['d_mcc_mean_paper'])))}); "
