@@ -94,6 +94,18 @@ def mc_dropout_stats(samples: np.ndarray, *, ddof: int = 0) -> tuple[np.ndarray,
     return mean.astype(np.float32), std.astype(np.float32)
 
 
+def softmax_classes(logits: torch.Tensor) -> torch.Tensor:
+    """Softmax over the class axis of (B, C, H, W) logits, fast for either memory layout.
+
+    Channels-last logits (what the shipped network returns) are softmaxed along their innermost
+    axis through a permuted view, which is about twice as fast as ``softmax(dim=1)`` on that layout;
+    the result keeps the channels-last strides (the same values; numpy sees a strided array).
+    """
+    if logits.ndim == 4 and not logits.is_contiguous() and logits.is_contiguous(memory_format=torch.channels_last):
+        return torch.softmax(logits.permute(0, 2, 3, 1), dim=-1).permute(0, 3, 1, 2)
+    return torch.softmax(logits, dim=1)
+
+
 class Segmenter:
     """Softmax segmentation of frames and patches, with MC dropout, around one network.
 
@@ -170,7 +182,7 @@ class Segmenter:
         if not isinstance(logits, torch.Tensor) or tuple(logits.shape) != shape:
             got = tuple(logits.shape) if isinstance(logits, torch.Tensor) else type(logits).__name__
             raise ValueError(f"{what}: model returned {got}, expected logits of shape {shape}")
-        probs = torch.softmax(logits.float(), dim=1).cpu().numpy()
+        probs = softmax_classes(logits.float()).cpu().numpy()
         return _check_finite(probs, what)
 
     def working_size(self, width: int, height: int) -> tuple[int, int]:
@@ -220,7 +232,8 @@ class Segmenter:
         h, w = images[0].shape[:2]
         with torch.inference_mode():
             logits = self.model(self._to_tensor(images))
-            return self._probs(logits, (len(images), NUM_CLASSES, h, w), what)
+            # C-contiguous: frames feed the core model's OpenCV and numpy code.
+            return np.ascontiguousarray(self._probs(logits, (len(images), NUM_CLASSES, h, w), what))
 
     # -- Monte-Carlo dropout -------------------------------------------------------------------
     def mc_dropout(self, rgb_patch: np.ndarray, n: int, keep_prob: float, seed: int) -> np.ndarray:
