@@ -287,3 +287,44 @@ def test_verify_reports_changed_validation_data(datasets, tmp_path) -> None:
     result = verify_card(out, val_dir=other)
     assert not result.ok
     assert any("validation data hash differs" in p for p in result.problems)
+
+
+def test_warm_start_begins_from_the_parent_weights(datasets, tmp_path) -> None:
+    train_dir, val_dir = datasets
+    parent = tmp_path / "parent" / "model.pt"
+    parent_card = train(train_dir, parent, val_dir=val_dir, config=tiny_config(baseline_pixels=0))
+    sha = parent_card["weights_sha256"]
+
+    # Zero steps' worth of learning rate: the child starts exactly where the parent ended.
+    child = tmp_path / "child" / "model.pt"
+    card = train(train_dir, child, config=tiny_config(baseline_pixels=0, steps=1, lr=1e-12, init_sha256=sha),
+                 init_weights=parent)
+    assert card["training"]["init"]["weights_sha256"] == sha
+    assert card["training"]["total_steps"] == 1 + parent_card["training"]["steps"]
+    parent_state = torch.load(parent, weights_only=True)
+    child_state = torch.load(child, weights_only=True)
+    for k, v in parent_state.items():
+        if v.dtype.is_floating_point and "running" not in k:  # BatchNorm statistics move with any step
+            torch.testing.assert_close(child_state[k], v, atol=1e-6, rtol=0)
+
+    with pytest.raises(ValueError, match="not the configured init_sha256"):
+        train(train_dir, tmp_path / "c2" / "m.pt", config=tiny_config(steps=1, init_sha256="0" * 64),
+              init_weights=parent)
+    other = ArchConfig(widths=(8, 8, 8), ms_channels=8, decoder_channels=8)
+    with pytest.raises(ValueError, match="architecture"):
+        train(train_dir, tmp_path / "c3" / "m.pt", config=tiny_config(steps=1, arch=other, init_sha256=sha),
+              init_weights=parent)
+
+
+def test_train_cli_warm_start_takes_the_parents_architecture(datasets, tmp_path, uav_el, capsys) -> None:
+    train_dir, _ = datasets
+    parent = tmp_path / "p" / "model.pt"
+    train(train_dir, parent, config=tiny_config(baseline_pixels=0, steps=2))
+    out = tmp_path / "c" / "model.pt"
+    rc = uav_el(["train", "--data", str(train_dir), "--out", str(out), "--init", str(parent), "--steps", "1",
+                 "--batch", "1", "--crop", "32", "--hd-crops", "0", "--working-width", "64", "--no-cache", "--quiet"])
+    assert rc == 0, capsys.readouterr().err
+    assert read_card(out)["architecture"] == read_card(parent)["architecture"]
+    rc = uav_el(["train", "--data", str(train_dir), "--out", str(tmp_path / "d.pt"),
+                 "--init", str(tmp_path / "nope.pt")])
+    assert rc == 2 and "nope" in capsys.readouterr().err

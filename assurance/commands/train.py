@@ -43,6 +43,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     length.add_argument("--epochs", type=int, help="passes over the training images (ceil(images / batch) steps each)")
     parser.add_argument("--seed", type=int, default=0, help="seed of everything random (default 0)")
     parser.add_argument("--resume", action="store_true", help="continue from the checkpoint")
+    parser.add_argument("--init", type=Path, metavar="WEIGHTS",
+                        help="warm start: begin from these weights (their architecture; SHA-256 checked) "
+                             "instead of a random initialisation")
     parser.add_argument("--checkpoint", type=Path, help="resumable training state (default: <out> with suffix .ckpt)")
     parser.add_argument("--threads", type=int, help="torch CPU threads (default: torch's choice)")
     parser.add_argument("--batch", type=int, default=4, help="working-resolution crops per step (default 4)")
@@ -78,6 +81,16 @@ def run(args: argparse.Namespace) -> int:
         images = sum(1 for _ in iter_samples(args.data))
         steps = steps_for_epochs(images, args.epochs, args.batch)
     arch_kwargs = {}
+    init_sha = None
+    if args.init is not None:
+        from el.segmentation.weights import WeightsError, read_card
+
+        try:
+            init_card = read_card(args.init)
+        except WeightsError as exc:
+            raise CommandError(str(exc)) from exc
+        init_sha = init_card["weights_sha256"]
+        arch_kwargs = dict(ArchConfig.from_dict(init_card["architecture"]).__dict__)
     if args.widths is not None:
         arch_kwargs["widths"] = args.widths
     if args.dropout is not None:
@@ -89,6 +102,7 @@ def run(args: argparse.Namespace) -> int:
             checkpoint_every=args.checkpoint_every, seed=args.seed, working_width=args.working_width,
             arch=ArchConfig(**arch_kwargs), baseline_pixels=0 if args.no_baseline else 200_000,
             eval_protocol=EvalProtocol(working_width=args.working_width, hd_patch_size=args.hd_eval_size),
+            init_sha256=init_sha,
         )
     except ValueError as exc:
         raise CommandError(str(exc)) from exc
@@ -97,7 +111,8 @@ def run(args: argparse.Namespace) -> int:
     log = None if args.quiet else (lambda msg: tqdm.write(msg, file=sys.stderr))
     bar = functools.partial(progress, enabled=not args.quiet)
     card = train(args.data, args.out, val_dir=args.val, config=config, resume=args.resume, cache_dir=cache_dir,
-                 checkpoint_file=args.checkpoint, threads=args.threads, progress=bar, log=log)
+                 checkpoint_file=args.checkpoint, threads=args.threads, init_weights=args.init, progress=bar,
+                 log=log)
     training = card["training"]
     print(f"weights: {args.out} (sha256 {card['weights_sha256']})")
     print(f"steps: {config.steps}, best step: {training.get('best_step')}, "

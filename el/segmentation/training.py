@@ -38,7 +38,7 @@ from el.segmentation.baseline import evaluate_baseline
 from el.segmentation.evaluation import EvalProtocol, evaluate, selection_score
 from el.segmentation.inference import Segmenter
 from el.segmentation.model import ArchConfig, MSDLite, build_model, count_parameters
-from el.segmentation.weights import read_card, save_weights, write_card
+from el.segmentation.weights import load_weights, read_card, save_weights, write_card
 from el.uavid import atomic_write_bytes
 
 Progress = Callable[..., Iterable]
@@ -67,6 +67,7 @@ class TrainConfig:
     augment: D.AugmentParams = field(default_factory=D.AugmentParams)
     eval_protocol: EvalProtocol = field(default_factory=EvalProtocol)
     baseline_pixels: int = 200_000  # 0: skip the per-pixel baseline
+    init_sha256: str | None = None  # SHA-256 of the weights a warm start begins from (None: random init)
 
     def __post_init__(self) -> None:
         positive = ("steps", "batch", "crop", "hd_crop_min", "hd_crop_max", "checkpoint_every")
@@ -203,6 +204,7 @@ def _diff_config(old: dict[str, Any], new: dict[str, Any]) -> list[str]:
 def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Path | None = None,
           config: TrainConfig | None = None, resume: bool = False, cache_dir: str | Path | None = None,
           checkpoint_file: str | Path | None = None, threads: int | None = None,
+          init_weights: str | Path | None = None,
           progress: Progress | None = None, log: Log | None = None) -> dict[str, Any]:
     """Train on a UAVid-layout folder, write the weights and their model card; returns the card.
 
@@ -222,6 +224,10 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
         The resumable state (default ``<weights>.ckpt``, see :func:`checkpoint_path`).
     threads : int, optional
         torch CPU threads (also the data-preparation threads).
+    init_weights : file, optional
+        Warm start: begin from these weights (SHA-256 checked, same architecture as ``config.arch``)
+        instead of a random initialisation; ``config.init_sha256`` must name them. The card records
+        the parent and the steps behind it.
     progress : callable, optional
         ``progress(iterable, total=..., desc=...)`` wrapper (a progress bar).
     log : callable, optional
@@ -265,6 +271,9 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
 
     torch.manual_seed(config.seed)
     model = build_model(config.arch)
+    parent = _warm_start(model, init_weights, config) if init_weights is not None else None
+    if init_weights is None and config.init_sha256 is not None:
+        raise ValueError("config.init_sha256 is set but no init_weights were given")
     optimizer = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
     scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, lambda s: _lr_factor(s, config))
     start_step, best_score, best_step = 0, -math.inf, None
@@ -296,7 +305,8 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
             "not_used_augmentations": ["brightness", "fog", "motion_blur", "shifted_pixels", "dead_rows"],
             "loss": "class-weighted cross-entropy (inverse sqrt frequency), mean of working and HD scales",
             "class_frequencies": [float(f) for f in freq], "class_weights": [float(w) for w in weights],
-            "torch_version": torch.__version__,
+            "torch_version": torch.__version__, "init": parent,
+            "total_steps": config.steps + (parent["total_steps"] if parent else 0),
         }}
 
     interval = config.evaluation_interval
@@ -365,6 +375,21 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
         card["baseline"]["miou_gap_to_cnn"] = None if cnn is None or base is None else cnn - base
     write_card(weights_path, card)
     return card
+
+
+def _warm_start(model: MSDLite, init_weights: str | Path, config: TrainConfig) -> dict[str, Any]:
+    """Load the parent weights into ``model``; returns the card's record of the parent."""
+    parent, card = load_weights(init_weights)
+    if card["weights_sha256"] != config.init_sha256:
+        raise ValueError(f"{init_weights}: SHA-256 {card['weights_sha256']} is not the configured init_sha256 "
+                         f"{config.init_sha256}")
+    if ArchConfig.from_dict(card["architecture"]) != config.arch:
+        raise ValueError(f"{init_weights}: architecture {card['architecture']} differs from this run's "
+                         f"{config.arch.to_dict()}")
+    model.load_state_dict(parent.state_dict())
+    training = card.get("training") or {}
+    return {"path": str(init_weights), "weights_sha256": card["weights_sha256"],
+            "steps": training.get("steps"), "total_steps": training.get("total_steps", training.get("steps") or 0)}
 
 
 def init_untrained(arch: ArchConfig | None = None, seed: int = 0) -> MSDLite:
