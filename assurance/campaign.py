@@ -184,16 +184,22 @@ def judge_candidates(
         for rho, n in mc_need.items():
             samples, t_mc = _timed(clock, segmenter.mc_dropout, patch.rgb, n, rho, seed + k)
             mc[rho] = (samples, t_mc)
+        scores: dict[tuple[float, int], tuple[np.ndarray, float]] = {}  # MCD's S per (rho, n)
         row = []
         for m in monitors:
             key = m.feature_key
-            if key[0] == "mc_dropout":
-                samples, t_mc = mc[key[1]]
-                feats, t_feat = samples, _attributed_mc_seconds(t_mc, t_soft, m.spec.n, samples.shape[0])
-            else:
-                feats, t_feat = softmax, t_soft
-            verdict = m.check_scores(feats, patch.disc_mask)
-            row.append((verdict.accepted, verdict.reason, t_patch + t_feat + verdict.seconds))
+            if key[0] != "mc_dropout":
+                verdict = m.check_scores(softmax, patch.disc_mask)
+                row.append((verdict.accepted, verdict.reason, t_patch + t_soft + verdict.seconds))
+                continue
+            samples, t_mc = mc[key[1]]
+            t_feat = _attributed_mc_seconds(t_mc, t_soft, m.spec.n, samples.shape[0])
+            skey = (key[1], m.spec.n)
+            if skey not in scores:  # LHD and the CH taus judge the same S: compute it once
+                scores[skey] = _timed(clock, m.disc_score, samples, patch.disc_mask)
+            s_disc, t_score = scores[skey]
+            (accepted, reason), t_rule = _timed(clock, m.rule.judge_pixels, s_disc)
+            row.append((bool(accepted), reason, t_patch + t_feat + t_score + t_rule))
         out.append(row)
     return out
 

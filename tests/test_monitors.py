@@ -31,6 +31,7 @@ from el.monitors import (
     mcd_score,
     parse_monitor_spec,
 )
+from el.monitors.lhd import take_disc
 
 SAFE_NAMES = {"clutter", "tree", "low_vegetation", "human"}
 UNSAFE_NAMES = {"building", "road", "static_car", "moving_car"}
@@ -560,3 +561,17 @@ def test_project_segmenter_mc_dropout_is_prefix_consistent(project_segmenter):
     rgb = np.random.default_rng(5).integers(0, 256, (32, 32, 3), dtype=np.uint8)
     s30 = project_segmenter.mc_dropout(rgb, 30, 0.5, 3)
     np.testing.assert_array_equal(project_segmenter.mc_dropout(rgb, 10, 0.5, 3), s30[:10])
+
+
+@pytest.mark.parametrize("lead", [(), (3,)])
+def test_take_disc_is_the_same_for_any_memory_layout(lead):
+    """Channels-last (cropped) scores, as the shipped network returns them, give the C-order result."""
+    rng = np.random.default_rng(0)
+    full = rng.random((*lead, 12, 11, 8)).astype(np.float32)  # (..., H, W, C) in memory
+    strided = np.moveaxis(full, -1, -3)[..., :10, :9]  # (..., 8, 10, 9) view, classes innermost
+    mask = rng.random((10, 9)) < 0.4
+    got = take_disc(strided, mask)
+    want = np.ascontiguousarray(strided)[..., mask]
+    assert got.flags.c_contiguous and got.shape == (*lead, 8, int(mask.sum()))
+    np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(take_disc(np.ascontiguousarray(strided), mask), want)

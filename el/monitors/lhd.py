@@ -58,6 +58,13 @@ def take_disc(scores: np.ndarray, disc_mask: np.ndarray) -> np.ndarray:
     (Boolean indexing would put the pixel axis first in memory, which makes the reductions that
     follow several times slower.)
     """
+    if scores.ndim >= 3 and scores.shape[-3] > 1 and scores.strides[-3] == scores.itemsize:
+        # Classes innermost in memory (a channels-last network's output, possibly a crop of it):
+        # gather the disc's pixels with all their classes at once, then put the classes first.
+        # Reshaping such an array would copy all of it.
+        ys, xs = np.nonzero(disc_mask)
+        picked = np.moveaxis(scores, -3, -1)[..., ys, xs, :]  # (..., m, 8)
+        return np.ascontiguousarray(np.moveaxis(picked, -1, -2))
     flat = scores.reshape(*scores.shape[:-2], -1)
     return np.take(flat, np.flatnonzero(disc_mask), axis=-1)
 

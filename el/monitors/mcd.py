@@ -90,7 +90,15 @@ class MCDMonitor(Monitor):
         return segmenter.mc_dropout(rgb_patch, self.n, self.rho, seed)
 
     def decide(self, scores: np.ndarray, disc_mask: np.ndarray) -> tuple[bool, str]:
+        return self.rule.judge_pixels(self.disc_score(scores, disc_mask))
+
+    def disc_score(self, scores: np.ndarray, disc_mask: np.ndarray) -> np.ndarray:
+        """``S`` (8, m) on the disc's pixels from samples (n' >= n, 8, h, w): what the rule judges.
+
+        It depends on the samples and ``n`` only, so configurations that differ only in their
+        rule (LHD or a CH tau) can share it (a campaign does).
+        """
         validate_mask(disc_mask)
         validate_samples(scores, disc_mask.shape, self.n)
         pixel_samples = take_disc(scores[: self.n], disc_mask)  # (n, 8, m): only the disc's pixels
-        return self.rule.judge_pixels(mcd_score(pixel_samples))
+        return mcd_score(pixel_samples)

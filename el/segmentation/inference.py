@@ -18,7 +18,8 @@ Plugging in another network::
 
 The contract: ``my_module(x)`` maps float RGB images ``x`` of shape (B, 3, H, W), values in
 [0, 1], to logits (B, 8, H, W) for any H, W >= 16 (normalisation and padding are the module's
-business). If the module has ``supports_mc_spec = True`` and ``trunk(x)``, ``head(features, mc)``
+business). If the module has ``supports_mc_spec = True`` and ``trunk(x)``,
+``head(features, mc, crop=False)`` (logits of at least the input size; the top-left H x W are kept)
 and ``mc_spec(n, keep_prob, seed)`` methods (as :class:`el.segmentation.model.MSDLite`), MC dropout
 computes the trunk once and runs the head as one batch of N. Otherwise MC dropout falls back to N
 full passes with the module's dropout layers (``nn.Dropout``, ``nn.Dropout2d``, ...) switched to
@@ -97,11 +98,12 @@ def mc_dropout_stats(samples: np.ndarray, *, ddof: int = 0) -> tuple[np.ndarray,
 def softmax_classes(logits: torch.Tensor) -> torch.Tensor:
     """Softmax over the class axis of (B, C, H, W) logits, fast for either memory layout.
 
-    Channels-last logits (what the shipped network returns) are softmaxed along their innermost
-    axis through a permuted view, which is about twice as fast as ``softmax(dim=1)`` on that layout;
-    the result keeps the channels-last strides (the same values; numpy sees a strided array).
+    Logits with the class axis innermost (channels-last, what the shipped network returns, cropped or
+    not) are softmaxed along that axis through a permuted view, about twice as fast as
+    ``softmax(dim=1)`` on that layout; the result keeps those strides (same values; numpy sees a
+    strided array).
     """
-    if logits.ndim == 4 and not logits.is_contiguous() and logits.is_contiguous(memory_format=torch.channels_last):
+    if logits.ndim == 4 and logits.shape[1] > 1 and logits.stride(1) == 1:  # channels innermost
         return torch.softmax(logits.permute(0, 2, 3, 1), dim=-1).permute(0, 3, 1, 2)
     return torch.softmax(logits, dim=1)
 
@@ -182,8 +184,13 @@ class Segmenter:
         if not isinstance(logits, torch.Tensor) or tuple(logits.shape) != shape:
             got = tuple(logits.shape) if isinstance(logits, torch.Tensor) else type(logits).__name__
             raise ValueError(f"{what}: model returned {got}, expected logits of shape {shape}")
-        probs = softmax_classes(logits.float()).cpu().numpy()
-        return _check_finite(probs, what)
+        return self._probs_checked(softmax_classes(logits.float()), shape, what)
+
+    @staticmethod
+    def _probs_checked(probs: torch.Tensor, shape: tuple[int, ...], what: str) -> np.ndarray:
+        if tuple(probs.shape) != shape:
+            raise ValueError(f"{what}: model returned {tuple(probs.shape)}, expected {shape}")
+        return _check_finite(probs.cpu().numpy(), what)
 
     def working_size(self, width: int, height: int) -> tuple[int, int]:
         """(width, height) of the working resolution for a frame of the given size."""
@@ -278,8 +285,13 @@ class Segmenter:
             spec = self.model.mc_spec(n, keep, seed)
             with torch.inference_mode():
                 features = self.model.trunk(x)
-                logits = self.model.head(features.repeat(n), spec)
-                return self._probs(logits, shape, "MC dropout")
+                # Softmax of the padded logits (dense channels-last), then the crop: the fast order.
+                logits = self.model.head(features.repeat(n), spec, crop=False)
+                if logits.ndim != 4 or logits.shape[2] < h or logits.shape[3] < w:
+                    raise ValueError(f"MC dropout: model returned {tuple(logits.shape)}, expected logits "
+                                     f"of at least {shape}")
+                probs = softmax_classes(logits.float())[:, :, :h, :w]
+                return self._probs_checked(probs, shape, "MC dropout")
         return self._mc_fallback(x, n, 1.0 - keep, seed, shape)
 
     def _mc_fallback(self, x: torch.Tensor, n: int, p: float, seed: int, shape: tuple[int, ...]) -> np.ndarray:

@@ -256,8 +256,12 @@ class MSDLite(nn.Module):
         deep = self.trunk_blocks(self.down(skip))
         return Features(deep, self.lateral(skip), (h, w))
 
-    def head(self, features: Features, mc: MCSpec | None = None) -> torch.Tensor:
-        """Stochastic part: dropout, dilated context, multi-scale block, dropout, decoder, logits."""
+    def head(self, features: Features, mc: MCSpec | None = None, *, crop: bool = True) -> torch.Tensor:
+        """Stochastic part: dropout, dilated context, multi-scale block, dropout, decoder, logits.
+
+        ``crop=False`` returns the logits of the padded input (a multiple of 8 on each side, a dense
+        channels-last tensor) for the caller to crop after its softmax, which is faster on that layout.
+        """
         x = self.drop1(features.deep, mc)
         x = self.multiscale(self.head_blocks(x))
         x = self.top(self.reduce(self.drop2(x, mc)))
@@ -267,6 +271,8 @@ class MSDLite(nn.Module):
         logits = self.classifier(x)
         hp, wp = skip.shape[2] * 4, skip.shape[3] * 4
         logits = F.interpolate(logits, size=(hp, wp), mode="bilinear", align_corners=False)
+        if not crop:
+            return logits
         h, w = features.size
         return logits[:, :, :h, :w]
 
