@@ -19,6 +19,7 @@ import subprocess
 import sys
 import time
 import traceback
+import warnings
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field
 from importlib import resources
@@ -393,7 +394,7 @@ def run_campaign(
     on_result: Callable[[dict[str, Any]], None] | None = None,
     segmenter: Any = None,
 ) -> dict[str, Any]:
-    """Run (or resume) a campaign; returns a summary {tasks, done, skipped, faults, seconds}.
+    """Run (or resume) a campaign; returns a summary {tasks, done, skipped, faults, missing, seconds}.
 
     ``segmenter`` replaces the model loaded from ``config.weights`` (any object with
     ``predict_frame``, ``predict_patch`` and ``mc_dropout``; picklable for parallel backends).
@@ -418,8 +419,9 @@ def run_campaign(
         if on_result:
             on_result(res)
     faults = [r for r in results if r["fault"]]
+    missing = [t.shard_name for t in todo if not readouts.shard_done(run_dir, t.shard_name)]
     summary = {"tasks": len(tasks), "done": len(results), "skipped": len(tasks) - len(todo),
-               "faults": [f"{r['shard']}: {r['fault']}" for r in faults],
+               "faults": [f"{r['shard']}: {r['fault']}" for r in faults], "missing": missing,
                "seconds": time.perf_counter() - t0}
     readouts.append_log(run_dir, summary)
     return summary
@@ -445,7 +447,13 @@ def _dispatch(todo: list[Task], config: CampaignConfig, run_dir: Path, *, jobs: 
 
     par = Parallel(n_jobs=jobs, backend="loky", return_as="generator_unordered")
     gen = par(delayed(execute)(t, config, str(run_dir), threads, segmenter) for t in todo)
-    yield from bar(gen, total=len(todo), desc="campaign", enabled=progress)
+    with warnings.catch_warnings():
+        # loky replaces a worker whose resident memory grew by 300 MB (its leak guard); MC-dropout
+        # batches grow the allocator's arenas that much once. The task is not lost (the replacement
+        # runs it and every shard is checked at the end), so the warning would only alarm.
+        warnings.filterwarnings("ignore", message="A worker stopped while some jobs were given",
+                                category=UserWarning)
+        yield from bar(gen, total=len(todo), desc="campaign", enabled=progress)
 
 
 def _dask_map(todo: list[Task], config: CampaignConfig, run_dir: Path, jobs: int, scheduler: str | None,
@@ -477,5 +485,8 @@ def describe(summary: dict[str, Any]) -> str:
     if summary["faults"]:
         lines.append(f"{len(summary['faults'])} fault(s) recorded:")
         lines += [f"  {f}" for f in summary["faults"][:10]]
+    if summary.get("missing"):
+        lines.append(f"{len(summary['missing'])} task(s) left no shard (a worker died?); run the same command "
+                     f"again to complete them: {', '.join(summary['missing'][:5])}")
     return "\n".join(lines)
 

@@ -58,7 +58,7 @@ def config(weights, **kw):
 def test_campaign_writes_one_shard_per_task_and_a_table(tmp_path, data, weights):
     cfg = config(weights)
     summary = run_campaign(data, tmp_path / "run", cfg, progress=False, segmenter=ORACLE)
-    assert summary["done"] == 6 and summary["faults"] == []
+    assert summary["done"] == 6 and summary["faults"] == [] and summary["missing"] == []
     df = results_table(tmp_path / "run", n_boot=200)
     assert len(df) == 2 * len(MONITORS)
     assert (df["images"] == 3).all()
@@ -163,3 +163,25 @@ def test_dask_local_cluster_gives_the_same_readouts(tmp_path, data, weights):
     b = readouts.load_table(tmp_path / "dask", "images").sort_values("key").reset_index(drop=True)
     keep = [c for c in a.columns if not c.endswith("_s")]
     pd.testing.assert_frame_equal(a[keep], b[keep])
+
+
+def test_a_task_that_left_no_shard_is_reported_and_rerun(tmp_path, data, weights, monkeypatch):
+    """A worker that dies after its task (no shard written) is named in the summary; re-running completes it."""
+    from assurance import campaign as C
+
+    write = readouts.write_shard
+    lost = []
+
+    def lose_one(run_dir, name, rows):
+        if not lost:
+            lost.append(name)
+            return
+        write(run_dir, name, rows)
+
+    monkeypatch.setattr(readouts, "write_shard", lose_one)
+    cfg = config(weights, perturbations=("none",))
+    summary = run_campaign(data, tmp_path / "run", cfg, progress=False, segmenter=ORACLE)
+    assert summary["missing"] == lost and "left no shard" in C.describe(summary)
+    monkeypatch.setattr(readouts, "write_shard", write)
+    again = run_campaign(data, tmp_path / "run", cfg, progress=False, segmenter=ORACLE)
+    assert again["done"] == 1 and again["skipped"] == 2 and again["missing"] == []

@@ -43,4 +43,4 @@ def run(args: argparse.Namespace) -> int:
                            scheduler=args.scheduler, progress=not args.quiet)
     print(describe(summary))
     print(f"readouts in {args.out}; results table: uav-el table {args.out}")
-    return 0
+    return 1 if summary["missing"] else 0
