@@ -13,6 +13,7 @@ an interrupted campaign resumes where it stopped, and a bad image is a recorded 
 from __future__ import annotations
 
 import hashlib
+import inspect
 import os
 import platform
 import subprocess
@@ -177,14 +178,26 @@ def judge_candidates(
     margins = {(m.margin, m.max_side) for m in monitors}
     if len(margins) != 1:
         raise ValueError("monitors of one campaign must share the patch margin and max_side")
+    # Optional Segmenter speed-ups; any object with the PatchSegmenter methods still works.
+    has_trunk = callable(getattr(segmenter, "patch_trunk", None))
+    windowed = mc_need and _accepts(segmenter.mc_dropout, "window")
     out: list[list[tuple[bool, str, float]]] = []
     for k, cand in enumerate(candidates):
         patch, t_patch = _timed(clock, monitors[0].patch, hd, cand)
-        softmax, t_soft = _timed(clock, segmenter.predict_patch, patch.rgb)
+        # The deterministic trunk once for the softmax and every dropout rate (when the network
+        # splits); each configuration is still charged a trunk of its own.
+        trunk, t_trunk = _timed(clock, segmenter.patch_trunk, patch.rgb) if has_trunk else (None, 0.0)
+        shared = {} if trunk is None else {"features": trunk}
+        softmax, t_soft = _timed(clock, segmenter.predict_patch, patch.rgb, **shared)
+        t_soft += t_trunk
+        # MC dropout only over the disc's box: the MCD rules read the disc's pixels and nothing else.
+        window, box_mask = _disc_box(patch.disc_mask) if windowed else (None, patch.disc_mask)
+        if window is not None:
+            shared = {**shared, "window": window}
         mc: dict[float, tuple[np.ndarray, float]] = {}
         for rho, n in mc_need.items():
-            samples, t_mc = _timed(clock, segmenter.mc_dropout, patch.rgb, n, rho, seed + k)
-            mc[rho] = (samples, t_mc)
+            samples, t_mc = _timed(clock, segmenter.mc_dropout, patch.rgb, n, rho, seed + k, **shared)
+            mc[rho] = (samples, t_trunk + t_mc)
         scores: dict[tuple[float, int], tuple[np.ndarray, float]] = {}  # MCD's S per (rho, n)
         row = []
         for m in monitors:
@@ -197,12 +210,28 @@ def judge_candidates(
             t_feat = _attributed_mc_seconds(t_mc, t_soft, m.spec.n, samples.shape[0])
             skey = (key[1], m.spec.n)
             if skey not in scores:  # LHD and the CH taus judge the same S: compute it once
-                scores[skey] = _timed(clock, m.disc_score, samples, patch.disc_mask)
+                scores[skey] = _timed(clock, m.disc_score, samples, box_mask)
             s_disc, t_score = scores[skey]
             (accepted, reason), t_rule = _timed(clock, m.rule.judge_pixels, s_disc)
             row.append((bool(accepted), reason, t_patch + t_feat + t_score + t_rule))
         out.append(row)
     return out
+
+
+def _accepts(fn: Callable[..., Any], name: str) -> bool:
+    try:
+        return name in inspect.signature(fn).parameters
+    except (TypeError, ValueError):
+        return False
+
+
+def _disc_box(mask: np.ndarray) -> tuple[tuple[int, int, int, int] | None, np.ndarray]:
+    """The disc's bounding box (y0, y1, x0, x1) in its patch and the mask cut to it (None, mask if empty)."""
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    if rows.size == 0:
+        return None, mask
+    y0, y1, x0, x1 = int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
+    return (y0, y1, x0, x1), mask[y0:y1, x0:x1]
 
 
 def walk(verdicts: Sequence[bool]) -> int | None:

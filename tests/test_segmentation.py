@@ -209,6 +209,31 @@ def test_mc_dropout_is_prefix_consistent(seg: Segmenter) -> None:
     np.testing.assert_allclose(seg.mc_dropout(rgb, 3, 0.5, 11), seg.mc_dropout(rgb, 8, 0.5, 11)[:3], atol=1e-6)
 
 
+def test_a_shared_trunk_gives_the_same_scores(seg: Segmenter) -> None:
+    """predict_patch / mc_dropout with features=patch_trunk(rgb) equal the calls that run the trunk."""
+    rgb = _rgb(37, 41)  # not a multiple of 8: the crop path too
+    trunk = seg.patch_trunk(rgb)
+    np.testing.assert_array_equal(seg.predict_patch(rgb, features=trunk), seg.predict_patch(rgb))
+    for keep in (0.5, 1.0):
+        np.testing.assert_array_equal(seg.mc_dropout(rgb, 5, keep, 3, features=trunk), seg.mc_dropout(rgb, 5, keep, 3))
+    assert Segmenter(_PlainNet()).patch_trunk(rgb) is None  # no trunk/head split: nothing to share
+
+
+@pytest.mark.parametrize("window", [(0, 37, 0, 41), (5, 30, 9, 26), (36, 37, 0, 1), (1, 37, 40, 41)])
+def test_mc_dropout_window_is_the_slice_of_the_full_samples(seg: Segmenter, window) -> None:
+    rgb = _rgb(37, 41)
+    y0, y1, x0, x1 = window
+    full = seg.mc_dropout(rgb, 4, 0.5, 9)
+    got = seg.mc_dropout(rgb, 4, 0.5, 9, window=window, features=seg.patch_trunk(rgb))
+    assert got.shape == (4, NUM_CLASSES, y1 - y0, x1 - x0)
+    np.testing.assert_allclose(got, full[:, :, y0:y1, x0:x1], atol=1e-6)
+    plain = Segmenter(_PlainNet())  # the fallback path slices
+    np.testing.assert_array_equal(plain.mc_dropout(rgb, 2, 0.5, 1, window=window),
+                                  plain.mc_dropout(rgb, 2, 0.5, 1)[:, :, y0:y1, x0:x1])
+    with pytest.raises(ValueError, match="window"):
+        seg.mc_dropout(rgb, 2, 0.5, 1, window=(5, 5, 0, 3))
+
+
 def test_mc_dropout_leaves_global_rng_and_bn_alone(seg: Segmenter, model: nn.Module) -> None:
     rng_state = torch.get_rng_state()
     buffers = {k: v.clone() for k, v in model.state_dict().items()}

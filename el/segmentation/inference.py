@@ -40,7 +40,7 @@ from torch import nn
 
 from el.camera import working_size
 from el.labels import NUM_CLASSES
-from el.segmentation.model import MCDropout
+from el.segmentation.model import MCDropout, upsample_logits
 from el.segmentation.weights import load_weights
 
 MIN_SIZE = 16  # smallest patch side (px) a Segmenter accepts
@@ -93,6 +93,19 @@ def mc_dropout_stats(samples: np.ndarray, *, ddof: int = 0) -> tuple[np.ndarray,
     mean = samples.mean(axis=0, dtype=np.float64)
     std = samples.std(axis=0, ddof=ddof, dtype=np.float64)
     return mean.astype(np.float32), std.astype(np.float32)
+
+
+def _check_window(window: Any, h: int, w: int) -> tuple[int, int, int, int]:
+    """(y0, y1, x0, x1) of a window inside an h x w patch; the whole patch for None."""
+    if window is None:
+        return 0, h, 0, w
+    try:
+        y0, y1, x0, x1 = (int(v) for v in window)
+    except (TypeError, ValueError):
+        raise ValueError(f"window must be (y0, y1, x0, x1), got {window!r}") from None
+    if not (0 <= y0 < y1 <= h and 0 <= x0 < x1 <= w):
+        raise ValueError(f"window {window!r} is not a non-empty box inside the {h}x{w} patch")
+    return y0, y1, x0, x1
 
 
 def softmax_classes(logits: torch.Tensor) -> torch.Tensor:
@@ -216,10 +229,31 @@ class Segmenter:
         _check_rgb(rgb, "frame at working resolution")
         return self._predict([rgb], "frame")[0]
 
-    def predict_patch(self, rgb_patch: np.ndarray) -> np.ndarray:
-        """Softmax of a patch at its own resolution: ndarray (8, h, w) float32 for a (h, w, 3) uint8 patch."""
+    def predict_patch(self, rgb_patch: np.ndarray, *, features: Any = None) -> np.ndarray:
+        """Softmax of a patch at its own resolution: ndarray (8, h, w) float32 for a (h, w, 3) uint8 patch.
+
+        ``features``: the patch's :meth:`patch_trunk`, when the caller shares it with MC dropout.
+        """
         _check_rgb(rgb_patch, "patch")
-        return self._predict([rgb_patch], "patch")[0]
+        if features is None:
+            return self._predict([rgb_patch], "patch")[0]
+        h, w = rgb_patch.shape[:2]
+        with torch.inference_mode():
+            logits = self.model.head(features)
+            return np.ascontiguousarray(self._probs(logits, (1, NUM_CLASSES, h, w), "patch")[0])
+
+    def patch_trunk(self, rgb_patch: np.ndarray) -> Any:
+        """The deterministic part of the network on a patch, computed once for several calls.
+
+        Pass it as ``features=`` to :meth:`predict_patch` and :meth:`mc_dropout` on the **same** patch
+        (a campaign judges a candidate with the softmax and three dropout rates: one trunk instead of
+        four). None for a network without the trunk/head split (the calls then run in full).
+        """
+        _check_rgb(rgb_patch, "patch")
+        if not self.fast_mc:
+            return None
+        with torch.inference_mode():
+            return self.model.trunk(self._to_tensor([rgb_patch]))
 
     def predict_patches(self, patches: list[np.ndarray]) -> list[np.ndarray]:
         """Softmax of several patches; patches of the same size run as one batch. Order is kept."""
@@ -243,7 +277,8 @@ class Segmenter:
             return np.ascontiguousarray(self._probs(logits, (len(images), NUM_CLASSES, h, w), what))
 
     # -- Monte-Carlo dropout -------------------------------------------------------------------
-    def mc_dropout(self, rgb_patch: np.ndarray, n: int, keep_prob: float, seed: int) -> np.ndarray:
+    def mc_dropout(self, rgb_patch: np.ndarray, n: int, keep_prob: float, seed: int, *,
+                   features: Any = None, window: tuple[int, int, int, int] | None = None) -> np.ndarray:
         """N softmax samples of a patch with dropout active (drop probability ``1 - keep_prob``).
 
         The trunk runs once and the head once on a batch of ``n`` (fast path), BatchNorm in eval
@@ -262,10 +297,15 @@ class Segmenter:
             The paper's rho, in (0, 1]; 1 means no dropout (all samples equal).
         seed : int
             Seed of the dropout masks.
+        features : optional
+            The patch's :meth:`patch_trunk` (shared with other calls on the same patch).
+        window : (y0, y1, x0, x1), optional
+            Return only these rows and columns of the patch (a monitor needs its disc's box): the
+            same scores, to float rounding, as slicing the full result, at the cost of the window.
 
         Returns
         -------
-        ndarray of shape (n, 8, h, w), float32.
+        ndarray of shape (n, 8, h, w), float32 (h, w: the window's size when one is given).
         """
         _check_rgb(rgb_patch, "patch")
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
@@ -277,22 +317,28 @@ class Segmenter:
         n, keep, seed = int(n), float(keep_prob), int(seed)
         h, w = rgb_patch.shape[:2]
         shape = (n, NUM_CLASSES, h, w)
+        y0, y1, x0, x1 = _check_window(window, h, w)
         if keep == 1.0:  # no dropout: every sample is the deterministic softmax (exactly, std 0)
-            probs = self._predict([rgb_patch], "MC dropout")
+            probs = self.predict_patch(rgb_patch, features=features)[None, :, y0:y1, x0:x1]
             return np.repeat(probs, n, axis=0)
         x = self._to_tensor([rgb_patch])
-        if self.fast_mc:
-            spec = self.model.mc_spec(n, keep, seed)
-            with torch.inference_mode():
+        if not self.fast_mc:
+            return self._mc_fallback(x, n, 1.0 - keep, seed, shape)[:, :, y0:y1, x0:x1]
+        spec = self.model.mc_spec(n, keep, seed)
+        with torch.inference_mode():
+            if features is None:
                 features = self.model.trunk(x)
-                # Softmax of the padded logits (dense channels-last), then the crop: the fast order.
-                logits = self.model.head(features.repeat(n), spec, crop=False)
-                if logits.ndim != 4 or logits.shape[2] < h or logits.shape[3] < w:
-                    raise ValueError(f"MC dropout: model returned {tuple(logits.shape)}, expected logits "
-                                     f"of at least {shape}")
-                probs = softmax_classes(logits.float())[:, :, :h, :w]
-                return self._probs_checked(probs, shape, "MC dropout")
-        return self._mc_fallback(x, n, 1.0 - keep, seed, shape)
+            if window is not None and hasattr(self.model, "head_logits") and hasattr(self.model, "logit_stride"):
+                low = self.model.head_logits(features.repeat(n), spec)
+                probs = upsample_logits(low.float(), self.model.logit_stride, (y0, y1, x0, x1), then=softmax_classes)
+                return self._probs_checked(probs, (n, NUM_CLASSES, y1 - y0, x1 - x0), "MC dropout")
+            # Softmax of the padded logits (dense channels-last), then the crop: the fast order.
+            logits = self.model.head(features.repeat(n), spec, crop=False)
+            if logits.ndim != 4 or logits.shape[2] < h or logits.shape[3] < w:
+                raise ValueError(f"MC dropout: model returned {tuple(logits.shape)}, expected logits "
+                                 f"of at least {shape}")
+            probs = softmax_classes(logits.float())[:, :, y0:y1, x0:x1]
+            return self._probs_checked(probs, (n, NUM_CLASSES, y1 - y0, x1 - x0), "MC dropout")
 
     def _mc_fallback(self, x: torch.Tensor, n: int, p: float, seed: int, shape: tuple[int, ...]) -> np.ndarray:
         drops = [m for m in self.model.modules() if _is_dropout(m)]

@@ -34,6 +34,7 @@ computation, so N samples cost far less than N passes.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
 import torch
@@ -190,6 +191,7 @@ class MSDLite(nn.Module):
     """Compact multi-scale dilated segmentation CNN (output stride 8, logits at input size)."""
 
     stride = 8
+    logit_stride = 4  # head_logits() are at 1/4 of the padded input; head() upsamples them bilinearly
     supports_mc_spec = True  # head() accepts an MCSpec: the fast trunk-once MC-dropout path
 
     def __init__(self, config: ArchConfig | None = None) -> None:
@@ -256,21 +258,23 @@ class MSDLite(nn.Module):
         deep = self.trunk_blocks(self.down(skip))
         return Features(deep, self.lateral(skip), (h, w))
 
-    def head(self, features: Features, mc: MCSpec | None = None, *, crop: bool = True) -> torch.Tensor:
-        """Stochastic part: dropout, dilated context, multi-scale block, dropout, decoder, logits.
-
-        ``crop=False`` returns the logits of the padded input (a multiple of 8 on each side, a dense
-        channels-last tensor) for the caller to crop after its softmax, which is faster on that layout.
-        """
+    def head_logits(self, features: Features, mc: MCSpec | None = None) -> torch.Tensor:
+        """Stochastic part up to the classifier: logits at 1/``logit_stride`` of the padded input."""
         x = self.drop1(features.deep, mc)
         x = self.multiscale(self.head_blocks(x))
         x = self.top(self.reduce(self.drop2(x, mc)))
         skip = features.skip
         x = F.interpolate(x, size=skip.shape[2:], mode="bilinear", align_corners=False)
         x = F.relu(self.fuse_bn(x + skip), inplace=True)
-        logits = self.classifier(x)
-        hp, wp = skip.shape[2] * 4, skip.shape[3] * 4
-        logits = F.interpolate(logits, size=(hp, wp), mode="bilinear", align_corners=False)
+        return self.classifier(x)
+
+    def head(self, features: Features, mc: MCSpec | None = None, *, crop: bool = True) -> torch.Tensor:
+        """Stochastic part: dropout, dilated context, multi-scale block, dropout, decoder, logits.
+
+        ``crop=False`` returns the logits of the padded input (a multiple of 8 on each side, a dense
+        channels-last tensor) for the caller to crop after its softmax, which is faster on that layout.
+        """
+        logits = upsample_logits(self.head_logits(features, mc), self.logit_stride)
         if not crop:
             return logits
         h, w = features.size
@@ -278,6 +282,32 @@ class MSDLite(nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return self.head(self.trunk(x))
+
+
+def upsample_logits(logits: torch.Tensor, stride: int, window: tuple[int, int, int, int] | None = None, *,
+                    then: Callable[[torch.Tensor], torch.Tensor] | None = None) -> torch.Tensor:
+    """Bilinear upsampling of low-resolution logits by ``stride`` (``align_corners=False``).
+
+    ``window = (y0, y1, x0, x1)`` returns only those rows and columns of the full upsampling, with the
+    same values, at the cost of the window: the low-resolution cells under it, plus a one-cell halo,
+    are upsampled (a pixel's value depends only on the cells around its source point, and the
+    fractional weights of a scale of exactly ``stride`` do not depend on where the crop starts).
+    ``then`` (a softmax, say) is applied to the dense upsampled block before the crop: elementwise
+    work is faster on a dense tensor than on a crop of one.
+    """
+    then = then or (lambda t: t)
+    h, w = logits.shape[2] * stride, logits.shape[3] * stride
+    if window is None:
+        return then(F.interpolate(logits, size=(h, w), mode="bilinear", align_corners=False))
+    y0, y1, x0, x1 = window
+    if not (0 <= y0 < y1 <= h and 0 <= x0 < x1 <= w):
+        raise ValueError(f"window {window} is not inside the {h}x{w} upsampled logits")
+    a0, a1 = max(0, y0 // stride - 1), min(logits.shape[2], -(-y1 // stride) + 1)
+    b0, b1 = max(0, x0 // stride - 1), min(logits.shape[3], -(-x1 // stride) + 1)
+    sub = logits[:, :, a0:a1, b0:b1]
+    up = then(F.interpolate(sub, scale_factor=stride, mode="bilinear", align_corners=False))
+    oy, ox = a0 * stride, b0 * stride
+    return up[:, :, y0 - oy:y1 - oy, x0 - ox:x1 - ox]
 
 
 def build_model(config: ArchConfig | dict | None = None) -> MSDLite:
