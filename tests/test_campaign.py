@@ -185,3 +185,12 @@ def test_a_task_that_left_no_shard_is_reported_and_rerun(tmp_path, data, weights
     monkeypatch.setattr(readouts, "write_shard", write)
     again = run_campaign(data, tmp_path / "run", cfg, progress=False, segmenter=ORACLE)
     assert again["done"] == 1 and again["skipped"] == 2 and again["missing"] == []
+
+
+def test_candidate_audit_of_a_perfect_segmenter_finds_no_unsafe_candidate(data):
+    from assurance.candidate_audit import candidate_audit
+
+    core = CoreConfig(n_star=6, working_width=256)
+    audit = candidate_audit(ORACLE, data, core=core)
+    assert audit["images"] == 3 and audit["candidates"] > 0
+    assert audit["unsafe"] == 0 and audit["unsafe_share"] == 0.0 and audit["top_unsafe_share"] == 0.0

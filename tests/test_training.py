@@ -254,11 +254,20 @@ def test_train_and_model_card_cli(datasets, tmp_path, uav_el, capsys) -> None:
     assert set(card["evaluation"]) >= {"working_resolution", "hd_patches", "protocol", "data"}
     assert len(card["evaluation"]["working_resolution"]["confusion"]) == NUM_CLASSES
     assert card["baseline"]["miou"] is not None and "miou_gap_to_cnn" in card["baseline"]
+    audit = card["candidates"]  # the core model's candidates on the clean validation scenes
+    assert audit["images"] == 2 and 0 <= audit["unsafe"] <= audit["candidates"]
+    assert "candidates:" in captured.out
 
     assert uav_el(["model-card", "--weights", str(out)]) == 0
     assert "mIoU" in capsys.readouterr().out
     assert uav_el(["model-card", "--weights", str(out), "--verify", "--quiet", "--train", str(train_dir)]) == 0
-    assert "model card verified" in capsys.readouterr().out
+    out_text = capsys.readouterr().out
+    assert "model card verified" in out_text and "candidate audit" in out_text
+    card["candidates"]["candidates"] += 1  # a recorded audit that the weights do not reproduce
+    card_path(out).write_text(json.dumps(card))
+    assert uav_el(["model-card", "--weights", str(out), "--verify", "--quiet"]) == 1
+    assert "candidate audit: recorded" in capsys.readouterr().out
+    card["candidates"]["candidates"] -= 1
 
     # A figure that does not match the weights: verification fails with exit code 1.
     card["evaluation"]["working_resolution"]["miou"] += 0.05

@@ -20,6 +20,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="check the SHA-256, recompute IoU / confusion on the validation data, compare")
     parser.add_argument("--data", type=Path, help="validation set for --verify (default: the folder in the card)")
     parser.add_argument("--train", type=Path, help="training set: with --verify, also refit and check the baseline")
+    parser.add_argument("--audit-candidates", action="store_true",
+                        help="measure the share of truly unsafe core-model candidates on the clean validation "
+                             "scenes and record it in the card")
     parser.add_argument("--tolerance", type=float, default=0.002, help="IoU tolerance of --verify (default 0.002)")
     parser.add_argument("--threads", type=int, help="torch CPU threads")
     parser.add_argument("--json", action="store_true", help="print the card (or the verification) as JSON")
@@ -61,6 +64,29 @@ def _print_card(card: dict[str, Any], path: Path) -> None:
     if base:
         print(f"baseline:     {base['name']}: mIoU {_fmt(base['miou'])} "
               f"(CNN - baseline = {_fmt(base.get('miou_gap_to_cnn'))})")
+    cands = card.get("candidates")
+    if cands:
+        print(f"candidates:   {describe_audit(cands)}")
+
+
+def describe_audit(a: dict[str, Any]) -> str:
+    return (f"{a['unsafe']} of {a['candidates']} core-model candidates truly unsafe ({_fmt(a['unsafe_share'])}) "
+            f"on {a['images']} clean scenes of {a['data']}; top-ranked unsafe in {_fmt(a['top_unsafe_share'])} "
+            f"of the scenes with a candidate")
+
+
+def audit(path: Path, data: Path | None, threads: int | None, quiet: bool) -> dict[str, Any]:
+    """The candidate audit of a weights file on its validation data (or ``data``)."""
+    from assurance.candidate_audit import candidate_audit
+    from el.segmentation import Segmenter
+    from el.segmentation.weights import read_card
+
+    card = read_card(path)
+    folder = data or Path(((card.get("training") or {}).get("data") or {}).get("val", {}).get("path", ""))
+    if not str(folder) or not folder.is_dir():
+        raise ValueError(f"{path}: no validation folder to audit (give --data)")
+    return candidate_audit(Segmenter.load(path, threads=threads), folder,
+                           progress=functools.partial(progress, enabled=not quiet))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -68,6 +94,15 @@ def run(args: argparse.Namespace) -> int:
     from el.segmentation.weights import DEFAULT_WEIGHTS, read_card
 
     path = args.weights or DEFAULT_WEIGHTS
+    if args.audit_candidates and not args.verify:
+        from el.segmentation.weights import write_card
+
+        result = audit(path, args.data, args.threads, args.quiet)
+        card = read_card(path)
+        card["candidates"] = result
+        write_card(path, card)
+        print(f"candidates: {describe_audit(result)}")
+        return 0
     if not args.verify:
         if not path.exists():
             from el.segmentation.weights import WeightsError
@@ -81,6 +116,15 @@ def run(args: argparse.Namespace) -> int:
         return 0
     result = verify_card(path, val_dir=args.data, train_dir=args.train, threads=args.threads,
                          iou_tol=args.tolerance, progress=functools.partial(progress, enabled=not args.quiet))
+    recorded = read_card(path).get("candidates")
+    if recorded and result.ok:
+        again = audit(path, args.data, args.threads, args.quiet)
+        keys = ("images", "candidates", "unsafe", "images_without_candidate")
+        if all(again[k] == recorded[k] for k in keys):
+            result.checks.append(f"candidate audit: {again['unsafe']} of {again['candidates']} unsafe, as recorded")
+        else:
+            result.problems.append("candidate audit: recorded " + ", ".join(f"{k}={recorded[k]}" for k in keys)
+                                   + "; recomputed " + ", ".join(f"{k}={again[k]}" for k in keys))
     if args.json:
         print(json.dumps({"weights": str(path), "ok": result.ok, "checks": result.checks,
                           "problems": result.problems}, indent=2))

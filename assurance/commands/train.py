@@ -64,6 +64,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cache-dir", type=Path, help="prepared-data cache (default ~/.cache/uav-el/segmentation)")
     parser.add_argument("--no-cache", action="store_true", help="do not cache prepared data")
     parser.add_argument("--no-baseline", action="store_true", help="skip the per-pixel baseline")
+    parser.add_argument("--no-audit", action="store_true",
+                        help="skip the audit of the core model's candidates on the validation scenes")
     parser.add_argument("--quiet", action="store_true", help="no progress bars or log lines")
 
 
@@ -124,4 +126,13 @@ def run(args: argparse.Namespace) -> int:
     if card.get("baseline"):
         print(f"per-pixel baseline mIoU: {card['baseline']['miou']:.4f} "
               f"(CNN - baseline = {card['baseline']['miou_gap_to_cnn']:.4f})")
+    if args.val is not None and not args.no_audit:
+        from assurance.commands.model_card import audit, describe_audit
+        from el.segmentation.weights import read_card, write_card
+
+        result = audit(args.out, args.val, args.threads, args.quiet)
+        card = read_card(args.out)
+        card["candidates"] = result
+        write_card(args.out, card)
+        print(f"candidates: {describe_audit(result)}")
     return 0

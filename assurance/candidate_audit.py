@@ -1,0 +1,55 @@
+"""How often the core model's candidates are truly unsafe on clean scenes (a model-card figure).
+
+A candidate is truly unsafe when its safe disc holds a forbidden ground-truth pixel at full
+resolution (``assurance.truth``). The share of such candidates on clean validation scenes measures
+how much work is left to the runtime monitors: near 0, the data (or the model) is too easy for the
+monitors to show anything; the paper's CNN on real UAVid gave about 36%, and the project's target is
+15-50% (segmentation issue).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from pathlib import Path
+from typing import Any
+
+from assurance.truth import true_hazard
+from el.config import CoreConfig
+from el.core import run_core
+from el.uavid import iter_samples, read_image, read_labels
+
+Progress = Callable[..., Iterable]
+
+__all__ = ["candidate_audit"]
+
+
+def candidate_audit(segmenter: Any, data_dir: str | Path, *, core: CoreConfig | None = None,
+                    progress: Progress | None = None) -> dict[str, Any]:
+    """Segment every clean scene of ``data_dir``, find the CM's candidates, count the truly unsafe ones.
+
+    Returns the figures recorded in a model card's ``candidates`` section: images, candidates,
+    unsafe candidates and their share, the share of images whose top-ranked candidate is unsafe, and
+    images without any candidate. Deterministic for given weights, data and core configuration.
+    """
+    core = core or CoreConfig()
+    samples = list(iter_samples(data_dir, require_labels=True))
+    if not samples:
+        raise ValueError(f"{data_dir}: no labelled scenes")
+    items = progress(samples, total=len(samples), desc="candidates") if progress else samples
+    total = unsafe = top_unsafe = empty = 0
+    for s in items:
+        rgb, ids = read_image(s.image_path), read_labels(s.label_path)
+        if ids.shape != rgb.shape[:2]:
+            raise ValueError(f"{s.label_path}: label size {ids.shape} differs from the image {rgb.shape[:2]}")
+        result = run_core(segmenter.predict_frame(rgb), (rgb.shape[1], rgb.shape[0]), core)
+        flags = [true_hazard(ids, c.disc) >= 1.0 for c in result.candidates]
+        total += len(flags)
+        unsafe += sum(flags)
+        top_unsafe += bool(flags and flags[0])
+        empty += not flags
+    return {
+        "data": str(data_dir), "images": len(samples), "candidates": total, "unsafe": unsafe,
+        "unsafe_share": unsafe / total if total else None,
+        "top_unsafe_share": top_unsafe / (len(samples) - empty) if len(samples) > empty else None,
+        "images_without_candidate": empty, "core": core.to_dict(),
+    }
