@@ -49,6 +49,10 @@ def _print_card(card: dict[str, Any], path: Path) -> None:
         print(f"training:     seed {training.get('seed')}, {training.get('steps')} steps, best step "
               f"{training.get('best_step')}, {training.get('train_seconds')} s "
               f"({training.get('seconds_per_step')} s/step, {training.get('threads')} threads)")
+        parent = training.get("init")
+        if parent:
+            print(f"warm start:   from {parent['weights_sha256'][:16]}... ({parent.get('total_steps')} steps): "
+                  f"{training.get('total_steps')} steps in all")
     ev = card.get("evaluation")
     if not ev:
         print("evaluation:   none (trained without validation data)")
