@@ -13,7 +13,6 @@ an interrupted campaign resumes where it stopped, and a bad image is a recorded 
 from __future__ import annotations
 
 import hashlib
-import inspect
 import os
 import platform
 import subprocess
@@ -37,6 +36,7 @@ from el.config import CoreConfig
 from el.core import run_core
 from el.decision import Candidate
 from el.monitors import DEMO_GRID, PAPER_GRID, Monitor, build_monitor, parse_monitor_spec
+from el.monitors.patches import accepts_keyword, disc_box
 from el.uavid import Sample, iter_samples, read_image, read_labels
 
 GRIDS = {"paper-grid": PAPER_GRID, "demo-grid": DEMO_GRID}
@@ -180,7 +180,7 @@ def judge_candidates(
         raise ValueError("monitors of one campaign must share the patch margin and max_side")
     # Optional Segmenter speed-ups; any object with the PatchSegmenter methods still works.
     has_trunk = callable(getattr(segmenter, "patch_trunk", None))
-    windowed = mc_need and _accepts(segmenter.mc_dropout, "window")
+    windowed = mc_need and accepts_keyword(segmenter.mc_dropout, "window")
     out: list[list[tuple[bool, str, float]]] = []
     for k, cand in enumerate(candidates):
         patch, t_patch = _timed(clock, monitors[0].patch, hd, cand)
@@ -191,7 +191,7 @@ def judge_candidates(
         softmax, t_soft = _timed(clock, segmenter.predict_patch, patch.rgb, **shared)
         t_soft += t_trunk
         # MC dropout only over the disc's box: the MCD rules read the disc's pixels and nothing else.
-        window, box_mask = _disc_box(patch.disc_mask) if windowed else (None, patch.disc_mask)
+        window, box_mask = disc_box(patch.disc_mask) if windowed else (None, patch.disc_mask)
         if window is not None:
             shared = {**shared, "window": window}
         mc: dict[float, tuple[np.ndarray, float]] = {}
@@ -216,22 +216,6 @@ def judge_candidates(
             row.append((bool(accepted), reason, t_patch + t_feat + t_score + t_rule))
         out.append(row)
     return out
-
-
-def _accepts(fn: Callable[..., Any], name: str) -> bool:
-    try:
-        return name in inspect.signature(fn).parameters
-    except (TypeError, ValueError):
-        return False
-
-
-def _disc_box(mask: np.ndarray) -> tuple[tuple[int, int, int, int] | None, np.ndarray]:
-    """The disc's bounding box (y0, y1, x0, x1) in its patch and the mask cut to it (None, mask if empty)."""
-    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
-    if rows.size == 0:
-        return None, mask
-    y0, y1, x0, x1 = int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
-    return (y0, y1, x0, x1), mask[y0:y1, x0:x1]
 
 
 def walk(verdicts: Sequence[bool]) -> int | None:

@@ -575,3 +575,39 @@ def test_take_disc_is_the_same_for_any_memory_layout(lead):
     assert got.flags.c_contiguous and got.shape == (*lead, 8, int(mask.sum()))
     np.testing.assert_array_equal(got, want)
     np.testing.assert_array_equal(take_disc(np.ascontiguousarray(strided), mask), want)
+
+
+def test_mcd_check_samples_only_the_disc_box_with_the_same_verdict():
+    """In flight, MCD asks a window-capable segmenter for the disc's box only; the verdict is unchanged."""
+    from el.segmentation import Segmenter
+    from el.segmentation.model import ArchConfig, build_model
+
+    torch.manual_seed(0)
+    seg = Segmenter(build_model(ArchConfig(widths=(8, 8, 8), ms_channels=8, decoder_channels=8)))
+    windows = []
+
+    class Spy:  # records the window; a segmenter without the keyword gets the full patch
+        predict_patch = staticmethod(seg.predict_patch)
+
+        def mc_dropout(self, rgb, n, keep_prob, seed, *, window=None):
+            windows.append(window)
+            return seg.mc_dropout(rgb, n, keep_prob, seed, window=window)
+
+    class Plain:
+        predict_patch = staticmethod(seg.predict_patch)
+
+        @staticmethod
+        def mc_dropout(rgb, n, keep_prob, seed):
+            windows.append(None)
+            return seg.mc_dropout(rgb, n, keep_prob, seed)
+
+    hd = np.random.default_rng(0).integers(0, 255, (120, 160, 3), dtype=np.uint8)
+    for spec in ("lhd+mcd:n=5,rho=0.5", "lhd+ch+mcd:tau=0.25,n=5,rho=0.75"):
+        monitor = mon.build_monitor(spec)
+        disc = Disc(80.5, 60.5, 20.0)
+        a = monitor.check(hd, disc, Spy(), seed=3)
+        b = monitor.check(hd, disc, Plain(), seed=3)
+        assert (a.accepted, a.reason) == (b.accepted, b.reason)
+        assert windows[-2] is not None and windows[-1] is None
+        y0, y1, x0, x1 = windows[-2]
+        assert y1 - y0 <= 41 and x1 - x0 <= 41  # the disc's box, not the 50 px patch

@@ -165,9 +165,18 @@ class Monitor(ABC):
         """
         t0 = self.clock()
         patch = self.patch(hd_image, candidate)
-        scores = self.features(patch.rgb, segmenter, seed=seed)
-        accepted, reason = self.decide(scores, patch.disc_mask)
+        scores, mask = self.patch_scores(patch, segmenter, seed=seed)
+        accepted, reason = self.decide(scores, mask)
         return MonitorVerdict(self.name, bool(accepted), reason, self.clock() - t0)
+
+    def patch_scores(self, patch: Patch, segmenter: PatchSegmenter, *, seed: int = 0
+                     ) -> tuple[np.ndarray, np.ndarray]:
+        """The scores :meth:`decide` judges for a patch, and the disc mask that goes with them.
+
+        By default :meth:`features` of the whole patch and its mask; a monitor may restrict both to
+        the disc's box when the segmenter can (MCD does).
+        """
+        return self.features(patch.rgb, segmenter, seed=seed), patch.disc_mask
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.name!r}, margin={self.margin}, max_side={self.max_side})"

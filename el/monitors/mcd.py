@@ -15,6 +15,7 @@ import numpy as np
 
 from el.monitors.base import Monitor, PatchSegmenter, validate_mask, validate_samples
 from el.monitors.lhd import LHDMonitor, take_disc
+from el.monitors.patches import Patch, accepts_keyword, disc_box
 from el.monitors.spec import MonitorSpec, validate_n, validate_rho
 
 MCD_SIGMAS = 3.0
@@ -88,6 +89,14 @@ class MCDMonitor(Monitor):
 
     def features(self, rgb_patch: np.ndarray, segmenter: PatchSegmenter, *, seed: int = 0) -> np.ndarray:
         return segmenter.mc_dropout(rgb_patch, self.n, self.rho, seed)
+
+    def patch_scores(self, patch: Patch, segmenter: PatchSegmenter, *, seed: int = 0
+                     ) -> tuple[np.ndarray, np.ndarray]:
+        """MC samples over the disc's box only, when the segmenter takes a ``window`` (same scores)."""
+        window, box_mask = disc_box(patch.disc_mask)
+        if window is None or not accepts_keyword(segmenter.mc_dropout, "window"):
+            return super().patch_scores(patch, segmenter, seed=seed)
+        return segmenter.mc_dropout(patch.rgb, self.n, self.rho, seed, window=window), box_mask
 
     def decide(self, scores: np.ndarray, disc_mask: np.ndarray) -> tuple[bool, str]:
         return self.rule.judge_pixels(self.disc_score(scores, disc_mask))

@@ -151,3 +151,26 @@ def extract_patch(
         rgb = cv2.resize(rgb, size, interpolation=cv2.INTER_AREA)
         mask = cv2.resize(mask.astype(np.float32), size, interpolation=cv2.INTER_AREA) > 0
     return Patch(rgb=np.ascontiguousarray(rgb), disc_mask=mask, scale=scale, offset=(x0, y0))
+
+
+def disc_box(mask: np.ndarray) -> tuple[tuple[int, int, int, int] | None, np.ndarray]:
+    """The disc's bounding box ``(y0, y1, x0, x1)`` in its patch and the mask cut to it.
+
+    MC dropout need only produce scores there (``Segmenter.mc_dropout(..., window=)``): the rules
+    read the disc's pixels and nothing else. ``(None, mask)`` for an empty mask.
+    """
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    if rows.size == 0:
+        return None, mask
+    y0, y1, x0, x1 = int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
+    return (y0, y1, x0, x1), mask[y0:y1, x0:x1]
+
+
+def accepts_keyword(fn: object, name: str) -> bool:
+    """Whether a callable takes the keyword ``name`` (an optional speed-up of some segmenters)."""
+    import inspect
+
+    try:
+        return name in inspect.signature(fn).parameters  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return False
