@@ -7,6 +7,10 @@ import numpy as np
 from el.camera import working_size
 from el.core import probs_from_labels
 from el.labels import NUM_CLASSES, PALETTE, ids_to_colors
+from el.segmentation.model import ArchConfig
+
+TINY_ARCH = ArchConfig(widths=(8, 8, 16), ms_channels=8, decoder_channels=8)
+"""The tiny network of the segmentation and training tests (fast on one thread)."""
 
 
 def nearest_class(rgb: np.ndarray) -> np.ndarray:

@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pytest
 import torch
+from helpers import TINY_ARCH as TINY
 from torch import nn
 
 import el.segmentation.inference as inference_module
@@ -23,8 +24,6 @@ from el.segmentation import (
 )
 from el.segmentation.model import MCSpec, count_parameters
 from el.segmentation.weights import card_path, read_card, sha256_file, state_dict_bytes
-
-TINY = ArchConfig(widths=(8, 8, 16), ms_channels=8, decoder_channels=8)
 
 
 @pytest.fixture(autouse=True, scope="module")

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from helpers import TINY_ARCH
 
 import assurance.cli as cli
 from el.labels import NUM_CLASSES, PALETTE
@@ -26,8 +27,6 @@ from el.segmentation.training import (
 )
 from el.segmentation.weights import card_path, read_card
 from el.uavid import write_sample
-
-TINY_ARCH = ArchConfig(widths=(8, 8, 16), ms_channels=8, decoder_channels=8)
 
 
 @pytest.fixture(autouse=True, scope="module")

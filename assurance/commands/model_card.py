@@ -93,19 +93,25 @@ def audit(path: Path, data: Path | None, threads: int | None, quiet: bool) -> di
                            progress=functools.partial(progress, enabled=not quiet))
 
 
+def record_audit(path: Path, data: Path | None, threads: int | None, quiet: bool) -> dict[str, Any]:
+    """Run the candidate audit, write it into the card's ``candidates`` section and print it."""
+    from el.segmentation.weights import read_card, write_card
+
+    result = audit(path, data, threads, quiet)
+    card = read_card(path)
+    card["candidates"] = result
+    write_card(path, card)
+    print(f"candidates: {describe_audit(result)}")
+    return result
+
+
 def run(args: argparse.Namespace) -> int:
     from el.segmentation.card import verify_card
     from el.segmentation.weights import DEFAULT_WEIGHTS, read_card
 
     path = args.weights or DEFAULT_WEIGHTS
     if args.audit_candidates and not args.verify:
-        from el.segmentation.weights import write_card
-
-        result = audit(path, args.data, args.threads, args.quiet)
-        card = read_card(path)
-        card["candidates"] = result
-        write_card(path, card)
-        print(f"candidates: {describe_audit(result)}")
+        record_audit(path, args.data, args.threads, args.quiet)
         return 0
     if not args.verify:
         if not path.exists():

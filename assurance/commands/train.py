@@ -127,12 +127,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"per-pixel baseline mIoU: {card['baseline']['miou']:.4f} "
               f"(CNN - baseline = {card['baseline']['miou_gap_to_cnn']:.4f})")
     if args.val is not None and not args.no_audit:
-        from assurance.commands.model_card import audit, describe_audit
-        from el.segmentation.weights import read_card, write_card
+        from assurance.commands.model_card import record_audit
 
-        result = audit(args.out, args.val, args.threads, args.quiet)
-        card = read_card(args.out)
-        card["candidates"] = result
-        write_card(args.out, card)
-        print(f"candidates: {describe_audit(result)}")
+        record_audit(args.out, args.val, args.threads, args.quiet)
     return 0

@@ -8,6 +8,7 @@ and the image spans [0, W] x [0, H]. A pixel belongs to the disc when its centre
 
 from __future__ import annotations
 
+import inspect
 import math
 from dataclasses import dataclass
 
@@ -168,8 +169,6 @@ def disc_box(mask: np.ndarray) -> tuple[tuple[int, int, int, int] | None, np.nda
 
 def accepts_keyword(fn: object, name: str) -> bool:
     """Whether a callable takes the keyword ``name`` (an optional speed-up of some segmenters)."""
-    import inspect
-
     try:
         return name in inspect.signature(fn).parameters  # type: ignore[arg-type]
     except (TypeError, ValueError):
