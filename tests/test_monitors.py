@@ -577,13 +577,9 @@ def test_take_disc_is_the_same_for_any_memory_layout(lead):
     np.testing.assert_array_equal(take_disc(np.ascontiguousarray(strided), mask), want)
 
 
-def test_mcd_check_samples_only_the_disc_box_with_the_same_verdict():
+def test_mcd_check_samples_only_the_disc_box_with_the_same_verdict(project_segmenter):
     """In flight, MCD asks a window-capable segmenter for the disc's box only; the verdict is unchanged."""
-    from el.segmentation import Segmenter
-    from el.segmentation.model import ArchConfig, build_model
-
-    torch.manual_seed(0)
-    seg = Segmenter(build_model(ArchConfig(widths=(8, 8, 8), ms_channels=8, decoder_channels=8)))
+    seg = project_segmenter
     windows = []
 
     class Spy:  # records the window; a segmenter without the keyword gets the full patch
