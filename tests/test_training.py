@@ -20,6 +20,8 @@ from el.segmentation.training import (
     TrainConfig,
     checkpoint_path,
     load_checkpoint,
+    prefetched,
+    resolve_device,
     sample_batch,
     steps_for_epochs,
     train,
@@ -220,6 +222,29 @@ def test_resume_continues_and_matches_an_uninterrupted_run(datasets, tmp_path) -
         torch.testing.assert_close(part_state[k], v, atol=1e-5, rtol=1e-4)
     assert card_part["training"]["best_step"] == card_full["training"]["best_step"]
     assert card_full["training"]["steps"] == config.steps
+
+
+def test_prefetched_batches_arrive_in_step_order_and_do_not_change_training(datasets, tmp_path) -> None:
+    assert list(prefetched(lambda s: s * s, range(3, 40), workers=3, depth=6)) == [s * s for s in range(3, 40)]
+    assert list(prefetched(lambda s: s + 1, range(5), workers=0, depth=0)) == [1, 2, 3, 4, 5]
+    train_dir, val_dir = datasets
+    config = tiny_config(baseline_pixels=0)
+    plain = train(train_dir, tmp_path / "a" / "model.pt", val_dir=val_dir, config=config)
+    ahead = train(train_dir, tmp_path / "b" / "model.pt", val_dir=val_dir, config=config, prefetch=3)
+    assert ahead["weights_sha256"] == plain["weights_sha256"]
+    assert ahead["training"]["device"] == "cpu"
+
+
+def test_a_missing_accelerator_is_a_clear_error(datasets, tmp_path, uav_el, capsys) -> None:
+    with pytest.raises(ValueError, match="unknown device"):
+        resolve_device("gpu-please")
+    if torch.cuda.is_available():
+        pytest.skip("this machine has a CUDA GPU")
+    with pytest.raises(ValueError, match="no CUDA GPU"):
+        resolve_device("cuda")
+    train_dir, _ = datasets
+    rc = uav_el(["train", "--data", str(train_dir), "--out", str(tmp_path / "m.pt"), "--device", "cuda"])
+    assert rc == 2 and "--device" in capsys.readouterr().err and not (tmp_path / "m.pt").exists()
 
 
 def test_resume_without_checkpoint_is_an_error(datasets, tmp_path) -> None:

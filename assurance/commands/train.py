@@ -48,6 +48,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "instead of a random initialisation")
     parser.add_argument("--checkpoint", type=Path, help="resumable training state (default: <out> with suffix .ckpt)")
     parser.add_argument("--threads", type=int, help="torch CPU threads (default: torch's choice)")
+    parser.add_argument("--device", default="cpu",
+                        help="where to optimise: cpu (default), cuda, cuda:1, mps; the card's figures are "
+                             "recomputed on the CPU either way")
+    parser.add_argument("--prefetch", type=int,
+                        help="threads drawing the next mini-batches ahead (default 0 on the CPU, 4 elsewhere)")
     parser.add_argument("--batch", type=int, default=4, help="working-resolution crops per step (default 4)")
     parser.add_argument("--crop", type=int, default=256, help="side of the working-resolution crops (default 256)")
     parser.add_argument("--hd-crops", type=float, default=4.0,
@@ -78,6 +83,15 @@ def run(args: argparse.Namespace) -> int:
 
     if args.threads is not None and args.threads < 1:
         raise CommandError(f"--threads must be >= 1, got {args.threads}")
+    if args.prefetch is not None and args.prefetch < 0:
+        raise CommandError(f"--prefetch must be >= 0, got {args.prefetch}")
+    from el.segmentation.training import resolve_device
+
+    try:
+        device = resolve_device(args.device)
+    except ValueError as exc:
+        raise CommandError(f"--device: {exc}") from exc
+    prefetch = args.prefetch if args.prefetch is not None else (0 if device.type == "cpu" else 4)
     steps = args.steps if args.steps is not None else 1500
     if args.epochs is not None:
         images = sum(1 for _ in iter_samples(args.data))
@@ -113,7 +127,8 @@ def run(args: argparse.Namespace) -> int:
     log = None if args.quiet else (lambda msg: tqdm.write(msg, file=sys.stderr))
     bar = functools.partial(progress, enabled=not args.quiet)
     card = train(args.data, args.out, val_dir=args.val, config=config, resume=args.resume, cache_dir=cache_dir,
-                 checkpoint_file=args.checkpoint, threads=args.threads, init_weights=args.init, progress=bar,
+                 checkpoint_file=args.checkpoint, threads=args.threads, init_weights=args.init, device=device,
+                 prefetch=prefetch, progress=bar,
                  log=log)
     training = card["training"]
     print(f"weights: {args.out} (sha256 {card['weights_sha256']})")

@@ -24,7 +24,9 @@ from __future__ import annotations
 import io
 import math
 import time
-from collections.abc import Callable, Iterable
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -168,6 +170,45 @@ def sample_batch(samples: list[D.Prepared], config: TrainConfig, step: int
     return working, (_to_tensor(imgs), _labels_tensor(labs))
 
 
+def prefetched(fn: Callable[[int], Any], steps: Iterable[int], *, workers: int, depth: int) -> Iterator[Any]:
+    """``fn(step)`` for each step, in order, computed ``depth`` steps ahead by ``workers`` threads.
+
+    ``fn`` must be a pure function of the step (as :func:`sample_batch` is), so the results do not
+    depend on the number of workers; with ``workers <= 1`` nothing runs ahead.
+    """
+    if workers <= 1:
+        yield from (fn(s) for s in steps)
+        return
+    pending: deque = deque()
+    todo = iter(steps)
+    with ThreadPoolExecutor(workers, thread_name_prefix="batches") as pool:
+        try:
+            for s in todo:
+                pending.append(pool.submit(fn, s))
+                if len(pending) > depth:
+                    yield pending.popleft().result()
+            while pending:
+                yield pending.popleft().result()
+        finally:
+            for future in pending:
+                future.cancel()
+
+
+def resolve_device(device: str | torch.device) -> torch.device:
+    """A torch device for training; ValueError if it names an accelerator this machine lacks."""
+    try:
+        dev = torch.device(device)
+    except (RuntimeError, TypeError) as exc:
+        raise ValueError(f"unknown device {device!r}: {exc}") from None
+    if dev.type == "cuda" and not torch.cuda.is_available():
+        raise ValueError(f"device {device!r}: torch {torch.__version__} sees no CUDA GPU on this machine")
+    if dev.type == "mps" and not torch.backends.mps.is_available():
+        raise ValueError(f"device {device!r}: no Apple MPS device on this machine")
+    if dev.type not in ("cpu", "cuda", "mps"):
+        raise ValueError(f"device {device!r}: training supports cpu, cuda and mps")
+    return dev
+
+
 def training_loss(model: torch.nn.Module, batches: tuple, weights: torch.Tensor) -> torch.Tensor:
     """Class-weighted cross-entropy, mean over the scales present in the step."""
     losses = [F.cross_entropy(model(x), y, weight=weights) for x, y in (b for b in batches if b is not None)]
@@ -204,7 +245,7 @@ def _diff_config(old: dict[str, Any], new: dict[str, Any]) -> list[str]:
 def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Path | None = None,
           config: TrainConfig | None = None, resume: bool = False, cache_dir: str | Path | None = None,
           checkpoint_file: str | Path | None = None, threads: int | None = None,
-          init_weights: str | Path | None = None,
+          init_weights: str | Path | None = None, device: str | torch.device = "cpu", prefetch: int = 0,
           progress: Progress | None = None, log: Log | None = None) -> dict[str, Any]:
     """Train on a UAVid-layout folder, write the weights and their model card; returns the card.
 
@@ -228,6 +269,13 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
         Warm start: begin from these weights (SHA-256 checked, same architecture as ``config.arch``)
         instead of a random initialisation; ``config.init_sha256`` must name them. The card records
         the parent and the steps behind it.
+    device : str
+        Where the optimisation runs (``"cpu"``, ``"cuda"``...). Model selection evaluates there; the
+        card's figures are then recomputed on the CPU, where the flight code runs, so that
+        ``uav-el model-card --verify`` reproduces them.
+    prefetch : int
+        Threads that draw the next steps' mini-batches while the current one trains (0: none). The
+        batches are a pure function of ``(seed, step)``, so this changes speed only.
     progress : callable, optional
         ``progress(iterable, total=..., desc=...)`` wrapper (a progress bar).
     log : callable, optional
@@ -236,6 +284,7 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
     config = config or TrainConfig()
     weights_path = Path(weights_path)
     say = log or (lambda _msg: None)
+    device = resolve_device(device)
     if threads is not None:
         torch.set_num_threads(threads)
     io_threads = threads or torch.get_num_threads()
@@ -272,6 +321,7 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
     torch.manual_seed(config.seed)
     model = build_model(config.arch)
     parent = _warm_start(model, init_weights, config) if init_weights is not None else None
+    model.to(device)
     if init_weights is None and config.init_sha256 is not None:
         raise ValueError("config.init_sha256 is set but no init_weights were given")
     optimizer = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
@@ -281,6 +331,7 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
     train_seconds = 0.0
     if state is not None:
         model.load_state_dict(state["model"])
+        model.to(device)
         optimizer.load_state_dict(state["optimizer"])
         scheduler.load_state_dict(state["scheduler"])
         start_step = int(state["step"])
@@ -305,7 +356,7 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
             "not_used_augmentations": ["brightness", "fog", "motion_blur", "shifted_pixels", "dead_rows"],
             "loss": "class-weighted cross-entropy (inverse sqrt frequency), mean of working and HD scales",
             "class_frequencies": [float(f) for f in freq], "class_weights": [float(w) for w in weights],
-            "torch_version": torch.__version__, "init": parent,
+            "torch_version": torch.__version__, "init": parent, "device": _device_name(device),
             "total_steps": config.steps + (parent["total_steps"] if parent else 0),
         }}
 
@@ -313,12 +364,15 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
     window: list[float] = []
     steps = range(start_step, config.steps)
     iterator = progress(steps, total=len(steps), desc="train") if progress is not None else steps
+    draws = prefetched(lambda s: sample_batch(train_set, config, s), steps, workers=prefetch, depth=2 * prefetch)
+    loss_weights = weights.to(device)
     model.train()
-    for step in iterator:
+    for step, batches in zip(iterator, draws, strict=True):
         tick = time.perf_counter()
         torch.manual_seed(int(np.random.default_rng([config.seed, 2, step]).integers(2**62)))  # dropout masks
-        batches = sample_batch(train_set, config, step)
-        loss = training_loss(model, batches, weights)
+        batches = tuple(None if b is None else (b[0].to(device, non_blocking=True), b[1].to(device, non_blocking=True))
+                        for b in batches)
+        loss = training_loss(model, batches, loss_weights)
         if not torch.isfinite(loss):
             raise ValueError(f"training diverged at step {step}: loss is {float(loss)}")
         optimizer.zero_grad(set_to_none=True)
@@ -338,7 +392,7 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
             if val_set:
                 tick = time.perf_counter()
                 model.eval()
-                figures = evaluate(Segmenter(model, working_width=config.working_width), val_set)
+                figures = evaluate(Segmenter(model, working_width=config.working_width, device=device), val_set)
                 model.train()
                 score = selection_score(figures)
                 entry.update({"val_miou_working": figures["working_resolution"]["miou"],
@@ -358,6 +412,12 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
         card = save_weights(model, weights_path, card={**card_base(), "evaluation": None})
     else:
         card = read_card(weights_path)
+        if device.type != "cpu":
+            say(f"re-evaluating the selected weights (step {best_step}) on the CPU")
+            selected, _ = load_weights(weights_path)
+            cpu_figures = evaluate(Segmenter(selected, working_width=config.working_width), val_set)
+            card["evaluation"].update(cpu_figures)
+            card["evaluation"]["selection_device"] = _device_name(device)
     card["training"].update({
         "best_step": best_step, "history": history, "train_seconds": round(train_seconds, 1),
         "seconds_per_step": round(train_seconds / max(1, config.steps), 3),
@@ -375,6 +435,12 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
         card["baseline"]["miou_gap_to_cnn"] = None if cnn is None or base is None else cnn - base
     write_card(weights_path, card)
     return card
+
+
+def _device_name(device: torch.device) -> str:
+    if device.type == "cuda":
+        return f"cuda ({torch.cuda.get_device_name(device)})"
+    return device.type
 
 
 def _warm_start(model: MSDLite, init_weights: str | Path, config: TrainConfig) -> dict[str, Any]:
