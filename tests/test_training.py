@@ -322,6 +322,32 @@ def test_verify_reports_changed_validation_data(datasets, tmp_path) -> None:
     assert any("validation data hash differs" in p for p in result.problems)
 
 
+def test_reissue_moves_the_card_to_another_copy_of_the_data(datasets, tmp_path, uav_el, capsys) -> None:
+    train_dir, val_dir = datasets
+    out = tmp_path / "model.pt"
+    train(train_dir, out, val_dir=val_dir, config=tiny_config(steps=2))
+    before = read_card(out)
+    other_val = fake_dataset(tmp_path / "other_val", 2, seed=9)
+    assert not verify_card(out, val_dir=other_val).ok
+
+    assert uav_el(["model-card", "--weights", str(out), "--reissue", "--quiet"]) == 2
+    assert "--reissue needs --data" in capsys.readouterr().err
+    rc = uav_el(["model-card", "--weights", str(out), "--reissue", "--quiet", "--data", str(other_val),
+                 "--train", str(train_dir)])
+    assert rc == 0, capsys.readouterr().err
+    assert "re-issued" in capsys.readouterr().out
+    card = read_card(out)
+    assert card["weights_sha256"] == before["weights_sha256"]
+    assert card["training"] == before["training"]  # what it was trained on stays recorded
+    assert card["evaluation"]["data"]["sha256"] == D.dataset_manifest(other_val).sha256
+    assert card["evaluation"]["reissued"]["data"] == before["evaluation"]["data"]
+    assert card["baseline"]["train_data"]["sha256"] == D.dataset_manifest(train_dir).sha256
+    assert card["candidates"]["images"] == 2
+    result = verify_card(out, val_dir=other_val, train_dir=train_dir)
+    assert result.ok, result.problems
+    assert uav_el(["model-card", "--weights", str(out), "--verify", "--quiet", "--data", str(other_val)]) == 0
+
+
 def test_warm_start_begins_from_the_parent_weights(datasets, tmp_path) -> None:
     train_dir, val_dir = datasets
     parent = tmp_path / "parent" / "model.pt"

@@ -23,6 +23,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--audit-candidates", action="store_true",
                         help="measure the share of truly unsafe core-model candidates on the clean validation "
                              "scenes and record it in the card")
+    parser.add_argument("--reissue", action="store_true",
+                        help="recompute the card's figures (evaluation, candidate audit; baseline with --train) on "
+                             "this machine's copy of the scenes given by --data and write them into the card")
     parser.add_argument("--tolerance", type=float, default=0.002, help="IoU tolerance of --verify (default 0.002)")
     parser.add_argument("--threads", type=int, help="torch CPU threads")
     parser.add_argument("--json", action="store_true", help="print the card (or the verification) as JSON")
@@ -105,11 +108,37 @@ def record_audit(path: Path, data: Path | None, threads: int | None, quiet: bool
     return result
 
 
+def _reissue(path: Path, args: argparse.Namespace) -> int:
+    from assurance.cli import CommandError
+    from el.segmentation.card import reissue_card
+
+    if args.verify:
+        raise CommandError("--reissue and --verify do not go together: re-issue first, then verify")
+    if args.data is None:
+        raise CommandError("--reissue needs --data: the validation scenes to recompute the figures on")
+    try:
+        card = reissue_card(path, val_dir=args.data, train_dir=args.train, threads=args.threads,
+                            progress=functools.partial(progress, enabled=not args.quiet))
+    except ValueError as exc:
+        raise CommandError(str(exc)) from exc
+    ev, before = card["evaluation"], card["evaluation"]["reissued"]
+    print(f"{path}: evaluation re-issued on {args.data} ({ev['data']['sha256'][:16]}...): mIoU working "
+          f"{_fmt(ev['working_resolution']['miou'])} (was {_fmt(before['miou_working'])}), HD patches "
+          f"{_fmt(ev['hd_patches']['miou'])} (was {_fmt(before['miou_hd'])})")
+    if card.get("baseline"):
+        print(f"baseline: mIoU {_fmt(card['baseline']['miou'])} "
+              f"(CNN - baseline = {_fmt(card['baseline']['miou_gap_to_cnn'])})")
+    record_audit(path, args.data, args.threads, args.quiet)
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     from el.segmentation.card import verify_card
     from el.segmentation.weights import DEFAULT_WEIGHTS, read_card
 
     path = args.weights or DEFAULT_WEIGHTS
+    if args.reissue:
+        return _reissue(path, args)
     if args.audit_candidates and not args.verify:
         record_audit(path, args.data, args.threads, args.quiet)
         return 0

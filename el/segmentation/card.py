@@ -1,9 +1,14 @@
-"""Check a model card against its weights and data: recompute the figures and compare.
+"""Check a model card against its weights and data, or re-issue its figures on another copy of the data.
 
 Used by ``uav-el model-card --verify``: the weights' SHA-256 is checked (loading fails otherwise),
 the validation data are hashed and compared with the recorded hash, and the per-class IoU, mIoU and
 confusion matrices at both scales are recomputed with the recorded protocol. Optionally the per-pixel
 baseline is refitted on the training data and its mIoU compared.
+
+``uav-el model-card --reissue`` (:func:`reissue_card`) recomputes the same figures on this machine's
+copy of the scenes and writes them into the card: the generator reproduces every label bit for bit
+from its seeds, but rendered pixels can differ by rounding between processors, so a model trained
+on another machine (a GPU box) gets its card's figures from the copy its users can regenerate.
 """
 
 from __future__ import annotations
@@ -17,7 +22,7 @@ from el.segmentation import data as D
 from el.segmentation.baseline import evaluate_baseline
 from el.segmentation.evaluation import EvalProtocol, compare_figures, evaluate
 from el.segmentation.inference import Segmenter
-from el.segmentation.weights import DEFAULT_WEIGHTS, load_weights
+from el.segmentation.weights import DEFAULT_WEIGHTS, load_weights, write_card
 
 
 @dataclass
@@ -83,7 +88,8 @@ def verify_card(weights_path: str | Path | None = None, *, val_dir: str | Path |
             result.problems.append("--train given but the card records no baseline")
             return result
         train_manifest = D.dataset_manifest(train_dir, threads=workers)
-        recorded_train = ((card.get("training") or {}).get("data") or {}).get("train") or {}
+        trained_on = ((card.get("training") or {}).get("data") or {}).get("train")
+        recorded_train = baseline.get("train_data") or trained_on or {}
         if train_manifest.sha256 != recorded_train.get("sha256"):
             result.problems.append(f"training data hash differs: recorded {recorded_train.get('sha256')}, "
                                    f"{train_dir} has {train_manifest.sha256}")
@@ -99,3 +105,44 @@ def verify_card(weights_path: str | Path | None = None, *, val_dir: str | Path |
         else:
             result.checks.append(f"baseline mIoU reproduced ({recomputed['miou']:.4f})")
     return result
+
+
+def reissue_card(weights_path: str | Path | None = None, *, val_dir: str | Path, train_dir: str | Path | None = None,
+                 threads: int | None = None, progress: Callable[..., Iterable] | None = None) -> dict[str, Any]:
+    """Recompute the card's evaluation (and, with ``train_dir``, the baseline) on these folders; write it.
+
+    The training record (what the network was trained and selected on) is kept; the evaluation names
+    the data it was computed on and keeps the figures it replaces under ``reissued``. Returns the card.
+    """
+    path = Path(weights_path) if weights_path is not None else DEFAULT_WEIGHTS
+    model, card = load_weights(path)
+    old = card.get("evaluation")
+    if not old:
+        raise ValueError(f"{path}: the card records no evaluation protocol (trained without validation data)")
+    workers = threads or 2
+    protocol = EvalProtocol.from_dict(old["protocol"])
+    manifest = D.dataset_manifest(val_dir, threads=workers)
+    val_set = D.load_dataset(manifest, protocol.prep_params(), cache_dir=None, threads=workers, progress=progress)
+    segmenter = Segmenter(model, threads=threads, card=card, working_width=protocol.working_width)
+    figures = evaluate(segmenter, val_set, progress=progress, total=len(val_set))
+    previous = {"data": old.get("data"), "miou_working": old["working_resolution"]["miou"],
+                "miou_hd": old["hd_patches"]["miou"]}
+    card["evaluation"] = {**old, **figures, "data": manifest.describe(), "reissued": previous}
+    baseline = card.get("baseline")
+    if train_dir is not None:
+        params = baseline or {"max_pixels": 200_000, "seed": (card.get("training") or {}).get("seed", 0)}
+        train_manifest = D.dataset_manifest(train_dir, threads=workers)
+        train_set = D.load_dataset(train_manifest, D.PrepParams(working_width=protocol.working_width, regions=0),
+                                   cache_dir=None, threads=workers, progress=progress)
+        baseline = evaluate_baseline([s.image for s in train_set], [s.labels for s in train_set],
+                                     [s.image for s in val_set], [s.labels for s in val_set],
+                                     max_pixels=int(params["max_pixels"]), seed=int(params["seed"]),
+                                     max_iter=int(params.get("max_iter", 300)))
+        baseline["train_data"] = train_manifest.describe()
+    if baseline:
+        cnn, base = figures["working_resolution"]["miou"], baseline["miou"]
+        baseline["miou_gap_to_cnn"] = None if cnn is None or base is None else cnn - base
+        card["baseline"] = baseline
+    card.pop("candidates", None)  # measured on the other copy; the caller re-runs the audit
+    write_card(path, card)
+    return card
