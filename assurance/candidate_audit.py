@@ -9,13 +9,17 @@ monitors to show anything; the paper's CNN on real UAVid gave about 36%, and the
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
-from assurance.truth import true_hazard
+import numpy as np
+
+from assurance.truth import disc_pixels
 from el.config import CoreConfig
 from el.core import run_core
+from el.labels import CLASS_NAMES, FORBIDDEN_LUT, NUM_CLASSES
 from el.uavid import iter_samples, read_image, read_labels
 
 Progress = Callable[..., Iterable]
@@ -28,8 +32,10 @@ def candidate_audit(segmenter: Any, data_dir: str | Path, *, core: CoreConfig | 
     """Segment every clean scene of ``data_dir``, find the CM's candidates, count the truly unsafe ones.
 
     Returns the figures recorded in a model card's ``candidates`` section: images, candidates,
-    unsafe candidates and their share, the share of images whose top-ranked candidate is unsafe, and
-    images without any candidate. Deterministic for given weights, data and core configuration.
+    unsafe candidates and their share, the share of images whose top-ranked candidate is unsafe,
+    images without any candidate, and what makes the unsafe ones unsafe (the forbidden class holding
+    most of each disc's forbidden pixels, and the median share of the disc that is forbidden).
+    Deterministic for given weights, data and core configuration.
     """
     core = core or CoreConfig()
     samples = list(iter_samples(data_dir, require_labels=True))
@@ -37,12 +43,20 @@ def candidate_audit(segmenter: Any, data_dir: str | Path, *, core: CoreConfig | 
         raise ValueError(f"{data_dir}: no labelled scenes")
     items = progress(samples, total=len(samples), desc="candidates") if progress else samples
     total = unsafe = top_unsafe = empty = 0
+    by_class: Counter[str] = Counter()
+    shares: list[float] = []
     for s in items:
         rgb, ids = read_image(s.image_path), read_labels(s.label_path)
         if ids.shape != rgb.shape[:2]:
             raise ValueError(f"{s.label_path}: label size {ids.shape} differs from the image {rgb.shape[:2]}")
         result = run_core(segmenter.predict_frame(rgb), (rgb.shape[1], rgb.shape[0]), core)
-        flags = [true_hazard(ids, c.disc) >= 1.0 for c in result.candidates]
+        flags = []
+        for c in result.candidates:
+            cause = _unsafe_cause(disc_pixels(ids, c.disc))
+            flags.append(cause is not None)
+            if cause is not None:
+                by_class[cause[0]] += 1
+                shares.append(cause[1])
         total += len(flags)
         unsafe += sum(flags)
         top_unsafe += bool(flags and flags[0])
@@ -51,5 +65,18 @@ def candidate_audit(segmenter: Any, data_dir: str | Path, *, core: CoreConfig | 
         "data": str(data_dir), "images": len(samples), "candidates": total, "unsafe": unsafe,
         "unsafe_share": unsafe / total if total else None,
         "top_unsafe_share": top_unsafe / (len(samples) - empty) if len(samples) > empty else None,
-        "images_without_candidate": empty, "core": core.to_dict(),
+        "images_without_candidate": empty,
+        "unsafe_by_class": {name: by_class[name] for name in CLASS_NAMES if by_class[name]},
+        "median_forbidden_share": float(np.median(shares)) if shares else None,
+        "core": core.to_dict(),
     }
+
+
+def _unsafe_cause(pixels: np.ndarray) -> tuple[str, float] | None:
+    """(forbidden class with most pixels in the disc, forbidden share of the disc), or None if safe."""
+    if pixels.size == 0:
+        return "outside the image", 1.0
+    counts = np.bincount(pixels, minlength=NUM_CLASSES) * FORBIDDEN_LUT
+    if not counts.any():
+        return None
+    return CLASS_NAMES[int(counts.argmax())], float(counts.sum() / pixels.size)

@@ -194,3 +194,25 @@ def test_candidate_audit_of_a_perfect_segmenter_finds_no_unsafe_candidate(data):
     audit = candidate_audit(ORACLE, data, core=core)
     assert audit["images"] == 3 and audit["candidates"] > 0
     assert audit["unsafe"] == 0 and audit["unsafe_share"] == 0.0 and audit["top_unsafe_share"] == 0.0
+
+
+class _BlindSegmenter:
+    """Sees open grass everywhere: every candidate it offers is judged on the ground truth alone."""
+
+    def predict_frame(self, rgb):
+        h = round(rgb.shape[0] * 256 / rgb.shape[1])
+        probs = np.full((8, h, 256), 0.01, np.float32)
+        probs[5] = 0.93
+        return probs
+
+
+def test_candidate_audit_says_what_makes_the_unsafe_candidates_unsafe(data):
+    from assurance.candidate_audit import _unsafe_cause, candidate_audit
+
+    assert _unsafe_cause(np.array([5, 5, 0, 4], np.uint8)) is None
+    assert _unsafe_cause(np.array([5, 2, 2, 1], np.uint8)) == ("road", 0.75)
+    audit = candidate_audit(_BlindSegmenter(), data, core=CoreConfig(n_star=6, working_width=256))
+    assert audit["unsafe"] > 0
+    assert sum(audit["unsafe_by_class"].values()) == audit["unsafe"]
+    assert set(audit["unsafe_by_class"]) <= {"building", "road", "static_car", "moving_car", "outside the image"}
+    assert 0 < audit["median_forbidden_share"] <= 1

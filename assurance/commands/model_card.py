@@ -77,9 +77,14 @@ def _print_card(card: dict[str, Any], path: Path) -> None:
 
 
 def describe_audit(a: dict[str, Any]) -> str:
-    return (f"{a['unsafe']} of {a['candidates']} core-model candidates truly unsafe ({_fmt(a['unsafe_share'])}) "
+    text = (f"{a['unsafe']} of {a['candidates']} core-model candidates truly unsafe ({_fmt(a['unsafe_share'])}) "
             f"on {a['images']} clean scenes of {a['data']}; top-ranked unsafe in {_fmt(a['top_unsafe_share'])} "
             f"of the scenes with a candidate")
+    causes = a.get("unsafe_by_class")
+    if causes:
+        text += ("; mostly " + ", ".join(f"{name} in {n}" for name, n in causes.items())
+                 + f"; median forbidden share of an unsafe disc {_fmt(a.get('median_forbidden_share'))}")
+    return text
 
 
 def audit(path: Path, data: Path | None, threads: int | None, quiet: bool) -> dict[str, Any]:
