@@ -51,7 +51,11 @@ def init_run(run_dir: Path, manifest: dict[str, Any]) -> None:
                 raise RunError(f"{run_dir}: holds another campaign (its manifest differs in '{key}'); "
                                "use a new --out folder or delete this one")
         return
-    (run_dir / SHARDS).mkdir(exist_ok=True)
+    shards = run_dir / SHARDS
+    if shards.is_dir() and any(shards.iterdir()):  # e.g. a half-deleted run: its shards may be another campaign's
+        raise RunError(f"{run_dir}: has shards but no manifest.json, so they cannot be checked against this "
+                       "campaign; use a new --out folder or delete this one")
+    shards.mkdir(exist_ok=True)
     atomic_write_bytes(path, json.dumps(manifest, indent=2, sort_keys=True, default=str).encode())
 
 

@@ -112,6 +112,10 @@ def test_other_campaign_in_same_folder_is_refused(tmp_path, data, weights):
     with pytest.raises(readouts.RunError, match="another campaign"):
         run_campaign(data, tmp_path / "run", config(weights, perturbations=("fog",)), progress=False,
                      segmenter=ORACLE)
+    (tmp_path / "run" / "manifest.json").unlink()  # a half-deleted run: shards whose campaign is unknown
+    with pytest.raises(readouts.RunError, match="no manifest"):
+        run_campaign(data, tmp_path / "run", config(weights, perturbations=("none",)), progress=False,
+                     segmenter=ORACLE)
 
 
 def test_shared_grid_equals_single_configuration_runs(tmp_path, data, weights):
