@@ -346,6 +346,10 @@ def test_reissue_moves_the_card_to_another_copy_of_the_data(datasets, tmp_path, 
     result = verify_card(out, val_dir=other_val, train_dir=train_dir)
     assert result.ok, result.problems
     assert uav_el(["model-card", "--weights", str(out), "--verify", "--quiet", "--data", str(other_val)]) == 0
+    capsys.readouterr()
+    # Without --data the audit uses the folder the card's figures come from, not the training machine's.
+    assert uav_el(["model-card", "--weights", str(out), "--audit-candidates", "--quiet"]) == 0
+    assert read_card(out)["candidates"]["data"] == str(other_val)
 
 
 def test_warm_start_begins_from_the_parent_weights(datasets, tmp_path) -> None:

@@ -94,7 +94,9 @@ def audit(path: Path, data: Path | None, threads: int | None, quiet: bool) -> di
     from el.segmentation.weights import read_card
 
     card = read_card(path)
-    folder = data or Path(((card.get("training") or {}).get("data") or {}).get("val", {}).get("path", ""))
+    recorded = ((card.get("evaluation") or {}).get("data") or ((card.get("training") or {}).get("data") or {})
+                .get("val") or {})  # where the card's figures come from (a re-issued card: this machine's copy)
+    folder = data or Path(recorded.get("path", ""))
     if not str(folder) or not folder.is_dir():
         raise ValueError(f"{path}: no validation folder to audit (give --data)")
     return candidate_audit(Segmenter.load(path, threads=threads), folder,
