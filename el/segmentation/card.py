@@ -93,18 +93,24 @@ def verify_card(weights_path: str | Path | None = None, *, val_dir: str | Path |
         if train_manifest.sha256 != recorded_train.get("sha256"):
             result.problems.append(f"training data hash differs: recorded {recorded_train.get('sha256')}, "
                                    f"{train_dir} has {train_manifest.sha256}")
-        train_set = D.load_dataset(train_manifest, D.PrepParams(working_width=protocol.working_width, regions=0),
-                                   cache_dir=None, threads=workers, progress=progress)
-        recomputed = evaluate_baseline([s.image for s in train_set], [s.labels for s in train_set],
-                                       [s.image for s in val_set], [s.labels for s in val_set],
-                                       max_pixels=int(baseline["max_pixels"]), seed=int(baseline["seed"]),
-                                       max_iter=int(baseline.get("max_iter", 300)))
+        recomputed = _refit_baseline(train_manifest, val_set, baseline, protocol, workers, progress)
         result.recomputed["baseline"] = recomputed
         if abs(recomputed["miou"] - baseline["miou"]) > iou_tol:
             result.problems.append(f"baseline mIoU: recorded {baseline['miou']}, recomputed {recomputed['miou']}")
         else:
             result.checks.append(f"baseline mIoU reproduced ({recomputed['miou']:.4f})")
     return result
+
+
+def _refit_baseline(train_manifest: D.Manifest, val_set: list[D.Prepared], params: dict[str, Any],
+                    protocol: EvalProtocol, workers: int, progress: Callable[..., Iterable] | None) -> dict[str, Any]:
+    """The per-pixel baseline fitted on the training frames with the card's recorded parameters."""
+    train_set = D.load_dataset(train_manifest, D.PrepParams(working_width=protocol.working_width, regions=0),
+                               cache_dir=None, threads=workers, progress=progress)
+    return evaluate_baseline([s.image for s in train_set], [s.labels for s in train_set],
+                             [s.image for s in val_set], [s.labels for s in val_set],
+                             max_pixels=int(params["max_pixels"]), seed=int(params["seed"]),
+                             max_iter=int(params.get("max_iter", 300)))
 
 
 def reissue_card(weights_path: str | Path | None = None, *, val_dir: str | Path, train_dir: str | Path | None = None,
@@ -132,12 +138,7 @@ def reissue_card(weights_path: str | Path | None = None, *, val_dir: str | Path,
     if train_dir is not None:
         params = baseline or {"max_pixels": 200_000, "seed": (card.get("training") or {}).get("seed", 0)}
         train_manifest = D.dataset_manifest(train_dir, threads=workers)
-        train_set = D.load_dataset(train_manifest, D.PrepParams(working_width=protocol.working_width, regions=0),
-                                   cache_dir=None, threads=workers, progress=progress)
-        baseline = evaluate_baseline([s.image for s in train_set], [s.labels for s in train_set],
-                                     [s.image for s in val_set], [s.labels for s in val_set],
-                                     max_pixels=int(params["max_pixels"]), seed=int(params["seed"]),
-                                     max_iter=int(params.get("max_iter", 300)))
+        baseline = _refit_baseline(train_manifest, val_set, params, protocol, workers, progress)
         baseline["train_data"] = train_manifest.describe()
     if baseline:
         cnn, base = figures["working_resolution"]["miou"], baseline["miou"]
