@@ -227,6 +227,7 @@ def test_resume_continues_and_matches_an_uninterrupted_run(datasets, tmp_path) -
 def test_prefetched_batches_arrive_in_step_order_and_do_not_change_training(datasets, tmp_path) -> None:
     assert list(prefetched(lambda s: s * s, range(3, 40), workers=3, depth=6)) == [s * s for s in range(3, 40)]
     assert list(prefetched(lambda s: s + 1, range(5), workers=0, depth=0)) == [1, 2, 3, 4, 5]
+    assert list(prefetched(lambda s: -s, range(9), workers=1, depth=2)) == [-s for s in range(9)]
     train_dir, val_dir = datasets
     config = tiny_config(baseline_pixels=0)
     plain = train(train_dir, tmp_path / "a" / "model.pt", val_dir=val_dir, config=config)

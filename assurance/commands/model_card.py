@@ -94,9 +94,10 @@ def audit(path: Path, data: Path | None, threads: int | None, quiet: bool) -> di
     from el.segmentation.weights import read_card
 
     card = read_card(path)
-    recorded = ((card.get("evaluation") or {}).get("data") or ((card.get("training") or {}).get("data") or {})
-                .get("val") or {})  # where the card's figures come from (a re-issued card: this machine's copy)
-    folder = data or Path(recorded.get("path", ""))
+    # Where the card's figures come from (a re-issued card: this machine's copy), else the training's val.
+    evaluated_on = (card.get("evaluation") or {}).get("data")
+    selected_on = ((card.get("training") or {}).get("data") or {}).get("val")
+    folder = data or Path((evaluated_on or selected_on or {}).get("path", ""))
     if not str(folder) or not folder.is_dir():
         raise ValueError(f"{path}: no validation folder to audit (give --data)")
     return candidate_audit(Segmenter.load(path, threads=threads), folder,

@@ -70,9 +70,7 @@ def verify_card(weights_path: str | Path | None = None, *, val_dir: str | Path |
         result.problems.append(f"validation data hash differs: recorded {recorded_data.get('sha256')}, "
                                f"{val_root} has {manifest.sha256}")
     protocol = EvalProtocol.from_dict(evaluation["protocol"])
-    segmenter = Segmenter(model, threads=threads, card=card, working_width=protocol.working_width)
-    val_set = D.load_dataset(manifest, protocol.prep_params(), cache_dir=None, threads=workers, progress=progress)
-    figures = evaluate(segmenter, val_set, progress=progress, total=len(val_set))
+    val_set, figures = _evaluate_on(model, card, manifest, protocol, threads, workers, progress)
     result.recomputed["evaluation"] = figures
     diffs = compare_figures(evaluation, figures, iou_tol=iou_tol)
     if diffs:
@@ -102,6 +100,15 @@ def verify_card(weights_path: str | Path | None = None, *, val_dir: str | Path |
     return result
 
 
+def _evaluate_on(model: Any, card: dict[str, Any], manifest: D.Manifest, protocol: EvalProtocol,
+                 threads: int | None, workers: int, progress: Callable[..., Iterable] | None
+                 ) -> tuple[list[D.Prepared], dict[str, Any]]:
+    """The prepared validation samples and the network's figures on them, by the recorded protocol."""
+    val_set = D.load_dataset(manifest, protocol.prep_params(), cache_dir=None, threads=workers, progress=progress)
+    segmenter = Segmenter(model, threads=threads, card=card, working_width=protocol.working_width)
+    return val_set, evaluate(segmenter, val_set, progress=progress, total=len(val_set))
+
+
 def _refit_baseline(train_manifest: D.Manifest, val_set: list[D.Prepared], params: dict[str, Any],
                     protocol: EvalProtocol, workers: int, progress: Callable[..., Iterable] | None) -> dict[str, Any]:
     """The per-pixel baseline fitted on the training frames with the card's recorded parameters."""
@@ -128,9 +135,7 @@ def reissue_card(weights_path: str | Path | None = None, *, val_dir: str | Path,
     workers = threads or 2
     protocol = EvalProtocol.from_dict(old["protocol"])
     manifest = D.dataset_manifest(val_dir, threads=workers)
-    val_set = D.load_dataset(manifest, protocol.prep_params(), cache_dir=None, threads=workers, progress=progress)
-    segmenter = Segmenter(model, threads=threads, card=card, working_width=protocol.working_width)
-    figures = evaluate(segmenter, val_set, progress=progress, total=len(val_set))
+    val_set, figures = _evaluate_on(model, card, manifest, protocol, threads, workers, progress)
     previous = {"data": old.get("data"), "miou_working": old["working_resolution"]["miou"],
                 "miou_hd": old["hd_patches"]["miou"]}
     card["evaluation"] = {**old, **figures, "data": manifest.describe(), "reissued": previous}

@@ -174,9 +174,9 @@ def prefetched(fn: Callable[[int], Any], steps: Iterable[int], *, workers: int, 
     """``fn(step)`` for each step, in order, computed ``depth`` steps ahead by ``workers`` threads.
 
     ``fn`` must be a pure function of the step (as :func:`sample_batch` is), so the results do not
-    depend on the number of workers; with ``workers <= 1`` nothing runs ahead.
+    depend on the number of workers; with ``workers < 1`` nothing runs ahead.
     """
-    if workers <= 1:
+    if workers < 1:
         yield from (fn(s) for s in steps)
         return
     pending: deque = deque()
