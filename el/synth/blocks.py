@@ -15,6 +15,7 @@ from el.labels import CLASS_IDS
 from el.synth import props
 from el.synth.geom import ellipse
 from el.synth.layout import L_BLOCK, L_DETAIL, L_DETAIL2, L_LOT_PAINT, Builder
+from el.synth.lookalikes import add_ground_lookalikes, add_object_lookalikes
 from el.synth.styles import pick
 from el.synth.world import Look
 
@@ -150,6 +151,8 @@ def perimeter(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
     _row_of_buildings(b, a0, a0 + depth, b0 + depth, b1 - depth, along_a=False)
     _row_of_buildings(b, a1 - depth, a1, b0 + depth, b1 - depth, along_a=False)
     ca0, ca1, cb0, cb1 = a0 + depth + 1, a1 - depth - 1, b0 + depth + 1, b1 - depth - 1
+    if court_kind == "paved":
+        add_ground_lookalikes(b, "perimeter", ca0, ca1, cb0, cb1, base)
     if court_kind == "parking":
         _park_cars_rows(b, ca0, ca1, cb0, cb1, st.parked_fill, lines=rng.random() < 0.6)
     elif court_kind == "lawn":
@@ -159,6 +162,7 @@ def perimeter(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
         _scatter_trees(b, ca0, ca1, cb0, cb1, 0.25)
         _scatter_clutter(b, ca0, ca1, cb0, cb1, int(rng.integers(0, 4)), ["bin", "bench", "dumpster", "pallets"])
         _park_cars_rows(b, ca0, ca1, cb0, cb0 + 6, 0.4, lines=False)
+    add_object_lookalikes(b, "perimeter", ca0, ca1, cb0, cb1)
     b.people_in_local(ca0, ca1, cb0, cb1, st.people_per_100m2 * 0.5)
 
 
@@ -244,9 +248,11 @@ def _service_road(b: Builder, a0: float, a1: float, b0: float, b1: float) -> Non
 def towers(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
     """One to three large buildings on a paved plaza with planters, trees, furniture and people."""
     rng, st = b.rng, b.style
-    _ground(b, a0, a1, b0, b1, CLUTTER, _paved_look(b))
+    ground = _paved_look(b)
+    _ground(b, a0, a1, b0, b1, CLUTTER, ground)
     if rng.random() < 0.6:
         _paving_bands(b, a0, a1, b0, b1)
+    add_ground_lookalikes(b, "towers", a0, a1, b0, b1, ground)
     n = int(rng.integers(1, 4))
     for _ in range(n * 3):
         if n == 0:
@@ -297,7 +303,7 @@ def houses(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
     for r0, r1, facing in rows:
         s = s0
         while s < s1 - 8:
-            lot = float(rng.uniform(12, 24))
+            lot = float(rng.uniform(11, 20))
             if s1 - (s + lot) < 10:
                 lot = s1 - s
             _house_lot(b, s, s + lot, r0, r1, facing, along_a)
@@ -409,6 +415,7 @@ def park(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
     w.add_region(paths, CLUTTER, path_look, L_DETAIL2)
     if rng.random() < 0.3 and min(a1 - a0, b1 - b0) > 25:
         _service_road(b, a0, a1, b0, b1)
+    add_ground_lookalikes(b, "park", a0, a1, b0, b1)
     if rng.random() < 0.35:
         ca, cb = float(rng.uniform(a0 + 12, a1 - 12)), float(rng.uniform(b0 + 10, b1 - 10))
         if b.free_local(ca, cb, 6):
@@ -421,6 +428,7 @@ def park(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
             _ground(b, ca - 7, ca + 7, cb - 5, cb + 5, CLUTTER, Look("sand", pick(rng, pal.sand, 0.1)), L_DETAIL2)
             _scatter_clutter(b, ca - 7, ca + 7, cb - 5, cb + 5, int(rng.integers(2, 6)), ["play"])
             b.people_in_local(ca - 7, ca + 7, cb - 5, cb + 5, 3.0)
+    add_object_lookalikes(b, "park", a0, a1, b0, b1)
     _scatter_trees(b, a0, a1, b0, b1, 0.9, clustered=True)
     _scatter_bushes(b, a0, a1, b0, b1, 0.4)
     _scatter_clutter(b, a0, a1, b0, b1, int(rng.integers(1, 6)), ["bench", "bin", "bench"])
@@ -436,6 +444,7 @@ def lawn(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
     elif rng.random() < 0.5 and b1 - b0 > 10:
         c = float(rng.uniform(b0 + 3, b1 - 3))
         _ground(b, a0, a1, c - 1.5, c + 1.5, CLUTTER, _paved_look(b), L_DETAIL2)
+    add_ground_lookalikes(b, "lawn", a0, a1, b0, b1)
     if rng.random() < 0.3 and min(a1 - a0, b1 - b0) > 25:
         ca, cb = (a0 + a1) / 2, (b0 + b1) / 2
         bw, bl = float(rng.uniform(8, 16)), float(rng.uniform(8, 14))
@@ -446,6 +455,7 @@ def lawn(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
     if rng.random() < 0.4:
         _blob_region(b, float(rng.uniform(a0, a1)), float(rng.uniform(b0, b1)), float(rng.uniform(3, 10)),
                      float(rng.uniform(2, 6)), CLUTTER, Look("soil", pick(rng, pal.soil, 0.1)))
+    add_object_lookalikes(b, "lawn", a0, a1, b0, b1)
     _scatter_trees(b, a0, a1, b0, b1, 0.35)
     _scatter_bushes(b, a0, a1, b0, b1, 0.3)
     b.people_in_local(a0, a1, b0, b1, st.people_per_100m2 * 0.3)
@@ -454,9 +464,11 @@ def lawn(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
 def plaza(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
     """A paved square: fountain, planters with trees, umbrellas, kiosks, benches and crowds."""
     rng, st, pal = b.rng, b.style, b.palette
-    _ground(b, a0, a1, b0, b1, CLUTTER, _paved_look(b))
+    ground = _paved_look(b)
+    _ground(b, a0, a1, b0, b1, CLUTTER, ground)
     if rng.random() < 0.7:
         _paving_bands(b, a0, a1, b0, b1)
+    add_ground_lookalikes(b, "plaza", a0, a1, b0, b1, ground)
     if rng.random() < 0.5:
         _tree_rows(b, a0, a1, b0, b1)
     if rng.random() < 0.5:
@@ -473,6 +485,7 @@ def plaza(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
             b.world.add_region(b.origin + poly[:, :1] * b.ea + poly[:, 1:] * b.eb, CLUTTER,
                                Look("water", pick(rng, pal.water, 0.1)), L_LOT_PAINT)
             b.occupy_local(ca - r, ca + r, cb - r, cb + r)
+    add_object_lookalikes(b, "plaza", a0, a1, b0, b1)
     _planters(b, a0, a1, b0, b1, int(rng.integers(2, 10)))
     _scatter_trees(b, a0, a1, b0, b1, 0.12)
     _scatter_clutter(b, a0, a1, b0, b1, int(rng.integers(3, 14)),
@@ -505,6 +518,7 @@ def industrial(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
         _blob_region(b, float(rng.uniform(a0, a1)), float(rng.uniform(b0, b1)), float(rng.uniform(4, 14)),
                      float(rng.uniform(3, 9)), CLUTTER, Look(str(rng.choice(["soil", "gravel"])),
                                                              pick(rng, pal.soil + pal.gravel, 0.1)))
+    add_ground_lookalikes(b, "industrial", a0, a1, b0, b1)
     for _ in range(int(rng.integers(1, 3)) * 3):
         w = float(rng.uniform(20, min(70, a1 - a0 - 6)))
         l = float(rng.uniform(15, min(45, b1 - b0 - 6)))
@@ -517,6 +531,7 @@ def industrial(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
         x, y = b.to_world(ca, cb)
         props.add_building(b, x, y, w, l, b.phi, float(np.clip(rng.uniform(*st.building_height), 4.0, 16.0)),
                            pitched=rng.random() < 0.15, industrial=True)
+    add_object_lookalikes(b, "industrial", a0, a1, b0, b1)
     _scatter_clutter(b, a0, a1, b0, b1, int(rng.integers(2, 12)), ["container", "pallets", "dumpster", "container"])
     for _ in range(int(rng.integers(0, 4))):
         a, c = float(rng.uniform(a0 + 6, a1 - 6)), float(rng.uniform(b0 + 4, b1 - 4))
@@ -540,6 +555,8 @@ def vacant(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
                      float(rng.uniform(2, 10)), LOW_VEG if veg else CLUTTER,
                      Look("grass" if veg else "gravel", pick(rng, (pal.dry_grass + pal.grass) if veg else pal.gravel,
                                                              0.1)))
+    add_ground_lookalikes(b, "vacant", a0, a1, b0, b1)
+    add_object_lookalikes(b, "vacant", a0, a1, b0, b1)
     _scatter_bushes(b, a0, a1, b0, b1, 0.6)
     _scatter_trees(b, a0, a1, b0, b1, 0.1, clustered=True)
     _scatter_clutter(b, a0, a1, b0, b1, int(rng.integers(0, 6)), ["pallets", "container", "dumpster"])
@@ -563,6 +580,7 @@ def sports(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
              b.rect((ca0 + ca1) / 2 - lw / 2, (ca0 + ca1) / 2 + lw / 2, cb0 + 1, cb1 - 1)]
     w.add_region(lines, label, paint, L_DETAIL2)
     b.people_in_local(ca0, ca1, cb0, cb1, 0.4)
+    add_object_lookalikes(b, "sports", a0, a1, b0, cb0)
     _scatter_trees(b, a0, a1, b0, cb0, 0.3)
 
 

@@ -28,7 +28,7 @@ from el.synth.view import coverage_domain, visible_ground
 from el.synth.world import Sun, World
 from el.uavid import atomic_write_bytes, sample_paths, write_image
 
-GENERATOR_VERSION = "1.0"
+GENERATOR_VERSION = "1.1"  # 1.1: look-alike hazards (tracks, shared streets, low sheds, stray and verge cars)
 SPLIT_BASE: dict[str, int] = {"train": 0, "val": 1_000_000, "test": 2_000_000}
 FRAMES_PER_SEQUENCE = 100
 FOOTPRINT_MARGIN_M = 25.0

@@ -453,6 +453,19 @@ def _moving_cars(b: Builder, road: Road, p0: float, p1: float, heading: float) -
                           moving=moving)
 
 
+def _verge_cars(b: Builder, road: Road, p0: float, p1: float, t: float, heading: float) -> None:
+    """Static cars parked on a grass verge (a look-alike hazard: a car on what reads as lawn)."""
+    rng = b.rng
+    s = p0 + float(rng.uniform(2, 12))
+    while s < p1 - 3:
+        if rng.random() < 0.45:
+            x, y = _point(b, road, s, t + float(rng.normal(0, 0.15)))
+            if b.free_world(x, y, 1.0):
+                props.add_car(b, x, y, heading + float(rng.normal(0, 0.04)) + (math.pi if rng.random() < 0.5 else 0),
+                              moving=False, kind=str(rng.choice(["sedan", "hatch", "suv"])))
+        s += float(rng.uniform(5.5, 9.0))
+
+
 def _street_side(b: Builder, road: Road, p0: float, p1: float, heading: float) -> None:
     """Street trees (overhanging the road), lamps, benches, bins, pits and people on both sidewalks."""
     rng, st, pal, w = b.rng, b.style, b.palette, b.world
@@ -476,6 +489,8 @@ def _street_side(b: Builder, road: Road, p0: float, p1: float, heading: float) -
                     if b.free_world(x, y, 0.6) and b.free_world(x, y, 0.7 * r, buildings_only=True):
                         props.add_tree(b, x, y, r, colour=pick(rng, (colour,), 0.08, 0.02))
                 s += spacing
+        if verge >= 2.0 and rng.random() < st.verge_parking_prob:
+            _verge_cars(b, road, p0, p1, edge + side * (verge / 2 + 0.2), heading)
         if rng.random() < 0.7:
             s = p0 + float(rng.uniform(3, 20))
             gap = float(rng.uniform(22, 35))

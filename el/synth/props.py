@@ -67,18 +67,20 @@ def facade_look(b: Builder, *, industrial: bool = False, height: float = 10.0) -
 
 
 def add_building(b: Builder, cx: float, cy: float, w: float, l: float, angle: float, h: float, *,
-                 pitched: bool = False, industrial: bool = False, equipment: bool = True) -> Block:
-    """A building block (ridge along ``w`` when pitched) with rooftop equipment on flat roofs."""
+                 pitched: bool = False, industrial: bool = False, equipment: bool = True,
+                 roof: Look | None = None, parapet: bool = True) -> Block:
+    """A building block (ridge along ``w`` when pitched) with rooftop equipment on flat roofs;
+    ``roof`` overrides the drawn roof appearance (look-alike sheds)."""
     rng = b.rng
     gable = 0.0
     if pitched:
         gable = (l / 2) * math.tan(math.radians(rng.uniform(22, 38)))
         gable = min(gable, 0.9 * h + 2.0)
     block = b.world.add_block(Block(cx, cy, w, l, angle, 0.0, h, BUILDING,
-                                    roof_look(b, pitched=pitched, industrial=industrial),
+                                    roof or roof_look(b, pitched=pitched, industrial=industrial),
                                     facade_look(b, industrial=industrial, height=h), gable=gable, kind="building"))
     b.occupy_rect_world(cx, cy, w, l, angle, building=True)
-    if not pitched and w > 6 and l > 6 and rng.random() < 0.6:
+    if parapet and not pitched and w > 6 and l > 6 and rng.random() < 0.6:
         add_parapet(b, block)
     if equipment and not pitched and w * l > 60:
         add_roof_equipment(b, block)

@@ -107,13 +107,14 @@ class Style:
 
     name: str
     blocks: dict[str, float]
-    block_size: tuple[float, float] = (55.0, 110.0)
+    block_size: tuple[float, float] = (40.0, 80.0)
     lanes: dict[int, float] = field(default_factory=lambda: {2: 0.6, 4: 0.4})
     lane_width: tuple[float, float] = (3.0, 3.6)
     parking_lane_prob: float = 0.6
     sidewalk_width: tuple[float, float] = (2.5, 5.0)
     verge_prob: float = 0.3
-    drop_road_prob: float = 0.2
+    verge_parking_prob: float = 0.35  # a verge at least 2 m wide gets cars parked on it
+    drop_road_prob: float = 0.1
     building_height: tuple[float, float] = (8.0, 25.0)
     pitched_prob: float = 0.1
     street_tree_prob: float = 0.6
@@ -131,26 +132,26 @@ STYLES: dict[str, Style] = {
     for s in (
         Style(name="downtown",
               blocks={"perimeter": 4, "towers": 2, "plaza": 1.2, "parking": 0.8, "park": 0.5},
-              lanes={2: 0.35, 4: 0.5, 6: 0.15}, building_height=(10.0, 25.0), block_size=(50.0, 95.0),
+              lanes={2: 0.35, 4: 0.5, 6: 0.15}, building_height=(10.0, 25.0), block_size=(36.0, 70.0),
               people_per_100m2=0.5, moving_per_100m=3.0),
         Style(name="residential",
               blocks={"houses": 5, "park": 0.8, "perimeter": 0.8, "vacant": 0.3, "sports": 0.3, "parking": 0.4},
               lanes={2: 0.9, 4: 0.1}, building_height=(4.0, 10.0), pitched_prob=0.7, verge_prob=0.55,
               street_tree_prob=0.8, sidewalk_width=(1.8, 3.0), tree_size=(2.5, 5.5), people_per_100m2=0.12,
-              moving_per_100m=1.0, block_size=(60.0, 110.0)),
+              moving_per_100m=1.0, block_size=(36.0, 70.0)),
         Style(name="industrial",
               blocks={"industrial": 5, "parking": 1.5, "vacant": 1.2, "perimeter": 0.5, "lawn": 0.4},
               lanes={2: 0.5, 4: 0.5}, building_height=(5.0, 14.0), street_tree_prob=0.25, verge_prob=0.4,
-              parked_fill=0.35, people_per_100m2=0.05, block_size=(70.0, 130.0),
+              parked_fill=0.35, people_per_100m2=0.05, block_size=(50.0, 95.0),
               lightings=("noon", "morning", "afternoon", "overcast", "hazy")),
         Style(name="park",
               blocks={"park": 4, "lawn": 1.5, "sports": 1.0, "houses": 1.0, "plaza": 0.6, "parking": 0.5},
               lanes={2: 0.85, 4: 0.15}, building_height=(4.0, 14.0), street_tree_prob=0.8, verge_prob=0.5,
-              pitched_prob=0.4, people_per_100m2=0.3, moving_per_100m=1.0, block_size=(70.0, 130.0)),
+              pitched_prob=0.4, people_per_100m2=0.3, moving_per_100m=1.0, block_size=(42.0, 80.0)),
         Style(name="campus",
               blocks={"towers": 1.5, "lawn": 2.0, "plaza": 1.2, "parking": 1.2, "perimeter": 1.0, "sports": 0.6,
                       "park": 0.6},
-              building_height=(8.0, 20.0), people_per_100m2=0.35, block_size=(60.0, 120.0)),
+              building_height=(8.0, 20.0), people_per_100m2=0.35, block_size=(42.0, 85.0)),
     )
 }
 
@@ -160,7 +161,7 @@ HELD_OUT_STYLES: dict[str, Style] = {
         Style(name="old_town",
               blocks={"perimeter": 5, "plaza": 1.5, "houses": 1.0, "park": 0.4},
               lanes={2: 1.0}, lane_width=(2.7, 3.2), sidewalk_width=(1.5, 2.5), building_height=(7.0, 18.0),
-              pitched_prob=0.75, street_tree_prob=0.35, block_size=(40.0, 75.0), drop_road_prob=0.1,
+              pitched_prob=0.75, street_tree_prob=0.35, block_size=(34.0, 60.0), drop_road_prob=0.1,
               people_per_100m2=0.6, moving_per_100m=1.5, palette=MEDITERRANEAN,
               lightings=("noon", "morning", "afternoon", "golden")),
         Style(name="autumn_suburb",
