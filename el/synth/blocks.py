@@ -226,20 +226,17 @@ def _service_road(b: Builder, a0: float, a1: float, b0: float, b1: float) -> Non
     rng, pal = b.rng, b.palette
     width = float(rng.uniform(3.0, 4.5))
     look = Look(str(rng.choice(["asphalt", "asphalt_worn"])), pick(rng, pal.asphalt + pal.lot_asphalt, 0.08, 0.015))
-    if rng.random() < 0.5:
-        c = float(rng.uniform(b0 + width, b1 - width))
-        poly = b.rect(a0, a1, c - width / 2, c + width / 2)
+    ra0, ra1, rb0, rb1 = b.strip_across(a0, a1, b0, b1, width)
+    if ra1 - ra0 > rb1 - rb0:  # along a
+        c = (rb0 + rb1) / 2
         trees = [(float(a), c + (width / 2 + 1.5) * float(rng.choice([-1, 1])))
                  for a in np.arange(a0 + 4, a1 - 2, float(rng.uniform(8, 14)))]
     else:
-        c = float(rng.uniform(a0 + width, a1 - width))
-        poly = b.rect(c - width / 2, c + width / 2, b0, b1)
+        c = (ra0 + ra1) / 2
         trees = [(c + (width / 2 + 1.5) * float(rng.choice([-1, 1])), float(bb))
                  for bb in np.arange(b0 + 4, b1 - 2, float(rng.uniform(8, 14)))]
-    b.world.add_region(poly, ROAD, look, L_DETAIL2)
-    loc = (poly - b.origin) @ np.stack([b.ea, b.eb], axis=1)
-    lo, hi = loc.min(axis=0), loc.max(axis=0)
-    b.occupy_local(float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1]))
+    b.world.add_region(b.rect(ra0, ra1, rb0, rb1), ROAD, look, L_DETAIL2)
+    b.occupy_local(ra0, ra1, rb0, rb1)
     for a, bb in trees:
         if rng.random() < 0.6:
             b.tree_at_local(a, bb)
@@ -263,7 +260,7 @@ def towers(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
             break
         ca = float(rng.uniform(a0 + 3 + w / 2, a1 - 3 - w / 2))
         cb = float(rng.uniform(b0 + 3 + l / 2, b1 - 3 - l / 2))
-        if b.solid[b._cells(ca - w / 2 - 3, ca + w / 2 + 3, cb - l / 2 - 3, cb + l / 2 + 3)].any():
+        if not b.free_rect_local(ca - w / 2 - 3, ca + w / 2 + 3, cb - l / 2 - 3, cb + l / 2 + 3):
             continue
         h = float(np.clip(rng.uniform(*st.building_height) * rng.uniform(1.0, 1.4), 6.0, 25.0))
         x, y = b.to_world(ca, cb)
@@ -448,7 +445,7 @@ def lawn(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
     if rng.random() < 0.3 and min(a1 - a0, b1 - b0) > 25:
         ca, cb = (a0 + a1) / 2, (b0 + b1) / 2
         bw, bl = float(rng.uniform(8, 16)), float(rng.uniform(8, 14))
-        if not b.solid[b._cells(ca - bw / 2 - 1, ca + bw / 2 + 1, cb - bl / 2 - 1, cb + bl / 2 + 1)].any():
+        if b.free_rect_local(ca - bw / 2 - 1, ca + bw / 2 + 1, cb - bl / 2 - 1, cb + bl / 2 + 1):
             x, y = b.to_world(ca, cb)
             props.add_building(b, x, y, bw, bl, b.phi, float(rng.uniform(4, 9)),
                                pitched=rng.random() < st.pitched_prob)
@@ -526,7 +523,7 @@ def industrial(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
             break
         ca = float(rng.uniform(a0 + 3 + w / 2, a1 - 3 - w / 2))
         cb = float(rng.uniform(b0 + 3 + l / 2, b1 - 3 - l / 2))
-        if b.solid[b._cells(ca - w / 2 - 4, ca + w / 2 + 4, cb - l / 2 - 4, cb + l / 2 + 4)].any():
+        if not b.free_rect_local(ca - w / 2 - 4, ca + w / 2 + 4, cb - l / 2 - 4, cb + l / 2 + 4):
             continue
         x, y = b.to_world(ca, cb)
         props.add_building(b, x, y, w, l, b.phi, float(np.clip(rng.uniform(*st.building_height), 4.0, 16.0)),

@@ -154,11 +154,24 @@ class Builder:
         grid = self.buildings if buildings_only else self.solid
         return not grid[sl].any()
 
+    def free_rect_local(self, a0: float, a1: float, b0: float, b1: float) -> bool:
+        """Whether nothing solid occupies the local rectangle [a0, a1] x [b0, b1]."""
+        return not self.solid[self._cells(a0, a1, b0, b1)].any()
+
     def free_world(self, x: float, y: float, r: float, *, buildings_only: bool = False) -> bool:
         a, b = self.to_local(x, y)
         return self.free_local(a, b, r, buildings_only=buildings_only)
 
     # -- helpers used by block fillers ----------------------------------------------------------
+    def strip_across(self, a0: float, a1: float, b0: float, b1: float,
+                     width: float) -> tuple[float, float, float, float]:
+        """Local rectangle of a straight strip of ``width`` crossing the block along a or b."""
+        if self.rng.random() < 0.5:
+            c = float(self.rng.uniform(b0 + width, b1 - width))
+            return a0, a1, c - width / 2, c + width / 2
+        c = float(self.rng.uniform(a0 + width, a1 - width))
+        return c - width / 2, c + width / 2, b0, b1
+
     def tree_at_local(self, a: float, b: float, radius: float | None = None, **kw: object) -> bool:
         """Plant a tree at (a, b) if its trunk spot is free and its crown clears buildings."""
         if radius is None:

@@ -77,24 +77,13 @@ def add_object_lookalikes(b: Builder, kind: str, a0: float, a1: float, b0: float
         stray_cars(b, a0, a1, b0, b1, int(rng.integers(1, mix.max_stray_cars + 1)))
 
 
-def _strip_across(b: Builder, a0: float, a1: float, b0: float, b1: float,
-                  width: float) -> tuple[float, float, float, float]:
-    """Local rectangle of a straight strip of ``width`` crossing the block along a or b."""
-    rng = b.rng
-    if rng.random() < 0.5:
-        c = float(rng.uniform(b0 + width, b1 - width))
-        return a0, a1, c - width / 2, c + width / 2
-    c = float(rng.uniform(a0 + width, a1 - width))
-    return c - width / 2, c + width / 2, b0, b1
-
-
 def track(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
     """A gravel or dirt access track (road) across the block, sometimes with darker wheel ruts."""
     rng, pal = b.rng, b.palette
     width = float(rng.uniform(3.0, 4.5))
     material = str(rng.choice(["gravel", "soil"], p=[0.6, 0.4]))
     look = Look(material, pick(rng, pal.gravel if material == "gravel" else pal.soil, 0.1))
-    ra0, ra1, rb0, rb1 = _strip_across(b, a0, a1, b0, b1, width)
+    ra0, ra1, rb0, rb1 = b.strip_across(a0, a1, b0, b1, width)
     b.world.add_region(b.rect(ra0, ra1, rb0, rb1), ROAD, look, L_TRACK)
     if rng.random() < 0.5:  # two wheel ruts 1.6 m apart, a shade darker (still road)
         rut = Look(material, tuple(c * 0.85 for c in look.rgb))  # type: ignore[arg-type]
@@ -120,7 +109,7 @@ def shared_street(b: Builder, a0: float, a1: float, b0: float, b1: float, ground
     if cell is not None:
         cell = (cell[1], cell[0], cell[3], cell[2])
     look = replace(base, rgb=rgb, cell=cell)
-    ra0, ra1, rb0, rb1 = _strip_across(b, a0, a1, b0, b1, width)
+    ra0, ra1, rb0, rb1 = b.strip_across(a0, a1, b0, b1, width)
     b.world.add_region(b.rect(ra0, ra1, rb0, rb1), ROAD, look, L_TRACK)
     b.occupy_local(ra0, ra1, rb0, rb1)
     if rng.random() < 0.5:
@@ -142,7 +131,7 @@ def low_building(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None
         return
     for _ in range(6):
         ca, cb = float(rng.uniform(a0 + 2 + w / 2, a1 - 2 - w / 2)), float(rng.uniform(b0 + 2 + l / 2, b1 - 2 - l / 2))
-        if not b.solid[b._cells(ca - w / 2 - 1, ca + w / 2 + 1, cb - l / 2 - 1, cb + l / 2 + 1)].any():
+        if b.free_rect_local(ca - w / 2 - 1, ca + w / 2 + 1, cb - l / 2 - 1, cb + l / 2 + 1):
             break
     else:
         return
