@@ -248,6 +248,25 @@ def test_a_missing_accelerator_is_a_clear_error(datasets, tmp_path, uav_el, caps
     assert rc == 2 and "--device" in capsys.readouterr().err and not (tmp_path / "m.pt").exists()
 
 
+def test_lovasz_fine_tuning_is_recorded_and_old_checkpoints_still_resume(datasets, tmp_path) -> None:
+    train_dir, val_dir = datasets
+    config = tiny_config(baseline_pixels=0, loss="ce+lovasz")
+    card = train(train_dir, tmp_path / "l" / "model.pt", val_dir=val_dir, config=config)
+    assert "Lovász" in card["training"]["loss"] and card["training"]["config"]["loss"] == "ce+lovasz"
+    with pytest.raises(ValueError, match="loss must be one of"):
+        tiny_config(loss="dice")
+    # a checkpoint written before the loss option existed resumes as the default "ce"
+    part = tmp_path / "p" / "model.pt"
+    with pytest.raises(KeyboardInterrupt):
+        train(train_dir, part, config=tiny_config(baseline_pixels=0), progress=_stop_after(4))
+    ckpt = checkpoint_path(part)
+    state = load_checkpoint(ckpt)
+    del state["config"]["loss"]
+    torch.save(state, ckpt)
+    done = train(train_dir, part, config=tiny_config(baseline_pixels=0), resume=True)
+    assert done["training"]["config"]["loss"] == "ce"
+
+
 def test_resume_without_checkpoint_is_an_error(datasets, tmp_path) -> None:
     train_dir, _ = datasets
     with pytest.raises(ValueError, match="no checkpoint"):

@@ -60,6 +60,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--hd-crop", type=_range, default=(192, 448), metavar="MIN-MAX",
                         help="side range of the full-resolution crops (default 192-448)")
     parser.add_argument("--lr", type=float, default=2e-3, help="peak learning rate (default 2e-3)")
+    parser.add_argument("--loss", choices=("ce", "ce+lovasz"), default="ce",  # el.segmentation.losses.LOSSES
+                        help="ce: class-weighted cross-entropy (default); ce+lovasz: plus the Lovász-softmax "
+                             "IoU surrogate, for fine-tuning towards mIoU")
     parser.add_argument("--eval-every", type=int, default=0, help="steps between evaluations (default: 4 per run)")
     parser.add_argument("--checkpoint-every", type=int, default=25, help="steps between checkpoints (default 25)")
     parser.add_argument("--widths", type=_widths, help="channels at 1/2, 1/4, 1/8 resolution (default 24,48,96)")
@@ -118,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
             checkpoint_every=args.checkpoint_every, seed=args.seed, working_width=args.working_width,
             arch=ArchConfig(**arch_kwargs), baseline_pixels=0 if args.no_baseline else 200_000,
             eval_protocol=EvalProtocol(working_width=args.working_width, hd_patch_size=args.hd_eval_size),
-            init_sha256=init_sha,
+            init_sha256=init_sha, loss=args.loss,
         )
     except ValueError as exc:
         raise CommandError(str(exc)) from exc

@@ -7,7 +7,8 @@ Each step draws (seeded by ``(seed, step)``, so a resumed run follows the same p
   candidate), as many as fit ``hd_pixels`` pixels, cut from seeded full-resolution regions.
 
 Loss: class-weighted cross-entropy (inverse square root of the class frequency, see
-:func:`el.segmentation.data.class_weights`), the mean of both scales. Optimiser: AdamW, linear warm-up
+:func:`el.segmentation.data.class_weights`), optionally plus the Lovász-softmax IoU surrogate
+(``loss="ce+lovasz"``, :mod:`el.segmentation.losses`), the mean of both scales. Optimiser: AdamW, linear warm-up
 then cosine decay. Augmentation: :data:`el.segmentation.data.AUGMENTATIONS` only; none of the
 evaluation perturbations (brightness, fog, motion blur, shifted rows, dead rows).
 
@@ -33,12 +34,13 @@ from typing import Any
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 
 from el.segmentation import data as D
 from el.segmentation.baseline import evaluate_baseline
 from el.segmentation.evaluation import EvalProtocol, evaluate, selection_score
 from el.segmentation.inference import Segmenter
+from el.segmentation.losses import LOSSES, segmentation_loss
+from el.segmentation.losses import describe as describe_loss
 from el.segmentation.model import ArchConfig, MSDLite, build_model, count_parameters
 from el.segmentation.weights import load_weights, read_card, save_weights, write_card
 from el.uavid import atomic_write_bytes
@@ -70,6 +72,7 @@ class TrainConfig:
     eval_protocol: EvalProtocol = field(default_factory=EvalProtocol)
     baseline_pixels: int = 200_000  # 0: skip the per-pixel baseline
     init_sha256: str | None = None  # SHA-256 of the weights a warm start begins from (None: random init)
+    loss: str = "ce"  # "ce" or "ce+lovasz" (see el.segmentation.losses)
 
     def __post_init__(self) -> None:
         positive = ("steps", "batch", "crop", "hd_crop_min", "hd_crop_max", "checkpoint_every")
@@ -86,6 +89,8 @@ class TrainConfig:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
         if not (self.lr > 0 and math.isfinite(self.lr)):
             raise ValueError(f"lr must be positive, got {self.lr!r}")
+        if self.loss not in LOSSES:
+            raise ValueError(f"loss must be one of {', '.join(LOSSES)}, got {self.loss!r}")
         if self.working_width != self.eval_protocol.working_width:
             raise ValueError("working_width and eval_protocol.working_width must agree")
 
@@ -209,9 +214,10 @@ def resolve_device(device: str | torch.device) -> torch.device:
     return dev
 
 
-def training_loss(model: torch.nn.Module, batches: tuple, weights: torch.Tensor) -> torch.Tensor:
-    """Class-weighted cross-entropy, mean over the scales present in the step."""
-    losses = [F.cross_entropy(model(x), y, weight=weights) for x, y in (b for b in batches if b is not None)]
+def training_loss(model: torch.nn.Module, batches: tuple, weights: torch.Tensor, kind: str = "ce"
+                  ) -> torch.Tensor:
+    """The step's loss (:func:`el.segmentation.losses.segmentation_loss`), mean over the scales present."""
+    losses = [segmentation_loss(model(x), y, weights, kind) for x, y in (b for b in batches if b is not None)]
     return torch.stack(losses).mean()
 
 
@@ -237,6 +243,8 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
 
 
 def _diff_config(old: dict[str, Any], new: dict[str, Any]) -> list[str]:
+    defaults = TrainConfig().to_dict()  # a key added since the checkpoint was written had its default
+    old = {**{k: v for k, v in defaults.items() if k not in old}, **old}
     keys = sorted(set(old) | set(new))
     return [f"{k}: {old.get(k)!r} -> {new.get(k)!r}" for k in keys
             if k not in ("checkpoint_every",) and old.get(k) != new.get(k)]
@@ -354,7 +362,7 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
             "data": data_ids, "seed": config.seed, "config": config.to_dict(), "steps": config.steps,
             "augmentations": list(D.AUGMENTATIONS),
             "not_used_augmentations": ["brightness", "fog", "motion_blur", "shifted_pixels", "dead_rows"],
-            "loss": "class-weighted cross-entropy (inverse sqrt frequency), mean of working and HD scales",
+            "loss": describe_loss(config.loss),
             "class_frequencies": [float(f) for f in freq], "class_weights": [float(w) for w in weights],
             "torch_version": torch.__version__, "init": parent, "device": _device_name(device),
             "total_steps": config.steps + (parent["total_steps"] if parent else 0),
@@ -372,7 +380,7 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
         torch.manual_seed(int(np.random.default_rng([config.seed, 2, step]).integers(2**62)))  # dropout masks
         batches = tuple(None if b is None else (b[0].to(device, non_blocking=True), b[1].to(device, non_blocking=True))
                         for b in batches)
-        loss = training_loss(model, batches, loss_weights)
+        loss = training_loss(model, batches, loss_weights, config.loss)
         if not torch.isfinite(loss):
             raise ValueError(f"training diverged at step {step}: loss is {float(loss)}")
         optimizer.zero_grad(set_to_none=True)
