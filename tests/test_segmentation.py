@@ -119,6 +119,30 @@ def test_predict_frame_at_working_size_equals_patch(seg: Segmenter) -> None:
     np.testing.assert_array_equal(seg.predict_frame(rgb), seg.predict_patch(rgb))
 
 
+def test_frame_flip_averages_the_frame_and_its_mirror(model: nn.Module, seg: Segmenter) -> None:
+    flip = Segmenter(model, working_width=64, frame_flip=True)
+    rgb = _rgb(36, 64, seed=5)
+    mirror = np.ascontiguousarray(rgb[:, ::-1])
+    expected = 0.5 * (seg.predict_frame(rgb) + seg.predict_frame(mirror)[:, :, ::-1])
+    got = flip.predict_frame(rgb)
+    assert got.shape == (NUM_CLASSES, 36, 64) and got.dtype == np.float32 and got.flags.c_contiguous
+    np.testing.assert_allclose(got, expected, atol=1e-6)
+    assert np.abs(got - seg.predict_frame(rgb)).max() > 1e-4  # the untrained net is not mirror-symmetric
+    # the averaged map is mirror-equivariant: the mirror image gets the mirrored map
+    np.testing.assert_allclose(flip.predict_frame(mirror)[:, :, ::-1], got, atol=1e-6)
+    np.testing.assert_array_equal(flip.predict_patch(rgb), seg.predict_patch(rgb))  # patches: unaffected
+    with pytest.raises(ValueError, match="frame_flip"):
+        Segmenter(model, frame_flip="yes")
+
+
+def test_load_follows_the_cards_frame_flip(tmp_path, model: nn.Module) -> None:
+    path = tmp_path / "model.pt"
+    save_weights(model, path, card={"evaluation": {"protocol": {"frame_flip": True}}})
+    assert Segmenter.load(path).frame_flip is True
+    save_weights(model, path, card={"evaluation": {"protocol": {"working_width": 1024}}})  # an older card
+    assert Segmenter.load(path).frame_flip is False
+
+
 def test_eval_mode_is_deterministic(seg: Segmenter) -> None:
     rgb = _rgb(40, 40, seed=3)
     np.testing.assert_array_equal(seg.predict_patch(rgb), seg.predict_patch(rgb))

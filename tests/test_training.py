@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +16,7 @@ from el.labels import NUM_CLASSES, PALETTE
 from el.segmentation import data as D
 from el.segmentation.card import verify_card
 from el.segmentation.evaluation import EvalProtocol, compare_figures, confusion, summarise
+from el.segmentation.inference import Segmenter
 from el.segmentation.model import ArchConfig, build_model
 from el.segmentation.training import (
     TrainConfig,
@@ -267,6 +269,22 @@ def test_lovasz_fine_tuning_is_recorded_and_old_checkpoints_still_resume(dataset
     assert done["training"]["config"]["loss"] == "ce"
 
 
+def test_a_checkpoint_without_frame_flip_resumes_and_the_card_records_it(datasets, tmp_path) -> None:
+    train_dir, val_dir = datasets
+    part = tmp_path / "model.pt"
+    with pytest.raises(KeyboardInterrupt):
+        train(train_dir, part, val_dir=val_dir, config=tiny_config(baseline_pixels=0), progress=_stop_after(4))
+    ckpt = checkpoint_path(part)
+    state = load_checkpoint(ckpt)
+    del state["config"]["eval_protocol"]["frame_flip"]  # written before the option existed
+    torch.save(state, ckpt)
+    done = train(train_dir, part, val_dir=val_dir, config=tiny_config(baseline_pixels=0), resume=True)
+    assert done["evaluation"]["protocol"]["frame_flip"] is False
+    flipped = tiny_config(baseline_pixels=0, eval_protocol=replace(tiny_config().eval_protocol, frame_flip=True))
+    with pytest.raises(ValueError, match="frame_flip"):  # a changed protocol is not resumed silently
+        train(train_dir, part, val_dir=val_dir, config=flipped, resume=True)
+
+
 def test_resume_without_checkpoint_is_an_error(datasets, tmp_path) -> None:
     train_dir, _ = datasets
     with pytest.raises(ValueError, match="no checkpoint"):
@@ -370,6 +388,19 @@ def test_reissue_moves_the_card_to_another_copy_of_the_data(datasets, tmp_path, 
     # Without --data the audit uses the folder the card's figures come from, not the training machine's.
     assert uav_el(["model-card", "--weights", str(out), "--audit-candidates", "--quiet"]) == 0
     assert read_card(out)["candidates"]["data"] == str(other_val)
+
+    # --frame-flip on: the protocol changes, figures follow, verify and the flight code follow the card
+    assert uav_el(["model-card", "--weights", str(out), "--frame-flip", "on", "--quiet"]) == 2
+    assert "--reissue" in capsys.readouterr().err
+    assert uav_el(["model-card", "--weights", str(out), "--reissue", "--quiet", "--data", str(other_val),
+                   "--frame-flip", "on"]) == 0
+    flipped = read_card(out)
+    assert flipped["evaluation"]["protocol"]["frame_flip"] is True
+    assert flipped["evaluation"]["reissued"]["protocol"]["frame_flip"] is False
+    assert Segmenter.load(out).frame_flip is True
+    assert verify_card(out, val_dir=other_val).ok
+    assert uav_el(["model-card", "--weights", str(out), "--quiet"]) == 0
+    assert "mirror image" in capsys.readouterr().out
 
 
 def test_warm_start_begins_from_the_parent_weights(datasets, tmp_path) -> None:

@@ -26,6 +26,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--reissue", action="store_true",
                         help="recompute the card's figures (evaluation, candidate audit; baseline with --train) on "
                              "this machine's copy of the scenes given by --data and write them into the card")
+    parser.add_argument("--frame-flip", choices=("on", "off"),
+                        help="with --reissue: segment frames as the mean softmax of the frame and its mirror image "
+                             "(on) or the frame alone (off); recorded in the card, which the flight code follows")
     parser.add_argument("--tolerance", type=float, default=0.002, help="IoU tolerance of --verify (default 0.002)")
     parser.add_argument("--threads", type=int, help="torch CPU threads")
     parser.add_argument("--json", action="store_true", help="print the card (or the verification) as JSON")
@@ -61,7 +64,8 @@ def _print_card(card: dict[str, Any], path: Path) -> None:
         print("evaluation:   none (trained without validation data)")
         return
     wr, hd = ev["working_resolution"], ev["hd_patches"]
-    print(f"evaluation:   {ev['frames']} frames at working resolution, {ev['patches']} HD patches "
+    flip = " (frames: mean of the frame and its mirror image)" if ev["protocol"].get("frame_flip") else ""
+    print(f"evaluation:   {ev['frames']} frames at working resolution{flip}, {ev['patches']} HD patches "
           f"({ev['protocol']['hd_patch_size']} px)")
     print(f"  {'class':<16}{'IoU working':>12}{'IoU HD':>10}")
     for name in CLASS_NAMES:
@@ -125,8 +129,9 @@ def _reissue(path: Path, args: argparse.Namespace) -> int:
     if args.data is None:
         raise CommandError("--reissue needs --data: the validation scenes to recompute the figures on")
     try:
+        flip = None if args.frame_flip is None else args.frame_flip == "on"
         card = reissue_card(path, val_dir=args.data, train_dir=args.train, threads=args.threads,
-                            progress=functools.partial(progress, enabled=not args.quiet))
+                            progress=functools.partial(progress, enabled=not args.quiet), frame_flip=flip)
     except ValueError as exc:
         raise CommandError(str(exc)) from exc
     ev, before = card["evaluation"], card["evaluation"]["reissued"]
@@ -145,6 +150,10 @@ def run(args: argparse.Namespace) -> int:
     from el.segmentation.weights import DEFAULT_WEIGHTS, read_card
 
     path = args.weights or DEFAULT_WEIGHTS
+    if args.frame_flip is not None and not args.reissue:
+        from assurance.cli import CommandError
+
+        raise CommandError("--frame-flip changes the card's protocol: use it with --reissue --data VAL")
     if args.reissue:
         return _reissue(path, args)
     if args.audit_candidates and not args.verify:

@@ -14,7 +14,7 @@ on another machine (a GPU box) gets its card's figures from the copy its users c
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -105,7 +105,8 @@ def _evaluate_on(model: Any, card: dict[str, Any], manifest: D.Manifest, protoco
                  ) -> tuple[list[D.Prepared], dict[str, Any]]:
     """The prepared validation samples and the network's figures on them, by the recorded protocol."""
     val_set = D.load_dataset(manifest, protocol.prep_params(), cache_dir=None, threads=workers, progress=progress)
-    segmenter = Segmenter(model, threads=threads, card=card, working_width=protocol.working_width)
+    segmenter = Segmenter(model, threads=threads, card=card, working_width=protocol.working_width,
+                          frame_flip=protocol.frame_flip)
     return val_set, evaluate(segmenter, val_set, progress=progress, total=len(val_set))
 
 
@@ -121,11 +122,14 @@ def _refit_baseline(train_manifest: D.Manifest, val_set: list[D.Prepared], param
 
 
 def reissue_card(weights_path: str | Path | None = None, *, val_dir: str | Path, train_dir: str | Path | None = None,
-                 threads: int | None = None, progress: Callable[..., Iterable] | None = None) -> dict[str, Any]:
+                 threads: int | None = None, progress: Callable[..., Iterable] | None = None,
+                 frame_flip: bool | None = None) -> dict[str, Any]:
     """Recompute the card's evaluation (and, with ``train_dir``, the baseline) on these folders; write it.
 
     The training record (what the network was trained and selected on) is kept; the evaluation names
-    the data it was computed on and keeps the figures it replaces under ``reissued``. Returns the card.
+    the data it was computed on and keeps the figures it replaces under ``reissued``. ``frame_flip``
+    (None: as recorded) changes how frames are segmented, in the figures and in deployment, since
+    :meth:`Segmenter.load` follows the card's protocol. Returns the card.
     """
     path = Path(weights_path) if weights_path is not None else DEFAULT_WEIGHTS
     model, card = load_weights(path)
@@ -134,11 +138,14 @@ def reissue_card(weights_path: str | Path | None = None, *, val_dir: str | Path,
         raise ValueError(f"{path}: the card records no evaluation protocol (trained without validation data)")
     workers = threads or 2
     protocol = EvalProtocol.from_dict(old["protocol"])
+    if frame_flip is not None:
+        protocol = replace(protocol, frame_flip=bool(frame_flip))
     manifest = D.dataset_manifest(val_dir, threads=workers)
     val_set, figures = _evaluate_on(model, card, manifest, protocol, threads, workers, progress)
-    previous = {"data": old.get("data"), "miou_working": old["working_resolution"]["miou"],
-                "miou_hd": old["hd_patches"]["miou"]}
-    card["evaluation"] = {**old, **figures, "data": manifest.describe(), "reissued": previous}
+    previous = {"data": old.get("data"), "protocol": old["protocol"],
+                "miou_working": old["working_resolution"]["miou"], "miou_hd": old["hd_patches"]["miou"]}
+    card["evaluation"] = {**old, **figures, "data": manifest.describe(), "protocol": protocol.to_dict(),
+                          "reissued": previous}
     baseline = card.get("baseline")
     if train_dir is not None:
         params = baseline or {"max_pixels": 200_000, "seed": (card.get("training") or {}).get("seed", 0)}

@@ -19,27 +19,42 @@ from el.segmentation.data import Prepared, PrepParams
 
 @dataclass(frozen=True, kw_only=True)
 class EvalProtocol:
-    """Which figures the model card holds: working width, HD patches per frame, their side and seed."""
+    """Which figures the model card holds: working width, HD patches per frame, their side and seed.
+
+    ``frame_flip``: frames are segmented as the mean softmax of the frame and its mirror image (see
+    :class:`~el.segmentation.inference.Segmenter`). It is part of how the network is deployed:
+    :meth:`Segmenter.load` follows the card's protocol, so the figures describe the flight code.
+    """
 
     working_width: int = 1024
     hd_patches: int = 2
     hd_patch_size: int = 384
     seed: int = 12345
+    frame_flip: bool = False
 
     def __post_init__(self) -> None:
         if self.working_width < 16 or self.hd_patches < 0 or self.hd_patch_size < 16:
             raise ValueError(f"invalid evaluation protocol: {self}")
+        if not isinstance(self.frame_flip, bool):
+            raise ValueError(f"frame_flip must be true or false, got {self.frame_flip!r}")
 
     def prep_params(self) -> PrepParams:
         return PrepParams(working_width=self.working_width, regions=self.hd_patches,
                           region_size=self.hd_patch_size, seed=self.seed)
 
-    def to_dict(self) -> dict[str, int]:
+    def to_dict(self) -> dict[str, int | bool]:
         return asdict(self)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> EvalProtocol:
-        return cls(**{k: int(v) for k, v in data.items() if k in cls.__dataclass_fields__})
+        """From a card's ``evaluation.protocol`` (cards written before ``frame_flip`` existed: False)."""
+        out: dict[str, Any] = {}
+        for k, v in data.items():
+            if k == "frame_flip":
+                out[k] = v
+            elif k in cls.__dataclass_fields__:
+                out[k] = int(v)
+        return cls(**out)
 
 
 def confusion(truth: np.ndarray, pred: np.ndarray, num_classes: int = NUM_CLASSES) -> np.ndarray:

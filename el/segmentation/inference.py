@@ -4,7 +4,9 @@ The one class here, :class:`Segmenter`, wraps any segmentation network and gives
 and the runtime monitors what they need (DESIGN sections 5.1 and 6):
 
 - :meth:`Segmenter.predict_frame`: the HD frame resized (``cv2.INTER_AREA``) to the working
-  resolution of :func:`el.camera.working_size` -> softmax (8, h, w);
+  resolution of :func:`el.camera.working_size` -> softmax (8, h, w); with ``frame_flip`` the mean
+  of the softmax of the frame and of its mirror image (one batch of two; the oblique view is
+  left-right symmetric in distribution, and training flips too);
 - :meth:`Segmenter.predict_patch` / :meth:`Segmenter.predict_patches`: a full-resolution crop
   segmented at its own resolution (the LHD monitor);
 - :meth:`Segmenter.mc_dropout`: N softmax samples with dropout active (the MCD monitor).
@@ -136,6 +138,10 @@ class Segmenter:
         The model card of the weights (identity for reports).
     working_width : int
         Width of the working resolution (1024; the height keeps the aspect ratio).
+    frame_flip : bool
+        Segment frames as the mean softmax of the frame and its left-right mirror image (about
+        1.5x the time of one frame; patches and MC dropout are unaffected). :meth:`load` takes it
+        from the card's evaluation protocol, so the deployed network is the one the card measured.
 
     Examples
     --------
@@ -147,7 +153,7 @@ class Segmenter:
     """
 
     def __init__(self, model: nn.Module, *, threads: int | None = None, device: str | torch.device = "cpu",
-                 card: dict[str, Any] | None = None, working_width: int = 1024) -> None:
+                 card: dict[str, Any] | None = None, working_width: int = 1024, frame_flip: bool = False) -> None:
         if not isinstance(model, nn.Module):
             raise ValueError(f"model must be a torch.nn.Module, got {type(model).__name__}")
         if threads is not None:
@@ -160,6 +166,9 @@ class Segmenter:
         self.model = model.to(self.device).eval()
         self.card = dict(card or {})
         self.working_width = int(working_width)
+        if not isinstance(frame_flip, bool):
+            raise ValueError(f"frame_flip must be true or false, got {frame_flip!r}")
+        self.frame_flip = frame_flip
         self.fast_mc = bool(getattr(model, "supports_mc_spec", False)
                             and all(callable(getattr(model, a, None)) for a in ("trunk", "head", "mc_spec")))
         self._lock = threading.Lock()  # the fallback MC path mutates dropout modules
@@ -170,10 +179,13 @@ class Segmenter:
         """The shipped network (``el/segmentation/weights/model.pt``) or another weights file.
 
         The file's SHA-256 is checked against its model card before ``torch.load(weights_only=True)``;
-        a missing or altered file raises :class:`el.segmentation.weights.WeightsError`.
+        a missing or altered file raises :class:`el.segmentation.weights.WeightsError`. Frames are
+        segmented as the card's evaluation protocol says (``frame_flip``; False when absent).
         """
         model, card = load_weights(weights_path, device=device)
-        return cls(model, threads=threads, device=device, card=card)
+        protocol = (card.get("evaluation") or {}).get("protocol") or {}
+        return cls(model, threads=threads, device=device, card=card,
+                   frame_flip=bool(protocol.get("frame_flip", False)))
 
     def __getstate__(self) -> dict[str, Any]:  # picklable (for worker processes): the lock is recreated
         state = self.__dict__.copy()
@@ -227,7 +239,10 @@ class Segmenter:
         if (rgb.shape[1], rgb.shape[0]) != (w, h):
             rgb = cv2.resize(rgb, (w, h), interpolation=cv2.INTER_AREA)
         _check_rgb(rgb, "frame at working resolution")
-        return self._predict([rgb], "frame")[0]
+        if not self.frame_flip:
+            return self._predict([rgb], "frame")[0]
+        probs = self._predict([rgb, np.ascontiguousarray(rgb[:, ::-1])], "frame")
+        return np.ascontiguousarray(0.5 * (probs[0] + probs[1][:, :, ::-1]))
 
     def predict_patch(self, rgb_patch: np.ndarray, *, features: Any = None) -> np.ndarray:
         """Softmax of a patch at its own resolution: ndarray (8, h, w) float32 for a (h, w, 3) uint8 patch.

@@ -242,9 +242,18 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
     return state
 
 
+def _with_defaults(old: dict[str, Any], defaults: dict[str, Any]) -> dict[str, Any]:
+    """``old`` with the keys it lacks (at any depth) taken from ``defaults``."""
+    out = {**{k: v for k, v in defaults.items() if k not in old}, **old}
+    for k, v in defaults.items():
+        if isinstance(v, dict) and isinstance(out.get(k), dict):
+            out[k] = _with_defaults(out[k], v)
+    return out
+
+
 def _diff_config(old: dict[str, Any], new: dict[str, Any]) -> list[str]:
-    defaults = TrainConfig().to_dict()  # a key added since the checkpoint was written had its default
-    old = {**{k: v for k, v in defaults.items() if k not in old}, **old}
+    # a key added since the checkpoint was written had its default
+    old = _with_defaults(old, TrainConfig().to_dict())
     keys = sorted(set(old) | set(new))
     return [f"{k}: {old.get(k)!r} -> {new.get(k)!r}" for k in keys
             if k not in ("checkpoint_every",) and old.get(k) != new.get(k)]
@@ -400,7 +409,8 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
             if val_set:
                 tick = time.perf_counter()
                 model.eval()
-                figures = evaluate(Segmenter(model, working_width=config.working_width, device=device), val_set)
+                figures = evaluate(Segmenter(model, working_width=config.working_width, device=device,
+                                                     frame_flip=config.eval_protocol.frame_flip), val_set)
                 model.train()
                 score = selection_score(figures)
                 entry.update({"val_miou_working": figures["working_resolution"]["miou"],
@@ -423,7 +433,8 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
         if device.type != "cpu":
             say(f"re-evaluating the selected weights (step {best_step}) on the CPU")
             selected, _ = load_weights(weights_path)
-            cpu_figures = evaluate(Segmenter(selected, working_width=config.working_width), val_set)
+            cpu_figures = evaluate(Segmenter(selected, working_width=config.working_width,
+                                             frame_flip=config.eval_protocol.frame_flip), val_set)
             card["evaluation"].update(cpu_figures)
             card["evaluation"]["selection_device"] = _device_name(device)
     card["training"].update({
