@@ -393,9 +393,10 @@ def test_reissue_moves_the_card_to_another_copy_of_the_data(datasets, tmp_path, 
     assert uav_el(["model-card", "--weights", str(out), "--frame-flip", "on", "--quiet"]) == 2
     assert "--reissue" in capsys.readouterr().err
     assert uav_el(["model-card", "--weights", str(out), "--reissue", "--quiet", "--data", str(other_val),
-                   "--frame-flip", "on"]) == 0
+                   "--frame-flip", "on", "--hd-patches", "3"]) == 0
     flipped = read_card(out)
     assert flipped["evaluation"]["protocol"]["frame_flip"] is True
+    assert flipped["evaluation"]["protocol"]["hd_patches"] == 3 and flipped["evaluation"]["patches"] == 2 * 3
     assert flipped["evaluation"]["reissued"]["protocol"]["frame_flip"] is False
     assert Segmenter.load(out).frame_flip is True
     assert verify_card(out, val_dir=other_val).ok

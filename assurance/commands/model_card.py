@@ -29,6 +29,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--frame-flip", choices=("on", "off"),
                         help="with --reissue: segment frames as the mean softmax of the frame and its mirror image "
                              "(on) or the frame alone (off); recorded in the card, which the flight code follows")
+    parser.add_argument("--hd-patches", type=int, metavar="N",
+                        help="with --reissue: HD validation patches per frame (default: as recorded in the card)")
     parser.add_argument("--tolerance", type=float, default=0.002, help="IoU tolerance of --verify (default 0.002)")
     parser.add_argument("--threads", type=int, help="torch CPU threads")
     parser.add_argument("--json", action="store_true", help="print the card (or the verification) as JSON")
@@ -131,7 +133,8 @@ def _reissue(path: Path, args: argparse.Namespace) -> int:
     try:
         flip = None if args.frame_flip is None else args.frame_flip == "on"
         card = reissue_card(path, val_dir=args.data, train_dir=args.train, threads=args.threads,
-                            progress=functools.partial(progress, enabled=not args.quiet), frame_flip=flip)
+                            progress=functools.partial(progress, enabled=not args.quiet), frame_flip=flip,
+                            hd_patches=args.hd_patches)
     except ValueError as exc:
         raise CommandError(str(exc)) from exc
     ev, before = card["evaluation"], card["evaluation"]["reissued"]
@@ -150,10 +153,11 @@ def run(args: argparse.Namespace) -> int:
     from el.segmentation.weights import DEFAULT_WEIGHTS, read_card
 
     path = args.weights or DEFAULT_WEIGHTS
-    if args.frame_flip is not None and not args.reissue:
-        from assurance.cli import CommandError
+    for given, flag in ((args.frame_flip, "--frame-flip"), (args.hd_patches, "--hd-patches")):
+        if given is not None and not args.reissue:
+            from assurance.cli import CommandError
 
-        raise CommandError("--frame-flip changes the card's protocol: use it with --reissue --data VAL")
+            raise CommandError(f"{flag} changes the card's protocol: use it with --reissue --data VAL")
     if args.reissue:
         return _reissue(path, args)
     if args.audit_candidates and not args.verify:

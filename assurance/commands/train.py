@@ -69,6 +69,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dropout", type=float, help="training drop probability of the dropout layers (default 0.2)")
     parser.add_argument("--working-width", type=int, default=1024, help="working resolution width (default 1024)")
     parser.add_argument("--hd-eval-size", type=int, default=384, help="side of the HD validation patches (default 384)")
+    parser.add_argument("--hd-eval-patches", type=int, default=2,
+                        help="HD validation patches per validation frame (default 2)")
     parser.add_argument("--frame-flip", action="store_true",
                         help="evaluate (and so deploy: the card records it) frames as the mean softmax of the frame "
                              "and its mirror image, about 1.5x the time of one frame")
@@ -124,7 +126,7 @@ def run(args: argparse.Namespace) -> int:
             checkpoint_every=args.checkpoint_every, seed=args.seed, working_width=args.working_width,
             arch=ArchConfig(**arch_kwargs), baseline_pixels=0 if args.no_baseline else 200_000,
             eval_protocol=EvalProtocol(working_width=args.working_width, hd_patch_size=args.hd_eval_size,
-                                       frame_flip=args.frame_flip),
+                                       hd_patches=args.hd_eval_patches, frame_flip=args.frame_flip),
             init_sha256=init_sha, loss=args.loss,
         )
     except ValueError as exc:
