@@ -73,7 +73,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="HD validation patches per validation frame (default 2)")
     parser.add_argument("--frame-flip", action="store_true",
                         help="evaluate (and so deploy: the card records it) frames as the mean softmax of the frame "
-                             "and its mirror image, about 1.5x the time of one frame")
+                             "and its mirror image, about 3x the time of one frame on 2 CPU cores")
     parser.add_argument("--cache-dir", type=Path, help="prepared-data cache (default ~/.cache/uav-el/segmentation)")
     parser.add_argument("--no-cache", action="store_true", help="do not cache prepared data")
     parser.add_argument("--no-baseline", action="store_true", help="skip the per-pixel baseline")

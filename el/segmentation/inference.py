@@ -140,7 +140,7 @@ class Segmenter:
         Width of the working resolution (1024; the height keeps the aspect ratio).
     frame_flip : bool
         Segment frames as the mean softmax of the frame and its left-right mirror image (about
-        1.5x the time of one frame; patches and MC dropout are unaffected). :meth:`load` takes it
+        3x the time of one frame on 2 CPU cores; patches and MC dropout are unaffected). :meth:`load` takes it
         from the card's evaluation protocol, so the deployed network is the one the card measured.
 
     Examples
