@@ -366,7 +366,8 @@ def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *,
         "config": config.to_dict(),
         "data": {"path": str(Path(data).resolve()), "images": len({t.sample.key for t in tasks}),
                  "sha256": h.hexdigest()},
-        "weights": {"path": str(weights), "sha256": sha256_file(weights) if weights.is_file() else None},
+        "weights": {"path": str(weights), "sha256": sha256_file(weights) if weights.is_file() else None,
+                    "frame_flip": _frame_flip(weights)},
         "tasks": len(tasks),
         "threads_per_worker": threads,
         "segmenter": segmenter,
@@ -374,6 +375,17 @@ def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *,
         "versions": {"python": sys.version.split()[0], "numpy": np.__version__, "torch": torch.__version__,
                      "platform": platform.platform()},
     }
+
+
+def _frame_flip(weights: Path) -> bool | None:
+    """How the weights' card has frames segmented (``frame_flip``), None without a readable card."""
+    from el.segmentation.weights import WeightsError, read_card
+
+    try:
+        card = read_card(weights)
+    except (WeightsError, OSError, ValueError):
+        return None
+    return bool(((card.get("evaluation") or {}).get("protocol") or {}).get("frame_flip", False))
 
 
 def _version() -> str:

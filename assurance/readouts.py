@@ -50,6 +50,14 @@ def init_run(run_dir: Path, manifest: dict[str, Any]) -> None:
             if old.get(key) != json.loads(json.dumps(manifest.get(key), default=str)):
                 raise RunError(f"{run_dir}: holds another campaign (its manifest differs in '{key}'); "
                                "use a new --out folder or delete this one")
+        # the same weights, segmenting frames the same way (a run recorded before frame_flip: off)
+        was, now = old.get("weights") or {}, manifest.get("weights") or {}
+        recorded = {"sha256": was.get("sha256"),
+                    "frame_flip": was.get("frame_flip", False if was.get("sha256") else None)}
+        for key, before in recorded.items():
+            if key in now and before != now[key]:
+                raise RunError(f"{run_dir}: holds a campaign run with other weights (weights.{key}: {before} "
+                               f"recorded, {now[key]} now); use a new --out folder or delete this one")
         return
     shards = run_dir / SHARDS
     if shards.is_dir() and any(shards.iterdir()):  # e.g. a half-deleted run: its shards may be another campaign's

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import json
+import shutil
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -17,7 +20,7 @@ from el.config import CoreConfig
 from el.labels import ids_to_colors
 from el.pipeline import EmergencyLanding, PipelineConfig
 from el.segmentation.model import ArchConfig, build_model
-from el.segmentation.weights import save_weights
+from el.segmentation.weights import read_card, save_weights, write_card
 from el.uavid import read_image, write_sample
 
 W, H = 512, 288
@@ -111,6 +114,20 @@ def test_other_campaign_in_same_folder_is_refused(tmp_path, data, weights):
     run_campaign(data, tmp_path / "run", config(weights, perturbations=("none",)), progress=False, segmenter=ORACLE)
     with pytest.raises(readouts.RunError, match="another campaign"):
         run_campaign(data, tmp_path / "run", config(weights, perturbations=("fog",)), progress=False,
+                     segmenter=ORACLE)
+    # the same campaign with the weights' card switched to frame + mirror image: other readouts, refused
+    flipped = tmp_path / "flipped.pt"
+    shutil.copy(weights, flipped)
+    card = read_card(weights)
+    card["evaluation"] = {"protocol": {"frame_flip": True}}
+    write_card(flipped, card)
+    run_campaign(data, tmp_path / "run2", config(str(flipped), perturbations=("none",)), progress=False,
+                 segmenter=ORACLE)
+    assert json.loads((tmp_path / "run2" / "manifest.json").read_text())["weights"]["frame_flip"] is True
+    card["evaluation"] = {"protocol": {"frame_flip": False}}
+    write_card(flipped, card)
+    with pytest.raises(readouts.RunError, match=r"other weights \(weights.frame_flip: True recorded, False now\)"):
+        run_campaign(data, tmp_path / "run2", config(str(flipped), perturbations=("none",)), progress=False,
                      segmenter=ORACLE)
     (tmp_path / "run" / "manifest.json").unlink()  # a half-deleted run: shards whose campaign is unknown
     with pytest.raises(readouts.RunError, match="no manifest"):
