@@ -379,13 +379,13 @@ def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *,
 
 def _frame_flip(weights: Path) -> bool | None:
     """How the weights' card has frames segmented (``frame_flip``), None without a readable card."""
-    from el.segmentation.weights import WeightsError, read_card
+    from el.segmentation.evaluation import card_protocol
+    from el.segmentation.weights import read_card
 
     try:
-        card = read_card(weights)
-    except (WeightsError, OSError, ValueError):
+        return card_protocol(read_card(weights)).frame_flip
+    except (OSError, ValueError):  # WeightsError is a ValueError
         return None
-    return bool(((card.get("evaluation") or {}).get("protocol") or {}).get("frame_flip", False))
 
 
 def _version() -> str:

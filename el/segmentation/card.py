@@ -21,7 +21,6 @@ from typing import Any
 from el.segmentation import data as D
 from el.segmentation.baseline import evaluate_baseline
 from el.segmentation.evaluation import EvalProtocol, compare_figures, evaluate
-from el.segmentation.inference import Segmenter
 from el.segmentation.weights import DEFAULT_WEIGHTS, load_weights, write_card
 
 
@@ -105,8 +104,7 @@ def _evaluate_on(model: Any, card: dict[str, Any], manifest: D.Manifest, protoco
                  ) -> tuple[list[D.Prepared], dict[str, Any]]:
     """The prepared validation samples and the network's figures on them, by the recorded protocol."""
     val_set = D.load_dataset(manifest, protocol.prep_params(), cache_dir=None, threads=workers, progress=progress)
-    segmenter = Segmenter(model, threads=threads, card=card, working_width=protocol.working_width,
-                          frame_flip=protocol.frame_flip)
+    segmenter = protocol.segmenter(model, threads=threads, card=card)
     return val_set, evaluate(segmenter, val_set, progress=progress, total=len(val_set))
 
 

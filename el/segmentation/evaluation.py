@@ -45,6 +45,12 @@ class EvalProtocol:
     def to_dict(self) -> dict[str, int | bool]:
         return asdict(self)
 
+    def segmenter(self, model: Any, **kwargs: Any) -> Any:
+        """A :class:`~el.segmentation.inference.Segmenter` that segments frames as this protocol says."""
+        from el.segmentation.inference import Segmenter
+
+        return Segmenter(model, working_width=self.working_width, frame_flip=self.frame_flip, **kwargs)
+
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> EvalProtocol:
         """From a card's ``evaluation.protocol`` (cards written before ``frame_flip`` existed: False)."""
@@ -55,6 +61,14 @@ class EvalProtocol:
             elif k in cls.__dataclass_fields__:
                 out[k] = int(v)
         return cls(**out)
+
+
+def card_protocol(card: dict[str, Any]) -> EvalProtocol:
+    """The evaluation protocol a model card records (defaults for what an older card lacks).
+
+    It is also how the network is deployed: :meth:`Segmenter.load` segments frames as it says.
+    """
+    return EvalProtocol.from_dict((card.get("evaluation") or {}).get("protocol") or {})
 
 
 def confusion(truth: np.ndarray, pred: np.ndarray, num_classes: int = NUM_CLASSES) -> np.ndarray:

@@ -42,6 +42,7 @@ from torch import nn
 
 from el.camera import working_size
 from el.labels import NUM_CLASSES
+from el.segmentation.evaluation import card_protocol
 from el.segmentation.model import MCDropout, upsample_logits
 from el.segmentation.weights import load_weights
 
@@ -183,9 +184,7 @@ class Segmenter:
         segmented as the card's evaluation protocol says (``frame_flip``; False when absent).
         """
         model, card = load_weights(weights_path, device=device)
-        protocol = (card.get("evaluation") or {}).get("protocol") or {}
-        return cls(model, threads=threads, device=device, card=card,
-                   frame_flip=bool(protocol.get("frame_flip", False)))
+        return cls(model, threads=threads, device=device, card=card, frame_flip=card_protocol(card).frame_flip)
 
     def __getstate__(self) -> dict[str, Any]:  # picklable (for worker processes): the lock is recreated
         state = self.__dict__.copy()

@@ -38,7 +38,6 @@ import torch
 from el.segmentation import data as D
 from el.segmentation.baseline import evaluate_baseline
 from el.segmentation.evaluation import EvalProtocol, evaluate, selection_score
-from el.segmentation.inference import Segmenter
 from el.segmentation.losses import LOSSES, segmentation_loss
 from el.segmentation.losses import describe as describe_loss
 from el.segmentation.model import ArchConfig, MSDLite, build_model, count_parameters
@@ -409,8 +408,7 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
             if val_set:
                 tick = time.perf_counter()
                 model.eval()
-                figures = evaluate(Segmenter(model, working_width=config.working_width, device=device,
-                                                     frame_flip=config.eval_protocol.frame_flip), val_set)
+                figures = evaluate(config.eval_protocol.segmenter(model, device=device), val_set)
                 model.train()
                 score = selection_score(figures)
                 entry.update({"val_miou_working": figures["working_resolution"]["miou"],
@@ -433,8 +431,7 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
         if device.type != "cpu":
             say(f"re-evaluating the selected weights (step {best_step}) on the CPU")
             selected, _ = load_weights(weights_path)
-            cpu_figures = evaluate(Segmenter(selected, working_width=config.working_width,
-                                             frame_flip=config.eval_protocol.frame_flip), val_set)
+            cpu_figures = evaluate(config.eval_protocol.segmenter(selected), val_set)
             card["evaluation"].update(cpu_figures)
             card["evaluation"]["selection_device"] = _device_name(device)
     card["training"].update({
