@@ -367,7 +367,7 @@ def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *,
         "data": {"path": str(Path(data).resolve()), "images": len({t.sample.key for t in tasks}),
                  "sha256": h.hexdigest()},
         "weights": {"path": str(weights), "sha256": sha256_file(weights) if weights.is_file() else None,
-                    "frame_flip": _frame_flip(weights)},
+                    **_frame_protocol(weights)},
         "tasks": len(tasks),
         "threads_per_worker": threads,
         "segmenter": segmenter,
@@ -377,15 +377,16 @@ def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *,
     }
 
 
-def _frame_flip(weights: Path) -> bool | None:
-    """How the weights' card has frames segmented (``frame_flip``), None without a readable card."""
+def _frame_protocol(weights: Path) -> dict[str, Any]:
+    """How the weights' card has frames segmented (``frame_flip``, ``frame_scales``); None without a card."""
     from el.segmentation.evaluation import card_protocol
     from el.segmentation.weights import read_card
 
     try:
-        return card_protocol(read_card(weights)).frame_flip
+        protocol = card_protocol(read_card(weights))
     except (OSError, ValueError):  # WeightsError is a ValueError
-        return None
+        return {"frame_flip": None, "frame_scales": None}
+    return {"frame_flip": protocol.frame_flip, "frame_scales": list(protocol.frame_scales)}
 
 
 def _version() -> str:

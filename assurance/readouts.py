@@ -50,10 +50,12 @@ def init_run(run_dir: Path, manifest: dict[str, Any]) -> None:
             if old.get(key) != json.loads(json.dumps(manifest.get(key), default=str)):
                 raise RunError(f"{run_dir}: holds another campaign (its manifest differs in '{key}'); "
                                "use a new --out folder or delete this one")
-        # the same weights, segmenting frames the same way (a run recorded before frame_flip: off)
+        # the same weights, segmenting frames the same way (a run recorded before these keys: the frame alone)
         was, now = old.get("weights") or {}, manifest.get("weights") or {}
+        carded = bool(was.get("sha256"))
         recorded = {"sha256": was.get("sha256"),
-                    "frame_flip": was.get("frame_flip", False if was.get("sha256") else None)}
+                    "frame_flip": was.get("frame_flip", False if carded else None),
+                    "frame_scales": was.get("frame_scales", [1.0] if carded else None)}
         for key, before in recorded.items():
             if key in now and before != now[key]:
                 raise RunError(f"{run_dir}: holds a campaign run with other weights (weights.{key}: {before} "

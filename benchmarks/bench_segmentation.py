@@ -28,9 +28,11 @@ from pathlib import Path
 import numpy as np
 
 CASES = (
-    ("frame 1024x576", "frame", 576, 1024, 0),  # as deployed: the card's frame_flip
+    ("frame 1024x576", "frame", 576, 1024, 0),  # as deployed: the card's frame_flip and frame_scales
     ("frame 1024x576, frame alone", "frame_plain", 576, 1024, 0),
     ("frame 1024x576, + mirror image", "frame_flip", 576, 1024, 0),
+    ("frame 1024x576, fed at x1.25", "frame_x1.25", 576, 1024, 0),
+    ("frame 1024x576, fed at x1, x1.25", "frame_x1,1.25", 576, 1024, 0),
     ("frame 3840x2160 (incl. resize)", "frame", 2160, 3840, 0),
     ("HD patch 384x384", "patch", 384, 384, 0),
     ("MC dropout n=10, one batch", "mc", 384, 384, 10),
@@ -60,9 +62,10 @@ def _runner(seg, kind: str, h: int, w: int, n: int):
     rgb = np.random.default_rng(0).integers(0, 256, (h, w, 3), dtype=np.uint8)
     if kind == "frame":
         return lambda: seg.predict_frame(rgb)
-    if kind in ("frame_plain", "frame_flip"):
+    if kind.startswith("frame_"):  # a forced way of segmenting frames, whatever the card says
         variant = copy.copy(seg)
         variant.frame_flip = kind == "frame_flip"
+        variant.frame_scales = tuple(float(v) for v in kind[7:].split(",")) if kind.startswith("frame_x") else (1.0,)
         return lambda: variant.predict_frame(rgb)
     if kind == "patch":
         return lambda: seg.predict_patch(rgb)
@@ -110,7 +113,7 @@ def main(argv: list[str] | None = None) -> int:
     weights = args.weights or (shipped if shipped.exists() else None)
     source = f"weights {weights}" if weights else "randomly initialised weights (no shipped weights found)"
     print(f"segmentation benchmark: {source}; {args.threads} threads, {args.repeats} repeats per case")
-    print("'frame 1024x576' runs as the card says (frame_flip); the next two rows force each way")
+    print("'frame 1024x576' runs as the card says (frame_flip, frame_scales); the next four rows force a way")
     ctx = mp.get_context("spawn")
     wname = str(weights) if weights else None
     peaks = {}

@@ -129,6 +129,11 @@ def test_other_campaign_in_same_folder_is_refused(tmp_path, data, weights):
     with pytest.raises(readouts.RunError, match=r"other weights \(weights.frame_flip: True recorded, False now\)"):
         run_campaign(data, tmp_path / "run2", config(str(flipped), perturbations=("none",)), progress=False,
                      segmenter=ORACLE)
+    card["evaluation"] = {"protocol": {"frame_flip": True, "frame_scales": [1.25]}}
+    write_card(flipped, card)
+    with pytest.raises(readouts.RunError, match=r"weights.frame_scales: \[1.0\] recorded, \[1.25\] now"):
+        run_campaign(data, tmp_path / "run2", config(str(flipped), perturbations=("none",)), progress=False,
+                     segmenter=ORACLE)
     (tmp_path / "run" / "manifest.json").unlink()  # a half-deleted run: shards whose campaign is unknown
     with pytest.raises(readouts.RunError, match="no manifest"):
         run_campaign(data, tmp_path / "run", config(weights, perturbations=("none",)), progress=False,

@@ -5,6 +5,7 @@ from __future__ import annotations
 import doctest
 import json
 
+import cv2
 import numpy as np
 import pytest
 import torch
@@ -135,12 +136,41 @@ def test_frame_flip_averages_the_frame_and_its_mirror(model: nn.Module, seg: Seg
         Segmenter(model, frame_flip="yes")
 
 
-def test_load_follows_the_cards_frame_flip(tmp_path, model: nn.Module) -> None:
+def test_frame_scales_feed_the_working_frame_resized_and_average(model: nn.Module, seg: Segmenter) -> None:
+    rgb = _rgb(36, 64, seed=6)
+    up = Segmenter(model, working_width=64, frame_scales=(1.5,))
+    big = seg.predict_patch(cv2.resize(rgb, (96, 54), interpolation=cv2.INTER_LINEAR))  # the network at x1.5
+    expected = np.stack([cv2.resize(c, (64, 36), interpolation=cv2.INTER_AREA) for c in big])
+    got = up.predict_frame(rgb)
+    assert got.shape == (NUM_CLASSES, 36, 64) and got.dtype == np.float32 and got.flags.c_contiguous
+    np.testing.assert_allclose(got, expected, atol=1e-6)
+    np.testing.assert_allclose(got.sum(0), 1.0, atol=1e-5)  # still a softmax at the working resolution
+    assert np.abs(got - seg.predict_frame(rgb)).max() > 1e-4
+    both = Segmenter(model, working_width=64, frame_scales=[1, 1.5])
+    assert both.frame_scales == (1.0, 1.5)
+    np.testing.assert_allclose(both.predict_frame(rgb), 0.5 * (seg.predict_frame(rgb) + got), atol=1e-6)
+    # with the mirror image too: each size's pair is averaged
+    flip_up = Segmenter(model, working_width=64, frame_scales=(1.5,), frame_flip=True)
+    mirror = np.ascontiguousarray(rgb[:, ::-1])
+    np.testing.assert_allclose(flip_up.predict_frame(rgb), 0.5 * (got + up.predict_frame(mirror)[:, :, ::-1]),
+                               atol=1e-6)
+    np.testing.assert_array_equal(up.predict_patch(rgb), seg.predict_patch(rgb))  # patches: unaffected
+    for bad in ((), (1.0, 1.0), (3.0,), (float("nan"),), "1.25", (1, 1.1, 1.2, 1.3, 1.4), ("x",)):
+        with pytest.raises(ValueError, match="frame_scales"):
+            Segmenter(model, frame_scales=bad)
+
+
+def test_load_follows_the_cards_way_of_segmenting_frames(tmp_path, model: nn.Module) -> None:
     path = tmp_path / "model.pt"
-    save_weights(model, path, card={"evaluation": {"protocol": {"frame_flip": True}}})
-    assert Segmenter.load(path).frame_flip is True
+    save_weights(model, path, card={"evaluation": {"protocol": {"frame_flip": True, "frame_scales": [1, 1.25]}}})
+    loaded = Segmenter.load(path)
+    assert loaded.frame_flip is True and loaded.frame_scales == (1.0, 1.25)
     save_weights(model, path, card={"evaluation": {"protocol": {"working_width": 1024}}})  # an older card
-    assert Segmenter.load(path).frame_flip is False
+    loaded = Segmenter.load(path)
+    assert loaded.frame_flip is False and loaded.frame_scales == (1.0,)
+    save_weights(model, path, card={"evaluation": {"protocol": {"frame_scales": [9]}}})
+    with pytest.raises(ValueError, match="frame_scales"):
+        Segmenter.load(path)
 
 
 def test_eval_mode_is_deterministic(seg: Segmenter) -> None:

@@ -269,20 +269,25 @@ def test_lovasz_fine_tuning_is_recorded_and_old_checkpoints_still_resume(dataset
     assert done["training"]["config"]["loss"] == "ce"
 
 
-def test_a_checkpoint_without_frame_flip_resumes_and_the_card_records_it(datasets, tmp_path) -> None:
+def test_a_checkpoint_without_frame_options_resumes_and_the_card_records_them(datasets, tmp_path) -> None:
     train_dir, val_dir = datasets
     part = tmp_path / "model.pt"
     with pytest.raises(KeyboardInterrupt):
         train(train_dir, part, val_dir=val_dir, config=tiny_config(baseline_pixels=0), progress=_stop_after(4))
     ckpt = checkpoint_path(part)
     state = load_checkpoint(ckpt)
-    del state["config"]["eval_protocol"]["frame_flip"]  # written before the option existed
+    del state["config"]["eval_protocol"]["frame_flip"]  # written before the options existed
+    del state["config"]["eval_protocol"]["frame_scales"]
     torch.save(state, ckpt)
     done = train(train_dir, part, val_dir=val_dir, config=tiny_config(baseline_pixels=0), resume=True)
     assert done["evaluation"]["protocol"]["frame_flip"] is False
+    assert done["evaluation"]["protocol"]["frame_scales"] == [1.0]
     flipped = tiny_config(baseline_pixels=0, eval_protocol=replace(tiny_config().eval_protocol, frame_flip=True))
     with pytest.raises(ValueError, match="frame_flip"):  # a changed protocol is not resumed silently
         train(train_dir, part, val_dir=val_dir, config=flipped, resume=True)
+    scaled = tiny_config(baseline_pixels=0, eval_protocol=replace(tiny_config().eval_protocol, frame_scales=(1.5,)))
+    with pytest.raises(ValueError, match="frame_scales"):
+        train(train_dir, part, val_dir=val_dir, config=scaled, resume=True)
 
 
 def test_resume_without_checkpoint_is_an_error(datasets, tmp_path) -> None:
@@ -402,6 +407,23 @@ def test_reissue_moves_the_card_to_another_copy_of_the_data(datasets, tmp_path, 
     assert verify_card(out, val_dir=other_val).ok
     assert uav_el(["model-card", "--weights", str(out), "--quiet"]) == 0
     assert "mirror image" in capsys.readouterr().out
+
+    # --frame-scales: the working frame fed to the network larger; recorded, followed, verified
+    with pytest.raises(SystemExit) as bad:  # argparse: usage and the message on stderr
+        uav_el(["model-card", "--weights", str(out), "--reissue", "--quiet", "--data", str(other_val),
+                "--frame-scales", "5"])
+    assert bad.value.code == 2
+    assert "frame_scales must be" in capsys.readouterr().err
+    assert uav_el(["model-card", "--weights", str(out), "--reissue", "--quiet", "--data", str(other_val),
+                   "--frame-scales", "1,1.5", "--frame-flip", "off"]) == 0
+    scaled = read_card(out)
+    assert scaled["evaluation"]["protocol"]["frame_scales"] == [1.0, 1.5]
+    assert scaled["evaluation"]["reissued"]["protocol"]["frame_scales"] == [1.0]
+    assert scaled["evaluation"]["working_resolution"] != flipped["evaluation"]["working_resolution"]
+    assert Segmenter.load(out).frame_scales == (1.0, 1.5)
+    assert verify_card(out, val_dir=other_val).ok
+    assert uav_el(["model-card", "--weights", str(out), "--quiet"]) == 0
+    assert "fed to the network at x1, x1.5, softmax averaged" in capsys.readouterr().out
 
 
 def test_warm_start_begins_from_the_parent_weights(datasets, tmp_path) -> None:

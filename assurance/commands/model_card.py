@@ -8,6 +8,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+from assurance.commands.train import frame_scales
 from assurance.progress import progress
 
 HELP = "print the segmentation model card; --verify recomputes its figures from the weights and data"
@@ -29,6 +30,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--frame-flip", choices=("on", "off"),
                         help="with --reissue: segment frames as the mean softmax of the frame and its mirror image "
                              "(on) or the frame alone (off); recorded in the card, which the flight code follows")
+    parser.add_argument("--frame-scales", type=frame_scales, metavar="S[,S...]",
+                        help="with --reissue: feed the working-resolution frame to the network resized by these "
+                             "factors (e.g. 1.25, or 1,1.25) and average the softmax; recorded in the card, which the "
+                             "flight code follows")
     parser.add_argument("--hd-patches", type=int, metavar="N",
                         help="with --reissue: HD validation patches per frame (default: as recorded in the card)")
     parser.add_argument("--tolerance", type=float, default=0.002, help="IoU tolerance of --verify (default 0.002)")
@@ -66,8 +71,8 @@ def _print_card(card: dict[str, Any], path: Path) -> None:
         print("evaluation:   none (trained without validation data)")
         return
     wr, hd = ev["working_resolution"], ev["hd_patches"]
-    flip = " (frames: mean of the frame and its mirror image)" if ev["protocol"].get("frame_flip") else ""
-    print(f"evaluation:   {ev['frames']} frames at working resolution{flip}, {ev['patches']} HD patches "
+    print(f"evaluation:   {ev['frames']} frames at working resolution{describe_frames(ev['protocol'])}, "
+          f"{ev['patches']} HD patches "
           f"({ev['protocol']['hd_patch_size']} px)")
     print(f"  {'class':<16}{'IoU working':>12}{'IoU HD':>10}")
     for name in CLASS_NAMES:
@@ -80,6 +85,18 @@ def _print_card(card: dict[str, Any], path: Path) -> None:
     cands = card.get("candidates")
     if cands:
         print(f"candidates:   {describe_audit(cands)}")
+
+
+def describe_frames(protocol: dict[str, Any]) -> str:
+    """How the card has frames segmented, as a parenthesis ('' for the frame alone, as it is)."""
+    scales = [float(s) for s in protocol.get("frame_scales", [1.0])]
+    parts = []
+    if scales != [1.0]:
+        parts.append("fed to the network at x" + ", x".join(f"{s:g}" for s in scales)
+                     + (", softmax averaged" if len(scales) > 1 else ", softmax brought back"))
+    if protocol.get("frame_flip"):
+        parts.append("mean of the frame and its mirror image")
+    return f" ({'; '.join(parts)})" if parts else ""
 
 
 def describe_audit(a: dict[str, Any]) -> str:
@@ -134,7 +151,7 @@ def _reissue(path: Path, args: argparse.Namespace) -> int:
         flip = None if args.frame_flip is None else args.frame_flip == "on"
         card = reissue_card(path, val_dir=args.data, train_dir=args.train, threads=args.threads,
                             progress=functools.partial(progress, enabled=not args.quiet), frame_flip=flip,
-                            hd_patches=args.hd_patches)
+                            hd_patches=args.hd_patches, frame_scales=args.frame_scales)
     except ValueError as exc:
         raise CommandError(str(exc)) from exc
     ev, before = card["evaluation"], card["evaluation"]["reissued"]
@@ -153,7 +170,8 @@ def run(args: argparse.Namespace) -> int:
     from el.segmentation.weights import DEFAULT_WEIGHTS, read_card
 
     path = args.weights or DEFAULT_WEIGHTS
-    for given, flag in ((args.frame_flip, "--frame-flip"), (args.hd_patches, "--hd-patches")):
+    for given, flag in ((args.frame_flip, "--frame-flip"), (args.hd_patches, "--hd-patches"),
+                        (args.frame_scales, "--frame-scales")):
         if given is not None and not args.reissue:
             from assurance.cli import CommandError
 

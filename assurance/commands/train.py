@@ -25,6 +25,16 @@ def _widths(text: str) -> tuple[int, int, int]:
     return values  # type: ignore[return-value]
 
 
+def frame_scales(text: str) -> tuple[float, ...]:
+    """``--frame-scales 1,1.25``: the sizes the working-resolution frame is fed to the network at."""
+    from el.segmentation.evaluation import check_frame_scales
+
+    try:
+        return check_frame_scales(text.split(","))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"{exc} (e.g. 1.25 or 1,1.25)") from None
+
+
 def _range(text: str) -> tuple[int, int]:
     try:
         lo, hi = (int(v) for v in text.split("-"))
@@ -74,6 +84,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--frame-flip", action="store_true",
                         help="evaluate (and so deploy: the card records it) frames as the mean softmax of the frame "
                              "and its mirror image, about 3x the time of one frame on 2 CPU cores")
+    parser.add_argument("--frame-scales", type=frame_scales, default=(1.0,), metavar="S[,S...]",
+                        help="evaluate (and so deploy) frames fed to the network resized by these factors, softmax "
+                             "averaged at the working resolution (default 1: the frame as it is)")
     parser.add_argument("--cache-dir", type=Path, help="prepared-data cache (default ~/.cache/uav-el/segmentation)")
     parser.add_argument("--no-cache", action="store_true", help="do not cache prepared data")
     parser.add_argument("--no-baseline", action="store_true", help="skip the per-pixel baseline")
@@ -126,7 +139,8 @@ def run(args: argparse.Namespace) -> int:
             checkpoint_every=args.checkpoint_every, seed=args.seed, working_width=args.working_width,
             arch=ArchConfig(**arch_kwargs), baseline_pixels=0 if args.no_baseline else 200_000,
             eval_protocol=EvalProtocol(working_width=args.working_width, hd_patch_size=args.hd_eval_size,
-                                       hd_patches=args.hd_eval_patches, frame_flip=args.frame_flip),
+                                       hd_patches=args.hd_eval_patches, frame_flip=args.frame_flip,
+                                       frame_scales=args.frame_scales),
             init_sha256=init_sha, loss=args.loss,
         )
     except ValueError as exc:

@@ -24,6 +24,11 @@ class EvalProtocol:
     ``frame_flip``: frames are segmented as the mean softmax of the frame and its mirror image (see
     :class:`~el.segmentation.inference.Segmenter`). It is part of how the network is deployed:
     :meth:`Segmenter.load` follows the card's protocol, so the figures describe the flight code.
+
+    ``frame_scales``: the frame at the working resolution is fed to the network resized by each of
+    these factors (1.25: 1280x720 for 1024x576) and the softmax, brought back to the working
+    resolution, averaged over them. Only the working-resolution image is used: an upsampled input
+    gives the network's stride-4 logits a finer grid, which small objects (people, cars) need.
     """
 
     working_width: int = 1024
@@ -31,36 +36,57 @@ class EvalProtocol:
     hd_patch_size: int = 384
     seed: int = 12345
     frame_flip: bool = False
+    frame_scales: tuple[float, ...] = (1.0,)
 
     def __post_init__(self) -> None:
         if self.working_width < 16 or self.hd_patches < 0 or self.hd_patch_size < 16:
             raise ValueError(f"invalid evaluation protocol: {self}")
         if not isinstance(self.frame_flip, bool):
             raise ValueError(f"frame_flip must be true or false, got {self.frame_flip!r}")
+        object.__setattr__(self, "frame_scales", check_frame_scales(self.frame_scales))
 
     def prep_params(self) -> PrepParams:
         return PrepParams(working_width=self.working_width, regions=self.hd_patches,
                           region_size=self.hd_patch_size, seed=self.seed)
 
-    def to_dict(self) -> dict[str, int | bool]:
-        return asdict(self)
+    def to_dict(self) -> dict[str, Any]:
+        return {**asdict(self), "frame_scales": list(self.frame_scales)}
 
     def segmenter(self, model: Any, **kwargs: Any) -> Any:
         """A :class:`~el.segmentation.inference.Segmenter` that segments frames as this protocol says."""
         from el.segmentation.inference import Segmenter
 
-        return Segmenter(model, working_width=self.working_width, frame_flip=self.frame_flip, **kwargs)
+        return Segmenter(model, working_width=self.working_width, frame_flip=self.frame_flip,
+                         frame_scales=self.frame_scales, **kwargs)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> EvalProtocol:
-        """From a card's ``evaluation.protocol`` (cards written before ``frame_flip`` existed: False)."""
+        """From a card's ``evaluation.protocol`` (what an older card lacks takes its default)."""
         out: dict[str, Any] = {}
         for k, v in data.items():
             if k == "frame_flip":
                 out[k] = v
+            elif k == "frame_scales":
+                out[k] = tuple(v) if isinstance(v, list | tuple) else v
             elif k in cls.__dataclass_fields__:
                 out[k] = int(v)
         return cls(**out)
+
+
+MAX_FRAME_SCALE = 2.0
+
+
+def check_frame_scales(scales: Any) -> tuple[float, ...]:
+    """``frame_scales`` as a tuple of floats; ValueError unless 1 to 4 distinct factors in [0.5, 2]."""
+    try:
+        if isinstance(scales, str | bytes):
+            raise TypeError
+        out = tuple(float(s) for s in scales)
+    except (TypeError, ValueError):
+        raise ValueError(f"frame_scales must be a list of numbers, got {scales!r}") from None
+    if not 1 <= len(out) <= 4 or len(set(out)) != len(out) or not all(0.5 <= s <= MAX_FRAME_SCALE for s in out):
+        raise ValueError(f"frame_scales must be 1 to 4 distinct factors in [0.5, {MAX_FRAME_SCALE}], got {scales!r}")
+    return out
 
 
 def card_protocol(card: dict[str, Any]) -> EvalProtocol:

@@ -6,7 +6,9 @@ and the runtime monitors what they need (DESIGN sections 5.1 and 6):
 - :meth:`Segmenter.predict_frame`: the HD frame resized (``cv2.INTER_AREA``) to the working
   resolution of :func:`el.camera.working_size` -> softmax (8, h, w); with ``frame_flip`` the mean
   of the softmax of the frame and of its mirror image (one batch of two; the oblique view is
-  left-right symmetric in distribution, and training flips too);
+  left-right symmetric in distribution, and training flips too); with ``frame_scales`` the mean
+  over the working-resolution frame fed to the network at several sizes (an upsampled view gives
+  the stride-4 logits a finer grid: people and cars are a few pixels wide at 1024x576);
 - :meth:`Segmenter.predict_patch` / :meth:`Segmenter.predict_patches`: a full-resolution crop
   segmented at its own resolution (the LHD monitor);
 - :meth:`Segmenter.mc_dropout`: N softmax samples with dropout active (the MCD monitor).
@@ -32,6 +34,7 @@ seeded inside ``torch.random.fork_rng`` so that the global RNG is left untouched
 from __future__ import annotations
 
 import threading
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -42,7 +45,7 @@ from torch import nn
 
 from el.camera import working_size
 from el.labels import NUM_CLASSES
-from el.segmentation.evaluation import card_protocol
+from el.segmentation.evaluation import card_protocol, check_frame_scales
 from el.segmentation.model import MCDropout, upsample_logits
 from el.segmentation.weights import load_weights
 
@@ -143,6 +146,10 @@ class Segmenter:
         Segment frames as the mean softmax of the frame and its left-right mirror image (about
         3x the time of one frame on 2 CPU cores; patches and MC dropout are unaffected). :meth:`load` takes it
         from the card's evaluation protocol, so the deployed network is the one the card measured.
+    frame_scales : sequence of float
+        Factors by which the frame at the working resolution is resized before the network (bilinear);
+        each softmax is brought back to the working resolution (area averaging) and they are averaged.
+        ``(1.0,)``: the frame as it is. Like ``frame_flip``, :meth:`load` takes it from the card.
 
     Examples
     --------
@@ -154,7 +161,8 @@ class Segmenter:
     """
 
     def __init__(self, model: nn.Module, *, threads: int | None = None, device: str | torch.device = "cpu",
-                 card: dict[str, Any] | None = None, working_width: int = 1024, frame_flip: bool = False) -> None:
+                 card: dict[str, Any] | None = None, working_width: int = 1024, frame_flip: bool = False,
+                 frame_scales: Sequence[float] = (1.0,)) -> None:
         if not isinstance(model, nn.Module):
             raise ValueError(f"model must be a torch.nn.Module, got {type(model).__name__}")
         if threads is not None:
@@ -170,6 +178,7 @@ class Segmenter:
         if not isinstance(frame_flip, bool):
             raise ValueError(f"frame_flip must be true or false, got {frame_flip!r}")
         self.frame_flip = frame_flip
+        self.frame_scales = check_frame_scales(frame_scales)
         self.fast_mc = bool(getattr(model, "supports_mc_spec", False)
                             and all(callable(getattr(model, a, None)) for a in ("trunk", "head", "mc_spec")))
         self._lock = threading.Lock()  # the fallback MC path mutates dropout modules
@@ -181,10 +190,13 @@ class Segmenter:
 
         The file's SHA-256 is checked against its model card before ``torch.load(weights_only=True)``;
         a missing or altered file raises :class:`el.segmentation.weights.WeightsError`. Frames are
-        segmented as the card's evaluation protocol says (``frame_flip``; False when absent).
+        segmented as the card's evaluation protocol says (``frame_flip``, ``frame_scales``; a card
+        without them: the frame alone).
         """
         model, card = load_weights(weights_path, device=device)
-        return cls(model, threads=threads, device=device, card=card, frame_flip=card_protocol(card).frame_flip)
+        protocol = card_protocol(card)  # its working_width is the card's; the flight code keeps its own
+        return cls(model, threads=threads, device=device, card=card, frame_flip=protocol.frame_flip,
+                   frame_scales=protocol.frame_scales)
 
     def __getstate__(self) -> dict[str, Any]:  # picklable (for worker processes): the lock is recreated
         state = self.__dict__.copy()
@@ -238,10 +250,27 @@ class Segmenter:
         if (rgb.shape[1], rgb.shape[0]) != (w, h):
             rgb = cv2.resize(rgb, (w, h), interpolation=cv2.INTER_AREA)
         _check_rgb(rgb, "frame at working resolution")
+        total = None
+        for scale in self.frame_scales:
+            probs = self._frame_at_scale(rgb, scale)
+            total = probs if total is None else total + probs
+        if len(self.frame_scales) > 1:
+            total /= np.float32(len(self.frame_scales))
+        return total
+
+    def _frame_at_scale(self, rgb: np.ndarray, scale: float) -> np.ndarray:
+        """Softmax (8, h, w) of a working-resolution frame fed to the network resized by ``scale``."""
+        h, w = rgb.shape[:2]
+        size = (max(MIN_SIZE, round(w * scale)), max(MIN_SIZE, round(h * scale)))
+        view = rgb if size == (w, h) else cv2.resize(rgb, size, interpolation=cv2.INTER_LINEAR)
         if not self.frame_flip:
-            return self._predict([rgb], "frame")[0]
-        probs = self._predict([rgb, np.ascontiguousarray(rgb[:, ::-1])], "frame")
-        return np.ascontiguousarray(0.5 * (probs[0] + probs[1][:, :, ::-1]))
+            probs = self._predict([view], "frame")[0]
+        else:
+            pair = self._predict([view, np.ascontiguousarray(view[:, ::-1])], "frame")
+            probs = 0.5 * (pair[0] + pair[1][:, :, ::-1])
+        if size != (w, h):  # back to the working resolution: each pixel the mean over its footprint
+            probs = np.stack([cv2.resize(c, (w, h), interpolation=cv2.INTER_AREA) for c in probs])
+        return np.ascontiguousarray(probs, dtype=np.float32)
 
     def predict_patch(self, rgb_patch: np.ndarray, *, features: Any = None) -> np.ndarray:
         """Softmax of a patch at its own resolution: ndarray (8, h, w) float32 for a (h, w, 3) uint8 patch.

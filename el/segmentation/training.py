@@ -109,6 +109,7 @@ class TrainConfig:
     def to_dict(self) -> dict[str, Any]:
         out = asdict(self)
         out["arch"] = self.arch.to_dict()
+        out["eval_protocol"] = self.eval_protocol.to_dict()
         return out
 
     @classmethod
