@@ -52,10 +52,9 @@ def init_run(run_dir: Path, manifest: dict[str, Any]) -> None:
                                "use a new --out folder or delete this one")
         # the same weights, segmenting frames the same way (a run recorded before these keys: the frame alone)
         was, now = old.get("weights") or {}, manifest.get("weights") or {}
-        carded = bool(was.get("sha256"))
-        recorded = {"sha256": was.get("sha256"),
-                    "frame_flip": was.get("frame_flip", False if carded else None),
-                    "frame_scales": was.get("frame_scales", [1.0] if carded else None)}
+        flip = was.get("frame_flip", False if was.get("sha256") else None)  # None: no readable card then
+        recorded = {"sha256": was.get("sha256"), "frame_flip": flip,
+                    "frame_scales": was.get("frame_scales", None if flip is None else [1.0])}
         for key, before in recorded.items():
             if key in now and before != now[key]:
                 raise RunError(f"{run_dir}: holds a campaign run with other weights (weights.{key}: {before} "

@@ -59,13 +59,16 @@ def _setup(weights: str | None, threads: int):
 
 
 def _runner(seg, kind: str, h: int, w: int, n: int):
+    from el.segmentation.evaluation import check_frame_scales
+
     rgb = np.random.default_rng(0).integers(0, 256, (h, w, 3), dtype=np.uint8)
     if kind == "frame":
         return lambda: seg.predict_frame(rgb)
     if kind.startswith("frame_"):  # a forced way of segmenting frames, whatever the card says
         variant = copy.copy(seg)
         variant.frame_flip = kind == "frame_flip"
-        variant.frame_scales = tuple(float(v) for v in kind[7:].split(",")) if kind.startswith("frame_x") else (1.0,)
+        scales = [float(v) for v in kind[7:].split(",")] if kind.startswith("frame_x") else [1.0]
+        variant.frame_scales = check_frame_scales(scales)
         return lambda: variant.predict_frame(rgb)
     if kind == "patch":
         return lambda: seg.predict_patch(rgb)

@@ -155,7 +155,8 @@ def test_frame_scales_feed_the_working_frame_resized_and_average(model: nn.Modul
     np.testing.assert_allclose(flip_up.predict_frame(rgb), 0.5 * (got + up.predict_frame(mirror)[:, :, ::-1]),
                                atol=1e-6)
     np.testing.assert_array_equal(up.predict_patch(rgb), seg.predict_patch(rgb))  # patches: unaffected
-    for bad in ((), (1.0, 1.0), (3.0,), (float("nan"),), "1.25", (1, 1.1, 1.2, 1.3, 1.4), ("x",)):
+    for bad in ((), (1.0, 1.0), (3.0,), (0.75,), (float("nan"),), "1.25", 1.25, (1, 1.1, 1.2, 1.3, 1.4), ("1.25",),
+                (True,), None):
         with pytest.raises(ValueError, match="frame_scales"):
             Segmenter(model, frame_scales=bad)
 

@@ -89,12 +89,17 @@ def _print_card(card: dict[str, Any], path: Path) -> None:
 
 def describe_frames(protocol: dict[str, Any]) -> str:
     """How the card has frames segmented, as a parenthesis ('' for the frame alone, as it is)."""
-    scales = [float(s) for s in protocol.get("frame_scales", [1.0])]
-    parts = []
+    from el.segmentation.evaluation import EvalProtocol
+
+    try:
+        read = EvalProtocol.from_dict(protocol)
+    except ValueError as exc:
+        return f" (frames: {exc})"
+    scales, parts = list(read.frame_scales), []
     if scales != [1.0]:
         parts.append("fed to the network at x" + ", x".join(f"{s:g}" for s in scales)
                      + (", softmax averaged" if len(scales) > 1 else ", softmax brought back"))
-    if protocol.get("frame_flip"):
+    if read.frame_flip:
         parts.append("mean of the frame and its mirror image")
     return f" ({'; '.join(parts)})" if parts else ""
 

@@ -30,7 +30,11 @@ def frame_scales(text: str) -> tuple[float, ...]:
     from el.segmentation.evaluation import check_frame_scales
 
     try:
-        return check_frame_scales(text.split(","))
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected factors like 1.25 or 1,1.25, got {text!r}") from None
+    try:
+        return check_frame_scales(values)
     except ValueError as exc:
         raise argparse.ArgumentTypeError(f"{exc} (e.g. 1.25 or 1,1.25)") from None
 

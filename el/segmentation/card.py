@@ -144,7 +144,7 @@ def reissue_card(weights_path: str | Path | None = None, *, val_dir: str | Path,
     if hd_patches is not None:
         protocol = replace(protocol, hd_patches=int(hd_patches))
     if frame_scales is not None:
-        protocol = replace(protocol, frame_scales=tuple(frame_scales))
+        protocol = replace(protocol, frame_scales=frame_scales)
     manifest = D.dataset_manifest(val_dir, threads=workers)
     val_set, figures = _evaluate_on(model, card, manifest, protocol, threads, workers, progress)
     previous = {"data": old.get("data"), "protocol": old["protocol"],

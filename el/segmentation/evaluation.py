@@ -67,7 +67,7 @@ class EvalProtocol:
             if k == "frame_flip":
                 out[k] = v
             elif k == "frame_scales":
-                out[k] = tuple(v) if isinstance(v, list | tuple) else v
+                out[k] = v
             elif k in cls.__dataclass_fields__:
                 out[k] = int(v)
         return cls(**out)
@@ -77,15 +77,17 @@ MAX_FRAME_SCALE = 2.0
 
 
 def check_frame_scales(scales: Any) -> tuple[float, ...]:
-    """``frame_scales`` as a tuple of floats; ValueError unless 1 to 4 distinct factors in [0.5, 2]."""
-    try:
-        if isinstance(scales, str | bytes):
-            raise TypeError
-        out = tuple(float(s) for s in scales)
-    except (TypeError, ValueError):
-        raise ValueError(f"frame_scales must be a list of numbers, got {scales!r}") from None
-    if not 1 <= len(out) <= 4 or len(set(out)) != len(out) or not all(0.5 <= s <= MAX_FRAME_SCALE for s in out):
-        raise ValueError(f"frame_scales must be 1 to 4 distinct factors in [0.5, {MAX_FRAME_SCALE}], got {scales!r}")
+    """``frame_scales`` as a tuple of floats; ValueError unless a list of 1 to 4 distinct numbers in [1, 2].
+
+    Factors are upsamplings (the frame is already at the working resolution; a smaller view would
+    only lose detail), so the input is enlarged bilinearly and the softmax brought down by area.
+    """
+    numbers = isinstance(scales, list | tuple) and all(
+        isinstance(s, int | float) and not isinstance(s, bool) for s in scales)
+    out = tuple(float(s) for s in scales) if numbers else ()
+    if not 1 <= len(out) <= 4 or len(set(out)) != len(out) or not all(1.0 <= s <= MAX_FRAME_SCALE for s in out):
+        raise ValueError(f"frame_scales must be a list of 1 to 4 distinct factors in [1, {MAX_FRAME_SCALE:g}], "
+                         f"got {scales!r}")
     return out
 
 

@@ -147,7 +147,7 @@ class Segmenter:
         3x the time of one frame on 2 CPU cores; patches and MC dropout are unaffected). :meth:`load` takes it
         from the card's evaluation protocol, so the deployed network is the one the card measured.
     frame_scales : sequence of float
-        Factors by which the frame at the working resolution is resized before the network (bilinear);
+        Factors (1 to 2) by which the frame at the working resolution is enlarged before the network (bilinear);
         each softmax is brought back to the working resolution (area averaging) and they are averaged.
         ``(1.0,)``: the frame as it is. Like ``frame_flip``, :meth:`load` takes it from the card.
 
