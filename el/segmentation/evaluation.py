@@ -64,9 +64,7 @@ class EvalProtocol:
         """From a card's ``evaluation.protocol`` (what an older card lacks takes its default)."""
         out: dict[str, Any] = {}
         for k, v in data.items():
-            if k == "frame_flip":
-                out[k] = v
-            elif k == "frame_scales":
+            if k in ("frame_flip", "frame_scales"):  # checked in __post_init__
                 out[k] = v
             elif k in cls.__dataclass_fields__:
                 out[k] = int(v)
