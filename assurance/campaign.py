@@ -379,14 +379,13 @@ def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *,
 
 def _frame_protocol(weights: Path) -> dict[str, Any]:
     """How the weights' card has frames segmented (``frame_flip``, ``frame_scales``); None without a card."""
-    from el.segmentation.evaluation import card_protocol
+    from el.segmentation.evaluation import FRAME_OPTIONS, card_protocol
     from el.segmentation.weights import read_card
 
     try:
-        protocol = card_protocol(read_card(weights))
+        return card_protocol(read_card(weights)).frame_options()
     except (OSError, ValueError):  # WeightsError is a ValueError
-        return {"frame_flip": None, "frame_scales": None}
-    return {"frame_flip": protocol.frame_flip, "frame_scales": list(protocol.frame_scales)}
+        return dict.fromkeys(FRAME_OPTIONS)
 
 
 def _version() -> str:

@@ -32,7 +32,7 @@ CASES = (
     ("frame 1024x576, frame alone", "frame_plain", 576, 1024, 0),
     ("frame 1024x576, + mirror image", "frame_flip", 576, 1024, 0),
     ("frame 1024x576, fed at x1.25", "frame_x1.25", 576, 1024, 0),
-    ("frame 1024x576, fed at x1, x1.25", "frame_x1,1.25", 576, 1024, 0),
+    ("frame 1024x576, fed at x1, x1.25", "frame_x1+1.25", 576, 1024, 0),
     ("frame 3840x2160 (incl. resize)", "frame", 2160, 3840, 0),
     ("HD patch 384x384", "patch", 384, 384, 0),
     ("MC dropout n=10, one batch", "mc", 384, 384, 10),
@@ -40,6 +40,13 @@ CASES = (
     ("MC dropout n=30, one batch", "mc", 384, 384, 30),
     ("MC dropout n=30, 30 passes", "mc_loop", 384, 384, 30),
 )
+# Frame cases forced to one way of segmenting, whatever the card says (Segmenter keywords).
+FRAME_VARIANTS = {
+    "frame_plain": {"frame_flip": False, "frame_scales": (1.0,)},
+    "frame_flip": {"frame_flip": True, "frame_scales": (1.0,)},
+    "frame_x1.25": {"frame_flip": False, "frame_scales": (1.25,)},
+    "frame_x1+1.25": {"frame_flip": False, "frame_scales": (1.0, 1.25)},
+}
 
 
 def _current_rss_kb() -> int:
@@ -59,16 +66,12 @@ def _setup(weights: str | None, threads: int):
 
 
 def _runner(seg, kind: str, h: int, w: int, n: int):
-    from el.segmentation.evaluation import check_frame_scales
-
     rgb = np.random.default_rng(0).integers(0, 256, (h, w, 3), dtype=np.uint8)
     if kind == "frame":
         return lambda: seg.predict_frame(rgb)
-    if kind.startswith("frame_"):  # a forced way of segmenting frames, whatever the card says
+    if kind in FRAME_VARIANTS:
         variant = copy.copy(seg)
-        variant.frame_flip = kind == "frame_flip"
-        scales = [float(v) for v in kind[7:].split(",")] if kind.startswith("frame_x") else [1.0]
-        variant.frame_scales = check_frame_scales(scales)
+        variant.__dict__.update(FRAME_VARIANTS[kind])
         return lambda: variant.predict_frame(rgb)
     if kind == "patch":
         return lambda: seg.predict_patch(rgb)

@@ -50,21 +50,24 @@ class EvalProtocol:
                           region_size=self.hd_patch_size, seed=self.seed)
 
     def to_dict(self) -> dict[str, Any]:
-        return {**asdict(self), "frame_scales": list(self.frame_scales)}
+        return {**asdict(self), **self.frame_options()}
+
+    def frame_options(self) -> dict[str, Any]:
+        """How frames are segmented, as :class:`~el.segmentation.inference.Segmenter` keywords (JSON-ready)."""
+        return {"frame_flip": self.frame_flip, "frame_scales": list(self.frame_scales)}
 
     def segmenter(self, model: Any, **kwargs: Any) -> Any:
         """A :class:`~el.segmentation.inference.Segmenter` that segments frames as this protocol says."""
         from el.segmentation.inference import Segmenter
 
-        return Segmenter(model, working_width=self.working_width, frame_flip=self.frame_flip,
-                         frame_scales=self.frame_scales, **kwargs)
+        return Segmenter(model, working_width=self.working_width, **self.frame_options(), **kwargs)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> EvalProtocol:
         """From a card's ``evaluation.protocol`` (what an older card lacks takes its default)."""
         out: dict[str, Any] = {}
         for k, v in data.items():
-            if k in ("frame_flip", "frame_scales"):  # checked in __post_init__
+            if k in FRAME_OPTIONS:  # checked in __post_init__
                 out[k] = v
             elif k in cls.__dataclass_fields__:
                 out[k] = int(v)
@@ -72,6 +75,7 @@ class EvalProtocol:
 
 
 MAX_FRAME_SCALE = 2.0
+FRAME_OPTIONS = ("frame_flip", "frame_scales")  # the protocol's keys that deployment follows too
 
 
 def check_frame_scales(scales: Any) -> tuple[float, ...]:

@@ -194,9 +194,8 @@ class Segmenter:
         without them: the frame alone).
         """
         model, card = load_weights(weights_path, device=device)
-        protocol = card_protocol(card)  # its working_width is the card's; the flight code keeps its own
-        return cls(model, threads=threads, device=device, card=card, frame_flip=protocol.frame_flip,
-                   frame_scales=protocol.frame_scales)
+        # the card's working_width is the evaluation's; the flight code keeps its own
+        return cls(model, threads=threads, device=device, card=card, **card_protocol(card).frame_options())
 
     def __getstate__(self) -> dict[str, Any]:  # picklable (for worker processes): the lock is recreated
         state = self.__dict__.copy()
