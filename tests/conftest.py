@@ -115,7 +115,8 @@ def tiny_campaign(tmp_path_factory):
     from assurance.perturbations import PAPER_PERTURBATIONS
     from el.config import CoreConfig
     from el.labels import ids_to_colors
-    from el.segmentation.model import ArchConfig, build_model
+    from el.segmentation.architectures import build_model
+    from el.segmentation.model import ArchConfig
     from el.segmentation.weights import save_weights
     from el.uavid import write_sample
 

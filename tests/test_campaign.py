@@ -19,7 +19,8 @@ from assurance.table import results_table
 from el.config import CoreConfig
 from el.labels import ids_to_colors
 from el.pipeline import EmergencyLanding, PipelineConfig
-from el.segmentation.model import ArchConfig, build_model
+from el.segmentation.architectures import build_model
+from el.segmentation.model import ArchConfig
 from el.segmentation.weights import read_card, save_weights, write_card
 from el.uavid import read_image, write_sample
 

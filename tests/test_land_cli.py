@@ -164,7 +164,8 @@ def test_model_pipeline_without_weights_takes_default_action(main, scene, tmp_pa
 def test_model_pipeline_with_weights(main, scene, tmp_path, capsys, monkeypatch):
     import torch
 
-    from el.segmentation.model import ArchConfig, build_model
+    from el.segmentation.architectures import build_model
+    from el.segmentation.model import ArchConfig
     from el.segmentation.weights import save_weights
 
     torch.manual_seed(0)

@@ -546,7 +546,8 @@ def test_docstring_examples(module):
 def project_segmenter():
     inference = pytest.importorskip("el.segmentation.inference")
     model = pytest.importorskip("el.segmentation.model")
-    return inference.Segmenter(model.build_model(model.ArchConfig(widths=(8, 8, 8))))
+    architectures = pytest.importorskip("el.segmentation.architectures")
+    return inference.Segmenter(architectures.build_model(model.ArchConfig(widths=(8, 8, 8))))
 
 
 def test_project_segmenter_implements_the_protocol(project_segmenter):

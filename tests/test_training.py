@@ -14,10 +14,11 @@ from helpers import TINY_ARCH
 import assurance.cli as cli
 from el.labels import NUM_CLASSES, PALETTE
 from el.segmentation import data as D
+from el.segmentation.architectures import build_model
 from el.segmentation.card import verify_card
 from el.segmentation.evaluation import EvalProtocol, compare_figures, confusion, summarise
 from el.segmentation.inference import Segmenter
-from el.segmentation.model import ArchConfig, build_model
+from el.segmentation.model import ArchConfig
 from el.segmentation.training import (
     TrainConfig,
     checkpoint_path,
@@ -308,7 +309,8 @@ def test_train_and_model_card_cli(datasets, tmp_path, uav_el, capsys) -> None:
     out = tmp_path / "w" / "model.pt"
     rc = uav_el([
         "train", "--data", str(train_dir), "--val", str(val_dir), "--out", str(out), "--steps", "4",
-        "--batch", "2", "--crop", "32", "--hd-crops", "0.03", "--hd-crop", "32-48", "--widths", "8,8,16",
+        "--batch", "2", "--crop", "32", "--hd-crops", "0.03", "--hd-crop", "32-48", "--arch", "msdlite",
+        "--widths", "8,8,16",
         "--working-width", "64", "--hd-eval-size", "48", "--cache-dir", str(tmp_path / "cache"), "--quiet",
         "--seed", "3",
     ])

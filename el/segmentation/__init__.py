@@ -7,8 +7,9 @@ Public entry points::
     probs = seg.predict_frame(rgb)         # (8, h, w) softmax at working resolution
 """
 
+from el.segmentation.architectures import build_model
 from el.segmentation.inference import MIN_SIZE, Segmenter, mc_dropout_stats
-from el.segmentation.model import ArchConfig, MSDLite, build_model
+from el.segmentation.model import ArchConfig, MSDLite
 from el.segmentation.weights import DEFAULT_WEIGHTS, WeightsError, load_weights, save_weights
 
 __all__ = [

@@ -154,7 +154,8 @@ class Segmenter:
     Examples
     --------
     >>> import numpy as np
-    >>> from el.segmentation.model import ArchConfig, build_model
+    >>> from el.segmentation.architectures import build_model
+    >>> from el.segmentation.model import ArchConfig
     >>> seg = Segmenter(build_model(ArchConfig(widths=(8, 8, 8))), working_width=64)
     >>> seg.predict_frame(np.zeros((72, 128, 3), np.uint8)).shape
     (8, 36, 64)

@@ -105,6 +105,19 @@ class MCSpec:
     used: int = 0
 
 
+def draw_mc_spec(layers: list[MCDropout], n: int, keep_prob: float, seed: int) -> MCSpec:
+    """Dropout masks for ``n`` MC samples of ``layers``, drawn **sample by sample** from one generator
+    seeded with ``seed`` (sample i: layer 1, then layer 2...). So the first k samples of a draw of n are
+    the draw of k (prefix-consistent), and the masks never touch torch's global RNG."""
+    if not (0.0 < keep_prob <= 1.0):
+        raise ValueError(f"keep_prob must lie in (0, 1], got {keep_prob!r}")
+    gen = torch.Generator(device="cpu")
+    gen.manual_seed(int(seed))
+    per_sample = [[(torch.rand(m.channels, generator=gen) < keep_prob).float() / keep_prob for m in layers]
+                  for _ in range(n)]
+    return MCSpec([torch.stack([s[j] for s in per_sample]).view(n, -1, 1, 1) for j in range(len(layers))])
+
+
 class MCDropout(nn.Module):
     """Channel dropout (whole feature maps, like ``nn.Dropout2d``) that MC sampling can drive.
 
@@ -232,17 +245,8 @@ class MSDLite(nn.Module):
             m.p = float(p)
 
     def mc_spec(self, n: int, keep_prob: float, seed: int) -> MCSpec:
-        """Dropout masks for ``n`` MC samples, drawn **sample by sample** from one generator seeded with
-        ``seed`` (sample i: layer 1, then layer 2). So the first k samples of a draw of n are the draw
-        of k (prefix-consistent), and the masks never touch torch's global RNG."""
-        if not (0.0 < keep_prob <= 1.0):
-            raise ValueError(f"keep_prob must lie in (0, 1], got {keep_prob!r}")
-        layers = self.dropout_layers()
-        gen = torch.Generator(device="cpu")
-        gen.manual_seed(int(seed))
-        per_sample = [[(torch.rand(m.channels, generator=gen) < keep_prob).float() / keep_prob for m in layers]
-                      for _ in range(n)]
-        return MCSpec([torch.stack([s[j] for s in per_sample]).view(n, -1, 1, 1) for j in range(len(layers))])
+        """Dropout masks for ``n`` MC samples (see :func:`draw_mc_spec`)."""
+        return draw_mc_spec(self.dropout_layers(), n, keep_prob, seed)
 
     # -- forward -----------------------------------------------------------------------------
     def trunk(self, x: torch.Tensor) -> Features:
@@ -308,13 +312,6 @@ def upsample_logits(logits: torch.Tensor, stride: int, window: tuple[int, int, i
     up = then(F.interpolate(sub, scale_factor=stride, mode="bilinear", align_corners=False))
     oy, ox = a0 * stride, b0 * stride
     return up[:, :, y0 - oy:y1 - oy, x0 - ox:x1 - ox]
-
-
-def build_model(config: ArchConfig | dict | None = None) -> MSDLite:
-    """An untrained :class:`MSDLite` from a config (or its dict form, as stored in a model card)."""
-    if isinstance(config, dict):
-        config = ArchConfig.from_dict(config)
-    return MSDLite(config)
 
 
 def count_parameters(model: nn.Module) -> int:

@@ -36,11 +36,12 @@ import numpy as np
 import torch
 
 from el.segmentation import data as D
+from el.segmentation.architectures import AnyArch, arch_from_dict, build_model, default_arch
 from el.segmentation.baseline import evaluate_baseline
 from el.segmentation.evaluation import EvalProtocol, evaluate, selection_score
 from el.segmentation.losses import LOSSES, segmentation_loss
 from el.segmentation.losses import describe as describe_loss
-from el.segmentation.model import ArchConfig, MSDLite, build_model, count_parameters
+from el.segmentation.model import ArchConfig, count_parameters
 from el.segmentation.weights import load_weights, read_card, save_weights, write_card
 from el.uavid import atomic_write_bytes
 
@@ -66,12 +67,14 @@ class TrainConfig:
     checkpoint_every: int = 25
     seed: int = 0
     working_width: int = 1024
-    arch: ArchConfig = field(default_factory=ArchConfig)
+    arch: AnyArch = field(default_factory=ArchConfig)
     augment: D.AugmentParams = field(default_factory=D.AugmentParams)
     eval_protocol: EvalProtocol = field(default_factory=EvalProtocol)
     baseline_pixels: int = 200_000  # 0: skip the per-pixel baseline
     init_sha256: str | None = None  # SHA-256 of the weights a warm start begins from (None: random init)
     loss: str = "ce"  # "ce" or "ce+lovasz" (see el.segmentation.losses)
+    encoder_lr_scale: float = 1.0  # a pretrained encoder's learning rate, as a fraction of lr
+    freeze_early_steps: int = 0  # steps during which a pretrained encoder's stem and 1/4 stages stay frozen
 
     def __post_init__(self) -> None:
         positive = ("steps", "batch", "crop", "hd_crop_min", "hd_crop_max", "checkpoint_every")
@@ -83,11 +86,13 @@ class TrainConfig:
             raise ValueError("crop and hd_crop_min must be >= 16 px")
         if self.hd_crop_max < self.hd_crop_min:
             raise ValueError(f"hd_crop_max ({self.hd_crop_max}) must be >= hd_crop_min ({self.hd_crop_min})")
-        for name in ("hd_pixels", "hd_regions", "warmup", "eval_every", "baseline_pixels"):
+        for name in ("hd_pixels", "hd_regions", "warmup", "eval_every", "baseline_pixels", "freeze_early_steps"):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
         if not (self.lr > 0 and math.isfinite(self.lr)):
             raise ValueError(f"lr must be positive, got {self.lr!r}")
+        if not (0 < self.encoder_lr_scale <= 1 and math.isfinite(self.encoder_lr_scale)):
+            raise ValueError(f"encoder_lr_scale must lie in (0, 1], got {self.encoder_lr_scale!r}")
         if self.loss not in LOSSES:
             raise ValueError(f"loss must be one of {', '.join(LOSSES)}, got {self.loss!r}")
         if self.working_width != self.eval_protocol.working_width:
@@ -115,7 +120,7 @@ class TrainConfig:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> TrainConfig:
         data = dict(data)
-        arch = ArchConfig.from_dict(data.pop("arch"))
+        arch = arch_from_dict(data.pop("arch"))
         augment = D.AugmentParams(**data.pop("augment"))
         protocol = EvalProtocol.from_dict(data.pop("eval_protocol"))
         return cls(arch=arch, augment=augment, eval_protocol=protocol, **data)
@@ -253,7 +258,9 @@ def _with_defaults(old: dict[str, Any], defaults: dict[str, Any]) -> dict[str, A
 
 def _diff_config(old: dict[str, Any], new: dict[str, Any]) -> list[str]:
     # a key added since the checkpoint was written had its default
-    old = _with_defaults(old, TrainConfig().to_dict())
+    defaults = TrainConfig().to_dict()
+    defaults["arch"] = default_arch((old.get("arch") or {}).get("name", "msdlite")).to_dict()
+    old = _with_defaults(old, defaults)
     keys = sorted(set(old) | set(new))
     return [f"{k}: {old.get(k)!r} -> {new.get(k)!r}" for k in keys
             if k not in ("checkpoint_every",) and old.get(k) != new.get(k)]
@@ -263,7 +270,8 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
           config: TrainConfig | None = None, resume: bool = False, cache_dir: str | Path | None = None,
           checkpoint_file: str | Path | None = None, threads: int | None = None,
           init_weights: str | Path | None = None, device: str | torch.device = "cpu", prefetch: int = 0,
-          progress: Progress | None = None, log: Log | None = None) -> dict[str, Any]:
+          progress: Progress | None = None, log: Log | None = None,
+          on_eval: Callable[[list[dict[str, Any]]], None] | None = None) -> dict[str, Any]:
     """Train on a UAVid-layout folder, write the weights and their model card; returns the card.
 
     Parameters
@@ -297,6 +305,9 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
         ``progress(iterable, total=..., desc=...)`` wrapper (a progress bar).
     log : callable, optional
         Receives one-line messages.
+    on_eval : callable, optional
+        Receives the history (loss and validation figures so far) after each evaluation, e.g. to draw
+        the training curve.
     """
     config = config or TrainConfig()
     weights_path = Path(weights_path)
@@ -338,10 +349,17 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
     torch.manual_seed(config.seed)
     model = build_model(config.arch)
     parent = _warm_start(model, init_weights, config) if init_weights is not None else None
+    encoder_init = None
+    if parent is None and hasattr(model, "load_pretrained"):
+        say("loading the ImageNet weights of the encoder")
+        encoder_init = model.load_pretrained()
+    elif parent is not None:
+        encoder_init = parent.get("encoder_init")
     model.to(device)
     if init_weights is None and config.init_sha256 is not None:
         raise ValueError("config.init_sha256 is set but no init_weights were given")
-    optimizer = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
+    optimizer = torch.optim.AdamW(_param_groups(model, config), lr=config.lr, weight_decay=config.weight_decay)
+    early = list(model.early_parameters()) if hasattr(model, "early_parameters") else []
     scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, lambda s: _lr_factor(s, config))
     start_step, best_score, best_step = 0, -math.inf, None
     history: list[dict[str, Any]] = []
@@ -373,7 +391,8 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
             "not_used_augmentations": ["brightness", "fog", "motion_blur", "shifted_pixels", "dead_rows"],
             "loss": describe_loss(config.loss),
             "class_frequencies": [float(f) for f in freq], "class_weights": [float(w) for w in weights],
-            "torch_version": torch.__version__, "init": parent, "device": _device_name(device),
+            "torch_version": torch.__version__, "init": parent, "encoder_init": encoder_init,
+            "device": _device_name(device),
             "total_steps": config.steps + (parent["total_steps"] if parent else 0),
         }}
 
@@ -389,6 +408,8 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
         torch.manual_seed(int(np.random.default_rng([config.seed, 2, step]).integers(2**62)))  # dropout masks
         batches = tuple(None if b is None else (b[0].to(device, non_blocking=True), b[1].to(device, non_blocking=True))
                         for b in batches)
+        for p in early:  # the early encoder stays as pretrained for the first steps (a pure function of the step)
+            p.requires_grad_(step >= config.freeze_early_steps)
         loss = training_loss(model, batches, loss_weights, config.loss)
         if not torch.isfinite(loss):
             raise ValueError(f"training diverged at step {step}: loss is {float(loss)}")
@@ -421,6 +442,8 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
                         "data": data_ids["val"], "protocol": config.eval_protocol.to_dict(),
                         "step": done, **figures}})
             history.append(entry)
+            if on_eval is not None:
+                on_eval(history)
             say(" ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in entry.items()))
         if improved or done % config.checkpoint_every == 0 or last:
             checkpoint(done)
@@ -454,28 +477,39 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
     return card
 
 
+def _param_groups(model: torch.nn.Module, config: TrainConfig) -> list[dict[str, Any]]:
+    """Optimiser parameter groups: a pretrained encoder learns at ``encoder_lr_scale`` times the rate."""
+    if not hasattr(model, "encoder_parameters") or config.encoder_lr_scale == 1.0:
+        return [{"params": list(model.parameters())}]
+    encoder = {id(p) for p in model.encoder_parameters()}
+    rest = [p for p in model.parameters() if id(p) not in encoder]
+    return [{"params": list(model.encoder_parameters()), "lr": config.lr * config.encoder_lr_scale},
+            {"params": rest}]
+
+
 def _device_name(device: torch.device) -> str:
     if device.type == "cuda":
         return f"cuda ({torch.cuda.get_device_name(device)})"
     return device.type
 
 
-def _warm_start(model: MSDLite, init_weights: str | Path, config: TrainConfig) -> dict[str, Any]:
+def _warm_start(model: torch.nn.Module, init_weights: str | Path, config: TrainConfig) -> dict[str, Any]:
     """Load the parent weights into ``model``; returns the card's record of the parent."""
     parent, card = load_weights(init_weights)
     if card["weights_sha256"] != config.init_sha256:
         raise ValueError(f"{init_weights}: SHA-256 {card['weights_sha256']} is not the configured init_sha256 "
                          f"{config.init_sha256}")
-    if ArchConfig.from_dict(card["architecture"]) != config.arch:
+    if arch_from_dict(card["architecture"]) != config.arch:
         raise ValueError(f"{init_weights}: architecture {card['architecture']} differs from this run's "
                          f"{config.arch.to_dict()}")
     model.load_state_dict(parent.state_dict())
     training = card.get("training") or {}
     return {"path": str(init_weights), "weights_sha256": card["weights_sha256"],
-            "steps": training.get("steps"), "total_steps": training.get("total_steps", training.get("steps") or 0)}
+            "steps": training.get("steps"), "total_steps": training.get("total_steps", training.get("steps") or 0),
+            "encoder_init": training.get("encoder_init")}
 
 
-def init_untrained(arch: ArchConfig | None = None, seed: int = 0) -> MSDLite:
+def init_untrained(arch: AnyArch | None = None, seed: int = 0) -> torch.nn.Module:
     """A seeded, randomly initialised network (benchmarks and tests)."""
     torch.manual_seed(seed)
     return build_model(arch).eval()

@@ -19,7 +19,8 @@ from typing import Any
 import torch
 
 from el.hashing import sha256_bytes, sha256_file  # noqa: F401  (re-exported)
-from el.segmentation.model import MSDLite, build_model, count_parameters
+from el.segmentation.architectures import build_model
+from el.segmentation.model import count_parameters
 from el.uavid import atomic_write_bytes
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
@@ -55,7 +56,8 @@ def write_card(weights_path: str | Path, card: dict[str, Any]) -> Path:
     return path
 
 
-def save_weights(model: MSDLite, weights_path: str | Path, card: dict[str, Any] | None = None) -> dict[str, Any]:
+def save_weights(model: torch.nn.Module, weights_path: str | Path,
+                 card: dict[str, Any] | None = None) -> dict[str, Any]:
     """Write the weights file and its card; returns the card as written.
 
     The card gets ``format``, ``weights_file``, ``weights_sha256``, ``architecture`` and
@@ -99,7 +101,7 @@ def read_card(weights_path: str | Path) -> dict[str, Any]:
 
 
 def load_weights(weights_path: str | Path | None = None, *, device: str | torch.device = "cpu"
-                 ) -> tuple[MSDLite, dict[str, Any]]:
+                 ) -> tuple[torch.nn.Module, dict[str, Any]]:
     """Rebuild the network from a weights file after checking its SHA-256 against its card.
 
     Returns ``(model in eval mode, card)``. Raises WeightsError when the weights file or its card

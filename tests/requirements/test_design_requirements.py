@@ -10,7 +10,8 @@ from assurance import requirements as rq
 from el.config import CoreConfig
 from el.pipeline import EmergencyLanding, PipelineConfig
 from el.segmentation import Segmenter
-from el.segmentation.model import ArchConfig, build_model
+from el.segmentation.architectures import build_model
+from el.segmentation.model import ArchConfig
 from el.segmentation.weights import WeightsError, load_weights, save_weights
 
 
