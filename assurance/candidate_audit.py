@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from assurance.separation import disc_scores, separation
 from assurance.truth import disc_pixels
 from el.config import CoreConfig
 from el.core import run_core
@@ -28,13 +29,15 @@ __all__ = ["candidate_audit"]
 
 
 def candidate_audit(segmenter: Any, data_dir: str | Path, *, core: CoreConfig | None = None,
-                    progress: Progress | None = None) -> dict[str, Any]:
+                    progress: Progress | None = None, evidence: bool = True) -> dict[str, Any]:
     """Segment every clean scene of ``data_dir``, find the CM's candidates, count the truly unsafe ones.
 
     Returns the figures recorded in a model card's ``candidates`` section: images, candidates,
     unsafe candidates and their share, the share of images whose top-ranked candidate is unsafe,
     images without any candidate, and what makes the unsafe ones unsafe (the forbidden class holding
     most of each disc's forbidden pixels, and the median share of the disc that is forbidden).
+    With ``evidence``, also how well the LHD monitor's evidence (the HD patch of each candidate's
+    disc) separates unsafe from safe candidates (:mod:`assurance.separation`), under ``separation``.
     Deterministic for given weights, data and core configuration.
     """
     core = core or CoreConfig()
@@ -45,6 +48,7 @@ def candidate_audit(segmenter: Any, data_dir: str | Path, *, core: CoreConfig | 
     total = unsafe = top_unsafe = empty = 0
     by_class: Counter[str] = Counter()
     shares: list[float] = []
+    rows: list[dict[str, Any]] = []
     for s in items:
         rgb, ids = read_image(s.image_path), read_labels(s.label_path)
         if ids.shape != rgb.shape[:2]:
@@ -54,6 +58,8 @@ def candidate_audit(segmenter: Any, data_dir: str | Path, *, core: CoreConfig | 
         for c in result.candidates:
             cause = _unsafe_cause(disc_pixels(ids, c.disc))
             flags.append(cause is not None)
+            if evidence:
+                rows.append({"scene": s.key, "unsafe": cause is not None, **disc_scores(segmenter, rgb, c.disc)})
             if cause is not None:
                 by_class[cause[0]] += 1
                 shares.append(cause[1])
@@ -69,6 +75,7 @@ def candidate_audit(segmenter: Any, data_dir: str | Path, *, core: CoreConfig | 
         "unsafe_by_class": {name: by_class[name] for name in CLASS_NAMES if by_class[name]},
         "median_forbidden_share": float(np.median(shares)) if shares else None,
         "core": core.to_dict(),
+        **({"separation": separation(rows)} if evidence else {}),
     }
 
 

@@ -325,6 +325,8 @@ def test_train_and_model_card_cli(datasets, tmp_path, uav_el, capsys) -> None:
     assert card["baseline"]["miou"] is not None and "miou_gap_to_cnn" in card["baseline"]
     audit = card["candidates"]  # the core model's candidates on the clean validation scenes
     assert audit["images"] == 2 and 0 <= audit["unsafe"] <= audit["candidates"]
+    sep = audit["separation"]  # the LHD evidence's separation of unsafe from safe candidates
+    assert sep["candidates"] == audit["candidates"] and sep["unsafe"] == audit["unsafe"]
     assert "candidates:" in captured.out
 
     assert uav_el(["model-card", "--weights", str(out)]) == 0

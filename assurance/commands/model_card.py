@@ -112,6 +112,10 @@ def describe_audit(a: dict[str, Any]) -> str:
     if causes:
         text += ("; mostly " + ", ".join(f"{name} in {n}" for name, n in causes.items())
                  + f"; median forbidden share of an unsafe disc {_fmt(a.get('median_forbidden_share'))}")
+    if a.get("separation"):
+        from assurance.separation import describe_separation
+
+        text += "\n              separation: " + describe_separation(a["separation"])
     return text
 
 
@@ -142,6 +146,12 @@ def record_audit(path: Path, data: Path | None, threads: int | None, quiet: bool
     write_card(path, card)
     print(f"candidates: {describe_audit(result)}")
     return result
+
+
+def _auroc(audit_result: dict[str, Any]) -> float | None:
+    """The recorded separation AUROC, rounded (it is recomputed bit for bit, but JSON rounds floats)."""
+    sep = (audit_result.get("separation") or {}).get("scores", {}).get("max_forbidden_probability")
+    return None if not sep or sep["auroc"] is None else round(sep["auroc"], 9)
 
 
 def _reissue(path: Path, args: argparse.Namespace) -> int:
@@ -203,7 +213,8 @@ def run(args: argparse.Namespace) -> int:
     if recorded and result.ok:
         again = audit(path, args.data, args.threads, args.quiet)
         keys = ("images", "candidates", "unsafe", "images_without_candidate")
-        if all(again[k] == recorded[k] for k in keys):
+        same_evidence = _auroc(again) == _auroc(recorded) or _auroc(recorded) is None
+        if all(again[k] == recorded[k] for k in keys) and same_evidence:
             result.checks.append(f"candidate audit: {again['unsafe']} of {again['candidates']} unsafe, as recorded")
         else:
             result.problems.append("candidate audit: recorded " + ", ".join(f"{k}={recorded[k]}" for k in keys)
