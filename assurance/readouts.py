@@ -54,7 +54,8 @@ def init_run(run_dir: Path, manifest: dict[str, Any]) -> None:
         was, now = old.get("weights") or {}, manifest.get("weights") or {}
         flip = was.get("frame_flip", False if was.get("sha256") else None)  # None: no readable card then
         recorded = {"sha256": was.get("sha256"), "frame_flip": flip,
-                    "frame_scales": was.get("frame_scales", None if flip is None else [1.0])}
+                    "frame_scales": was.get("frame_scales", None if flip is None else [1.0]),
+                    "frame_pooling": was.get("frame_pooling", None if flip is None else "area")}
         for key, before in recorded.items():
             if key in now and before != now[key]:
                 raise RunError(f"{run_dir}: holds a campaign run with other weights (weights.{key}: {before} "

@@ -144,14 +144,19 @@ def test_other_campaign_in_same_folder_is_refused(tmp_path, data, weights):
 def test_runs_recorded_before_the_frame_keys_resume(tmp_path):
     """A manifest written before frame_flip / frame_scales existed resumes when nothing changed."""
     base = {"format": readouts.FORMAT_VERSION, "config": {"a": 1}, "data": {"sha256": "d"}}
-    for was, now in (({"sha256": "w"}, {"frame_flip": False, "frame_scales": [1.0]}),  # before both keys
-                     ({"sha256": "w", "frame_flip": None}, {"frame_flip": None, "frame_scales": None}),  # no card
-                     ({"sha256": "w", "frame_flip": False}, {"frame_flip": False, "frame_scales": [1.0]})):
+    area = {"frame_pooling": "area"}
+    for was, now in (({"sha256": "w"}, {"frame_flip": False, "frame_scales": [1.0], **area}),  # before the keys
+                     ({"sha256": "w", "frame_flip": None},
+                      {"frame_flip": None, "frame_scales": None, "frame_pooling": None}),  # no card
+                     ({"sha256": "w", "frame_flip": False}, {"frame_flip": False, "frame_scales": [1.0], **area})):
         run = tmp_path / f"run{len(list(tmp_path.iterdir()))}"
         readouts.init_run(run, {**base, "weights": was})
         readouts.init_run(run, {**base, "weights": {"sha256": "w", **now}})  # no RunError
         with pytest.raises(readouts.RunError, match="frame_scales"):
             readouts.init_run(run, {**base, "weights": {"sha256": "w", **now, "frame_scales": [1.25]}})
+        if now["frame_pooling"]:
+            with pytest.raises(readouts.RunError, match="frame_pooling"):
+                readouts.init_run(run, {**base, "weights": {"sha256": "w", **now, "frame_pooling": "conservative"}})
 
 
 def test_shared_grid_equals_single_configuration_runs(tmp_path, data, weights):

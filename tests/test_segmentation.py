@@ -161,14 +161,32 @@ def test_frame_scales_feed_the_working_frame_resized_and_average(model: nn.Modul
             Segmenter(model, frame_scales=bad)
 
 
+def test_conservative_frame_pooling_keeps_what_a_source_pixel_shows(model: nn.Module, seg: Segmenter) -> None:
+    from el.monitors.lhd import forbidden_pixels
+    from el.segmentation.pooling import downsample_probs
+
+    rgb = _rgb(36, 64, seed=7)
+    cons = Segmenter(model, working_width=64, frame_scales=(1.5,), frame_pooling="conservative")
+    big = seg.predict_patch(cv2.resize(rgb, (96, 54), interpolation=cv2.INTER_LINEAR))
+    got = cons.predict_frame(rgb)
+    np.testing.assert_allclose(got, downsample_probs(big, (64, 36), "conservative"), atol=1e-6)
+    area = Segmenter(model, working_width=64, frame_scales=(1.5,)).predict_frame(rgb)
+    assert forbidden_pixels(got).sum() >= forbidden_pixels(area).sum()
+    assert (forbidden_pixels(got) | ~forbidden_pixels(area)).all()  # area's forbidden pixels stay forbidden
+    with pytest.raises(ValueError, match="frame_pooling"):
+        Segmenter(model, frame_pooling="max")
+
+
 def test_load_follows_the_cards_way_of_segmenting_frames(tmp_path, model: nn.Module) -> None:
     path = tmp_path / "model.pt"
-    save_weights(model, path, card={"evaluation": {"protocol": {"frame_flip": True, "frame_scales": [1, 1.25]}}})
+    save_weights(model, path, card={"evaluation": {"protocol": {"frame_flip": True, "frame_scales": [1, 1.25],
+                                                                "frame_pooling": "conservative"}}})
     loaded = Segmenter.load(path)
     assert loaded.frame_flip is True and loaded.frame_scales == (1.0, 1.25)
+    assert loaded.frame_pooling == "conservative"
     save_weights(model, path, card={"evaluation": {"protocol": {"working_width": 1024}}})  # an older card
     loaded = Segmenter.load(path)
-    assert loaded.frame_flip is False and loaded.frame_scales == (1.0,)
+    assert loaded.frame_flip is False and loaded.frame_scales == (1.0,) and loaded.frame_pooling == "area"
     save_weights(model, path, card={"evaluation": {"protocol": {"frame_scales": [9]}}})
     with pytest.raises(ValueError, match="frame_scales"):
         Segmenter.load(path)

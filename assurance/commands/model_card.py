@@ -34,6 +34,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="with --reissue: feed the working-resolution frame to the network resized by these "
                              "factors (e.g. 1.25, or 1,1.25) and average the softmax; recorded in the card, which the "
                              "flight code follows")
+    parser.add_argument("--frame-pooling", choices=("area", "conservative"),
+                        help="with --reissue: how a softmax of a frame fed at x>1 comes back to the working "
+                             "resolution: area (footprint mean) or conservative (keeps any forbidden class a source "
+                             "pixel shows); recorded in the card, which the flight code follows")
     parser.add_argument("--hd-patches", type=int, metavar="N",
                         help="with --reissue: HD validation patches per frame (default: as recorded in the card)")
     parser.add_argument("--tolerance", type=float, default=0.002, help="IoU tolerance of --verify (default 0.002)")
@@ -98,7 +102,8 @@ def describe_frames(protocol: dict[str, Any]) -> str:
     scales, parts = list(read.frame_scales), []
     if scales != [1.0]:
         parts.append("fed to the network at x" + ", x".join(f"{s:g}" for s in scales)
-                     + (", softmax averaged" if len(scales) > 1 else ", softmax brought back"))
+                     + (", softmax averaged" if len(scales) > 1 else ", softmax brought back")
+                     + (" conservatively" if read.frame_pooling == "conservative" else ""))
     if read.frame_flip:
         parts.append("mean of the frame and its mirror image")
     return f" ({'; '.join(parts)})" if parts else ""
@@ -166,7 +171,8 @@ def _reissue(path: Path, args: argparse.Namespace) -> int:
         flip = None if args.frame_flip is None else args.frame_flip == "on"
         card = reissue_card(path, val_dir=args.data, train_dir=args.train, threads=args.threads,
                             progress=functools.partial(progress, enabled=not args.quiet), frame_flip=flip,
-                            hd_patches=args.hd_patches, frame_scales=args.frame_scales)
+                            hd_patches=args.hd_patches, frame_scales=args.frame_scales,
+                            frame_pooling=args.frame_pooling)
     except ValueError as exc:
         raise CommandError(str(exc)) from exc
     ev, before = card["evaluation"], card["evaluation"]["reissued"]
@@ -186,7 +192,7 @@ def run(args: argparse.Namespace) -> int:
 
     path = args.weights or DEFAULT_WEIGHTS
     for given, flag in ((args.frame_flip, "--frame-flip"), (args.hd_patches, "--hd-patches"),
-                        (args.frame_scales, "--frame-scales")):
+                        (args.frame_scales, "--frame-scales"), (args.frame_pooling, "--frame-pooling")):
         if given is not None and not args.reissue:
             from assurance.cli import CommandError
 

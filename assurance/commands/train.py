@@ -102,6 +102,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--frame-scales", type=frame_scales, default=(1.0,), metavar="S[,S...]",
                         help="evaluate (and so deploy) frames fed to the network resized by these factors, softmax "
                              "averaged at the working resolution (default 1: the frame as it is)")
+    parser.add_argument("--frame-pooling", choices=("area", "conservative"), default="area",
+                        help="with --frame-scales above 1: bring the softmax back by footprint mean (area, default) "
+                             "or keeping any forbidden class a source pixel shows (conservative)")
     parser.add_argument("--cache-dir", type=Path, help="prepared-data cache (default ~/.cache/uav-el/segmentation)")
     parser.add_argument("--no-cache", action="store_true", help="do not cache prepared data")
     parser.add_argument("--no-baseline", action="store_true", help="skip the per-pixel baseline")
@@ -163,7 +166,7 @@ def run(args: argparse.Namespace) -> int:
             arch=arch_from_dict(arch_kwargs), baseline_pixels=0 if args.no_baseline else 200_000,
             eval_protocol=EvalProtocol(working_width=args.working_width, hd_patch_size=args.hd_eval_size,
                                        hd_patches=args.hd_eval_patches, frame_flip=args.frame_flip,
-                                       frame_scales=args.frame_scales),
+                                       frame_scales=args.frame_scales, frame_pooling=args.frame_pooling),
             init_sha256=init_sha, loss=args.loss, encoder_lr_scale=args.encoder_lr_scale,
             freeze_early_steps=args.freeze_early_steps,
         )

@@ -122,15 +122,17 @@ def _refit_baseline(train_manifest: D.Manifest, val_set: list[D.Prepared], param
 def reissue_card(weights_path: str | Path | None = None, *, val_dir: str | Path, train_dir: str | Path | None = None,
                  threads: int | None = None, progress: Callable[..., Iterable] | None = None,
                  frame_flip: bool | None = None, hd_patches: int | None = None,
-                 frame_scales: Sequence[float] | None = None) -> dict[str, Any]:
+                 frame_scales: Sequence[float] | None = None,
+                 frame_pooling: str | None = None) -> dict[str, Any]:
     """Recompute the card's evaluation (and, with ``train_dir``, the baseline) on these folders; write it.
 
     The training record (what the network was trained and selected on) is kept; the evaluation names
     the data it was computed on and keeps the figures it replaces under ``reissued``. ``frame_flip``
     (None: as recorded) changes how frames are segmented, in the figures and in deployment, since
     :meth:`Segmenter.load` follows the card's protocol, and so does ``frame_scales`` (None: as
-    recorded; the sizes the working frame is fed at); ``hd_patches`` (None: as recorded) sets the HD
-    validation patches per frame (more patches: a steadier HD figure). Returns the card.
+    recorded; the sizes the working frame is fed at) and ``frame_pooling`` (how their softmax comes
+    back); ``hd_patches`` (None: as recorded) sets the HD validation patches per frame (more patches:
+    a steadier HD figure). Returns the card.
     """
     path = Path(weights_path) if weights_path is not None else DEFAULT_WEIGHTS
     model, card = load_weights(path)
@@ -145,6 +147,8 @@ def reissue_card(weights_path: str | Path | None = None, *, val_dir: str | Path,
         protocol = replace(protocol, hd_patches=int(hd_patches))
     if frame_scales is not None:
         protocol = replace(protocol, frame_scales=frame_scales)
+    if frame_pooling is not None:
+        protocol = replace(protocol, frame_pooling=frame_pooling)
     manifest = D.dataset_manifest(val_dir, threads=workers)
     val_set, figures = _evaluate_on(model, card, manifest, protocol, threads, workers, progress)
     previous = {"data": old.get("data"), "protocol": old["protocol"],

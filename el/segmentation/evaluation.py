@@ -15,6 +15,7 @@ import numpy as np
 
 from el.labels import CLASS_NAMES, NUM_CLASSES
 from el.segmentation.data import Prepared, PrepParams
+from el.segmentation.pooling import check_pooling
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -29,6 +30,10 @@ class EvalProtocol:
     these factors (1.25: 1280x720 for 1024x576) and the softmax, brought back to the working
     resolution, averaged over them. Only the working-resolution image is used: an upsampled input
     gives the network's stride-4 logits a finer grid, which small objects (people, cars) need.
+
+    ``frame_pooling``: how such a softmax comes back to the working resolution: ``area`` (mean over
+    each working pixel's footprint) or ``conservative`` (no forbidden class that a source pixel shows
+    is lost; :mod:`el.segmentation.pooling`).
     """
 
     working_width: int = 1024
@@ -37,6 +42,7 @@ class EvalProtocol:
     seed: int = 12345
     frame_flip: bool = False
     frame_scales: tuple[float, ...] = (1.0,)
+    frame_pooling: str = "area"
 
     def __post_init__(self) -> None:
         if self.working_width < 16 or self.hd_patches < 0 or self.hd_patch_size < 16:
@@ -44,6 +50,7 @@ class EvalProtocol:
         if not isinstance(self.frame_flip, bool):
             raise ValueError(f"frame_flip must be true or false, got {self.frame_flip!r}")
         object.__setattr__(self, "frame_scales", check_frame_scales(self.frame_scales))
+        check_pooling(self.frame_pooling)
 
     def prep_params(self) -> PrepParams:
         return PrepParams(working_width=self.working_width, regions=self.hd_patches,
@@ -54,7 +61,8 @@ class EvalProtocol:
 
     def frame_options(self) -> dict[str, Any]:
         """How frames are segmented, as :class:`~el.segmentation.inference.Segmenter` keywords (JSON-ready)."""
-        return {"frame_flip": self.frame_flip, "frame_scales": list(self.frame_scales)}
+        return {"frame_flip": self.frame_flip, "frame_scales": list(self.frame_scales),
+                "frame_pooling": self.frame_pooling}
 
     def segmenter(self, model: Any, **kwargs: Any) -> Any:
         """A :class:`~el.segmentation.inference.Segmenter` that segments frames as this protocol says."""
@@ -75,7 +83,7 @@ class EvalProtocol:
 
 
 MAX_FRAME_SCALE = 2.0
-FRAME_OPTIONS = ("frame_flip", "frame_scales")  # the protocol's keys that deployment follows too
+FRAME_OPTIONS = ("frame_flip", "frame_scales", "frame_pooling")  # the protocol's keys that deployment follows too
 
 
 def check_frame_scales(scales: Any) -> tuple[float, ...]:

@@ -47,6 +47,7 @@ from el.camera import working_size
 from el.labels import NUM_CLASSES
 from el.segmentation.evaluation import card_protocol, check_frame_scales
 from el.segmentation.model import MCDropout, upsample_logits
+from el.segmentation.pooling import check_pooling, downsample_probs
 from el.segmentation.weights import load_weights
 
 MIN_SIZE = 16  # smallest patch side (px) a Segmenter accepts
@@ -150,6 +151,9 @@ class Segmenter:
         Factors (1 to 2) by which the frame at the working resolution is enlarged before the network (bilinear);
         each softmax is brought back to the working resolution (area averaging) and they are averaged.
         ``(1.0,)``: the frame as it is. Like ``frame_flip``, :meth:`load` takes it from the card.
+    frame_pooling : str
+        How such a softmax comes back to the working resolution: ``"area"`` (footprint mean) or
+        ``"conservative"`` (a forbidden class any source pixel shows is kept, :mod:`el.segmentation.pooling`).
 
     Examples
     --------
@@ -163,7 +167,7 @@ class Segmenter:
 
     def __init__(self, model: nn.Module, *, threads: int | None = None, device: str | torch.device = "cpu",
                  card: dict[str, Any] | None = None, working_width: int = 1024, frame_flip: bool = False,
-                 frame_scales: Sequence[float] = (1.0,)) -> None:
+                 frame_scales: Sequence[float] = (1.0,), frame_pooling: str = "area") -> None:
         if not isinstance(model, nn.Module):
             raise ValueError(f"model must be a torch.nn.Module, got {type(model).__name__}")
         if threads is not None:
@@ -180,6 +184,7 @@ class Segmenter:
             raise ValueError(f"frame_flip must be true or false, got {frame_flip!r}")
         self.frame_flip = frame_flip
         self.frame_scales = check_frame_scales(frame_scales)
+        self.frame_pooling = check_pooling(frame_pooling)
         self.fast_mc = bool(getattr(model, "supports_mc_spec", False)
                             and all(callable(getattr(model, a, None)) for a in ("trunk", "head", "mc_spec")))
         self._lock = threading.Lock()  # the fallback MC path mutates dropout modules
@@ -268,8 +273,8 @@ class Segmenter:
         else:
             pair = self._predict([view, np.ascontiguousarray(view[:, ::-1])], "frame")
             probs = 0.5 * (pair[0] + pair[1][:, :, ::-1])
-        if size != (w, h):  # back to the working resolution: each pixel the mean over its footprint
-            probs = np.stack([cv2.resize(c, (w, h), interpolation=cv2.INTER_AREA) for c in probs])
+        if size != (w, h):  # back to the working resolution, over each pixel's footprint
+            probs = downsample_probs(probs, (w, h), self.frame_pooling)
         return np.ascontiguousarray(probs, dtype=np.float32)
 
     def predict_patch(self, rgb_patch: np.ndarray, *, features: Any = None) -> np.ndarray:
