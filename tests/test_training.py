@@ -227,6 +227,24 @@ def test_resume_continues_and_matches_an_uninterrupted_run(datasets, tmp_path) -
     assert card_full["training"]["steps"] == config.steps
 
 
+def test_stop_at_cuts_a_run_short_on_the_same_schedule(datasets, tmp_path) -> None:
+    train_dir, val_dir = datasets
+    config = tiny_config(baseline_pixels=0, eval_every=2)
+    full = tmp_path / "full" / "model.pt"
+    train(train_dir, full, val_dir=val_dir, config=config)
+    cut = tmp_path / "cut" / "model.pt"
+    card = train(train_dir, cut, val_dir=val_dir, config=config, stop_at=4)
+    assert card["training"]["stopped_at"] == 4 and card["training"]["history"][-1]["step"] == 4
+    assert load_checkpoint(checkpoint_path(cut))["step"] == 4
+    full_ckpt = load_checkpoint(checkpoint_path(full))  # the first 4 steps are those of the full run
+    cut_losses = [h["loss"] for h in card["training"]["history"]]
+    assert [h["loss"] for h in full_ckpt["history"][:2]] == pytest.approx(cut_losses)
+    with pytest.raises(ValueError, match="stop_at"):
+        train(train_dir, tmp_path / "bad" / "model.pt", val_dir=val_dir, config=config, stop_at=config.steps + 1)
+    card = train(train_dir, cut, val_dir=val_dir, config=config, resume=True)  # and then to the end
+    assert card["training"]["stopped_at"] is None and load_checkpoint(checkpoint_path(cut))["step"] == config.steps
+
+
 def test_prefetched_batches_arrive_in_step_order_and_do_not_change_training(datasets, tmp_path) -> None:
     assert list(prefetched(lambda s: s * s, range(3, 40), workers=3, depth=6)) == [s * s for s in range(3, 40)]
     assert list(prefetched(lambda s: s + 1, range(5), workers=0, depth=0)) == [1, 2, 3, 4, 5]

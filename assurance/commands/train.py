@@ -56,6 +56,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     length = parser.add_mutually_exclusive_group()
     length.add_argument("--steps", type=int, help="optimisation steps (default 1500)")
     length.add_argument("--epochs", type=int, help="passes over the training images (ceil(images / batch) steps each)")
+    parser.add_argument("--stop-at", type=int, metavar="STEP",
+                        help="end the run after this step (evaluated, card completed) while keeping the learning-rate "
+                             "schedule of --steps: to cut a run short, resume it with --resume --stop-at STEP")
     parser.add_argument("--seed", type=int, default=0, help="seed of everything random (default 0)")
     parser.add_argument("--resume", action="store_true", help="continue from the checkpoint")
     parser.add_argument("--init", type=Path, metavar="WEIGHTS",
@@ -178,7 +181,7 @@ def run(args: argparse.Namespace) -> int:
     bar = functools.partial(progress, enabled=not args.quiet)
     card = train(args.data, args.out, val_dir=args.val, config=config, resume=args.resume, cache_dir=cache_dir,
                  checkpoint_file=args.checkpoint, threads=args.threads, init_weights=args.init, device=device,
-                 prefetch=prefetch, progress=bar, log=log,
+                 prefetch=prefetch, progress=bar, log=log, stop_at=args.stop_at,
                  on_eval=lambda history: write_training_curve(history, curve_path(args.out)))
     training = card["training"]
     print(f"weights: {args.out} (sha256 {card['weights_sha256']})")

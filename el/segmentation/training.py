@@ -270,6 +270,7 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
           config: TrainConfig | None = None, resume: bool = False, cache_dir: str | Path | None = None,
           checkpoint_file: str | Path | None = None, threads: int | None = None,
           init_weights: str | Path | None = None, device: str | torch.device = "cpu", prefetch: int = 0,
+          stop_at: int | None = None,
           progress: Progress | None = None, log: Log | None = None,
           on_eval: Callable[[list[dict[str, Any]]], None] | None = None) -> dict[str, Any]:
     """Train on a UAVid-layout folder, write the weights and their model card; returns the card.
@@ -298,6 +299,10 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
         Where the optimisation runs (``"cpu"``, ``"cuda"``...). Model selection evaluates there; the
         card's figures are then recomputed on the CPU, where the flight code runs, so that
         ``uav-el model-card --verify`` reproduces them.
+    stop_at : int, optional
+        End the run after this step, evaluating and completing the card there, with the learning-rate
+        schedule still that of ``config.steps`` (a run cut short to fit a time budget; the card
+        records ``stopped_at``). Not part of the configuration, so a run can be resumed with it.
     prefetch : int
         Threads that draw the next steps' mini-batches while the current one trains (0: none). The
         batches are a pure function of ``(seed, step)``, so this changes speed only.
@@ -393,12 +398,17 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
             "class_frequencies": [float(f) for f in freq], "class_weights": [float(w) for w in weights],
             "torch_version": torch.__version__, "init": parent, "encoder_init": encoder_init,
             "device": _device_name(device),
-            "total_steps": config.steps + (parent["total_steps"] if parent else 0),
+            "total_steps": end + (parent["total_steps"] if parent else 0),
         }}
 
     interval = config.evaluation_interval
     window: list[float] = []
-    steps = range(start_step, config.steps)
+    end = config.steps if stop_at is None else int(stop_at)
+    if not 0 < end <= config.steps:
+        raise ValueError(f"stop_at must lie in 1..{config.steps}, got {stop_at!r}")
+    if start_step >= end and start_step < config.steps:
+        raise ValueError(f"{ckpt_path}: the checkpoint is at step {start_step}, past stop_at {end}")
+    steps = range(start_step, end)
     iterator = progress(steps, total=len(steps), desc="train") if progress is not None else steps
     draws = prefetched(lambda s: sample_batch(train_set, config, s), steps, workers=prefetch, depth=2 * prefetch)
     loss_weights = weights.to(device)
@@ -421,7 +431,7 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
         train_seconds += time.perf_counter() - tick
         window.append(loss.item())
         done = step + 1
-        last = done == config.steps
+        last = done == end
         improved = False
         if done % interval == 0 or last:
             entry: dict[str, Any] = {"step": done, "loss": float(np.mean(window)),
@@ -460,7 +470,8 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
             card["evaluation"]["selection_device"] = _device_name(device)
     card["training"].update({
         "best_step": best_step, "history": history, "train_seconds": round(train_seconds, 1),
-        "seconds_per_step": round(train_seconds / max(1, config.steps), 3),
+        "seconds_per_step": round(train_seconds / max(1, end), 3),
+        "stopped_at": end if end < config.steps else None,
         "prepare_seconds": round(prep_seconds, 1), "threads": torch.get_num_threads(),
         "parameters": count_parameters(model),
     })
