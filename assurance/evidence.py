@@ -1,4 +1,4 @@
-"""The evidence report (DESIGN section 8): what was assessed, against which requirements, with what result.
+"""The evidence report (docs/architecture.md 4.7): what was assessed, against which requirements, with what result.
 
 ``generate(run, out, ...)`` reads a campaign run (manifest, readouts, results table), the requirement
 registry and the requirement results of a test session (``pytest -m requirements --run RUN``, JSON

@@ -1,4 +1,4 @@
-"""Image perturbations for the evaluation scenarios (DESIGN section 7).
+"""Image perturbations for the evaluation scenarios (docs/architecture.md section 4.1).
 
 One plain function per perturbation, all with the same signature::
 
@@ -30,7 +30,7 @@ Extras beyond the paper's six: ``gaussian_noise`` (imagecorruptions' table).
 point.
 
 Deliberate differences from the authors' code (each documented at its function): the shift
-offsets include the upper bound 10 (their ``randint(0, 10)`` stops at 9; DESIGN says [0, 10]);
+offsets include the upper bound 10 (their ``randint(0, 10)`` stops at 9; section 4.1 of the architecture says [0, 10]);
 the motion-blur kernel is a true (k, 1) column, where their even-sized (30, 30) kernel with its
 line in column 14 (anchor 15) also shifted the image one pixel to the right; results are
 rounded, not truncated, to ``uint8``; fog follows imagecorruptions (the authors' copy pads the

@@ -1,4 +1,4 @@
-"""pytest plugin: the ``requirements`` marker that ties tests to safety requirements (DESIGN section 8).
+"""pytest plugin: the ``requirements`` marker that ties tests to safety requirements (docs/architecture.md section 4.6).
 
 Registered with the ``pytest11`` entry point ``uav_el_requirements``, so every pytest run of the
 project has it.

@@ -1,4 +1,4 @@
-"""Ground truth for readouts: the true hazard of a landing disc from full-resolution labels (DESIGN 7).
+"""Ground truth for readouts: the true hazard of a landing disc from full-resolution labels (docs/architecture.md 4.3).
 
 True hazard of a disc: 1 if any forbidden ground-truth pixel lies in it, else
 ``(1 - kappa) * H_s_true`` with ``H_s_true`` the class shares in the disc weighted by the hazard

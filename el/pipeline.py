@@ -1,4 +1,4 @@
-"""The monitored emergency-landing decision loop (DESIGN sections 5-6): the function a flight computer calls.
+"""The monitored emergency-landing decision loop (docs/architecture.md section 3): the function a flight computer calls.
 
 image -> segmentation (working resolution) -> CM candidates ranked by hazard -> runtime monitor on the
 HD image, candidate by candidate -> the first accepted candidate, else the default action (parachute).

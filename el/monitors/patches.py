@@ -28,7 +28,7 @@ class Patch:
         The crop, downscaled when its side exceeded ``max_side``.
     disc_mask : ndarray of shape (h, w), bool
         Patch pixels in the disc. After a downscale, a patch pixel is in the disc when any
-        full-resolution pixel under it is (conservative pooling, as in DESIGN section 5).
+        full-resolution pixel under it is (conservative pooling, as in docs/architecture.md section 3.3).
     scale : float
         Patch pixels per full-resolution pixel (1.0 without downscale, < 1 with).
     offset : tuple of int

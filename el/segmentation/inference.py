@@ -1,7 +1,7 @@
 """Segmentation inference: softmax maps for working-resolution frames and full-resolution patches.
 
 The one class here, :class:`Segmenter`, wraps any segmentation network and gives the core model
-and the runtime monitors what they need (DESIGN sections 5.1 and 6):
+and the runtime monitors what they need (docs/architecture.md sections 3.2 and 3.6):
 
 - :meth:`Segmenter.predict_frame`: the HD frame resized (``cv2.INTER_AREA``) to the working
   resolution of :func:`el.camera.working_size` -> softmax (8, h, w); with ``frame_flip`` the mean
