@@ -55,6 +55,8 @@ from typing import TypeVar
 import cv2
 import numpy as np
 
+from el.rgb import check_rgb
+
 __all__ = [
     "PAPER_PERTURBATIONS",
     "PERTURBATIONS",
@@ -85,12 +87,7 @@ def _level(table: Sequence[_T], severity: int) -> _T:
 
 
 def _check_image(image: np.ndarray) -> None:
-    if not isinstance(image, np.ndarray):
-        raise ValueError(f"image must be a numpy array, got {type(image).__name__}")
-    if image.dtype != np.uint8:
-        raise ValueError(f"image must have dtype uint8, got {image.dtype}")
-    if image.ndim != 3 or image.shape[2] != 3 or image.shape[0] < 1 or image.shape[1] < 1:
-        raise ValueError(f"image must have shape (H, W, 3) with H, W >= 1, got {image.shape}")
+    check_rgb(image, "image")
 
 
 # --------------------------------------------------------------------------------------------
