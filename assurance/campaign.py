@@ -1,4 +1,4 @@
-"""Evaluation campaigns (DESIGN section 7): perturbation x image tasks, every monitor configuration per task.
+"""Evaluation campaigns (docs/architecture.md 4.2): perturbation x image tasks, every monitor configuration per task.
 
 One task = one (perturbation, severity, image). It perturbs the HD frame (seeded per image), segments
 it and finds the CM's candidates **once**, then judges every candidate with every monitor

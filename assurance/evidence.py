@@ -1,11 +1,11 @@
-"""The evidence report (DESIGN section 8): what was assessed, against which requirements, with what result.
+"""The evidence report (docs/architecture.md 4.7): what was assessed, against which requirements, with what result.
 
 ``generate(run, out, ...)`` reads a campaign run (manifest, readouts, results table), the requirement
 registry and the requirement results of a test session (``pytest -m requirements --run RUN``, JSON
 written by ``assurance.pytest_plugin``), and writes into ``out``:
 
 - ``evidence.html``: self-contained (CSS inline, images as data URIs), rendered from the Jinja2
-  templates in ``evidence_templates/`` (autoescape on, undefined variables are errors);
+  templates in ``assurance/templates/`` (autoescape on, undefined variables are errors);
 - ``evidence.pdf``: the same HTML through WeasyPrint (skipped with a clear message if it is missing);
 - ``evidence.json``: identity, requirement states, campaign checks and the results table, for tools;
 - ``results.csv``: the results table the report shows; ``SHA256SUMS``: the hashes of these files.
@@ -40,7 +40,7 @@ from el.hashing import sha256_file
 
 EVIDENCE_FORMAT = "uav-el-evidence/1"
 ROOT = Path(__file__).resolve().parent.parent
-TEMPLATES_DIR = ROOT / "evidence_templates"
+TEMPLATES_DIR = Path(__file__).resolve().parent / "templates"  # package data: found by an installed wheel too
 TEMPLATE = "report.html.j2"
 PDF_HINT = ("install WeasyPrint (`pip install weasyprint`, or `pip install -e '.[pdf]'`) and the Pango "
             "library it needs (Debian/Ubuntu: `apt-get install libpango-1.0-0 libpangoft2-1.0-0`)")

@@ -1,6 +1,6 @@
 """Evaluation metrics: monitor classification figures, safety gains, and their uncertainty.
 
-DESIGN section 7. Metrics live apart from the monitors (pytorch-ood's pattern): the campaign
+docs/architecture.md sections 4.4-4.5. Metrics live apart from the monitors (pytorch-ood's pattern): the campaign
 feeds per-image readouts to a ``ScenarioMetrics`` accumulator and reads one dict with fixed
 keys (``RESULT_COLUMNS``, the CSV columns of the results table).
 
@@ -92,7 +92,7 @@ RESULT_COLUMNS: tuple[str, ...] = (
     *CI_METRICS,  # the figures, in the paper's Table I order
     "unsafe_landing_ub95",
 ) + tuple(f"{name}_{side}95" for name in CI_METRICS for side in ("lo", "hi"))
-"""The CSV columns of the results table (DESIGN section 7), the keys of ``ScenarioMetrics.compute``."""
+"""The CSV columns of the results table (docs/architecture.md section 4.5), the keys of ``ScenarioMetrics.compute``."""
 
 
 # --------------------------------------------------------------------------------------------

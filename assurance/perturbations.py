@@ -1,4 +1,4 @@
-"""Image perturbations for the evaluation scenarios (DESIGN section 7).
+"""Image perturbations for the evaluation scenarios (docs/architecture.md section 4.1).
 
 One plain function per perturbation, all with the same signature::
 
@@ -30,7 +30,7 @@ Extras beyond the paper's six: ``gaussian_noise`` (imagecorruptions' table).
 point.
 
 Deliberate differences from the authors' code (each documented at its function): the shift
-offsets include the upper bound 10 (their ``randint(0, 10)`` stops at 9; DESIGN says [0, 10]);
+offsets include the upper bound 10 (their ``randint(0, 10)`` stops at 9; section 4.1 of the architecture says [0, 10]);
 the motion-blur kernel is a true (k, 1) column, where their even-sized (30, 30) kernel with its
 line in column 14 (anchor 15) also shifted the image one pixel to the right; results are
 rounded, not truncated, to ``uint8``; fog follows imagecorruptions (the authors' copy pads the
@@ -54,6 +54,8 @@ from typing import TypeVar
 
 import cv2
 import numpy as np
+
+from el.rgb import check_rgb
 
 __all__ = [
     "PAPER_PERTURBATIONS",
@@ -85,12 +87,7 @@ def _level(table: Sequence[_T], severity: int) -> _T:
 
 
 def _check_image(image: np.ndarray) -> None:
-    if not isinstance(image, np.ndarray):
-        raise ValueError(f"image must be a numpy array, got {type(image).__name__}")
-    if image.dtype != np.uint8:
-        raise ValueError(f"image must have dtype uint8, got {image.dtype}")
-    if image.ndim != 3 or image.shape[2] != 3 or image.shape[0] < 1 or image.shape[1] < 1:
-        raise ValueError(f"image must have shape (H, W, 3) with H, W >= 1, got {image.shape}")
+    check_rgb(image, "image")
 
 
 # --------------------------------------------------------------------------------------------

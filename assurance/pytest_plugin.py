@@ -1,4 +1,4 @@
-"""pytest plugin: the ``requirements`` marker that ties tests to safety requirements (DESIGN section 8).
+"""pytest plugin: the ``requirements`` marker that ties tests to safety requirements (docs/architecture.md section 4.6).
 
 Registered with the ``pytest11`` entry point ``uav_el_requirements``, so every pytest run of the
 project has it.
@@ -51,7 +51,7 @@ def pytest_addoption(parser: pytest.Parser) -> None:
                          f"(default with -m requirements: {DEFAULT_REPORT} under the rootdir)")
     group.addoption("--requirements-registry", metavar="PATH", default=None,
                     help="requirement registry to check marker ids against (default: assurance/requirements.yaml)")
-    group.addoption("--run", dest="uav_el_run", metavar="RUN", default=None,
+    group.addoption("--uav-el-run", dest="uav_el_run", metavar="RUN", default=None,
                     help="campaign run folder for the campaign requirement tests "
                          "(default: $UAV_EL_RUN, else runs/demo under the rootdir)")
 

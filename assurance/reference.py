@@ -43,7 +43,7 @@ __all__ = [
 
 REFERENCE_CSV = "guerin2022_results.csv"
 REFERENCE_IMAGES = 70  # UAVid validation images per scenario (paper, Table I caption)
-REFERENCE_SEVERITY = 3  # the paper's settings are our severity 3 (DESIGN section 7)
+REFERENCE_SEVERITY = 3  # the paper's settings are our severity 3 (docs/architecture.md section 4.1)
 
 PERTURBATION_NAMES: dict[str, str] = {
     "None": "none",

@@ -1,6 +1,6 @@
 """Safety requirements: the registry, the three verification states, and the campaign checks.
 
-DESIGN section 8. The registry (``assurance/requirements.yaml``) lists every requirement with its
+docs/architecture.md section 4.6. The registry (``assurance/requirements.yaml``) lists every requirement with its
 id, title, text, source, rationale, verification method, acceptance criterion and operating domain;
 ``load_registry`` validates it (unique ids, required fields, known sources) and raises
 ``RegistryError`` naming the file and the entry.
@@ -69,7 +69,7 @@ STATES: tuple[str, ...] = (VERIFIED, FAILED, NOT_VERIFIED)
 REGISTRY_FORMAT = "uav-el-requirements/1"
 RESULTS_FORMAT = "uav-el-requirement-results/1"
 KNOWN_SOURCES: tuple[str, ...] = ("SORA", "SSIV21", "ICRA22", "PROJECT")
-"""The only sources a requirement may cite (DESIGN section 8: never invent a citation)."""
+"""The only sources a requirement may cite (docs/architecture.md section 4.6: never invent a citation)."""
 
 _ID = re.compile(r"^EL-R\d{2,3}$")
 _FIELDS: tuple[str, ...] = ("id", "title", "text", "source", "rationale", "verification", "acceptance", "domain")
@@ -87,7 +87,7 @@ TIMING_COLUMNS: frozenset[str] = frozenset({
     "read_s", "perturb_s", "segmentation_s", "candidates_s", "monitoring_s", "total_s", "overhead_s", "seconds",
     "overhead_s_lo95", "overhead_s_hi95",
 })
-"""Readout and table columns that may differ between two runs of the same campaign (DESIGN section 7)."""
+"""Readout and table columns that may differ between two runs of the same campaign (docs/architecture.md 4.2)."""
 
 
 # ------------------------------------------------------------------------------------------------

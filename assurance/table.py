@@ -1,4 +1,4 @@
-"""The results table of a campaign run (DESIGN section 7; the paper's Table I layout).
+"""The results table of a campaign run (docs/architecture.md section 4.5; the paper's Table I layout).
 
 ``results_table(run)`` turns the readouts store into one row per (perturbation, severity, monitor)
 with the CSV columns of ``assurance.metrics.RESULT_COLUMNS`` (plus ``faults``: images whose

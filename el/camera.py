@@ -1,6 +1,6 @@
 """Pinhole camera over a flat ground plane: pixel footprints, safety radius in pixels, pixel <-> ground.
 
-DESIGN section 4. World frame: origin on the ground below the camera, x to the right of the
+docs/architecture.md section 2.2. World frame: origin on the ground below the camera, x to the right of the
 image, y forward (the direction the camera looks), z up. Image rows count from the top,
 columns from the left; pixel centres sit at half-integers of the sensor grid.
 """

@@ -1,4 +1,4 @@
-"""Landing candidates from a segmentation at working resolution (DESIGN section 5, steps 2-3).
+"""Landing candidates from a segmentation at working resolution (docs/architecture.md sections 3.3-3.4).
 
 Pipeline (all at working resolution, pixel indices (row, col); pixel (i, j) covers the square
 [j, j+1) x [i, i+1) and its centre is (j + 0.5, i + 0.5)):

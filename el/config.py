@@ -1,4 +1,4 @@
-"""Configuration of the core model (CM): valid pixels, regions, representatives, ranking (DESIGN 4-5).
+"""Configuration of the core model (CM): valid pixels, regions, representatives, ranking (docs/architecture.md 2-3).
 
 One frozen keyword-only dataclass, validated when it is built: a bad value raises a ValueError
 that names the parameter, the value and the allowed range, before any image is processed.

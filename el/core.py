@@ -2,7 +2,7 @@
 
 ``run_core`` takes the softmax of the segmentation at working resolution, (8, h, w) float, and
 returns the candidates in **full-resolution** pixel coordinates of the input image, ranked by
-increasing hazard (DESIGN section 5, steps 2-4).
+increasing hazard (docs/architecture.md sections 3.3-3.5).
 
 Coordinates: continuous image coordinates; the full-resolution pixel at (row r, col c) covers
 [c, c+1) x [r, r+1), so its centre is (c + 0.5, r + 0.5) and the image spans [0, W] x [0, H].

@@ -1,4 +1,4 @@
-"""The landing decision as typed records that serialise to the JSON of DESIGN section 5.
+"""The landing decision as typed records that serialise to the JSON of docs/architecture.md section 5.3.
 
 Field names are fixed (the report, the campaign and users' tools read them); coordinates and
 radii are in pixels of the full-resolution input image.

@@ -11,6 +11,7 @@ the CM ends in the default action with reason ``"fault: ..."`` (EL-R06).
 from __future__ import annotations
 
 import json
+import logging
 import time
 from collections.abc import Callable
 from importlib import resources
@@ -28,6 +29,7 @@ from el.labels import NUM_CLASSES
 from el.uavid import DataError, check_same_size, read_labels
 
 PIPELINE = "ground_truth"
+logger = logging.getLogger(__name__)  # faults with their tracebacks; the decision keeps only the reason
 
 
 def decision_schema() -> dict[str, Any]:
@@ -78,6 +80,7 @@ def decide_from_labels(
         core = run_core(probs, (W, H), config, clock=clock)
         t2 = clock()
     except Exception as exc:  # fail safe: any fault ends in the default action, with its reason
+        logger.exception("fault in the core model on %s; default action", info.get("path", "?"))
         timings["total_s"] = float(read_s) + clock() - t0
         return Decision(action="default", reason=f"fault: {type(exc).__name__}: {exc}", selected=None,
                         candidates=[], default_area=area, timings=timings, input=info, config=cfg)

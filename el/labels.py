@@ -1,4 +1,4 @@
-"""UAVid classes, their colours, emergency-landing categories and hazard scores (DESIGN section 3).
+"""UAVid classes, their colours, emergency-landing categories and hazard scores (docs/architecture.md section 2.1).
 
 The table is data: every other module asks this one which classes are forbidden and how
 hazardous the safe ones are, so the policy lives in one place.

@@ -1,4 +1,4 @@
-"""The monitored emergency-landing decision loop (DESIGN sections 5-6): the function a flight computer calls.
+"""The monitored emergency-landing decision loop (docs/architecture.md section 3): the function a flight computer calls.
 
 image -> segmentation (working resolution) -> CM candidates ranked by hazard -> runtime monitor on the
 HD image, candidate by candidate -> the first accepted candidate, else the default action (parachute).
@@ -11,6 +11,7 @@ reason recorded in ``Decision.reason``.
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 from collections.abc import Callable
@@ -29,6 +30,7 @@ from el.uavid import read_image
 
 Clock = Callable[[], float]
 DEFAULT_TIME_BUDGET_S = 10.0
+logger = logging.getLogger(__name__)  # faults with their tracebacks; the decision keeps only the reason
 
 
 class BudgetExceeded(Exception):
@@ -149,6 +151,7 @@ class EmergencyLanding:
                 self.segmenter = Segmenter.load(weights)
             except Exception as exc:  # missing/altered weights: every decision is the default action
                 self.fault = f"fault: model: {type(exc).__name__}: {exc}"
+                logger.exception("segmentation model not loaded; every decision will be the default action")
         try:
             self.monitor = build_monitor(
                 self.config.monitor, margin=self.config.patch_margin, max_side=self.config.patch_max_side,
@@ -156,6 +159,8 @@ class EmergencyLanding:
             )
         except Exception as exc:
             self.fault = self.fault or f"fault: monitor: {type(exc).__name__}: {exc}"
+            logger.exception("runtime monitor %r not built; every decision will be the default action",
+                             self.config.monitor)
 
     # -- the decision ----------------------------------------------------------------------------
     def decide(self, image: np.ndarray | str | Path) -> Decision:
@@ -202,6 +207,8 @@ class EmergencyLanding:
             return self._default("timeout", candidates, size, timings, info, budget)
         except Exception as exc:
             reason = f"fault: {stage}: {type(exc).__name__}: {exc}"
+            logger.exception("fault in stage %s of the decision (input %s); default action", stage,
+                             info.get("path", "?"))
             return self._default(reason, candidates, size, timings, info, budget)
 
         if not candidates:
@@ -284,6 +291,8 @@ class EmergencyLanding:
         try:
             area = default_area(*size, self.config.core)
         except Exception:  # the default area of the nominal frame: the decision itself must not fail
+            logger.exception("default area of a %dx%d frame failed; using the nominal %dx%d frame", *size,
+                             *self.config.nominal_size)
             area = default_area(*self.config.nominal_size, self.config.core)
         timings = dict(timings)
         timings["total_s"] = budget.elapsed()

@@ -1,4 +1,4 @@
-"""Hazard of a landing candidate: H = alpha H_s + (1 - alpha) H_d (DESIGN section 5.4).
+"""Hazard of a landing candidate: H = alpha H_s + (1 - alpha) H_d (docs/architecture.md section 3.5).
 
 Pure functions on arrays, no state. Coordinates are working-resolution pixel indices (row, col);
 a disc of radius R around pixel (i, j) holds the pixels whose centres lie within R of its centre.

@@ -1,6 +1,6 @@
 """Shared options and fixtures of the test suite.
 
-``--run RUN`` (or the environment variable ``UAV_EL_RUN``) names the campaign run that the campaign
+``--uav-el-run RUN`` (or the environment variable ``UAV_EL_RUN``) names the campaign run that the campaign
 requirement tests (``tests/requirements``) read; the default is the README's demo run ``runs/demo``
 under the rootdir. Without a run those tests skip, so their requirements end "not verified", never
 "failed".
@@ -20,7 +20,7 @@ DEFAULT_RUN = Path("runs") / "demo"
 
 
 def campaign_run_path(config: pytest.Config) -> Path:
-    """The campaign run the requirement tests read: --run, else $UAV_EL_RUN, else runs/demo (rootdir)."""
+    """The campaign run the requirement tests read: --uav-el-run, else $UAV_EL_RUN, else runs/demo (rootdir)."""
     given = config.getoption("uav_el_run") or os.environ.get("UAV_EL_RUN")
     if given:
         return Path(given).resolve()
@@ -47,8 +47,8 @@ def campaign_run(pytestconfig: pytest.Config) -> Path:
     """The campaign run folder; skips (requirement not verified) when there is none."""
     run = campaign_run_path(pytestconfig)
     if not (run / "manifest.json").is_file():
-        pytest.skip(f"not verified: no campaign run at {run} (pass --run RUN or set UAV_EL_RUN; make the demo run "
-                    f"with: uav-el campaign --data data/test --out {DEFAULT_RUN})")
+        pytest.skip(f"not verified: no campaign run at {run} (pass --uav-el-run RUN or set UAV_EL_RUN; "
+                    f"make the demo run with: uav-el campaign --data data/test --out {DEFAULT_RUN})")
     return run
 
 

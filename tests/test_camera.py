@@ -1,4 +1,4 @@
-"""Camera geometry against DESIGN section 4's reference table, and the beta figure."""
+"""Camera geometry against the reference rows of docs/architecture.md section 2.2, and the beta figure."""
 
 import numpy as np
 import pytest

@@ -38,7 +38,7 @@ def weasyprint_ok() -> bool:
 def pytest_results(pytester, run, out, *args) -> Path:
     """Run the real campaign requirement tests on ``run`` and return the results JSON."""
     path = out / "requirements.json"
-    pytester.runpytest(str(CAMPAIGN_TESTS), "-p", "no:cacheprovider", "--run", str(run),
+    pytester.runpytest(str(CAMPAIGN_TESTS), "-p", "no:cacheprovider", "--uav-el-run", str(run),
                        "--requirements-report", str(path), *args)
     return path
 

@@ -1,4 +1,4 @@
-"""Label table and colour <-> class-id conversion (DESIGN section 3)."""
+"""Label table and colour <-> class-id conversion (docs/architecture.md section 2.1)."""
 
 import numpy as np
 import pytest

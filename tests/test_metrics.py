@@ -1,4 +1,4 @@
-"""Metrics (DESIGN section 7) against scikit-learn and scipy, and the paper's reference table."""
+"""Metrics (docs/architecture.md sections 4.4-4.5) against scikit-learn and scipy, and the paper's reference table."""
 
 import math
 
@@ -480,7 +480,7 @@ def test_reference_is_consistent_with_pooled_counts(ref):
     assert (ok.g_star - ok.g_cm - ok.g_rm).abs().max() <= 0.0015
     assert np.allclose(ok.fn_rate, 1 - ok.recall, atol=1e-9)
     lhd_none = ok[(ok.perturbation == "none") & (ok.monitor == "lhd")].iloc[0]
-    assert lhd_none.unsafe_share == pytest.approx(0.36, abs=0.005)  # DESIGN section 3's "about 36%"
+    assert lhd_none.unsafe_share == pytest.approx(0.36, abs=0.005)  # "about 36%", docs/architecture.md section 5.2
     scale = 10**7
     for r in ok.itertuples():
         pos, neg = scale * r.unsafe_share, scale * (1 - r.unsafe_share)

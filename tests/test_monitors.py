@@ -1,4 +1,4 @@
-"""Runtime monitors (DESIGN section 6): LHD, CH, MCD, their names, patch geometry and fail-safe inputs."""
+"""Runtime monitors (docs/architecture.md 3.6): LHD, CH, MCD, their names, patch geometry and fail-safe inputs."""
 
 from __future__ import annotations
 
@@ -227,7 +227,7 @@ def test_lhd_sees_a_car_too_small_for_the_working_resolution():
 
 # -- CH -----------------------------------------------------------------------------------------
 def brute_force_ch(scores: np.ndarray, mask: np.ndarray, tau: float) -> bool:
-    """Accepted by LHD+CH, pixel by pixel from the DESIGN's words."""
+    """Accepted by LHD+CH, pixel by pixel from the words of docs/architecture.md section 3.6."""
     for r, c in zip(*np.nonzero(mask), strict=True):
         s = scores[:, r, c]
         if FORBIDDEN_LUT[np.flatnonzero(s == s.max())].any():

@@ -1,4 +1,4 @@
-"""Perturbations (DESIGN section 7): severity 3 reproduces the paper's settings, contracts hold."""
+"""Perturbations (docs/architecture.md section 4.1): severity 3 reproduces the paper's settings, contracts hold."""
 
 import cv2
 import numpy as np

@@ -276,7 +276,7 @@ def test_junit_xml_carries_the_requirements(pytester):
 # ------------------------------------------------------------------------------------------------
 def _campaign_report(pytester, run, *args):
     out = pytester.path / "campaign.json"
-    result = pytester.runpytest(str(CAMPAIGN_TESTS), "-p", "no:cacheprovider", "--run", str(run),
+    result = pytester.runpytest(str(CAMPAIGN_TESTS), "-p", "no:cacheprovider", "--uav-el-run", str(run),
                                 "--requirements-report", str(out), *args)
     return result, json.loads(out.read_text())
 

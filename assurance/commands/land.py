@@ -1,6 +1,6 @@
 """``uav-el land``: decide where to land for one frame, and say why.
 
-Two pipelines (DESIGN section 5):
+Two pipelines (docs/architecture.md section 3.7):
 - ground truth: ``uav-el land --labels LABELS.png [--image IMAGE.png]`` runs the CM on the label
   map (a perfect segmentation), without a monitor; the image is only for drawing;
 - model: ``uav-el land IMAGE.png [--monitor SPEC]`` segments the image with the shipped CNN (or

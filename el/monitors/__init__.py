@@ -1,4 +1,4 @@
-"""Runtime monitors (DESIGN section 6): LHD, CH and MCD on HD patches around landing candidates.
+"""Runtime monitors (docs/architecture.md section 3.6): LHD, CH and MCD on HD patches around landing candidates.
 
 What the decision loop calls::
 

@@ -2,7 +2,7 @@
 
 A pixel is labelled with the closest common ancestor (LCA) of the classes whose score exceeds tau.
 With 8 classes a pixel's "classes above tau" is an 8-bit mask, so the LCA of every possible mask is
-precomputed once (256 entries) and labelling a patch is a table look-up (DESIGN section 6).
+precomputed once (256 entries) and labelling a patch is a table look-up (docs/architecture.md section 3.6).
 
 Node ids: the leaves keep their class ids (0..7, el/labels.py); inner nodes follow (8, 9, ...).
 """

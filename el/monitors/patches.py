@@ -16,6 +16,8 @@ import cv2
 import numpy as np
 
 from el.decision import Candidate, Disc
+from el.discs import disc_window_mask
+from el.rgb import check_rgb
 
 
 @dataclass(frozen=True, eq=False)
@@ -28,7 +30,7 @@ class Patch:
         The crop, downscaled when its side exceeded ``max_side``.
     disc_mask : ndarray of shape (h, w), bool
         Patch pixels in the disc. After a downscale, a patch pixel is in the disc when any
-        full-resolution pixel under it is (conservative pooling, as in DESIGN section 5).
+        full-resolution pixel under it is (conservative pooling, as in docs/architecture.md section 3.3).
     scale : float
         Patch pixels per full-resolution pixel (1.0 without downscale, < 1 with).
     offset : tuple of int
@@ -58,14 +60,8 @@ def _as_disc(disc: object) -> Disc:
 
 
 def validate_rgb(image: object, what: str = "image") -> np.ndarray:
-    """Check an RGB image: ndarray of shape (H, W, 3), uint8, non-empty."""
-    if not isinstance(image, np.ndarray):
-        raise ValueError(f"{what} must be a numpy array, got {type(image).__name__}")
-    if image.ndim != 3 or image.shape[2] != 3 or image.shape[0] < 1 or image.shape[1] < 1:
-        raise ValueError(f"{what} must have shape (H, W, 3), got {image.shape}")
-    if image.dtype != np.uint8:
-        raise ValueError(f"{what} must be uint8, got {image.dtype}")
-    return image
+    """Check an RGB image: ndarray of shape (H, W, 3), uint8, non-empty (``el.rgb.check_rgb``)."""
+    return check_rgb(image, what)
 
 
 def validate_patch_params(margin: float, max_side: int | None) -> None:
@@ -138,9 +134,7 @@ def extract_patch(
     where = f"disc ({d.x:.1f}, {d.y:.1f}, r={d.radius_px:.1f}) has no pixel inside the {width}x{height} image"
     if x1 <= x0 or y1 <= y0:
         raise ValueError(where)
-    cols = np.arange(x0, x1, dtype=np.float64) + 0.5 - d.x
-    rows = np.arange(y0, y1, dtype=np.float64) + 0.5 - d.y
-    mask = rows[:, None] ** 2 + cols[None, :] ** 2 <= d.radius_px**2
+    mask = disc_window_mask(d, x0, y0, x1, y1)
     if not mask.any():
         raise ValueError(where)
     rgb = hd_image[y0:y1, x0:x1]

@@ -2,13 +2,13 @@
 
 Public entry points::
 
-    from el.segmentation import Segmenter, WeightsError, mc_dropout_stats
+    from el.segmentation import Segmenter, WeightsError
     seg = Segmenter.load()                 # shipped weights, SHA-256 checked
     probs = seg.predict_frame(rgb)         # (8, h, w) softmax at working resolution
 """
 
 from el.segmentation.architectures import build_model
-from el.segmentation.inference import MIN_SIZE, Segmenter, mc_dropout_stats
+from el.segmentation.inference import MIN_SIZE, Segmenter
 from el.segmentation.model import ArchConfig, MSDLite
 from el.segmentation.weights import DEFAULT_WEIGHTS, WeightsError, load_weights, save_weights
 
@@ -21,6 +21,5 @@ __all__ = [
     "WeightsError",
     "build_model",
     "load_weights",
-    "mc_dropout_stats",
     "save_weights",
 ]

@@ -1,7 +1,7 @@
 """Per-pixel baseline for the model card: logistic regression on colour and local texture.
 
 Features per working-resolution pixel (15): RGB, and the local mean and variance of RGB in 5x5 and
-15x15 boxes. DESIGN section 3 asks that such a colour classifier does far worse than the CNN (the
+15x15 boxes. docs/architecture.md section 5.2 asks that such a colour classifier does far worse than the CNN (the
 issue: at least 0.2 mIoU below), otherwise the scenes are too easy for the campaign to prove anything.
 """
 

@@ -1,7 +1,7 @@
 """Segmentation inference: softmax maps for working-resolution frames and full-resolution patches.
 
 The one class here, :class:`Segmenter`, wraps any segmentation network and gives the core model
-and the runtime monitors what they need (DESIGN sections 5.1 and 6):
+and the runtime monitors what they need (docs/architecture.md sections 3.2 and 3.6):
 
 - :meth:`Segmenter.predict_frame`: the HD frame resized (``cv2.INTER_AREA``) to the working
   resolution of :func:`el.camera.working_size` -> softmax (8, h, w); with ``frame_flip`` the mean
@@ -45,6 +45,7 @@ from torch import nn
 
 from el.camera import working_size
 from el.labels import NUM_CLASSES
+from el.rgb import check_rgb
 from el.segmentation.evaluation import card_protocol, check_frame_scales
 from el.segmentation.model import MCDropout, upsample_logits
 from el.segmentation.pooling import check_pooling, downsample_probs
@@ -54,16 +55,7 @@ MIN_SIZE = 16  # smallest patch side (px) a Segmenter accepts
 
 
 def _check_rgb(rgb: Any, what: str) -> np.ndarray:
-    if not isinstance(rgb, np.ndarray):
-        raise ValueError(f"{what}: expected a numpy array, got {type(rgb).__name__}")
-    if rgb.dtype != np.uint8:
-        raise ValueError(f"{what}: expected dtype uint8, got {rgb.dtype}")
-    if rgb.ndim != 3 or rgb.shape[2] != 3:
-        raise ValueError(f"{what}: expected shape (H, W, 3) RGB, got {rgb.shape}")
-    if rgb.shape[0] < MIN_SIZE or rgb.shape[1] < MIN_SIZE:
-        raise ValueError(f"{what}: image must be at least {MIN_SIZE}x{MIN_SIZE} px, got "
-                         f"{rgb.shape[1]}x{rgb.shape[0]}")
-    return rgb
+    return check_rgb(rgb, what, min_size=MIN_SIZE)
 
 
 def _check_finite(probs: np.ndarray, what: str) -> np.ndarray:
@@ -76,30 +68,6 @@ def _check_finite(probs: np.ndarray, what: str) -> np.ndarray:
 
 def _is_dropout(module: nn.Module) -> bool:
     return isinstance(module, (nn.modules.dropout._DropoutNd, MCDropout))
-
-
-def mc_dropout_stats(samples: np.ndarray, *, ddof: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """Per-pixel mean and standard deviation of MC-dropout softmax samples.
-
-    Parameters
-    ----------
-    samples : ndarray of shape (N, C, H, W), float
-        Softmax samples from :meth:`Segmenter.mc_dropout`.
-    ddof : int
-        Delta degrees of freedom of the standard deviation (0: the empirical, population one).
-
-    Returns
-    -------
-    (mean, std) : two float32 ndarrays of shape (C, H, W).
-    """
-    samples = np.asarray(samples)
-    if samples.ndim != 4 or samples.shape[0] < 1:
-        raise ValueError(f"samples must have shape (N, C, H, W) with N >= 1, got {samples.shape}")
-    if samples.shape[0] <= ddof:
-        raise ValueError(f"need more than ddof={ddof} samples, got {samples.shape[0]}")
-    mean = samples.mean(axis=0, dtype=np.float64)
-    std = samples.std(axis=0, ddof=ddof, dtype=np.float64)
-    return mean.astype(np.float32), std.astype(np.float32)
 
 
 def _check_window(window: Any, h: int, w: int) -> tuple[int, int, int, int]:

@@ -12,7 +12,7 @@ In the spirit of MSDnet (the paper's model), :class:`MSDLite`:
 
 About 0.83 M parameters (3.3 MB of float32 weights); ~0.2 s for a 1024x576 frame on 2 CPU cores.
 
-Contract (shared by every model the toolkit accepts, DESIGN section 5.1): ``forward(x)`` maps RGB
+Contract (shared by every model the toolkit accepts, docs/architecture.md section 3.2): ``forward(x)`` maps RGB
 float images ``x`` of shape (B, 3, H, W), values in [0, 1], to logits of shape (B, 8, H, W) for any
 H, W >= 1 (the network pads internally, by edge replication, to a multiple of 8 and crops back).
 The mean/std normalisation (ImageNet statistics) happens inside the model.

@@ -74,12 +74,6 @@ def convex_hull(points: np.ndarray) -> np.ndarray:
     return hull
 
 
-def polygon_area(poly: np.ndarray) -> float:
-    """Unsigned area of a simple polygon (shoelace)."""
-    x, y = poly[:, 0], poly[:, 1]
-    return 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
-
-
 def _segments(polygons: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     """All edges (S, 4) as x1, y1, x2, y2 and the index of the polygon each belongs to."""
     segs, owner = [], []

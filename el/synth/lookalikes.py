@@ -3,8 +3,8 @@
 Gravel and dirt access tracks (road), shared-space streets paved like the square they cross
 (road), low sheds and garages whose green, gravel or concrete roofs read as lawn or yard
 (building), and cars parked on grass, gravel and verges (static car). They put forbidden pixels
-where open ground is expected, so the CNN makes the errors the monitors exist to catch (DESIGN
-section 3: a sizeable share of the core model's candidates must be truly unsafe).
+where open ground is expected, so the CNN makes the errors the monitors exist to catch (docs/architecture.md
+section 5.2: a sizeable share of the core model's candidates must be truly unsafe).
 """
 
 from __future__ import annotations

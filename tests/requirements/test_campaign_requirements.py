@@ -1,4 +1,4 @@
-"""Campaign requirement tests: they read a campaign run (--run RUN, $UAV_EL_RUN, default runs/demo).
+"""Campaign requirement tests: they read a campaign run (--uav-el-run RUN, $UAV_EL_RUN, default runs/demo).
 
 Each test runs one check of ``assurance.requirements`` on the run: a pass passes, a failure fails
 with the offending scenarios, and too little data to decide (no run, a missing perturbation, too
@@ -14,7 +14,7 @@ from assurance import readouts
 from assurance import requirements as rq
 from assurance.table import results_table
 
-# These read a campaign run (--run / $UAV_EL_RUN / runs/demo): the evidence step runs them
+# These read a campaign run (--uav-el-run / $UAV_EL_RUN / runs/demo): the evidence step runs them
 # (`pytest -m requirements`), the default test run (`make test`, -m "not campaign") does not.
 pytestmark = pytest.mark.campaign
 

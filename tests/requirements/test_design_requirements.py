@@ -21,7 +21,7 @@ def test_shipped_beta_covers_the_declared_pose_error_box(size, requirement_regis
     ev = rq.check_pose_margin(CoreConfig(), size, requirement_registry.parameters["pose_error"])
     assert ev.status == rq.PASS, ev.summary
     need = ev.rows[0]["required_beta"]
-    assert 1.5 < need < CoreConfig().safety.beta  # DESIGN section 4: about 1.56 for +-20%, so 1.7 has margin
+    assert 1.5 < need < CoreConfig().safety.beta  # docs/architecture.md 2.3: about 1.56 for +-20%, so 1.7 has margin
 
 
 @pytest.mark.requirements("EL-R14")

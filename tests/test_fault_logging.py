@@ -1,0 +1,63 @@
+"""Faults turned into a default action are logged with their traceback; the reason string is unchanged."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+from helpers import OracleSegmenter, scene_ids, scene_image
+
+from el.config import CoreConfig
+from el.gt_pipeline import decide_from_labels
+from el.pipeline import EmergencyLanding, PipelineConfig
+
+WW = 128
+
+
+class _Exploding(OracleSegmenter):
+    def predict_frame(self, rgb):
+        raise RuntimeError("GPU fell off")
+
+
+def _records(caplog, name: str) -> list[logging.LogRecord]:
+    return [r for r in caplog.records if r.name == name and r.levelno == logging.ERROR]
+
+
+def test_segmentation_fault_is_logged_with_traceback(caplog) -> None:
+    system = EmergencyLanding(PipelineConfig(core=CoreConfig(working_width=WW)), segmenter=_Exploding(WW))
+    with caplog.at_level(logging.ERROR, logger="el.pipeline"):
+        d = system.decide(scene_image(scene_ids()))
+    assert d.action == "default"
+    assert d.reason == "fault: segmentation: RuntimeError: GPU fell off"  # the reason itself is unchanged
+    (rec,) = _records(caplog, "el.pipeline")
+    assert "segmentation" in rec.getMessage()
+    assert rec.exc_info is not None and rec.exc_info[0] is RuntimeError  # the traceback is kept
+
+
+def test_missing_weights_are_logged_once_at_construction(tmp_path, caplog) -> None:
+    with caplog.at_level(logging.ERROR, logger="el.pipeline"):
+        system = EmergencyLanding(PipelineConfig(core=CoreConfig(working_width=WW)), weights=tmp_path / "none.pt")
+    assert len(_records(caplog, "el.pipeline")) == 1
+    assert system.decide(scene_image(scene_ids())).reason.startswith("fault: model")
+
+
+def test_ground_truth_pipeline_fault_is_logged(caplog, monkeypatch) -> None:
+    import el.gt_pipeline
+
+    def broken_core(*args, **kwargs):
+        raise ValueError("no candidates today")
+
+    monkeypatch.setattr(el.gt_pipeline, "run_core", broken_core)
+    with caplog.at_level(logging.ERROR, logger="el.gt_pipeline"):
+        d = decide_from_labels(scene_ids(), config=CoreConfig(working_width=WW))
+    assert d.action == "default" and d.reason == "fault: ValueError: no candidates today"
+    (rec,) = _records(caplog, "el.gt_pipeline")
+    assert rec.exc_info is not None and rec.exc_info[0] is ValueError
+
+
+def test_a_good_decision_logs_nothing(caplog) -> None:
+    system = EmergencyLanding(PipelineConfig(core=CoreConfig(working_width=WW)), segmenter=OracleSegmenter(WW))
+    with caplog.at_level(logging.DEBUG, logger="el"):
+        d = system.decide(np.ascontiguousarray(scene_image(scene_ids())))
+    assert not d.reason.startswith("fault")
+    assert [r for r in caplog.records if r.name.startswith("el.")] == []
