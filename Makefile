@@ -34,11 +34,11 @@ campaign: setup
 
 ## Requirement tests against the campaign run; their results feed the evidence gate.
 requirements: setup
-	$(PY) -m pytest -q -m requirements --run $(RUN) --requirements-report $(REPORTS)/requirements.json
+	$(PY) -m pytest -q -m requirements --uav-el-run $(RUN) --requirements-report $(REPORTS)/requirements.json
 
 ## The evidence step (also run by CI): requirement tests (a failure is reported by the gate), then the report.
 evidence: setup
-	-$(PY) -m pytest -q -m requirements --run $(RUN) --requirements-report $(REPORTS)/requirements.json
+	-$(PY) -m pytest -q -m requirements --uav-el-run $(RUN) --requirements-report $(REPORTS)/requirements.json
 	$(PY) -m assurance evidence --run $(RUN) --out $(REPORTS) --waivers assurance/waivers.yaml
 
 ## The test suite (fast; long tests are marked slow, checks of a campaign run are marked campaign:

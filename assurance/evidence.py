@@ -1,7 +1,7 @@
 """The evidence report (docs/architecture.md 4.7): what was assessed, against which requirements, with what result.
 
 ``generate(run, out, ...)`` reads a campaign run (manifest, readouts, results table), the requirement
-registry and the requirement results of a test session (``pytest -m requirements --run RUN``, JSON
+registry and the requirement results of a test session (``pytest -m requirements --uav-el-run RUN``, JSON
 written by ``assurance.pytest_plugin``), and writes into ``out``:
 
 - ``evidence.html``: self-contained (CSS inline, images as data URIs), rendered from the Jinja2
@@ -144,7 +144,7 @@ def _requirement_results(registry: rq.Registry, path: Path | None, run: Path,
                          warnings: list[str]) -> tuple[dict[str, rq.RequirementResult], dict[str, Any] | None]:
     if path is None:
         warnings.append("no requirement test results were given: every requirement is 'not verified' "
-                        f"(run: pytest -m requirements --run {run} --requirements-report <out>/requirements.json)")
+                        f"(run: pytest -m requirements --uav-el-run {run} --requirements-report <out>/requirements.json)")
         results = {r.id: rq.RequirementResult(r.id, r.title, rq.NOT_VERIFIED, "no test results given")
                    for r in registry}
         return results, None
@@ -713,7 +713,7 @@ def generate(
         + " ".join(f"'{m}'" for m in cfg["monitors"])
         + (f" --images {cfg['images']}" if cfg.get("images") else "") + f" --seed {cfg['seed']}"
         + (f" --weights {cfg['weights']}" if cfg.get("weights") else ""),
-        f"pytest -m requirements --run {run} --requirements-report {out / 'requirements.json'}",
+        f"pytest -m requirements --uav-el-run {run} --requirements-report {out / 'requirements.json'}",
         f"uav-el evidence --run {run} --out {out}" + (f" --requirements {req_path}" if req_path else ""),
     ]
     context = {
