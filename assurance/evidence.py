@@ -144,7 +144,8 @@ def _requirement_results(registry: rq.Registry, path: Path | None, run: Path,
                          warnings: list[str]) -> tuple[dict[str, rq.RequirementResult], dict[str, Any] | None]:
     if path is None:
         warnings.append("no requirement test results were given: every requirement is 'not verified' "
-                        f"(run: pytest -m requirements --uav-el-run {run} --requirements-report <out>/requirements.json)")
+                        f"(run: pytest -m requirements --uav-el-run {run} "
+                        "--requirements-report <out>/requirements.json)")
         results = {r.id: rq.RequirementResult(r.id, r.title, rq.NOT_VERIFIED, "no test results given")
                    for r in registry}
         return results, None
