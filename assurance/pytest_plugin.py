@@ -22,10 +22,8 @@ report (e.g. the campaign run the campaign tests read).
 from __future__ import annotations
 
 import json
-import os
 import re
 import sys
-import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -87,6 +85,11 @@ def registry(config: pytest.Config) -> Any:
 def set_context(config: pytest.Config, **values: Any) -> None:
     """Record facts about the session in the requirement report (``context``), e.g. ``run=...``."""
     config.stash.setdefault(_CONTEXT, {}).update(values)
+
+
+def get_context(config: pytest.Config) -> dict[str, Any]:
+    """The facts recorded so far for the requirement report (a copy)."""
+    return dict(config.stash.get(_CONTEXT, {}))
 
 
 def claimed_ids(item: pytest.Item) -> tuple[str, ...]:
@@ -156,17 +159,18 @@ class _Recorder:
 
         results = session_results(config)
         context = dict(config.stash[_CONTEXT])
-        context.update(finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"), rootdir=str(config.rootpath),
+        from assurance.integrity import code_sha256
+
+        context.setdefault("run_digest", None)  # the evidence gate refuses results bound to no run
+        context.update(code_sha256=code_sha256(), finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                       rootdir=str(config.rootpath),
                        args=list(config.invocation_params.args), markexpr=config.getoption("markexpr", "") or "",
                        python=sys.version.split()[0], pytest=pytest.__version__)
         doc = results_document(registry(config), results, context=context,
                                collection_errors=config.stash[_ERRORS], exitstatus=int(exitstatus))
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            json.dump(doc, f, indent=2, sort_keys=False, allow_nan=False)
-            f.write("\n")
-        os.replace(tmp, path)
+        from el.uavid import atomic_write_bytes
+
+        atomic_write_bytes(path, (json.dumps(doc, indent=2, sort_keys=False, allow_nan=False) + "\n").encode())
         config.stash[_WRITTEN] = (path, doc["summary"], results)
 
     def pytest_terminal_summary(self, terminalreporter: Any, exitstatus: int, config: pytest.Config) -> None:
