@@ -8,7 +8,13 @@ written by ``assurance.pytest_plugin``), and writes into ``out``:
   templates in ``evidence_templates/`` (autoescape on, undefined variables are errors);
 - ``evidence.pdf``: the same HTML through WeasyPrint (skipped with a clear message if it is missing);
 - ``evidence.json``: identity, requirement states, campaign checks and the results table, for tools;
-- ``results.csv``: the results table the report shows; ``SHA256SUMS``: the hashes of these files.
+- ``results.csv``: the results table the report shows; ``traceability.csv``: one row per (requirement,
+  test) with outcome, state and artefact; ``SHA256SUMS``: the hashes of these files (and of
+  ``junit.xml`` when the evidence step wrote one into ``out``);
+- the PDF is PDF/A-3b with ``evidence.json``, ``results.csv``, ``traceability.csv``, ``junit.xml`` and
+  ``SHA256SUMS`` attached (that copy of SHA256SUMS lists every file but the PDF itself).
+
+Paths in the report and its JSON are relative to the project root when they lie under it.
 
 Everything the templates show is computed here, as finished strings: the templates compute nothing.
 The gate (``EvidenceReport.exit_code``): 1 when a requirement is failed (and not waived), when the
@@ -603,22 +609,93 @@ def render_html(context: Mapping[str, Any], templates: str | Path | None = None)
     return environment(templates).get_template(TEMPLATE).render(**context)
 
 
-def write_pdf(html: str, path: Path) -> str | None:
-    """Write the PDF of ``html`` (WeasyPrint); returns None, or why no PDF was written."""
+def rel(path: str | Path | None) -> str | None:
+    """A path relative to the project root when it lies under it (as written elsewhere otherwise)."""
+    if path is None:
+        return None
+    p = Path(path)
+    try:
+        return p.resolve().relative_to(ROOT).as_posix()
+    except ValueError:
+        return str(path)
+
+
+PDF_VARIANT = "pdf/a-3b"
+
+
+def write_pdf(html: str, path: Path, attachments: Sequence[Path] = ()) -> str | None:
+    """Write the PDF/A-3b of ``html`` (WeasyPrint) with ``attachments`` embedded; returns None, or why no
+    PDF was written."""
     try:
         with warnings.catch_warnings():  # e.g. "HarfBuzz-Subset will be required by future versions"
             warnings.simplefilter("ignore", DeprecationWarning)
             from weasyprint import HTML
     except Exception as exc:  # ImportError, or OSError when the Pango library is missing
         return f"PDF not written: WeasyPrint cannot be loaded ({type(exc).__name__}: {exc}); {PDF_HINT}"
+    from weasyprint import Attachment
+
     tmp = path.with_name(f".{path.name}.tmp")
     try:
-        HTML(string=html, base_url=str(path.parent)).write_pdf(str(tmp))
+        files = [Attachment(filename=str(a), name=a.name, description=f"{a.name} of this evidence report",
+                            relationship="Data" if a.suffix in (".json", ".csv", ".xml") else "Supplement")
+                 for a in attachments if a.is_file()]
+        HTML(string=html, base_url=str(path.parent)).write_pdf(str(tmp), pdf_variant=PDF_VARIANT, attachments=files)
         tmp.replace(path)
     except Exception as exc:
         tmp.unlink(missing_ok=True)
         return f"PDF not written: WeasyPrint failed ({type(exc).__name__}: {exc})"
     return None
+
+
+def pdf_attachment_names(path: str | Path) -> list[str]:
+    """Names of the files embedded in a PDF (its EmbeddedFiles name tree), read without a PDF library:
+    the objects are searched in the file and in its compressed object streams."""
+    import re
+    import zlib
+
+    data = Path(path).read_bytes()
+    chunks = [data]
+    for m in re.finditer(rb"stream\r?\n", data):
+        try:
+            chunks.append(zlib.decompressobj().decompress(data[m.end():m.end() + 4_000_000]))
+        except zlib.error:
+            continue
+    names: list[str] = []
+    for chunk in chunks:
+        for m in re.finditer(rb"/Type\s*/Filespec(.{0,400}?)>>", chunk, re.S):
+            f = re.search(rb"/UF\s*\((.*?)\)|/F\s*\((.*?)\)", m.group(1))
+            if f:
+                names.append((f.group(1) or f.group(2)).decode("latin-1"))
+    return list(dict.fromkeys(names))
+
+
+TRACE_COLUMNS = ("requirement", "test", "outcome", "state", "artefact")
+
+
+def traceability_rows(registry: rq.Registry, results: Mapping[str, rq.RequirementResult], run: Path,
+                      csv_path: Path) -> list[dict[str, str]]:
+    """One row per (requirement, claiming test): outcome, the requirement's state, the artefact it read."""
+    rows = []
+    for req in registry:
+        res = results[req.id]
+        campaign = "campaign" in req.verification_kind
+        for t in res.tests or [None]:
+            test_file = t.nodeid.split("::")[0] if t else ""
+            artefact = (rel(csv_path) if req.id in ("EL-R09", "EL-R10") else rel(run)) if campaign else test_file
+            rows.append({"requirement": req.id, "test": t.nodeid if t else "", "outcome": t.outcome if t else "",
+                         "state": res.state, "artefact": artefact or ""})
+    return rows
+
+
+def _write_csv_rows(path: Path, rows: Sequence[Mapping[str, str]], columns: Sequence[str]) -> None:
+    import csv
+    import io
+
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=list(columns), lineterminator="\n")
+    w.writeheader()
+    w.writerows(rows)
+    _write(path, buf.getvalue())
 
 
 def _write(path: Path, text: str) -> None:
@@ -843,36 +920,47 @@ def generate(
     }
     html = render_html(context, templates)
     html_path, json_path, pdf_path = out / "evidence.html", out / "evidence.json", out / "evidence.pdf"
+    trace_path, junit_path, sums_path = out / "traceability.csv", out / "junit.xml", out / "SHA256SUMS"
     _write(html_path, html)
-    pdf_error = None
-    if pdf:
-        pdf_error = write_pdf(html, pdf_path)
-    else:
-        pdf_error = "PDF not written (--no-pdf)"
-    if pdf_error and pdf_path.exists():
+    _write_csv_rows(trace_path, traceability_rows(reg, results, run, csv_path), TRACE_COLUMNS)
+    if pdf_path.exists():
         pdf_path.unlink()  # never leave a PDF of an earlier report beside this one
-    exit_code = 1 if blocking or problems or (strict and (not_verified or pdf_error)) else 0
-    doc = {
-        "format": EVIDENCE_FORMAT, "created": created, "run": str(run), "strict": strict,
-        "gate": {"result": gate, "exit_code": exit_code, "counts": counts, "failed": failed,
-                 "waived": {rid: waiver_list[rid] for rid in waived}, "not_verified": not_verified,
-                 "problems": problems},
-        "identity": ident,
-        "parameters": params,
-        "requirements": {rid: {**results[rid].to_dict(), "text": reg[rid].text, "source": list(reg[rid].source),
-                               "acceptance": reg[rid].acceptance} for rid in reg.ids},
-        "checks": {ev.requirement: {"name": ev.name, "status": ev.status, "summary": ev.summary,
-                                    "rows": list(ev.rows)} for ev in checks.values()},
-        "results": table.to_dict("records"),
-        "unsafe_landings": n_unsafe,
-        "baseline": base and {k: v for k, v in base.items() if k != "figures"},
-        "warnings": warnings,
-        "files": {"html": str(html_path), "pdf": None if pdf_error else str(pdf_path), "csv": str(csv_path)},
-        "pdf_error": pdf_error,
-    }
-    _write(json_path, json.dumps(_jsonable(doc), indent=2, allow_nan=False) + "\n")
-    sums = [(p, sha256_file(p)) for p in (html_path, pdf_path, json_path, csv_path) if p.is_file()]
-    _write(out / "SHA256SUMS", "".join(f"{h}  {p.name}\n" for p, h in sums))
+    pdf_error = None if pdf else "PDF not written (--no-pdf)"
+
+    def finish(pdf_error: str | None) -> int:
+        exit_code = 1 if blocking or problems or (strict and (not_verified or pdf_error)) else 0
+        doc = _doc(pdf_error, exit_code)
+        _write(json_path, json.dumps(_jsonable(doc), indent=2, allow_nan=False) + "\n")
+        files = (html_path, pdf_path, json_path, csv_path, trace_path, junit_path)
+        sums = [(p, sha256_file(p)) for p in files if p.is_file()]
+        _write(sums_path, "".join(f"{h}  {p.name}\n" for p, h in sums))
+        return exit_code
+
+    def _doc(pdf_error: str | None, exit_code: int) -> dict[str, Any]:
+        return {
+            "format": EVIDENCE_FORMAT, "created": created, "run": rel(run), "strict": strict,
+            "gate": {"result": gate, "exit_code": exit_code, "counts": counts, "failed": failed,
+                     "waived": {rid: waiver_list[rid] for rid in waived}, "not_verified": not_verified,
+                     "problems": problems},
+            "identity": ident,
+            "parameters": params,
+            "requirements": {rid: {**results[rid].to_dict(), "text": reg[rid].text, "source": list(reg[rid].source),
+                                   "acceptance": reg[rid].acceptance} for rid in reg.ids},
+            "checks": {ev.requirement: {"name": ev.name, "status": ev.status, "summary": ev.summary,
+                                        "rows": list(ev.rows)} for ev in checks.values()},
+            "results": table.to_dict("records"),
+            "unsafe_landings": n_unsafe,
+            "baseline": base and {k: v for k, v in base.items() if k != "figures"},
+            "warnings": warnings,
+            "files": {"html": rel(html_path), "pdf": None if pdf_error else rel(pdf_path), "csv": rel(csv_path),
+                      "traceability": rel(trace_path), "junit": rel(junit_path) if junit_path.is_file() else None},
+            "pdf_error": pdf_error,
+        }
+
+    exit_code = finish(pdf_error)  # the JSON says the PDF will be there; rewritten if it could not be
+    if pdf:
+        pdf_error = write_pdf(html, pdf_path, [json_path, csv_path, trace_path, junit_path, sums_path])
+        exit_code = finish(pdf_error)
     return EvidenceReport(out=out, html=html_path, json=json_path, pdf=None if pdf_error else pdf_path,
                           pdf_error=pdf_error, states=states, exit_code=exit_code, warnings=warnings,
                           problems=problems, waived=waived)

@@ -8,8 +8,8 @@ project has it.
   know, or a marker without ids, stops the session at collection (``pytest.UsageError`` naming the
   test and the id). A test may carry several markers (function, class, module): all count.
   ``pytest -m requirements`` runs exactly the tests that claim a requirement.
-- Every claimed id is added to the test's ``user_properties`` as a property named ``requirements``,
-  so ``pytest --junitxml=...`` carries them.
+- The claimed ids are added to the test's ``user_properties`` as one property named ``requirements``
+  (comma-joined, e.g. ``EL-R03,EL-R04``), so ``pytest --junitxml=...`` carries them.
 - At the end of the session each requirement of the registry gets a state (verified / failed /
   not verified, see ``assurance.requirements.requirement_state``) and the results go to a JSON file:
   ``--requirements-report PATH``, or ``reports/requirements.json`` under the rootdir when the marker
@@ -126,8 +126,8 @@ class _Recorder:
                         problems.append(f"{item.nodeid}: unknown requirement id {rid!r}")
             ids = tuple(r for r in claimed_ids(item) if isinstance(r, str))
             claims[item.nodeid] = ids
-            for rid in ids:
-                item.user_properties.append((MARKER, rid))
+            if ids:  # one comma-joined property (the form test-management tools import from JUnit XML)
+                item.user_properties.append((MARKER, ",".join(ids)))
         if problems:
             reg = registry(config)
             raise pytest.UsageError(
@@ -238,7 +238,7 @@ def session_results(config: pytest.Config) -> dict[str, Any]:
     seen = set()
     for nodeid, reports in config.stash[_PHASES].items():
         ids = claims.get(nodeid) or tuple(dict.fromkeys(
-            v for r in reports for k, v in r.user_properties if k == MARKER))
+            rid for r in reports for k, v in r.user_properties if k == MARKER for rid in str(v).split(",") if rid))
         pairs.append((ids, outcome_of(nodeid, reports)))
         seen.add(nodeid)
     for nodeid, ids in claims.items():

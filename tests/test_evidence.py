@@ -326,3 +326,73 @@ def test_hostile_2_altered_shard_is_named_and_gets_no_report(tiny_campaign, tmp_
 def test_cli_errors(evidence_cli, tmp_path, capsys):
     assert evidence_cli("--run", tmp_path / "nothing", "--out", tmp_path / "o") == 2
     assert "not a campaign run" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------------------------------------
+# Formats auditors' tools read (issue 19)
+# ------------------------------------------------------------------------------------------------
+def _schema(name: str) -> dict:
+    from importlib import resources
+
+    return json.loads(resources.files("assurance").joinpath(f"data/{name}.schema.json").read_text())
+
+
+def test_evidence_and_requirement_results_follow_their_json_schemas(report, pytester, monitor_runs, tmp_path):
+    import jsonschema
+
+    rep, doc, _ = report
+    jsonschema.validate(doc, _schema("evidence"))
+    results = json.loads(pytest_results(pytester, monitor_runs["good"], tmp_path, "-k", "monitor_coverage").read_text())
+    jsonschema.validate(results, _schema("requirements"))
+    broken = dict(doc, gate={**doc["gate"], "result": "MAYBE"})
+    with pytest.raises(jsonschema.ValidationError):
+        jsonschema.validate(broken, _schema("evidence"))
+
+
+def test_traceability_csv_and_relative_paths(report):
+    rep, doc, _ = report
+    trace = pd.read_csv(rep.out / "traceability.csv", keep_default_na=False)
+    assert list(trace.columns) == ["requirement", "test", "outcome", "state", "artefact"]
+    assert set(trace["requirement"]) == set(doc["requirements"])
+    for rid, entry in doc["requirements"].items():
+        rows = trace[trace["requirement"] == rid]
+        assert set(rows["state"]) == {entry["state"]}
+        assert sorted(t for t in rows["test"] if t) == sorted(t["nodeid"] for t in entry["tests"])
+    sums = (rep.out / "SHA256SUMS").read_text()
+    assert f"{sha(rep.out / 'traceability.csv')}  traceability.csv" in sums
+    from assurance.evidence import ROOT, rel
+
+    assert rel(ROOT / "reports" / "x.csv") == "reports/x.csv" and rel("/elsewhere/x") == "/elsewhere/x"
+
+
+@pytest.mark.skipif(not weasyprint_ok(), reason="WeasyPrint not installed")
+def test_pdf_is_pdf_a_3b_with_the_evidence_files_attached(report):
+    from assurance.evidence import pdf_attachment_names
+
+    rep, _, _ = report
+    data = rep.pdf.read_bytes()
+    assert b"pdfaid" in data or b"pdfaid" in b"".join(_inflated(data))  # the PDF/A identification (XMP)
+    names = pdf_attachment_names(rep.pdf)
+    assert {"evidence.json", "results.csv", "traceability.csv", "SHA256SUMS"} <= set(names), names
+    assert f"{sha(rep.pdf)}  evidence.pdf" in (rep.out / "SHA256SUMS").read_text()
+
+
+def _inflated(data: bytes) -> list[bytes]:
+    import re
+    import zlib
+
+    out = []
+    for m in re.finditer(rb"stream\r?\n", data):
+        try:
+            out.append(zlib.decompressobj().decompress(data[m.end():m.end() + 1_000_000]))
+        except zlib.error:
+            pass
+    return out
+
+
+def test_shipped_waivers_name_an_owner_and_have_not_expired():
+    from assurance.evidence import ROOT, load_waivers, waiver_expired
+
+    waivers = load_waivers(ROOT / "assurance" / "waivers.yaml")
+    assert waivers["EL-R09"]["owner"] == "segmentation maintainers"
+    assert not [rid for rid, w in waivers.items() if waiver_expired(w)], "a shipped waiver expired: fix or renew it"
