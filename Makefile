@@ -36,9 +36,12 @@ campaign: setup
 requirements: setup
 	$(PY) -m pytest -q -m requirements --uav-el-run $(RUN) --requirements-report $(REPORTS)/requirements.json
 
-## The evidence step (also run by CI): requirement tests (a failure is reported by the gate), then the report.
+## The evidence step (also run by CI): requirement tests (a failure is reported by the gate; their JUnit XML
+## carries one comma-joined `requirements` property per test), then the report (HTML, PDF/A-3b with the
+## JSON, CSVs, JUnit XML and SHA256SUMS attached, traceability.csv).
 evidence: setup
-	-$(PY) -m pytest -q -m requirements --uav-el-run $(RUN) --requirements-report $(REPORTS)/requirements.json
+	-$(PY) -m pytest -q -m requirements --uav-el-run $(RUN) --requirements-report $(REPORTS)/requirements.json \
+		--junitxml $(REPORTS)/junit.xml
 	$(PY) -m assurance evidence --run $(RUN) --out $(REPORTS) --waivers assurance/waivers.yaml
 
 ## The test suite (fast; long tests are marked slow, checks of a campaign run are marked campaign:

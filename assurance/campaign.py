@@ -81,6 +81,8 @@ class CampaignConfig:
         object.__setattr__(self, "monitors", tuple(canon))
         if self.images is not None and self.images < 1:
             raise ValueError(f"images must be >= 1, got {self.images}")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
+            raise ValueError(f"seed must be an integer >= 0, got {self.seed!r}")
 
     def scenarios(self) -> list[tuple[str, int]]:
         """(perturbation, severity) pairs; 'none' is evaluated once, at the first severity."""
@@ -332,9 +334,10 @@ def execute(task: Task, config: CampaignConfig, run_dir: str, threads: int, segm
     from assurance.clearance import sample_clearance_m
 
     rows = run_task(task, config, segmenter, world_clearance=sample_clearance_m)
-    readouts.write_shard(Path(run_dir), task.shard_name, rows)
+    hashes = readouts.write_shard(Path(run_dir), task.shard_name, rows)
     faults = [r["fault"] for r in rows["images"] if r.get("fault")]
-    return {"shard": task.shard_name, "seconds": time.perf_counter() - t, "fault": faults[0] if faults else ""}
+    return {"shard": task.shard_name, "seconds": time.perf_counter() - t, "fault": faults[0] if faults else "",
+            "hashes": hashes}
 
 
 def plan(data: str | Path, config: CampaignConfig) -> list[Task]:
@@ -369,6 +372,8 @@ def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *,
         "weights": {"path": str(weights), "sha256": sha256_file(weights) if weights.is_file() else None,
                     **_frame_protocol(weights)},
         "tasks": len(tasks),
+        "integrity": readouts.INTEGRITY,
+        "shard_order": [t.shard_name for t in tasks],
         "threads_per_worker": threads,
         "segmenter": segmenter,
         "code": {"version": _version(), "git_commit": git_commit()},
@@ -419,37 +424,83 @@ def run_campaign(
     on_result: Callable[[dict[str, Any]], None] | None = None,
     segmenter: Any = None,
 ) -> dict[str, Any]:
-    """Run (or resume) a campaign; returns a summary {tasks, done, skipped, faults, missing, seconds}.
+    """Run (or resume) a campaign; returns a summary {tasks, done, skipped, faults, missing, repaired, seconds}.
 
     ``segmenter`` replaces the model loaded from ``config.weights`` (any object with
     ``predict_frame``, ``predict_patch`` and ``mc_dropout``; picklable for parallel backends).
 
-    Finished shards are skipped, so re-running an interrupted campaign completes it. The run's
-    manifest must match the config (a different campaign in the same folder is an error).
+    Finished shards that verify are skipped, so re-running an interrupted campaign completes it; a
+    shard that fails verification (altered, truncated, missing though recorded) is moved to
+    ``RUN/damaged/`` and run again (``summary["repaired"]`` says which and why). The run's manifest
+    must match the config (a different campaign in the same folder is an error). Nothing is
+    written before the configuration, the data and the weights have been checked.
     """
     run_dir = Path(run_dir)
+    if run_dir.exists() and not run_dir.is_dir():
+        raise readouts.RunError(f"{run_dir}: exists and is not a folder (--out names the run folder)")
     tasks = plan(data, config)
     if not tasks:
         raise ValueError(f"{data}: no images to evaluate")
+    if segmenter is None:  # bad weights are refused before the run folder exists
+        from el.segmentation.weights import load_weights
+
+        load_weights(config.weights)
     threads = max(1, (os.cpu_count() or 1) // max(1, jobs))
     man = manifest(data, config, tasks, threads=threads,
                    segmenter="weights" if segmenter is None else type(segmenter).__name__)
     readouts.init_run(run_dir, man)
+    repaired = _set_aside_damaged(run_dir, tasks)
     todo = [t for t in tasks if not readouts.shard_done(run_dir, t.shard_name)]
     t0 = time.perf_counter()
     results: list[dict[str, Any]] = []
     for res in _dispatch(todo, config, run_dir, jobs=jobs, backend=backend, scheduler=scheduler,
                          threads=threads, progress=progress, segmenter=segmenter):
         results.append(res)
+        if res.get("hashes"):
+            readouts.record_shards(run_dir, {res["shard"]: res["hashes"]})
         if on_result:
             on_result(res)
     faults = [r for r in results if r["fault"]]
     missing = [t.shard_name for t in todo if not readouts.shard_done(run_dir, t.shard_name)]
     summary = {"tasks": len(tasks), "done": len(results), "skipped": len(tasks) - len(todo),
                "faults": [f"{r['shard']}: {r['fault']}" for r in faults], "missing": missing,
-               "seconds": time.perf_counter() - t0}
+               "repaired": repaired, "seconds": time.perf_counter() - t0}
     readouts.append_log(run_dir, summary)
     return summary
+
+
+def _set_aside_damaged(run_dir: Path, tasks: Sequence[Task]) -> list[str]:
+    """Move the shards that fail verification to ``RUN/damaged/`` (kept for inspection) so they are run
+    again; record the verified shards the index lacks. Returns one line per damaged shard."""
+    if not readouts.has_integrity(run_dir):
+        return []
+    index = readouts.read_index(run_dir)
+    out: list[str] = []
+    found: dict[str, dict[str, str] | None] = {}
+    for t in tasks:
+        name = t.shard_name
+        folder = run_dir / readouts.SHARDS / name
+        if not folder.exists():
+            if name in index:
+                out.append(f"{name}: shard folder missing")
+                found[name] = None
+            continue
+        why = readouts.check_shard(run_dir, name, index.get(name))
+        if why is None:
+            if name not in index:
+                found[name] = readouts.read_sums(folder)
+            continue
+        out.append(f"{name}: {why}")
+        found[name] = None
+        aside = run_dir / "damaged"
+        aside.mkdir(exist_ok=True)
+        k = 0
+        while (aside / f"{name}.{k}").exists():
+            k += 1
+        folder.rename(aside / f"{name}.{k}")
+    if found:
+        readouts.record_shards(run_dir, found)
+    return out
 
 
 def _dispatch(todo: list[Task], config: CampaignConfig, run_dir: Path, *, jobs: int, backend: str,
@@ -507,6 +558,10 @@ def describe(summary: dict[str, Any]) -> str:
     """One paragraph for the terminal."""
     lines = [f"{summary['done']} task(s) run, {summary['skipped']} already done, of {summary['tasks']}"
              f" in {summary['seconds']:.1f} s"]
+    if summary.get("repaired"):
+        lines.append(f"{len(summary['repaired'])} damaged shard(s) failed verification and were run again "
+                     "(the damaged copies are in RUN/damaged/):")
+        lines += [f"  {r}" for r in summary["repaired"][:10]]
     if summary["faults"]:
         lines.append(f"{len(summary['faults'])} fault(s) recorded:")
         lines += [f"  {f}" for f in summary["faults"][:10]]

@@ -3,12 +3,18 @@
 Each sub-command lives in ``assurance/commands/<name>.py`` and exposes ``HELP``,
 ``add_arguments(parser)`` and ``run(args) -> int``. Expected errors (bad input files, bad
 options) are printed as one line naming the file and the problem, with a non-zero exit code.
+
+Exit codes (the same for every sub-command, ``EXIT_CODES``): 0 success; 1 a requirement failed (the
+evidence gate); 2 bad input or options; 3 ``land`` hit a fault in the flight path and took the default
+action; 4 a damaged run (a shard altered, truncated or missing: its readouts fail verification);
+70 an internal error (a bug: one line, the traceback with ``UAV_EL_DEBUG=1``); 130 interrupted.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from collections.abc import Sequence
 
@@ -27,6 +33,19 @@ COMMANDS: dict[str, str] = {
 }
 
 
+EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_FLIGHT_FAULT, EXIT_DAMAGED_RUN, EXIT_INTERNAL = 0, 1, 2, 3, 4, 70
+EXIT_CODES: dict[int, str] = {
+    EXIT_OK: "success",
+    EXIT_FAILED: "a requirement failed (evidence gate; with --strict also one not verified)",
+    EXIT_BAD_INPUT: "bad input or options (one line naming the file and the problem)",
+    EXIT_FLIGHT_FAULT: "land: a fault in the flight path; the default action was taken",
+    EXIT_DAMAGED_RUN: "damaged run: a shard altered, truncated or missing (its readouts fail verification)",
+    EXIT_INTERNAL: "internal error (a bug; UAV_EL_DEBUG=1 shows the traceback)",
+    130: "interrupted",
+}
+EPILOG = "exit codes: " + "; ".join(f"{k} {v}" for k, v in EXIT_CODES.items())
+
+
 class CommandError(Exception):
     """An expected failure of a command: printed as one line, exit code 2."""
 
@@ -35,12 +54,13 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="uav-el",
         description="Safety-assurance toolkit for UAV emergency landing.",
+        epilog=EPILOG,
     )
     parser.add_argument("--version", action="version", version=f"uav-el {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name, module_name in COMMANDS.items():
         module = importlib.import_module(f"assurance.commands.{module_name}")
-        p = sub.add_parser(name, help=module.HELP, description=module.HELP)
+        p = sub.add_parser(name, help=module.HELP, description=module.HELP, epilog=EPILOG)
         module.add_arguments(p)
         p.set_defaults(_run=module.run)
     return parser
@@ -48,6 +68,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``uav-el``; returns the exit code."""
+    from assurance.readouts import DamagedRunError
     from el.labels import LabelColourError
     from el.uavid import DataError
 
@@ -55,12 +76,25 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args._run(args) or 0)
+    except DamagedRunError as exc:
+        print(f"uav-el {args.command}: error: {exc}", file=sys.stderr)
+        return EXIT_DAMAGED_RUN
     except (CommandError, DataError, LabelColourError, FileNotFoundError, ValueError) as exc:
         print(f"uav-el {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+        return EXIT_BAD_INPUT
+    except OSError as exc:  # e.g. a folder given where a file is written, a full disk, no permission
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"uav-el {args.command}: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print(f"uav-el {args.command}: interrupted", file=sys.stderr)
         return 130
+    except Exception as exc:  # a bug: still one line, never a traceback for the user
+        if os.environ.get("UAV_EL_DEBUG"):
+            raise
+        print(f"uav-el {args.command}: internal error: {type(exc).__name__}: {exc} "
+              "(a bug; UAV_EL_DEBUG=1 shows the traceback)", file=sys.stderr)
+        return EXIT_INTERNAL
 
 
 if __name__ == "__main__":  # pragma: no cover

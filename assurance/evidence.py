@@ -8,17 +8,26 @@ written by ``assurance.pytest_plugin``), and writes into ``out``:
   templates in ``assurance/templates/`` (autoescape on, undefined variables are errors);
 - ``evidence.pdf``: the same HTML through WeasyPrint (skipped with a clear message if it is missing);
 - ``evidence.json``: identity, requirement states, campaign checks and the results table, for tools;
-- ``results.csv``: the results table the report shows; ``SHA256SUMS``: the hashes of these files.
+- ``results.csv``: the results table the report shows; ``traceability.csv``: one row per (requirement,
+  test) with outcome, state and artefact; ``SHA256SUMS``: the hashes of these files (and of
+  ``junit.xml`` when the evidence step wrote one into ``out``);
+- the PDF is PDF/A-3b with ``evidence.json``, ``results.csv``, ``traceability.csv``, ``junit.xml`` and
+  ``SHA256SUMS`` attached (that copy of SHA256SUMS lists every file but the PDF itself).
+
+Paths in the report and its JSON are relative to the project root when they lie under it.
 
 Everything the templates show is computed here, as finished strings: the templates compute nothing.
-The gate (``EvidenceReport.exit_code``): 1 when a requirement is failed; with ``strict`` also when one
-is not verified or the PDF could not be written; else 0.
+The gate (``EvidenceReport.exit_code``): 1 when a requirement is failed (and not waived), when the
+requirement results are not bound to this run, code and registry (the run digest, code hash and
+registry hash their test session recorded), when a state contradicts its own tests or this report's
+check of the run, or when a waiver has expired; with ``strict`` (which ignores waivers) also when a
+requirement is not verified or the PDF could not be written; else 0. A run whose shards fail
+verification gets no report (``readouts.DamagedRunError``, exit 4 at the command line).
 """
 
 from __future__ import annotations
 
 import datetime as _dt
-import hashlib
 import json
 import math
 import platform
@@ -34,6 +43,7 @@ import numpy as np
 
 from assurance import __version__, readouts
 from assurance import requirements as rq
+from assurance.integrity import RunCheck, code_sha256, tree_sha256, verify_run
 from assurance.metrics import clopper_pearson_upper
 from assurance.table import results_table, write_csv
 from el.hashing import sha256_file
@@ -64,6 +74,8 @@ class EvidenceReport:
     states: dict[str, str]
     exit_code: int
     warnings: list[str] = field(default_factory=list)
+    problems: list[str] = field(default_factory=list)
+    waived: list[str] = field(default_factory=list)
 
     def ids(self, state: str) -> list[str]:
         return [rid for rid, s in self.states.items() if s == state]
@@ -73,8 +85,10 @@ class EvidenceReport:
         lines = []
         for state in rq.STATES:
             ids = self.ids(state)
-            tail = f"  {', '.join(ids)}" if ids and state != rq.VERIFIED else ""
+            shown = [f"{i} (waived)" if i in self.waived else i for i in ids]
+            tail = f"  {', '.join(shown)}" if ids and state != rq.VERIFIED else ""
             lines.append(f"{state + ':':<14}{len(ids):3d}{tail}")
+        lines += [f"gate problem: {p}" for p in self.problems]
         files = [self.html] + ([self.pdf] if self.pdf else []) + [self.json]
         lines.append("report: " + ", ".join(str(f) for f in files))
         if self.pdf_error:
@@ -112,17 +126,6 @@ def _ci(row: Mapping[str, Any], name: str, digits: int) -> str:
 
 
 
-def tree_sha256(roots: Sequence[Path], *, suffixes: Sequence[str] = (".py", ".yaml", ".yml", ".j2", ".css"),
-                base: Path = ROOT) -> tuple[str, int]:
-    """SHA-256 over the source files under ``roots`` (relative path and content hash, sorted); (hash, files)."""
-    files = sorted(p for r in roots if r.is_dir() for p in r.rglob("*")
-                   if p.is_file() and p.suffix in suffixes and "__pycache__" not in p.parts)
-    h = hashlib.sha256()
-    for p in files:
-        h.update(f"{p.relative_to(base).as_posix()}:{sha256_file(p)}\n".encode())
-    return h.hexdigest(), len(files)
-
-
 def _jsonable(obj: Any) -> Any:
     if isinstance(obj, float):
         return obj if math.isfinite(obj) else None
@@ -140,8 +143,14 @@ def _jsonable(obj: Any) -> Any:
 # ------------------------------------------------------------------------------------------------
 # Sections
 # ------------------------------------------------------------------------------------------------
-def _requirement_results(registry: rq.Registry, path: Path | None, run: Path,
-                         warnings: list[str]) -> tuple[dict[str, rq.RequirementResult], dict[str, Any] | None]:
+def _requirement_results(registry: rq.Registry, path: Path | None, run: Path, warnings: list[str],
+                         problems: list[str], check: RunCheck | None = None,
+                         ) -> tuple[dict[str, rq.RequirementResult], dict[str, Any] | None]:
+    """The requirement results of ``path`` and what they say about the gate.
+
+    ``problems`` (each fails the gate) gets: results not bound to this run's digest, this code or this
+    registry; a state that is not the one its own test outcomes give.
+    """
     if path is None:
         warnings.append("no requirement test results were given: every requirement is 'not verified' "
                         f"(run: pytest -m requirements --uav-el-run {run} "
@@ -153,14 +162,40 @@ def _requirement_results(registry: rq.Registry, path: Path | None, run: Path,
     ctx = doc.get("context") or {}
     if ctx.get("run") and Path(ctx["run"]).resolve() != run.resolve():
         warnings.append(f"the requirement results were produced on run {ctx['run']}, not on {run}")
-    if (doc.get("registry") or {}).get("sha256") not in (None, registry.sha256):
-        warnings.append(f"the requirement results were produced with another registry ({doc['registry'].get('path')})")
+    if check is not None:
+        problems.extend(binding_problems(doc, check.digest, code_sha256(), registry.sha256, path))
+    for rid, res in results.items():
+        if not res.tests:
+            if res.state != rq.NOT_VERIFIED:
+                problems.append(f"{path}: {rid} is '{res.state}' with no test outcome behind it")
+            continue
+        own, _ = rq.requirement_state(res.tests)
+        if own != res.state:
+            problems.append(f"{path}: {rid} is '{res.state}' but its own test outcomes give '{own}'")
     if doc.get("collection_errors"):
         warnings.append(f"the test session had {len(doc['collection_errors'])} collection error(s): "
                         + "; ".join(doc["collection_errors"][:3]))
     if doc.get("ignored_ids"):
         warnings.append(f"ids in the test results that the registry lacks: {', '.join(doc['ignored_ids'])}")
     return results, doc
+
+
+def binding_problems(doc: Mapping[str, Any], digest: str, code: str, registry_sha: str, path: Path) -> list[str]:
+    """Why requirement results do not belong to this run, code and registry (empty when they do)."""
+    ctx = doc.get("context") or {}
+    out = []
+    given = ctx.get("run_digest")
+    if not given:
+        out.append(f"{path}: the requirement results are not bound to a run (no run digest recorded)")
+    elif given != digest:
+        out.append(f"{path}: the requirement results were produced on other readouts (run digest {str(given)[:12]}, "
+                   f"this run {digest[:12]})")
+    if ctx.get("code_sha256") != code:
+        out.append(f"{path}: the requirement results were produced on other code (code hash "
+                   f"{str(ctx.get('code_sha256'))[:12]}, this checkout {code[:12]})")
+    if (doc.get("registry") or {}).get("sha256") != registry_sha:
+        out.append(f"{path}: the requirement results were produced with another requirement registry")
+    return out
 
 
 def _checks(registry: rq.Registry, man: Mapping[str, Any], images: Any, candidates: Any, table: Any,
@@ -205,7 +240,8 @@ def _input_size(images: Any) -> tuple[int, int] | None:
 
 
 def _identity(run: Path, man: Mapping[str, Any], registry: rq.Registry, req_path: Path | None,
-              req_doc: Mapping[str, Any] | None, csv_path: Path, templates: Path) -> tuple[list[dict], dict]:
+              req_doc: Mapping[str, Any] | None, csv_path: Path, templates: Path,
+              check: RunCheck) -> tuple[list[dict], dict]:
     from assurance.campaign import git_commit
 
     weights = man.get("weights") or {}
@@ -244,6 +280,11 @@ def _identity(run: Path, man: Mapping[str, Any], registry: rq.Registry, req_path
         {"item": "Report templates", "value": f"{templates} ({n_tpl} files)", "sha256": tpl_sha, "note": ""},
         {"item": "Run folder", "value": str(run), "sha256": sha256_file(run / "manifest.json"),
          "note": "hash of manifest.json"},
+        {"item": "Run readouts", "value": f"{check.shards} shard(s)" + (" (written before shard hashes: not "
+                                                                         "verifiable)" if check.legacy else
+                                                                         ", each verified against its SHA-256"),
+         "sha256": check.digest, "note": "run digest: the shards' hashes in task order; the requirement "
+                                         "results must carry it"},
         {"item": "Software", "value": (f"Python {versions.get('python', '?')}, torch {versions.get('torch', '?')}, "
                                        f"numpy {versions.get('numpy', '?')}"),
          "sha256": "", "note": f"campaign machine: {versions.get('platform', '?')}"},
@@ -258,7 +299,8 @@ def _identity(run: Path, man: Mapping[str, Any], registry: rq.Registry, req_path
              "requirements_results_path": str(req_path) if req_path else None,
              "requirements_results_sha256": sha256_file(req_path) if req_path else None,
              "results_csv_sha256": sha256_file(csv_path), "templates_sha256": tpl_sha,
-             "manifest_sha256": sha256_file(run / "manifest.json"), "versions": dict(versions)}
+             "manifest_sha256": sha256_file(run / "manifest.json"), "run_digest": check.digest,
+             "run_shards_verified": not check.legacy, "versions": dict(versions)}
     return rows, ident
 
 
@@ -568,22 +610,93 @@ def render_html(context: Mapping[str, Any], templates: str | Path | None = None)
     return environment(templates).get_template(TEMPLATE).render(**context)
 
 
-def write_pdf(html: str, path: Path) -> str | None:
-    """Write the PDF of ``html`` (WeasyPrint); returns None, or why no PDF was written."""
+def rel(path: str | Path | None) -> str | None:
+    """A path relative to the project root when it lies under it (as written elsewhere otherwise)."""
+    if path is None:
+        return None
+    p = Path(path)
+    try:
+        return p.resolve().relative_to(ROOT).as_posix()
+    except ValueError:
+        return str(path)
+
+
+PDF_VARIANT = "pdf/a-3b"
+
+
+def write_pdf(html: str, path: Path, attachments: Sequence[Path] = ()) -> str | None:
+    """Write the PDF/A-3b of ``html`` (WeasyPrint) with ``attachments`` embedded; returns None, or why no
+    PDF was written."""
     try:
         with warnings.catch_warnings():  # e.g. "HarfBuzz-Subset will be required by future versions"
             warnings.simplefilter("ignore", DeprecationWarning)
             from weasyprint import HTML
     except Exception as exc:  # ImportError, or OSError when the Pango library is missing
         return f"PDF not written: WeasyPrint cannot be loaded ({type(exc).__name__}: {exc}); {PDF_HINT}"
+    from weasyprint import Attachment
+
     tmp = path.with_name(f".{path.name}.tmp")
     try:
-        HTML(string=html, base_url=str(path.parent)).write_pdf(str(tmp))
+        files = [Attachment(filename=str(a), name=a.name, description=f"{a.name} of this evidence report",
+                            relationship="Data" if a.suffix in (".json", ".csv", ".xml") else "Supplement")
+                 for a in attachments if a.is_file()]
+        HTML(string=html, base_url=str(path.parent)).write_pdf(str(tmp), pdf_variant=PDF_VARIANT, attachments=files)
         tmp.replace(path)
     except Exception as exc:
         tmp.unlink(missing_ok=True)
         return f"PDF not written: WeasyPrint failed ({type(exc).__name__}: {exc})"
     return None
+
+
+def pdf_attachment_names(path: str | Path) -> list[str]:
+    """Names of the files embedded in a PDF (its EmbeddedFiles name tree), read without a PDF library:
+    the objects are searched in the file and in its compressed object streams."""
+    import re
+    import zlib
+
+    data = Path(path).read_bytes()
+    chunks = [data]
+    for m in re.finditer(rb"stream\r?\n", data):
+        try:
+            chunks.append(zlib.decompressobj().decompress(data[m.end():m.end() + 4_000_000]))
+        except zlib.error:
+            continue
+    names: list[str] = []
+    for chunk in chunks:
+        for m in re.finditer(rb"/Type\s*/Filespec(.{0,400}?)>>", chunk, re.S):
+            f = re.search(rb"/UF\s*\((.*?)\)|/F\s*\((.*?)\)", m.group(1))
+            if f:
+                names.append((f.group(1) or f.group(2)).decode("latin-1"))
+    return list(dict.fromkeys(names))
+
+
+TRACE_COLUMNS = ("requirement", "test", "outcome", "state", "artefact")
+
+
+def traceability_rows(registry: rq.Registry, results: Mapping[str, rq.RequirementResult], run: Path,
+                      csv_path: Path) -> list[dict[str, str]]:
+    """One row per (requirement, claiming test): outcome, the requirement's state, the artefact it read."""
+    rows = []
+    for req in registry:
+        res = results[req.id]
+        campaign = "campaign" in req.verification_kind
+        for t in res.tests or [None]:
+            test_file = t.nodeid.split("::")[0] if t else ""
+            artefact = (rel(csv_path) if req.id in ("EL-R09", "EL-R10") else rel(run)) if campaign else test_file
+            rows.append({"requirement": req.id, "test": t.nodeid if t else "", "outcome": t.outcome if t else "",
+                         "state": res.state, "artefact": artefact or ""})
+    return rows
+
+
+def _write_csv_rows(path: Path, rows: Sequence[Mapping[str, str]], columns: Sequence[str]) -> None:
+    import csv
+    import io
+
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=list(columns), lineterminator="\n")
+    w.writeheader()
+    w.writerows(rows)
+    _write(path, buf.getvalue())
 
 
 def _write(path: Path, text: str) -> None:
@@ -592,24 +705,63 @@ def _write(path: Path, text: str) -> None:
     atomic_write_bytes(path, text.encode("utf-8"))
 
 
-def load_waivers(path: str | Path) -> dict[str, dict[str, str]]:
-    """Accepted deviations: requirement id -> {reason, tracked_by} (``assurance/waivers.yaml``).
+WAIVER_FIELDS = ("id", "reason", "tracked_by", "owner", "expires")
 
-    ValueError naming the file for a malformed file or an entry without a reason or tracker.
+
+def load_waivers(path: str | Path) -> dict[str, dict[str, str]]:
+    """Accepted deviations: requirement id -> {reason, tracked_by, owner, expires} (``assurance/waivers.yaml``).
+
+    ``expires`` is a date (YYYY-MM-DD: the waiver holds until the end of that day) or a toolkit version
+    (X.Y.Z: it holds for versions before that one). ValueError naming the file for a malformed file, an
+    entry without one of the fields, an expiry that is neither, or a requirement waived twice.
     """
     import yaml
 
     path = Path(path)
     try:
         data = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
-    except (OSError, yaml.YAMLError) as exc:
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
         raise ValueError(f"{path}: unreadable waivers file: {exc}") from None
+    if not isinstance(data, dict) or not isinstance(data.get("waivers") or [], list):
+        raise ValueError(f"{path}: a waivers file is a mapping with a list 'waivers'")
     out: dict[str, dict[str, str]] = {}
     for i, w in enumerate(data.get("waivers") or []):
-        if not isinstance(w, dict) or not all(str(w.get(k) or "").strip() for k in ("id", "reason", "tracked_by")):
-            raise ValueError(f"{path}: waiver {i + 1} needs an id, a reason and tracked_by")
-        out[str(w["id"])] = {"reason": " ".join(str(w["reason"]).split()), "tracked_by": str(w["tracked_by"])}
+        if not isinstance(w, dict) or not all(str(w.get(k) or "").strip() for k in WAIVER_FIELDS):
+            raise ValueError(f"{path}: waiver {i + 1} needs an id, a reason, tracked_by, an owner and expires "
+                             "(a date YYYY-MM-DD or a version X.Y.Z)")
+        expires = str(w["expires"]).strip()
+        _expiry(expires, path, i)
+        rid = str(w["id"])
+        if rid in out:
+            raise ValueError(f"{path}: {rid} is waived twice")
+        out[rid] = {"reason": " ".join(str(w["reason"]).split()), "tracked_by": str(w["tracked_by"]),
+                    "owner": str(w["owner"]), "expires": expires}
     return out
+
+
+def _version_tuple(text: str) -> tuple[int, ...]:
+    return tuple(int(x) for x in text.split("."))
+
+
+def _expiry(expires: str, path: Path, i: int) -> tuple[str, Any]:
+    import re
+
+    if re.fullmatch(r"\d{4}-\d{2}-\d{2}", expires):
+        try:
+            return "date", _dt.date.fromisoformat(expires)
+        except ValueError:
+            pass
+    elif re.fullmatch(r"\d+(\.\d+){0,2}", expires):
+        return "version", _version_tuple(expires)
+    raise ValueError(f"{path}: waiver {i + 1}: expires must be a date YYYY-MM-DD or a version X.Y.Z, got {expires!r}")
+
+
+def waiver_expired(waiver: Mapping[str, str], *, today: _dt.date | None = None, version: str = __version__) -> bool:
+    """Whether a waiver no longer holds: its date has passed, or this toolkit's version reached its version."""
+    kind, value = _expiry(waiver["expires"], Path("waivers"), 0)
+    if kind == "date":
+        return (today or _dt.datetime.now(_dt.UTC).date()) > value
+    return _version_tuple(version) >= value
 
 
 def generate(
@@ -645,6 +797,11 @@ def generate(
     params = reg.parameters
     deployed = params["deployed_monitor"]
     man = readouts.read_manifest(run)
+    check = verify_run(run).raise_if_damaged()
+    if check.legacy:
+        warnings.append(f"{run}: written before shard hashes: its readouts cannot be verified")
+    if baseline:
+        verify_run(baseline).raise_if_damaged()
     images = readouts.load_table(run, "images")
     candidates = readouts.load_table(run, "candidates")
     table = results_table(run, n_boot=n_boot)
@@ -655,18 +812,22 @@ def generate(
     req_path = Path(requirements) if requirements else (out / "requirements.json")
     if requirements is None and not req_path.is_file():
         req_path = None
-    results, req_doc = _requirement_results(reg, req_path, run, warnings)
+    problems: list[str] = []
+    results, req_doc = _requirement_results(reg, req_path, run, warnings, problems, check)
     size = _input_size(images)
     checks = _checks(reg, man, images, candidates, table, size)
     for rid, ev in checks.items():
         state = results[rid].state
-        if (ev.status == rq.FAIL and state == rq.VERIFIED) or (ev.status == rq.PASS and state == rq.FAILED):
+        if state == rq.VERIFIED and ev.status != rq.PASS:  # a claim this report can refute: never passes
+            problems.append(f"{rid}: the test results say verified, this report's own check of the run says "
+                            f"{STATUS_TEXT[ev.status]} ({ev.summary})")
+        elif ev.status == rq.PASS and state == rq.FAILED:
             warnings.append(f"{rid}: the test results ({state}) disagree with the campaign check on this run "
                             f"({STATUS_TEXT[ev.status]}): were they produced on another run?")
     if deployed not in man["config"]["monitors"]:
         warnings.append(f"the deployed monitor {deployed!r} (registry) was not evaluated by this campaign")
 
-    identity_rows, ident = _identity(run, man, reg, req_path, req_doc, csv_path, templates)
+    identity_rows, ident = _identity(run, man, reg, req_path, req_doc, csv_path, templates, check)
     scenes = Scenes(man["data"]["path"], man["config"]["seed"])
     if scenes.error:
         warnings.append(scenes.error)
@@ -696,17 +857,22 @@ def generate(
     failed = [rid for rid, s in states.items() if s == rq.FAILED]
     not_verified = [rid for rid, s in states.items() if s == rq.NOT_VERIFIED]
     waiver_list = load_waivers(waivers) if waivers else {}
-    waived = [rid for rid in failed if rid in waiver_list and not strict]
+    expired = {rid for rid, w in waiver_list.items() if waiver_expired(w)}
+    problems += [f"the waiver of {rid} (owner: {waiver_list[rid]['owner']}) expired ({waiver_list[rid]['expires']})"
+                 for rid in sorted(expired)]
+    waived = [rid for rid in failed if rid in waiver_list and rid not in expired and not strict]
     base = (_baseline(Path(baseline), man, ident, table, results, reg,
                       Path(baseline_requirements) if baseline_requirements else None, n_boot)
             if baseline else None)
     created = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
     blocking = [rid for rid in failed if rid not in waived]
-    gate = "FAILED" if blocking else ("WAIVED" if waived else "INCOMPLETE" if not_verified else "PASSED")
+    gate = "FAILED" if blocking or problems else ("WAIVED" if waived else "INCOMPLETE" if not_verified else "PASSED")
     gate_text = (f"{len(failed)} requirement(s) failed" + (f", {len(waived)} waived" if waived else "")
                  if failed else
                  f"{len(not_verified)} requirement(s) not verified" if not_verified else
                  "every requirement verified")
+    if problems:
+        gate_text = f"{len(problems)} integrity problem(s) (below); " + gate_text
     cfg = man["config"]
     commands = [
         f"uav-el campaign --data {man['data']['path']} --out {run} --perturbations {' '.join(cfg['perturbations'])} "
@@ -723,10 +889,11 @@ def generate(
         "gate": gate, "gate_class": {"FAILED": "failed", "WAIVED": "failed", "INCOMPLETE": "not-verified",
                                      "PASSED": "verified"}[gate],
         "gate_text": gate_text,
-        "waivers": [{"id": rid, "reason": waiver_list[rid]["reason"], "tracked_by": waiver_list[rid]["tracked_by"]}
-                    for rid in waived],
+        "waivers": [{"id": rid, **waiver_list[rid]} for rid in waived],
+        "problems": problems,
         "counts": [{"state": s, "n": counts[s], "cls": STATE_CLASS[s],
-                    "ids": ", ".join(rid for rid, st in states.items() if st == s)} for s in rq.STATES],
+                    "ids": ", ".join(f"{rid} (failed, waived)" if rid in waived else rid
+                                     for rid, st in states.items() if st == s)} for s in rq.STATES],
         "warnings": warnings,
         "identity": identity_rows,
         "domain": _domain(man, reg, size, checks, scene_text, len(keys)),
@@ -754,34 +921,47 @@ def generate(
     }
     html = render_html(context, templates)
     html_path, json_path, pdf_path = out / "evidence.html", out / "evidence.json", out / "evidence.pdf"
+    trace_path, junit_path, sums_path = out / "traceability.csv", out / "junit.xml", out / "SHA256SUMS"
     _write(html_path, html)
-    pdf_error = None
-    if pdf:
-        pdf_error = write_pdf(html, pdf_path)
-    else:
-        pdf_error = "PDF not written (--no-pdf)"
-    if pdf_error and pdf_path.exists():
+    _write_csv_rows(trace_path, traceability_rows(reg, results, run, csv_path), TRACE_COLUMNS)
+    if pdf_path.exists():
         pdf_path.unlink()  # never leave a PDF of an earlier report beside this one
-    exit_code = 1 if blocking or (strict and (not_verified or pdf_error)) else 0
-    doc = {
-        "format": EVIDENCE_FORMAT, "created": created, "run": str(run), "strict": strict,
-        "gate": {"result": gate, "exit_code": exit_code, "counts": counts, "failed": failed,
-                 "waived": {rid: waiver_list[rid] for rid in waived}, "not_verified": not_verified},
-        "identity": ident,
-        "parameters": params,
-        "requirements": {rid: {**results[rid].to_dict(), "text": reg[rid].text, "source": list(reg[rid].source),
-                               "acceptance": reg[rid].acceptance} for rid in reg.ids},
-        "checks": {ev.requirement: {"name": ev.name, "status": ev.status, "summary": ev.summary,
-                                    "rows": list(ev.rows)} for ev in checks.values()},
-        "results": table.to_dict("records"),
-        "unsafe_landings": n_unsafe,
-        "baseline": base and {k: v for k, v in base.items() if k != "figures"},
-        "warnings": warnings,
-        "files": {"html": str(html_path), "pdf": None if pdf_error else str(pdf_path), "csv": str(csv_path)},
-        "pdf_error": pdf_error,
-    }
-    _write(json_path, json.dumps(_jsonable(doc), indent=2, allow_nan=False) + "\n")
-    sums = [(p, sha256_file(p)) for p in (html_path, pdf_path, json_path, csv_path) if p.is_file()]
-    _write(out / "SHA256SUMS", "".join(f"{h}  {p.name}\n" for p, h in sums))
+    pdf_error = None if pdf else "PDF not written (--no-pdf)"
+
+    def finish(pdf_error: str | None) -> int:
+        exit_code = 1 if blocking or problems or (strict and (not_verified or pdf_error)) else 0
+        doc = _doc(pdf_error, exit_code)
+        _write(json_path, json.dumps(_jsonable(doc), indent=2, allow_nan=False) + "\n")
+        files = (html_path, pdf_path, json_path, csv_path, trace_path, junit_path)
+        sums = [(p, sha256_file(p)) for p in files if p.is_file()]
+        _write(sums_path, "".join(f"{h}  {p.name}\n" for p, h in sums))
+        return exit_code
+
+    def _doc(pdf_error: str | None, exit_code: int) -> dict[str, Any]:
+        return {
+            "format": EVIDENCE_FORMAT, "created": created, "run": rel(run), "strict": strict,
+            "gate": {"result": gate, "exit_code": exit_code, "counts": counts, "failed": failed,
+                     "waived": {rid: waiver_list[rid] for rid in waived}, "not_verified": not_verified,
+                     "problems": problems},
+            "identity": ident,
+            "parameters": params,
+            "requirements": {rid: {**results[rid].to_dict(), "text": reg[rid].text, "source": list(reg[rid].source),
+                                   "acceptance": reg[rid].acceptance} for rid in reg.ids},
+            "checks": {ev.requirement: {"name": ev.name, "status": ev.status, "summary": ev.summary,
+                                        "rows": list(ev.rows)} for ev in checks.values()},
+            "results": table.to_dict("records"),
+            "unsafe_landings": n_unsafe,
+            "baseline": base and {k: v for k, v in base.items() if k != "figures"},
+            "warnings": warnings,
+            "files": {"html": rel(html_path), "pdf": None if pdf_error else rel(pdf_path), "csv": rel(csv_path),
+                      "traceability": rel(trace_path), "junit": rel(junit_path) if junit_path.is_file() else None},
+            "pdf_error": pdf_error,
+        }
+
+    exit_code = finish(pdf_error)  # the JSON says the PDF will be there; rewritten if it could not be
+    if pdf:
+        pdf_error = write_pdf(html, pdf_path, [json_path, csv_path, trace_path, junit_path, sums_path])
+        exit_code = finish(pdf_error)
     return EvidenceReport(out=out, html=html_path, json=json_path, pdf=None if pdf_error else pdf_path,
-                          pdf_error=pdf_error, states=states, exit_code=exit_code, warnings=warnings)
+                          pdf_error=pdf_error, states=states, exit_code=exit_code, warnings=warnings,
+                          problems=problems, waived=waived)

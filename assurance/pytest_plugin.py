@@ -8,8 +8,8 @@ project has it.
   know, or a marker without ids, stops the session at collection (``pytest.UsageError`` naming the
   test and the id). A test may carry several markers (function, class, module): all count.
   ``pytest -m requirements`` runs exactly the tests that claim a requirement.
-- Every claimed id is added to the test's ``user_properties`` as a property named ``requirements``,
-  so ``pytest --junitxml=...`` carries them.
+- The claimed ids are added to the test's ``user_properties`` as one property named ``requirements``
+  (comma-joined, e.g. ``EL-R03,EL-R04``), so ``pytest --junitxml=...`` carries them.
 - At the end of the session each requirement of the registry gets a state (verified / failed /
   not verified, see ``assurance.requirements.requirement_state``) and the results go to a JSON file:
   ``--requirements-report PATH``, or ``reports/requirements.json`` under the rootdir when the marker
@@ -22,10 +22,8 @@ report (e.g. the campaign run the campaign tests read).
 from __future__ import annotations
 
 import json
-import os
 import re
 import sys
-import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -89,6 +87,11 @@ def set_context(config: pytest.Config, **values: Any) -> None:
     config.stash.setdefault(_CONTEXT, {}).update(values)
 
 
+def get_context(config: pytest.Config) -> dict[str, Any]:
+    """The facts recorded so far for the requirement report (a copy)."""
+    return dict(config.stash.get(_CONTEXT, {}))
+
+
 def claimed_ids(item: pytest.Item) -> tuple[str, ...]:
     """Every requirement id claimed by the test's ``requirements`` markers (all levels), in order."""
     ids: list[str] = []
@@ -123,8 +126,8 @@ class _Recorder:
                         problems.append(f"{item.nodeid}: unknown requirement id {rid!r}")
             ids = tuple(r for r in claimed_ids(item) if isinstance(r, str))
             claims[item.nodeid] = ids
-            for rid in ids:
-                item.user_properties.append((MARKER, rid))
+            if ids:  # one comma-joined property (the form test-management tools import from JUnit XML)
+                item.user_properties.append((MARKER, ",".join(ids)))
         if problems:
             reg = registry(config)
             raise pytest.UsageError(
@@ -156,17 +159,18 @@ class _Recorder:
 
         results = session_results(config)
         context = dict(config.stash[_CONTEXT])
-        context.update(finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"), rootdir=str(config.rootpath),
+        from assurance.integrity import code_sha256
+
+        context.setdefault("run_digest", None)  # the evidence gate refuses results bound to no run
+        context.update(code_sha256=code_sha256(), finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                       rootdir=str(config.rootpath),
                        args=list(config.invocation_params.args), markexpr=config.getoption("markexpr", "") or "",
                        python=sys.version.split()[0], pytest=pytest.__version__)
         doc = results_document(registry(config), results, context=context,
                                collection_errors=config.stash[_ERRORS], exitstatus=int(exitstatus))
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            json.dump(doc, f, indent=2, sort_keys=False, allow_nan=False)
-            f.write("\n")
-        os.replace(tmp, path)
+        from el.uavid import atomic_write_bytes
+
+        atomic_write_bytes(path, (json.dumps(doc, indent=2, sort_keys=False, allow_nan=False) + "\n").encode())
         config.stash[_WRITTEN] = (path, doc["summary"], results)
 
     def pytest_terminal_summary(self, terminalreporter: Any, exitstatus: int, config: pytest.Config) -> None:
@@ -234,7 +238,7 @@ def session_results(config: pytest.Config) -> dict[str, Any]:
     seen = set()
     for nodeid, reports in config.stash[_PHASES].items():
         ids = claims.get(nodeid) or tuple(dict.fromkeys(
-            v for r in reports for k, v in r.user_properties if k == MARKER))
+            rid for r in reports for k, v in r.user_properties if k == MARKER for rid in str(v).split(",") if rid))
         pairs.append((ids, outcome_of(nodeid, reports)))
         seen.add(nodeid)
     for nodeid, ids in claims.items():

@@ -113,6 +113,11 @@ class _Budget:
         if self.budget_s is not None and self.elapsed() > self.budget_s:
             raise BudgetExceeded(f"time budget of {self.budget_s:g} s exceeded after {stage}")
 
+    def ahead(self, next_s: float) -> None:
+        """Stop now if the next step, taking about ``next_s`` seconds, would end past the budget."""
+        if self.budget_s is not None and self.elapsed() + max(0.0, next_s) > self.budget_s:
+            raise BudgetExceeded(f"time budget of {self.budget_s:g} s would be exceeded during monitoring")
+
 
 class EmergencyLanding:
     """The EL system around one segmentation model and one runtime monitor.
@@ -261,10 +266,16 @@ class EmergencyLanding:
         out: list[Candidate] = []
         selected: int | None = None
         overhead = 0.0
+        if hasattr(self.monitor, "between"):  # MC dropout: the budget binds between its chunks too
+            self.monitor.between = budget.ahead if self.config.time_budget_s is not None else None
         for k, cand in enumerate(candidates):
             if selected is not None and not self.config.evaluate_all:
                 out.append(cand)
                 continue
+            if selected is None:
+                budget.check("monitoring")  # before each candidate of the real walk
+            elif hasattr(self.monitor, "between"):
+                self.monitor.between = None  # evaluation-only checks past the decision are not budgeted
             verdict = self.monitor.check(rgb, cand, self.segmenter, seed=self.config.seed + k)
             if not isinstance(verdict, MonitorVerdict):
                 raise ValueError(f"monitor returned {type(verdict).__name__}, not a MonitorVerdict")

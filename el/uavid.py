@@ -73,14 +73,26 @@ def write_image(path: str | Path, rgb: np.ndarray, *, compression: int = 3) -> N
     atomic_write_bytes(path, buf.tobytes())
 
 
+def public_mode(mode: int = 0o666) -> int:
+    """``mode`` less the process's umask: what ``open()`` would give a new file (0644 under umask 022).
+
+    ``tempfile.mkstemp`` creates files 0600 whatever the umask; files written through it get this mode
+    before they are renamed into place, so reports and readouts are readable as any other file.
+    """
+    mask = os.umask(0o022)  # reading the umask means setting it: put it back at once
+    os.umask(mask)
+    return mode & ~mask
+
+
 def atomic_write_bytes(path: str | Path, data: bytes) -> None:
-    """Write bytes to ``path`` so that a reader never sees a half-written file."""
+    """Write bytes to ``path`` so that a reader never sees a half-written file (mode 0666 less the umask)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
+        os.chmod(tmp, public_mode())
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

@@ -16,6 +16,10 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # tests/helpers.py for tests in sub-folders
 
+# Imported once here: the run verification in pytest_configure needs them, and pytester's in-process
+# sessions would otherwise import pandas inside a session and drop it afterwards (two copies of its types).
+import assurance.integrity  # noqa: E402, F401
+
 DEFAULT_RUN = Path("runs") / "demo"
 
 
@@ -31,7 +35,18 @@ def pytest_configure(config: pytest.Config) -> None:
     from assurance.pytest_plugin import set_context
 
     run = campaign_run_path(config)
-    set_context(config, run=str(run), run_exists=(run / "manifest.json").is_file())
+    exists = (run / "manifest.json").is_file()
+    set_context(config, run=str(run), run_exists=exists)
+    if exists:  # bind the requirement results to the readouts they are about (assurance.evidence checks it)
+        from assurance.integrity import verify_run
+        from assurance.readouts import RunError
+
+        try:
+            check = verify_run(run)
+        except RunError as exc:
+            set_context(config, run_digest=None, run_problems=[str(exc)])
+        else:
+            set_context(config, run_digest=check.digest if check.ok else None, run_problems=check.problems)
 
 
 @pytest.fixture(scope="session")
@@ -45,10 +60,15 @@ def requirement_registry(pytestconfig: pytest.Config):
 @pytest.fixture(scope="session")
 def campaign_run(pytestconfig: pytest.Config) -> Path:
     """The campaign run folder; skips (requirement not verified) when there is none."""
+    from assurance.pytest_plugin import get_context
+
     run = campaign_run_path(pytestconfig)
     if not (run / "manifest.json").is_file():
         pytest.skip(f"not verified: no campaign run at {run} (pass --uav-el-run RUN or set UAV_EL_RUN; "
                     f"make the demo run with: uav-el campaign --data data/test --out {DEFAULT_RUN})")
+    problems = get_context(pytestconfig).get("run_problems")
+    if problems:
+        pytest.skip(f"not verified: the campaign run {run} is damaged: {'; '.join(problems[:3])}")
     return run
 
 
@@ -148,9 +168,12 @@ def tiny_run_without(tiny_campaign, tmp_path_factory):
             return made[perturbation]
         run = tmp_path_factory.mktemp(f"without_{perturbation}") / "run"
         shutil.copytree(tiny_campaign["run"], run)
+        from assurance.readouts import record_shards
+
         for shard in (run / "shards").iterdir():
             if shard.name.startswith(f"{perturbation}-s"):
                 shutil.rmtree(shard)
+                record_shards(run, {shard.name: None})  # never evaluated, not deleted: out of the index too
         man = json.loads((run / "manifest.json").read_text())
         man["config"]["perturbations"] = [p for p in man["config"]["perturbations"] if p != perturbation]
         (run / "manifest.json").write_text(json.dumps(man, indent=2, sort_keys=True))

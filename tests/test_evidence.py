@@ -11,6 +11,7 @@ from pathlib import Path
 import hypothesis  # noqa: F401  # imported once here: pytester's in-process runs would re-import it every time
 import pandas as pd
 import pytest
+from helpers import reseal_shard
 
 from assurance import cli, readouts
 from assurance import requirements as rq
@@ -55,6 +56,7 @@ def hostile_run(tiny_campaign, tmp_path_factory):
             cands = pd.read_parquet(path)
             cands["reason"] = SCRIPT
             cands.to_parquet(path, index=False)
+            reseal_shard(run, shard.name)
     man = json.loads((run / "manifest.json").read_text())
     man["weights"]["path"] = WEIRD_WEIGHTS
     (run / "manifest.json").write_text(json.dumps(man, indent=2, sort_keys=True))
@@ -188,22 +190,36 @@ def test_waiver_accepts_a_listed_failure_but_not_under_strict(pytester, monitor_
     --strict (a certification release) ignores waivers; an unlisted failure still fails."""
     pytest_results(pytester, monitor_runs["broken"], tmp_path / "bad", "-k", "monitor_coverage")
     waivers = tmp_path / "waivers.yaml"
-    waivers.write_text("waivers:\n  - id: EL-R04\n    reason: known <bad> variant\n    tracked_by: issue 0\n")
+    waivers.write_text("waivers:\n  - id: EL-R04\n    reason: known <bad> variant\n    tracked_by: issue 0\n"
+                       "    owner: monitor maintainers\n    expires: 2999-01-01\n")
     args = ("--run", monitor_runs["broken"], "--out", tmp_path / "bad", "--no-pdf", "--boot", 100)
     capsys.readouterr()
     assert evidence_cli(*args, "--waivers", waivers) == 0
     assert "failed but waived: EL-R04" in capsys.readouterr().out
     doc = json.loads((tmp_path / "bad" / "evidence.json").read_text())
     assert doc["gate"]["failed"] == ["EL-R04"] and "EL-R04" in doc["gate"]["waived"]
-    assert "known &lt;bad&gt; variant" in (tmp_path / "bad" / "evidence.html").read_text()
+    html = (tmp_path / "bad" / "evidence.html").read_text()
+    assert "known &lt;bad&gt; variant" in html and "owner monitor maintainers" in html
+    cover = html.split("<nav>")[0]  # page 1: the waived failure is still a failure
+    assert "EL-R04 (failed, waived)" in cover and "Gate: WAIVED" in cover
     assert evidence_cli(*args, "--waivers", waivers, "--strict") == 1
     other = tmp_path / "other.yaml"
-    other.write_text("waivers:\n  - id: EL-R09\n    reason: r\n    tracked_by: t\n")
+    other.write_text("waivers:\n  - id: EL-R09\n    reason: r\n    tracked_by: t\n    owner: o\n    expires: 99.0.0\n")
     assert evidence_cli(*args, "--waivers", other) == 1
-    bad = tmp_path / "bad.yaml"
-    bad.write_text("waivers:\n  - id: EL-R04\n")
-    assert evidence_cli(*args, "--waivers", bad) == 2
-    assert "needs an id, a reason and tracked_by" in capsys.readouterr().err
+    # an expired waiver (by date or by version) waives nothing and fails the gate by itself
+    for expires in ("2001-01-01", "0.0.1"):
+        old = tmp_path / "old.yaml"
+        old.write_text(waivers.read_text().replace("2999-01-01", expires))
+        capsys.readouterr()
+        assert evidence_cli(*args, "--waivers", old) == 1
+        out = capsys.readouterr().out
+        assert f"the waiver of EL-R04 (owner: monitor maintainers) expired ({expires})" in out
+    for text, why in (("waivers:\n  - id: EL-R04\n", "needs an id, a reason, tracked_by, an owner and expires"),
+                      (waivers.read_text().replace("2999-01-01", "soon"), "expires must be a date")):
+        bad = tmp_path / "bad.yaml"
+        bad.write_text(text)
+        assert evidence_cli(*args, "--waivers", bad) == 2
+        assert why in capsys.readouterr().err
 
 
 def test_missing_weasyprint_keeps_the_html_and_says_what_to_install(monitor_runs, tmp_path, monkeypatch):
@@ -219,14 +235,164 @@ def test_missing_weasyprint_keeps_the_html_and_says_what_to_install(monitor_runs
     assert any("pip install weasyprint" in line for line in rep.summary_lines())
 
 
-def test_results_of_another_run_are_flagged(pytester, monitor_runs, tmp_path):
+def test_results_of_another_run_fail_the_gate(pytester, monitor_runs, tmp_path):
     results = pytest_results(pytester, monitor_runs["good"], tmp_path, "-k", "monitor_coverage")
     rep = generate(monitor_runs["broken"], tmp_path / "r", requirements=results, pdf=False, n_boot=100)
     assert any("produced on run" in w for w in rep.warnings)
+    assert rep.exit_code == 1 and "EL-R04" not in rep.ids(rq.FAILED)  # failed by the binding, not by a state
+    assert any("produced on other readouts (run digest" in p for p in rep.problems)
     # and the campaign check on this run contradicts the verified state
-    assert any(w.startswith("EL-R04: the test results (verified) disagree") for w in rep.warnings)
+    assert any(p.startswith("EL-R04: the test results say verified, this report's own check of the run says fail")
+               for p in rep.problems)
+    assert generate(monitor_runs["broken"], tmp_path / "r", requirements=results, pdf=False, n_boot=100,
+                    strict=True).exit_code == 1
+
+
+def _forge(doc: dict, state: str = rq.VERIFIED) -> dict:
+    doc = json.loads(json.dumps(doc))
+    for entry in doc["requirements"].values():
+        entry["state"] = state
+    return doc
+
+
+def test_hostile_1_forged_requirement_states_never_pass_the_gate(pytester, monitor_runs, evidence_cli, tmp_path,
+                                                                  capsys):
+    """Case 1 of issue 19: states set to "verified" by hand, with --strict, exit 1 (they passed before)."""
+    results = pytest_results(pytester, monitor_runs["broken"], tmp_path, "-k", "monitor_coverage")
+    doc = json.loads(results.read_text())
+    assert doc["context"]["run_digest"] and doc["context"]["code_sha256"]
+    forged = tmp_path / "forged.json"
+    args = ("--run", monitor_runs["broken"], "--out", tmp_path / "r", "--no-pdf", "--boot", 100,
+            "--requirements", forged)
+    # every state "verified": each contradicts its own test outcomes (or has none), EL-R04 the run's check too
+    forged.write_text(json.dumps(_forge(doc)))
+    capsys.readouterr()
+    assert evidence_cli(*args, "--strict") == 1
+    out = capsys.readouterr().out
+    assert "gate: FAILED" in out and "is 'verified' but its own test outcomes give 'failed'" in out
+    assert "EL-R01 is 'verified' with no test outcome behind it" in out
+    # consistent forgery (tests rewritten as passed): the run's own check still refutes EL-R04
+    consistent = _forge(doc)
+    for entry in consistent["requirements"].values():
+        for t in entry["tests"]:
+            t["outcome"] = "passed"
+    consistent["requirements"] = {"EL-R04": consistent["requirements"]["EL-R04"]}
+    forged.write_text(json.dumps(consistent))
+    assert evidence_cli(*args, "--strict") == 1
+    assert "EL-R04: the test results say verified, this report's own check of the run says fail" in \
+        capsys.readouterr().out
+    # results not bound (digest, code, registry removed or altered)
+    for key, value in (("run_digest", None), ("run_digest", "0" * 64), ("code_sha256", "f" * 64)):
+        unbound = json.loads(results.read_text())
+        unbound["context"][key] = value
+        forged.write_text(json.dumps(unbound))
+        assert evidence_cli(*args) == 1
+        assert "not bound to a run" in (out := capsys.readouterr().out) or "produced on other" in out
+
+
+def test_hostile_2_altered_shard_is_named_and_gets_no_report(tiny_campaign, tmp_path, evidence_cli, capsys):
+    """Case 2 of issue 19: true_unsafe flipped in one shard: evidence and table exit 4 naming the shard and
+    file; a re-run of the campaign re-computes that shard and says so."""
+    from conftest import TINY_WW
+    from helpers import OracleSegmenter
+
+    from assurance.campaign import describe, run_campaign
+
+    run = tmp_path / "run"
+    shutil.copytree(tiny_campaign["run"], run)
+    shard = next(p for p in sorted((run / "shards").iterdir())
+                 if p.name.startswith("none-s") and pd.read_parquet(p / "candidates.parquet")["selected"].any())
+    path = shard / "candidates.parquet"
+    cands = pd.read_parquet(path)
+    before = cands["true_unsafe"].copy()
+    cands.loc[cands["selected"], "true_unsafe"] = ~cands.loc[cands["selected"], "true_unsafe"]
+    cands.to_parquet(path, index=False)
+    capsys.readouterr()
+    assert evidence_cli("--run", run, "--out", tmp_path / "r", "--no-pdf", "--boot", 50) == 4
+    err = capsys.readouterr().err
+    assert f"shard {shard.name}: candidates.parquet differs from its SHA256SUMS" in err
+    assert not (tmp_path / "r" / "evidence.html").exists()
+    assert cli.main(["table", str(run), "--boot", "50"]) == 4
+    assert shard.name in capsys.readouterr().err
+    summary = run_campaign(tiny_campaign["data"], run, tiny_campaign["config"], progress=False,
+                           segmenter=OracleSegmenter(TINY_WW))
+    assert summary["done"] == 1 and summary["repaired"] == [
+        f"{shard.name}: candidates.parquet differs from its SHA256SUMS (altered or truncated)"]
+    assert "1 damaged shard(s) failed verification and were run again" in describe(summary)
+    assert pd.read_parquet(path)["true_unsafe"].equals(before) and (run / "damaged" / f"{shard.name}.0").is_dir()
+    assert cli.main(["table", str(run), "--boot", "50"]) == 0
 
 
 def test_cli_errors(evidence_cli, tmp_path, capsys):
     assert evidence_cli("--run", tmp_path / "nothing", "--out", tmp_path / "o") == 2
     assert "not a campaign run" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------------------------------------
+# Formats auditors' tools read (issue 19)
+# ------------------------------------------------------------------------------------------------
+def _schema(name: str) -> dict:
+    from importlib import resources
+
+    return json.loads(resources.files("assurance").joinpath(f"data/{name}.schema.json").read_text())
+
+
+def test_evidence_and_requirement_results_follow_their_json_schemas(report, pytester, monitor_runs, tmp_path):
+    import jsonschema
+
+    rep, doc, _ = report
+    jsonschema.validate(doc, _schema("evidence"))
+    results = json.loads(pytest_results(pytester, monitor_runs["good"], tmp_path, "-k", "monitor_coverage").read_text())
+    jsonschema.validate(results, _schema("requirements"))
+    broken = dict(doc, gate={**doc["gate"], "result": "MAYBE"})
+    with pytest.raises(jsonschema.ValidationError):
+        jsonschema.validate(broken, _schema("evidence"))
+
+
+def test_traceability_csv_and_relative_paths(report):
+    rep, doc, _ = report
+    trace = pd.read_csv(rep.out / "traceability.csv", keep_default_na=False)
+    assert list(trace.columns) == ["requirement", "test", "outcome", "state", "artefact"]
+    assert set(trace["requirement"]) == set(doc["requirements"])
+    for rid, entry in doc["requirements"].items():
+        rows = trace[trace["requirement"] == rid]
+        assert set(rows["state"]) == {entry["state"]}
+        assert sorted(t for t in rows["test"] if t) == sorted(t["nodeid"] for t in entry["tests"])
+    sums = (rep.out / "SHA256SUMS").read_text()
+    assert f"{sha(rep.out / 'traceability.csv')}  traceability.csv" in sums
+    from assurance.evidence import ROOT, rel
+
+    assert rel(ROOT / "reports" / "x.csv") == "reports/x.csv" and rel("/elsewhere/x") == "/elsewhere/x"
+
+
+@pytest.mark.skipif(not weasyprint_ok(), reason="WeasyPrint not installed")
+def test_pdf_is_pdf_a_3b_with_the_evidence_files_attached(report):
+    from assurance.evidence import pdf_attachment_names
+
+    rep, _, _ = report
+    data = rep.pdf.read_bytes()
+    assert b"pdfaid" in data or b"pdfaid" in b"".join(_inflated(data))  # the PDF/A identification (XMP)
+    names = pdf_attachment_names(rep.pdf)
+    assert {"evidence.json", "results.csv", "traceability.csv", "SHA256SUMS"} <= set(names), names
+    assert f"{sha(rep.pdf)}  evidence.pdf" in (rep.out / "SHA256SUMS").read_text()
+
+
+def _inflated(data: bytes) -> list[bytes]:
+    import re
+    import zlib
+
+    out = []
+    for m in re.finditer(rb"stream\r?\n", data):
+        try:
+            out.append(zlib.decompressobj().decompress(data[m.end():m.end() + 1_000_000]))
+        except zlib.error:
+            pass
+    return out
+
+
+def test_shipped_waivers_name_an_owner_and_have_not_expired():
+    from assurance.evidence import ROOT, load_waivers, waiver_expired
+
+    waivers = load_waivers(ROOT / "assurance" / "waivers.yaml")
+    assert waivers["EL-R09"]["owner"] == "segmentation maintainers"
+    assert not [rid for rid, w in waivers.items() if waiver_expired(w)], "a shipped waiver expired: fix or renew it"

@@ -8,8 +8,9 @@ from pathlib import Path
 
 from assurance.cli import CommandError
 
-HELP = ("write the evidence report (HTML, PDF, JSON) of a campaign run; exit 1 when a requirement failed "
-        "(with --strict also when one is not verified)")
+HELP = ("write the evidence report (HTML, PDF, JSON) of a campaign run; exit 1 when a requirement failed, "
+        "when the requirement results are not bound to this run, code and registry or contradict the run, or "
+        "when a waiver expired (with --strict also when one is not verified); exit 4 for a damaged run")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -31,7 +32,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from assurance.evidence import generate
-    from assurance.readouts import RunError
+    from assurance.readouts import DamagedRunError, RunError
     from assurance.requirements import RegistryError
 
     if args.baseline_requirements and not args.baseline:
@@ -45,6 +46,8 @@ def run(args: argparse.Namespace) -> int:
         report = generate(args.run, args.out, requirements=args.requirements, baseline=args.baseline,
                           baseline_requirements=args.baseline_requirements, registry=args.registry,
                           strict=args.strict, pdf=not args.no_pdf, n_boot=args.boot, waivers=args.waivers)
+    except DamagedRunError:
+        raise  # exit 4: the run's readouts fail verification
     except (RegistryError, RunError, ValueError) as exc:
         raise CommandError(str(exc)) from None
     for w in report.warnings:
@@ -52,12 +55,16 @@ def run(args: argparse.Namespace) -> int:
     for line in report.summary_lines():
         print(line)
     if report.exit_code:
-        why = "requirement(s) failed" if report.ids("failed") else "--strict: not everything verified"
-        if not report.ids("failed") and report.pdf_error and not report.ids("not verified"):
+        blocking = [r for r in report.ids("failed") if r not in report.waived]
+        why = "requirement(s) failed" if blocking else "--strict: not everything verified"
+        if not blocking and report.pdf_error and not report.ids("not verified"):
             why = "--strict: no PDF"
+        if report.problems:
+            why = "the requirement results are not bound to this run or contradict it" + (
+                "; requirement(s) failed" if blocking else "")
         print(f"gate: FAILED ({why})")
     else:
-        waived = " (failed but waived: " + ", ".join(report.ids("failed")) + ")" if report.ids("failed") else ""
+        waived = " (failed but waived: " + ", ".join(report.waived) + ")" if report.waived else ""
         print("gate: passed" + waived + (" (not everything verified; --strict would fail)"
                                          if report.ids("not verified") else ""))
     return report.exit_code

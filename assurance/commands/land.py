@@ -68,8 +68,29 @@ def config_from_args(args: argparse.Namespace) -> CoreConfig:
     )
 
 
+OVERLAY_SUFFIXES = (".png", ".jpg", ".jpeg")
+
+
+def check_outputs(args: argparse.Namespace) -> None:
+    """Refuse output paths that cannot be written, before anything is computed or written."""
+    for flag, path in (("--json", args.json), ("--overlay", args.overlay)):
+        if path is None:
+            continue
+        if path.is_dir():
+            raise CommandError(f"{flag} {path}: is a folder; give a file name")
+        if path.parent.exists() and not path.parent.is_dir():
+            raise CommandError(f"{flag} {path}: cannot write: {path.parent} is not a folder")
+    if args.overlay is not None and args.overlay.suffix.lower() not in OVERLAY_SUFFIXES:
+        raise CommandError(f"--overlay {args.overlay}: unknown image type {args.overlay.suffix or '(none)'!r}; "
+                           f"give a {', '.join(OVERLAY_SUFFIXES)} file")
+    if args.json is not None and args.overlay is not None and args.json.resolve() == args.overlay.resolve():
+        raise CommandError(f"--json and --overlay name the same file {args.json}")
+
+
 def run(args: argparse.Namespace) -> int:
     from el.gt_pipeline import decide_from_label_file
+
+    check_outputs(args)
 
     if args.labels is None:
         if args.image_arg is None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from assurance.cli import CommandError
 from assurance.findings import findings, findings_markdown
 from assurance.reference import load_reference
 from assurance.stages import stage_table, stages_markdown, wall_seconds
@@ -25,7 +26,25 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import sys
+
+    from assurance.integrity import verify_run
+    from assurance.readouts import read_manifest
+
+    if args.boot < 1:
+        raise CommandError("--boot must be >= 1")
+    check = verify_run(args.run).raise_if_damaged()  # exit 4 naming the shard and file
+    planned = read_manifest(args.run).get("tasks")
+    if isinstance(planned, int) and check.shards < planned:
+        print(f"warning: {args.run}: {check.shards} of {planned} task(s) finished (an unfinished campaign: "
+              "run the same `uav-el campaign` command to complete it)", file=sys.stderr)
+    if check.legacy:
+        print(f"warning: {args.run}: written before shard hashes; its readouts cannot be verified", file=sys.stderr)
     df = results_table(args.run, n_boot=args.boot)
+    faulted = int(df.drop_duplicates(["perturbation", "severity"])["faults"].sum()) if len(df) else 0
+    if faulted:
+        print(f"warning: {args.run}: {faulted} faulted task(s) are left out of the table (see the faults column "
+              "and the run's log)", file=sys.stderr)
     out = Path(args.out or args.run)
     write_csv(df, out / "results.csv")
     md = to_markdown(df, intervals=not args.no_intervals)

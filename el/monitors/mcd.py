@@ -15,6 +15,7 @@ import numpy as np
 
 from el.monitors.base import Monitor, PatchSegmenter, validate_mask, validate_samples
 from el.monitors.lhd import LHDMonitor, take_disc
+from el.monitors.mc_chunks import Between, can_chunk, mc_samples
 from el.monitors.patches import Patch, accepts_keyword, disc_box
 from el.monitors.spec import MonitorSpec, validate_n, validate_rho
 
@@ -78,6 +79,7 @@ class MCDMonitor(Monitor):
         self.rule = rule
         self.n = validate_n(n)
         self.rho = validate_rho(rho)
+        self.between: Between | None = None  # the decision loop's budget check between MC chunks
 
     @property
     def spec(self) -> MonitorSpec:
@@ -92,11 +94,19 @@ class MCDMonitor(Monitor):
 
     def patch_scores(self, patch: Patch, segmenter: PatchSegmenter, *, seed: int = 0
                      ) -> tuple[np.ndarray, np.ndarray]:
-        """MC samples over the disc's box only, when the segmenter takes a ``window`` (same scores)."""
+        """MC samples over the disc's box only, when the segmenter takes a ``window`` (same scores).
+
+        Drawn in chunks of ``MC_CHUNK`` samples, with ``self.between`` (set by the decision loop: its
+        budget check) called between them, so a large ``n`` cannot overrun the time budget unseen.
+        """
         window, box_mask = disc_box(patch.disc_mask)
         if window is None or not accepts_keyword(segmenter.mc_dropout, "window"):
+            if can_chunk(segmenter):
+                return mc_samples(segmenter, patch.rgb, self.n, self.rho, seed, between=self.between,
+                                  clock=self.clock), patch.disc_mask
             return super().patch_scores(patch, segmenter, seed=seed)
-        return segmenter.mc_dropout(patch.rgb, self.n, self.rho, seed, window=window), box_mask
+        return mc_samples(segmenter, patch.rgb, self.n, self.rho, seed, window=window, between=self.between,
+                          clock=self.clock), box_mask
 
     def decide(self, scores: np.ndarray, disc_mask: np.ndarray) -> tuple[bool, str]:
         return self.rule.judge_pixels(self.disc_score(scores, disc_mask))

@@ -100,6 +100,20 @@ def read_card(weights_path: str | Path) -> dict[str, Any]:
     return card
 
 
+def _unpickling_reason(exc: Exception) -> str:
+    """Why torch refused a file, without torch's advice to retry with ``weights_only=False`` (never do:
+    that would run the pickled code this check exists to refuse)."""
+    import pickle
+
+    text = str(exc)
+    if isinstance(exc, pickle.UnpicklingError) or "weights_only" in text:
+        keep = [ln.strip() for ln in text.splitlines() if ln.strip() and "weights_only" not in ln
+                and "trusted source" not in ln and "documentation" not in ln]
+        detail = keep[0] if keep else type(exc).__name__
+        return f"refused: the file holds pickled objects that are not plain tensors ({detail})"
+    return text
+
+
 def load_weights(weights_path: str | Path | None = None, *, device: str | torch.device = "cpu"
                  ) -> tuple[torch.nn.Module, dict[str, Any]]:
     """Rebuild the network from a weights file after checking its SHA-256 against its card.
@@ -127,7 +141,7 @@ def load_weights(weights_path: str | Path | None = None, *, device: str | torch.
     try:
         state = torch.load(io.BytesIO(data), map_location=device, weights_only=True)
     except Exception as exc:  # torch raises several types for corrupt or unsafe files
-        raise WeightsError(f"{path}: cannot load the state dict (weights_only): {exc}") from exc
+        raise WeightsError(f"{path}: cannot load the state dict (weights_only): {_unpickling_reason(exc)}") from exc
     if not isinstance(state, dict):
         raise WeightsError(f"{path}: expected a state dict, got {type(state).__name__}")
     try:
