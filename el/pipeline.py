@@ -24,7 +24,7 @@ from el.config import CoreConfig
 from el.core import default_area, run_core
 from el.decision import Candidate, Decision, Disc, MonitorVerdict
 from el.hashing import sha256_bytes
-from el.monitors import Monitor, build_monitor, monitor_name, parse_monitor_spec
+from el.monitors import CandidateContext, Monitor, build_monitor, monitor_name, parse_monitor_spec
 from el.uavid import read_image
 
 Clock = Callable[[], float]
@@ -194,7 +194,7 @@ class EmergencyLanding:
 
             stage = "monitoring"
             t = self.clock()
-            candidates, selected, overhead = self._walk(rgb, candidates, budget)
+            candidates, selected, overhead = self._walk(rgb, candidates, budget, probs)
             timings["monitoring_s"] = self.clock() - t
             timings["overhead_s"] = overhead
             budget.check(stage)
@@ -242,7 +242,7 @@ class EmergencyLanding:
         return probs
 
     def _walk(
-        self, rgb: np.ndarray, candidates: list[Candidate], budget: _Budget
+        self, rgb: np.ndarray, candidates: list[Candidate], budget: _Budget, probs: np.ndarray | None = None
     ) -> tuple[list[Candidate], int | None, float]:
         """Monitor candidates in rank order; returns (candidates with verdicts, selected, overhead s).
 
@@ -258,7 +258,8 @@ class EmergencyLanding:
             if selected is not None and not self.config.evaluate_all:
                 out.append(cand)
                 continue
-            verdict = self.monitor.check(rgb, cand, self.segmenter, seed=self.config.seed + k)
+            context = None if probs is None else CandidateContext(cand, probs, (rgb.shape[1], rgb.shape[0]))
+            verdict = self.monitor.check(rgb, cand, self.segmenter, seed=self.config.seed + k, context=context)
             if not isinstance(verdict, MonitorVerdict):
                 raise ValueError(f"monitor returned {type(verdict).__name__}, not a MonitorVerdict")
             out.append(replace(cand, monitor=verdict))
