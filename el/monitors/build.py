@@ -19,8 +19,8 @@ def _build_registered(spec: GenericSpec, **common: object) -> Monitor:
     monitor = entry.factory(**spec.kwargs(), **common)
     if not isinstance(monitor, Monitor):
         raise ValueError(f"monitor {spec.kind!r} ({entry.source}) built a {type(monitor).__name__}, not a Monitor")
-    if parse_monitor_spec(monitor.name) != parse_monitor_spec(spec.name):
-        raise ValueError(f"monitor {spec.kind!r} ({entry.source}) names itself {monitor.name!r}, not {spec.name!r}")
+    if getattr(monitor.spec, "kind", None) != spec.kind:
+        raise ValueError(f"monitor {spec.kind!r} ({entry.source}) names itself {monitor.name!r}")
     return monitor
 
 
