@@ -95,8 +95,8 @@ def test_land_and_campaign_run_the_plugin_monitor_by_name(toy_installed, tmp_pat
     write_image(image, ids_to_colors(ids))
     out = tmp_path / "d.json"
     monkeypatch.setattr(cli, "COMMANDS", {"land": "land"})
-    code = cli.main(["land", str(image), "--weights", str(weights), "--monitor", "toy:q=0.9", "--all", "--budget", "1000",
-                     "--working-width", "1024", "--json", str(out)])
+    code = cli.main(["land", str(image), "--weights", str(weights), "--monitor", "toy:q=0.9", "--all",
+                     "--budget", "1000", "--working-width", "1024", "--json", str(out)])
     assert code == 0, capsys.readouterr().err
     d = json.loads(out.read_text())
     assert d["config"]["monitor"] == "toy:q=0.9" and d["reason"] != "timeout"
