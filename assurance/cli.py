@@ -22,6 +22,7 @@ COMMANDS: dict[str, str] = {
     "train": "train",
     "model-card": "model_card",
     "campaign": "campaign",
+    "calibrate": "calibrate",
     "table": "table",
     "evidence": "evidence",
 }

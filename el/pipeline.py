@@ -63,6 +63,9 @@ class PipelineConfig:
         Downscale HD patches whose side exceeds this (None: native resolution).
     nominal_size : (int, int)
         Input size assumed for the default area when the image cannot be read.
+    calibration : path or None
+        A calibration card (``uav-el calibrate``): the monitor runs at the card's threshold. The card
+        must calibrate ``monitor``; a missing or altered card is a fault (default action).
     """
 
     core: CoreConfig = field(default_factory=CoreConfig)
@@ -73,6 +76,7 @@ class PipelineConfig:
     patch_margin: float = 0.25
     patch_max_side: int | None = None
     nominal_size: tuple[int, int] = (3840, 2160)
+    calibration: str | None = None
 
     def __post_init__(self) -> None:
         parse_monitor_spec(self.monitor)  # a bad spec fails here, before any image
@@ -95,6 +99,7 @@ class PipelineConfig:
             "patch_margin": self.patch_margin,
             "patch_max_side": self.patch_max_side,
             "core": self.core.to_dict(),
+            **({"calibration": self.calibration} if self.calibration else {}),
         }
 
 
@@ -151,8 +156,8 @@ class EmergencyLanding:
                 self.fault = f"fault: model: {type(exc).__name__}: {exc}"
         try:
             self.monitor = build_monitor(
-                self.config.monitor, margin=self.config.patch_margin, max_side=self.config.patch_max_side,
-                clock=clock,
+                calibrated_spec(self.config.monitor, self.config.calibration), margin=self.config.patch_margin,
+                max_side=self.config.patch_max_side, clock=clock,
             )
         except Exception as exc:
             self.fault = self.fault or f"fault: monitor: {type(exc).__name__}: {exc}"
@@ -290,6 +295,19 @@ class EmergencyLanding:
         timings["total_s"] = budget.elapsed()
         return Decision(action="default", reason=reason, selected=None, candidates=list(candidates),
                         default_area=area, timings=timings, input=info, config=self.config.to_dict())
+
+
+def calibrated_spec(monitor: str | None, calibration: str | None) -> str | None:
+    """The monitor spec to run: ``monitor``, or the card's calibrated spec (which must calibrate ``monitor``)."""
+    if not calibration:
+        return monitor
+    from el.monitors.calibration import CalibrationError, load_calibration
+
+    card = load_calibration(calibration)
+    wanted = parse_monitor_spec(monitor)
+    if wanted is None or wanted.base != parse_monitor_spec(card.monitor).base:
+        raise CalibrationError(f"{calibration}: calibrates {card.monitor!r}, not {monitor_name(monitor)!r}")
+    return card.spec
 
 
 def _extra(done: list[Candidate], selected: int | None) -> float:
