@@ -175,7 +175,7 @@ def test_gate_turns_red_for_exactly_the_broken_requirement(pytester, monitor_run
     capsys.readouterr()
     assert evidence_cli("--run", monitor_runs["good"], "--out", tmp_path / "good", "--no-pdf", "--boot", 100) == 0
     out = capsys.readouterr().out
-    assert "failed:         0" in out and "not verified:  14  EL-R01, EL-R02" in out
+    assert "failed:         0" in out and "not verified:  15  EL-R01, EL-R02" in out
     assert f"report: {tmp_path / 'good' / 'evidence.html'}" in out
     # --strict: not verified is red too
     assert evidence_cli("--run", monitor_runs["good"], "--out", tmp_path / "good", "--no-pdf", "--strict",
