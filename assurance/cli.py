@@ -23,6 +23,7 @@ COMMANDS: dict[str, str] = {
     "model-card": "model_card",
     "campaign": "campaign",
     "calibrate": "calibrate",
+    "fit-monitor": "fit_monitor",
     "table": "table",
     "evidence": "evidence",
 }

@@ -110,6 +110,9 @@ def run_model(args: argparse.Namespace) -> int:
 
         monitor = args.monitor or load_calibration(args.calibration).monitor
         calibrated_spec(monitor, str(args.calibration))
+    from el.monitors import build_monitor
+
+    build_monitor(monitor)  # a monitor that cannot be built (e.g. a missing model file): one line, exit 2
     config = PipelineConfig(core=config_from_args(args), monitor=monitor, time_budget_s=args.budget,
                             seed=args.seed, evaluate_all=args.evaluate_all,
                             calibration=str(args.calibration) if args.calibration else None)

@@ -32,6 +32,7 @@ BUILTIN: dict[str, str] = {
     "msp": "el.monitors.softmax_scores:MSPMonitor",
     "entropy": "el.monitors.softmax_scores:EntropyMonitor",
     "energy": "el.monitors.softmax_scores:EnergyMonitor",
+    "learned": "el.monitors.learned:LearnedMonitor",
 }
 """Monitors of this repository: name -> ``module:Class`` (imported when first used)."""
 
