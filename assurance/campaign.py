@@ -13,6 +13,7 @@ an interrupted campaign resumes where it stopped, and a bad image is a recorded 
 from __future__ import annotations
 
 import hashlib
+import math
 import os
 import platform
 import subprocess
@@ -35,8 +36,7 @@ from assurance.truth import true_hazard
 from el.config import CoreConfig
 from el.core import run_core
 from el.decision import Candidate
-from el.monitors import DEMO_GRID, PAPER_GRID, Monitor, build_monitor, parse_monitor_spec
-from el.monitors.patches import accepts_keyword, disc_box
+from el.monitors import DEMO_GRID, PAPER_GRID, CandidateContext, Monitor, build_monitor, parse_monitor_spec
 from el.uavid import Sample, iter_samples, read_image, read_labels
 
 GRIDS = {"paper-grid": PAPER_GRID, "demo-grid": DEMO_GRID}
@@ -150,17 +150,6 @@ def _timed(clock: Callable[[], float], fn: Callable[..., Any], *args: Any, **kwa
     return out, clock() - t
 
 
-def _attributed_mc_seconds(t_full: float, t_single: float, n: int, n_full: int) -> float:
-    """Time n MC samples would cost alone, from the time of n_full samples (one batch) and of one pass.
-
-    The trunk runs once and the head once per sample, so the cost is affine in n: interpolate
-    between one pass (n = 1) and the batch that was run (n = n_full).
-    """
-    if n >= n_full or n_full <= 1:
-        return t_full
-    return t_single + (t_full - t_single) * (n - 1) / (n_full - 1)
-
-
 def judge_candidates(
     hd: np.ndarray,
     candidates: Sequence[Candidate],
@@ -169,53 +158,52 @@ def judge_candidates(
     *,
     seed: int,
     clock: Callable[[], float] = time.perf_counter,
-) -> list[list[tuple[bool, str, float]]]:
-    """Every monitor's verdict on every candidate, sharing features; [candidate][monitor] ->
-    (accepted, reason, attributed seconds)."""
-    mc_need: dict[float, int] = {}
-    for m in monitors:
-        key = m.feature_key
-        if key[0] == "mc_dropout":
-            mc_need[key[1]] = max(mc_need.get(key[1], 0), m.spec.n)
+    frame_probs: np.ndarray | None = None,
+) -> list[list[tuple[bool, str, float, float]]]:
+    """Every monitor's verdict on every candidate, sharing work; [candidate][monitor] ->
+    (accepted, reason, attributed seconds, score).
+
+    Only the monitor interface is used: per candidate, the HD patch and the segmenter's trunk once
+    (when it has ``patch_trunk``), then the features once per ``feature_key`` (drawn by the monitor
+    that needs the most samples), the ``reduce`` step once per ``reduce_key``, and each monitor's
+    ``judge``. Each configuration is charged what it would have spent alone: the patch, the trunk,
+    its share of its features (``feature_seconds``), the reduction and its judgement.
+    ``frame_probs`` (the frame's softmax) reaches monitors that read it (``CandidateContext``).
+    """
     margins = {(m.margin, m.max_side) for m in monitors}
     if len(margins) != 1:
         raise ValueError("monitors of one campaign must share the patch margin and max_side")
-    # Optional Segmenter speed-ups; any object with the PatchSegmenter methods still works.
+    owners: dict[Any, Monitor] = {}  # feature key -> the monitor that draws the most samples of it
+    for m in monitors:
+        held = owners.get(m.feature_key)
+        if held is None or m.feature_size > held.feature_size:
+            owners[m.feature_key] = m
+    # Optional Segmenter speed-up; any object with the PatchSegmenter methods still works.
     has_trunk = callable(getattr(segmenter, "patch_trunk", None))
-    windowed = mc_need and accepts_keyword(segmenter.mc_dropout, "window")
-    out: list[list[tuple[bool, str, float]]] = []
+    size = (hd.shape[1], hd.shape[0])
+    out: list[list[tuple[bool, str, float, float]]] = []
     for k, cand in enumerate(candidates):
         patch, t_patch = _timed(clock, monitors[0].patch, hd, cand)
-        # The deterministic trunk once for the softmax and every dropout rate (when the network
-        # splits); each configuration is still charged a trunk of its own.
         trunk, t_trunk = _timed(clock, segmenter.patch_trunk, patch.rgb) if has_trunk else (None, 0.0)
-        shared = {} if trunk is None else {"features": trunk}
-        softmax, t_soft = _timed(clock, segmenter.predict_patch, patch.rgb, **shared)
-        t_soft += t_trunk
-        # MC dropout only over the disc's box: the MCD rules read the disc's pixels and nothing else.
-        window, box_mask = disc_box(patch.disc_mask) if windowed else (None, patch.disc_mask)
-        if window is not None:
-            shared = {**shared, "window": window}
-        mc: dict[float, tuple[np.ndarray, float]] = {}
-        for rho, n in mc_need.items():
-            samples, t_mc = _timed(clock, segmenter.mc_dropout, patch.rgb, n, rho, seed + k, **shared)
-            mc[rho] = (samples, t_trunk + t_mc)
-        scores: dict[tuple[float, int], tuple[np.ndarray, float]] = {}  # MCD's S per (rho, n)
+        context = None if frame_probs is None else CandidateContext(cand, frame_probs, size)
+        features = {}
+        for key, owner in owners.items():
+            (feats, mask), t_feat = _timed(clock, owner.patch_features, patch, segmenter, seed=seed + k,
+                                           size=owner.feature_size, trunk=trunk, context=context)
+            features[key] = (feats, mask, t_feat, owner.feature_size)
+        reduced: dict[Any, tuple[Any, float]] = {}
         row = []
         for m in monitors:
-            key = m.feature_key
-            if key[0] != "mc_dropout":
-                verdict = m.check_scores(softmax, patch.disc_mask)
-                row.append((verdict.accepted, verdict.reason, t_patch + t_soft + verdict.seconds))
-                continue
-            samples, t_mc = mc[key[1]]
-            t_feat = _attributed_mc_seconds(t_mc, t_soft, m.spec.n, samples.shape[0])
-            skey = (key[1], m.spec.n)
-            if skey not in scores:  # LHD and the CH taus judge the same S: compute it once
-                scores[skey] = _timed(clock, m.disc_score, samples, box_mask)
-            s_disc, t_score = scores[skey]
-            (accepted, reason), t_rule = _timed(clock, m.rule.judge_pixels, s_disc)
-            row.append((bool(accepted), reason, t_patch + t_feat + t_score + t_rule))
+            feats, mask, t_feat, drawn = features[m.feature_key]
+            rkey = (m.feature_key, m.reduce_key)
+            if rkey not in reduced:  # e.g. LHD and the CH taus read the same disc pixels: take them once
+                reduced[rkey] = _timed(clock, m.reduce, feats, mask)
+            red, t_red = reduced[rkey]
+            judgement, t_judge = _timed(clock, m.judge, red)
+            if math.isnan(judgement.score):
+                raise ValueError(f"{m.name}: non-finite score (NaN)")
+            seconds = t_patch + t_trunk + m.feature_seconds(t_feat, drawn) + t_red + t_judge
+            row.append((bool(judgement.accepted), judgement.reason, seconds, float(judgement.score)))
         out.append(row)
     return out
 
@@ -251,7 +239,8 @@ def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Calla
         monitors = [build_monitor(m, margin=config.patch_margin, max_side=config.patch_max_side, clock=clock)
                     for m in config.monitors]
         t = clock()
-        verdicts = judge_candidates(hd, core.candidates, monitors, segmenter, seed=config.seed, clock=clock)
+        verdicts = judge_candidates(hd, core.candidates, monitors, segmenter, seed=config.seed, clock=clock,
+                                    frame_probs=probs)
         timings["monitoring_s"] = clock() - t
     except Exception as exc:  # a bad image is a recorded fault, never a crash of the campaign
         fault = f"{type(exc).__name__}: {exc}"
@@ -262,6 +251,7 @@ def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Calla
     truth = [true_hazard(ids, c.disc) for c in cands]
     clearance = _clearance(world_clearance, s, (W, H), cands)
     h_default = true_hazard(ids, core.default_area)
+    thresholds = [m.threshold for m in monitors]
     image_rows, cand_rows = [], []
     for j, name in enumerate(config.monitors):
         accepted = [verdicts[k][j][0] for k in range(len(cands))]
@@ -292,6 +282,7 @@ def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Calla
                 "hazard": c.hazard, "hazard_semantic": c.hazard_semantic, "hazard_distance": c.hazard_distance,
                 "true_hazard": truth[k], "true_unsafe": bool(truth[k] >= 1.0), "clearance_m": clearance[k],
                 "accepted": bool(accepted[k]), "reason": verdicts[k][j][1], "seconds": float(seconds[k]),
+                "score": verdicts[k][j][3], "threshold": thresholds[j],
                 "selected": sel == k, "examined": k < examined,
             })
     return {"images": image_rows, "candidates": cand_rows}

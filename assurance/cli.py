@@ -28,6 +28,8 @@ COMMANDS: dict[str, str] = {
     "train": "train",
     "model-card": "model_card",
     "campaign": "campaign",
+    "calibrate": "calibrate",
+    "fit-monitor": "fit_monitor",
     "table": "table",
     "evidence": "evidence",
 }

@@ -785,7 +785,7 @@ def generate(
     ``baseline_requirements``: that run's results JSON (for requirement state changes).
     """
     from assurance.evidence_gallery import Scenes, decision_examples, perturbation_gallery
-    from assurance.evidence_plots import gains_figure, monitor_metrics_figure, overhead_figure
+    from assurance.evidence_plots import gains_figure, monitor_metrics_figure, overhead_figure, roc_figure
     from assurance.perturbations import PAPER_PERTURBATIONS
 
     run, out = Path(run), Path(out)
@@ -851,6 +851,9 @@ def generate(
         plots.append({"title": "Runtime-monitor overhead",
                       "uri": overhead_figure(images, list(man["config"]["monitors"]), params["time_budget_s"],
                                              deployed)})
+        roc = roc_figure(candidates, list(man["config"]["monitors"]), deployed)
+        if roc is not None:
+            plots.append({"title": "Runtime-monitor scores: ROC curves and operating points", "uri": roc})
 
     states = {rid: r.state for rid, r in results.items()}
     counts = rq.summary_counts(states.values())

@@ -192,3 +192,41 @@ def overhead_figure(images: Any, monitors: list[str], budget_s: float, deployed:
     ax.legend(fontsize=6, loc="lower right")
     fig.tight_layout()
     return data_uri(fig)
+
+
+def roc_figure(candidates: Any, monitors: list[str], deployed: str, perturbation: str = "none") -> str | None:
+    """ROC curves of the monitors' scores (unsafe candidates as positives) under one perturbation, with each
+    configuration's operating point (its threshold) marked; None when the run holds no scores."""
+    from assurance.scores import auroc, roc_curve
+
+    if candidates is None or len(candidates) == 0 or "score" not in candidates.columns:
+        return None
+    sub = candidates[candidates["perturbation"] == perturbation]
+    if sub.empty or sub["score"].isna().all():
+        return None
+    fig = Figure(figsize=(WIDTH_IN * 0.62, WIDTH_IN * 0.55))
+    ax = fig.subplots()
+    for mon in monitors:
+        g = sub[sub["monitor"] == mon]
+        if g.empty or g["score"].isna().all():
+            continue
+        y = g["true_unsafe"].to_numpy(bool)
+        fpr, tpr, _ = roc_curve(g["score"], y)
+        a = auroc(g["score"], y)
+        lw = 1.8 if mon == deployed else 0.9
+        (line,) = ax.plot(fpr, tpr, lw=lw, label=f"{mon} (AUROC {a:.3f})" if math.isfinite(a) else mon)
+        rejected = ~g["accepted"].to_numpy(bool)
+        op_tpr = rejected[y].mean() if y.any() else math.nan
+        op_fpr = rejected[~y].mean() if (~y).any() else math.nan
+        ax.plot([op_fpr], [op_tpr], "o", ms=5 if mon == deployed else 3.5, color=line.get_color(), mec="k", mew=0.5)
+    ax.plot([0, 1], [0, 1], color="#999999", lw=0.6, ls=":")
+    ax.set_xlim(-0.01, 1.01)
+    ax.set_ylim(-0.01, 1.01)
+    ax.set_xlabel("false-positive rate (safe candidates rejected)", fontsize=7)
+    ax.set_ylabel("recall (unsafe candidates rejected)", fontsize=7)
+    ax.tick_params(labelsize=6)
+    ax.grid(lw=0.3, alpha=0.6)
+    ax.legend(fontsize=5.5, loc="lower right")
+    ax.set_title(f"ROC of the monitor scores ({perturbation}); dot: the configuration's threshold", fontsize=8)
+    fig.tight_layout()
+    return data_uri(fig)

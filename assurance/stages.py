@@ -20,7 +20,7 @@ STAGE_NAMES = {"read_s": "read image", "perturb_s": "perturb", "segmentation_s":
                "candidates_s": "find candidates", "monitoring_s": "monitors (all configurations)",
                "other_s": "ground truth and clearance"}
 
-__all__ = ["STAGES", "stage_table", "stages_markdown", "wall_seconds"]
+__all__ = ["STAGES", "monitor_costs", "monitor_costs_markdown", "stage_table", "stages_markdown", "wall_seconds"]
 
 
 def stage_table(run_dir: str | Path) -> pd.DataFrame:
@@ -63,3 +63,25 @@ def stages_markdown(table: pd.DataFrame, wall: float | None = None) -> str:
         n = int(table["tasks"].iloc[-1])
         text += f"\nWall time of the campaign: {wall / 60:.1f} min for {n} task(s) ({wall / max(n, 1):.2f} s a task).\n"
     return text
+
+
+def monitor_costs(run_dir: str | Path) -> pd.DataFrame:
+    """Per monitor configuration: monitoring seconds per candidate (what each configuration would have spent
+    alone, shared work included, as the campaign attributes it), and the ratio to LHD's when LHD ran."""
+    cands = readouts.load_table(run_dir, "candidates")
+    if cands.empty:
+        return pd.DataFrame(columns=["monitor", "candidates", "seconds_per_candidate", "x_lhd"])
+    per = cands.groupby("monitor", sort=False)["seconds"].agg(["count", "mean"]).reset_index()
+    lhd = per.loc[per["monitor"] == "lhd", "mean"]
+    base = float(lhd.iloc[0]) if len(lhd) and float(lhd.iloc[0]) > 0 else float("nan")
+    return pd.DataFrame({"monitor": per["monitor"], "candidates": per["count"].astype(int),
+                         "seconds_per_candidate": per["mean"].astype(float),
+                         "x_lhd": per["mean"].astype(float) / base})
+
+
+def monitor_costs_markdown(table: pd.DataFrame) -> str:
+    lines = ["| Monitor | Candidates | Seconds per candidate | x LHD |", "|---|---|---|---|"]
+    for r in table.itertuples(index=False):
+        ratio = "-" if r.x_lhd != r.x_lhd else f"{r.x_lhd:.2f}"
+        lines.append(f"| `{r.monitor}` | {r.candidates} | {r.seconds_per_candidate:.4f} | {ratio} |")
+    return "\n".join(lines) + "\n"

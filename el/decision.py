@@ -16,12 +16,18 @@ Action = Literal["land", "default"]
 
 @dataclass(frozen=True)
 class MonitorVerdict:
-    """What a runtime monitor said about one candidate, and how long it took."""
+    """What a runtime monitor said about one candidate, and how long it took.
+
+    ``score``: the monitor's real-valued score (higher = more likely unsafe); ``threshold``: the
+    candidate is rejected iff ``score > threshold`` (NaN for a verdict recorded without them).
+    """
 
     name: str
     accepted: bool
     reason: str
     seconds: float
+    score: float = math.nan
+    threshold: float = math.nan
 
 
 @dataclass(frozen=True)

@@ -25,7 +25,7 @@ from el.config import CoreConfig
 from el.core import default_area, run_core
 from el.decision import Candidate, Decision, Disc, MonitorVerdict
 from el.hashing import sha256_bytes
-from el.monitors import Monitor, build_monitor, monitor_name, parse_monitor_spec
+from el.monitors import CandidateContext, Monitor, build_monitor, monitor_name, parse_monitor_spec
 from el.uavid import read_image
 
 Clock = Callable[[], float]
@@ -65,6 +65,9 @@ class PipelineConfig:
         Downscale HD patches whose side exceeds this (None: native resolution).
     nominal_size : (int, int)
         Input size assumed for the default area when the image cannot be read.
+    calibration : path or None
+        A calibration card (``uav-el calibrate``): the monitor runs at the card's threshold. The card
+        must calibrate ``monitor``; a missing or altered card is a fault (default action).
     """
 
     core: CoreConfig = field(default_factory=CoreConfig)
@@ -75,6 +78,7 @@ class PipelineConfig:
     patch_margin: float = 0.25
     patch_max_side: int | None = None
     nominal_size: tuple[int, int] = (3840, 2160)
+    calibration: str | None = None
 
     def __post_init__(self) -> None:
         parse_monitor_spec(self.monitor)  # a bad spec fails here, before any image
@@ -97,6 +101,7 @@ class PipelineConfig:
             "patch_margin": self.patch_margin,
             "patch_max_side": self.patch_max_side,
             "core": self.core.to_dict(),
+            **({"calibration": self.calibration} if self.calibration else {}),
         }
 
 
@@ -159,8 +164,8 @@ class EmergencyLanding:
                 logger.exception("segmentation model not loaded; every decision will be the default action")
         try:
             self.monitor = build_monitor(
-                self.config.monitor, margin=self.config.patch_margin, max_side=self.config.patch_max_side,
-                clock=clock,
+                calibrated_spec(self.config.monitor, self.config.calibration), margin=self.config.patch_margin,
+                max_side=self.config.patch_max_side, clock=clock,
             )
         except Exception as exc:
             self.fault = self.fault or f"fault: monitor: {type(exc).__name__}: {exc}"
@@ -204,7 +209,7 @@ class EmergencyLanding:
 
             stage = "monitoring"
             t = self.clock()
-            candidates, selected, overhead = self._walk(rgb, candidates, budget)
+            candidates, selected, overhead = self._walk(rgb, candidates, budget, probs)
             timings["monitoring_s"] = self.clock() - t
             timings["overhead_s"] = overhead
             budget.check(stage)
@@ -254,7 +259,7 @@ class EmergencyLanding:
         return probs
 
     def _walk(
-        self, rgb: np.ndarray, candidates: list[Candidate], budget: _Budget
+        self, rgb: np.ndarray, candidates: list[Candidate], budget: _Budget, probs: np.ndarray | None = None
     ) -> tuple[list[Candidate], int | None, float]:
         """Monitor candidates in rank order; returns (candidates with verdicts, selected, overhead s).
 
@@ -276,7 +281,8 @@ class EmergencyLanding:
                 budget.check("monitoring")  # before each candidate of the real walk
             elif hasattr(self.monitor, "between"):
                 self.monitor.between = None  # evaluation-only checks past the decision are not budgeted
-            verdict = self.monitor.check(rgb, cand, self.segmenter, seed=self.config.seed + k)
+            context = None if probs is None else CandidateContext(cand, probs, (rgb.shape[1], rgb.shape[0]))
+            verdict = self.monitor.check(rgb, cand, self.segmenter, seed=self.config.seed + k, context=context)
             if not isinstance(verdict, MonitorVerdict):
                 raise ValueError(f"monitor returned {type(verdict).__name__}, not a MonitorVerdict")
             out.append(replace(cand, monitor=verdict))
@@ -309,6 +315,19 @@ class EmergencyLanding:
         timings["total_s"] = budget.elapsed()
         return Decision(action="default", reason=reason, selected=None, candidates=list(candidates),
                         default_area=area, timings=timings, input=info, config=self.config.to_dict())
+
+
+def calibrated_spec(monitor: str | None, calibration: str | None) -> str | None:
+    """The monitor spec to run: ``monitor``, or the card's calibrated spec (which must calibrate ``monitor``)."""
+    if not calibration:
+        return monitor
+    from el.monitors.calibration import CalibrationError, load_calibration
+
+    card = load_calibration(calibration)
+    wanted = parse_monitor_spec(monitor)
+    if wanted is None or wanted.base != parse_monitor_spec(card.monitor).base:
+        raise CalibrationError(f"{calibration}: calibrates {card.monitor!r}, not {monitor_name(monitor)!r}")
+    return card.spec
 
 
 def _extra(done: list[Candidate], selected: int | None) -> float:

@@ -18,6 +18,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--perturbations", nargs="+", metavar="NAME", help="perturbations to apply")
     p.add_argument("--severities", nargs="+", type=int, metavar="S", help="severities 1-5")
     p.add_argument("--monitors", nargs="+", metavar="SPEC", help="monitor configurations, e.g. lhd 'lhd+ch:tau=0.25'")
+    p.add_argument("--calibration", nargs="+", metavar="CALIB.json",
+                   help="calibration card(s) (uav-el calibrate): also evaluate each calibrated monitor")
     p.add_argument("--images", type=int, help="use the first N images of --data")
     p.add_argument("--weights", help="segmentation weights (default: the shipped model)")
     p.add_argument("--seed", type=int, help="campaign seed (perturbations, MC dropout)")
@@ -32,11 +34,17 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError("--jobs must be >= 1")
     if args.scheduler and args.backend != "dask":
         raise CommandError("--scheduler needs --backend dask")
+    monitors = tuple(args.monitors) if args.monitors else None
+    if args.calibration:
+        from el.monitors.calibration import load_calibration
+
+        base = monitors or tuple(preset_config(args.preset).monitors)
+        monitors = tuple(dict.fromkeys((*base, *(load_calibration(c).spec for c in args.calibration))))
     config = preset_config(
         args.preset,
         perturbations=tuple(args.perturbations) if args.perturbations else None,
         severities=tuple(args.severities) if args.severities else None,
-        monitors=tuple(args.monitors) if args.monitors else None,
+        monitors=monitors,
         images=args.images, weights=args.weights, seed=args.seed,
     )
     summary = run_campaign(args.data, args.out, config, jobs=args.jobs, backend=args.backend,

@@ -46,9 +46,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--working-width", type=int, default=CoreConfig().working_width, metavar="PX",
                         help="working resolution width (default: %(default)s)")
-    parser.add_argument("--monitor", default="lhd", metavar="SPEC",
+    parser.add_argument("--monitor", default=None, metavar="SPEC",
                         help="runtime monitor: none, lhd, 'lhd+ch:tau=0.25', 'lhd+mcd:n=10,rho=0.9', "
-                             "'lhd+ch+mcd:tau=0.125,n=30,rho=0.5' (default: %(default)s; model pipeline)")
+                             "'lhd+ch+mcd:tau=0.125,n=30,rho=0.5', a registered monitor such as msp "
+                             "(default: lhd, or the "
+                             "--calibration card's monitor; model pipeline)")
+    parser.add_argument("--calibration", type=Path, metavar="CALIB.json",
+                        help="calibration card (uav-el calibrate): run the monitor at its calibrated threshold")
     parser.add_argument("--weights", type=Path, help="segmentation weights (default: the shipped model)")
     parser.add_argument("--budget", type=float, default=DEFAULT_TIME_BUDGET_S, metavar="S",
                         help="time budget in seconds; past it, the default action (default: %(default)s)")
@@ -120,8 +124,19 @@ def run_model(args: argparse.Namespace) -> int:
         raise CommandError("--image is for the ground-truth pipeline; give the image as IMAGE")
     image_path = Path(args.image_arg)
     read_image(image_path)  # bad input is a usage error here (in flight it is the default action)
-    config = PipelineConfig(core=config_from_args(args), monitor=args.monitor, time_budget_s=args.budget,
-                            seed=args.seed, evaluate_all=args.evaluate_all)
+    monitor = args.monitor or "lhd"
+    if args.calibration is not None:  # a bad card is a usage error here (in flight it is the default action)
+        from el.monitors.calibration import load_calibration
+        from el.pipeline import calibrated_spec
+
+        monitor = args.monitor or load_calibration(args.calibration).monitor
+        calibrated_spec(monitor, str(args.calibration))
+    from el.monitors import build_monitor
+
+    build_monitor(monitor)  # a monitor that cannot be built (e.g. a missing model file): one line, exit 2
+    config = PipelineConfig(core=config_from_args(args), monitor=monitor, time_budget_s=args.budget,
+                            seed=args.seed, evaluate_all=args.evaluate_all,
+                            calibration=str(args.calibration) if args.calibration else None)
     segmenter = None
     if args.threads is not None or args.weights is not None:
         try:

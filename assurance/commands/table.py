@@ -5,10 +5,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from assurance import readouts
 from assurance.cli import CommandError
 from assurance.findings import findings, findings_markdown
 from assurance.reference import load_reference
-from assurance.stages import stage_table, stages_markdown, wall_seconds
+from assurance.scores import auroc_markdown, auroc_table
+from assurance.stages import monitor_costs, monitor_costs_markdown, stage_table, stages_markdown, wall_seconds
 from assurance.table import compare, compare_markdown, results_table, to_markdown, write_csv
 from el.uavid import atomic_write_bytes
 
@@ -53,7 +55,10 @@ def run(args: argparse.Namespace) -> int:
         write_csv(merged, out / "comparison.csv")
         md += "\n### Beside the published results (Guerin et al., ICRA 2022)\n\n" + compare_markdown(merged)
         md += "\n### The paper's findings, asked of both tables\n\n" + findings_markdown(findings(df, load_reference()))
+    md += "\n### Monitor scores: AUROC (unsafe candidates as positives, 95% bootstrap interval over images)\n\n"
+    md += auroc_markdown(auroc_table(readouts.load_table(args.run, "candidates"), n_boot=min(args.boot, 1000)))
     md += "\n### Where the time went\n\n" + stages_markdown(stage_table(args.run), wall_seconds(args.run))
+    md += "\nMonitoring time per candidate, by configuration:\n\n" + monitor_costs_markdown(monitor_costs(args.run))
     atomic_write_bytes(out / "results.md", md.encode())
     print(md)
     written = [out / "results.csv", out / "results.md"] + ([out / "comparison.csv"] if args.compare else [])

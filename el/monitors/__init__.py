@@ -11,18 +11,24 @@ What a campaign calls to segment a patch once and judge it with many configurati
     softmax = segmenter.predict_patch(patch.rgb)                    # LHD, LHD+CH
     samples = segmenter.mc_dropout(patch.rgb, 30, rho, seed)        # every MCD config with this rho
     verdict = monitor.check_scores(softmax or samples, patch.disc_mask)
+
+Every monitor gives each candidate a score (higher = more likely unsafe) and rejects it iff the score
+is above its threshold (``verdict.score``, ``verdict.threshold``). Monitors beyond the paper's are in
+the registry (``el.monitors.registry``: built-ins and the ``uav_el.monitors`` entry points).
 """
 
-from el.monitors.base import Monitor, PatchSegmenter
+from el.monitors.base import CandidateContext, Judgement, Monitor, PatchSegmenter
 from el.monitors.build import build_monitor
 from el.monitors.ch import CHMonitor, ch_rule, rejected_label_counts
 from el.monitors.hierarchy import ClassHierarchy, default_hierarchy
 from el.monitors.lhd import LHDMonitor, forbidden_counts, forbidden_pixels, lhd_rule
 from el.monitors.mcd import MCDMonitor, mcd_score
 from el.monitors.patches import Patch, extract_patch
+from el.monitors.registry import ENTRY_POINT_GROUP, MonitorEntry, monitor_names, register_monitor
 from el.monitors.spec import (
     DEMO_GRID,
     PAPER_GRID,
+    GenericSpec,
     MonitorSpec,
     monitor_name,
     parse_monitor_spec,
@@ -30,8 +36,13 @@ from el.monitors.spec import (
 
 __all__ = [
     "DEMO_GRID",
+    "ENTRY_POINT_GROUP",
     "PAPER_GRID",
     "CHMonitor",
+    "CandidateContext",
+    "GenericSpec",
+    "Judgement",
+    "MonitorEntry",
     "ClassHierarchy",
     "LHDMonitor",
     "MCDMonitor",
@@ -48,6 +59,8 @@ __all__ = [
     "lhd_rule",
     "mcd_score",
     "monitor_name",
+    "monitor_names",
     "parse_monitor_spec",
+    "register_monitor",
     "rejected_label_counts",
 ]

@@ -7,16 +7,21 @@ Two levels, as pytorch-ood's detectors (STYLE.md):
 - ``Monitor.check_scores(scores, disc_mask)`` applies the rule to scores already computed
   (``Monitor.features(...)``): a campaign segments a patch once and feeds every configuration.
 
+Every monitor returns a real-valued score per candidate (higher = more likely unsafe) and rejects
+the candidate iff its score is above its threshold (``Monitor.accepts``).
+
 Monitors never catch exceptions: a bad input raises ValueError and the decision loop turns any
 exception into the default action (EL-R06).
 """
 
 from __future__ import annotations
 
+import math
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Hashable
-from typing import TYPE_CHECKING, Protocol, runtime_checkable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -25,7 +30,7 @@ from el.labels import NUM_CLASSES
 from el.monitors.patches import Patch, extract_patch, validate_patch_params
 
 if TYPE_CHECKING:
-    from el.monitors.spec import MonitorSpec
+    from el.monitors.spec import GenericSpec, MonitorSpec
 
 Clock = Callable[[], float]
 
@@ -92,8 +97,48 @@ def validate_samples(samples: object, shape: tuple[int, int], n: int) -> np.ndar
     return samples
 
 
+@dataclass(frozen=True)
+class Judgement:
+    """A monitor's word on one candidate: its score (higher = more likely unsafe), verdict and why."""
+
+    score: float
+    accepted: bool
+    reason: str
+
+
+@dataclass(frozen=True)
+class CandidateContext:
+    """What the decision loop knows about a candidate besides its HD patch (for monitors that use it).
+
+    ``frame_probs``: the frame's softmax at the working resolution, (8, h, w); ``frame_size``: the
+    full-resolution ``(width, height)``; ``candidate``: the ranked candidate being judged.
+    """
+
+    candidate: Candidate
+    frame_probs: np.ndarray
+    frame_size: tuple[int, int]
+
+
+def validate_threshold(threshold: object) -> float:
+    """A monitor threshold: a finite real number."""
+    if isinstance(threshold, bool) or not isinstance(threshold, int | float | np.floating) \
+            or not math.isfinite(float(threshold)):
+        raise ValueError(f"threshold must be a finite number, got {threshold!r}")
+    return float(threshold)
+
+
 class Monitor(ABC):
-    """A runtime monitor: judges one candidate's safe disc on the segmented HD patch.
+    """A runtime monitor: scores one candidate's safe disc on the segmented HD patch.
+
+    The one interface the decision loop and the campaign talk to, in three steps:
+
+    1. **features** of a patch (:meth:`patch_features`), with a shareable :attr:`feature_key`:
+       monitors with equal keys can use one computation (of :attr:`feature_size` samples, the
+       largest any of them needs; :meth:`feature_seconds` says what a smaller one would have cost);
+    2. a **score** from the features: :meth:`reduce` (shared by monitors with equal
+       :attr:`reduce_key`), then :meth:`judge`, real-valued, higher = more likely unsafe;
+    3. a **threshold**: the candidate is rejected **iff score > threshold** (:meth:`accepts`). A
+       score may be ``+inf`` (always rejected), never NaN.
 
     Parameters
     ----------
@@ -103,37 +148,75 @@ class Monitor(ABC):
         Downscale patches whose longer side exceeds this (None: always full resolution).
     clock : callable returning seconds, default ``time.perf_counter``
         Injectable for tests of time budgets.
+    threshold : float or None
+        None: the monitor's :attr:`DEFAULT_THRESHOLD` (for the paper's rules, the one that gives
+        the paper's verdicts); a calibration card sets another.
 
-    Subclasses implement ``spec``, ``features`` and ``decide``; ``decide`` is pure and untimed.
+    Subclasses implement ``spec``, ``feature_key``, ``features`` and ``judge`` (pure and untimed);
+    a registered monitor also takes ``threshold`` and the patch keywords in its constructor.
     """
 
+    DEFAULT_THRESHOLD: ClassVar[float] = 0.0
+
     def __init__(
-        self, *, margin: float = 0.25, max_side: int | None = None, clock: Clock = time.perf_counter
+        self, *, margin: float = 0.25, max_side: int | None = None, clock: Clock = time.perf_counter,
+        threshold: float | None = None,
     ) -> None:
         self.margin = margin
         self.max_side = max_side
         self.clock = clock
+        self.threshold = validate_threshold(self.DEFAULT_THRESHOLD if threshold is None else threshold)
         validate_patch_params(margin, max_side)  # now, not at the first candidate
 
     # -- what a subclass defines -------------------------------------------------------------
     @property
     @abstractmethod
-    def spec(self) -> MonitorSpec:
+    def spec(self) -> MonitorSpec | GenericSpec:
         """The configuration this monitor implements."""
 
     @property
     @abstractmethod
     def feature_key(self) -> Hashable:
-        """What ``features`` computes, minus the size of an MC batch: monitors with equal keys can
-        share features (``("softmax",)``, or ``("mc_dropout", rho)`` with ``n`` samples needed)."""
+        """What ``features`` computes, minus its size: monitors with equal keys share features
+        (``("softmax",)``, or ``("mc_dropout", rho)`` with ``feature_size`` samples needed)."""
 
     @abstractmethod
     def features(self, rgb_patch: np.ndarray, segmenter: PatchSegmenter, *, seed: int = 0) -> np.ndarray:
         """Segment a patch: softmax (8, h, w), or MC samples (n, 8, h, w) for MCD monitors."""
 
     @abstractmethod
-    def decide(self, scores: np.ndarray, disc_mask: np.ndarray) -> tuple[bool, str]:
-        """The rule on features already computed: ``(accepted, reason)``. Validates its inputs."""
+    def judge(self, reduced: Any) -> Judgement:
+        """Score, verdict at :attr:`threshold` and reason, from :meth:`reduce`'s output. Validates."""
+
+    # -- overridable steps -------------------------------------------------------------------
+    @property
+    def feature_size(self) -> int:
+        """How many samples of the features this monitor needs (1 unless it draws several)."""
+        return 1
+
+    def patch_features(self, patch: Patch, segmenter: PatchSegmenter, *, seed: int = 0, size: int | None = None,
+                       trunk: Any = None, context: CandidateContext | None = None
+                       ) -> tuple[Any, np.ndarray]:
+        """Features of a patch and the disc mask that goes with them.
+
+        ``size``: samples to draw (>= :attr:`feature_size`; a campaign draws the largest once);
+        ``trunk``: the segmenter's ``patch_trunk`` of this patch, when the caller shares it;
+        ``context``: the candidate and the frame's segmentation (see :class:`CandidateContext`).
+        """
+        return self.features(patch.rgb, segmenter, seed=seed), patch.disc_mask
+
+    def feature_seconds(self, seconds: float, size: int) -> float:
+        """What this monitor's features would have cost alone, from ``seconds`` for ``size`` samples."""
+        return seconds
+
+    @property
+    def reduce_key(self) -> Hashable:
+        """Monitors with equal keys compute the same :meth:`reduce` (default: shared with none)."""
+        return ("own", id(self))
+
+    def reduce(self, features: Any, disc_mask: np.ndarray) -> Any:
+        """The part of scoring that monitors may share (default: the features and mask as they are)."""
+        return features, disc_mask
 
     # -- shared behaviour --------------------------------------------------------------------
     @property
@@ -141,45 +224,73 @@ class Monitor(ABC):
         """Canonical configuration name, e.g. ``lhd+ch:tau=0.25``."""
         return self.spec.name
 
+    def accepts(self, score: float) -> bool:
+        """The verdict at this monitor's threshold: accepted iff ``score <= threshold``."""
+        if math.isnan(score):
+            raise ValueError(f"{self.name}: non-finite score (NaN)")
+        return not score > self.threshold
+
+    def threshold_note(self, score: float, accepted: bool) -> str:
+        """Reason suffix when the threshold, not the rule's default, decided."""
+        return f"score {score:.6g} {'<=' if accepted else '>'} threshold {self.threshold:.6g}"
+
     def patch(self, hd_image: np.ndarray, disc: Disc | Candidate) -> Patch:
         """The HD patch this monitor looks at for a disc (or candidate)."""
         return extract_patch(hd_image, disc, margin=self.margin, max_side=self.max_side)
 
-    def check_scores(self, scores: np.ndarray, disc_mask: np.ndarray) -> MonitorVerdict:
+    def decide(self, scores: Any, disc_mask: np.ndarray) -> tuple[bool, str]:
+        """The verdict on features already computed: ``(accepted, reason)``."""
+        j = self.judge(self.reduce(scores, disc_mask))
+        return j.accepted, j.reason
+
+    def score(self, scores: Any, disc_mask: np.ndarray) -> float:
+        """The score on features already computed (higher = more likely unsafe)."""
+        return self.judge(self.reduce(scores, disc_mask)).score
+
+    def check_scores(self, scores: Any, disc_mask: np.ndarray) -> MonitorVerdict:
         """Features-level entry: the verdict on scores already computed for a patch.
 
         ``seconds`` is the time of the rule alone; a campaign adds the cost of the patch and
         of the segmentation it shares.
         """
         t0 = self.clock()
-        accepted, reason = self.decide(scores, disc_mask)
-        return MonitorVerdict(self.name, bool(accepted), reason, self.clock() - t0)
+        j = self.judge(self.reduce(scores, disc_mask))
+        return self._verdict(j, self.clock() - t0)
 
     def check(
-        self, hd_image: np.ndarray, candidate: Candidate | Disc, segmenter: PatchSegmenter, *, seed: int = 0
+        self, hd_image: np.ndarray, candidate: Candidate | Disc, segmenter: PatchSegmenter, *, seed: int = 0,
+        context: CandidateContext | None = None,
     ) -> MonitorVerdict:
         """Crop, segment and judge one candidate (or Disc) on the HD image; ``seconds`` is the total.
 
-        ``seed`` drives MC dropout (ignored by deterministic monitors). Raises on bad input or a
-        segmenter that returns the wrong shape or non-finite scores.
+        ``seed`` drives MC dropout (ignored by deterministic monitors); ``context`` is for monitors
+        that read the frame's segmentation. Raises on bad input or a segmenter that returns the
+        wrong shape or non-finite scores.
         """
         t0 = self.clock()
         patch = self.patch(hd_image, candidate)
-        scores, mask = self.patch_scores(patch, segmenter, seed=seed)
-        accepted, reason = self.decide(scores, mask)
-        return MonitorVerdict(self.name, bool(accepted), reason, self.clock() - t0)
+        features, mask = self.patch_features(patch, segmenter, seed=seed, context=context)
+        j = self.judge(self.reduce(features, mask))
+        return self._verdict(j, self.clock() - t0)
 
-    def patch_scores(self, patch: Patch, segmenter: PatchSegmenter, *, seed: int = 0
-                     ) -> tuple[np.ndarray, np.ndarray]:
-        """The scores :meth:`decide` judges for a patch, and the disc mask that goes with them.
+    def _verdict(self, j: Judgement, seconds: float) -> MonitorVerdict:
+        if math.isnan(j.score):
+            raise ValueError(f"{self.name}: non-finite score (NaN)")
+        return MonitorVerdict(self.name, bool(j.accepted), j.reason, seconds, float(j.score), self.threshold)
 
-        By default :meth:`features` of the whole patch and its mask; a monitor may restrict both to
-        the disc's box when the segmenter can (MCD does).
-        """
-        return self.features(patch.rgb, segmenter, seed=seed), patch.disc_mask
+    def generic_spec(self, kind: str, **params: Any) -> GenericSpec:
+        """The spec of a registered monitor: its parameters (None ones left out), then the threshold
+        when it is not the default (so one configuration has one name)."""
+        from el.monitors.spec import THRESHOLD, GenericSpec
+
+        items = [(k, v) for k, v in params.items() if v is not None]
+        if self.threshold != self.DEFAULT_THRESHOLD:
+            items.append((THRESHOLD, self.threshold))
+        return GenericSpec(kind, tuple(items))
 
     def __repr__(self) -> str:
-        return f"{type(self).__name__}({self.name!r}, margin={self.margin}, max_side={self.max_side})"
+        return (f"{type(self).__name__}({self.name!r}, margin={self.margin}, max_side={self.max_side}, "
+                f"threshold={self.threshold})")
 
 
 def format_counts(counts: dict[str, int]) -> str:

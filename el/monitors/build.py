@@ -9,11 +9,23 @@ from el.monitors.ch import CHMonitor
 from el.monitors.hierarchy import ClassHierarchy
 from el.monitors.lhd import LHDMonitor
 from el.monitors.mcd import MCDMonitor
-from el.monitors.spec import MonitorSpec, parse_monitor_spec
+from el.monitors.registry import monitor_entry
+from el.monitors.spec import GenericSpec, MonitorSpec, parse_monitor_spec
+
+
+def _build_registered(spec: GenericSpec, **common: object) -> Monitor:
+    """A registered monitor from its spec; checks that it is a Monitor and names itself as asked."""
+    entry = monitor_entry(spec.kind)
+    monitor = entry.factory(**spec.kwargs(), **common)
+    if not isinstance(monitor, Monitor):
+        raise ValueError(f"monitor {spec.kind!r} ({entry.source}) built a {type(monitor).__name__}, not a Monitor")
+    if getattr(monitor.spec, "kind", None) != spec.kind:
+        raise ValueError(f"monitor {spec.kind!r} ({entry.source}) names itself {monitor.name!r}")
+    return monitor
 
 
 def build_monitor(
-    spec: str | MonitorSpec | None,
+    spec: str | MonitorSpec | GenericSpec | None,
     *,
     margin: float = 0.25,
     max_side: int | None = None,
@@ -24,8 +36,9 @@ def build_monitor(
 
     Parameters
     ----------
-    spec : str, MonitorSpec or None
-        E.g. ``"lhd+ch+mcd:tau=0.25,n=10,rho=0.9"`` (see ``parse_monitor_spec``).
+    spec : str, MonitorSpec, GenericSpec or None
+        E.g. ``"lhd+ch+mcd:tau=0.25,n=10,rho=0.9"``, ``"lhd:threshold=0.01"``, ``"msp:threshold=0.6"``
+        (see ``parse_monitor_spec``; registered monitors: ``el.monitors.registry``).
     margin, max_side, clock
         Patch geometry and timing, shared by every monitor kind (see ``Monitor``).
     hierarchy : ClassHierarchy, optional
@@ -46,7 +59,9 @@ def build_monitor(
     parsed = parse_monitor_spec(spec)
     if parsed is None:
         return None
-    common = {"margin": margin, "max_side": max_side, "clock": clock}
+    if isinstance(parsed, GenericSpec):
+        return _build_registered(parsed, margin=margin, max_side=max_side, clock=clock)
+    common = {"margin": margin, "max_side": max_side, "clock": clock, "threshold": parsed.threshold}
     rule: LHDMonitor
     if parsed.tau is not None:
         rule = CHMonitor(tau=parsed.tau, hierarchy=hierarchy, **common)

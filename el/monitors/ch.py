@@ -2,7 +2,8 @@
 
 Each pixel is labelled with the closest common ancestor of its classes scoring above tau
 (``hierarchy.yaml``); the disc is rejected if a pixel's label has a forbidden class under it
-(``any``, ``unsafe`` or a forbidden class) or if LHD rejects it.
+(``any``, ``unsafe`` or a forbidden class) or if LHD rejects it. Score: the fraction of such pixels
+(``el.monitors.lhd.fraction_score``); threshold 0 is the paper's rule.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ import numpy as np
 from el.labels import NUM_CLASSES
 from el.monitors.base import format_counts
 from el.monitors.hierarchy import ClassHierarchy, default_hierarchy
-from el.monitors.lhd import EMPTY_DISC, LHDMonitor, forbidden_counts, lhd_reason
+from el.monitors.lhd import EMPTY_DISC, LHDMonitor, forbidden_counts, forbidden_pixels, lhd_reason
 from el.monitors.spec import MonitorSpec, validate_tau
 
 
@@ -67,8 +68,13 @@ class CHMonitor(LHDMonitor):
 
     @property
     def spec(self) -> MonitorSpec:
-        return MonitorSpec(tau=self.tau)
+        return MonitorSpec(tau=self.tau, threshold=self.threshold)
 
-    def judge_pixels(self, pixel_scores: np.ndarray) -> tuple[bool, str]:
+    def rule(self, pixel_scores: np.ndarray) -> tuple[bool, str]:
         return ch_rule(pixel_scores, self.tau, self.hierarchy)
+
+    def rejected_pixels(self, pixel_scores: np.ndarray) -> np.ndarray:
+        """(m,) bool: forbidden by argmax, or labelled with a hierarchy node that has a forbidden class under it."""
+        labels = self.hierarchy.label(pixel_scores, self.tau)
+        return forbidden_pixels(pixel_scores) | self.hierarchy.rejected[labels]
 

@@ -2,12 +2,23 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Hashable
+from typing import Any
 
 import numpy as np
 
 from el.labels import CLASS_NAMES, FORBIDDEN_IDS, SAFE_IDS
-from el.monitors.base import Monitor, PatchSegmenter, format_counts, validate_mask, validate_scores
+from el.monitors.base import (
+    CandidateContext,
+    Judgement,
+    Monitor,
+    PatchSegmenter,
+    format_counts,
+    validate_mask,
+    validate_scores,
+)
+from el.monitors.patches import Patch
 from el.monitors.spec import MonitorSpec
 
 _FORBIDDEN = np.array(FORBIDDEN_IDS)
@@ -72,10 +83,40 @@ def take_disc(scores: np.ndarray, disc_mask: np.ndarray) -> np.ndarray:
 EMPTY_DISC = "empty disc: no pixel to check"
 
 
+def fraction_score(rejected: np.ndarray, slack: np.ndarray) -> float:
+    """The score of the paper's pixel rules on a disc of ``m`` pixels: higher = more likely unsafe.
+
+    ``rejected``: (m,) bool, the pixels the rule rejects; ``slack``: (m,) float, how far an accepted
+    pixel is from being rejected (< 0 for every accepted pixel).
+
+    - some pixel rejected: the fraction of rejected pixels, in (0, 1];
+    - none: the largest slack, < 0 (the pixel closest to being rejected);
+    - an empty disc: ``+inf``.
+
+    So the score is > 0 exactly when the rule rejects the disc, and the paper's verdicts are those
+    at threshold 0 (reject iff score > 0). A threshold of 0.01 tolerates forbidden pixels on up to
+    1% of the disc; a negative one demands a margin on every pixel.
+    """
+    m = rejected.shape[0]
+    if m == 0:
+        return math.inf
+    k = int(np.count_nonzero(rejected))
+    if k:
+        return k / m
+    return float(slack.max())
+
+
+def argmax_slack(pixel_scores: np.ndarray) -> np.ndarray:
+    """(m,) top forbidden score minus top safe score per pixel (>= 0: forbidden by argmax, ties included)."""
+    return pixel_scores[_FORBIDDEN].max(axis=0) - pixel_scores[_SAFE].max(axis=0)
+
+
 class LHDMonitor(Monitor):
     """LHD: segment the HD patch; reject if any disc pixel's top class is forbidden.
 
-    Parameters: see ``Monitor`` (``margin``, ``max_side``, ``clock``). An empty disc is rejected.
+    Score: :func:`fraction_score` (fraction of forbidden pixels, or the best safe margin when
+    there is none); threshold 0 is the paper's rule. Parameters: see ``Monitor`` (``margin``,
+    ``max_side``, ``clock``, ``threshold``). An empty disc is rejected.
 
     Examples
     --------
@@ -84,11 +125,13 @@ class LHDMonitor(Monitor):
     >>> scores[2, 1, 1] = 2.0                                       # one road pixel
     >>> LHDMonitor().decide(scores, np.ones((3, 3), bool))
     (False, 'forbidden class in disc: road (1 px)')
+    >>> round(LHDMonitor().score(scores, np.ones((3, 3), bool)), 4)     # 1 pixel of 9
+    0.1111
     """
 
     @property
     def spec(self) -> MonitorSpec:
-        return MonitorSpec()
+        return MonitorSpec(threshold=self.threshold)
 
     @property
     def feature_key(self) -> Hashable:
@@ -97,12 +140,45 @@ class LHDMonitor(Monitor):
     def features(self, rgb_patch: np.ndarray, segmenter: PatchSegmenter, *, seed: int = 0) -> np.ndarray:
         return segmenter.predict_patch(rgb_patch)
 
-    def decide(self, scores: np.ndarray, disc_mask: np.ndarray) -> tuple[bool, str]:
-        return self.judge_pixels(disc_pixels(scores, disc_mask))
+    def patch_features(self, patch: Patch, segmenter: PatchSegmenter, *, seed: int = 0, size: int | None = None,
+                       trunk: Any = None, context: CandidateContext | None = None) -> tuple[Any, np.ndarray]:
+        if trunk is None:
+            return segmenter.predict_patch(patch.rgb), patch.disc_mask
+        return segmenter.predict_patch(patch.rgb, features=trunk), patch.disc_mask  # type: ignore[call-arg]
 
-    def judge_pixels(self, pixel_scores: np.ndarray) -> tuple[bool, str]:
-        """The rule on the disc's pixels only: scores (8, m), already validated."""
+    @property
+    def reduce_key(self) -> Hashable:
+        return ("disc_pixels", self.feature_key)
+
+    def reduce(self, features: Any, disc_mask: np.ndarray) -> np.ndarray:
+        """The disc's pixel scores (8, m), validated: shared by LHD, CH and the softmax-family monitors."""
+        return disc_pixels(features, disc_mask)
+
+    def judge(self, reduced: Any) -> Judgement:
+        return self.judge_pixels(reduced)
+
+    def rule(self, pixel_scores: np.ndarray) -> tuple[bool, str]:
+        """The paper's rule on the disc's pixels: ``(accepted, reason)``."""
         return lhd_rule(pixel_scores)
+
+    def rejected_pixels(self, pixel_scores: np.ndarray) -> np.ndarray:
+        """(m,) bool: the disc pixels the rule rejects."""
+        return forbidden_pixels(pixel_scores)
+
+    def judge_pixels(self, pixel_scores: np.ndarray, threshold: float | None = None) -> Judgement:
+        """Score, verdict and reason on the disc's pixels only: scores (8, m), already validated.
+
+        ``threshold``: None for this monitor's own (MCD passes its threshold to the rule it wraps).
+        """
+        accepted_by_rule, reason = self.rule(pixel_scores)
+        if pixel_scores.shape[1] == 0:
+            return Judgement(math.inf, False, reason)
+        score = fraction_score(self.rejected_pixels(pixel_scores), argmax_slack(pixel_scores))
+        t = self.threshold if threshold is None else threshold
+        accepted = not score > t
+        if accepted != accepted_by_rule:
+            reason = f"{reason}; score {score:.6g} {'<=' if accepted else '>'} threshold {t:.6g}"
+        return Judgement(score, accepted, reason)
 
 
 def lhd_rule(pixel_scores: np.ndarray) -> tuple[bool, str]:

@@ -10,12 +10,13 @@ from __future__ import annotations
 
 from collections.abc import Hashable
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 
-from el.monitors.base import Monitor, PatchSegmenter, validate_mask, validate_samples
+from el.monitors.base import CandidateContext, Judgement, Monitor, PatchSegmenter, validate_mask, validate_samples
 from el.monitors.lhd import LHDMonitor, take_disc
-from el.monitors.mc_chunks import Between, can_chunk, mc_samples
+from el.monitors.mc_chunks import Between, mc_samples
 from el.monitors.patches import Patch, accepts_keyword, disc_box
 from el.monitors.spec import MonitorSpec, validate_n, validate_rho
 
@@ -60,7 +61,7 @@ class MCDMonitor(Monitor):
     Parameters
     ----------
     rule : LHDMonitor or CHMonitor
-        The rule applied to ``S``; its ``margin``, ``max_side`` and ``clock`` are used.
+        The rule applied to ``S``; its ``margin``, ``max_side``, ``clock`` and ``threshold`` are used.
     n : int
         MC-dropout samples (keyword-only).
     rho : float
@@ -69,13 +70,14 @@ class MCDMonitor(Monitor):
     ``features`` asks the segmenter for ``n`` samples in one batch, seeded with ``seed``.
     ``check_scores``/``decide`` take samples (n', 8, h, w) with ``n' >= n`` and use the first
     ``n``: a campaign draws 30 samples once and serves the n = 10 configurations their prefix
-    (equal to a 10-sample draw with the same seed, by the ``PatchSegmenter`` contract).
+    (equal to a 10-sample draw with the same seed, by the ``PatchSegmenter`` contract). The score
+    is the wrapped rule's (``el.monitors.lhd.fraction_score``) on ``S``.
     """
 
     def __init__(self, rule: LHDMonitor, *, n: int, rho: float):
         if not isinstance(rule, LHDMonitor):
             raise ValueError(f"MCD wraps an LHD or LHD+CH monitor, got {type(rule).__name__}")
-        super().__init__(margin=rule.margin, max_side=rule.max_side, clock=rule.clock)
+        super().__init__(margin=rule.margin, max_side=rule.max_side, clock=rule.clock, threshold=rule.threshold)
         self.rule = rule
         self.n = validate_n(n)
         self.rho = validate_rho(rho)
@@ -89,27 +91,47 @@ class MCDMonitor(Monitor):
     def feature_key(self) -> Hashable:
         return ("mc_dropout", self.rho)
 
+    @property
+    def feature_size(self) -> int:
+        return self.n
+
     def features(self, rgb_patch: np.ndarray, segmenter: PatchSegmenter, *, seed: int = 0) -> np.ndarray:
         return segmenter.mc_dropout(rgb_patch, self.n, self.rho, seed)
 
-    def patch_scores(self, patch: Patch, segmenter: PatchSegmenter, *, seed: int = 0
-                     ) -> tuple[np.ndarray, np.ndarray]:
-        """MC samples over the disc's box only, when the segmenter takes a ``window`` (same scores).
+    def patch_features(self, patch: Patch, segmenter: PatchSegmenter, *, seed: int = 0, size: int | None = None,
+                       trunk: Any = None, context: CandidateContext | None = None) -> tuple[Any, np.ndarray]:
+        """MC samples (``size`` of them, default ``n``) over the disc's box only, when the segmenter
+        takes a ``window`` (the same scores: the rules read the disc's pixels and nothing else).
 
-        Drawn in chunks of ``MC_CHUNK`` samples, with ``self.between`` (set by the decision loop: its
-        budget check) called between them, so a large ``n`` cannot overrun the time budget unseen.
+        Without a shared ``trunk`` (the flight path) they are drawn in chunks of ``MC_CHUNK`` samples of
+        the same seeded draw, with ``self.between`` (set by the decision loop: its budget check) called
+        between them, so a large ``n`` cannot overrun the time budget unseen.
         """
+        n = self.n if size is None else max(int(size), self.n)
         window, box_mask = disc_box(patch.disc_mask)
         if window is None or not accepts_keyword(segmenter.mc_dropout, "window"):
-            if can_chunk(segmenter):
-                return mc_samples(segmenter, patch.rgb, self.n, self.rho, seed, between=self.between,
-                                  clock=self.clock), patch.disc_mask
-            return super().patch_scores(patch, segmenter, seed=seed)
-        return mc_samples(segmenter, patch.rgb, self.n, self.rho, seed, window=window, between=self.between,
-                          clock=self.clock), box_mask
+            window, box_mask = None, patch.disc_mask
+        if trunk is None:
+            return mc_samples(segmenter, patch.rgb, n, self.rho, seed, window=window, between=self.between,
+                              clock=self.clock), box_mask
+        shared: dict[str, Any] = {"features": trunk}
+        if window is None:
+            return segmenter.mc_dropout(patch.rgb, n, self.rho, seed, **shared), box_mask
+        return segmenter.mc_dropout(patch.rgb, n, self.rho, seed, window=window, **shared), box_mask
 
-    def decide(self, scores: np.ndarray, disc_mask: np.ndarray) -> tuple[bool, str]:
-        return self.rule.judge_pixels(self.disc_score(scores, disc_mask))
+    def feature_seconds(self, seconds: float, size: int) -> float:
+        """The head runs once per sample: ``n`` of ``size`` samples cost their share of the batch."""
+        return seconds if size <= self.n else seconds * self.n / size
+
+    @property
+    def reduce_key(self) -> Hashable:
+        return ("mcd_score", self.rho, self.n)
+
+    def reduce(self, features: Any, disc_mask: np.ndarray) -> np.ndarray:
+        return self.disc_score(features, disc_mask)
+
+    def judge(self, reduced: Any) -> Judgement:
+        return self.rule.judge_pixels(reduced, self.threshold)
 
     def disc_score(self, scores: np.ndarray, disc_mask: np.ndarray) -> np.ndarray:
         """``S`` (8, m) on the disc's pixels from samples (n' >= n, 8, h, w): what the rule judges.

@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from itertools import product
+from typing import Any
 
 NONE = "none"
 PAPER_TAUS: tuple[float, ...] = (0.25, 0.125)
@@ -24,8 +25,11 @@ VALID_FORMS = (
     "valid forms: none | lhd | lhd+ch:tau=T | lhd+mcd:n=N,rho=R | lhd+ch+mcd:tau=T,n=N,rho=R, "
     "with T the CH threshold in (0, 1) (paper: 0.25, 0.125), N the number of MC-dropout samples, "
     f"an integer in [2, {MAX_MC_SAMPLES}] (paper: 10, 30), and R the dropout keep probability in (0, 1] "
-    "(paper: 0.5, 0.75, 0.9); e.g. 'lhd+ch+mcd:tau=0.25,n=10,rho=0.9'"
+    "(paper: 0.5, 0.75, 0.9); e.g. 'lhd+ch+mcd:tau=0.25,n=10,rho=0.9'; any monitor also takes "
+    "threshold=X (reject iff score > X; the paper's rules: 0), and registered monitors are named by "
+    "their registry name (el.monitors.registry)"
 )
+THRESHOLD = "threshold"
 
 
 def validate_tau(tau: object) -> float:
@@ -61,6 +65,8 @@ class MonitorSpec:
         MC-dropout samples.
     rho : float in (0, 1] or None
         MC-dropout keep probability (set together with ``n``).
+    threshold : float or None
+        Reject iff the monitor's score is above it; None (or 0): the paper's rule.
 
     Examples
     --------
@@ -73,8 +79,12 @@ class MonitorSpec:
     tau: float | None = None
     n: int | None = None
     rho: float | None = None
+    threshold: float | None = None
 
     def __post_init__(self) -> None:
+        if self.threshold is not None:  # the paper's threshold 0 is the default: one name per configuration
+            t = _threshold(self.threshold)
+            object.__setattr__(self, "threshold", None if t == 0.0 else t)
         if self.tau is not None:
             object.__setattr__(self, "tau", validate_tau(self.tau))
         if (self.n is None) != (self.rho is None):
@@ -104,7 +114,14 @@ class MonitorSpec:
             params.append(f"tau={self.tau!r}")
         if self.n is not None:
             params += [f"n={self.n}", f"rho={self.rho!r}"]
+        if self.threshold is not None:
+            params.append(f"{THRESHOLD}={self.threshold!r}")
         return self.kind + (":" + ",".join(params) if params else "")
+
+    @property
+    def base(self) -> MonitorSpec:
+        """The same configuration at the default threshold."""
+        return MonitorSpec(tau=self.tau, n=self.n, rho=self.rho)
 
     def __str__(self) -> str:
         return self.name
@@ -124,47 +141,95 @@ class MonitorSpec:
 
 
 _PARAMS = {"lhd": (), "lhd+ch": ("tau",), "lhd+mcd": ("n", "rho"), "lhd+ch+mcd": ("tau", "n", "rho")}
+PAPER_COMPONENTS = frozenset({"lhd", "ch", "mcd"})
+
+
+def _threshold(value: object) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(float(value)):
+        raise ValueError(f"threshold must be a finite number, got {value!r}")
+    return float(value)
+
+
+def _format(value: Any) -> str:
+    return repr(value) if isinstance(value, float) else str(value)
+
+
+@dataclass(frozen=True)
+class GenericSpec:
+    """A configuration of a registered monitor (``el.monitors.registry``): ``kind:key=value,...``.
+
+    ``params`` holds the converted parameters in the registry's order (``threshold`` last).
+
+    Examples
+    --------
+    >>> GenericSpec("msp", (("threshold", 0.5),)).name
+    'msp:threshold=0.5'
+    """
+
+    kind: str
+    params: tuple[tuple[str, Any], ...] = ()
+
+    @property
+    def name(self) -> str:
+        return self.kind + (":" + ",".join(f"{k}={_format(v)}" for k, v in self.params) if self.params else "")
+
+    @property
+    def threshold(self) -> float | None:
+        return dict(self.params).get(THRESHOLD)
+
+    @property
+    def base(self) -> GenericSpec:
+        """The same configuration at the monitor's default threshold."""
+        return GenericSpec(self.kind, tuple((k, v) for k, v in self.params if k != THRESHOLD))
+
+    def kwargs(self) -> dict[str, Any]:
+        return dict(self.params)
+
+    def __str__(self) -> str:
+        return self.name
+
+
+AnySpec = MonitorSpec | GenericSpec
 
 
 def _bad(text: str, why: str) -> ValueError:
     return ValueError(f"bad monitor spec {text!r}: {why}; {VALID_FORMS}")
 
 
-def parse_monitor_spec(text: str | MonitorSpec | None) -> MonitorSpec | None:
+def parse_monitor_spec(text: str | AnySpec | None) -> AnySpec | None:
     """Parse a monitor name; ``"none"`` (or None) gives None (no runtime monitor).
 
-    Case and spaces are ignored, the components may come in any order (``lhd`` first in the
-    canonical name), the parameters too, but every parameter of the kind is required.
+    The paper's monitors (``lhd``, ``ch``, ``mcd`` components) give a :class:`MonitorSpec`: case and
+    spaces are ignored, the components may come in any order (``lhd`` first in the canonical name),
+    the parameters too, but every parameter of the kind is required. Any other name is looked up in
+    the monitor registry (built-ins and the ``uav_el.monitors`` entry points) and gives a
+    :class:`GenericSpec`; its values keep their case (file paths). Every monitor takes
+    ``threshold=X``.
 
     Raises
     ------
     ValueError
         With the reason and the valid forms.
     """
-    if text is None or isinstance(text, MonitorSpec):
+    if text is None or isinstance(text, MonitorSpec | GenericSpec):
         return text
     if not isinstance(text, str):
         raise ValueError(f"a monitor spec must be a string, got {type(text).__name__}; {VALID_FORMS}")
-    clean = "".join(text.split()).lower()
-    if clean == NONE:
+    raw = "".join(text.split())
+    if raw.lower() == NONE:
         return None
-    head, sep, tail = clean.partition(":")
+    head, sep, tail = raw.partition(":")
+    head = head.lower()
     parts = head.split("+")
-    if "lhd" not in parts or len(set(parts)) != len(parts) or not set(parts) <= {"lhd", "ch", "mcd"}:
+    if not set(parts) & PAPER_COMPONENTS:
+        return _parse_registered(text, head, tail if sep else "")
+    clean = raw.lower()
+    head, sep, tail = clean.partition(":")
+    if "lhd" not in parts or len(set(parts)) != len(parts) or not set(parts) <= PAPER_COMPONENTS:
         raise _bad(text, f"unknown monitor {head!r}")
     kind = "lhd" + ("+ch" if "ch" in parts else "") + ("+mcd" if "mcd" in parts else "")
     expected = _PARAMS[kind]
-    values: dict[str, str] = {}
-    if sep:
-        for item in tail.split(","):
-            key, eq, value = item.partition("=")
-            if not eq or not key or not value:
-                raise _bad(text, f"parameter {item!r} is not key=value")
-            if key not in expected:
-                raise _bad(text, f"{kind} takes no parameter {key!r}")
-            if key in values:
-                raise _bad(text, f"parameter {key!r} given twice")
-            values[key] = value
+    values = _key_values(text, kind, tail if sep else "", (*expected, THRESHOLD))
     missing = [k for k in expected if k not in values]
     if missing:
         raise _bad(text, f"{kind} needs {', '.join(missing)}")
@@ -172,14 +237,56 @@ def parse_monitor_spec(text: str | MonitorSpec | None) -> MonitorSpec | None:
         tau = float(values["tau"]) if "tau" in values else None
         rho = float(values["rho"]) if "rho" in values else None
         n = int(values["n"]) if "n" in values else None
-        if (tau is not None and not math.isfinite(tau)) or (rho is not None and not math.isfinite(rho)):
+        threshold = float(values[THRESHOLD]) if THRESHOLD in values else None
+        if any(v is not None and not math.isfinite(v) for v in (tau, rho, threshold)):
             raise ValueError("parameters must be finite")
-        return MonitorSpec(tau=tau, n=n, rho=rho)
+        return MonitorSpec(tau=tau, n=n, rho=rho, threshold=threshold)
     except ValueError as err:
         raise _bad(text, str(err)) from None
 
 
-def monitor_name(spec: str | MonitorSpec | None) -> str:
+def _key_values(text: str, kind: str, tail: str, allowed: tuple[str, ...]) -> dict[str, str]:
+    values: dict[str, str] = {}
+    if not tail:
+        return values
+    for item in tail.split(","):
+        key, eq, value = item.partition("=")
+        key = key.lower()
+        if not eq or not key or not value:
+            raise _bad(text, f"parameter {item!r} is not key=value")
+        if key not in allowed:
+            raise _bad(text, f"{kind} takes no parameter {key!r}")
+        if key in values:
+            raise _bad(text, f"parameter {key!r} given twice")
+        values[key] = value
+    return values
+
+
+def _parse_registered(text: str, kind: str, tail: str) -> GenericSpec:
+    from el.monitors.registry import monitor_entry
+
+    try:
+        entry = monitor_entry(kind)
+    except ValueError as err:  # unknown, or a plugin that failed to load
+        raise _bad(text, str(err)) from None
+    values = _key_values(text, kind, tail, (*entry.params, THRESHOLD))
+    missing = [k for k in entry.required if k not in values]
+    if missing:
+        raise _bad(text, f"{kind} needs {', '.join(missing)}")
+    params: list[tuple[str, Any]] = []
+    try:
+        for key, convert in (*entry.params.items(), (THRESHOLD, float)):
+            if key in values:
+                value = convert(values[key])
+                if key == THRESHOLD:
+                    value = _threshold(value)
+                params.append((key, value))
+    except (TypeError, ValueError) as err:
+        raise _bad(text, str(err)) from None
+    return GenericSpec(kind, tuple(params))
+
+
+def monitor_name(spec: str | AnySpec | None) -> str:
     """Canonical name of a spec, ``"none"`` for no monitor."""
     parsed = parse_monitor_spec(spec)
     return NONE if parsed is None else parsed.name

@@ -103,3 +103,14 @@ def test_beta_of_the_run_covers_the_pose_error_box(campaign_run, tables, params)
     size = (int(round(2 * first["default_x"])), int(round(first["default_y"] + first["default_r"])))
     core = readouts.read_manifest(campaign_run)["config"]["core"]
     judge(rq.check_pose_margin(core, size, params["pose_error"]))
+
+
+@pytest.mark.requirements("EL-R16")
+def test_calibrated_monitor_miss_rate_within_its_card(tables, params):
+    from assurance.calibration import check_calibrated_miss_rate
+    from el.monitors.calibration import load_calibration
+
+    card = params.get("calibration_card")
+    if not card:
+        pytest.skip("insufficient evidence: no calibration card chosen (parameters.calibration_card)")
+    judge(check_calibrated_miss_rate(tables[1], load_calibration(card)))

@@ -1,0 +1,294 @@
+"""``learned``: a small classifier on per-candidate features, trained on train-split candidates.
+
+Score = the classifier's probability that the candidate is truly unsafe (its disc holds a forbidden
+ground-truth pixel); rejected iff score > threshold. The threshold of the model file is the default
+(chosen on validation data by ``uav-el fit-monitor``: the largest one whose recall of unsafe candidates
+is >= 0.95); ``learned:threshold=X`` or a calibration card sets another.
+
+Features (:data:`BASE_FEATURES`, per candidate): the same four statistics of the disc on the frame's
+softmax (``lr_*``, working resolution, from :class:`CandidateContext`) and on the HD patch's softmax
+(``hd_*``): the largest and mean forbidden probability (sum of the forbidden classes), the share of
+pixels whose top class is forbidden, and the largest (top forbidden - top safe) margin; the distance
+from the disc's edge to the nearest predicted-forbidden pixel of the HD patch, in radii (< 0 inside
+the disc); the candidate's row (over the frame height), radius (over the frame height) and hazard.
+Optional (:data:`MCD_FEATURES`, when the model file asks for ``mcd.n`` > 0 samples): the mean and
+largest standard deviation of the forbidden probability over MC-dropout samples in the disc.
+
+The model file is plain JSON (no pickle), a card like the calibration card: ``{"format", "body",
+"sha256"}`` with the SHA-256 of the body's canonical JSON; the body holds the feature names, the
+standardisation (``mean``, ``scale``), the logistic regression's ``coef`` and ``intercept``, the
+threshold and what the model rests on (training data hash, segmentation weights hash, sklearn
+version). Inference is numpy only: the flight code does not import scikit-learn. A missing, altered
+or inconsistent file raises :class:`LearnedModelError` when the monitor is built, which the decision
+loop turns into the default action with that reason.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Hashable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+
+from el.labels import FORBIDDEN_IDS
+from el.monitors.base import CandidateContext, Judgement, PatchSegmenter, validate_scores
+from el.monitors.calibration import body_sha256
+from el.monitors.lhd import LHDMonitor, argmax_slack, forbidden_pixels, take_disc
+from el.monitors.patches import Patch
+from el.monitors.spec import GenericSpec
+
+MODEL_FORMAT = "uav-el-learned-monitor/1"
+DEFAULT_MODEL = Path(__file__).resolve().parent / "data" / "learned.json"
+
+_DISC_STATS = ("max_forbidden_p", "mean_forbidden_p", "forbidden_fraction", "max_margin")
+BASE_FEATURES: tuple[str, ...] = (
+    *(f"lr_{s}" for s in _DISC_STATS),
+    *(f"hd_{s}" for s in _DISC_STATS),
+    "edge_distance_radii", "row", "radius", "hazard",
+)
+MCD_FEATURES: tuple[str, ...] = ("mcd_mean_std", "mcd_max_std")
+_FORBIDDEN = np.array(FORBIDDEN_IDS)
+
+
+class LearnedModelError(ValueError):
+    """A learned-monitor model file that cannot be used (missing, unreadable, altered, inconsistent)."""
+
+
+# -- features ------------------------------------------------------------------------------------
+def disc_stats(pixel_scores: np.ndarray) -> list[float]:
+    """The four disc statistics (:data:`_DISC_STATS`) of the softmax of the disc's pixels (8, m)."""
+    if pixel_scores.shape[1] == 0:
+        return [1.0, 1.0, 1.0, 1.0]  # nothing seen: as bad as it gets
+    p = pixel_scores.astype(np.float64)
+    forbidden_p = p[_FORBIDDEN].sum(axis=0)
+    return [float(forbidden_p.max()), float(forbidden_p.mean()),
+            float(np.count_nonzero(forbidden_pixels(p)) / p.shape[1]), float(argmax_slack(p).max())]
+
+
+def frame_disc_mask(shape: tuple[int, int], candidate: Any, scale: float) -> np.ndarray:
+    """Pixels (h, w) of a working-resolution grid whose centres lie in the candidate's disc.
+
+    ``scale``: working pixels per full-resolution pixel. At least the pixel under the centre is kept
+    (a disc smaller than one working pixel).
+    """
+    h, w = shape
+    cx, cy, r = candidate.x * scale, candidate.y * scale, candidate.radius_px * scale
+    rows = np.arange(h, dtype=np.float64)[:, None] + 0.5 - cy
+    cols = np.arange(w, dtype=np.float64)[None, :] + 0.5 - cx
+    mask = rows**2 + cols**2 <= r * r
+    if not mask.any():
+        mask[min(max(int(cy), 0), h - 1), min(max(int(cx), 0), w - 1)] = True
+    return mask
+
+
+def edge_distance(patch_probs: np.ndarray, patch: Patch, candidate: Any, margin: float) -> float:
+    """Distance from the disc's edge to the nearest predicted-forbidden pixel of the HD patch, in radii.
+
+    < 0 when one lies inside the disc (-1 at the centre); the patch's reach ``(1 + margin) sqrt(2) - 1``
+    when the patch holds none. Patch pixel centres are mapped back to full-resolution coordinates.
+    """
+    cap = (1.0 + margin) * math.sqrt(2.0) - 1.0
+    ys, xs = np.nonzero(forbidden_pixels(patch_probs))
+    if ys.size == 0:
+        return cap
+    x = patch.offset[0] + (xs + 0.5) / patch.scale - candidate.x
+    y = patch.offset[1] + (ys + 0.5) / patch.scale - candidate.y
+    d = float(np.sqrt((x * x + y * y).min())) / candidate.radius_px - 1.0
+    return min(max(d, -1.0), cap)
+
+
+def mcd_spread(samples: np.ndarray, disc_mask: np.ndarray) -> list[float]:
+    """Mean and largest standard deviation, over MC-dropout samples (n, 8, h, w), of the disc's
+    forbidden probability (:data:`MCD_FEATURES`)."""
+    p = take_disc(samples, disc_mask).astype(np.float64)  # (n, 8, m)
+    if p.shape[-1] == 0:
+        return [0.0, 0.0]
+    std = p[:, _FORBIDDEN].sum(axis=1).std(axis=0)
+    return [float(std.mean()), float(std.max())]
+
+
+def candidate_features(patch_probs: np.ndarray, patch: Patch, context: CandidateContext, *, margin: float,
+                       mcd_samples: np.ndarray | None = None) -> np.ndarray:
+    """The feature vector of one candidate: :data:`BASE_FEATURES`, then :data:`MCD_FEATURES` with samples.
+
+    ``patch_probs``: the HD patch's softmax (8, h, w); ``context``: the candidate and the frame's softmax.
+    """
+    validate_scores(patch_probs, patch.shape, "patch softmax")
+    frame = context.frame_probs
+    if not isinstance(frame, np.ndarray) or frame.ndim != 3 or frame.shape[0] != patch_probs.shape[0]:
+        raise ValueError(f"frame softmax must be (8, h, w), got {getattr(frame, 'shape', frame)!r}")
+    validate_scores(frame, frame.shape[1:], "frame softmax")
+    cand = context.candidate
+    width, height = context.frame_size
+    lr_mask = frame_disc_mask(frame.shape[1:], cand, frame.shape[2] / width)
+    values = [
+        *disc_stats(take_disc(frame, lr_mask)),
+        *disc_stats(take_disc(patch_probs, patch.disc_mask)),
+        edge_distance(patch_probs, patch, cand, margin),
+        cand.y / height, cand.radius_px / height, float(cand.hazard),
+    ]
+    if mcd_samples is not None:
+        values += mcd_spread(mcd_samples, patch.disc_mask)
+    out = np.asarray(values, dtype=np.float64)
+    if not np.isfinite(out).all():
+        raise ValueError("non-finite candidate features")
+    return out
+
+
+# -- the model file --------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class LearnedModel:
+    """A checked learned-monitor model (:func:`load_learned_model`): standardised logistic regression."""
+
+    path: str
+    sha256: str
+    body: dict[str, Any]
+    mean: np.ndarray
+    scale: np.ndarray
+    coef: np.ndarray
+    intercept: float
+
+    @property
+    def features(self) -> tuple[str, ...]:
+        return tuple(self.body["features"])
+
+    @property
+    def threshold(self) -> float:
+        return float(self.body["threshold"])
+
+    @property
+    def mcd_n(self) -> int:
+        return int(self.body.get("mcd", {}).get("n", 0))
+
+    @property
+    def mcd_rho(self) -> float:
+        return float(self.body.get("mcd", {}).get("rho", 0.9))
+
+    def predict(self, x: np.ndarray) -> np.ndarray:
+        """P(truly unsafe) of feature rows ``x`` (n, d) or one row (d,)."""
+        z = ((np.asarray(x, np.float64) - self.mean) / self.scale) @ self.coef + self.intercept
+        return 1.0 / (1.0 + np.exp(-np.clip(z, -500.0, 500.0)))
+
+
+def model_document(body: dict[str, Any]) -> dict[str, Any]:
+    """The JSON document of a model with this body (format and hash added)."""
+    return {"format": MODEL_FORMAT, "body": body, "sha256": body_sha256(body)}
+
+
+def _vector(body: dict[str, Any], key: str, d: int) -> np.ndarray:
+    v = np.asarray(body[key], dtype=np.float64)
+    if v.shape != (d,) or not np.isfinite(v).all():
+        raise ValueError(f"{key} must be {d} finite numbers")
+    return v
+
+
+def load_learned_model(path: str | Path | None = None) -> LearnedModel:
+    """Read and check a model file (default: the shipped ``el/monitors/data/learned.json``).
+
+    Raises
+    ------
+    LearnedModelError
+        One line naming the file and the problem (missing, not JSON, altered, inconsistent).
+    """
+    p = Path(path) if path else DEFAULT_MODEL
+    try:
+        doc = json.loads(p.read_text(encoding="utf-8"))
+    except OSError as exc:
+        hint = " (train one with: uav-el fit-monitor --data data/train --val data/val --out FILE)"
+        raise LearnedModelError(f"{p}: cannot read the learned monitor model: {exc.strerror or exc}{hint}") from None
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise LearnedModelError(f"{p}: not a learned monitor model (bad JSON: {exc})") from None
+    if not isinstance(doc, dict) or doc.get("format") != MODEL_FORMAT or not isinstance(doc.get("body"), dict):
+        raise LearnedModelError(f"{p}: not a learned monitor model (format {MODEL_FORMAT!r} expected)")
+    body = doc["body"]
+    try:
+        digest = body_sha256(body)
+    except ValueError as exc:
+        raise LearnedModelError(f"{p}: model body is not plain JSON ({exc})") from None
+    if digest != doc.get("sha256"):
+        raise LearnedModelError(f"{p}: learned monitor model altered: SHA-256 of its body is {digest[:12]}..., "
+                                f"recorded {str(doc.get('sha256'))[:12]}...")
+    try:
+        names = tuple(body["features"])
+        mcd_n = int(body.get("mcd", {}).get("n", 0))
+        want = BASE_FEATURES + (MCD_FEATURES if mcd_n > 0 else ())
+        if names != want:
+            raise ValueError(f"features {list(names)} are not this version's {list(want)}")
+        d = len(names)
+        mean, scale, coef = (_vector(body, k, d) for k in ("mean", "scale", "coef"))
+        if (scale <= 0).any():
+            raise ValueError("scale must be positive")
+        intercept = float(body["intercept"])
+        threshold = float(body["threshold"])
+        if not (math.isfinite(intercept) and math.isfinite(threshold)):
+            raise ValueError("intercept and threshold must be finite")
+    except (KeyError, TypeError, ValueError) as exc:
+        raise LearnedModelError(f"{p}: inconsistent learned monitor model ({exc})") from None
+    return LearnedModel(str(p), digest, body, mean, scale, coef, intercept)
+
+
+# -- the monitor -----------------------------------------------------------------------------------
+class LearnedMonitor(LHDMonitor):
+    """``learned[:model=FILE]``: P(truly unsafe) from a logistic regression on candidate features.
+
+    Needs the candidate's :class:`CandidateContext` (the decision loop and the campaign give it). The
+    default threshold is the model file's; the segmenter must be the one the model was trained on
+    when both say which weights they are (``weights_sha256``).
+    """
+
+    PARAMS: ClassVar[dict[str, Any]] = {"model": str}
+
+    def __init__(self, *, model: str | None = None, threshold: float | None = None, **common: Any) -> None:
+        self.model_path = model
+        self.model = load_learned_model(model)
+        self.DEFAULT_THRESHOLD = self.model.threshold  # type: ignore[misc]  # per model file, not per class
+        super().__init__(threshold=threshold, **common)
+
+    @property
+    def spec(self) -> GenericSpec:  # type: ignore[override]
+        return self.generic_spec("learned", model=self.model_path)
+
+    @property
+    def feature_key(self) -> Hashable:
+        return ("learned", self.model.sha256, self.margin, self.max_side)
+
+    def patch_features(self, patch: Patch, segmenter: PatchSegmenter, *, seed: int = 0, size: int | None = None,
+                       trunk: Any = None, context: CandidateContext | None = None) -> tuple[Any, np.ndarray]:
+        if context is None:
+            raise ValueError("the learned monitor needs the candidate's context (frame softmax)")
+        self._check_weights(segmenter)
+        probs, mask = super().patch_features(patch, segmenter, seed=seed, trunk=trunk)
+        samples = None
+        if self.model.mcd_n > 0:
+            samples = segmenter.mc_dropout(patch.rgb, self.model.mcd_n, self.model.mcd_rho, seed)
+        return candidate_features(probs, patch, context, margin=self.margin, mcd_samples=samples), mask
+
+    def _check_weights(self, segmenter: Any) -> None:
+        want = self.model.body.get("weights", {}).get("sha256")
+        have = getattr(segmenter, "weights_sha256", None)
+        if want and isinstance(have, str) and have != want:
+            raise ValueError(f"learned monitor {self.model.path} was trained on weights {want[:12]}..., "
+                             f"the segmenter runs {have[:12]}...")
+
+    @property
+    def reduce_key(self) -> Hashable:
+        return ("learned_score", self.model.sha256)
+
+    def reduce(self, features: Any, disc_mask: np.ndarray) -> float:
+        x = np.asarray(features, dtype=np.float64)
+        if x.shape != (len(self.model.features),) or not np.isfinite(x).all():
+            raise ValueError(f"learned monitor: expected {len(self.model.features)} finite features, got {x.shape}")
+        return float(self.model.predict(x))
+
+    def judge(self, reduced: Any) -> Judgement:
+        score = float(reduced)
+        accepted = self.accepts(score)
+        return Judgement(score, accepted, f"P(unsafe) {score:.4f} {'<=' if accepted else '>'} "
+                                          f"threshold {self.threshold:.4g}")
+
+    def features(self, rgb_patch: np.ndarray, segmenter: PatchSegmenter, *, seed: int = 0) -> np.ndarray:
+        raise ValueError("the learned monitor judges candidates in context (check(..., context=...))")

@@ -1,0 +1,167 @@
+"""The learned candidate monitor: features, training and selection, the hash-checked JSON model (tampered
+file refused), and its use by name in the pipeline, uav-el land, campaigns and calibration."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from helpers import OracleSegmenter, nearest_class, scene_ids
+
+from el.config import CoreConfig
+from el.labels import CLASS_IDS, ids_to_colors
+from el.uavid import write_sample
+
+WW = 256
+CORE = CoreConfig(working_width=WW)
+
+
+class RoadBlindFrame(OracleSegmenter):
+    """Frames: road seen as low vegetation (candidates land on roads); patches: perfect."""
+
+    def predict_frame(self, rgb):
+        ids = nearest_class(rgb)
+        ids[ids == CLASS_IDS["road"]] = CLASS_IDS["low_vegetation"]
+        return super().predict_frame(ids_to_colors(ids))
+
+
+def _split(root, n, offset):
+    for i in range(n):
+        ids = scene_ids(256, 144, seed=offset + i, road_col=20 + 40 * i)
+        ids[:, 140 + 12 * i: 160 + 12 * i] = CLASS_IDS["road"]
+        write_sample(root, "seq00", f"{i:06d}", ids_to_colors(ids), ids)
+    return root
+
+
+@pytest.fixture(scope="module")
+def splits(tmp_path_factory):
+    root = tmp_path_factory.mktemp("learned")
+    return _split(root / "train", 5, 0), _split(root / "val", 4, 100)
+
+
+@pytest.fixture(scope="module")
+def model_file(splits, tmp_path_factory):
+    from assurance.learned_monitor import fit_learned_monitor
+
+    train, val = splits
+    doc = fit_learned_monitor(train, RoadBlindFrame(WW), val=val, core=CORE, weights={"sha256": None})
+    out = tmp_path_factory.mktemp("model") / "learned.json"
+    out.write_text(json.dumps(doc))
+    return out
+
+
+def test_fit_records_a_plain_json_model_with_what_it_rests_on(model_file):
+    from el.monitors.learned import BASE_FEATURES, load_learned_model
+
+    doc = json.loads(model_file.read_text())
+    b = doc["body"]
+    assert b["features"] == list(BASE_FEATURES) and len(b["coef"]) == len(b["mean"]) == len(BASE_FEATURES)
+    assert len(b["training"]["sha256"]) == 64 and b["training"]["unsafe"] > 0 and b["held_out"]["unsafe"] > 0
+    assert b["selection"]["held_out_recall"] >= 0.95 and b["C"] in (0.01, 0.1, 1.0, 10.0)
+    assert b["sklearn_version"] and "weights" in b and b["mcd"]["n"] == 0
+    m = load_learned_model(model_file)
+    assert m.threshold == b["threshold"] and 0.0 < m.threshold < 1.0
+
+
+def test_recall_threshold():
+    from assurance.learned_monitor import recall_threshold
+
+    s = np.linspace(0, 1, 101)
+    t = recall_threshold(s, np.ones(101, bool), 0.95)
+    assert (s > t).mean() >= 0.95 and (s > s[6]).mean() < 0.95
+    with pytest.raises(ValueError, match="no truly unsafe"):
+        recall_threshold(s, np.zeros(101, bool))
+
+
+def test_tampered_missing_or_foreign_model_files_are_refused(model_file, tmp_path):
+    from el.monitors.learned import LearnedModelError, load_learned_model
+
+    doc = json.loads(model_file.read_text())
+    doc["body"]["coef"][0] += 1.0
+    bad = tmp_path / "tampered.json"
+    bad.write_text(json.dumps(doc))
+    with pytest.raises(LearnedModelError, match="altered"):
+        load_learned_model(bad)
+    with pytest.raises(LearnedModelError, match="cannot read.*fit-monitor"):
+        load_learned_model(tmp_path / "missing.json")
+    (tmp_path / "x.json").write_text('{"format": "pickle"}')
+    with pytest.raises(LearnedModelError, match="not a learned monitor model"):
+        load_learned_model(tmp_path / "x.json")
+
+
+def test_features_are_what_the_frame_and_patch_show():
+    from el.decision import Candidate
+    from el.monitors.base import CandidateContext
+    from el.monitors.learned import BASE_FEATURES, candidate_features
+    from el.monitors.patches import extract_patch
+
+    ids = np.full((64, 64), CLASS_IDS["low_vegetation"], np.uint8)
+    ids[:, 40:] = CLASS_IDS["road"]  # road 8 px right of a disc of radius 8 centred at x = 24
+    seg = OracleSegmenter(64)
+    rgb = ids_to_colors(ids)
+    cand = Candidate(0, 24.0, 32.0, 8.0, 0.1, 0.1, 0.1)
+    patch = extract_patch(rgb, cand, margin=1.5)
+    f = dict(zip(BASE_FEATURES, candidate_features(seg.predict_patch(patch.rgb), patch,
+                                                   CandidateContext(cand, seg.predict_frame(rgb), (64, 64)),
+                                                   margin=1.5), strict=True))
+    assert f["hd_forbidden_fraction"] == 0 and f["lr_forbidden_fraction"] == 0 and f["hd_max_margin"] < 0
+    assert f["edge_distance_radii"] == pytest.approx(np.hypot(40.5 - 24, 0.5) / 8 - 1)
+    assert f["row"] == 0.5 and f["radius"] == 8 / 64 and f["hazard"] == 0.1
+
+
+def test_pipeline_uses_it_by_name_and_a_bad_file_is_the_default_action(model_file, splits, tmp_path):
+    from el.pipeline import EmergencyLanding, PipelineConfig
+
+    _, val = splits
+    image = next(val.glob("**/Images/*.png"))
+    seg = RoadBlindFrame(WW)
+    spec = f"learned:model={model_file}"
+    d = EmergencyLanding(PipelineConfig(core=CORE, monitor=spec, evaluate_all=True, time_budget_s=None),
+                         segmenter=seg).decide(image)
+    assert not d.reason.startswith("fault"), d.reason
+    assert d.candidates and all(c.monitor.name == spec and 0 <= c.monitor.score <= 1 for c in d.candidates)
+    assert all(c.monitor.accepted == (c.monitor.score <= c.monitor.threshold) for c in d.candidates)
+    doc = json.loads(model_file.read_text())
+    doc["body"]["threshold"] = 1.0
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(doc))
+    for path, needle in ((bad, "altered"), (tmp_path / "none.json", "cannot read")):
+        d = EmergencyLanding(PipelineConfig(core=CORE, monitor=f"learned:model={path}"), segmenter=seg).decide(image)
+        assert d.action == "default" and d.reason.startswith("fault: monitor") and needle in d.reason
+
+
+def test_cli_fit_monitor_and_land_fail_loud(splits, tmp_path, capsys, monkeypatch):
+    import el.segmentation as seg_module
+    from assurance.cli import main
+
+    train, val = splits
+    monkeypatch.setattr(seg_module.Segmenter, "load", classmethod(lambda cls, *a, **k: RoadBlindFrame(WW)))
+    out = tmp_path / "m.json"
+    assert main(["fit-monitor", "--data", str(train), "--val", str(val), "--out", str(out),
+                 "--working-width", str(WW)]) == 0, capsys.readouterr().err
+    assert "held-out AUROC" in capsys.readouterr().out
+    assert len(json.loads(out.read_text())["body"]["weights"]["sha256"]) == 64  # the shipped weights' hash
+    assert main(["fit-monitor", "--data", str(tmp_path / "nope"), "--out", str(out)]) == 2
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1
+    image = next(val.glob("**/Images/*.png"))
+    assert main(["land", str(image), "--monitor", f"learned:model={tmp_path / 'none.json'}"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "none.json" in err[0]
+
+
+def test_campaign_and_calibration_by_name(model_file, splits, tmp_path):
+    from assurance import readouts
+    from assurance.calibration import calibrate_on_data
+    from assurance.campaign import CampaignConfig, run_campaign
+
+    _, val = splits
+    spec = f"learned:model={model_file}"
+    config = CampaignConfig(perturbations=("none",), monitors=("lhd", spec), core=CORE)
+    summary = run_campaign(val, tmp_path / "run", config, progress=False, segmenter=RoadBlindFrame(WW))
+    assert summary["faults"] == []
+    cands = readouts.load_table(tmp_path / "run", "candidates")
+    mine = cands[cands["monitor"] == spec]
+    assert len(mine) and mine["score"].between(0, 1).all()
+    doc = calibrate_on_data(val, spec, miss_rate=0.3, confidence=0.7, segmenter=RoadBlindFrame(WW), core=CORE)
+    assert doc["body"]["monitor"] == spec and doc["body"]["spec"].startswith(spec + ",threshold=")
