@@ -30,6 +30,7 @@ COMMANDS: dict[str, str] = {
     "campaign": "campaign",
     "calibrate": "calibrate",
     "fit-monitor": "fit_monitor",
+    "fit-ood": "fit_ood",
     "table": "table",
     "evidence": "evidence",
 }

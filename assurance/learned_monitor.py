@@ -48,11 +48,11 @@ class CandidateSet:
     images: int
 
 
-def split_sha256(samples: Sequence[Sample], root: str | Path) -> str:
-    """SHA-256 over the relative paths and SHA-256 of every image and label file of a split."""
+def split_sha256(samples: Sequence[Sample], root: str | Path, *, labels: bool = True) -> str:
+    """SHA-256 over the relative paths and SHA-256 of every image (and label) file of a split."""
     h = hashlib.sha256()
     for s in samples:
-        for f in (s.image_path, s.label_path):
+        for f in (s.image_path, s.label_path) if labels else (s.image_path,):
             h.update(f"{Path(f).relative_to(root)}:{sha256_file(f)}\n".encode())
     return h.hexdigest()
 

@@ -68,6 +68,10 @@ class PipelineConfig:
     calibration : path or None
         A calibration card (``uav-el calibrate``): the monitor runs at the card's threshold. The card
         must calibrate ``monitor``; a missing or altered card is a fault (default action).
+    ood : path or None
+        An out-of-domain gate (``uav-el fit-ood``, ``el.monitors.ood``): a frame whose distance is above
+        the gate's threshold ends in the default action with reason ``out_of_domain``; a missing or
+        altered gate file is a fault (default action).
     """
 
     core: CoreConfig = field(default_factory=CoreConfig)
@@ -79,6 +83,7 @@ class PipelineConfig:
     patch_max_side: int | None = None
     nominal_size: tuple[int, int] = (3840, 2160)
     calibration: str | None = None
+    ood: str | None = None
 
     def __post_init__(self) -> None:
         parse_monitor_spec(self.monitor)  # a bad spec fails here, before any image
@@ -102,6 +107,7 @@ class PipelineConfig:
             "patch_max_side": self.patch_max_side,
             "core": self.core.to_dict(),
             **({"calibration": self.calibration} if self.calibration else {}),
+            **({"ood": self.ood} if self.ood else {}),
         }
 
 
@@ -154,6 +160,7 @@ class EmergencyLanding:
         self.fault: str | None = None
         self.segmenter = segmenter
         self.monitor: Monitor | None = None
+        self.ood: Any = None
         if segmenter is None:
             try:
                 from el.segmentation import Segmenter
@@ -171,6 +178,14 @@ class EmergencyLanding:
             self.fault = self.fault or f"fault: monitor: {type(exc).__name__}: {exc}"
             logger.exception("runtime monitor %r not built; every decision will be the default action",
                              self.config.monitor)
+        if self.config.ood:
+            try:
+                from el.monitors.ood import load_ood
+
+                self.ood = load_ood(self.config.ood)
+            except Exception as exc:
+                self.fault = self.fault or f"fault: ood: {type(exc).__name__}: {exc}"
+                logger.exception("out-of-domain gate not loaded; every decision will be the default action")
 
     # -- the decision ----------------------------------------------------------------------------
     def decide(self, image: np.ndarray | str | Path) -> Decision:
@@ -199,6 +214,16 @@ class EmergencyLanding:
             probs = self._segment(rgb)
             timings["segmentation_s"] = self.clock() - t
             budget.check(stage)
+
+            if self.ood is not None:
+                stage = "ood"
+                t = self.clock()
+                info["ood_score"] = self.ood.score(self.segmenter, rgb, probs)
+                info["ood_threshold"] = self.ood.threshold
+                timings["ood_s"] = self.clock() - t
+                if not info["ood_score"] <= self.ood.threshold:
+                    return self._default("out_of_domain", candidates, size, timings, info, budget)
+                budget.check(stage)
 
             stage = "candidates"
             t = self.clock()

@@ -53,6 +53,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "--calibration card's monitor; model pipeline)")
     parser.add_argument("--calibration", type=Path, metavar="CALIB.json",
                         help="calibration card (uav-el calibrate): run the monitor at its calibrated threshold")
+    parser.add_argument("--ood", type=Path, metavar="GATE.json",
+                        help="out-of-domain gate (uav-el fit-ood): a frame above its threshold takes the "
+                             "default action")
     parser.add_argument("--weights", type=Path, help="segmentation weights (default: the shipped model)")
     parser.add_argument("--budget", type=float, default=DEFAULT_TIME_BUDGET_S, metavar="S",
                         help="time budget in seconds; past it, the default action (default: %(default)s)")
@@ -134,9 +137,14 @@ def run_model(args: argparse.Namespace) -> int:
     from el.monitors import build_monitor
 
     build_monitor(monitor)  # a monitor that cannot be built (e.g. a missing model file): one line, exit 2
+    if args.ood is not None:
+        from el.monitors.ood import load_ood
+
+        load_ood(args.ood)  # a bad gate is a usage error here (in flight it is the default action)
     config = PipelineConfig(core=config_from_args(args), monitor=monitor, time_budget_s=args.budget,
                             seed=args.seed, evaluate_all=args.evaluate_all,
-                            calibration=str(args.calibration) if args.calibration else None)
+                            calibration=str(args.calibration) if args.calibration else None,
+                            ood=str(args.ood) if args.ood else None)
     segmenter = None
     if args.threads is not None or args.weights is not None:
         try:
