@@ -49,6 +49,7 @@ def candidate_audit(segmenter: Any, data_dir: str | Path, *, core: CoreConfig | 
     by_class: Counter[str] = Counter()
     shares: list[float] = []
     rows: list[dict[str, Any]] = []
+    evidence = evidence and callable(getattr(segmenter, "predict_patch", None))  # a frame-only segmenter: none
     for s in items:
         rgb, ids = read_image(s.image_path), read_labels(s.label_path)
         if ids.shape != rgb.shape[:2]:
