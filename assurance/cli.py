@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import logging
 import os
 import sys
 from collections.abc import Sequence
@@ -60,6 +61,11 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=EPILOG,
     )
     parser.add_argument("--version", action="version", version=f"uav-el {__version__}")
+    parser.add_argument("-v", "--verbose", action="count", default=0,
+                        help="log (-v: INFO, -vv: DEBUG), e.g. the tracebacks behind a fault reason; by default "
+                             "faults show as their one-line reason only")
+    parser.add_argument("--log-level", choices=("DEBUG", "INFO", "WARNING", "ERROR"),
+                        help="logging level (overrides -v)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name, module_name in COMMANDS.items():
         module = importlib.import_module(f"assurance.commands.{module_name}")
@@ -77,6 +83,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     parser = build_parser()
     args = parser.parse_args(argv)
+    level = args.log_level or ("DEBUG" if args.verbose >= 2 else "INFO" if args.verbose else "CRITICAL")
+    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
     try:
         return int(args._run(args) or 0)
     except DamagedRunError as exc:
