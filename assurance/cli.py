@@ -34,6 +34,7 @@ COMMANDS: dict[str, str] = {
     "fit-ood": "fit_ood",
     "table": "table",
     "evidence": "evidence",
+    "fault-table": "fault_table",
 }
 
 

@@ -598,6 +598,23 @@ def _unsafe(images: Any) -> tuple[list[tuple[Any, str]], dict[tuple, list[str]],
 # ------------------------------------------------------------------------------------------------
 # Rendering
 # ------------------------------------------------------------------------------------------------
+FAULTS_CSV = "faults.csv"
+
+
+def _faults(out: Path, warnings: list[str]) -> list[dict[str, str]] | None:
+    """The fault-injection table (``uav-el fault-table``) found next to the report, for its appendix."""
+    from assurance.fault_injection import read_table
+
+    path = out / FAULTS_CSV
+    if not path.is_file():
+        return None
+    try:
+        return read_table(path)
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        warnings.append(f"{path}: fault-injection table not shown: {exc}")
+        return None
+
+
 def environment(templates: str | Path | None = None) -> Any:
     """The Jinja2 environment of the report: autoescape on for every template, strict undefined."""
     from jinja2 import Environment, FileSystemLoader, StrictUndefined
@@ -921,10 +938,12 @@ def generate(
         "limitations": _limitations(man, reg, results, synthetic, table),
         "baseline": base,
         "commands": commands,
+        "faults": _faults(out, warnings),
     }
     html = render_html(context, templates)
     html_path, json_path, pdf_path = out / "evidence.html", out / "evidence.json", out / "evidence.pdf"
     trace_path, junit_path, sums_path = out / "traceability.csv", out / "junit.xml", out / "SHA256SUMS"
+    faults_path = out / FAULTS_CSV
     _write(html_path, html)
     _write_csv_rows(trace_path, traceability_rows(reg, results, run, csv_path), TRACE_COLUMNS)
     if pdf_path.exists():
@@ -935,7 +954,7 @@ def generate(
         exit_code = 1 if blocking or problems or (strict and (not_verified or pdf_error)) else 0
         doc = _doc(pdf_error, exit_code)
         _write(json_path, json.dumps(_jsonable(doc), indent=2, allow_nan=False) + "\n")
-        files = (html_path, pdf_path, json_path, csv_path, trace_path, junit_path)
+        files = (html_path, pdf_path, json_path, csv_path, trace_path, junit_path, faults_path)
         sums = [(p, sha256_file(p)) for p in files if p.is_file()]
         _write(sums_path, "".join(f"{h}  {p.name}\n" for p, h in sums))
         return exit_code
@@ -957,13 +976,15 @@ def generate(
             "baseline": base and {k: v for k, v in base.items() if k != "figures"},
             "warnings": warnings,
             "files": {"html": rel(html_path), "pdf": None if pdf_error else rel(pdf_path), "csv": rel(csv_path),
-                      "traceability": rel(trace_path), "junit": rel(junit_path) if junit_path.is_file() else None},
+                      "traceability": rel(trace_path), "junit": rel(junit_path) if junit_path.is_file() else None,
+                      "faults": rel(faults_path) if context["faults"] else None},
             "pdf_error": pdf_error,
         }
 
     exit_code = finish(pdf_error)  # the JSON says the PDF will be there; rewritten if it could not be
     if pdf:
-        pdf_error = write_pdf(html, pdf_path, [json_path, csv_path, trace_path, junit_path, sums_path])
+        pdf_error = write_pdf(html, pdf_path, [json_path, csv_path, trace_path, junit_path, sums_path]
+                              + ([faults_path] if context["faults"] else []))
         exit_code = finish(pdf_error)
     return EvidenceReport(out=out, html=html_path, json=json_path, pdf=None if pdf_error else pdf_path,
                           pdf_error=pdf_error, states=states, exit_code=exit_code, warnings=warnings,

@@ -1,0 +1,66 @@
+"""``uav-el fault-table`` (issue 19): the fault-injection table, and its appendix in the evidence report."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from assurance import fault_injection as fi
+from assurance.cli import main
+from assurance.evidence import generate
+
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+
+FAST = ("H5-negative-seed", "H6-deleted-shard", "H7-overlay-extension", "H8-json-is-a-folder", "B3-missing-weights")
+
+
+@pytest.fixture(scope="module")
+def workspace(tmp_path_factory):
+    return fi.build_workspace(tmp_path_factory.mktemp("faults"))
+
+
+def test_cases_cover_issue_19_and_bad_inputs():
+    ids = [c.id for c in fi.CASES]
+    assert len(ids) == len(set(ids))
+    assert sum(i.startswith("H") for i in ids) >= 11 and sum(i.startswith("B") for i in ids) >= 4
+    for n in range(1, 9):
+        assert any(i.startswith(f"H{n}-") for i in ids), n
+
+
+def test_fast_cases_behave_and_the_report_shows_the_appendix(workspace, tmp_path):
+    rows = fi.run_cases(workspace, [c for c in fi.CASES if c.id in FAST])
+    assert [r["case"] for r in rows] == list(FAST)
+    for r in rows:
+        assert tuple(r) == fi.COLUMNS and r["result"] == "pass", r
+        assert r["observed"] == r["expected"] and str(workspace) not in r["command"] + r["outcome"]
+    by = {r["case"]: r for r in rows}
+    assert by["H6-deleted-shard"]["observed"] == "4" and "shard folder missing" in by["H6-deleted-shard"]["outcome"]
+    assert "seed must be an integer >= 0" in by["H5-negative-seed"]["outcome"]
+
+    out = tmp_path / "reports"
+    rows[0] = {**rows[0], "outcome": "<script>alert('x')</script>"}
+    csv_path, md_path = fi.write_table(rows, out / "faults.csv")
+    assert fi.read_table(csv_path) == rows and md_path.read_text().count("\n") == len(rows) + 2
+    rep = generate(workspace / "run", out, pdf=False, n_boot=20)
+    html = rep.html.read_text(encoding="utf-8")
+    assert "Appendix: fault injection" in html and "H8-json-is-a-folder" in html
+    assert "<script>alert" not in html and "&lt;script&gt;" in html
+    doc = json.loads(rep.json.read_text())
+    assert doc["files"]["faults"].endswith("faults.csv")
+    assert "faults.csv" in (out / "SHA256SUMS").read_text()
+    # no table beside the report: no appendix
+    rep = generate(workspace / "run", tmp_path / "bare", pdf=False, n_boot=20)
+    assert "Appendix: fault injection" not in rep.html.read_text(encoding="utf-8")
+
+
+def test_command_writes_csv_and_markdown_and_refuses_bad_options(tmp_path, capsys):
+    assert main(["fault-table", "--list"]) == 0
+    assert "H3-budget-timeout" in capsys.readouterr().out
+    assert main(["fault-table", "--out", str(tmp_path / "f.txt")]) == 2
+    assert main(["fault-table", "--cases", "nope", "--out", str(tmp_path / "f.csv")]) == 2
+    assert "unknown case(s): nope" in capsys.readouterr().err
+    bad = tmp_path / "faults.csv"
+    bad.write_text("a,b\n1,2\n")
+    with pytest.raises(ValueError, match="not a fault-injection table"):
+        fi.read_table(bad)
