@@ -29,7 +29,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from el.labels import NUM_CLASSES
-from el.segmentation.model import MCDropout, MCSpec, draw_mc_spec, upsample_logits
+from el.segmentation.model import MCDropout, MCSpec, TrunkHeadNet
 
 # EfficientNet-Lite was trained on (x - 127) / 128 of 8-bit RGB: in [0, 1] units, mean 127/255, std 128/255.
 LITE_MEAN = 127.0 / 255.0
@@ -219,12 +219,11 @@ def _up_to(x: torch.Tensor, ref: torch.Tensor) -> torch.Tensor:
     return F.interpolate(x, size=ref.shape[2:], mode="bilinear", align_corners=False)
 
 
-class LiteSeg(nn.Module):
+class LiteSeg(TrunkHeadNet):
     """EfficientNet-Lite0 encoder + FPN decoder; logits at input size (output stride 32, logits at 1/4)."""
 
     stride = 32
     logit_stride = 4
-    supports_mc_spec = True
 
     def __init__(self, config: LiteConfig | None = None) -> None:
         super().__init__()
@@ -268,30 +267,10 @@ class LiteSeg(nn.Module):
                 m.eval()
         return self
 
-    # -- dropout control ---------------------------------------------------------------------
-    def dropout_layers(self) -> list[MCDropout]:
-        return [m for m in self.modules() if isinstance(m, MCDropout)]
-
-    def set_dropout(self, p: float) -> None:
-        if not (0.0 <= p < 1.0):
-            raise ValueError(f"drop probability must lie in [0, 1), got {p!r}")
-        for m in self.dropout_layers():
-            m.p = float(p)
-
-    def mc_spec(self, n: int, keep_prob: float, seed: int) -> MCSpec:
-        """Dropout masks for ``n`` samples (see :func:`el.segmentation.model.draw_mc_spec`)."""
-        return draw_mc_spec(self.dropout_layers(), n, keep_prob, seed)
-
     # -- forward -----------------------------------------------------------------------------
     def trunk(self, x: torch.Tensor) -> LiteFeatures:
         """Deterministic part: normalise, pad to a multiple of 32, encoder, lateral projections."""
-        if x.ndim != 4 or x.shape[1] != 3:
-            raise ValueError(f"expected input of shape (B, 3, H, W), got {tuple(x.shape)}")
-        h, w = int(x.shape[2]), int(x.shape[3])
-        ph, pw = (-h) % self.stride, (-w) % self.stride
-        x = (x - LITE_MEAN) / LITE_STD  # NCHW: faster than channels-last for depthwise convolutions on CPU
-        if ph or pw:
-            x = F.pad(x, (0, pw, 0, ph), mode="replicate")
+        x, (h, w) = self.padded_input(x, LITE_MEAN, LITE_STD)  # NCHW: faster for depthwise convs on CPU
         f4, f8, f16, f32 = self.encoder(x)
         return LiteFeatures((self.lat32(f32), self.lat16(f16), self.lat8(f8), self.lat4(f4)), (h, w))
 
@@ -303,14 +282,3 @@ class LiteSeg(nn.Module):
         p = self.smooth8(self.drop2(l8 + _up_to(p, l8), mc))
         p = F.relu(self.fuse_bn(l4 + _up_to(self.reduce(p), l4)), inplace=True)
         return self.classifier(p)
-
-    def head(self, features: LiteFeatures, mc: MCSpec | None = None, *, crop: bool = True) -> torch.Tensor:
-        """Stochastic part: logits at the padded input size, cropped to the input unless ``crop=False``."""
-        logits = upsample_logits(self.head_logits(features, mc), self.logit_stride)
-        if not crop:
-            return logits
-        h, w = features.size
-        return logits[:, :, :h, :w]
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return self.head(self.trunk(x))

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import torch
 import torch.nn.functional as F
@@ -200,12 +201,68 @@ class Features:
         return Features(self.deep.expand(n, -1, -1, -1), self.skip.expand(n, -1, -1, -1), self.size)
 
 
-class MSDLite(nn.Module):
+class TrunkHeadNet(nn.Module):
+    """What the networks split into a deterministic trunk and a stochastic head have in common.
+
+    Subclasses define ``stride`` (the input is padded to a multiple of it), ``logit_stride``,
+    ``trunk(x) -> features`` (with ``features.size``, the unpadded (H, W)) and
+    ``head_logits(features, mc)``; this class gives dropout control, MC masks, ``head`` and ``forward``.
+    """
+
+    stride = 1
+    logit_stride = 1
+    supports_mc_spec = True  # head() accepts an MCSpec: the fast trunk-once MC-dropout path
+
+    # -- dropout control ---------------------------------------------------------------------
+    def dropout_layers(self) -> list[MCDropout]:
+        return [m for m in self.modules() if isinstance(m, MCDropout)]
+
+    def set_dropout(self, p: float) -> None:
+        """Set the training-mode drop probability of every dropout layer."""
+        if not (0.0 <= p < 1.0):
+            raise ValueError(f"drop probability must lie in [0, 1), got {p!r}")
+        for m in self.dropout_layers():
+            m.p = float(p)
+
+    def mc_spec(self, n: int, keep_prob: float, seed: int) -> MCSpec:
+        """Dropout masks for ``n`` MC samples (see :func:`draw_mc_spec`)."""
+        return draw_mc_spec(self.dropout_layers(), n, keep_prob, seed)
+
+    # -- forward -----------------------------------------------------------------------------
+    def padded_input(self, x: torch.Tensor, mean: torch.Tensor | float, std: torch.Tensor | float
+                     ) -> tuple[torch.Tensor, tuple[int, int]]:
+        """``x`` (B, 3, H, W) normalised and edge-padded to a multiple of ``stride``, and its (H, W)."""
+        if x.ndim != 4 or x.shape[1] != 3:
+            raise ValueError(f"expected input of shape (B, 3, H, W), got {tuple(x.shape)}")
+        h, w = int(x.shape[2]), int(x.shape[3])
+        ph, pw = (-h) % self.stride, (-w) % self.stride
+        x = (x - mean) / std
+        if ph or pw:
+            x = F.pad(x, (0, pw, 0, ph), mode="replicate")
+        return x, (h, w)
+
+    def head_logits(self, features: Any, mc: MCSpec | None = None) -> torch.Tensor:
+        raise NotImplementedError
+
+    def head(self, features: Any, mc: MCSpec | None = None, *, crop: bool = True) -> torch.Tensor:
+        """Stochastic part: logits at the padded input size (``head_logits`` upsampled by
+        ``logit_stride``), cropped to the input unless ``crop=False`` (then the caller crops after its
+        softmax, which is faster on a dense tensor)."""
+        logits = upsample_logits(self.head_logits(features, mc), self.logit_stride)
+        if not crop:
+            return logits
+        h, w = features.size
+        return logits[:, :, :h, :w]
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.head(self.trunk(x))
+
+
+class MSDLite(TrunkHeadNet):
     """Compact multi-scale dilated segmentation CNN (output stride 8, logits at input size)."""
 
     stride = 8
     logit_stride = 4  # head_logits() are at 1/4 of the padded input; head() upsamples them bilinearly
-    supports_mc_spec = True  # head() accepts an MCSpec: the fast trunk-once MC-dropout path
 
     def __init__(self, config: ArchConfig | None = None) -> None:
         super().__init__()
@@ -233,31 +290,11 @@ class MSDLite(nn.Module):
         # NHWC ("channels_last") weights and activations: ~15-25% faster oneDNN convolutions on CPU.
         self.to(memory_format=torch.channels_last)
 
-    # -- dropout control ---------------------------------------------------------------------
-    def dropout_layers(self) -> list[MCDropout]:
-        return [m for m in self.modules() if isinstance(m, MCDropout)]
-
-    def set_dropout(self, p: float) -> None:
-        """Set the training-mode drop probability of every dropout layer."""
-        if not (0.0 <= p < 1.0):
-            raise ValueError(f"drop probability must lie in [0, 1), got {p!r}")
-        for m in self.dropout_layers():
-            m.p = float(p)
-
-    def mc_spec(self, n: int, keep_prob: float, seed: int) -> MCSpec:
-        """Dropout masks for ``n`` MC samples (see :func:`draw_mc_spec`)."""
-        return draw_mc_spec(self.dropout_layers(), n, keep_prob, seed)
-
     # -- forward -----------------------------------------------------------------------------
     def trunk(self, x: torch.Tensor) -> Features:
         """Deterministic part: normalise, pad to a multiple of 8, stem and first context blocks."""
-        if x.ndim != 4 or x.shape[1] != 3:
-            raise ValueError(f"expected input of shape (B, 3, H, W), got {tuple(x.shape)}")
-        h, w = int(x.shape[2]), int(x.shape[3])
-        ph, pw = (-h) % self.stride, (-w) % self.stride
-        x = ((x - self.mean) / self.std).contiguous(memory_format=torch.channels_last)
-        if ph or pw:
-            x = F.pad(x, (0, pw, 0, ph), mode="replicate")
+        x, (h, w) = self.padded_input(x, self.mean, self.std)
+        x = x.contiguous(memory_format=torch.channels_last)
         skip = self.stem2(self.stem1(x))
         deep = self.trunk_blocks(self.down(skip))
         return Features(deep, self.lateral(skip), (h, w))
@@ -271,21 +308,6 @@ class MSDLite(nn.Module):
         x = F.interpolate(x, size=skip.shape[2:], mode="bilinear", align_corners=False)
         x = F.relu(self.fuse_bn(x + skip), inplace=True)
         return self.classifier(x)
-
-    def head(self, features: Features, mc: MCSpec | None = None, *, crop: bool = True) -> torch.Tensor:
-        """Stochastic part: dropout, dilated context, multi-scale block, dropout, decoder, logits.
-
-        ``crop=False`` returns the logits of the padded input (a multiple of 8 on each side, a dense
-        channels-last tensor) for the caller to crop after its softmax, which is faster on that layout.
-        """
-        logits = upsample_logits(self.head_logits(features, mc), self.logit_stride)
-        if not crop:
-            return logits
-        h, w = features.size
-        return logits[:, :, :h, :w]
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return self.head(self.trunk(x))
 
 
 def upsample_logits(logits: torch.Tensor, stride: int, window: tuple[int, int, int, int] | None = None, *,
