@@ -48,7 +48,7 @@ evidence: setup
 ## The test suite (fast; long tests are marked slow, checks of a campaign run are marked campaign:
 ## both are left out here; the evidence step runs the campaign checks).
 test: setup
-	$(PY) -m pytest -q -m "not slow and not campaign"
+	$(PY) -m pytest -q -m "not slow and not campaign" --junitxml $(REPORTS)/junit-tests.xml
 
 test-all: setup
 	$(PY) -m pytest -q
