@@ -10,12 +10,11 @@ split, hashes and counts.
 
 from __future__ import annotations
 
-import hashlib
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from el.monitors.signed import read_signed, signed_document
 from el.monitors.spec import parse_monitor_spec
 
 CARD_FORMAT = "uav-el-calibration/1"
@@ -25,15 +24,9 @@ class CalibrationError(ValueError):
     """A calibration card that cannot be used (missing, unreadable, altered, inconsistent)."""
 
 
-def body_sha256(body: dict[str, Any]) -> str:
-    """SHA-256 of a card body's canonical JSON."""
-    text = json.dumps(body, sort_keys=True, separators=(",", ":"), allow_nan=False)
-    return hashlib.sha256(text.encode("utf-8")).hexdigest()
-
-
 def card_document(body: dict[str, Any]) -> dict[str, Any]:
     """The JSON document of a card with this body (format and hash added)."""
-    return {"format": CARD_FORMAT, "body": body, "sha256": body_sha256(body)}
+    return signed_document(CARD_FORMAT, body)
 
 
 @dataclass(frozen=True)
@@ -68,22 +61,7 @@ def load_calibration(path: str | Path) -> CalibrationCard:
         One line naming the file and the problem.
     """
     p = Path(path)
-    try:
-        doc = json.loads(p.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise CalibrationError(f"{p}: cannot read the calibration card: {exc.strerror or exc}") from None
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise CalibrationError(f"{p}: not a calibration card (bad JSON: {exc})") from None
-    if not isinstance(doc, dict) or doc.get("format") != CARD_FORMAT or not isinstance(doc.get("body"), dict):
-        raise CalibrationError(f"{p}: not a calibration card (format {CARD_FORMAT!r} expected)")
-    body = doc["body"]
-    try:
-        digest = body_sha256(body)
-    except ValueError as exc:
-        raise CalibrationError(f"{p}: calibration card body is not plain JSON ({exc})") from None
-    if digest != doc.get("sha256"):
-        raise CalibrationError(f"{p}: calibration card altered: SHA-256 of its body is {digest[:12]}..., "
-                               f"recorded {str(doc.get('sha256'))[:12]}...")
+    body, digest = read_signed(p, CARD_FORMAT, "calibration card", CalibrationError)
     try:
         spec = parse_monitor_spec(body["spec"])
         base = parse_monitor_spec(body["monitor"])

@@ -25,7 +25,6 @@ loop turns into the default action with that reason.
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Hashable
 from dataclasses import dataclass
@@ -36,9 +35,9 @@ import numpy as np
 
 from el.labels import FORBIDDEN_IDS
 from el.monitors.base import CandidateContext, Judgement, PatchSegmenter, validate_scores
-from el.monitors.calibration import body_sha256
 from el.monitors.lhd import LHDMonitor, argmax_slack, forbidden_pixels, take_disc
 from el.monitors.patches import Patch
+from el.monitors.signed import read_signed, signed_document
 from el.monitors.spec import GenericSpec
 
 MODEL_FORMAT = "uav-el-learned-monitor/1"
@@ -176,7 +175,7 @@ class LearnedModel:
 
 def model_document(body: dict[str, Any]) -> dict[str, Any]:
     """The JSON document of a model with this body (format and hash added)."""
-    return {"format": MODEL_FORMAT, "body": body, "sha256": body_sha256(body)}
+    return signed_document(MODEL_FORMAT, body)
 
 
 def _vector(body: dict[str, Any], key: str, d: int) -> np.ndarray:
@@ -195,23 +194,8 @@ def load_learned_model(path: str | Path | None = None) -> LearnedModel:
         One line naming the file and the problem (missing, not JSON, altered, inconsistent).
     """
     p = Path(path) if path else DEFAULT_MODEL
-    try:
-        doc = json.loads(p.read_text(encoding="utf-8"))
-    except OSError as exc:
-        hint = " (train one with: uav-el fit-monitor --data data/train --val data/val --out FILE)"
-        raise LearnedModelError(f"{p}: cannot read the learned monitor model: {exc.strerror or exc}{hint}") from None
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise LearnedModelError(f"{p}: not a learned monitor model (bad JSON: {exc})") from None
-    if not isinstance(doc, dict) or doc.get("format") != MODEL_FORMAT or not isinstance(doc.get("body"), dict):
-        raise LearnedModelError(f"{p}: not a learned monitor model (format {MODEL_FORMAT!r} expected)")
-    body = doc["body"]
-    try:
-        digest = body_sha256(body)
-    except ValueError as exc:
-        raise LearnedModelError(f"{p}: model body is not plain JSON ({exc})") from None
-    if digest != doc.get("sha256"):
-        raise LearnedModelError(f"{p}: learned monitor model altered: SHA-256 of its body is {digest[:12]}..., "
-                                f"recorded {str(doc.get('sha256'))[:12]}...")
+    hint = " (train one with: uav-el fit-monitor --data data/train --val data/val --out FILE)"
+    body, digest = read_signed(p, MODEL_FORMAT, "learned monitor model", LearnedModelError, hint=hint)
     try:
         names = tuple(body["features"])
         mcd_n = int(body.get("mcd", {}).get("n", 0))

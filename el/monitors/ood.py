@@ -20,7 +20,6 @@ the SHA-256 of its body (like calibration cards): an altered or missing file is 
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,7 +29,7 @@ import cv2
 import numpy as np
 
 from el.labels import NUM_CLASSES
-from el.monitors.calibration import body_sha256
+from el.monitors.signed import read_signed, signed_document
 
 OOD_FORMAT = "uav-el-ood/1"
 TRUNK, SOFTMAX = "trunk", "softmax"
@@ -132,7 +131,7 @@ class OODGate:
 
 def ood_document(body: dict[str, Any]) -> dict[str, Any]:
     """The JSON document of a gate with this body (format and hash added)."""
-    return {"format": OOD_FORMAT, "body": body, "sha256": body_sha256(body)}
+    return signed_document(OOD_FORMAT, body)
 
 
 def load_ood(path: str | Path) -> OODGate:
@@ -144,22 +143,7 @@ def load_ood(path: str | Path) -> OODGate:
         One line naming the file and the problem.
     """
     p = Path(path)
-    try:
-        doc = json.loads(p.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise OODError(f"{p}: cannot read the out-of-domain gate: {exc.strerror or exc}") from None
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise OODError(f"{p}: not an out-of-domain gate (bad JSON: {exc})") from None
-    if not isinstance(doc, dict) or doc.get("format") != OOD_FORMAT or not isinstance(doc.get("body"), dict):
-        raise OODError(f"{p}: not an out-of-domain gate (format {OOD_FORMAT!r} expected)")
-    body = doc["body"]
-    try:
-        digest = body_sha256(body)
-    except ValueError as exc:
-        raise OODError(f"{p}: gate body is not plain JSON ({exc})") from None
-    if digest != doc.get("sha256"):
-        raise OODError(f"{p}: out-of-domain gate altered: SHA-256 of its body is {digest[:12]}..., "
-                       f"recorded {str(doc.get('sha256'))[:12]}...")
+    body, digest = read_signed(p, OOD_FORMAT, "out-of-domain gate", OODError, a="an")
     try:
         mean = np.asarray(body["mean"], np.float64)
         precision = np.asarray(body["precision"], np.float64)
