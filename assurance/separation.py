@@ -16,10 +16,12 @@ monitor add safety, which is why a model card records this figure.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
 
+from assurance.scores import auroc as scores_auroc
 from el.labels import FORBIDDEN_IDS, SAFE_IDS
 from el.monitors.lhd import disc_pixels
 from el.monitors.patches import extract_patch
@@ -38,19 +40,9 @@ def disc_scores(segmenter: Any, rgb: np.ndarray, disc: Any, *, margin: float = 0
 
 
 def auroc(unsafe: np.ndarray, score: np.ndarray) -> float | None:
-    """Area under the ROC curve (ties count one half): P(score of an unsafe > score of a safe one)."""
-    unsafe, score = np.asarray(unsafe, bool), np.asarray(score, np.float64)
-    pos, neg = score[unsafe], score[~unsafe]
-    if pos.size == 0 or neg.size == 0:
-        return None
-    order = np.argsort(np.concatenate([neg, pos]), kind="mergesort")
-    ranks = np.empty(order.size, np.float64)
-    values = np.concatenate([neg, pos])[order]
-    # average ranks of ties
-    _, start, counts = np.unique(values, return_index=True, return_counts=True)
-    avg = start + (counts - 1) / 2.0 + 1.0
-    ranks[order] = np.repeat(avg, counts)
-    return float((ranks[neg.size:].sum() - pos.size * (pos.size + 1) / 2.0) / (pos.size * neg.size))
+    """Area under the ROC curve (ties count one half), :func:`assurance.scores.auroc`; None without both classes."""
+    area = scores_auroc(score, unsafe)
+    return None if math.isnan(area) else area
 
 
 def separation(rows: list[dict[str, Any]], *, n_boot: int = 1000, seed: int = 0, conf: float = 0.95

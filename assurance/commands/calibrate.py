@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 from assurance.cli import CommandError
-from el.uavid import atomic_write_bytes
+from assurance.commands.fit_monitor import write_json
 
 HELP = ("calibrate a monitor's threshold on held-out scenes: P(accept an unsafe candidate) <= --miss-rate "
         "with --confidence (order statistic + Clopper-Pearson)")
@@ -33,10 +32,7 @@ def run(args: argparse.Namespace) -> int:
                                 weights=args.weights, images=args.images)
     except ValueError as exc:  # CalibrationError, WeightsError, a bad spec: one line
         raise CommandError(str(exc)) from None
-    try:
-        atomic_write_bytes(args.out, (json.dumps(doc, indent=2, sort_keys=True) + "\n").encode())
-    except OSError as exc:
-        raise CommandError(f"{args.out}: cannot write: {exc.strerror or exc}") from None
+    write_json(args.out, doc, indent=2)
     b = doc["body"]
     c = b["counts"]
     print(f"{b['spec']}: threshold {b['threshold']:.6g} from {c['unsafe']} truly unsafe of {c['candidates']} "

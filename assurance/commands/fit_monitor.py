@@ -57,9 +57,9 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def write_json(path: Path, doc: dict) -> None:
+def write_json(path: Path, doc: dict, *, indent: int = 1) -> None:
     """Write a JSON document atomically; an unwritable path is one line, exit 2."""
     try:
-        atomic_write_bytes(path, (json.dumps(doc, indent=1, sort_keys=True) + "\n").encode())
+        atomic_write_bytes(path, (json.dumps(doc, indent=indent, sort_keys=True) + "\n").encode())
     except OSError as exc:
         raise CommandError(f"{path}: cannot write: {exc.strerror or exc}") from None
