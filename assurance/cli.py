@@ -33,6 +33,7 @@ COMMANDS: dict[str, str] = {
     "fit-monitor": "fit_monitor",
     "fit-ood": "fit_ood",
     "table": "table",
+    "sweep": "sweep",
     "evidence": "evidence",
     "fault-table": "fault_table",
 }
