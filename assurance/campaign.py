@@ -104,14 +104,29 @@ def load_presets() -> dict[str, dict[str, Any]]:
     return yaml.safe_load(text)
 
 
+def resolve_monitors(value: str | Sequence[str]) -> tuple[str, ...]:
+    """A preset's monitor list with its keywords expanded: a grid name (``paper-grid``, ``demo-grid``) and
+    ``deployed``, the configuration the flight code ships with (``el.pipeline.PipelineConfig``)."""
+    from el.pipeline import PipelineConfig
+
+    out: list[str] = []
+    for item in [value] if isinstance(value, str) else value:
+        if item in GRIDS:
+            out.extend(GRIDS[item])
+        elif item == "deployed":
+            out.append(PipelineConfig().monitor_name)
+        else:
+            out.append(item)
+    return tuple(dict.fromkeys(out))
+
+
 def preset_config(name: str, **overrides: Any) -> CampaignConfig:
     """The CampaignConfig of a named preset, with non-None overrides applied."""
     presets = load_presets()
     if name not in presets:
         raise ValueError(f"unknown preset {name!r}; valid: {', '.join(presets)}")
     p = presets[name]
-    monitors = p["monitors"]
-    monitors = GRIDS[monitors] if isinstance(monitors, str) else tuple(monitors)
+    monitors = resolve_monitors(p["monitors"])
     kwargs: dict[str, Any] = {
         "perturbations": tuple(p["perturbations"]),
         "severities": tuple(p["severities"]),

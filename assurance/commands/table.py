@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 from assurance import readouts
 from assurance.cli import CommandError
@@ -25,6 +26,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "the paper's findings of both")
     p.add_argument("--no-intervals", action="store_true", help="print point values only")
     p.add_argument("--boot", type=int, default=2000, help="bootstrap resamples (default 2000)")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--readme", metavar="README.md", help="also write the headline table of the deployed "
+                                                         "configuration between the file's headline markers")
+    g.add_argument("--check-readme", metavar="README.md", help="only check that the file's headline table is "
+                                                               "the run's (exit 1 naming the difference)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -43,6 +49,8 @@ def run(args: argparse.Namespace) -> int:
     if check.legacy:
         print(f"warning: {args.run}: written before shard hashes; its readouts cannot be verified", file=sys.stderr)
     df = results_table(args.run, n_boot=args.boot)
+    if args.check_readme:
+        return check_readme(args.run, df, args.check_readme)
     faulted = int(df.drop_duplicates(["perturbation", "severity"])["faults"].sum()) if len(df) else 0
     if faulted:
         print(f"warning: {args.run}: {faulted} faulted task(s) are left out of the table (see the faults column "
@@ -62,5 +70,48 @@ def run(args: argparse.Namespace) -> int:
     atomic_write_bytes(out / "results.md", md.encode())
     print(md)
     written = [out / "results.csv", out / "results.md"] + ([out / "comparison.csv"] if args.compare else [])
+    if args.readme:
+        written.append(write_readme(args.run, df, args.readme))
     print("written: " + ", ".join(map(str, written)))
     return 0
+
+
+def _headline(run: str, df: Any) -> str:
+    from assurance.headline import HeadlineError, headline_markdown, release_parameters
+
+    try:
+        return headline_markdown(run, df, **release_parameters())
+    except HeadlineError as exc:
+        raise CommandError(str(exc)) from None
+
+
+def write_readme(run: str, df: Any, readme: str) -> str:
+    """Write the headline block into ``readme``; the file's name."""
+    from assurance.headline import HeadlineError, write_block
+
+    block = _headline(run, df)
+    try:
+        changed = write_block(readme, block)
+    except (HeadlineError, OSError) as exc:
+        raise CommandError(str(exc)) from None
+    print(f"{readme}: headline table {'updated' if changed else 'already up to date'}")
+    return readme
+
+
+def check_readme(run: str, df: Any, readme: str) -> int:
+    """0 when ``readme`` shows the run's headline table, else 1 with both versions printed."""
+    import sys
+
+    from assurance.headline import HeadlineError, current_block
+
+    block = _headline(run, df)
+    try:
+        shown = current_block(readme)
+    except (HeadlineError, OSError) as exc:
+        raise CommandError(str(exc)) from None
+    if shown == block:
+        print(f"{readme}: the headline table matches {run}")
+        return 0
+    print(f"{readme}: the headline table differs from {run}; run `uav-el table {run} --readme {readme}`\n"
+          f"--- README\n{shown}--- run\n{block}", file=sys.stderr)
+    return 1
