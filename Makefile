@@ -6,10 +6,12 @@ DATA   ?= data
 DEMO_SCENES ?= 10
 DEMO_SIZE   ?= 3840x2160
 RUN    ?= runs/demo
+RELEASE_SCENES ?= 70
+RELEASE_RUN    ?= runs/release
 REPORTS ?= reports
 JOBS   ?= 2
 
-.PHONY: setup demo scenes campaign requirements evidence test test-all bench lint clean
+.PHONY: setup demo scenes campaign requirements evidence release-evidence release-campaign test test-all bench lint clean
 
 setup: $(VENV)/.installed
 
@@ -44,6 +46,18 @@ evidence: setup
 		--junitxml $(REPORTS)/junit.xml
 	$(PY) -m assurance fault-table --out $(REPORTS)/faults.csv
 	$(PY) -m assurance evidence --run $(RUN) --out $(REPORTS) --waivers assurance/waivers.yaml
+
+## The release evidence (CI's gate): the 70 test scenes x 6 perturbations x the deployed configuration and the
+## paper's 4 headline ones (about 20 min on 2 cores), its requirement tests and report, and the check that the
+## README's headline table is this run's (`uav-el table RUN --readme README.md` rewrites it).
+release-evidence: release-campaign
+	$(MAKE) --no-print-directory evidence RUN=$(RELEASE_RUN)
+	$(PY) -m pytest -q -m campaign tests/test_readme_headline.py --uav-el-run $(RELEASE_RUN)
+
+release-campaign: setup
+	$(MAKE) --no-print-directory scenes DEMO_SCENES=$(RELEASE_SCENES)
+	$(PY) -m assurance campaign --preset release --data $(DATA)/test --out $(RELEASE_RUN) --jobs $(JOBS)
+	$(PY) -m assurance table $(RELEASE_RUN) --compare --out $(REPORTS)
 
 ## The test suite (fast; long tests are marked slow, checks of a campaign run are marked campaign:
 ## both are left out here; the evidence step runs the campaign checks).

@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 from scipy.stats import binom
 
+from assurance.paths import shown_path
 from el.monitors.calibration import CalibrationError, card_document
 from el.monitors.spec import THRESHOLD, parse_monitor_spec
 
@@ -156,9 +157,9 @@ def calibrate_on_data(data: str | Path, monitor: str, *, miss_rate: float, confi
     w = Path(weights) if weights else DEFAULT_WEIGHTS
     body = calibration_body(
         scores, unsafe, monitor=base.base.name, miss_rate=miss_rate, confidence=confidence,
-        split={"path": str(Path(data).resolve()), "images": len(tasks), "sha256": h.hexdigest(),
+        split={"path": shown_path(data), "images": len(tasks), "sha256": h.hexdigest(),
                "perturbation": "none"},
-        weights={"path": str(w), "sha256": sha256_file(w) if w.is_file() else None,
+        weights={"path": shown_path(w), "sha256": sha256_file(w) if w.is_file() else None,
                  "segmenter": "weights" if weights or w.is_file() else type(segmenter).__name__},
     )
     return card_document(body)

@@ -37,6 +37,7 @@ from el.config import CoreConfig
 from el.core import run_core
 from el.decision import Candidate
 from el.monitors import DEMO_GRID, PAPER_GRID, CandidateContext, Monitor, build_monitor, parse_monitor_spec
+from el.monitors.walk import HAZARD, SCORE, select
 from el.uavid import Sample, iter_samples, read_image, read_labels
 
 GRIDS = {"paper-grid": PAPER_GRID, "demo-grid": DEMO_GRID}
@@ -223,12 +224,21 @@ def judge_candidates(
     return out
 
 
-def walk(verdicts: Sequence[bool]) -> int | None:
-    """The ranked walk: index of the first accepted candidate, or None (default action)."""
-    for k, ok in enumerate(verdicts):
-        if ok:
-            return k
-    return None
+def walk_of(name: str) -> str:
+    """The walk order a configuration's decision loop uses (``walk=score`` in its spec, else hazard).
+
+    A name that no longer parses here (a plugin monitor not installed on the machine reading a run) is
+    read from its text."""
+    try:
+        return getattr(parse_monitor_spec(name), "walk", HAZARD)
+    except ValueError:
+        params = "".join(name.split()).lower().partition(":")[2].split(",")
+        return SCORE if "walk=score" in params else HAZARD
+
+
+def walk(verdicts: Sequence[bool], scores: Sequence[float] | None = None, order: str = HAZARD) -> int | None:
+    """The decision loop's walk (``el.monitors.walk``): the candidate it lands on, or None (default)."""
+    return select(verdicts, scores if scores is not None else [0.0] * len(verdicts), order)
 
 
 def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Callable[[], float] = time.perf_counter,
@@ -271,8 +281,9 @@ def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Calla
     for j, name in enumerate(config.monitors):
         accepted = [verdicts[k][j][0] for k in range(len(cands))]
         seconds = [verdicts[k][j][2] for k in range(len(cands))]
-        sel = walk(accepted)
-        examined = len(cands) if sel is None else sel + 1
+        order = walk_of(name)
+        sel = walk(accepted, [verdicts[k][j][3] for k in range(len(cands))], order)
+        examined = len(cands) if sel is None or order == SCORE else sel + 1
         h_decision = h_default if sel is None else truth[sel]
         image_rows.append({
             **base, "monitor": name, "fault": "",

@@ -561,6 +561,9 @@ def _baseline(baseline: Path, man: Mapping[str, Any], ident: Mapping[str, Any], 
 
 
 def _pick_examples(images: Any, deployed: str) -> list[tuple[Any, str]]:
+    present = [m for m in dict.fromkeys(images["monitor"]) if m]
+    if deployed not in present and present:  # a run without the deployed configuration: its first one
+        deployed = present[0]
     ok = images[(images["fault"].fillna("") == "") & (images["monitor"] == deployed)]
     if not len(ok):
         return []

@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from assurance.paths import shown_path
 from assurance.truth import true_hazard
 from el.config import CoreConfig
 from el.core import run_core
@@ -162,11 +163,11 @@ def fit_learned_monitor(data: str | Path, segmenter: Any, *, val: str | Path | N
             raise ValueError(f"{data}: too few scenes to hold out every 5th (give --val)")
         train = collect_candidates(data, segmenter, samples=[s for i, s in enumerate(scenes) if i % 5 != 4], **kw)
         held_out = collect_candidates(data, segmenter, samples=held, **kw)
-        splits = {"train": str(Path(data).resolve()), "held_out": f"every 5th scene of {Path(data).resolve()}"}
+        splits = {"train": shown_path(data), "held_out": f"every 5th scene of {shown_path(data)}"}
     else:
         train = collect_candidates(data, segmenter, samples=scenes, **kw)
         held_out = collect_candidates(val, segmenter, images=images, **kw)
-        splits = {"train": str(Path(data).resolve()), "held_out": str(Path(val).resolve())}
+        splits = {"train": shown_path(data), "held_out": shown_path(val)}
     body = fit_learned_body(train, held_out, cs=cs, recall=recall, mcd_n=mcd_n, mcd_rho=mcd_rho,
                             weights=weights, splits=splits)
     body["patch"] = {"margin": margin, "max_side": max_side}

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from assurance.learned_monitor import split_sha256
+from assurance.paths import shown_path
 from assurance.perturbations import PAPER_PERTURBATIONS, perturb
 from el.monitors.ood import OODGate, embedding_kind, frame_embedding, ood_document
 from el.uavid import Sample, iter_samples, read_image
@@ -74,9 +75,9 @@ def fit_ood(data: str | Path, val: str | Path, segmenter: Any, *, quantile: floa
     train = embed_frames(data, segmenter, kind=kind, images=images)
     held = embed_frames(val, segmenter, kind=kind, images=images)
     body = fit_ood_body(train, held, kind=kind, quantile=quantile, weights=weights or {},
-                        training={"path": str(Path(data).resolve()), "frames": int(train.shape[0]),
+                        training={"path": shown_path(data), "frames": int(train.shape[0]),
                                   "sha256": split_sha256(_samples(data, images), data, labels=False)},
-                        validation={"path": str(Path(val).resolve()), "frames": int(held.shape[0]),
+                        validation={"path": shown_path(val), "frames": int(held.shape[0]),
                                     "sha256": split_sha256(_samples(val, images), val, labels=False)})
     return ood_document(body)
 

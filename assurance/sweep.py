@@ -15,6 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from assurance.campaign import walk_of
+from el.monitors.walk import HAZARD, check_walk
+
 IMAGE_KEYS = ["perturbation", "severity", "key"]
 
 
@@ -35,13 +38,15 @@ def monitor_rows(images: pd.DataFrame, candidates: pd.DataFrame, monitor: str) -
     return im, ca
 
 
-def replay(images: pd.DataFrame, candidates: pd.DataFrame, threshold: float) -> pd.DataFrame:
-    """Per image: the true hazard of the decision at ``threshold`` (one configuration's readouts).
+def replay(images: pd.DataFrame, candidates: pd.DataFrame, threshold: float, walk: str = HAZARD) -> pd.DataFrame:
+    """Per image: the true hazard of the decision at ``threshold`` (one configuration's readouts) when
+    the decision loop walks the candidates by ``walk`` (``el.monitors.walk``).
 
     An image with a fault keeps the default action, as the decision loop does.
     """
     acc = candidates[candidates["score"] <= threshold]
-    first = acc.sort_values("rank").drop_duplicates(IMAGE_KEYS)[[*IMAGE_KEYS, "true_hazard"]]
+    order = ["rank"] if check_walk(walk) == HAZARD else ["score", "rank"]
+    first = acc.sort_values(order, kind="mergesort").drop_duplicates(IMAGE_KEYS)[[*IMAGE_KEYS, "true_hazard"]]
     out = images[[*IMAGE_KEYS, "h_default", "h_top", "fault"]].merge(first, on=IMAGE_KEYS, how="left")
     faulty = out["fault"].fillna("").astype(str) != ""
     landed = out["true_hazard"].notna() & ~faulty
@@ -62,23 +67,27 @@ def default_thresholds(scores: np.ndarray, points: int = 200) -> np.ndarray:
 
 
 def sweep(images: pd.DataFrame, candidates: pd.DataFrame, monitor: str,
-          thresholds: Sequence[float] | None = None) -> pd.DataFrame:
-    """One row per (threshold, perturbation): unsafe landings, G*, default share, miss and FP rates."""
+          thresholds: Sequence[float] | None = None, walks: Sequence[str] | None = None) -> pd.DataFrame:
+    """One row per (walk, threshold, perturbation): unsafe landings, G*, default share, miss and FP rates.
+
+    ``walks``: the walk orders to replay (default: the configuration's own)."""
     im, ca = monitor_rows(images, candidates, monitor)
+    own = walk_of(monitor)
     run_t = float(ca["threshold"].iloc[0]) if len(ca) and "threshold" in ca.columns else float("nan")
     ts = np.asarray(thresholds if thresholds is not None else default_thresholds(ca["score"].to_numpy(float)))
     if np.isfinite(run_t):  # the run's own threshold is always one of the rows
         ts = np.unique(np.append(ts, run_t))
     unsafe = ca["true_unsafe"].astype(bool).to_numpy()
     rows = []
-    for t in ts:
-        dec = replay(im, ca, float(t))
+    for walk, t in ((w, t) for w in (walks or [own]) for t in ts):
+        dec = replay(im, ca, float(t), walk)
         rej = ca["score"].to_numpy(float) > t
         for pert, g in dec.groupby("perturbation", sort=True):
             in_p = (ca["perturbation"] == pert).to_numpy()
             u, s = unsafe & in_p, ~unsafe & in_p
             rows.append({
-                "monitor": monitor, "threshold": float(t), "run_threshold": run_t, "perturbation": pert,
+                "monitor": monitor, "walk": walk, "run_walk": own, "threshold": float(t),
+                "run_threshold": run_t, "perturbation": pert,
                 "images": len(g),
                 "unsafe_landings": int((g["h_decision"] >= 1.0).sum()),
                 "unsafe_landing_rate": float((g["h_decision"] >= 1.0).mean()),
@@ -96,6 +105,7 @@ class Choice:
     """The threshold a sweep picks and what it gives over all perturbations of the run."""
 
     monitor: str
+    walk: str
     threshold: float
     unsafe_landings: int
     images: int
@@ -106,7 +116,7 @@ class Choice:
 
 def totals(table: pd.DataFrame) -> pd.DataFrame:
     """Per threshold, summed over perturbations: unsafe landings, images, mean G*, mean miss/FP rate."""
-    g = table.groupby(["monitor", "threshold"], sort=True)
+    g = table.groupby(["monitor", "walk", "threshold"], sort=True)
     return pd.DataFrame({
         "unsafe_landings": g["unsafe_landings"].sum(), "images": g["images"].sum(),
         "g_star": g.apply(lambda d: float(np.average(d["g_star"], weights=d["images"])), include_groups=False),
@@ -120,5 +130,6 @@ def choose(table: pd.DataFrame) -> Choice:
     t = totals(table).sort_values(["unsafe_landings", "g_star", "miss_rate"], ascending=[True, False, True],
                                   kind="mergesort")
     best = t.iloc[0]
-    return Choice(str(best["monitor"]), float(best["threshold"]), int(best["unsafe_landings"]), int(best["images"]),
+    return Choice(str(best["monitor"]), str(best["walk"]), float(best["threshold"]),
+                  int(best["unsafe_landings"]), int(best["images"]),
                   float(best["g_star"]), float(best["miss_rate"]), float(best["fp_rate"]))

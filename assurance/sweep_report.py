@@ -25,14 +25,16 @@ def scored_monitors(candidates: pd.DataFrame) -> list[str]:
     return sorted(m for m, v in ok.items() if v)
 
 
-def sweep_run(images: pd.DataFrame, candidates: pd.DataFrame,
-              monitors: Sequence[str] | None = None) -> tuple[pd.DataFrame, list[Choice]]:
-    """Sweep every (or the named) scored configuration; the choice of each, best first."""
+def sweep_run(images: pd.DataFrame, candidates: pd.DataFrame, monitors: Sequence[str] | None = None,
+              walks: Sequence[str] | None = None) -> tuple[pd.DataFrame, list[Choice]]:
+    """Sweep every (or the named) scored configuration under ``walks`` (default: each one's own); the
+    choice of each (monitor, walk), best first."""
     names = list(monitors) if monitors else scored_monitors(candidates)
     if not names:
         raise SweepError("no configuration of the run carries candidate scores (monitor 'none' has none)")
-    table = pd.concat([sweep(images, candidates, m) for m in names], ignore_index=True)
-    choices = sorted((choose(table[table["monitor"] == m]) for m in names),
+    table = pd.concat([sweep(images, candidates, m, walks=walks) for m in names], ignore_index=True)
+    pairs = table[["monitor", "walk"]].drop_duplicates().itertuples(index=False)
+    choices = sorted((choose(table[(table["monitor"] == m) & (table["walk"] == w)]) for m, w in pairs),
                      key=lambda c: (c.unsafe_landings, -c.g_star, c.miss_rate))
     return table, choices
 
@@ -40,23 +42,23 @@ def sweep_run(images: pd.DataFrame, candidates: pd.DataFrame,
 def choice_markdown(table: pd.DataFrame, choices: Sequence[Choice]) -> str:
     """The chosen threshold of each monitor beside its run threshold, unsafe landings per perturbation."""
     perts = sorted(table["perturbation"].unique())
-    head = ["monitor", "threshold", "miss rate", "FP rate", "mean G*", *perts, "total"]
+    head = ["monitor", "walk", "threshold", "miss rate", "FP rate", "mean G*", *perts, "total"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     tot = totals(table)
     for c in choices:
-        sub = table[table["monitor"] == c.monitor]
-        run_t = float(sub["run_threshold"].iloc[0])
+        sub = table[(table["monitor"] == c.monitor) & (table["walk"] == c.walk)]
+        run_t = float(sub["run_threshold"].iloc[0]) if (sub["run_walk"] == c.walk).all() else np.nan
         for label, t in (("chosen", c.threshold), ("run", run_t)):
             if not np.isfinite(t):
                 continue
             rows = sub[sub["threshold"] == t].set_index("perturbation")
-            tt = tot[(tot["monitor"] == c.monitor) & (tot["threshold"] == t)].iloc[0]
-            cells = [f"{c.monitor} ({label})", f"{t:.4g}", f"{tt['miss_rate']:.3f}", f"{tt['fp_rate']:.3f}",
+            tt = tot[(tot["monitor"] == c.monitor) & (tot["walk"] == c.walk) & (tot["threshold"] == t)].iloc[0]
+            cells = [f"{c.monitor} ({label})", c.walk, f"{t:.4g}", f"{tt['miss_rate']:.3f}", f"{tt['fp_rate']:.3f}",
                      f"{tt['g_star']:.3f}", *(str(int(rows.loc[p, 'unsafe_landings'])) for p in perts),
                      f"{int(tt['unsafe_landings'])} / {int(tt['images'])}"]
             lines.append("| " + " | ".join(cells) + " |")
     best = choices[0]
-    lines += ["", f"Fewest unsafe landings: `{best.monitor}` at threshold {best.threshold:.6g} "
+    lines += ["", f"Fewest unsafe landings: `{best.monitor}` walked by {best.walk} at threshold {best.threshold:.6g} "
                   f"({best.unsafe_landings} of {best.images} decisions unsafe, mean G* {best.g_star:.3f})."]
     return "\n".join(lines) + "\n"
 
@@ -67,8 +69,8 @@ def sweep_figure(table: pd.DataFrame, choices: Sequence[Choice]) -> Figure:
     ax = fig.add_subplot(1, 1, 1)
     tot = totals(table)
     for c in choices:
-        d = tot[tot["monitor"] == c.monitor].sort_values("fp_rate")
-        line, = ax.plot(d["fp_rate"], d["unsafe_landings"], label=c.monitor, lw=1.4)
+        d = tot[(tot["monitor"] == c.monitor) & (tot["walk"] == c.walk)].sort_values("fp_rate")
+        line, = ax.plot(d["fp_rate"], d["unsafe_landings"], label=f"{c.monitor} ({c.walk} walk)", lw=1.4)
         pick = d[d["threshold"] == c.threshold].iloc[0]
         ax.plot([pick["fp_rate"]], [pick["unsafe_landings"]], "o", color=line.get_color())
     ax.set_xlabel("FP rate (safe candidates rejected, mean over perturbations)")

@@ -26,10 +26,16 @@ from el.core import default_area, run_core
 from el.decision import Candidate, Decision, Disc, MonitorVerdict
 from el.hashing import sha256_bytes
 from el.monitors import CandidateContext, Monitor, build_monitor, monitor_name, parse_monitor_spec
+from el.monitors.walk import HAZARD, SCORE, select
 from el.uavid import read_image
 
 Clock = Callable[[], float]
 DEFAULT_TIME_BUDGET_S = 10.0
+DEPLOYED_MONITOR = "learned:walk=score,threshold=0.80361501009869"
+"""The shipped runtime monitor, chosen on the validation split (README, "The deployed monitor"): the learned
+candidate monitor (``el/monitors/data/learned.json``), candidates walked by its score (``el.monitors.walk``),
+at the threshold of its calibration card :data:`DEPLOYED_CALIBRATION` (a test checks they agree)."""
+DEPLOYED_CALIBRATION = Path(__file__).resolve().parent / "monitors" / "data" / "calibration.json"
 logger = logging.getLogger(__name__)  # faults with their tracebacks; the decision keeps only the reason
 
 
@@ -46,8 +52,9 @@ class PipelineConfig:
     core : CoreConfig
         CM parameters (geometry, safety radius, candidates, ranking).
     monitor : str or None
-        Monitor spec (``"lhd"``, ``"lhd+ch:tau=0.25"``, ``"lhd+mcd:n=10,rho=0.9"``, ...); None or
-        ``"none"``: no runtime monitor (the CM's top candidate is taken).
+        Monitor spec (``"lhd"``, ``"lhd+ch:tau=0.25"``, ``"lhd+mcd:n=10,rho=0.9"``,
+        ``"learned:walk=score"``, ...); None or ``"none"``: no runtime monitor (the CM's top candidate is
+        taken). Default: :data:`DEPLOYED_MONITOR`, the shipped calibrated configuration.
     time_budget_s : float or None
         Seconds from the call to the decision; past it, the default action with reason "timeout".
         10 s by default: the slowest shipped configuration (MC dropout, n = 30) needs a few seconds
@@ -75,7 +82,7 @@ class PipelineConfig:
     """
 
     core: CoreConfig = field(default_factory=CoreConfig)
-    monitor: str | None = "lhd"
+    monitor: str | None = DEPLOYED_MONITOR
     time_budget_s: float | None = DEFAULT_TIME_BUDGET_S
     evaluate_all: bool = False
     seed: int = 0
@@ -160,6 +167,7 @@ class EmergencyLanding:
         self.fault: str | None = None
         self.segmenter = segmenter
         self.monitor: Monitor | None = None
+        self.walk = HAZARD
         self.ood: Any = None
         if segmenter is None:
             try:
@@ -170,8 +178,10 @@ class EmergencyLanding:
                 self.fault = f"fault: model: {type(exc).__name__}: {exc}"
                 logger.exception("segmentation model not loaded; every decision will be the default action")
         try:
+            spec = calibrated_spec(self.config.monitor, self.config.calibration)
+            self.walk = getattr(parse_monitor_spec(spec), "walk", HAZARD)
             self.monitor = build_monitor(
-                calibrated_spec(self.config.monitor, self.config.calibration), margin=self.config.patch_margin,
+                spec, margin=self.config.patch_margin,
                 max_side=self.config.patch_max_side, clock=clock,
             )
         except Exception as exc:
@@ -298,6 +308,8 @@ class EmergencyLanding:
         overhead = 0.0
         if hasattr(self.monitor, "between"):  # MC dropout: the budget binds between its chunks too
             self.monitor.between = budget.ahead if self.config.time_budget_s is not None else None
+        if self.walk == SCORE:
+            return self._score_walk(rgb, candidates, budget, probs)
         for k, cand in enumerate(candidates):
             if selected is not None and not self.config.evaluate_all:
                 out.append(cand)
@@ -306,11 +318,8 @@ class EmergencyLanding:
                 budget.check("monitoring")  # before each candidate of the real walk
             elif hasattr(self.monitor, "between"):
                 self.monitor.between = None  # evaluation-only checks past the decision are not budgeted
-            context = None if probs is None else CandidateContext(cand, probs, (rgb.shape[1], rgb.shape[0]))
-            verdict = self.monitor.check(rgb, cand, self.segmenter, seed=self.config.seed + k, context=context)
-            if not isinstance(verdict, MonitorVerdict):
-                raise ValueError(f"monitor returned {type(verdict).__name__}, not a MonitorVerdict")
-            out.append(replace(cand, monitor=verdict))
+            out.append(self._judge(rgb, cand, k, probs))
+            verdict = out[-1].monitor
             if selected is None:
                 overhead += verdict.seconds
                 if verdict.accepted:
@@ -320,6 +329,27 @@ class EmergencyLanding:
                 if budget_left is not None and budget.elapsed() - _extra(out, selected) > budget_left:
                     raise BudgetExceeded("time budget exceeded during monitoring")
         return out, selected, overhead
+
+    def _judge(self, rgb: np.ndarray, cand: Candidate, k: int, probs: np.ndarray | None) -> Candidate:
+        """One candidate with the monitor's verdict attached."""
+        context = None if probs is None else CandidateContext(cand, probs, (rgb.shape[1], rgb.shape[0]))
+        verdict = self.monitor.check(rgb, cand, self.segmenter, seed=self.config.seed + k, context=context)
+        if not isinstance(verdict, MonitorVerdict):
+            raise ValueError(f"monitor returned {type(verdict).__name__}, not a MonitorVerdict")
+        return replace(cand, monitor=verdict)
+
+    def _score_walk(
+        self, rgb: np.ndarray, candidates: list[Candidate], budget: _Budget, probs: np.ndarray | None
+    ) -> tuple[list[Candidate], int | None, float]:
+        """The ``score`` walk (``el.monitors.walk``): judge every candidate inside the budget, then land on
+        the accepted one with the lowest score. Every judgement is part of the real walk's overhead."""
+        out = []
+        for k, cand in enumerate(candidates):
+            budget.check("monitoring")
+            out.append(self._judge(rgb, cand, k, probs))
+        verdicts = [c.monitor for c in out]
+        selected = select([v.accepted for v in verdicts], [v.score for v in verdicts], SCORE)
+        return out, selected, float(sum(v.seconds for v in verdicts))
 
     def _default(
         self,

@@ -196,7 +196,7 @@ def monitor_runs(tiny_campaign, tmp_path_factory):
     seg = GrassIsRoadOracle(TINY_WW)
     run_campaign(tiny_campaign["data"], root / "good", config, progress=False, segmenter=seg)
     real_walk = campaign.walk
-    campaign.walk = lambda verdicts: 0 if len(verdicts) else None  # lands on the top candidate, accepted or not
+    campaign.walk = lambda verdicts, *_: 0 if len(verdicts) else None  # lands on the top candidate, accepted or not
     try:
         run_campaign(tiny_campaign["data"], root / "broken", config, progress=False, segmenter=seg)
     finally:

@@ -144,8 +144,8 @@ def test_case_8_json_dir_bad_weights_pickle_and_file_modes(small, tmp_path, caps
     # files are written 0666 less the umask (mkstemp alone would give 0600)
     old = os.umask(0o027)
     try:
-        code, _, _ = cli(capsys, "land", image, "--weights", small["weights"], "--json", tmp_path / "m.json",
-                         "--overlay", tmp_path / "m.png")
+        code, _, _ = cli(capsys, "land", image, "--weights", small["weights"], "--monitor", "lhd", "--json",
+                         tmp_path / "m.json", "--overlay", tmp_path / "m.png")
         assert code == 0
         for f in ("m.json", "m.png"):
             assert stat.S_IMODE((tmp_path / f).stat().st_mode) == 0o640

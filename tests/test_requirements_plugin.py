@@ -281,17 +281,31 @@ def _campaign_report(pytester, run, *args):
     return result, json.loads(out.read_text())
 
 
-def test_campaign_tests_verify_coverage_and_gain_on_a_complete_run(pytester, tiny_campaign):
-    result, doc = _campaign_report(pytester, tiny_campaign["run"], "-k", "coverage or safety_gain")
+@pytest.fixture(scope="module")
+def lhd_registry(tmp_path_factory):
+    """The shipped registry with LHD as the deployed monitor: the tiny campaigns evaluate the paper's monitors."""
+    import yaml
+
+    doc = yaml.safe_load(rq.default_registry_path().read_text(encoding="utf-8"))
+    doc["parameters"].update(deployed_monitor="lhd", calibration_card=None)
+    path = tmp_path_factory.mktemp("registry") / "requirements.yaml"
+    path.write_text(yaml.safe_dump(doc, sort_keys=False), encoding="utf-8")
+    return str(path)
+
+
+def test_campaign_tests_verify_coverage_and_gain_on_a_complete_run(pytester, tiny_campaign, lhd_registry):
+    result, doc = _campaign_report(pytester, tiny_campaign["run"], "-k", "coverage or safety_gain",
+                                   "--requirements-registry", lhd_registry)
     result.assert_outcomes(passed=3)
     state = {rid: r["state"] for rid, r in doc["requirements"].items()}
     assert state["EL-R04"] == state["EL-R08"] == state["EL-R09"] == rq.VERIFIED
     assert doc["context"]["run"] == str(tiny_campaign["run"].resolve())
 
 
-def test_a_missing_perturbation_leaves_r08_r09_not_verified_not_failed(pytester, tiny_run_without):
+def test_a_missing_perturbation_leaves_r08_r09_not_verified_not_failed(pytester, tiny_run_without, lhd_registry):
     run = tiny_run_without("pixel_trap")
-    result, doc = _campaign_report(pytester, run, "-k", "perturbation_coverage or safety_gain")
+    result, doc = _campaign_report(pytester, run, "-k", "perturbation_coverage or safety_gain",
+                                   "--requirements-registry", lhd_registry)
     result.assert_outcomes(skipped=2)
     for rid in ("EL-R08", "EL-R09"):
         entry = doc["requirements"][rid]

@@ -44,6 +44,8 @@ def test_replay_follows_reject_iff_score_above_threshold():
     assert list(replay(images, cands, 1.0)["h_decision"]) == [1.0, 0.3]   # all accepted: the top candidates
     assert list(replay(images, cands, 0.5)["h_decision"]) == [0.1, 0.3]   # score 0.5 is not above 0.5
     assert list(replay(images, cands, 0.1)["h_decision"]) == [1.0, 0.0]   # all rejected: the default areas
+    assert list(replay(images, cands, 1.0, "score")["h_decision"]) == [0.1, 0.3]  # lowest score first
+    assert list(replay(images, cands, 0.1, "score")["h_decision"]) == [1.0, 0.0]
     faulty = images.assign(fault=["fault: read: x", ""])
     assert list(replay(faulty, cands, 1.0)["action"]) == ["default", "land"]
 
@@ -52,6 +54,9 @@ def test_sweep_choice_has_the_fewest_unsafe_landings():
     images, cands = _toy()
     table = sweep(images, cands, "m")
     assert set(table["threshold"]) >= {0.2, 0.5, 0.9}
+    assert set(table["walk"]) == {"hazard"}
+    both = sweep(images, cands, "m", walks=["hazard", "score"])
+    assert choose(both[both["walk"] == "score"]).g_star >= choose(table).g_star
     best = choose(table)
     # 0.2 and 0.5 both avoid the unsafe top candidate; at 0.2 image b takes its (safer) default area
     assert best.unsafe_landings == 0 and best.threshold == 0.2

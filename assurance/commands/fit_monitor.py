@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 from assurance.cli import CommandError
+from assurance.paths import shown_path
 from el.uavid import atomic_write_bytes
 
 HELP = ("train the learned candidate monitor (logistic regression on candidate features) on a split, select it "
@@ -44,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
         core = CoreConfig(working_width=args.working_width) if args.working_width else CoreConfig()
         w = Path(args.weights) if args.weights else DEFAULT_WEIGHTS
         doc = fit_learned_monitor(args.data, segmenter, val=args.val, core=core, mcd_n=args.mcd, recall=args.recall,
-                                  images=args.images, weights={"path": str(w), "sha256": sha256_file(w)})
+                                  images=args.images, weights={"path": shown_path(w), "sha256": sha256_file(w)})
     except ValueError as exc:
         raise CommandError(str(exc)) from None
     write_json(args.out, doc)

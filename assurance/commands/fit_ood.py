@@ -7,6 +7,7 @@ from pathlib import Path
 
 from assurance.cli import CommandError
 from assurance.commands.fit_monitor import write_json
+from assurance.paths import shown_path
 
 HELP = ("fit the out-of-domain frame gate (Mahalanobis distance of pooled encoder features, Ledoit-Wolf) on a "
         "split, threshold at a quantile of --val distances; --report DIR adds the distances under each perturbation")
@@ -37,7 +38,7 @@ def run(args: argparse.Namespace) -> int:
         segmenter = Segmenter.load(args.weights)
         w = Path(args.weights) if args.weights else DEFAULT_WEIGHTS
         doc = fit_ood(args.data, args.val, segmenter, quantile=args.quantile, images=args.images,
-                      weights={"path": str(w), "sha256": sha256_file(w)})
+                      weights={"path": shown_path(w), "sha256": sha256_file(w)})
     except ValueError as exc:
         raise CommandError(str(exc)) from None
     write_json(args.out, doc)

@@ -49,7 +49,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--monitor", default=None, metavar="SPEC",
                         help="runtime monitor: none, lhd, 'lhd+ch:tau=0.25', 'lhd+mcd:n=10,rho=0.9', "
                              "'lhd+ch+mcd:tau=0.125,n=30,rho=0.5', a registered monitor such as msp "
-                             "(default: lhd, or the "
+                             "(default: the deployed monitor, el.pipeline.DEPLOYED_MONITOR, or the "
                              "--calibration card's monitor; model pipeline)")
     parser.add_argument("--calibration", type=Path, metavar="CALIB.json",
                         help="calibration card (uav-el calibrate): run the monitor at its calibrated threshold")
@@ -127,7 +127,7 @@ def run_model(args: argparse.Namespace) -> int:
         raise CommandError("--image is for the ground-truth pipeline; give the image as IMAGE")
     image_path = Path(args.image_arg)
     read_image(image_path)  # bad input is a usage error here (in flight it is the default action)
-    monitor = args.monitor or "lhd"
+    monitor = args.monitor or PipelineConfig().monitor
     if args.calibration is not None:  # a bad card is a usage error here (in flight it is the default action)
         from el.monitors.calibration import load_calibration
         from el.pipeline import calibrated_spec

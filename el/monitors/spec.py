@@ -15,6 +15,8 @@ from dataclasses import dataclass
 from itertools import product
 from typing import Any
 
+from el.monitors.walk import HAZARD, check_walk
+
 NONE = "none"
 PAPER_TAUS: tuple[float, ...] = (0.25, 0.125)
 PAPER_NS: tuple[int, ...] = (10, 30)
@@ -30,6 +32,7 @@ VALID_FORMS = (
     "their registry name (el.monitors.registry)"
 )
 THRESHOLD = "threshold"
+WALK = "walk"  # el.monitors.walk: the order of the decision loop's walk (registered monitors only)
 
 
 def validate_tau(tau: object) -> float:
@@ -123,6 +126,11 @@ class MonitorSpec:
         """The same configuration at the default threshold."""
         return MonitorSpec(tau=self.tau, n=self.n, rho=self.rho)
 
+    @property
+    def walk(self) -> str:
+        """The paper's monitors walk the candidates by hazard rank."""
+        return HAZARD
+
     def __str__(self) -> str:
         return self.name
 
@@ -178,12 +186,18 @@ class GenericSpec:
         return dict(self.params).get(THRESHOLD)
 
     @property
+    def walk(self) -> str:
+        """The decision loop's walk order (``el.monitors.walk``): ``hazard`` unless ``walk=score``."""
+        return str(dict(self.params).get(WALK, HAZARD))
+
+    @property
     def base(self) -> GenericSpec:
         """The same configuration at the monitor's default threshold."""
         return GenericSpec(self.kind, tuple((k, v) for k, v in self.params if k != THRESHOLD))
 
     def kwargs(self) -> dict[str, Any]:
-        return dict(self.params)
+        """The monitor's constructor keywords (the walk is the decision loop's, not the monitor's)."""
+        return {k: v for k, v in self.params if k != WALK}
 
     def __str__(self) -> str:
         return self.name
@@ -204,7 +218,7 @@ def parse_monitor_spec(text: str | AnySpec | None) -> AnySpec | None:
     the parameters too, but every parameter of the kind is required. Any other name is looked up in
     the monitor registry (built-ins and the ``uav_el.monitors`` entry points) and gives a
     :class:`GenericSpec`; its values keep their case (file paths). Every monitor takes
-    ``threshold=X``.
+    ``threshold=X``; a registered one also ``walk=score`` (``el.monitors.walk``).
 
     Raises
     ------
@@ -269,13 +283,15 @@ def _parse_registered(text: str, kind: str, tail: str) -> GenericSpec:
         entry = monitor_entry(kind)
     except ValueError as err:  # unknown, or a plugin that failed to load
         raise _bad(text, str(err)) from None
-    values = _key_values(text, kind, tail, (*entry.params, THRESHOLD))
+    values = _key_values(text, kind, tail, (*entry.params, WALK, THRESHOLD))
     missing = [k for k in entry.required if k not in values]
     if missing:
         raise _bad(text, f"{kind} needs {', '.join(missing)}")
     params: list[tuple[str, Any]] = []
     try:
-        for key, convert in (*entry.params.items(), (THRESHOLD, float)):
+        for key, convert in (*entry.params.items(), (WALK, check_walk), (THRESHOLD, float)):
+            if key == WALK and values.get(WALK, "").lower() == HAZARD:
+                continue  # the default walk is left out of the canonical name
             if key in values:
                 value = convert(values[key])
                 if key == THRESHOLD:

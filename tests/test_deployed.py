@@ -1,0 +1,34 @@
+"""The deployed configuration is one thing: the flight code's default, the registry's, and its calibration card."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from assurance.requirements import load_registry
+from el.hashing import sha256_file
+from el.monitors import build_monitor, parse_monitor_spec
+from el.monitors.calibration import load_calibration
+from el.monitors.learned import DEFAULT_MODEL
+from el.monitors.signed import read_signed
+from el.pipeline import DEPLOYED_CALIBRATION, DEPLOYED_MONITOR, PipelineConfig
+from el.segmentation.weights import DEFAULT_WEIGHTS
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_flight_default_registry_and_card_name_the_same_configuration():
+    params = load_registry().parameters
+    card = load_calibration(DEPLOYED_CALIBRATION)
+    assert PipelineConfig().monitor_name == DEPLOYED_MONITOR == params["deployed_monitor"] == card.spec
+    assert (ROOT / params["calibration_card"]).resolve() == DEPLOYED_CALIBRATION
+    assert parse_monitor_spec(DEPLOYED_MONITOR).walk == "score"
+    assert build_monitor(DEPLOYED_MONITOR).threshold == card.body["threshold"]
+
+
+def test_shipped_monitor_files_rest_on_the_shipped_weights():
+    weights = sha256_file(DEFAULT_WEIGHTS)
+    assert load_calibration(DEPLOYED_CALIBRATION).body["weights"]["sha256"] == weights
+    body, _ = read_signed(DEFAULT_MODEL, "uav-el-learned-monitor/1", "learned monitor", ValueError)
+    assert body["weights"]["sha256"] == weights
+    for f in (DEPLOYED_CALIBRATION, DEFAULT_MODEL, DEFAULT_MODEL.with_name("ood.json")):
+        assert "/work/" not in f.read_text() and "\\\\" not in f.read_text()  # no machine paths recorded

@@ -1,0 +1,29 @@
+"""The README's headline table is the release run's (`make release-evidence` runs this on the release run).
+
+Marked `campaign`: it reads a campaign run (--uav-el-run). It judges only a release-sized run (the
+release preset's images and perturbations); on any other run it is skipped.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from assurance.campaign import preset_config
+from assurance.headline import current_block, headline_markdown, release_parameters
+from assurance.readouts import read_manifest
+from assurance.table import results_table
+
+README = Path(__file__).resolve().parents[1] / "README.md"
+
+
+@pytest.mark.campaign
+def test_readme_headline_table_is_the_release_runs(campaign_run):
+    cfg = read_manifest(campaign_run)["config"]
+    release = preset_config("release")
+    if cfg.get("images") != release.images or tuple(cfg.get("perturbations", ())) != release.perturbations:
+        pytest.skip(f"{campaign_run} is not a release-sized run (the headline table is about the release run)")
+    block = headline_markdown(campaign_run, results_table(campaign_run), **release_parameters())
+    assert current_block(README) == block, (
+        f"README.md's headline table is not {campaign_run}'s: run `uav-el table {campaign_run} --readme README.md`")

@@ -1,0 +1,72 @@
+"""The decision loop's walk order (el.monitors.walk): hazard rank (the paper's) or ascending monitor score."""
+
+from __future__ import annotations
+
+import pytest
+from helpers import OracleSegmenter, scene_ids, scene_image
+from hypothesis import given
+from hypothesis import strategies as st
+
+from assurance.campaign import walk, walk_of
+from el.config import CoreConfig
+from el.decision import MonitorVerdict
+from el.monitors import parse_monitor_spec
+from el.monitors.walk import select, walk_order
+from el.pipeline import EmergencyLanding, PipelineConfig
+
+WW = 128
+
+
+def test_walk_is_a_spec_parameter_of_registered_monitors_only():
+    spec = parse_monitor_spec("learned: walk=SCORE, threshold=0.8")
+    assert spec.name == "learned:walk=score,threshold=0.8" and spec.walk == "score"
+    assert "walk" not in spec.kwargs() and spec.base.name == "learned:walk=score"
+    assert parse_monitor_spec("msp:walk=hazard").name == "msp"  # the default walk is left out of the name
+    assert parse_monitor_spec("msp").walk == "hazard" and parse_monitor_spec("lhd").walk == "hazard"
+    assert walk_of("msp:walk=score") == "score" and walk_of("lhd+ch:tau=0.25") == "hazard"
+    for bad, needle in (("msp:walk=zigzag", "walk must be one of"), ("lhd:walk=score", "takes no parameter")):
+        with pytest.raises(ValueError, match=needle):
+            parse_monitor_spec(bad)
+
+
+@given(st.lists(st.tuples(st.booleans(), st.floats(-5, 5)), max_size=12))
+def test_score_walk_lands_on_the_accepted_candidate_with_the_lowest_score(items):
+    accepted, scores = [a for a, _ in items], [s for _, s in items]
+    ok = [k for k in range(len(items)) if accepted[k]]
+    want = min(ok, key=lambda k: (scores[k], k)) if ok else None
+    assert select(accepted, scores, "score") == want == walk(accepted, scores, "score")
+    assert select(accepted, scores, "hazard") == (ok[0] if ok else None) == walk(accepted)
+    assert sorted(walk_order(scores, "score")) == list(range(len(items)))
+
+
+class ByIndex:
+    """A monitor whose score is given per candidate (by its position in the ranked list)."""
+
+    def __init__(self, scores, threshold):
+        self.scores, self.threshold, self.seen = scores, threshold, []
+
+    def check(self, rgb, cand, segmenter, *, seed=0, context=None):
+        k = len(self.seen)
+        self.seen.append(k)
+        s = self.scores[k]
+        return MonitorVerdict("byindex", s <= self.threshold, "test", 0.001, s, self.threshold)
+
+
+@pytest.mark.parametrize("monitor, expected", [("msp:walk=score", "min"), ("msp", "first")])
+def test_pipeline_walks_as_its_spec_says(monitor, expected):
+    el = EmergencyLanding(PipelineConfig(core=CoreConfig(working_width=WW), monitor=monitor),
+                          segmenter=OracleSegmenter(WW))
+    image = scene_image(scene_ids())
+    n = len(EmergencyLanding(PipelineConfig(core=CoreConfig(working_width=WW), monitor="none"),
+                             segmenter=OracleSegmenter(WW)).decide(image).candidates)
+    assert n >= 3
+    scores = [0.9 - 0.1 * k for k in range(n)]  # the last-ranked candidate scores lowest
+    scores[0] = 2.0  # the top one is rejected
+    el.monitor = ByIndex(scores, threshold=1.0)
+    d = el.decide(image)
+    assert d.action == "land"
+    if expected == "min":
+        assert d.selected == n - 1 and el.monitor.seen == list(range(n))  # every candidate judged first
+        assert d.timings["overhead_s"] == pytest.approx(0.001 * n)
+    else:
+        assert d.selected == 1 and el.monitor.seen == [0, 1]  # the walk stops at the first accepted
