@@ -19,11 +19,12 @@ import time
 
 import numpy as np
 
-from el.pipeline import EmergencyLanding, PipelineConfig
+from el.pipeline import DEPLOYED_MONITOR, EmergencyLanding, PipelineConfig
 from el.segmentation import Segmenter
 from el.uavid import iter_samples
 
-CONFIGS = ("none", "lhd", "lhd+ch:tau=0.25", "lhd+mcd:n=10,rho=0.9", "lhd+mcd:n=30,rho=0.9")
+CONFIGS = ("none", "lhd", "lhd+ch:tau=0.25", "lhd+mcd:n=10,rho=0.9", "lhd+mcd:n=30,rho=0.9",
+           DEPLOYED_MONITOR)
 LABELS = {"none": "CM only", "lhd": "CM + LHD", "lhd+ch:tau=0.25": "CM + LHD + CH (0.25)",
           "lhd+mcd:n=10,rho=0.9": "CM + LHD + MCD n=10", "lhd+mcd:n=30,rho=0.9": "CM + LHD + MCD n=30"}
 
