@@ -24,6 +24,7 @@ import numpy as np
 from el.config import CoreConfig
 from el.core import default_area, run_core
 from el.decision import Candidate, Decision, Disc, MonitorVerdict
+from el.errors import BudgetExceeded
 from el.hashing import sha256_bytes
 from el.monitors import CandidateContext, Monitor, build_monitor, monitor_name, parse_monitor_spec
 from el.uavid import read_image
@@ -31,10 +32,6 @@ from el.uavid import read_image
 Clock = Callable[[], float]
 DEFAULT_TIME_BUDGET_S = 10.0
 logger = logging.getLogger(__name__)  # faults with their tracebacks; the decision keeps only the reason
-
-
-class BudgetExceeded(Exception):
-    """The decision's time budget ran out (turned into the default action with reason 'timeout')."""
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -16,6 +16,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from el.errors import DataError
 from el.labels import colors_to_ids, ids_to_colors
 
 IMAGE_DIR = "Images"
@@ -23,10 +24,6 @@ LABEL_DIR = "Labels"
 META_DIR = "meta"
 _SEQ = re.compile(r"^seq\d+$")
 _EXTS = (".png", ".jpg", ".jpeg")
-
-
-class DataError(ValueError):
-    """A data file or folder is missing, unreadable or inconsistent; the message names it."""
 
 
 def read_image(path: str | Path) -> np.ndarray:

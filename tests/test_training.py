@@ -16,9 +16,10 @@ from el.labels import NUM_CLASSES, PALETTE
 from el.segmentation import data as D
 from el.segmentation.architectures import build_model
 from el.segmentation.card import verify_card
-from el.segmentation.evaluation import EvalProtocol, compare_figures, confusion, summarise
+from el.segmentation.evaluation import compare_figures, confusion, summarise
 from el.segmentation.inference import Segmenter
 from el.segmentation.model import ArchConfig
+from el.segmentation.protocol import EvalProtocol
 from el.segmentation.training import (
     TrainConfig,
     checkpoint_path,

@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from assurance.cli import CommandError
+from assurance.errors import CommandError
 from el.uavid import atomic_write_bytes
 
 HELP = ("train the learned candidate monitor (logistic regression on candidate features) on a split, select it "

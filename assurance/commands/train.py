@@ -9,7 +9,8 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from assurance.cli import CommandError
+from assurance.commands.arguments import frame_scales
+from assurance.errors import CommandError
 from assurance.progress import progress
 from assurance.training_curve import curve_path, write_training_curve
 
@@ -24,20 +25,6 @@ def _widths(text: str) -> tuple[int, int, int]:
     if len(values) != 3:
         raise argparse.ArgumentTypeError(f"expected three integers like 24,48,96, got {text!r}")
     return values  # type: ignore[return-value]
-
-
-def frame_scales(text: str) -> tuple[float, ...]:
-    """``--frame-scales 1,1.25``: the sizes the working-resolution frame is fed to the network at."""
-    from el.segmentation.evaluation import check_frame_scales
-
-    try:
-        values = [float(v) for v in text.split(",")]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected factors like 1.25 or 1,1.25, got {text!r}") from None
-    try:
-        return check_frame_scales(values)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"{exc} (e.g. 1.25 or 1,1.25)") from None
 
 
 def _range(text: str) -> tuple[int, int]:
@@ -119,7 +106,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from el.segmentation import data as D
     from el.segmentation.architectures import arch_from_dict, default_arch
-    from el.segmentation.evaluation import EvalProtocol
+    from el.segmentation.protocol import EvalProtocol
     from el.segmentation.training import TrainConfig, steps_for_epochs, train
     from el.uavid import iter_samples
 
@@ -197,7 +184,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"per-pixel baseline mIoU: {card['baseline']['miou']:.4f} "
               f"(CNN - baseline = {card['baseline']['miou_gap_to_cnn']:.4f})")
     if args.val is not None and not args.no_audit:
-        from assurance.commands.model_card import record_audit
+        from assurance.card_audit import record_audit
 
         record_audit(args.out, args.val, args.threads, args.quiet)
     return 0

@@ -33,6 +33,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from el.errors import LearnedModelError
 from el.labels import FORBIDDEN_IDS
 from el.monitors.base import CandidateContext, Judgement, PatchSegmenter, validate_scores
 from el.monitors.lhd import LHDMonitor, argmax_slack, forbidden_pixels, take_disc
@@ -51,10 +52,6 @@ BASE_FEATURES: tuple[str, ...] = (
 )
 MCD_FEATURES: tuple[str, ...] = ("mcd_mean_std", "mcd_max_std")
 _FORBIDDEN = np.array(FORBIDDEN_IDS)
-
-
-class LearnedModelError(ValueError):
-    """A learned-monitor model file that cannot be used (missing, unreadable, altered, inconsistent)."""
 
 
 # -- features ------------------------------------------------------------------------------------

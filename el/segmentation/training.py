@@ -38,10 +38,12 @@ import torch
 from el.segmentation import data as D
 from el.segmentation.architectures import AnyArch, arch_from_dict, build_model, default_arch
 from el.segmentation.baseline import evaluate_baseline
-from el.segmentation.evaluation import EvalProtocol, evaluate, selection_score
+from el.segmentation.evaluation import evaluate, selection_score
+from el.segmentation.inference import Segmenter
 from el.segmentation.losses import LOSSES, segmentation_loss
 from el.segmentation.losses import describe as describe_loss
 from el.segmentation.model import ArchConfig, count_parameters
+from el.segmentation.protocol import EvalProtocol
 from el.segmentation.weights import load_weights, read_card, save_weights, write_card
 from el.uavid import atomic_write_bytes
 
@@ -440,7 +442,7 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
             if val_set:
                 tick = time.perf_counter()
                 model.eval()
-                figures = evaluate(config.eval_protocol.segmenter(model, device=device), val_set)
+                figures = evaluate(Segmenter.for_protocol(model, config.eval_protocol, device=device), val_set)
                 model.train()
                 score = selection_score(figures)
                 entry.update({"val_miou_working": figures["working_resolution"]["miou"],
@@ -465,7 +467,7 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
         if device.type != "cpu":
             say(f"re-evaluating the selected weights (step {best_step}) on the CPU")
             selected, _ = load_weights(weights_path)
-            cpu_figures = evaluate(config.eval_protocol.segmenter(selected), val_set)
+            cpu_figures = evaluate(Segmenter.for_protocol(selected, config.eval_protocol), val_set)
             card["evaluation"].update(cpu_figures)
             card["evaluation"]["selection_device"] = _device_name(device)
     card["training"].update({
