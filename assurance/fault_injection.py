@@ -5,8 +5,8 @@ campaign run); ``run_cases`` injects each fault into a copy of what it needs and
 (``assurance.cli.main``, passed in by the caller: the command line imports this module through ``uav-el
 fault-table``, so importing it back would be a cycle), recording the exit code and the first line that says
 what happened. A case passes when the exit code is the expected one, the expected words are in the output
-and no traceback was printed. ``uav-el fault-table`` writes the table (CSV and Markdown); the evidence report shows it as an
-appendix when ``faults.csv`` lies next to it.
+and no traceback was printed. ``uav-el fault-table`` writes the table (CSV and Markdown); the evidence
+report shows it as an appendix when ``faults.csv`` lies next to it.
 """
 
 from __future__ import annotations

@@ -35,6 +35,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from el.camera import NUM_STRIPES, CameraGeometry, SafetyParams
+from el.forbidden import forbidden_pixels
 from el.labels import FORBIDDEN_IDS, NUM_CLASSES, SAFE_IDS
 
 # Distance from a pixel centre to the farthest point of its square, plus a float32 guard.
@@ -51,17 +52,12 @@ DIST_CAP = 1024.0
 def forbidden_from_probs(probs: np.ndarray) -> np.ndarray:
     """(H, W) bool: True where a forbidden class has the highest probability.
 
-    A tie between a forbidden and a safe class counts as forbidden (the conservative side).
+    A tie between a forbidden and a safe class counts as forbidden (the conservative side): the one
+    rule, :func:`el.forbidden.forbidden_pixels`, here for a whole frame.
     """
     if probs.ndim != 3 or probs.shape[0] != NUM_CLASSES:
         raise ValueError(f"probs must have shape ({NUM_CLASSES}, H, W), got {probs.shape}")
-    fmax = probs[FORBIDDEN_IDS[0]]
-    for c in FORBIDDEN_IDS[1:]:
-        fmax = np.maximum(fmax, probs[c])
-    smax = probs[SAFE_IDS[0]]
-    for c in SAFE_IDS[1:]:
-        smax = np.maximum(smax, probs[c])
-    return fmax >= smax
+    return forbidden_pixels(probs)
 
 
 def _overlap_ranges(src: int, dst: int) -> tuple[np.ndarray, np.ndarray]:
