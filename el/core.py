@@ -26,6 +26,8 @@ import numpy as np
 
 from el import candidates as cand
 from el import ranking
+from el import regions as reg
+from el import representatives as reps
 from el.camera import working_size
 from el.config import CoreConfig
 from el.decision import Candidate, Disc
@@ -165,11 +167,11 @@ def run_core(
     vp = cand.valid_pixels(forbidden, radii, mode=config.mode, min_row=min_row)
     t1 = clock()
 
-    region_fn = cand.regions_fast if config.region_method == "fast" else cand.regions_dbscan
+    region_fn = reg.regions_fast if config.region_method == "fast" else reg.regions_dbscan
     regions = region_fn(vp.valid, eps=config.dbscan_eps, min_samples=config.dbscan_min_samples)
     t2 = clock()
 
-    rows, cols, _ = cand.representatives(
+    rows, cols, _ = reps.representatives(
         regions, n_star=config.n_star, max_points=config.kmeans_max_points,
         seed=config.kmeans_seed, n_init=config.kmeans_n_init,
     )
