@@ -177,26 +177,7 @@ def run_core(
     )
     t3 = clock()
 
-    r = vp.radii[rows]
-    h_s = ranking.semantic_hazard(probs, rows, cols, r)
-    h_d = ranking.distance_hazard(vp.clearance[rows, cols], r, config.d_max_factor)
-    hazard = ranking.combined_hazard(h_s, h_d, config.alpha)
-    order = ranking.rank_order(hazard, rows, cols)
-    kept = cand.prune_overlaps(rows, cols, r, order, config.overlap_max)
-    sx, sy = W / w, H / h
-    scale = min(sx, sy)
-    out = [
-        Candidate(
-            rank=rank,
-            x=float((cols[k] + 0.5) * sx),
-            y=float((rows[k] + 0.5) * sy),
-            radius_px=float(r[k] * scale),
-            hazard=float(hazard[k]),
-            hazard_semantic=float(h_s[k]),
-            hazard_distance=float(h_d[k]),
-        )
-        for rank, k in enumerate(kept)
-    ]
+    out = _ranked_candidates(probs, vp, rows, cols, config, (W, H))
     t4 = clock()
     return CoreResult(
         candidates=out,
@@ -210,6 +191,33 @@ def run_core(
         first_reachable_row=full_first,
         valid=vp.valid,
     )
+
+
+def _ranked_candidates(probs: np.ndarray, vp: cand.ValidPixels, rows: np.ndarray, cols: np.ndarray,
+                       config: CoreConfig, input_size: tuple[int, int]) -> list[Candidate]:
+    """Rank the representatives by hazard, prune overlaps, map to full-resolution coordinates (3.5, 3.1)."""
+    W, H = input_size
+    _, h, w = probs.shape
+    r = vp.radii[rows]
+    h_s = ranking.semantic_hazard(probs, rows, cols, r)
+    h_d = ranking.distance_hazard(vp.clearance[rows, cols], r, config.d_max_factor)
+    hazard = ranking.combined_hazard(h_s, h_d, config.alpha)
+    order = ranking.rank_order(hazard, rows, cols)
+    kept = cand.prune_overlaps(rows, cols, r, order, config.overlap_max)
+    sx, sy = W / w, H / h
+    scale = min(sx, sy)
+    return [
+        Candidate(
+            rank=rank,
+            x=float((cols[k] + 0.5) * sx),
+            y=float((rows[k] + 0.5) * sy),
+            radius_px=float(r[k] * scale),
+            hazard=float(hazard[k]),
+            hazard_semantic=float(h_s[k]),
+            hazard_distance=float(h_d[k]),
+        )
+        for rank, k in enumerate(kept)
+    ]
 
 
 def default_area(width: int, height: int, config: CoreConfig | None = None) -> Disc:

@@ -107,7 +107,8 @@ def run(args: argparse.Namespace) -> int:
     from el.segmentation import data as D
     from el.segmentation.architectures import arch_from_dict, default_arch
     from el.segmentation.protocol import EvalProtocol
-    from el.segmentation.training import TrainConfig, steps_for_epochs, train
+    from el.segmentation.train_config import TrainConfig, steps_for_epochs
+    from el.segmentation.training import train
     from el.uavid import iter_samples
 
     if args.threads is not None and args.threads < 1:
