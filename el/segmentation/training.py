@@ -206,14 +206,6 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
         run = _restore(state, model, optimizer, scheduler, device)
         say(f"resuming from step {run.step} of {config.steps}")
 
-    def checkpoint(step: int) -> None:
-        save_checkpoint(ckpt_path, {
-            "step": step, "model": model.state_dict(), "optimizer": optimizer.state_dict(),
-            "scheduler": scheduler.state_dict(), "config": config.to_dict(), "data": data_ids,
-            "best_score": run.best_score, "best_step": run.best_step, "history": run.history,
-            "train_seconds": run.train_seconds,
-        })
-
     end = _end_step(config, stop_at, run.step, ckpt_path)
     card_base = functools.partial(_card_base, config, data_ids, freq, weights, parent, encoder_init, device, end)
     interval = config.evaluation_interval
@@ -241,15 +233,12 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
                 on_eval(run.history)
             say(" ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in entry.items()))
         if improved or done % config.checkpoint_every == 0 or last:
-            checkpoint(done)
+            save_checkpoint(ckpt_path, {
+                "step": done, "model": model.state_dict(), "optimizer": optimizer.state_dict(),
+                "scheduler": scheduler.state_dict(), "config": config.to_dict(), "data": data_ids,
+                **_checkpoint_record(run)})
     card = _final_card(model, run, config, weights_path, card_base(), val_set, device, say)
-    card["training"].update({
-        "best_step": run.best_step, "history": run.history, "train_seconds": round(run.train_seconds, 1),
-        "seconds_per_step": round(run.train_seconds / max(1, end), 3),
-        "stopped_at": end if end < config.steps else None,
-        "prepare_seconds": round(prep_seconds, 1), "threads": torch.get_num_threads(),
-        "parameters": count_parameters(model),
-    })
+    card["training"].update(_run_record(run, model, config, end, prep_seconds))
     if config.baseline_pixels and val_set:
         say("fitting the per-pixel baseline")
         card["baseline"] = _baseline(train_set, val_set, config, card["evaluation"]["working_resolution"]["miou"])
@@ -266,6 +255,24 @@ class _RunState:
     best_step: int | None = None
     history: list[dict[str, Any]] = field(default_factory=list)
     train_seconds: float = 0.0
+
+
+def _checkpoint_record(run: _RunState) -> dict[str, Any]:
+    """The run's state as its checkpoint keeps it (beside the model, optimiser and scheduler)."""
+    return {"best_score": run.best_score, "best_step": run.best_step, "history": run.history,
+            "train_seconds": run.train_seconds}
+
+
+def _run_record(run: _RunState, model: torch.nn.Module, config: TrainConfig, end: int,
+                prep_seconds: float) -> dict[str, Any]:
+    """What the card's ``training`` section learns at the end: selection, history, timing, size."""
+    return {
+        "best_step": run.best_step, "history": run.history, "train_seconds": round(run.train_seconds, 1),
+        "seconds_per_step": round(run.train_seconds / max(1, end), 3),
+        "stopped_at": end if end < config.steps else None,
+        "prepare_seconds": round(prep_seconds, 1), "threads": torch.get_num_threads(),
+        "parameters": count_parameters(model),
+    }
 
 
 def _load_data(train_dir: str | Path, val_dir: str | Path | None, config: TrainConfig, resume_from: Path | None,
