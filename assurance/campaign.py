@@ -401,7 +401,7 @@ def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *,
 
 def _frame_protocol(weights: Path) -> dict[str, Any]:
     """How the weights' card has frames segmented (``frame_flip``, ``frame_scales``); None without a card."""
-    from el.segmentation.evaluation import FRAME_OPTIONS, card_protocol
+    from el.segmentation.protocol import FRAME_OPTIONS, card_protocol
     from el.segmentation.weights import read_card
 
     try:

@@ -20,6 +20,7 @@ import sys
 from collections.abc import Sequence
 
 from assurance import __version__
+from assurance.errors import CommandError
 
 # Sub-command name -> module under assurance.commands. Order is the order of `uav-el --help`.
 COMMANDS: dict[str, str] = {
@@ -52,10 +53,6 @@ EXIT_CODES: dict[int, str] = {
 EPILOG = "exit codes: " + "; ".join(f"{k} {v}" for k, v in EXIT_CODES.items())
 
 
-class CommandError(Exception):
-    """An expected failure of a command: printed as one line, exit code 2."""
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="uav-el",
@@ -68,6 +65,9 @@ def build_parser() -> argparse.ArgumentParser:
                              "faults show as their one-line reason only")
     parser.add_argument("--log-level", choices=("DEBUG", "INFO", "WARNING", "ERROR"),
                         help="logging level (overrides -v)")
+    # A command that replays the command line (fault-table) gets it here: importing this module would
+    # close an import cycle (this module imports every command).
+    parser.set_defaults(cli_main=main)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name, module_name in COMMANDS.items():
         module = importlib.import_module(f"assurance.commands.{module_name}")
@@ -80,8 +80,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``uav-el``; returns the exit code."""
     from assurance.readouts import DamagedRunError
-    from el.labels import LabelColourError
-    from el.uavid import DataError
+    from el.errors import DataError, LabelColourError
 
     parser = build_parser()
     args = parser.parse_args(argv)

@@ -2,10 +2,11 @@
 
 ``build_workspace`` makes a scratch workspace (two tiny synthetic scenes, a tiny CNN's weights, a 2-image
 campaign run); ``run_cases`` injects each fault into a copy of what it needs and runs ``uav-el`` in-process
-(``assurance.cli.main``), recording the exit code and the first line that says what happened. A case
-passes when the exit code is the expected one, the expected words are in the output and no traceback was
-printed. ``uav-el fault-table`` writes the table (CSV and Markdown); the evidence report shows it as an
-appendix when ``faults.csv`` lies next to it.
+(``assurance.cli.main``, passed in by the caller: the command line imports this module through ``uav-el
+fault-table``, so importing it back would be a cycle), recording the exit code and the first line that says
+what happened. A case passes when the exit code is the expected one, the expected words are in the output
+and no traceback was printed. ``uav-el fault-table`` writes the table (CSV and Markdown); the evidence
+report shows it as an appendix when ``faults.csv`` lies next to it.
 """
 
 from __future__ import annotations
@@ -23,6 +24,8 @@ COLUMNS = ("case", "injected", "command", "expected", "observed", "outcome", "re
 CSV_NAME, MD_NAME = "faults.csv", "faults.md"
 MCD_SPEC = "lhd+ch+mcd:tau=0.25,n=1000,rho=0.5"
 
+CliMain = Callable[[list[str]], int]  # ``assurance.cli.main``: argv -> exit code
+
 
 @dataclass(frozen=True)
 class Case:
@@ -39,10 +42,8 @@ class Case:
 # ------------------------------------------------------------------------------------------------
 # Workspace
 # ------------------------------------------------------------------------------------------------
-def _cli(argv: Sequence[str]) -> tuple[int, str, str]:
-    """``uav-el ARGV`` in-process: (exit code, stdout, stderr)."""
-    from assurance.cli import main
-
+def _cli(main: CliMain, argv: Sequence[str]) -> tuple[int, str, str]:
+    """``uav-el ARGV`` in-process through ``main``: (exit code, stdout, stderr)."""
     out, err = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
         try:
@@ -70,17 +71,17 @@ def save_tiny_weights(path: Path, *, nan: bool = False) -> Path:
     return path
 
 
-def build_workspace(root: str | Path) -> Path:
+def build_workspace(root: str | Path, *, main: CliMain) -> Path:
     """Two 320x180 synthetic test scenes, tiny weights and a finished 2-image campaign run under ``root``."""
     ws = Path(root)
     steps = (["synth", "--out", ws / "data", "--split", "test", "--scenes", "2", "--size", "320x180",
               "--no-progress"],)
     for argv in steps:
-        code, _, err = _cli(argv)
+        code, _, err = _cli(main, argv)
         if code:
             raise RuntimeError(f"fault-table workspace: uav-el {argv[0]} exited {code}: {err.strip()}")
     save_tiny_weights(ws / "tiny.pt")
-    code, _, err = _cli(_campaign(ws, ws / "run"))
+    code, _, err = _cli(main, _campaign(ws, ws / "run"))
     if code:
         raise RuntimeError(f"fault-table workspace: uav-el campaign exited {code}: {err.strip()}")
     return ws
@@ -252,10 +253,10 @@ def _outcome(case: Case, out: str, err: str) -> str:
     return (err_lines or lines or [""])[0]
 
 
-def run_case(case: Case, ws: Path) -> dict[str, str]:
-    """Inject ``case`` into the workspace ``ws`` and replay it; the table row."""
+def run_case(case: Case, ws: Path, *, main: CliMain) -> dict[str, str]:
+    """Inject ``case`` into the workspace ``ws`` and replay it through ``main``; the table row."""
     argv = [str(a) for a in case.make(ws)]
-    code, out, err = _cli(argv)
+    code, out, err = _cli(main, argv)
     text = out + err
     ok = code == case.expected and case.expect_text in text and "Traceback" not in text
     command = "uav-el " + " ".join(a.replace(str(ws), "WS") if str(ws) in a else a for a in argv)
@@ -264,8 +265,9 @@ def run_case(case: Case, ws: Path) -> dict[str, str]:
             "observed": str(code), "outcome": outcome, "result": "pass" if ok else "FAIL"}
 
 
-def run_cases(ws: Path, cases: Sequence[Case] = CASES) -> list[dict[str, str]]:
-    return [run_case(c, ws) for c in cases]
+def run_cases(ws: Path, cases: Sequence[Case] = CASES, *, main: CliMain) -> list[dict[str, str]]:
+    """The table rows of ``cases`` replayed through ``main`` in the workspace ``ws``."""
+    return [run_case(c, ws, main=main) for c in cases]
 
 
 def to_csv(rows: Sequence[dict[str, str]]) -> str:

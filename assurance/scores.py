@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 from scipy.stats import rankdata
 
-from assurance.metrics import _percentile_interval, _resample_indices
+from assurance.intervals import percentile_interval, resample_indices
 
 __all__ = ["auroc", "auroc_markdown", "auroc_table", "roc_curve"]
 
@@ -64,10 +64,10 @@ def _image_auroc_ci(g: pd.DataFrame, n_boot: int, seed: int, conf: float = 0.95)
     members = [np.flatnonzero(inv == i) for i in range(len(uniq))]
     s, y = g["score"].to_numpy(float), g["true_unsafe"].to_numpy(bool)
     reps = np.empty(n_boot)
-    for b, idx in enumerate(_resample_indices(len(uniq), n_boot, seed)):
+    for b, idx in enumerate(resample_indices(len(uniq), n_boot, seed)):
         rows = np.concatenate([members[i] for i in idx])
         reps[b] = auroc(s[rows], y[rows])
-    return _percentile_interval(reps, conf)
+    return percentile_interval(reps, conf)
 
 
 def auroc_table(candidates: pd.DataFrame, *, n_boot: int = 1000, seed: int = 0) -> pd.DataFrame:

@@ -22,19 +22,18 @@ from typing import Any
 import numpy as np
 
 from assurance.scores import auroc as scores_auroc
-from el.labels import FORBIDDEN_IDS, SAFE_IDS
+from el.forbidden import top_scores
 from el.monitors.lhd import disc_pixels
 from el.monitors.patches import extract_patch
 
 SCORES = ("max_forbidden_probability", "lhd_margin", "forbidden_fraction")
-_F, _S = np.array(FORBIDDEN_IDS), np.array(SAFE_IDS)
 
 
 def disc_scores(segmenter: Any, rgb: np.ndarray, disc: Any, *, margin: float = 0.25) -> dict[str, float]:
     """The three evidence scores of one candidate's disc on its HD patch (see the module docstring)."""
     patch = extract_patch(rgb, disc, margin=margin)
     pixels = disc_pixels(segmenter.predict_patch(patch.rgb), patch.disc_mask)  # (8, m)
-    top_f, top_s = pixels[_F].max(axis=0), pixels[_S].max(axis=0)
+    top_f, top_s = top_scores(pixels)
     return {"max_forbidden_probability": float(top_f.max()), "lhd_margin": float((top_f - top_s).max()),
             "forbidden_fraction": float((top_f >= top_s).mean())}
 

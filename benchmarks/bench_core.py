@@ -21,6 +21,7 @@ import cv2
 import numpy as np
 
 from el import candidates as cand
+from el import regions as reg
 from el.config import CoreConfig
 from el.core import probs_from_labels, reachable_working_row, run_core
 from el.labels import CLASS_IDS, NUM_CLASSES
@@ -125,11 +126,11 @@ def main(argv: list[str] | None = None) -> int:
     for probs in maps[: args.dbscan_maps]:
         vp = cand.valid_pixels(cand.forbidden_from_probs(probs), radii, min_row=min_row)
         t0 = time.perf_counter()
-        ours = cand.regions_fast(vp.valid)
+        ours = reg.regions_fast(vp.valid)
         t1 = time.perf_counter()
-        ref = cand.regions_dbscan(vp.valid)
+        ref = reg.regions_dbscan(vp.valid)
         t2 = time.perf_counter()
-        same = bool((ours.core == ref.core).all()) and cand.same_partition(ours.labels[ours.core], ref.labels[ref.core])
+        same = bool((ours.core == ref.core).all()) and reg.same_partition(ours.labels[ours.core], ref.labels[ref.core])
         ref_rows.append((int(vp.valid.sum()), t1 - t0, t2 - t1, same))
     dbscan_total = []
     for probs in maps[: args.dbscan_maps]:

@@ -26,6 +26,8 @@ import numpy as np
 
 from el import candidates as cand
 from el import ranking
+from el import regions as reg
+from el import representatives as reps
 from el.camera import working_size
 from el.config import CoreConfig
 from el.decision import Candidate, Disc
@@ -165,36 +167,17 @@ def run_core(
     vp = cand.valid_pixels(forbidden, radii, mode=config.mode, min_row=min_row)
     t1 = clock()
 
-    region_fn = cand.regions_fast if config.region_method == "fast" else cand.regions_dbscan
+    region_fn = reg.regions_fast if config.region_method == "fast" else reg.regions_dbscan
     regions = region_fn(vp.valid, eps=config.dbscan_eps, min_samples=config.dbscan_min_samples)
     t2 = clock()
 
-    rows, cols, _ = cand.representatives(
+    rows, cols, _ = reps.representatives(
         regions, n_star=config.n_star, max_points=config.kmeans_max_points,
         seed=config.kmeans_seed, n_init=config.kmeans_n_init,
     )
     t3 = clock()
 
-    r = vp.radii[rows]
-    h_s = ranking.semantic_hazard(probs, rows, cols, r)
-    h_d = ranking.distance_hazard(vp.clearance[rows, cols], r, config.d_max_factor)
-    hazard = ranking.combined_hazard(h_s, h_d, config.alpha)
-    order = ranking.rank_order(hazard, rows, cols)
-    kept = cand.prune_overlaps(rows, cols, r, order, config.overlap_max)
-    sx, sy = W / w, H / h
-    scale = min(sx, sy)
-    out = [
-        Candidate(
-            rank=rank,
-            x=float((cols[k] + 0.5) * sx),
-            y=float((rows[k] + 0.5) * sy),
-            radius_px=float(r[k] * scale),
-            hazard=float(hazard[k]),
-            hazard_semantic=float(h_s[k]),
-            hazard_distance=float(h_d[k]),
-        )
-        for rank, k in enumerate(kept)
-    ]
+    out = _ranked_candidates(probs, vp, rows, cols, config, (W, H))
     t4 = clock()
     return CoreResult(
         candidates=out,
@@ -208,6 +191,33 @@ def run_core(
         first_reachable_row=full_first,
         valid=vp.valid,
     )
+
+
+def _ranked_candidates(probs: np.ndarray, vp: cand.ValidPixels, rows: np.ndarray, cols: np.ndarray,
+                       config: CoreConfig, input_size: tuple[int, int]) -> list[Candidate]:
+    """Rank the representatives by hazard, prune overlaps, map to full-resolution coordinates (3.5, 3.1)."""
+    W, H = input_size
+    _, h, w = probs.shape
+    r = vp.radii[rows]
+    h_s = ranking.semantic_hazard(probs, rows, cols, r)
+    h_d = ranking.distance_hazard(vp.clearance[rows, cols], r, config.d_max_factor)
+    hazard = ranking.combined_hazard(h_s, h_d, config.alpha)
+    order = ranking.rank_order(hazard, rows, cols)
+    kept = cand.prune_overlaps(rows, cols, r, order, config.overlap_max)
+    sx, sy = W / w, H / h
+    scale = min(sx, sy)
+    return [
+        Candidate(
+            rank=rank,
+            x=float((cols[k] + 0.5) * sx),
+            y=float((rows[k] + 0.5) * sy),
+            radius_px=float(r[k] * scale),
+            hazard=float(hazard[k]),
+            hazard_semantic=float(h_s[k]),
+            hazard_distance=float(h_d[k]),
+        )
+        for rank, k in enumerate(kept)
+    ]
 
 
 def default_area(width: int, height: int, config: CoreConfig | None = None) -> Disc:

@@ -11,6 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
+from el.errors import LabelColourError
+
 
 @dataclass(frozen=True)
 class UavidClass:
@@ -44,10 +46,6 @@ FORBIDDEN_LUT = np.array([c.forbidden for c in CLASSES], dtype=bool)
 # Hazard score per class; forbidden classes get 0 because they never lie in a valid disc.
 HAZARD_SCORES = np.array([c.hazard_score or 0.0 for c in CLASSES], dtype=np.float64)
 MAX_HAZARD_SCORE = float(HAZARD_SCORES.max())
-
-
-class LabelColourError(ValueError):
-    """A label image holds colours that are not UAVid class colours."""
 
 
 def _pack(rgb: np.ndarray) -> np.ndarray:

@@ -24,9 +24,11 @@ import numpy as np
 from el.config import CoreConfig
 from el.core import default_area, run_core
 from el.decision import Candidate, Decision, Disc, MonitorVerdict
+from el.errors import BudgetExceeded
 from el.hashing import sha256_bytes
 from el.monitors import CandidateContext, Monitor, build_monitor, monitor_name, parse_monitor_spec
 from el.monitors.walk import HAZARD, SCORE, select
+from el.rgb import check_rgb
 from el.uavid import read_image
 
 Clock = Callable[[], float]
@@ -36,11 +38,8 @@ DEPLOYED_MONITOR = "learned:walk=score,threshold=0.80361501009869"
 candidate monitor (``el/monitors/data/learned.json``), candidates walked by its score (``el.monitors.walk``),
 at the threshold of its calibration card :data:`DEPLOYED_CALIBRATION` (a test checks they agree)."""
 DEPLOYED_CALIBRATION = Path(__file__).resolve().parent / "monitors" / "data" / "calibration.json"
+MIN_FRAME_SIZE = 16  # px: the smallest frame side the segmenter takes (el.segmentation.inference.MIN_SIZE)
 logger = logging.getLogger(__name__)  # faults with their tracebacks; the decision keeps only the reason
-
-
-class BudgetExceeded(Exception):
-    """The decision's time budget ran out (turned into the default action with reason 'timeout')."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -277,15 +276,10 @@ class EmergencyLanding:
             if not isinstance(rgb, np.ndarray):
                 raise ValueError(f"image must be a numpy array or a path, got {type(rgb).__name__}")
             info["path"] = "<array>"
-            if rgb.ndim != 3 or rgb.shape[2] != 3:
-                raise ValueError(f"image must have shape (H, W, 3), got {rgb.shape}")
-            if rgb.dtype != np.uint8:
-                raise ValueError(f"image must be uint8, got {rgb.dtype}")
+            check_rgb(rgb, "image", min_size=0)  # shape and type now; the size once the input is recorded
             info["sha256"] = sha256_bytes(np.ascontiguousarray(rgb).tobytes())
         info["width"], info["height"] = int(rgb.shape[1]), int(rgb.shape[0])
-        if rgb.shape[0] < 16 or rgb.shape[1] < 16:
-            raise ValueError(f"image of {rgb.shape[1]}x{rgb.shape[0]} px is too small")
-        return rgb
+        return check_rgb(rgb, "image", min_size=MIN_FRAME_SIZE)
 
     def _segment(self, rgb: np.ndarray) -> np.ndarray:
         probs = self.segmenter.predict_frame(rgb)

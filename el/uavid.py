@@ -16,17 +16,15 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from el.errors import DataError
 from el.labels import colors_to_ids, ids_to_colors
+from el.rgb import check_rgb
 
 IMAGE_DIR = "Images"
 LABEL_DIR = "Labels"
 META_DIR = "meta"
 _SEQ = re.compile(r"^seq\d+$")
 _EXTS = (".png", ".jpg", ".jpeg")
-
-
-class DataError(ValueError):
-    """A data file or folder is missing, unreadable or inconsistent; the message names it."""
 
 
 def read_image(path: str | Path) -> np.ndarray:
@@ -64,8 +62,7 @@ def write_image(path: str | Path, rgb: np.ndarray, *, compression: int = 3) -> N
     """Write an RGB uint8 image atomically (temp file + rename); the format follows the suffix."""
     path = Path(path)
     rgb = np.asarray(rgb)
-    if rgb.dtype != np.uint8 or rgb.ndim != 3 or rgb.shape[2] != 3:
-        raise ValueError(f"{path}: expected uint8 (H, W, 3) RGB, got {rgb.dtype} {rgb.shape}")
+    check_rgb(rgb, f"{path}: image")
     params = [cv2.IMWRITE_PNG_COMPRESSION, compression] if path.suffix.lower() == ".png" else []
     ok, buf = cv2.imencode(path.suffix or ".png", np.ascontiguousarray(rgb[:, :, ::-1]), params)
     if not ok:

@@ -11,6 +11,8 @@ from hypothesis.extra import numpy as hnp
 
 from el import candidates as cand
 from el import ranking
+from el import regions as reg
+from el import representatives as reps
 from el.camera import CameraGeometry, Pose, SafetyParams
 from el.config import CoreConfig
 from el.core import check_probs, default_area, probs_from_labels, run_core
@@ -159,11 +161,11 @@ def valid_masks(draw, *, max_side=36):
 @given(valid_masks(), st.sampled_from([(3.0, 5), (2.0, 3), (1.5, 4), (4.0, 9)]))
 def test_fast_regions_partition_core_points_like_dbscan(valid, params):
     eps, min_samples = params
-    fast = cand.regions_fast(valid, eps=eps, min_samples=min_samples)
-    ref = cand.regions_dbscan(valid, eps=eps, min_samples=min_samples)
+    fast = reg.regions_fast(valid, eps=eps, min_samples=min_samples)
+    ref = reg.regions_dbscan(valid, eps=eps, min_samples=min_samples)
     np.testing.assert_array_equal(fast.core, ref.core)
     assert fast.n_regions == ref.n_regions
-    assert cand.same_partition(fast.labels[fast.core], ref.labels[ref.core])
+    assert reg.same_partition(fast.labels[fast.core], ref.labels[ref.core])
     # noise is the same; border points join a region with a core point within eps
     np.testing.assert_array_equal(fast.labels > 0, ref.labels > 0)
     border = (fast.labels > 0) & ~fast.core
@@ -178,15 +180,15 @@ def test_fast_regions_merge_core_points_that_are_not_8_connected():
     valid[5, 2:28] = True  # a line: every point is core (7 points within 3)
     valid[8, 2:28] = True  # another line 3 px below: within eps, not 8-connected
     valid[15, 2:28] = True  # a third, 7 px below: separate
-    fast = cand.regions_fast(valid)
+    fast = reg.regions_fast(valid)
     assert fast.n_regions == 2
     assert fast.labels[5, 10] == fast.labels[8, 20] != fast.labels[15, 10]
 
 
 def test_same_partition():
-    assert cand.same_partition([1, 1, 2, 3], [7, 7, 5, 9])
-    assert not cand.same_partition([1, 1, 2], [7, 8, 5])
-    assert not cand.same_partition([1, 2, 2], [7, 7, 7])
+    assert reg.same_partition([1, 1, 2, 3], [7, 7, 5, 9])
+    assert not reg.same_partition([1, 1, 2], [7, 8, 5])
+    assert not reg.same_partition([1, 2, 2], [7, 7, 7])
 
 
 # -- representatives -------------------------------------------------------------------------------
@@ -196,13 +198,13 @@ def test_kmeans_centroid_of_a_u_shaped_region_is_snapped_into_the_region():
     valid[10:50, 10:18] = True  # left arm
     valid[10:50, 42:50] = True  # right arm
     valid[42:50, 10:50] = True  # bottom
-    regions = cand.regions_fast(valid)
+    regions = reg.regions_fast(valid)
     assert regions.n_regions == 1
     ys, xs = np.nonzero(regions.labels == 1)
     centroid = (ys.mean(), xs.mean())
     assert not valid[int(round(centroid[0])), int(round(centroid[1]))]  # the trap: centroid outside
-    rows, cols, reg = cand.representatives(regions, n_star=1)
-    assert len(rows) == 1 and reg[0] == 1
+    rows, cols, region_of = reps.representatives(regions, n_star=1)
+    assert len(rows) == 1 and region_of[0] == 1
     assert valid[rows[0], cols[0]]
     d2 = (ys - centroid[0]) ** 2 + (xs - centroid[1]) ** 2
     assert (rows[0] - centroid[0]) ** 2 + (cols[0] - centroid[1]) ** 2 == pytest.approx(d2.min())
@@ -212,16 +214,16 @@ def test_representatives_are_proportional_and_inside_their_regions():
     valid = np.zeros((80, 200), dtype=bool)
     valid[10:70, 10:150] = True  # big
     valid[10:20, 170:190] = True  # small
-    regions = cand.regions_fast(valid)
-    rows, cols, reg = cand.representatives(regions, n_star=10, seed=3)
+    regions = reg.regions_fast(valid)
+    rows, cols, region_of = reps.representatives(regions, n_star=10, seed=3)
     big, small = regions.labels[40, 50], regions.labels[15, 180]
     n_big, n_small = (regions.labels == big).sum(), (regions.labels == small).sum()
     expect_big = max(1, math.floor(10 * n_big / (n_big + n_small) + 0.5))
-    assert (reg == big).sum() == expect_big
-    assert (reg == small).sum() == 1
-    assert (regions.labels[rows, cols] == reg).all()
-    again = cand.representatives(regions, n_star=10, seed=3)
-    for a, b in zip((rows, cols, reg), again, strict=True):
+    assert (region_of == big).sum() == expect_big
+    assert (region_of == small).sum() == 1
+    assert (regions.labels[rows, cols] == region_of).all()
+    again = reps.representatives(regions, n_star=10, seed=3)
+    for a, b in zip((rows, cols, region_of), again, strict=True):
         np.testing.assert_array_equal(a, b)
 
 
@@ -229,12 +231,12 @@ def test_kmeans_finds_separated_blobs_deterministically():
     rng = np.random.default_rng(0)
     truth = np.array([[0.0, 0.0], [50.0, 0.0], [0.0, 50.0]])
     pts = np.concatenate([c + rng.normal(size=(200, 2)) for c in truth])
-    centres = cand.kmeans(pts, 3, seed=1, n_init=2)
+    centres = reps.kmeans(pts, 3, seed=1, n_init=2)
     for c in truth:
         assert np.min(np.hypot(*(centres - c).T)) < 0.5
-    np.testing.assert_array_equal(centres, cand.kmeans(pts, 3, seed=1, n_init=2))
+    np.testing.assert_array_equal(centres, reps.kmeans(pts, 3, seed=1, n_init=2))
     with pytest.raises(ValueError):
-        cand.kmeans(pts, 0)
+        reps.kmeans(pts, 0)
 
 
 # -- overlap pruning ---------------------------------------------------------------------------------

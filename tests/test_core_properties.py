@@ -17,6 +17,7 @@ from hypothesis import strategies as st
 from scipy.spatial import cKDTree
 
 from el import candidates as cand
+from el import regions as reg
 from el.camera import CameraGeometry, working_size
 from el.config import CoreConfig
 from el.core import probs_from_labels, reachable_working_row, run_core
@@ -231,11 +232,11 @@ def test_fast_regions_give_dbscans_partition_of_core_points_on_real_valid_masks(
     min_row, _ = reachable_working_row((W, H), (w, h), cfg)
     radii = cand.row_radii(cfg.geometry(w, h), cfg.safety, cfg.mode)
     vp = cand.valid_pixels(cand.forbidden_from_probs(probs), radii, min_row=min_row)
-    fast = cand.regions_fast(vp.valid)
-    ref = cand.regions_dbscan(vp.valid)
+    fast = reg.regions_fast(vp.valid)
+    ref = reg.regions_dbscan(vp.valid)
     np.testing.assert_array_equal(fast.core, ref.core)
     assert fast.n_regions == ref.n_regions
-    assert cand.same_partition(fast.labels[fast.core], ref.labels[ref.core])
+    assert reg.same_partition(fast.labels[fast.core], ref.labels[ref.core])
 
 
 @pytest.mark.requirements("EL-R11")

@@ -17,7 +17,7 @@ FAST = ("H5-negative-seed", "H6-deleted-shard", "H7-overlay-extension", "H8-json
 
 @pytest.fixture(scope="module")
 def workspace(tmp_path_factory):
-    return fi.build_workspace(tmp_path_factory.mktemp("faults"))
+    return fi.build_workspace(tmp_path_factory.mktemp("faults"), main=main)
 
 
 def test_cases_cover_issue_19_and_bad_inputs():
@@ -29,7 +29,7 @@ def test_cases_cover_issue_19_and_bad_inputs():
 
 
 def test_fast_cases_behave_and_the_report_shows_the_appendix(workspace, tmp_path):
-    rows = fi.run_cases(workspace, [c for c in fi.CASES if c.id in FAST])
+    rows = fi.run_cases(workspace, [c for c in fi.CASES if c.id in FAST], main=main)
     assert [r["case"] for r in rows] == list(FAST)
     for r in rows:
         assert tuple(r) == fi.COLUMNS and r["result"] == "pass", r

@@ -7,7 +7,7 @@ import pytest
 
 from el.labels import CLASS_IDS
 from el.synth import default_geometry, generate_world, render
-from el.synth.layout import Builder
+from el.synth.builder import Builder
 from el.synth.lookalikes import low_building, shared_street, stray_cars, track
 from el.synth.rand import Rand
 from el.synth.styles import STYLES

@@ -46,3 +46,19 @@ def test_callers_share_it() -> None:
     with pytest.raises(ValueError, match="patch of 15x15 px is too small"):  # the segmenter needs 16 px
         _check_rgb(np.zeros((15, 15, 3), np.uint8), "patch")
     assert validate_rgb(np.zeros((1, 1, 3), np.uint8)).shape == (1, 1, 3)  # a monitor's crop may be tiny
+
+
+def test_the_flight_path_and_the_writers_use_it_too(tmp_path) -> None:
+    from el.pipeline import EmergencyLanding
+    from el.segmentation.baseline import pixel_features
+    from el.uavid import write_image
+
+    bad = np.zeros((20, 20, 3), np.float32)
+    with pytest.raises(ValueError, match="^image must be uint8, got float32$"):
+        EmergencyLanding._read(None, bad, {})  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="^image of 15x20 px is too small$"):
+        EmergencyLanding._read(None, np.zeros((20, 15, 3), np.uint8), {})  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="out.png: image must be uint8, got float32"):
+        write_image(tmp_path / "out.png", bad)
+    with pytest.raises(ValueError, match="^image must have shape"):
+        pixel_features(np.zeros((20, 20), np.uint8))

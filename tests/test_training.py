@@ -16,20 +16,13 @@ from el.labels import NUM_CLASSES, PALETTE
 from el.segmentation import data as D
 from el.segmentation.architectures import build_model
 from el.segmentation.card import verify_card
-from el.segmentation.evaluation import EvalProtocol, compare_figures, confusion, summarise
+from el.segmentation.checkpoint import checkpoint_path, load_checkpoint
+from el.segmentation.evaluation import compare_figures, confusion, summarise
 from el.segmentation.inference import Segmenter
 from el.segmentation.model import ArchConfig
-from el.segmentation.training import (
-    TrainConfig,
-    checkpoint_path,
-    load_checkpoint,
-    prefetched,
-    resolve_device,
-    sample_batch,
-    steps_for_epochs,
-    train,
-    training_loss,
-)
+from el.segmentation.protocol import EvalProtocol
+from el.segmentation.train_config import TrainConfig, steps_for_epochs
+from el.segmentation.training import prefetched, resolve_device, sample_batch, train, training_loss
 from el.segmentation.weights import card_path, read_card
 from el.uavid import write_sample
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from assurance.cli import CommandError
 from assurance.commands.fit_monitor import write_json
+from assurance.errors import CommandError
 
 HELP = ("calibrate a monitor's threshold on held-out scenes: P(accept an unsafe candidate) <= --miss-rate "
         "with --confidence (order statistic + Clopper-Pearson)")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from assurance.campaign import describe, load_presets, preset_config, run_campaign
-from assurance.cli import CommandError
+from assurance.errors import CommandError
 
 HELP = "run or resume an evaluation campaign (perturbations x test images x monitor configurations)"
 

@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from assurance.cli import CommandError
+from assurance.errors import CommandError
 
 HELP = ("write the evidence report (HTML, PDF, JSON) of a campaign run; exit 1 when a requirement failed, "
         "when the requirement results are not bound to this run, code and registry or contradict the run, or "

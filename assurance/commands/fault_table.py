@@ -6,7 +6,7 @@ import argparse
 import tempfile
 from pathlib import Path
 
-from assurance.cli import CommandError
+from assurance.errors import CommandError
 
 HELP = ("replay the fault-injection cases (issue 19's hostile cases, bad inputs) through the command line in a "
         "scratch workspace and write the table (case, exit code, outcome) as CSV and Markdown; exit 1 when a "
@@ -44,8 +44,8 @@ def run(args: argparse.Namespace) -> int:
     torch.set_num_threads(1)  # tiny tensors: one thread is faster
     try:
         with tempfile.TemporaryDirectory(prefix="uav-el-faults-") as tmp:
-            ws = fi.build_workspace(tmp)
-            rows = fi.run_cases(ws, cases)
+            ws = fi.build_workspace(tmp, main=args.cli_main)
+            rows = fi.run_cases(ws, cases, main=args.cli_main)
     finally:
         torch.set_num_threads(threads)
     csv_path, md_path = fi.write_table(rows, args.out)

@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from assurance.cli import CommandError
+from assurance.errors import CommandError
 from assurance.paths import shown_path
 from el.uavid import atomic_write_bytes
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from assurance.cli import CommandError
 from assurance.commands.fit_monitor import write_json
+from assurance.errors import CommandError
 from assurance.paths import shown_path
 
 HELP = ("fit the out-of-domain frame gate (Mahalanobis distance of pooled encoder features, Ledoit-Wolf) on a "

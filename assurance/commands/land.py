@@ -16,7 +16,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from assurance.cli import CommandError
+from assurance.errors import CommandError
 from el.camera import CAMERAS, Pose
 from el.config import MODES, CoreConfig, camera_intrinsics
 from el.decision import Decision

@@ -8,7 +8,10 @@ import json
 from pathlib import Path
 from typing import Any
 
-from assurance.commands.train import frame_scales
+from assurance.card_audit import audit, describe_audit, record_audit
+from assurance.card_audit import fmt_figure as _fmt
+from assurance.commands.arguments import frame_scales
+from assurance.errors import CommandError
 from assurance.progress import progress
 
 HELP = "print the segmentation model card; --verify recomputes its figures from the weights and data"
@@ -44,10 +47,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--threads", type=int, help="torch CPU threads")
     parser.add_argument("--json", action="store_true", help="print the card (or the verification) as JSON")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
-
-
-def _fmt(value: Any) -> str:
-    return "-" if value is None else f"{value:.4f}"
 
 
 def _print_card(card: dict[str, Any], path: Path) -> None:
@@ -93,7 +92,7 @@ def _print_card(card: dict[str, Any], path: Path) -> None:
 
 def describe_frames(protocol: dict[str, Any]) -> str:
     """How the card has frames segmented, as a parenthesis ('' for the frame alone, as it is)."""
-    from el.segmentation.evaluation import EvalProtocol
+    from el.segmentation.protocol import EvalProtocol
 
     try:
         read = EvalProtocol.from_dict(protocol)
@@ -109,50 +108,6 @@ def describe_frames(protocol: dict[str, Any]) -> str:
     return f" ({'; '.join(parts)})" if parts else ""
 
 
-def describe_audit(a: dict[str, Any]) -> str:
-    text = (f"{a['unsafe']} of {a['candidates']} core-model candidates truly unsafe ({_fmt(a['unsafe_share'])}) "
-            f"on {a['images']} clean scenes of {a['data']}; top-ranked unsafe in {_fmt(a['top_unsafe_share'])} "
-            f"of the scenes with a candidate")
-    causes = a.get("unsafe_by_class")
-    if causes:
-        text += ("; mostly " + ", ".join(f"{name} in {n}" for name, n in causes.items())
-                 + f"; median forbidden share of an unsafe disc {_fmt(a.get('median_forbidden_share'))}")
-    if a.get("separation"):
-        from assurance.separation import describe_separation
-
-        text += "\n              separation: " + describe_separation(a["separation"])
-    return text
-
-
-def audit(path: Path, data: Path | None, threads: int | None, quiet: bool) -> dict[str, Any]:
-    """The candidate audit of a weights file on its validation data (or ``data``)."""
-    from assurance.candidate_audit import candidate_audit
-    from el.segmentation import Segmenter
-    from el.segmentation.weights import read_card
-
-    card = read_card(path)
-    # Where the card's figures come from (a re-issued card: this machine's copy), else the training's val.
-    evaluated_on = (card.get("evaluation") or {}).get("data")
-    selected_on = ((card.get("training") or {}).get("data") or {}).get("val")
-    folder = data or Path((evaluated_on or selected_on or {}).get("path", ""))
-    if not str(folder) or not folder.is_dir():
-        raise ValueError(f"{path}: no validation folder to audit (give --data)")
-    return candidate_audit(Segmenter.load(path, threads=threads), folder,
-                           progress=functools.partial(progress, enabled=not quiet))
-
-
-def record_audit(path: Path, data: Path | None, threads: int | None, quiet: bool) -> dict[str, Any]:
-    """Run the candidate audit, write it into the card's ``candidates`` section and print it."""
-    from el.segmentation.weights import read_card, write_card
-
-    result = audit(path, data, threads, quiet)
-    card = read_card(path)
-    card["candidates"] = result
-    write_card(path, card)
-    print(f"candidates: {describe_audit(result)}")
-    return result
-
-
 def _auroc(audit_result: dict[str, Any]) -> float | None:
     """The recorded separation AUROC, rounded (it is recomputed bit for bit, but JSON rounds floats)."""
     sep = (audit_result.get("separation") or {}).get("scores", {}).get("max_forbidden_probability")
@@ -160,7 +115,6 @@ def _auroc(audit_result: dict[str, Any]) -> float | None:
 
 
 def _reissue(path: Path, args: argparse.Namespace) -> int:
-    from assurance.cli import CommandError
     from el.segmentation.card import reissue_card
 
     if args.verify:
@@ -194,8 +148,6 @@ def run(args: argparse.Namespace) -> int:
     for given, flag in ((args.frame_flip, "--frame-flip"), (args.hd_patches, "--hd-patches"),
                         (args.frame_scales, "--frame-scales"), (args.frame_pooling, "--frame-pooling")):
         if given is not None and not args.reissue:
-            from assurance.cli import CommandError
-
             raise CommandError(f"{flag} changes the card's protocol: use it with --reissue --data VAL")
     if args.reissue:
         return _reissue(path, args)

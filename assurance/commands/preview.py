@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from assurance.cli import CommandError
+from assurance.errors import CommandError
 
 HELP = "Write a preview PNG of a UAVid-layout dataset: image | colour labels side by side, with a legend."
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from assurance.cli import CommandError
+from assurance.errors import CommandError
 
 HELP = ("replay a campaign at every threshold of its monitors (unsafe landings, G*, default share, miss and FP "
         "rates per perturbation) from the recorded scores; --choose picks the threshold with the fewest unsafe "

@@ -7,7 +7,7 @@ import re
 import sys
 from pathlib import Path
 
-from assurance.cli import CommandError
+from assurance.errors import CommandError
 
 HELP = "Generate synthetic oblique urban scenes (UAVid layout: Images, Labels, meta) with a progress bar."
 

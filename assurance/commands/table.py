@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from assurance import readouts
-from assurance.cli import CommandError
+from assurance.errors import CommandError
 from assurance.findings import findings, findings_markdown
 from assurance.reference import load_reference
 from assurance.scores import auroc_markdown, auroc_table

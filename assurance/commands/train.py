@@ -6,10 +6,12 @@ import argparse
 import functools
 import sys
 from pathlib import Path
+from typing import Any
 
 from tqdm import tqdm
 
-from assurance.cli import CommandError
+from assurance.commands.arguments import frame_scales
+from assurance.errors import CommandError
 from assurance.progress import progress
 from assurance.training_curve import curve_path, write_training_curve
 
@@ -24,20 +26,6 @@ def _widths(text: str) -> tuple[int, int, int]:
     if len(values) != 3:
         raise argparse.ArgumentTypeError(f"expected three integers like 24,48,96, got {text!r}")
     return values  # type: ignore[return-value]
-
-
-def frame_scales(text: str) -> tuple[float, ...]:
-    """``--frame-scales 1,1.25``: the sizes the working-resolution frame is fed to the network at."""
-    from el.segmentation.evaluation import check_frame_scales
-
-    try:
-        values = [float(v) for v in text.split(",")]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected factors like 1.25 or 1,1.25, got {text!r}") from None
-    try:
-        return check_frame_scales(values)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(f"{exc} (e.g. 1.25 or 1,1.25)") from None
 
 
 def _range(text: str) -> tuple[int, int]:
@@ -118,9 +106,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from el.segmentation import data as D
-    from el.segmentation.architectures import arch_from_dict, default_arch
-    from el.segmentation.evaluation import EvalProtocol
-    from el.segmentation.training import TrainConfig, steps_for_epochs, train
+    from el.segmentation.architectures import arch_from_dict
+    from el.segmentation.protocol import EvalProtocol
+    from el.segmentation.train_config import TrainConfig, steps_for_epochs
+    from el.segmentation.training import train
     from el.uavid import iter_samples
 
     if args.threads is not None and args.threads < 1:
@@ -138,22 +127,7 @@ def run(args: argparse.Namespace) -> int:
     if args.epochs is not None:
         images = sum(1 for _ in iter_samples(args.data))
         steps = steps_for_epochs(images, args.epochs, args.batch)
-    arch = default_arch(args.arch or "lite0")
-    init_sha = None
-    if args.init is not None:
-        from el.segmentation.weights import WeightsError, read_card
-
-        try:
-            init_card = read_card(args.init)
-        except WeightsError as exc:
-            raise CommandError(str(exc)) from exc
-        init_sha = init_card["weights_sha256"]
-        try:
-            arch = arch_from_dict(init_card["architecture"])
-        except ValueError as exc:
-            raise CommandError(f"{args.init}: {exc}") from exc
-        if args.arch is not None and args.arch != arch.name:
-            raise CommandError(f"--arch {args.arch}: the --init weights are {arch.name}")
+    arch, init_sha = _architecture(args)
     arch_kwargs = arch.to_dict()
     if args.widths is not None:
         if arch.name != "msdlite":
@@ -183,11 +157,43 @@ def run(args: argparse.Namespace) -> int:
                  checkpoint_file=args.checkpoint, threads=args.threads, init_weights=args.init, device=device,
                  prefetch=prefetch, progress=bar, log=log, stop_at=args.stop_at,
                  on_eval=lambda history: write_training_curve(history, curve_path(args.out)))
+    _print_summary(card, args.out, config.steps)
+    if args.val is not None and not args.no_audit:
+        from assurance.card_audit import record_audit
+
+        record_audit(args.out, args.val, args.threads, args.quiet)
+    return 0
+
+
+def _architecture(args: argparse.Namespace) -> tuple[Any, str | None]:
+    """The network to train (``--arch``, or the ``--init`` parent's) and the parent's SHA-256 (None: none)."""
+    from el.segmentation.architectures import arch_from_dict, default_arch
+
+    arch = default_arch(args.arch or "lite0")
+    if args.init is None:
+        return arch, None
+    from el.segmentation.weights import WeightsError, read_card
+
+    try:
+        init_card = read_card(args.init)
+    except WeightsError as exc:
+        raise CommandError(str(exc)) from exc
+    try:
+        arch = arch_from_dict(init_card["architecture"])
+    except ValueError as exc:
+        raise CommandError(f"{args.init}: {exc}") from exc
+    if args.arch is not None and args.arch != arch.name:
+        raise CommandError(f"--arch {args.arch}: the --init weights are {arch.name}")
+    return arch, init_card["weights_sha256"]
+
+
+def _print_summary(card: dict[str, Any], out: Path, steps: int) -> None:
+    """What the run wrote and its figures: weights, curve, steps and timing, validation mIoU, baseline."""
     training = card["training"]
-    print(f"weights: {args.out} (sha256 {card['weights_sha256']})")
+    print(f"weights: {out} (sha256 {card['weights_sha256']})")
     if training.get("history"):
-        print(f"training curve: {write_training_curve(training['history'], curve_path(args.out))}")
-    print(f"steps: {config.steps}, best step: {training.get('best_step')}, "
+        print(f"training curve: {write_training_curve(training['history'], curve_path(out))}")
+    print(f"steps: {steps}, best step: {training.get('best_step')}, "
           f"{training['seconds_per_step']:.2f} s/step, training {training['train_seconds']:.0f} s")
     ev = card.get("evaluation")
     if ev:
@@ -196,8 +202,3 @@ def run(args: argparse.Namespace) -> int:
     if card.get("baseline"):
         print(f"per-pixel baseline mIoU: {card['baseline']['miou']:.4f} "
               f"(CNN - baseline = {card['baseline']['miou_gap_to_cnn']:.4f})")
-    if args.val is not None and not args.no_audit:
-        from assurance.commands.model_card import record_audit
-
-        record_audit(args.out, args.val, args.threads, args.quiet)
-    return 0

@@ -17,11 +17,12 @@ is above its threshold (``verdict.score``, ``verdict.threshold``). Monitors beyo
 the registry (``el.monitors.registry``: built-ins and the ``uav_el.monitors`` entry points).
 """
 
+from el.forbidden import forbidden_pixels
 from el.monitors.base import CandidateContext, Judgement, Monitor, PatchSegmenter
 from el.monitors.build import build_monitor
 from el.monitors.ch import CHMonitor, ch_rule, rejected_label_counts
 from el.monitors.hierarchy import ClassHierarchy, default_hierarchy
-from el.monitors.lhd import LHDMonitor, forbidden_counts, forbidden_pixels, lhd_rule
+from el.monitors.lhd import LHDMonitor, forbidden_counts, lhd_rule
 from el.monitors.mcd import MCDMonitor, mcd_score
 from el.monitors.patches import Patch, extract_patch
 from el.monitors.registry import ENTRY_POINT_GROUP, MonitorEntry, monitor_names, register_monitor

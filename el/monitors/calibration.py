@@ -14,14 +14,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from el.errors import CalibrationError
 from el.monitors.signed import read_signed, signed_document
 from el.monitors.spec import parse_monitor_spec
 
 CARD_FORMAT = "uav-el-calibration/1"
-
-
-class CalibrationError(ValueError):
-    """A calibration card that cannot be used (missing, unreadable, altered, inconsistent)."""
 
 
 def card_document(body: dict[str, Any]) -> dict[str, Any]:

@@ -10,10 +10,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from el.forbidden import forbidden_pixels
 from el.labels import NUM_CLASSES
 from el.monitors.base import format_counts
 from el.monitors.hierarchy import ClassHierarchy, default_hierarchy
-from el.monitors.lhd import EMPTY_DISC, LHDMonitor, forbidden_counts, forbidden_pixels, lhd_reason
+from el.monitors.lhd import EMPTY_DISC, LHDMonitor, forbidden_counts, lhd_reason
 from el.monitors.spec import MonitorSpec, validate_tau
 
 

@@ -33,9 +33,13 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from el.decision import Disc
+from el.discs import disc_window_mask
+from el.errors import LearnedModelError
+from el.forbidden import argmax_slack, forbidden_pixels
 from el.labels import FORBIDDEN_IDS
 from el.monitors.base import CandidateContext, Judgement, PatchSegmenter, validate_scores
-from el.monitors.lhd import LHDMonitor, argmax_slack, forbidden_pixels, take_disc
+from el.monitors.lhd import LHDMonitor, take_disc
 from el.monitors.patches import Patch
 from el.monitors.signed import read_signed, signed_document
 from el.monitors.spec import GenericSpec
@@ -51,10 +55,6 @@ BASE_FEATURES: tuple[str, ...] = (
 )
 MCD_FEATURES: tuple[str, ...] = ("mcd_mean_std", "mcd_max_std")
 _FORBIDDEN = np.array(FORBIDDEN_IDS)
-
-
-class LearnedModelError(ValueError):
-    """A learned-monitor model file that cannot be used (missing, unreadable, altered, inconsistent)."""
 
 
 # -- features ------------------------------------------------------------------------------------
@@ -76,9 +76,7 @@ def frame_disc_mask(shape: tuple[int, int], candidate: Any, scale: float) -> np.
     """
     h, w = shape
     cx, cy, r = candidate.x * scale, candidate.y * scale, candidate.radius_px * scale
-    rows = np.arange(h, dtype=np.float64)[:, None] + 0.5 - cy
-    cols = np.arange(w, dtype=np.float64)[None, :] + 0.5 - cx
-    mask = rows**2 + cols**2 <= r * r
+    mask = disc_window_mask(Disc(cx, cy, r), 0, 0, w, h)  # the one disc rasterisation, on the working grid
     if not mask.any():
         mask[min(max(int(cy), 0), h - 1), min(max(int(cx), 0), w - 1)] = True
     return mask

@@ -8,7 +8,8 @@ from typing import Any
 
 import numpy as np
 
-from el.labels import CLASS_NAMES, FORBIDDEN_IDS, SAFE_IDS
+from el.forbidden import argmax_slack, forbidden_pixels
+from el.labels import CLASS_NAMES, FORBIDDEN_IDS
 from el.monitors.base import (
     CandidateContext,
     Judgement,
@@ -22,22 +23,6 @@ from el.monitors.patches import Patch
 from el.monitors.spec import MonitorSpec
 
 _FORBIDDEN = np.array(FORBIDDEN_IDS)
-_SAFE = np.array(SAFE_IDS)
-
-
-def forbidden_pixels(scores: np.ndarray) -> np.ndarray:
-    """True where the top-scoring class is forbidden (ties between a safe and a forbidden class
-    count as forbidden: the conservative reading of argmax).
-
-    Parameters
-    ----------
-    scores : ndarray of shape (8, ...), float
-
-    Returns
-    -------
-    ndarray of shape (...), bool
-    """
-    return scores[_FORBIDDEN].max(axis=0) >= scores[_SAFE].max(axis=0)
 
 
 def forbidden_counts(pixel_scores: np.ndarray) -> dict[str, int]:
@@ -104,11 +89,6 @@ def fraction_score(rejected: np.ndarray, slack: np.ndarray) -> float:
     if k:
         return k / m
     return float(slack.max())
-
-
-def argmax_slack(pixel_scores: np.ndarray) -> np.ndarray:
-    """(m,) top forbidden score minus top safe score per pixel (>= 0: forbidden by argmax, ties included)."""
-    return pixel_scores[_FORBIDDEN].max(axis=0) - pixel_scores[_SAFE].max(axis=0)
 
 
 class LHDMonitor(Monitor):

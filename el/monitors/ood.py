@@ -28,15 +28,12 @@ from typing import Any
 import cv2
 import numpy as np
 
+from el.errors import OODError
 from el.labels import NUM_CLASSES
 from el.monitors.signed import read_signed, signed_document
 
 OOD_FORMAT = "uav-el-ood/1"
 TRUNK, SOFTMAX = "trunk", "softmax"
-
-
-class OODError(ValueError):
-    """An out-of-domain gate file that cannot be used (missing, unreadable, altered, inconsistent)."""
 
 
 def deepest_level(features: Any) -> Any:

@@ -28,9 +28,10 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from el.forbidden import forbidden_pixels
 from el.labels import NUM_CLASSES
 from el.monitors.base import Judgement
-from el.monitors.lhd import LHDMonitor, forbidden_pixels
+from el.monitors.lhd import LHDMonitor
 from el.monitors.spec import GenericSpec
 
 

@@ -19,6 +19,7 @@ from sklearn.pipeline import make_pipeline
 from sklearn.preprocessing import StandardScaler
 
 from el.labels import NUM_CLASSES
+from el.rgb import check_rgb
 from el.segmentation.evaluation import confusion, summarise
 
 BOX_SIZES = (5, 15)
@@ -30,8 +31,7 @@ FEATURE_NAMES: tuple[str, ...] = (
 
 def pixel_features(rgb: np.ndarray) -> np.ndarray:
     """Features of every pixel of an RGB uint8 image (H, W, 3): float32 (H * W, 15)."""
-    if rgb.dtype != np.uint8 or rgb.ndim != 3 or rgb.shape[2] != 3:
-        raise ValueError(f"expected uint8 (H, W, 3) RGB, got {rgb.dtype} {rgb.shape}")
+    check_rgb(rgb, "image")
     img = rgb.astype(np.float32) / 255.0
     parts = [img]
     for k in BOX_SIZES:

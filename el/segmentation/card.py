@@ -20,7 +20,9 @@ from typing import Any
 
 from el.segmentation import data as D
 from el.segmentation.baseline import evaluate_baseline
-from el.segmentation.evaluation import EvalProtocol, compare_figures, evaluate
+from el.segmentation.evaluation import compare_figures, evaluate
+from el.segmentation.inference import Segmenter
+from el.segmentation.protocol import EvalProtocol
 from el.segmentation.weights import DEFAULT_WEIGHTS, load_weights, write_card
 
 
@@ -104,7 +106,7 @@ def _evaluate_on(model: Any, card: dict[str, Any], manifest: D.Manifest, protoco
                  ) -> tuple[list[D.Prepared], dict[str, Any]]:
     """The prepared validation samples and the network's figures on them, by the recorded protocol."""
     val_set = D.load_dataset(manifest, protocol.prep_params(), cache_dir=None, threads=workers, progress=progress)
-    segmenter = protocol.segmenter(model, threads=threads, card=card)
+    segmenter = Segmenter.for_protocol(model, protocol, threads=threads, card=card)
     return val_set, evaluate(segmenter, val_set, progress=progress, total=len(val_set))
 
 

@@ -46,9 +46,9 @@ from torch import nn
 from el.camera import working_size
 from el.labels import NUM_CLASSES
 from el.rgb import check_rgb
-from el.segmentation.evaluation import card_protocol, check_frame_scales
 from el.segmentation.model import MCDropout, upsample_logits
 from el.segmentation.pooling import check_pooling, downsample_probs
+from el.segmentation.protocol import EvalProtocol, card_protocol, check_frame_scales
 from el.segmentation.weights import load_weights
 
 MIN_SIZE = 16  # smallest patch side (px) a Segmenter accepts
@@ -170,6 +170,11 @@ class Segmenter:
         model, card = load_weights(weights_path, device=device)
         # the card's working_width is the evaluation's; the flight code keeps its own
         return cls(model, threads=threads, device=device, card=card, **card_protocol(card).frame_options())
+
+    @classmethod
+    def for_protocol(cls, model: nn.Module, protocol: EvalProtocol, **kwargs: Any) -> Segmenter:
+        """A segmenter of ``model`` that segments frames as an evaluation protocol says (training, card figures)."""
+        return cls(model, working_width=protocol.working_width, **protocol.frame_options(), **kwargs)
 
     def __getstate__(self) -> dict[str, Any]:  # picklable (for worker processes): the lock is recreated
         state = self.__dict__.copy()

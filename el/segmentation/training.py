@@ -22,13 +22,13 @@ baseline).
 
 from __future__ import annotations
 
-import io
+import functools
 import math
 import time
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -36,114 +36,19 @@ import numpy as np
 import torch
 
 from el.segmentation import data as D
-from el.segmentation.architectures import AnyArch, arch_from_dict, build_model, default_arch
+from el.segmentation.architectures import AnyArch, arch_from_dict, build_model
 from el.segmentation.baseline import evaluate_baseline
-from el.segmentation.evaluation import EvalProtocol, evaluate, selection_score
-from el.segmentation.losses import LOSSES, segmentation_loss
+from el.segmentation.checkpoint import checkpoint_path, config_changes, load_checkpoint, save_checkpoint
+from el.segmentation.evaluation import evaluate, selection_score
+from el.segmentation.inference import Segmenter
 from el.segmentation.losses import describe as describe_loss
-from el.segmentation.model import ArchConfig, count_parameters
+from el.segmentation.losses import segmentation_loss
+from el.segmentation.model import count_parameters
+from el.segmentation.train_config import TrainConfig, lr_factor
 from el.segmentation.weights import load_weights, read_card, save_weights, write_card
-from el.uavid import atomic_write_bytes
 
 Progress = Callable[..., Iterable]
 Log = Callable[[str], None]
-
-
-@dataclass(frozen=True, kw_only=True)
-class TrainConfig:
-    """Everything that shapes a training run (recorded in the checkpoint and the model card)."""
-
-    steps: int = 1500
-    batch: int = 4  # working-resolution crops per step
-    crop: int = 256  # their side (px)
-    hd_pixels: int = 4 * 256 * 256  # full-resolution crop pixels per step
-    hd_crop_min: int = 192
-    hd_crop_max: int = 448
-    hd_regions: int = 4  # full-resolution regions kept per training image
-    lr: float = 2e-3
-    weight_decay: float = 1e-4
-    warmup: int = 50
-    eval_every: int = 0  # 0: evaluate 4 times, evenly spaced
-    checkpoint_every: int = 25
-    seed: int = 0
-    working_width: int = 1024
-    arch: AnyArch = field(default_factory=ArchConfig)
-    augment: D.AugmentParams = field(default_factory=D.AugmentParams)
-    eval_protocol: EvalProtocol = field(default_factory=EvalProtocol)
-    baseline_pixels: int = 200_000  # 0: skip the per-pixel baseline
-    init_sha256: str | None = None  # SHA-256 of the weights a warm start begins from (None: random init)
-    loss: str = "ce"  # "ce" or "ce+lovasz" (see el.segmentation.losses)
-    encoder_lr_scale: float = 1.0  # a pretrained encoder's learning rate, as a fraction of lr
-    freeze_early_steps: int = 0  # steps during which a pretrained encoder's stem and 1/4 stages stay frozen
-
-    def __post_init__(self) -> None:
-        positive = ("steps", "batch", "crop", "hd_crop_min", "hd_crop_max", "checkpoint_every")
-        for name in positive:
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"{name} must be a positive integer, got {value!r}")
-        if self.crop < 16 or self.hd_crop_min < 16:
-            raise ValueError("crop and hd_crop_min must be >= 16 px")
-        if self.hd_crop_max < self.hd_crop_min:
-            raise ValueError(f"hd_crop_max ({self.hd_crop_max}) must be >= hd_crop_min ({self.hd_crop_min})")
-        for name in ("hd_pixels", "hd_regions", "warmup", "eval_every", "baseline_pixels", "freeze_early_steps"):
-            if getattr(self, name) < 0:
-                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
-        if not (self.lr > 0 and math.isfinite(self.lr)):
-            raise ValueError(f"lr must be positive, got {self.lr!r}")
-        if not (0 < self.encoder_lr_scale <= 1 and math.isfinite(self.encoder_lr_scale)):
-            raise ValueError(f"encoder_lr_scale must lie in (0, 1], got {self.encoder_lr_scale!r}")
-        if self.loss not in LOSSES:
-            raise ValueError(f"loss must be one of {', '.join(LOSSES)}, got {self.loss!r}")
-        if self.working_width != self.eval_protocol.working_width:
-            raise ValueError("working_width and eval_protocol.working_width must agree")
-
-    @property
-    def region_size(self) -> int:
-        """Side of the kept full-resolution regions: room for the largest crop after scale jitter."""
-        return int(math.ceil(self.hd_crop_max * (1 + self.augment.scale_jitter)))
-
-    @property
-    def evaluation_interval(self) -> int:
-        return self.eval_every or max(1, math.ceil(self.steps / 4))
-
-    def prep_params(self) -> D.PrepParams:
-        return D.PrepParams(working_width=self.working_width, regions=self.hd_regions if self.hd_pixels else 0,
-                            region_size=self.region_size, seed=self.seed)
-
-    def to_dict(self) -> dict[str, Any]:
-        out = asdict(self)
-        out["arch"] = self.arch.to_dict()
-        out["eval_protocol"] = self.eval_protocol.to_dict()
-        return out
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> TrainConfig:
-        data = dict(data)
-        arch = arch_from_dict(data.pop("arch"))
-        augment = D.AugmentParams(**data.pop("augment"))
-        protocol = EvalProtocol.from_dict(data.pop("eval_protocol"))
-        return cls(arch=arch, augment=augment, eval_protocol=protocol, **data)
-
-
-def steps_for_epochs(images: int, epochs: int, batch: int) -> int:
-    """Steps for ``epochs`` passes, one pass = every training image once as a working-resolution crop."""
-    if images < 1 or epochs < 1 or batch < 1:
-        raise ValueError(f"images, epochs and batch must be positive, got {images}, {epochs}, {batch}")
-    return epochs * math.ceil(images / batch)
-
-
-def checkpoint_path(weights_path: str | Path) -> Path:
-    """Where training keeps its resumable state: ``<weights>.ckpt``."""
-    return Path(weights_path).with_suffix(".ckpt")
-
-
-def _lr_factor(step: int, config: TrainConfig) -> float:
-    if step < config.warmup:
-        return (step + 1) / config.warmup
-    span = max(1, config.steps - config.warmup)
-    t = min(1.0, (step - config.warmup) / span)
-    return 0.05 + 0.95 * 0.5 * (1 + math.cos(math.pi * t))
 
 
 def _to_tensor(images: list[np.ndarray]) -> torch.Tensor:
@@ -226,46 +131,6 @@ def training_loss(model: torch.nn.Module, batches: tuple, weights: torch.Tensor,
     return torch.stack(losses).mean()
 
 
-def _save_checkpoint(path: Path, state: dict[str, Any]) -> None:
-    buf = io.BytesIO()
-    torch.save(state, buf)
-    atomic_write_bytes(path, buf.getvalue())
-
-
-def load_checkpoint(path: str | Path) -> dict[str, Any]:
-    """A training checkpoint (``weights_only`` loading); ValueError naming the file if unusable."""
-    path = Path(path)
-    if not path.is_file():
-        raise ValueError(f"{path}: no checkpoint to resume from")
-    try:
-        state = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as exc:  # corrupt or foreign file
-        raise ValueError(f"{path}: unreadable checkpoint: {exc}") from exc
-    for key in ("step", "model", "optimizer", "scheduler", "config", "data"):
-        if key not in state:
-            raise ValueError(f"{path}: checkpoint has no {key!r}")
-    return state
-
-
-def _with_defaults(old: dict[str, Any], defaults: dict[str, Any]) -> dict[str, Any]:
-    """``old`` with the keys it lacks (at any depth) taken from ``defaults``."""
-    out = {**{k: v for k, v in defaults.items() if k not in old}, **old}
-    for k, v in defaults.items():
-        if isinstance(v, dict) and isinstance(out.get(k), dict):
-            out[k] = _with_defaults(out[k], v)
-    return out
-
-
-def _diff_config(old: dict[str, Any], new: dict[str, Any]) -> list[str]:
-    # a key added since the checkpoint was written had its default
-    defaults = TrainConfig().to_dict()
-    defaults["arch"] = default_arch((old.get("arch") or {}).get("name", "msdlite")).to_dict()
-    old = _with_defaults(old, defaults)
-    keys = sorted(set(old) | set(new))
-    return [f"{k}: {old.get(k)!r} -> {new.get(k)!r}" for k in keys
-            if k not in ("checkpoint_every",) and old.get(k) != new.get(k)]
-
-
 def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Path | None = None,
           config: TrainConfig | None = None, resume: bool = False, cache_dir: str | Path | None = None,
           checkpoint_file: str | Path | None = None, threads: int | None = None,
@@ -326,31 +191,120 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
         raise ValueError(f"{ckpt_path}: a checkpoint exists; resume it (--resume) or delete it")
 
     started = time.perf_counter()
-    say(f"hashing {train_dir}" + (f" and {val_dir}" if val_dir else ""))
-    train_manifest = D.dataset_manifest(train_dir, threads=io_threads)
-    val_manifest = D.dataset_manifest(val_dir, threads=io_threads) if val_dir is not None else None
-    data_ids = {"train": train_manifest.describe(), "val": val_manifest.describe() if val_manifest else None}
-
-    state = None
-    if resume:
-        state = load_checkpoint(ckpt_path)
-        changes = _diff_config(state["config"], config.to_dict())
-        if changes:
-            raise ValueError(f"{ckpt_path}: the checkpoint was made with another configuration: " + "; ".join(changes))
-        for split in ("train", "val"):
-            old, new = state["data"].get(split), data_ids[split]
-            if (old or {}).get("sha256") != (new or {}).get("sha256"):
-                raise ValueError(f"{ckpt_path}: the {split} data changed since the checkpoint "
-                                 f"({(old or {}).get('sha256')} -> {(new or {}).get('sha256')})")
-
-    train_set = D.load_dataset(train_manifest, config.prep_params(), cache_dir=cache_dir, threads=io_threads,
-                               progress=progress)
-    val_set = (D.load_dataset(val_manifest, config.eval_protocol.prep_params(), cache_dir=cache_dir,
-                              threads=io_threads, progress=progress) if val_manifest else [])
+    data_ids, train_set, val_set, state = _load_data(train_dir, val_dir, config, ckpt_path if resume else None,
+                                                     cache_dir, io_threads, progress, say)
     prep_seconds = time.perf_counter() - started
     freq = D.class_frequencies(train_set)
     weights = torch.from_numpy(D.class_weights(freq))
 
+    model, parent, encoder_init = _build_model(config, init_weights, device, say)
+    optimizer = torch.optim.AdamW(_param_groups(model, config), lr=config.lr, weight_decay=config.weight_decay)
+    early = list(model.early_parameters()) if hasattr(model, "early_parameters") else []
+    scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, lambda s: lr_factor(s, config))
+    run = _RunState()
+    if state is not None:
+        run = _restore(state, model, optimizer, scheduler, device)
+        say(f"resuming from step {run.step} of {config.steps}")
+
+    end = _end_step(config, stop_at, run.step, ckpt_path)
+    card_base = functools.partial(_card_base, config, data_ids, freq, weights, parent, encoder_init, device, end)
+    interval = config.evaluation_interval
+    window: list[float] = []
+    steps = range(run.step, end)
+    iterator = progress(steps, total=len(steps), desc="train") if progress is not None else steps
+    draws = prefetched(lambda s: sample_batch(train_set, config, s), steps, workers=prefetch, depth=2 * prefetch)
+    loss_weights = weights.to(device)
+    model.train()
+    for step, batches in zip(iterator, draws, strict=True):
+        loss, seconds = _optimise(model, optimizer, scheduler, early, batches, loss_weights, config, step, device)
+        run.train_seconds += seconds
+        window.append(loss.item())
+        done = step + 1
+        last = done == end
+        improved = False
+        if done % interval == 0 or last:
+            entry: dict[str, Any] = {"step": done, "loss": float(np.mean(window)),
+                                     "seconds_per_step": run.train_seconds / done}
+            window = []
+            if val_set:
+                improved = _select(run, entry, model, val_set, config, device, weights_path, card_base, data_ids)
+            run.history.append(entry)
+            if on_eval is not None:
+                on_eval(run.history)
+            say(" ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in entry.items()))
+        if improved or done % config.checkpoint_every == 0 or last:
+            save_checkpoint(ckpt_path, {
+                "step": done, "model": model.state_dict(), "optimizer": optimizer.state_dict(),
+                "scheduler": scheduler.state_dict(), "config": config.to_dict(), "data": data_ids,
+                **_checkpoint_record(run)})
+    card = _final_card(model, run, config, weights_path, card_base(), val_set, device, say)
+    card["training"].update(_run_record(run, model, config, end, prep_seconds))
+    if config.baseline_pixels and val_set:
+        say("fitting the per-pixel baseline")
+        card["baseline"] = _baseline(train_set, val_set, config, card["evaluation"]["working_resolution"]["miou"])
+    write_card(weights_path, card)
+    return card
+
+
+@dataclass
+class _RunState:
+    """What a run carries from step to step (and through its checkpoint)."""
+
+    step: int = 0
+    best_score: float = -math.inf
+    best_step: int | None = None
+    history: list[dict[str, Any]] = field(default_factory=list)
+    train_seconds: float = 0.0
+
+
+def _checkpoint_record(run: _RunState) -> dict[str, Any]:
+    """The run's state as its checkpoint keeps it (beside the model, optimiser and scheduler)."""
+    return {"best_score": run.best_score, "best_step": run.best_step, "history": run.history,
+            "train_seconds": run.train_seconds}
+
+
+def _run_record(run: _RunState, model: torch.nn.Module, config: TrainConfig, end: int,
+                prep_seconds: float) -> dict[str, Any]:
+    """What the card's ``training`` section learns at the end: selection, history, timing, size."""
+    return {
+        "best_step": run.best_step, "history": run.history, "train_seconds": round(run.train_seconds, 1),
+        "seconds_per_step": round(run.train_seconds / max(1, end), 3),
+        "stopped_at": end if end < config.steps else None,
+        "prepare_seconds": round(prep_seconds, 1), "threads": torch.get_num_threads(),
+        "parameters": count_parameters(model),
+    }
+
+
+def _load_data(train_dir: str | Path, val_dir: str | Path | None, config: TrainConfig, resume_from: Path | None,
+               cache_dir: str | Path | None, io_threads: int, progress: Progress | None, say: Log
+               ) -> tuple[dict[str, Any], list[D.Prepared], list[D.Prepared], dict[str, Any] | None]:
+    """Hash the data, check a resumed checkpoint against it and the configuration, prepare the samples."""
+    say(f"hashing {train_dir}" + (f" and {val_dir}" if val_dir else ""))
+    train_manifest = D.dataset_manifest(train_dir, threads=io_threads)
+    val_manifest = D.dataset_manifest(val_dir, threads=io_threads) if val_dir is not None else None
+    data_ids = {"train": train_manifest.describe(), "val": val_manifest.describe() if val_manifest else None}
+    state = None
+    if resume_from is not None:
+        state = load_checkpoint(resume_from)
+        changes = config_changes(state["config"], config.to_dict())
+        if changes:
+            raise ValueError(f"{resume_from}: the checkpoint was made with another configuration: "
+                             + "; ".join(changes))
+        for split in ("train", "val"):
+            old, new = state["data"].get(split), data_ids[split]
+            if (old or {}).get("sha256") != (new or {}).get("sha256"):
+                raise ValueError(f"{resume_from}: the {split} data changed since the checkpoint "
+                                 f"({(old or {}).get('sha256')} -> {(new or {}).get('sha256')})")
+    train_set = D.load_dataset(train_manifest, config.prep_params(), cache_dir=cache_dir, threads=io_threads,
+                               progress=progress)
+    val_set = (D.load_dataset(val_manifest, config.eval_protocol.prep_params(), cache_dir=cache_dir,
+                              threads=io_threads, progress=progress) if val_manifest else [])
+    return data_ids, train_set, val_set, state
+
+
+def _build_model(config: TrainConfig, init_weights: str | Path | None, device: torch.device, say: Log
+                 ) -> tuple[torch.nn.Module, dict[str, Any] | None, Any]:
+    """The seeded network on ``device``: warm-started, or with its encoder's ImageNet weights; and their records."""
     torch.manual_seed(config.seed)
     model = build_model(config.arch)
     parent = _warm_start(model, init_weights, config) if init_weights is not None else None
@@ -363,129 +317,112 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
     model.to(device)
     if init_weights is None and config.init_sha256 is not None:
         raise ValueError("config.init_sha256 is set but no init_weights were given")
-    optimizer = torch.optim.AdamW(_param_groups(model, config), lr=config.lr, weight_decay=config.weight_decay)
-    early = list(model.early_parameters()) if hasattr(model, "early_parameters") else []
-    scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, lambda s: _lr_factor(s, config))
-    start_step, best_score, best_step = 0, -math.inf, None
-    history: list[dict[str, Any]] = []
-    train_seconds = 0.0
-    if state is not None:
-        model.load_state_dict(state["model"])
-        model.to(device)
-        optimizer.load_state_dict(state["optimizer"])
-        scheduler.load_state_dict(state["scheduler"])
-        start_step = int(state["step"])
-        best_score = float(state.get("best_score", -math.inf))
-        best_step = state.get("best_step")
-        history = list(state.get("history", []))
-        train_seconds = float(state.get("train_seconds", 0.0))
-        say(f"resuming from step {start_step} of {config.steps}")
+    return model, parent, encoder_init
 
-    def checkpoint(step: int) -> None:
-        _save_checkpoint(ckpt_path, {
-            "step": step, "model": model.state_dict(), "optimizer": optimizer.state_dict(),
-            "scheduler": scheduler.state_dict(), "config": config.to_dict(), "data": data_ids,
-            "best_score": best_score, "best_step": best_step, "history": history,
-            "train_seconds": train_seconds,
-        })
 
-    def card_base() -> dict[str, Any]:
-        return {"training": {
-            "data": data_ids, "seed": config.seed, "config": config.to_dict(), "steps": config.steps,
-            "augmentations": list(D.AUGMENTATIONS),
-            "not_used_augmentations": ["brightness", "fog", "motion_blur", "shifted_pixels", "dead_rows"],
-            "loss": describe_loss(config.loss),
-            "class_frequencies": [float(f) for f in freq], "class_weights": [float(w) for w in weights],
-            "torch_version": torch.__version__, "init": parent, "encoder_init": encoder_init,
-            "device": _device_name(device),
-            "total_steps": end + (parent["total_steps"] if parent else 0),
-        }}
+def _restore(state: dict[str, Any], model: torch.nn.Module, optimizer: torch.optim.Optimizer,
+             scheduler: torch.optim.lr_scheduler.LRScheduler, device: torch.device) -> _RunState:
+    """Load a checkpoint into the model, optimiser and scheduler; the run's state at its step."""
+    model.load_state_dict(state["model"])
+    model.to(device)
+    optimizer.load_state_dict(state["optimizer"])
+    scheduler.load_state_dict(state["scheduler"])
+    return _RunState(step=int(state["step"]), best_score=float(state.get("best_score", -math.inf)),
+                     best_step=state.get("best_step"), history=list(state.get("history", [])),
+                     train_seconds=float(state.get("train_seconds", 0.0)))
 
-    interval = config.evaluation_interval
-    window: list[float] = []
+
+def _end_step(config: TrainConfig, stop_at: int | None, start_step: int, ckpt_path: Path) -> int:
+    """The step the run ends after (``stop_at`` or ``config.steps``), checked against the resumed step."""
     end = config.steps if stop_at is None else int(stop_at)
     if not 0 < end <= config.steps:
         raise ValueError(f"stop_at must lie in 1..{config.steps}, got {stop_at!r}")
     if start_step >= end and start_step < config.steps:
         raise ValueError(f"{ckpt_path}: the checkpoint is at step {start_step}, past stop_at {end}")
-    steps = range(start_step, end)
-    iterator = progress(steps, total=len(steps), desc="train") if progress is not None else steps
-    draws = prefetched(lambda s: sample_batch(train_set, config, s), steps, workers=prefetch, depth=2 * prefetch)
-    loss_weights = weights.to(device)
-    model.train()
-    for step, batches in zip(iterator, draws, strict=True):
-        tick = time.perf_counter()
-        torch.manual_seed(int(np.random.default_rng([config.seed, 2, step]).integers(2**62)))  # dropout masks
-        batches = tuple(None if b is None else (b[0].to(device, non_blocking=True), b[1].to(device, non_blocking=True))
-                        for b in batches)
-        for p in early:  # the early encoder stays as pretrained for the first steps (a pure function of the step)
-            p.requires_grad_(step >= config.freeze_early_steps)
-        loss = training_loss(model, batches, loss_weights, config.loss)
-        if not torch.isfinite(loss):
-            raise ValueError(f"training diverged at step {step}: loss is {float(loss)}")
-        optimizer.zero_grad(set_to_none=True)
-        loss.backward()
-        torch.nn.utils.clip_grad_norm_(model.parameters(), 5.0)
-        optimizer.step()
-        scheduler.step()
-        train_seconds += time.perf_counter() - tick
-        window.append(loss.item())
-        done = step + 1
-        last = done == end
-        improved = False
-        if done % interval == 0 or last:
-            entry: dict[str, Any] = {"step": done, "loss": float(np.mean(window)),
-                                     "seconds_per_step": train_seconds / done}
-            window = []
-            if val_set:
-                tick = time.perf_counter()
-                model.eval()
-                figures = evaluate(config.eval_protocol.segmenter(model, device=device), val_set)
-                model.train()
-                score = selection_score(figures)
-                entry.update({"val_miou_working": figures["working_resolution"]["miou"],
-                              "val_miou_hd": figures["hd_patches"]["miou"], "score": score,
-                              "eval_seconds": time.perf_counter() - tick})
-                if score > best_score:
-                    improved, best_score, best_step = True, score, done
-                    save_weights(model, weights_path, card={**card_base(), "evaluation": {
-                        "data": data_ids["val"], "protocol": config.eval_protocol.to_dict(),
-                        "step": done, **figures}})
-            history.append(entry)
-            if on_eval is not None:
-                on_eval(history)
-            say(" ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in entry.items()))
-        if improved or done % config.checkpoint_every == 0 or last:
-            checkpoint(done)
+    return end
 
+
+def _card_base(config: TrainConfig, data_ids: dict[str, Any], freq: np.ndarray, weights: torch.Tensor,
+               parent: dict[str, Any] | None, encoder_init: Any, device: torch.device, end: int) -> dict[str, Any]:
+    """The card's ``training`` section as known before the run ends (a fresh dict each call)."""
+    return {"training": {
+        "data": data_ids, "seed": config.seed, "config": config.to_dict(), "steps": config.steps,
+        "augmentations": list(D.AUGMENTATIONS),
+        "not_used_augmentations": ["brightness", "fog", "motion_blur", "shifted_pixels", "dead_rows"],
+        "loss": describe_loss(config.loss),
+        "class_frequencies": [float(f) for f in freq], "class_weights": [float(w) for w in weights],
+        "torch_version": torch.__version__, "init": parent, "encoder_init": encoder_init,
+        "device": _device_name(device),
+        "total_steps": end + (parent["total_steps"] if parent else 0),
+    }}
+
+
+def _optimise(model: torch.nn.Module, optimizer: torch.optim.Optimizer, scheduler: torch.optim.lr_scheduler.LRScheduler,
+              early: list[torch.nn.Parameter], batches: tuple, loss_weights: torch.Tensor, config: TrainConfig,
+              step: int, device: torch.device) -> tuple[torch.Tensor, float]:
+    """One optimisation step (dropout masks seeded by ``(seed, step)``); its loss and its seconds."""
+    tick = time.perf_counter()
+    torch.manual_seed(int(np.random.default_rng([config.seed, 2, step]).integers(2**62)))  # dropout masks
+    batches = tuple(None if b is None else (b[0].to(device, non_blocking=True), b[1].to(device, non_blocking=True))
+                    for b in batches)
+    for p in early:  # the early encoder stays as pretrained for the first steps (a pure function of the step)
+        p.requires_grad_(step >= config.freeze_early_steps)
+    loss = training_loss(model, batches, loss_weights, config.loss)
+    if not torch.isfinite(loss):
+        raise ValueError(f"training diverged at step {step}: loss is {float(loss)}")
+    optimizer.zero_grad(set_to_none=True)
+    loss.backward()
+    torch.nn.utils.clip_grad_norm_(model.parameters(), 5.0)
+    optimizer.step()
+    scheduler.step()
+    return loss, time.perf_counter() - tick
+
+
+def _select(run: _RunState, entry: dict[str, Any], model: torch.nn.Module, val_set: list[D.Prepared],
+            config: TrainConfig, device: torch.device, weights_path: Path, card_base: Callable[[], dict[str, Any]],
+            data_ids: dict[str, Any]) -> bool:
+    """Evaluate on the validation set into ``entry``; write the weights and card if best so far (True)."""
+    tick = time.perf_counter()
+    model.eval()
+    figures = evaluate(Segmenter.for_protocol(model, config.eval_protocol, device=device), val_set)
+    model.train()
+    score = selection_score(figures)
+    entry.update({"val_miou_working": figures["working_resolution"]["miou"],
+                  "val_miou_hd": figures["hd_patches"]["miou"], "score": score,
+                  "eval_seconds": time.perf_counter() - tick})
+    if not score > run.best_score:  # (a NaN score never wins)
+        return False
+    run.best_score, run.best_step = score, entry["step"]
+    save_weights(model, weights_path, card={**card_base(), "evaluation": {
+        "data": data_ids["val"], "protocol": config.eval_protocol.to_dict(), "step": entry["step"], **figures}})
+    return True
+
+
+def _final_card(model: torch.nn.Module, run: _RunState, config: TrainConfig, weights_path: Path,
+                base: dict[str, Any], val_set: list[D.Prepared], device: torch.device, say: Log) -> dict[str, Any]:
+    """The card of the final network (no validation) or of the selected one, its figures from the CPU."""
     if not val_set:
-        card = save_weights(model, weights_path, card={**card_base(), "evaluation": None})
-    else:
-        card = read_card(weights_path)
-        if device.type != "cpu":
-            say(f"re-evaluating the selected weights (step {best_step}) on the CPU")
-            selected, _ = load_weights(weights_path)
-            cpu_figures = evaluate(config.eval_protocol.segmenter(selected), val_set)
-            card["evaluation"].update(cpu_figures)
-            card["evaluation"]["selection_device"] = _device_name(device)
-    card["training"].update({
-        "best_step": best_step, "history": history, "train_seconds": round(train_seconds, 1),
-        "seconds_per_step": round(train_seconds / max(1, end), 3),
-        "stopped_at": end if end < config.steps else None,
-        "prepare_seconds": round(prep_seconds, 1), "threads": torch.get_num_threads(),
-        "parameters": count_parameters(model),
-    })
-    if config.baseline_pixels and val_set:
-        say("fitting the per-pixel baseline")
-        card["baseline"] = evaluate_baseline(
-            [s.image for s in train_set], [s.labels for s in train_set],
-            [s.image for s in val_set], [s.labels for s in val_set],
-            max_pixels=config.baseline_pixels, seed=config.seed)
-        cnn = card["evaluation"]["working_resolution"]["miou"]
-        base = card["baseline"]["miou"]
-        card["baseline"]["miou_gap_to_cnn"] = None if cnn is None or base is None else cnn - base
-    write_card(weights_path, card)
+        return save_weights(model, weights_path, card={**base, "evaluation": None})
+    card = read_card(weights_path)
+    if device.type != "cpu":
+        say(f"re-evaluating the selected weights (step {run.best_step}) on the CPU")
+        selected, _ = load_weights(weights_path)
+        cpu_figures = evaluate(Segmenter.for_protocol(selected, config.eval_protocol), val_set)
+        card["evaluation"].update(cpu_figures)
+        card["evaluation"]["selection_device"] = _device_name(device)
     return card
+
+
+def _baseline(train_set: list[D.Prepared], val_set: list[D.Prepared], config: TrainConfig,
+              cnn_miou: float | None) -> dict[str, Any]:
+    """The per-pixel baseline's figures, with its mIoU gap to the network's."""
+    baseline = evaluate_baseline(
+        [s.image for s in train_set], [s.labels for s in train_set],
+        [s.image for s in val_set], [s.labels for s in val_set],
+        max_pixels=config.baseline_pixels, seed=config.seed)
+    base = baseline["miou"]
+    baseline["miou_gap_to_cnn"] = None if cnn_miou is None or base is None else cnn_miou - base
+    return baseline
 
 
 def _param_groups(model: torch.nn.Module, config: TrainConfig) -> list[dict[str, Any]]:

@@ -18,6 +18,7 @@ from typing import Any
 
 import torch
 
+from el.errors import WeightsError
 from el.hashing import sha256_bytes, sha256_file  # noqa: F401  (re-exported)
 from el.segmentation.architectures import build_model
 from el.segmentation.model import count_parameters
@@ -26,10 +27,6 @@ from el.uavid import atomic_write_bytes
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
 DEFAULT_WEIGHTS = WEIGHTS_DIR / "model.pt"
 CARD_FORMAT = "uav-el-segmentation-card/1"
-
-
-class WeightsError(ValueError):
-    """A weights file or its model card is missing, altered or unusable; the message names it."""
 
 
 def card_path(weights_path: str | Path) -> Path:

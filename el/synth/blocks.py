@@ -13,8 +13,18 @@ import numpy as np
 
 from el.labels import CLASS_IDS
 from el.synth import props
+from el.synth.builder import L_DETAIL, L_DETAIL2, L_LOT_PAINT, Builder
 from el.synth.geom import ellipse
-from el.synth.layout import L_BLOCK, L_DETAIL, L_DETAIL2, L_LOT_PAINT, Builder
+from el.synth.ground import (
+    blob_region,
+    ground_region,
+    lawn_look,
+    park_cars_rows,
+    paved_look,
+    scatter_bushes,
+    scatter_clutter,
+    scatter_trees,
+)
 from el.synth.lookalikes import add_ground_lookalikes, add_object_lookalikes
 from el.synth.styles import pick
 from el.synth.world import Look
@@ -37,112 +47,14 @@ def fill_block(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
     FILLERS[kind](b, a0, a1, b0, b1)
 
 
-# -- ground helpers -------------------------------------------------------------------------------
-def _ground(b: Builder, a0: float, a1: float, b0: float, b1: float, label: int, look: Look,
-            layer: int = L_BLOCK) -> None:
-    b.world.add_region(b.rect(a0, a1, b0, b1), label, look, layer)
-
-
-def _blob_region(b: Builder, a: float, c: float, ra: float, rb: float, label: int, look: Look,
-                 layer: int = L_DETAIL) -> None:
-    """An irregular patch (soil, dry grass, gravel, pond) around local (a, c)."""
-    jit = 1 + 0.25 * np.convolve(b.rng.normal(0, 1, 20), np.ones(3) / 3, mode="same")
-    poly_local = ellipse(a, c, ra, rb, float(b.rng.uniform(0, math.pi)), n=20, jitter=np.clip(jit, 0.5, 1.5))
-    world = b.origin + poly_local[:, :1] * b.ea + poly_local[:, 1:] * b.eb
-    b.world.add_region(world, label, look, layer)
-
-
-def _lawn_look(b: Builder) -> Look:
-    pal = b.palette
-    return Look(str(b.rng.choice(["grass", "grass_mown"], p=[0.6, 0.4])), pick(b.rng, pal.grass, 0.1, 0.03))
-
-
-def _paved_look(b: Builder) -> Look:
-    rng, pal = b.rng, b.palette
-    kind = str(rng.choice(["pavers", "slabs", "concrete_slab", "asphalt"], p=[0.35, 0.3, 0.15, 0.2]))
-    colours = pal.lot_asphalt if kind == "asphalt" else pal.paving
-    look = Look(kind, pick(rng, colours, 0.1, 0.02))
-    if kind == "pavers" and rng.random() < 0.5:
-        s = float(rng.uniform(0.25, 0.8))
-        look = Look(kind, look.rgb, cell=(s, s * float(rng.uniform(0.5, 1.0)), 0.44, 0.42))
-    return look
-
-
-def _scatter_trees(b: Builder, a0: float, a1: float, b0: float, b1: float, per_100m2: float,
-                   *, clustered: bool = False) -> None:
-    rng = b.rng
-    area = max(0.0, (a1 - a0) * (b1 - b0))
-    n = int(rng.poisson(per_100m2 * area / 100))
-    centres = [(rng.uniform(a0, a1), rng.uniform(b0, b1)) for _ in range(max(1, n // 6))] if clustered else []
-    for _ in range(n):
-        if centres:
-            ca, cb = centres[int(rng.integers(len(centres)))]
-            a, c = ca + rng.normal(0, 8), cb + rng.normal(0, 8)
-            if not (a0 < a < a1 and b0 < c < b1):
-                continue
-        else:
-            a, c = rng.uniform(a0, a1), rng.uniform(b0, b1)
-        b.tree_at_local(a, c)
-
-
-def _scatter_bushes(b: Builder, a0: float, a1: float, b0: float, b1: float, per_100m2: float) -> None:
-    rng = b.rng
-    n = int(rng.poisson(per_100m2 * max(0.0, (a1 - a0) * (b1 - b0)) / 100))
-    for _ in range(n):
-        a, c = rng.uniform(a0 + 1, a1 - 1), rng.uniform(b0 + 1, b1 - 1)
-        if b.free_local(a, c, 1.0):
-            x, y = b.to_world(a, c)
-            props.add_bush(b, x, y, float(rng.uniform(0.5, 1.6)))
-
-
-def _scatter_clutter(b: Builder, a0: float, a1: float, b0: float, b1: float, n: int, kinds: list[str]) -> None:
-    rng = b.rng
-    for _ in range(n):
-        a, c = rng.uniform(a0 + 1, a1 - 1), rng.uniform(b0 + 1, b1 - 1)
-        if b.free_local(a, c, 2.0):
-            x, y = b.to_world(a, c)
-            props.add_clutter(b, x, y, b.phi + float(rng.choice([0, math.pi / 2])) + float(rng.normal(0, 0.05)),
-                              str(rng.choice(kinds)))
-
-
-def _park_cars_rows(b: Builder, a0: float, a1: float, b0: float, b1: float, fill: float, *,
-                    lines: bool = True) -> None:
-    """Rows of parking bays (5 m deep, 2.5 m wide, 6 m aisles) with bay lines and static cars."""
-    rng, w = b.rng, b.world
-    paint = Look("paint", pick(rng, b.palette.paint, 0.05))
-    marks: list[np.ndarray] = []
-    along_a = (a1 - a0) >= (b1 - b0)
-    s0, s1, t0, t1 = (a0, a1, b0, b1) if along_a else (b0, b1, a0, a1)
-    t = t0 + 0.5
-    row = 0
-    while t + 5.0 <= t1 - 0.5:
-        s = s0 + 1.0
-        while s + 2.5 <= s1 - 1.0:
-            if lines:
-                line = (s, s + 0.12, t, t + 5.0)
-                marks.append(b.rect(*line) if along_a else b.rect(line[2], line[3], line[0], line[1]))
-            if rng.random() < fill:
-                cs, ct = s + 1.25, t + 2.5 + rng.normal(0, 0.15)
-                x, y = b.to_world(cs, ct) if along_a else b.to_world(ct, cs)
-                heading = (b.phi + math.pi / 2 if along_a else b.phi) + (math.pi if rng.random() < 0.5 else 0)
-                if b.free_world(x, y, 1.0):
-                    props.add_car(b, x, y, heading + rng.normal(0, 0.03), moving=False,
-                                  kind=str(rng.choice(["sedan", "hatch", "suv", "van"], p=[0.4, 0.3, 0.22, 0.08])))
-            s += 2.5
-        t += 5.0 + (6.0 if row % 2 == 0 else 0.0)
-        row += 1
-    if marks:
-        w.add_region(marks, CLUTTER, paint, L_LOT_PAINT)
-
-
 # -- block types ---------------------------------------------------------------------------------
 def perimeter(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
     """Buildings along the block edges around a courtyard (lawn, paving or parking)."""
     rng, st = b.rng, b.style
     depth = float(rng.uniform(9, 16))
     court_kind = str(rng.choice(["lawn", "paved", "parking"], p=[0.45, 0.35, 0.2]))
-    base = _lawn_look(b) if court_kind == "lawn" else _paved_look(b)
-    _ground(b, a0, a1, b0, b1, LOW_VEG if court_kind == "lawn" else CLUTTER, base)
+    base = lawn_look(b) if court_kind == "lawn" else paved_look(b)
+    ground_region(b, a0, a1, b0, b1, LOW_VEG if court_kind == "lawn" else CLUTTER, base)
     if min(a1 - a0, b1 - b0) < 2 * depth + 10:
         _row_of_buildings(b, a0, a1, b0, b1, along_a=(a1 - a0) >= (b1 - b0))
         return
@@ -154,16 +66,16 @@ def perimeter(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
     if court_kind == "paved":
         add_ground_lookalikes(b, "perimeter", ca0, ca1, cb0, cb1, base)
     if court_kind == "parking":
-        _park_cars_rows(b, ca0, ca1, cb0, cb1, st.parked_fill, lines=rng.random() < 0.6)
+        park_cars_rows(b, ca0, ca1, cb0, cb1, st.parked_fill, lines=rng.random() < 0.6)
     elif court_kind == "lawn":
-        _scatter_trees(b, ca0, ca1, cb0, cb1, 0.6)
-        _scatter_bushes(b, ca0, ca1, cb0, cb1, 0.5)
+        scatter_trees(b, ca0, ca1, cb0, cb1, 0.6)
+        scatter_bushes(b, ca0, ca1, cb0, cb1, 0.5)
     else:
-        _scatter_trees(b, ca0, ca1, cb0, cb1, 0.25)
-        _scatter_clutter(b, ca0, ca1, cb0, cb1, int(rng.integers(0, 4)), ["bin", "bench", "dumpster", "pallets"])
-        _park_cars_rows(b, ca0, ca1, cb0, cb0 + 6, 0.4, lines=False)
+        scatter_trees(b, ca0, ca1, cb0, cb1, 0.25)
+        scatter_clutter(b, ca0, ca1, cb0, cb1, int(rng.integers(0, 4)), ["bin", "bench", "dumpster", "pallets"])
+        park_cars_rows(b, ca0, ca1, cb0, cb0 + 6, 0.4, lines=False)
     add_object_lookalikes(b, "perimeter", ca0, ca1, cb0, cb1)
-    b.people_in_local(ca0, ca1, cb0, cb1, st.people_per_100m2 * 0.5)
+    props.people_in_local(b, ca0, ca1, cb0, cb1, st.people_per_100m2 * 0.5)
 
 
 def _row_of_buildings(b: Builder, a0: float, a1: float, b0: float, b1: float, *, along_a: bool) -> None:
@@ -194,7 +106,7 @@ def _row_of_buildings(b: Builder, a0: float, a1: float, b0: float, b1: float, *,
 def _paving_bands(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
     """Contrasting paving: a border band and sometimes a grid of bands across the square (clutter)."""
     rng = b.rng
-    look = _paved_look(b)
+    look = paved_look(b)
     bw = float(rng.uniform(1.0, 2.5))
     bands = [b.rect(a0, a1, b0, b0 + bw), b.rect(a0, a1, b1 - bw, b1),
              b.rect(a0, a0 + bw, b0, b1), b.rect(a1 - bw, a1, b0, b1)]
@@ -214,11 +126,11 @@ def _tree_rows(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
         if rng.random() < 0.5:
             c = float(rng.uniform(b0 + 3, b1 - 3))
             for a in np.arange(a0 + spacing / 2, a1 - 1, spacing):
-                b.tree_at_local(float(a), c, radius * float(rng.uniform(0.85, 1.15)))
+                props.tree_at_local(b, float(a), c, radius * float(rng.uniform(0.85, 1.15)))
         else:
             c = float(rng.uniform(a0 + 3, a1 - 3))
             for bb in np.arange(b0 + spacing / 2, b1 - 1, spacing):
-                b.tree_at_local(c, float(bb), radius * float(rng.uniform(0.85, 1.15)))
+                props.tree_at_local(b, c, float(bb), radius * float(rng.uniform(0.85, 1.15)))
 
 
 def _service_road(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
@@ -239,14 +151,14 @@ def _service_road(b: Builder, a0: float, a1: float, b0: float, b1: float) -> Non
     b.occupy_local(ra0, ra1, rb0, rb1)
     for a, bb in trees:
         if rng.random() < 0.6:
-            b.tree_at_local(a, bb)
+            props.tree_at_local(b, a, bb)
 
 
 def towers(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
     """One to three large buildings on a paved plaza with planters, trees, furniture and people."""
     rng, st = b.rng, b.style
-    ground = _paved_look(b)
-    _ground(b, a0, a1, b0, b1, CLUTTER, ground)
+    ground = paved_look(b)
+    ground_region(b, a0, a1, b0, b1, CLUTTER, ground)
     if rng.random() < 0.6:
         _paving_bands(b, a0, a1, b0, b1)
     add_ground_lookalikes(b, "towers", a0, a1, b0, b1, ground)
@@ -269,10 +181,10 @@ def towers(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
     _planters(b, a0, a1, b0, b1, int(rng.integers(2, 8)))
     if rng.random() < 0.4:
         _tree_rows(b, a0, a1, b0, b1)
-    _scatter_clutter(b, a0, a1, b0, b1, int(rng.integers(2, 8)), ["bench", "bin", "bollard", "kiosk", "umbrella"])
-    b.people_in_local(a0, a1, b0, b1, st.people_per_100m2)
+    scatter_clutter(b, a0, a1, b0, b1, int(rng.integers(2, 8)), ["bench", "bin", "bollard", "kiosk", "umbrella"])
+    props.people_in_local(b, a0, a1, b0, b1, st.people_per_100m2)
     if rng.random() < 0.4:
-        _park_cars_rows(b, a0 + 2, a1 - 2, b0 + 1, b0 + 12, st.parked_fill)
+        park_cars_rows(b, a0 + 2, a1 - 2, b0 + 1, b0 + 12, st.parked_fill)
 
 
 def _planters(b: Builder, a0: float, a1: float, b0: float, b1: float, n: int) -> None:
@@ -285,15 +197,15 @@ def _planters(b: Builder, a0: float, a1: float, b0: float, b1: float, n: int) ->
         look = Look(str(rng.choice(["grass", "shrub", "soil"], p=[0.5, 0.3, 0.2])),
                     pick(rng, pal.grass + pal.shrub, 0.1))
         label = CLUTTER if look.material == "soil" else LOW_VEG
-        _ground(b, ca - sa / 2, ca + sa / 2, cb - sb / 2, cb + sb / 2, label, look, L_DETAIL2)
+        ground_region(b, ca - sa / 2, ca + sa / 2, cb - sb / 2, cb + sb / 2, label, look, L_DETAIL2)
         if rng.random() < 0.7:
-            b.tree_at_local(ca, cb)
+            props.tree_at_local(b, ca, cb)
 
 
 def houses(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
     """Two rows of lots back to back: house, lawn, hedges, driveway with a car, trees, sheds, pools."""
     rng = b.rng
-    _ground(b, a0, a1, b0, b1, LOW_VEG, _lawn_look(b))
+    ground_region(b, a0, a1, b0, b1, LOW_VEG, lawn_look(b))
     along_a = (a1 - a0) >= (b1 - b0)
     s0, s1, t0, t1 = (a0, a1, b0, b1) if along_a else (b0, b1, a0, a1)
     rows = [(t0, (t0 + t1) / 2, 1), ((t0 + t1) / 2, t1, -1)] if t1 - t0 > 30 else [(t0, t1, 1)]
@@ -330,7 +242,7 @@ def _house_lot(b: Builder, s0: float, s1: float, t0: float, t1: float, facing: i
     drive_s = hs + hw + 0.5 if s1 - (hs + hw) > 4 else hs - 3.5
     if s0 + 0.5 < drive_s < s1 - 3.5:
         drive = lrect(drive_s, drive_s + 3.0, *sorted((front, front + facing * (setback + hd))))
-        w.add_region(drive, CLUTTER, _paved_look(b), L_DETAIL)
+        w.add_region(drive, CLUTTER, paved_look(b), L_DETAIL)
         if rng.random() < 0.55:
             ca, cb = loc(drive_s + 1.5, front + facing * float(rng.uniform(2.8, setback + 1)))
             x, y = b.to_world(ca, cb)
@@ -339,7 +251,7 @@ def _house_lot(b: Builder, s0: float, s1: float, t0: float, t1: float, facing: i
     if rng.random() < 0.35:  # terrace / yard paving behind the house
         tt = front + facing * (setback + hd)
         w.add_region(lrect(hs, hs + hw, *sorted((tt, tt + facing * float(rng.uniform(2, 4))))), CLUTTER,
-                     _paved_look(b), L_DETAIL)
+                     paved_look(b), L_DETAIL)
     ca, cb = loc(hs + hw / 2, ht)
     x, y = b.to_world(ca, cb)
     h = float(np.clip(rng.uniform(*st.building_height), 3.5, 12))
@@ -366,7 +278,7 @@ def _house_lot(b: Builder, s0: float, s1: float, t0: float, t1: float, facing: i
     if bb - ba > 3:
         for _ in range(int(rng.integers(0, 4))):
             ca, cb = loc(float(rng.uniform(s0 + 1, s1 - 1)), float(rng.uniform(ba, bb)))
-            b.tree_at_local(ca, cb)
+            props.tree_at_local(b, ca, cb)
         if rng.random() < 0.2 and bb - ba > 7:
             ca, cb = loc(float(rng.uniform(s0 + 3, s1 - 3)), (ba + bb) / 2)
             if b.free_local(ca, cb, 3):
@@ -380,10 +292,10 @@ def _house_lot(b: Builder, s0: float, s1: float, t0: float, t1: float, facing: i
                 props.add_clutter(b, x, y, ang, "shed")
         if rng.random() < 0.4:
             ca, cb = loc(float(rng.uniform(s0 + 2, s1 - 2)), (ba + bb) / 2)
-            _blob_region(b, ca, cb, float(rng.uniform(1.5, 4)), float(rng.uniform(1, 3)), CLUTTER,
-                         Look("soil", pick(rng, pal.soil, 0.1)), L_DETAIL)
+            blob_region(b, ca, cb, float(rng.uniform(1.5, 4)), float(rng.uniform(1, 3)), CLUTTER,
+                        Look("soil", pick(rng, pal.soil, 0.1)), L_DETAIL)
         (qa0, qb0), (qa1, qb1) = loc(s0, ba), loc(s1, bb)
-        _scatter_bushes(b, min(qa0, qa1), max(qa0, qa1), min(qb0, qb1), max(qb0, qb1), 0.6)
+        scatter_bushes(b, min(qa0, qa1), max(qa0, qa1), min(qb0, qb1), max(qb0, qb1), 0.6)
     if rng.random() < 0.15:
         ca, cb = loc(float(rng.uniform(s0 + 1, s1 - 1)), front + facing * float(rng.uniform(0.5, setback)))
         x, y = b.to_world(ca, cb)
@@ -393,11 +305,11 @@ def _house_lot(b: Builder, s0: float, s1: float, t0: float, t1: float, facing: i
 def park(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
     """Lawn with paths, clustered trees, bushes, a pond or playground, benches and people."""
     rng, st, pal, w = b.rng, b.style, b.palette, b.world
-    _ground(b, a0, a1, b0, b1, LOW_VEG, _lawn_look(b))
+    ground_region(b, a0, a1, b0, b1, LOW_VEG, lawn_look(b))
     for _ in range(int(rng.integers(1, 4))):
-        _blob_region(b, float(rng.uniform(a0, a1)), float(rng.uniform(b0, b1)), float(rng.uniform(3, 12)),
-                     float(rng.uniform(2, 8)), LOW_VEG if rng.random() < 0.6 else CLUTTER,
-                     Look(str(rng.choice(["grass", "soil"])), pick(rng, pal.dry_grass + pal.soil, 0.1)))
+        blob_region(b, float(rng.uniform(a0, a1)), float(rng.uniform(b0, b1)), float(rng.uniform(3, 12)),
+                    float(rng.uniform(2, 8)), LOW_VEG if rng.random() < 0.6 else CLUTTER,
+                    Look(str(rng.choice(["grass", "soil"])), pick(rng, pal.dry_grass + pal.soil, 0.1)))
     path_look = Look(str(rng.choice(["gravel", "pavers", "slabs", "asphalt"])),
                      pick(rng, pal.gravel + pal.paving + pal.lot_asphalt, 0.1))
     paths = []
@@ -416,31 +328,31 @@ def park(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
     if rng.random() < 0.35:
         ca, cb = float(rng.uniform(a0 + 12, a1 - 12)), float(rng.uniform(b0 + 10, b1 - 10))
         if b.free_local(ca, cb, 6):
-            _blob_region(b, ca, cb, float(rng.uniform(5, 12)), float(rng.uniform(4, 9)), CLUTTER,
-                         Look("water", pick(rng, pal.water, 0.1)), L_DETAIL2)
+            blob_region(b, ca, cb, float(rng.uniform(5, 12)), float(rng.uniform(4, 9)), CLUTTER,
+                        Look("water", pick(rng, pal.water, 0.1)), L_DETAIL2)
             b.occupy_local(ca - 6, ca + 6, cb - 5, cb + 5)
     if rng.random() < 0.35:
         ca, cb = float(rng.uniform(a0 + 8, a1 - 8)), float(rng.uniform(b0 + 8, b1 - 8))
         if b.free_local(ca, cb, 5):
-            _ground(b, ca - 7, ca + 7, cb - 5, cb + 5, CLUTTER, Look("sand", pick(rng, pal.sand, 0.1)), L_DETAIL2)
-            _scatter_clutter(b, ca - 7, ca + 7, cb - 5, cb + 5, int(rng.integers(2, 6)), ["play"])
-            b.people_in_local(ca - 7, ca + 7, cb - 5, cb + 5, 3.0)
+            ground_region(b, ca - 7, ca + 7, cb - 5, cb + 5, CLUTTER, Look("sand", pick(rng, pal.sand, 0.1)), L_DETAIL2)
+            scatter_clutter(b, ca - 7, ca + 7, cb - 5, cb + 5, int(rng.integers(2, 6)), ["play"])
+            props.people_in_local(b, ca - 7, ca + 7, cb - 5, cb + 5, 3.0)
     add_object_lookalikes(b, "park", a0, a1, b0, b1)
-    _scatter_trees(b, a0, a1, b0, b1, 0.9, clustered=True)
-    _scatter_bushes(b, a0, a1, b0, b1, 0.4)
-    _scatter_clutter(b, a0, a1, b0, b1, int(rng.integers(1, 6)), ["bench", "bin", "bench"])
-    b.people_in_local(a0, a1, b0, b1, st.people_per_100m2 * 0.6)
+    scatter_trees(b, a0, a1, b0, b1, 0.9, clustered=True)
+    scatter_bushes(b, a0, a1, b0, b1, 0.4)
+    scatter_clutter(b, a0, a1, b0, b1, int(rng.integers(1, 6)), ["bench", "bin", "bench"])
+    props.people_in_local(b, a0, a1, b0, b1, st.people_per_100m2 * 0.6)
 
 
 def lawn(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
     """An open lawn with scattered trees, a path, sometimes a small building."""
     rng, st, pal = b.rng, b.style, b.palette
-    _ground(b, a0, a1, b0, b1, LOW_VEG, _lawn_look(b))
+    ground_region(b, a0, a1, b0, b1, LOW_VEG, lawn_look(b))
     if rng.random() < 0.3 and min(a1 - a0, b1 - b0) > 25:
         _service_road(b, a0, a1, b0, b1)
     elif rng.random() < 0.5 and b1 - b0 > 10:
         c = float(rng.uniform(b0 + 3, b1 - 3))
-        _ground(b, a0, a1, c - 1.5, c + 1.5, CLUTTER, _paved_look(b), L_DETAIL2)
+        ground_region(b, a0, a1, c - 1.5, c + 1.5, CLUTTER, paved_look(b), L_DETAIL2)
     add_ground_lookalikes(b, "lawn", a0, a1, b0, b1)
     if rng.random() < 0.3 and min(a1 - a0, b1 - b0) > 25:
         ca, cb = (a0 + a1) / 2, (b0 + b1) / 2
@@ -450,59 +362,59 @@ def lawn(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
             props.add_building(b, x, y, bw, bl, b.phi, float(rng.uniform(4, 9)),
                                pitched=rng.random() < st.pitched_prob)
     if rng.random() < 0.4:
-        _blob_region(b, float(rng.uniform(a0, a1)), float(rng.uniform(b0, b1)), float(rng.uniform(3, 10)),
-                     float(rng.uniform(2, 6)), CLUTTER, Look("soil", pick(rng, pal.soil, 0.1)))
+        blob_region(b, float(rng.uniform(a0, a1)), float(rng.uniform(b0, b1)), float(rng.uniform(3, 10)),
+                    float(rng.uniform(2, 6)), CLUTTER, Look("soil", pick(rng, pal.soil, 0.1)))
     add_object_lookalikes(b, "lawn", a0, a1, b0, b1)
-    _scatter_trees(b, a0, a1, b0, b1, 0.35)
-    _scatter_bushes(b, a0, a1, b0, b1, 0.3)
-    b.people_in_local(a0, a1, b0, b1, st.people_per_100m2 * 0.3)
+    scatter_trees(b, a0, a1, b0, b1, 0.35)
+    scatter_bushes(b, a0, a1, b0, b1, 0.3)
+    props.people_in_local(b, a0, a1, b0, b1, st.people_per_100m2 * 0.3)
 
 
 def plaza(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
     """A paved square: fountain, planters with trees, umbrellas, kiosks, benches and crowds."""
     rng, st, pal = b.rng, b.style, b.palette
-    ground = _paved_look(b)
-    _ground(b, a0, a1, b0, b1, CLUTTER, ground)
+    ground = paved_look(b)
+    ground_region(b, a0, a1, b0, b1, CLUTTER, ground)
     if rng.random() < 0.7:
         _paving_bands(b, a0, a1, b0, b1)
     add_ground_lookalikes(b, "plaza", a0, a1, b0, b1, ground)
     if rng.random() < 0.5:
         _tree_rows(b, a0, a1, b0, b1)
     if rng.random() < 0.5:
-        inner = _paved_look(b)
+        inner = paved_look(b)
         m = float(rng.uniform(3, 8))
         if min(a1 - a0, b1 - b0) > 2 * m + 6:
-            _ground(b, a0 + m, a1 - m, b0 + m, b1 - m, CLUTTER, inner, L_DETAIL)
+            ground_region(b, a0 + m, a1 - m, b0 + m, b1 - m, CLUTTER, inner, L_DETAIL)
     if rng.random() < 0.4:
         ca, cb = (a0 + a1) / 2, (b0 + b1) / 2
         r = float(rng.uniform(3, 7))
         if b.free_local(ca, cb, r):
-            _blob_region(b, ca, cb, r + 0.6, r + 0.6, CLUTTER, Look("curb", pick(rng, pal.paving, 0.05)), L_DETAIL2)
+            blob_region(b, ca, cb, r + 0.6, r + 0.6, CLUTTER, Look("curb", pick(rng, pal.paving, 0.05)), L_DETAIL2)
             poly = ellipse(ca, cb, r, r, 0, n=24)
             b.world.add_region(b.origin + poly[:, :1] * b.ea + poly[:, 1:] * b.eb, CLUTTER,
                                Look("water", pick(rng, pal.water, 0.1)), L_LOT_PAINT)
             b.occupy_local(ca - r, ca + r, cb - r, cb + r)
     add_object_lookalikes(b, "plaza", a0, a1, b0, b1)
     _planters(b, a0, a1, b0, b1, int(rng.integers(2, 10)))
-    _scatter_trees(b, a0, a1, b0, b1, 0.12)
-    _scatter_clutter(b, a0, a1, b0, b1, int(rng.integers(3, 14)),
-                     ["bench", "bin", "umbrella", "umbrella", "kiosk", "bollard"])
-    b.people_in_local(a0, a1, b0, b1, st.people_per_100m2 * 2.5)
+    scatter_trees(b, a0, a1, b0, b1, 0.12)
+    scatter_clutter(b, a0, a1, b0, b1, int(rng.integers(3, 14)),
+                    ["bench", "bin", "umbrella", "umbrella", "kiosk", "bollard"])
+    props.people_in_local(b, a0, a1, b0, b1, st.people_per_100m2 * 2.5)
 
 
 def parking(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
     """An asphalt car park (clutter, not road) with bay lines, static cars, islands and trees."""
     rng, st, pal = b.rng, b.style, b.palette
-    _ground(b, a0, a1, b0, b1, CLUTTER, Look(str(rng.choice(["asphalt", "asphalt_worn"])),
-                                             pick(rng, pal.lot_asphalt + pal.asphalt, 0.08, 0.015)))
+    ground_region(b, a0, a1, b0, b1, CLUTTER, Look(str(rng.choice(["asphalt", "asphalt_worn"])),
+                                                   pick(rng, pal.lot_asphalt + pal.asphalt, 0.08, 0.015)))
     if rng.random() < 0.5:  # planted edge
-        _ground(b, a0, a1, b0, b0 + 2.5, LOW_VEG, _lawn_look(b), L_DETAIL)
+        ground_region(b, a0, a1, b0, b0 + 2.5, LOW_VEG, lawn_look(b), L_DETAIL)
         for a in np.arange(a0 + 4, a1 - 2, float(rng.uniform(8, 14))):
-            b.tree_at_local(float(a), b0 + 1.25)
+            props.tree_at_local(b, float(a), b0 + 1.25)
         b0 += 2.5
-    _park_cars_rows(b, a0 + 1, a1 - 1, b0 + 1, b1 - 1, float(np.clip(st.parked_fill + rng.normal(0, 0.2), 0.2, 0.95)),
-                    lines=rng.random() < 0.85)
-    b.people_in_local(a0, a1, b0, b1, st.people_per_100m2 * 0.3)
+    park_cars_rows(b, a0 + 1, a1 - 1, b0 + 1, b1 - 1, float(np.clip(st.parked_fill + rng.normal(0, 0.2), 0.2, 0.95)),
+                   lines=rng.random() < 0.85)
+    props.people_in_local(b, a0, a1, b0, b1, st.people_per_100m2 * 0.3)
 
 
 def industrial(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
@@ -510,11 +422,11 @@ def industrial(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
     rng, st, pal = b.rng, b.style, b.palette
     yard = str(rng.choice(["concrete_slab", "gravel", "soil", "asphalt_worn"], p=[0.35, 0.25, 0.15, 0.25]))
     colours = {"concrete_slab": pal.paving, "gravel": pal.gravel, "soil": pal.soil, "asphalt_worn": pal.lot_asphalt}
-    _ground(b, a0, a1, b0, b1, CLUTTER, Look(yard, pick(rng, colours[yard], 0.08)))
+    ground_region(b, a0, a1, b0, b1, CLUTTER, Look(yard, pick(rng, colours[yard], 0.08)))
     for _ in range(int(rng.integers(1, 4))):
-        _blob_region(b, float(rng.uniform(a0, a1)), float(rng.uniform(b0, b1)), float(rng.uniform(4, 14)),
-                     float(rng.uniform(3, 9)), CLUTTER, Look(str(rng.choice(["soil", "gravel"])),
-                                                             pick(rng, pal.soil + pal.gravel, 0.1)))
+        blob_region(b, float(rng.uniform(a0, a1)), float(rng.uniform(b0, b1)), float(rng.uniform(4, 14)),
+                    float(rng.uniform(3, 9)), CLUTTER, Look(str(rng.choice(["soil", "gravel"])),
+                                                            pick(rng, pal.soil + pal.gravel, 0.1)))
     add_ground_lookalikes(b, "industrial", a0, a1, b0, b1)
     for _ in range(int(rng.integers(1, 3)) * 3):
         w = float(rng.uniform(20, min(70, a1 - a0 - 6)))
@@ -529,56 +441,56 @@ def industrial(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
         props.add_building(b, x, y, w, l, b.phi, float(np.clip(rng.uniform(*st.building_height), 4.0, 16.0)),
                            pitched=rng.random() < 0.15, industrial=True)
     add_object_lookalikes(b, "industrial", a0, a1, b0, b1)
-    _scatter_clutter(b, a0, a1, b0, b1, int(rng.integers(2, 12)), ["container", "pallets", "dumpster", "container"])
+    scatter_clutter(b, a0, a1, b0, b1, int(rng.integers(2, 12)), ["container", "pallets", "dumpster", "container"])
     for _ in range(int(rng.integers(0, 4))):
         a, c = float(rng.uniform(a0 + 6, a1 - 6)), float(rng.uniform(b0 + 4, b1 - 4))
         if b.free_local(a, c, 6):
             x, y = b.to_world(a, c)
             props.add_car(b, x, y, b.phi + float(rng.choice([0, math.pi / 2])), moving=False, kind="truck")
     if rng.random() < 0.6:
-        _park_cars_rows(b, a0 + 1, a1 - 1, b0 + 1, b0 + 12, st.parked_fill)
-    _scatter_bushes(b, a0, a1, b0, b1, 0.1)
-    _scatter_trees(b, a0, a1, b0, b1, 0.05)
-    b.people_in_local(a0, a1, b0, b1, st.people_per_100m2)
+        park_cars_rows(b, a0 + 1, a1 - 1, b0 + 1, b0 + 12, st.parked_fill)
+    scatter_bushes(b, a0, a1, b0, b1, 0.1)
+    scatter_trees(b, a0, a1, b0, b1, 0.05)
+    props.people_in_local(b, a0, a1, b0, b1, st.people_per_100m2)
 
 
 def vacant(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
     """Waste ground: soil, dry grass and gravel patches, shrubs, a few trees and debris."""
     rng, pal = b.rng, b.palette
-    _ground(b, a0, a1, b0, b1, CLUTTER, Look("soil", pick(rng, pal.soil, 0.1)))
+    ground_region(b, a0, a1, b0, b1, CLUTTER, Look("soil", pick(rng, pal.soil, 0.1)))
     for _ in range(int(rng.integers(3, 9))):
         veg = rng.random() < 0.6
-        _blob_region(b, float(rng.uniform(a0, a1)), float(rng.uniform(b0, b1)), float(rng.uniform(3, 15)),
-                     float(rng.uniform(2, 10)), LOW_VEG if veg else CLUTTER,
-                     Look("grass" if veg else "gravel", pick(rng, (pal.dry_grass + pal.grass) if veg else pal.gravel,
-                                                             0.1)))
+        blob_region(b, float(rng.uniform(a0, a1)), float(rng.uniform(b0, b1)), float(rng.uniform(3, 15)),
+                    float(rng.uniform(2, 10)), LOW_VEG if veg else CLUTTER,
+                    Look("grass" if veg else "gravel", pick(rng, (pal.dry_grass + pal.grass) if veg else pal.gravel,
+                                                            0.1)))
     add_ground_lookalikes(b, "vacant", a0, a1, b0, b1)
     add_object_lookalikes(b, "vacant", a0, a1, b0, b1)
-    _scatter_bushes(b, a0, a1, b0, b1, 0.6)
-    _scatter_trees(b, a0, a1, b0, b1, 0.1, clustered=True)
-    _scatter_clutter(b, a0, a1, b0, b1, int(rng.integers(0, 6)), ["pallets", "container", "dumpster"])
+    scatter_bushes(b, a0, a1, b0, b1, 0.6)
+    scatter_trees(b, a0, a1, b0, b1, 0.1, clustered=True)
+    scatter_clutter(b, a0, a1, b0, b1, int(rng.integers(0, 6)), ["pallets", "container", "dumpster"])
 
 
 def sports(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
     """A court or pitch with white lines (clutter) in a lawn, with spectators."""
     rng, pal, w = b.rng, b.palette, b.world
-    _ground(b, a0, a1, b0, b1, LOW_VEG, _lawn_look(b))
+    ground_region(b, a0, a1, b0, b1, LOW_VEG, lawn_look(b))
     m = float(rng.uniform(3, 8))
     if min(a1 - a0, b1 - b0) < 2 * m + 10:
         return
     ca0, ca1, cb0, cb1 = a0 + m, a1 - m, b0 + m, b1 - m
-    surface = Look("court", pick(rng, pal.court, 0.1)) if rng.random() < 0.7 else _lawn_look(b)
+    surface = Look("court", pick(rng, pal.court, 0.1)) if rng.random() < 0.7 else lawn_look(b)
     label = CLUTTER if surface.material == "court" else LOW_VEG
-    _ground(b, ca0, ca1, cb0, cb1, label, surface, L_DETAIL)
+    ground_region(b, ca0, ca1, cb0, cb1, label, surface, L_DETAIL)
     lw = 0.12
     paint = Look("paint", pick(rng, pal.paint, 0.05))
     lines = [b.rect(ca0 + 1, ca1 - 1, cb0 + 1, cb0 + 1 + lw), b.rect(ca0 + 1, ca1 - 1, cb1 - 1 - lw, cb1 - 1),
              b.rect(ca0 + 1, ca0 + 1 + lw, cb0 + 1, cb1 - 1), b.rect(ca1 - 1 - lw, ca1 - 1, cb0 + 1, cb1 - 1),
              b.rect((ca0 + ca1) / 2 - lw / 2, (ca0 + ca1) / 2 + lw / 2, cb0 + 1, cb1 - 1)]
     w.add_region(lines, label, paint, L_DETAIL2)
-    b.people_in_local(ca0, ca1, cb0, cb1, 0.4)
+    props.people_in_local(b, ca0, ca1, cb0, cb1, 0.4)
     add_object_lookalikes(b, "sports", a0, a1, b0, cb0)
-    _scatter_trees(b, a0, a1, b0, cb0, 0.3)
+    scatter_trees(b, a0, a1, b0, cb0, 0.3)
 
 
 FILLERS: dict[str, Filler] = {f.__name__: f for f in (perimeter, towers, houses, park, lawn, plaza, parking,

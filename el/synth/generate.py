@@ -20,7 +20,8 @@ import numpy as np
 
 from el.camera import CameraGeometry, Intrinsics, Pose
 from el.labels import CLASS_NAMES, NUM_CLASSES, PALETTE
-from el.synth.layout import Builder, build_city
+from el.synth.builder import Builder
+from el.synth.layout import build_city
 from el.synth.rand import Rand
 from el.synth.renderer import render
 from el.synth.styles import ALL_STYLES, HELD_OUT_STYLES, LIGHTINGS, Style, choose_style, get_style

@@ -16,7 +16,7 @@ import numpy as np
 
 from el.labels import CLASS_IDS
 from el.synth import props
-from el.synth.layout import L_LOT_PAINT, Builder
+from el.synth.builder import L_LOT_PAINT, Builder
 from el.synth.materials import MATERIALS
 from el.synth.styles import pick
 from el.synth.world import Look

@@ -7,16 +7,13 @@ a heading (rad) and randomises its size and colours from the builder's style pal
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from el.labels import CLASS_IDS
+from el.synth.builder import Builder
 from el.synth.styles import pick
 from el.synth.world import Block, Crown, Look
-
-if TYPE_CHECKING:
-    from el.synth.layout import Builder
 
 BUILDING = CLASS_IDS["building"]
 ROAD = CLASS_IDS["road"]
@@ -203,6 +200,17 @@ def add_people(b: Builder, x: float, y: float, n: int, spread: float = 1.2) -> N
             add_person(b, px, py)
 
 
+
+def people_in_local(b: Builder, a0: float, a1: float, b0: float, b1: float, density: float) -> None:
+    """Scatter people (groups of 1-4) over a local rectangle at ``density`` per 100 m^2."""
+    area = max(0.0, (a1 - a0) * (b1 - b0))
+    n_groups = int(b.rng.poisson(density * area / 100 / 1.8))
+    for _ in range(n_groups):
+        a, c = b.rng.uniform(a0, a1), b.rng.uniform(b0, b1)
+        x, y = b.to_world(a, c)
+        add_people(b, x, y, int(b.rng.integers(1, 5)), spread=0.9)
+
+
 # -- vegetation -------------------------------------------------------------------------------
 def add_tree(b: Builder, x: float, y: float, radius: float, *, trunk_h: float | None = None,
              colour: tuple[float, float, float] | None = None) -> None:
@@ -248,6 +256,18 @@ def add_hedge(b: Builder, cx: float, cy: float, length: float, angle: float) -> 
     side = Look("shrub", tuple(c * 0.85 for c in col))
     b.world.add_block(Block(cx, cy, length, rng.uniform(0.6, 1.1), angle, 0.0, rng.uniform(0.7, 1.8), LOW_VEG,
                             look, side, kind="hedge"))
+
+
+
+def tree_at_local(b: Builder, a: float, c: float, radius: float | None = None, **kw: object) -> bool:
+    """Plant a tree at local (a, c) if its trunk spot is free and its crown clears buildings."""
+    if radius is None:
+        radius = float(b.rng.uniform(*b.style.tree_size))
+    if not b.free_local(a, c, 0.6) or not b.free_local(a, c, 0.75 * radius, buildings_only=True):
+        return False
+    x, y = b.to_world(a, c)
+    add_tree(b, x, y, radius, **kw)  # type: ignore[arg-type]
+    return True
 
 
 # -- street furniture and other clutter ---------------------------------------------------------

@@ -1,0 +1,40 @@
+"""Every exception the project raises on purpose, under one root (:class:`UavElError`).
+
+One module so that a caller can catch the project's expected failures with one ``except``
+(``assurance.errors`` adds the harness's on the same root). The input errors are also
+``ValueError`` so existing ``except ValueError`` handlers keep catching them.
+"""
+
+from __future__ import annotations
+
+
+class UavElError(Exception):
+    """Root of the exceptions that ``el`` and ``assurance`` raise on purpose."""
+
+
+class DataError(UavElError, ValueError):
+    """A data file or folder is missing, unreadable or inconsistent; the message names it."""
+
+
+class LabelColourError(UavElError, ValueError):
+    """A label image holds colours that are not UAVid class colours."""
+
+
+class WeightsError(UavElError, ValueError):
+    """A weights file or its model card is missing, altered or unusable; the message names it."""
+
+
+class CalibrationError(UavElError, ValueError):
+    """A calibration card that cannot be used (missing, unreadable, altered, inconsistent)."""
+
+
+class OODError(UavElError, ValueError):
+    """An out-of-domain gate file that cannot be used (missing, unreadable, altered, inconsistent)."""
+
+
+class LearnedModelError(UavElError, ValueError):
+    """A learned-monitor model file that cannot be used (missing, unreadable, altered, inconsistent)."""
+
+
+class BudgetExceeded(UavElError):
+    """The decision's time budget ran out (turned into the default action with reason 'timeout')."""

@@ -1,0 +1,40 @@
+"""The one forbidden-pixel rule: a forbidden class wins the argmax, and a tie counts as forbidden.
+
+The core model reads the working-resolution softmax by it (``el.candidates.forbidden_from_probs``),
+the monitors read their HD patch scores by it (``el.monitors.lhd``) and the harness's evidence scores
+use it too (``assurance.separation``): one definition, so that "forbidden" means the same pixels
+everywhere (docs/architecture.md sections 3.3 and 3.6).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from el.labels import FORBIDDEN_IDS, SAFE_IDS
+
+
+def top_scores(scores: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(top forbidden score, top safe score) per pixel of ``scores`` of shape (8, ...).
+
+    Element-wise maxima without copying the class planes (a frame's softmax is large); the values
+    are exactly ``scores[ids].max(axis=0)``.
+    """
+    top_forbidden = scores[FORBIDDEN_IDS[0]]
+    for c in FORBIDDEN_IDS[1:]:
+        top_forbidden = np.maximum(top_forbidden, scores[c])
+    top_safe = scores[SAFE_IDS[0]]
+    for c in SAFE_IDS[1:]:
+        top_safe = np.maximum(top_safe, scores[c])
+    return top_forbidden, top_safe
+
+
+def forbidden_pixels(scores: np.ndarray) -> np.ndarray:
+    """Bool of shape (...): True where the top-scoring class of ``scores`` (8, ...) is forbidden, ties included."""
+    top_forbidden, top_safe = top_scores(scores)
+    return top_forbidden >= top_safe
+
+
+def argmax_slack(scores: np.ndarray) -> np.ndarray:
+    """Top forbidden score minus top safe score per pixel (>= 0 exactly where :func:`forbidden_pixels`)."""
+    top_forbidden, top_safe = top_scores(scores)
+    return top_forbidden - top_safe
