@@ -31,7 +31,7 @@ import numpy as np
 import yaml
 
 from assurance import readouts
-from assurance.perturbations import PERTURBATIONS, perturb
+from assurance.perturbations import PERTURBATIONS, perturb, severities_of
 from assurance.truth import true_hazard
 from el.config import CoreConfig
 from el.core import run_core
@@ -85,12 +85,8 @@ class CampaignConfig:
             raise ValueError(f"seed must be an integer >= 0, got {self.seed!r}")
 
     def scenarios(self) -> list[tuple[str, int]]:
-        """(perturbation, severity) pairs; 'none' is evaluated once, at the first severity."""
-        out: list[tuple[str, int]] = []
-        for p in self.perturbations:
-            for s in self.severities[:1] if p == "none" else self.severities:
-                out.append((p, s))
-        return out
+        """(perturbation, severity) pairs; one not graded by severity ('none') is evaluated once, at the first."""
+        return [(p, s) for p in self.perturbations for s in severities_of(p, self.severities)]
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -272,7 +268,7 @@ def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Calla
             "clearance_decision_m": clearance[sel] if sel is not None else float("nan"),
             "overhead_s": float(sum(seconds[:examined])),
             "default_x": core.default_area.x, "default_y": core.default_area.y,
-            "default_r": core.default_area.radius_px,
+            "default_r": core.default_area.radius_px, "width": W, "height": H,
             **timings,
             "total_s": clock() - t0,
         })
