@@ -31,12 +31,13 @@ import numpy as np
 import yaml
 
 from assurance import readouts
-from assurance.perturbations import PERTURBATIONS, perturb
+from assurance.perturbations import PERTURBATIONS, perturb, severities_of
 from assurance.truth import true_hazard
 from el.config import CoreConfig
 from el.core import run_core
 from el.decision import Candidate
 from el.monitors import DEMO_GRID, PAPER_GRID, CandidateContext, Monitor, build_monitor, parse_monitor_spec
+from el.monitors.spec import walk_of
 from el.monitors.walk import HAZARD, SCORE, select
 from el.uavid import Sample, iter_samples, read_image, read_labels
 
@@ -86,12 +87,8 @@ class CampaignConfig:
             raise ValueError(f"seed must be an integer >= 0, got {self.seed!r}")
 
     def scenarios(self) -> list[tuple[str, int]]:
-        """(perturbation, severity) pairs; 'none' is evaluated once, at the first severity."""
-        out: list[tuple[str, int]] = []
-        for p in self.perturbations:
-            for s in self.severities[:1] if p == "none" else self.severities:
-                out.append((p, s))
-        return out
+        """(perturbation, severity) pairs; one not graded by severity ('none') is evaluated once, at the first."""
+        return [(p, s) for p in self.perturbations for s in severities_of(p, self.severities)]
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -224,18 +221,6 @@ def judge_candidates(
     return out
 
 
-def walk_of(name: str) -> str:
-    """The walk order a configuration's decision loop uses (``walk=score`` in its spec, else hazard).
-
-    A name that no longer parses here (a plugin monitor not installed on the machine reading a run) is
-    read from its text."""
-    try:
-        return getattr(parse_monitor_spec(name), "walk", HAZARD)
-    except ValueError:
-        params = "".join(name.split()).lower().partition(":")[2].split(",")
-        return SCORE if "walk=score" in params else HAZARD
-
-
 def walk(verdicts: Sequence[bool], scores: Sequence[float] | None = None, order: str = HAZARD) -> int | None:
     """The decision loop's walk (``el.monitors.walk``): the candidate it lands on, or None (default)."""
     return select(verdicts, scores if scores is not None else [0.0] * len(verdicts), order)
@@ -298,7 +283,7 @@ def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Calla
             "clearance_decision_m": clearance[sel] if sel is not None else float("nan"),
             "overhead_s": float(sum(seconds[:examined])),
             "default_x": core.default_area.x, "default_y": core.default_area.y,
-            "default_r": core.default_area.radius_px,
+            "default_r": core.default_area.radius_px, "width": W, "height": H,
             **timings,
             "total_s": clock() - t0,
         })

@@ -21,6 +21,7 @@ import numpy as np
 
 from assurance.campaign import task_seed
 from assurance.perturbations import perturb
+from assurance.readouts import image_size
 from el.uavid import Sample, iter_samples, read_image
 
 GALLERY_SEVERITY = 3
@@ -95,8 +96,7 @@ def _f(v: Any, digits: int = 2) -> str:
 
 def decision_record(image_row: Any, cands: Any) -> dict[str, Any]:
     """The decision dict ``draw_decision`` reads, rebuilt from one images-table row and its candidates."""
-    W = int(round(2 * float(image_row["default_x"])))
-    H = int(round(float(image_row["default_y"]) + float(image_row["default_r"])))
+    W, H = image_size(image_row)
     sel = int(image_row["selected"])
     candidates = []
     for c in cands.sort_values("rank").itertuples(index=False):

@@ -19,7 +19,7 @@ import numpy as np
 
 from assurance.learned_monitor import split_sha256
 from assurance.paths import shown_path
-from assurance.perturbations import PAPER_PERTURBATIONS, perturb
+from assurance.perturbations import PAPER_PERTURBATIONS, TRAITS, perturb
 from el.monitors.ood import OODGate, embedding_kind, frame_embedding, ood_document
 from el.uavid import Sample, iter_samples, read_image
 
@@ -97,7 +97,7 @@ def ood_shift_report(gate: OODGate, data: str | Path, segmenter: Any, *, out: st
                          seed=seed)
         dists[name] = np.array([gate.distance(v) for v in x])
     t = gate.threshold
-    rows = [{"perturbation": n, "severity": 0 if n == "none" else severity, "frames": int(d.size),
+    rows = [{"perturbation": n, "severity": severity if TRAITS[n].graded else 0, "frames": int(d.size),
              "median": float(np.median(d)), "p95": float(np.quantile(d, 0.95)), "max": float(d.max()),
              "above_threshold": float((d > t).mean())} for n, d in dists.items()]
     if out is not None:

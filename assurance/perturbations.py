@@ -25,9 +25,11 @@ pixel_trap     n distinct random rows set to 0 (dead sensor lines)     n = 2 5 *
 ============== ======================================================= ======================
 
 Extras beyond the paper's six: ``gaussian_noise`` (imagecorruptions' table).
-``PAPER_PERTURBATIONS`` names the six the paper (and requirement EL-R08) uses;
-``PERTURBATIONS`` maps every name to its function, and ``perturb`` is the one validating entry
-point.
+Each function is registered with its traits (``TRAITS``, a ``Traits`` per name): whether it draws
+random numbers, whether its severity changes it (``none``'s does not, so a campaign runs it at one
+severity only: ``severities_of``) and whether it is one of the paper's six. ``PAPER_PERTURBATIONS``
+names the six the paper (and requirement EL-R08) uses; ``PERTURBATIONS`` maps every name to its
+function, and ``perturb`` is the one validating entry point.
 
 Deliberate differences from the authors' code (each documented at its function): the shift
 offsets include the upper bound 10 (their ``randint(0, 10)`` stops at 9; section 4.1 of the architecture says [0, 10]);
@@ -50,6 +52,7 @@ Examples
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import TypeVar
 
 import cv2
@@ -61,7 +64,9 @@ __all__ = [
     "PAPER_PERTURBATIONS",
     "PERTURBATIONS",
     "SEVERITIES",
+    "TRAITS",
     "Perturbation",
+    "Traits",
     "brightness",
     "fog",
     "gaussian_noise",
@@ -70,6 +75,7 @@ __all__ = [
     "perturb",
     "pixel_trap",
     "plasma_fractal",
+    "severities_of",
     "shifted_pixels",
 ]
 
@@ -77,6 +83,39 @@ Perturbation = Callable[[np.ndarray, int, np.random.Generator], np.ndarray]
 SEVERITIES: tuple[int, ...] = (1, 2, 3, 4, 5)
 
 _T = TypeVar("_T")
+_F = TypeVar("_F", bound=Perturbation)
+
+
+@dataclass(frozen=True)
+class Traits:
+    """What the harness needs to know about a perturbation besides its function."""
+
+    random: bool
+    """It draws from ``rng``: its result depends on the campaign's per-image seed."""
+    graded: bool = True
+    """Its severity changes it (False: one severity shows everything; a campaign runs only the first)."""
+    paper: bool = True
+    """One of the paper's six scenarios."""
+
+
+PERTURBATIONS: dict[str, Perturbation] = {}
+"""Every perturbation by name (the function's own name, so names cannot drift), in definition order."""
+TRAITS: dict[str, Traits] = {}
+"""Every perturbation's traits by name (filled with ``PERTURBATIONS`` by ``_registered``)."""
+
+
+def _registered(traits: Traits) -> Callable[[_F], _F]:
+    """Register a perturbation function under its own name with its traits."""
+    def wrap(func: _F) -> _F:
+        PERTURBATIONS[func.__name__] = func
+        TRAITS[func.__name__] = traits
+        return func
+    return wrap
+
+
+def severities_of(name: str, severities: Sequence[_T]) -> Sequence[_T]:
+    """The severities a campaign evaluates ``name`` at: all of them, or the first one when it is not graded."""
+    return severities if TRAITS[name].graded else severities[:1]
 
 
 def _level(table: Sequence[_T], severity: int) -> _T:
@@ -95,6 +134,7 @@ def _check_image(image: np.ndarray) -> None:
 # --------------------------------------------------------------------------------------------
 
 
+@_registered(Traits(random=False, graded=False))
 def none(image: np.ndarray, severity: int, rng: np.random.Generator) -> np.ndarray:
     """No perturbation: a copy of ``image`` (severity is validated, then ignored)."""
     _level(SEVERITIES, severity)
@@ -102,6 +142,7 @@ def none(image: np.ndarray, severity: int, rng: np.random.Generator) -> np.ndarr
     return image.copy()
 
 
+@_registered(Traits(random=False))
 def brightness(image: np.ndarray, severity: int, rng: np.random.Generator) -> np.ndarray:
     """Brighter scene: add ``d`` to the HSV value channel (V in [0, 1]), clipped at 1.
 
@@ -198,6 +239,7 @@ def _plasma_raw(mapsize: int, wibbledecay: float, rng: np.random.Generator) -> n
     return g
 
 
+@_registered(Traits(random=True))
 def fog(image: np.ndarray, severity: int, rng: np.random.Generator) -> np.ndarray:
     """Fog: a plasma fractal added to the image, then rescaled (imagecorruptions' ``fog``).
 
@@ -221,6 +263,7 @@ def fog(image: np.ndarray, severity: int, rng: np.random.Generator) -> np.ndarra
     return cv2.addWeighted(image, scale, cv2.merge([haze, haze, haze]), 1.0, 0.0, dtype=cv2.CV_8U)
 
 
+@_registered(Traits(random=False))
 def motion_blur(image: np.ndarray, severity: int, rng: np.random.Generator) -> np.ndarray:
     """Vertical motion blur: mean over a vertical line of ``k`` pixels.
 
@@ -234,6 +277,7 @@ def motion_blur(image: np.ndarray, severity: int, rng: np.random.Generator) -> n
     return cv2.blur(image, (1, k))
 
 
+@_registered(Traits(random=True))
 def shifted_pixels(image: np.ndarray, severity: int, rng: np.random.Generator) -> np.ndarray:
     """Row jitter (sensor read-out fault): each row shifted cyclically left by its own offset.
 
@@ -253,6 +297,7 @@ def shifted_pixels(image: np.ndarray, severity: int, rng: np.random.Generator) -
     return out
 
 
+@_registered(Traits(random=True))
 def pixel_trap(image: np.ndarray, severity: int, rng: np.random.Generator) -> np.ndarray:
     """Dead sensor lines: ``n`` distinct rows, drawn at random, set to 0 (black).
 
@@ -271,6 +316,7 @@ def pixel_trap(image: np.ndarray, severity: int, rng: np.random.Generator) -> np
 # --------------------------------------------------------------------------------------------
 
 
+@_registered(Traits(random=True, paper=False))
 def gaussian_noise(image: np.ndarray, severity: int, rng: np.random.Generator) -> np.ndarray:
     """Sensor noise: i.i.d. Gaussian noise of standard deviation ``sigma`` (image in [0, 1]).
 
@@ -282,14 +328,7 @@ def gaussian_noise(image: np.ndarray, severity: int, rng: np.random.Generator) -
     return cv2.addWeighted(image, 1.0, noise, 255.0 * sigma, 0.0, dtype=cv2.CV_8U)
 
 
-PERTURBATIONS: dict[str, Perturbation] = {
-    f.__name__: f for f in (none, brightness, fog, motion_blur, shifted_pixels, pixel_trap, gaussian_noise)
-}
-"""Every perturbation by name (the function's own name, so names cannot drift)."""
-
-PAPER_PERTURBATIONS: tuple[str, ...] = tuple(
-    f.__name__ for f in (none, brightness, fog, motion_blur, shifted_pixels, pixel_trap)
-)
+PAPER_PERTURBATIONS: tuple[str, ...] = tuple(name for name, t in TRAITS.items() if t.paper)
 """The six scenarios of the paper (requirement EL-R08), in its order apart from ``none`` first."""
 
 

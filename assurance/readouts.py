@@ -43,8 +43,8 @@ TABLES = ("images", "candidates")
 COLUMNS: dict[str, tuple[str, ...]] = {
     "images": ("key", "sequence", "frame", "perturbation", "severity", "monitor", "fault", "candidates", "action",
                "reason", "selected", "h_default", "h_top", "h_decision", "decision_unsafe", "clearance_decision_m",
-               "overhead_s", "default_x", "default_y", "default_r", "read_s", "perturb_s", "segmentation_s",
-               "candidates_s", "monitoring_s", "total_s"),
+               "overhead_s", "default_x", "default_y", "default_r", "width", "height", "read_s", "perturb_s",
+               "segmentation_s", "candidates_s", "monitoring_s", "total_s"),
     "candidates": ("key", "sequence", "frame", "perturbation", "severity", "monitor", "rank", "x", "y", "radius_px",
                    "hazard", "hazard_semantic", "hazard_distance", "true_hazard", "true_unsafe", "clearance_m",
                    "accepted", "reason", "seconds", "selected", "examined"),
@@ -244,6 +244,22 @@ def load_table(run_dir: str | Path, table: str) -> pd.DataFrame:
     df = pd.concat(frames, ignore_index=True)
     missing = [c for c in COLUMNS[table] if c not in df.columns]
     return df.assign(**dict.fromkeys(missing, float("nan"))) if missing else df
+
+
+def image_size(row: Mapping[str, Any]) -> tuple[int, int]:
+    """The input image's (width, height) of an images-table row: its ``width`` / ``height`` readouts or, in a
+    run recorded before them, worked back from the default disc (centred, tangent to the bottom edge)."""
+    w, h = row.get("width"), row.get("height")
+    if w is not None and h is not None and not (pd.isna(w) or pd.isna(h)):
+        return int(w), int(h)
+    return (int(round(2 * float(row["default_x"]))),
+            int(round(float(row["default_y"]) + float(row["default_r"]))))
+
+
+def input_size(images: pd.DataFrame) -> tuple[int, int] | None:
+    """The input size (W, H) of a run's first evaluated (non-faulted) image; None when there is none."""
+    ok = images[images["fault"].fillna("") == ""] if len(images) else images
+    return image_size(ok.iloc[0]) if len(ok) else None
 
 
 def shard_dirs(run_dir: str | Path) -> list[Path]:

@@ -30,6 +30,7 @@ import numpy as np
 import pandas as pd
 
 from assurance.metrics import RESULT_COLUMNS
+from assurance.perturbations import TRAITS
 
 __all__ = [
     "PERTURBATION_NAMES",
@@ -162,7 +163,7 @@ def load_reference(path: str | Path | None = None) -> pd.DataFrame:
     df["source_perturbation"] = raw["Perturbation"]
     df["perturbation"] = raw["Perturbation"].map(PERTURBATION_NAMES)
     df["severity"] = pd.array(
-        [pd.NA if p == "none" else REFERENCE_SEVERITY for p in df["perturbation"]], dtype="Int64"
+        [REFERENCE_SEVERITY if TRAITS[p].graded else pd.NA for p in df["perturbation"]], dtype="Int64"
     )
     df["monitor"] = [monitor_spec_name(t, n, r) for t, n, r in zip(tau, n_mcd, rho, strict=True)]
     df["kind"] = [name.partition(":")[0] for name in df["monitor"]]

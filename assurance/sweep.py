@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from assurance.campaign import walk_of
+from el.monitors.spec import walk_of
 from el.monitors.walk import HAZARD, check_walk
 
 IMAGE_KEYS = ["perturbation", "severity", "key"]

@@ -17,6 +17,7 @@ import pandas as pd
 
 from assurance import readouts
 from assurance.metrics import RESULT_COLUMNS, ImageReadout, ScenarioMetrics, rows_to_frame
+from assurance.perturbations import severities_of
 
 PAPER_FIGURES = ("g_cm", "mcc", "f1", "precision", "recall", "fp_rate", "g_rm", "overhead_s", "g_star")
 HEADERS = {"g_cm": "G_CM", "mcc": "MCC", "f1": "F1", "precision": "Precision", "recall": "Recall",
@@ -73,11 +74,7 @@ def results_table(run_dir: str | Path, *, n_boot: int = 2000, seed: int = 0) -> 
 
 
 def _scenario_order(cfg: dict[str, Any]) -> list[tuple[str, int]]:
-    out = []
-    for p in cfg["perturbations"]:
-        for s in cfg["severities"][:1] if p == "none" else cfg["severities"]:
-            out.append((p, int(s)))
-    return out
+    return [(p, int(s)) for p in cfg["perturbations"] for s in severities_of(p, cfg["severities"])]
 
 
 def write_csv(df: pd.DataFrame, path: str | Path) -> None:

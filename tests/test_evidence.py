@@ -396,3 +396,10 @@ def test_shipped_waivers_name_an_owner_and_have_not_expired():
     waivers = load_waivers(ROOT / "assurance" / "waivers.yaml")
     assert waivers["EL-R09"]["owner"] == "segmentation maintainers"
     assert not [rid for rid, w in waivers.items() if waiver_expired(w)], "a shipped waiver expired: fix or renew it"
+
+
+def test_a_demo_sized_run_says_on_page_one_what_it_cannot_decide(report):
+    _, _, html = report
+    cover = html.split("<nav>")[0]
+    assert "A demo-sized run" in cover and "make release-evidence" in cover
+    assert "scene(s) per perturbation; the release run" in cover and "has 70" in cover

@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 from assurance.perturbations import (
     PAPER_PERTURBATIONS,
     PERTURBATIONS,
+    TRAITS,
     brightness,
     fog,
     motion_blur,
@@ -16,6 +17,7 @@ from assurance.perturbations import (
     perturb,
     pixel_trap,
     plasma_fractal,
+    severities_of,
     shifted_pixels,
 )
 
@@ -334,3 +336,14 @@ def test_higher_severity_changes_more(name):
         assert mad[0] < mad[1] < mad[2] and mad[3] < mad[4] and mad[3] >= 0.98 * mad[2]
     else:
         assert np.all(np.diff(mad) > 0), mad
+
+
+@pytest.mark.parametrize("name", sorted(PERTURBATIONS))
+def test_traits_say_truly_whether_a_perturbation_draws_random_numbers_or_is_graded(name):
+    image = np.random.default_rng(7).integers(0, 256, (64, 48, 3), dtype=np.uint8)
+    a = PERTURBATIONS[name](image, 3, np.random.default_rng(1))
+    b = PERTURBATIONS[name](image, 3, np.random.default_rng(2))
+    assert (not np.array_equal(a, b)) == TRAITS[name].random
+    graded = not np.array_equal(PERTURBATIONS[name](image, 1, np.random.default_rng(1)), a)
+    assert graded == TRAITS[name].graded
+    assert severities_of(name, (1, 3, 5)) == ((1, 3, 5) if graded else (1,))

@@ -326,3 +326,15 @@ DEMO_GRID: tuple[str, ...] = (
 """One configuration per kind, with the parameters the paper shows in its Table I because they
 "always perform better or similar to other values" (tau = 0.25, N = 10, rho = 0.9); n = 10 is also
 the cheaper MCD batch (overhead grows linearly with n)."""
+
+
+def walk_of(name: str) -> str:
+    """The walk order a configuration's decision loop uses (``walk=score`` in its spec, else hazard).
+
+    A name that no longer parses here (a plugin monitor not installed on the machine reading a run) is
+    read from its text."""
+    try:
+        return getattr(parse_monitor_spec(name), "walk", HAZARD)
+    except ValueError:
+        params = "".join(name.split()).lower().partition(":")[2].split(",")
+        return "score" if "walk=score" in params else HAZARD

@@ -1,0 +1,222 @@
+"""The evidence report's inputs (the run, its tables, the requirement results, the report's own checks) and the
+finished context its templates render."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from assurance import readouts
+from assurance import requirements as rq
+from assurance.evidence.gate import GATE_CLASS, Gate, requirement_results
+from assurance.evidence.identity import identity
+from assurance.evidence.matrix import check_problems, check_view, matrix, run_checks
+from assurance.evidence.render import TEMPLATE, TEMPLATES_DIR, faults_table
+from assurance.evidence.sections import (
+    domain,
+    limitations,
+    pick_examples,
+    results_view,
+    sample_size,
+    scene_types,
+    unsafe_picks,
+)
+from assurance.evidence.text import STATE_CLASS, pct
+from assurance.integrity import RunCheck, verify_run
+from assurance.table import results_table, write_csv
+
+
+@dataclass
+class Inputs:
+    """What the report reads: the run and its tables, the registry, the requirement results, its own checks."""
+
+    run: Path
+    out: Path
+    templates: Path
+    registry: rq.Registry
+    manifest: dict[str, Any]
+    check: RunCheck
+    images: Any
+    candidates: Any
+    table: Any
+    csv_path: Path
+    req_path: Path | None
+    results: dict[str, rq.RequirementResult]
+    req_doc: dict[str, Any] | None
+    checks: dict[str, rq.Evidence]
+    warnings: list[str]
+    problems: list[str]
+
+    @property
+    def deployed(self) -> str:
+        return self.registry.parameters["deployed_monitor"]
+
+
+def read_inputs(run: Path, out: Path, *, requirements: str | Path | None, baseline: str | Path | None,
+                registry: str | Path | None, n_boot: int, templates: str | Path | None) -> Inputs:
+    """Read and verify the run (and the baseline's shards), write ``results.csv``, read the requirement results
+    and run the report's checks; a damaged run raises ``readouts.DamagedRunError``."""
+    templates = Path(templates) if templates else TEMPLATES_DIR
+    if not (templates / TEMPLATE).is_file():
+        raise FileNotFoundError(f"{templates / TEMPLATE}: report template not found")
+    warnings: list[str] = []
+    reg = rq.load_registry(registry)
+    man = readouts.read_manifest(run)
+    check = verify_run(run).raise_if_damaged()
+    if check.legacy:
+        warnings.append(f"{run}: written before shard hashes: its readouts cannot be verified")
+    if baseline:
+        verify_run(baseline).raise_if_damaged()
+    images = readouts.load_table(run, "images")
+    candidates = readouts.load_table(run, "candidates")
+    table = results_table(run, n_boot=n_boot)
+    out.mkdir(parents=True, exist_ok=True)
+    csv_path = out / "results.csv"
+    write_csv(table, csv_path)
+    req_path = Path(requirements) if requirements else (out / "requirements.json")
+    if requirements is None and not req_path.is_file():
+        req_path = None
+    problems: list[str] = []
+    results, req_doc = requirement_results(reg, req_path, run, warnings, problems, check)
+    ctx = rq.CheckContext(run, reg.parameters, n_boot=n_boot, manifest=man, images=images, candidates=candidates,
+                          table=table)
+    checks = run_checks(reg, ctx)
+    check_problems(checks, results, problems, warnings)
+    deployed = reg.parameters["deployed_monitor"]
+    if deployed not in man["config"]["monitors"]:
+        warnings.append(f"the deployed monitor {deployed!r} (registry) was not evaluated by this campaign")
+    return Inputs(run, out, templates, reg, man, check, images, candidates, table, csv_path, req_path, results,
+                  req_doc, checks, warnings, problems)
+
+
+def _plots(inp: Inputs) -> list[dict[str, str]]:
+    """The report's figures (none for an empty results table)."""
+    from assurance.evidence_plots import gains_figure, monitor_metrics_figure, overhead_figure, roc_figure
+
+    table, deployed, monitors = inp.table, inp.deployed, list(inp.manifest["config"]["monitors"])
+    if not len(table):
+        return []
+    plots = [{"title": "Safety gain per perturbation and monitor configuration",
+              "uri": gains_figure(table, deployed)},
+             {"title": "Runtime monitor: precision, recall, false-positive rate",
+              "uri": monitor_metrics_figure(table, deployed)},
+             {"title": "Runtime-monitor overhead",
+              "uri": overhead_figure(inp.images, monitors, inp.registry.parameters["time_budget_s"], deployed)}]
+    roc = roc_figure(inp.candidates, monitors, deployed)
+    if roc is not None:
+        plots.append({"title": "Runtime-monitor scores: ROC curves and operating points", "uri": roc})
+    return plots
+
+
+def campaign_context(inp: Inputs) -> dict[str, Any]:
+    """The run's part of the context: identity, operating domain, pictures, plots, results and limitations."""
+    from assurance.evidence_gallery import Scenes, decision_examples, perturbation_gallery
+    from assurance.perturbations import PAPER_PERTURBATIONS
+
+    man, images, candidates, reg = inp.manifest, inp.images, inp.candidates, inp.registry
+    identity_rows, ident = identity(inp.run, man, reg, inp.req_path, inp.req_doc, inp.csv_path, inp.templates,
+                                    inp.check)
+    scenes = Scenes(man["data"]["path"], man["config"]["seed"])
+    if scenes.error:
+        inp.warnings.append(scenes.error)
+    ok = images[images["fault"].fillna("") == ""] if len(images) else images
+    keys = sorted(set(ok["key"])) if len(ok) else []
+    scene_text, synthetic = scene_types(scenes, keys)
+    gallery_perts = list(dict.fromkeys(list(PAPER_PERTURBATIONS) + list(man["config"]["perturbations"])))
+    picks, groups, n_unsafe = unsafe_picks(images) if len(ok) else ([], {}, 0)
+    unsafe = decision_examples(scenes, images, candidates, picks, width=360, also=groups, compact=True)
+    params = reg.parameters
+    return {
+        "ident": ident, "synthetic": synthetic,
+        "identity": identity_rows,
+        "domain": domain(man, reg, readouts.input_size(images), scene_text, len(keys)),
+        "gallery": perturbation_gallery(scenes, keys[0] if keys else None, gallery_perts),
+        "gallery_key": keys[0] if keys else "",
+        "examples": (decision_examples(scenes, images, candidates, pick_examples(images, inp.deployed))
+                     if len(ok) else []),
+        "unsafe": unsafe, "n_unsafe": n_unsafe, "n_unsafe_pictures": len(unsafe),
+        "scenes_error": scenes.error,
+        "plots": _plots(inp),
+        "results": results_view(inp.table, inp.deployed, float(params["unsafe_landing_bound"])),
+        "deployed": inp.deployed, "bound": pct(params["unsafe_landing_bound"]),
+    }
+
+
+def commands(inp: Inputs) -> list[str]:
+    """The commands that reproduce the run, the requirement results and this report."""
+    man, run, out, cfg = inp.manifest, inp.run, inp.out, inp.manifest["config"]
+    return [
+        f"uav-el campaign --data {man['data']['path']} --out {run} --perturbations {' '.join(cfg['perturbations'])} "
+        f"--severities {' '.join(str(s) for s in cfg['severities'])} --monitors "
+        + " ".join(f"'{m}'" for m in cfg["monitors"])
+        + (f" --images {cfg['images']}" if cfg.get("images") else "") + f" --seed {cfg['seed']}"
+        + (f" --weights {cfg['weights']}" if cfg.get("weights") else ""),
+        f"pytest -m requirements --uav-el-run {run} --requirements-report {out / 'requirements.json'}",
+        f"uav-el evidence --run {run} --out {out}" + (f" --requirements {inp.req_path}" if inp.req_path else ""),
+    ]
+
+
+def _parameter_text(v: Any) -> str:
+    """A registry parameter as the report shows it."""
+    if isinstance(v, list):
+        return ", ".join(map(str, v))
+    if isinstance(v, dict):
+        return ", ".join(f"{a} {b:.0%}" for a, b in v.items())
+    return str(v)
+
+
+def run_scope(inp: Inputs, states: dict[str, str]) -> dict[str, Any] | None:
+    """For a run smaller than the release preset (e.g. the demo): its size, the requirements it leaves
+    undecided and the command that decides them; None for a release-sized run."""
+    from assurance.campaign import preset_config
+
+    release = preset_config("release")
+    ok = inp.images[inp.images["fault"].fillna("") == ""] if inp.images is not None and len(inp.images) else None
+    n = int(ok.groupby("perturbation")["key"].nunique().min()) if ok is not None and len(ok) else 0
+    if release.images is not None and n >= release.images:
+        return None
+    undecided = [rid for rid, st in states.items() if st == rq.NOT_VERIFIED]
+    return {"images": n, "release_images": release.images, "undecided": ", ".join(undecided) or "none",
+            "command": "make release-evidence"}
+
+
+def template_context(inp: Inputs, gate: Gate, campaign: dict[str, Any], base: dict[str, Any] | None,
+                     created: str, n_boot: int) -> dict[str, Any]:
+    """Everything the templates show, as finished strings and records."""
+    reg, results = inp.registry, inp.results
+    counts = rq.summary_counts(gate.states.values())
+    return {
+        "title": "Evidence report: UAV emergency landing",
+        "run_name": inp.run.name, "run": str(inp.run), "created": created,
+        "gate": gate.result, "gate_class": GATE_CLASS[gate.result], "gate_text": gate.text,
+        "waivers": [{"id": rid, **gate.waivers[rid]} for rid in gate.waived],
+        "problems": inp.problems,
+        "counts": [{"state": s, "n": counts[s], "cls": STATE_CLASS[s],
+                    "ids": ", ".join(f"{rid} (failed, waived)" if rid in gate.waived else rid
+                                     for rid, st in gate.states.items() if st == s)} for s in rq.STATES],
+        "warnings": inp.warnings,
+        "scope": run_scope(inp, gate.states),
+        "identity": campaign["identity"],
+        "domain": campaign["domain"],
+        "domain_text": [{"name": k.replace("_", " "), "value": v} for k, v in reg.operating_domain.items()],
+        "parameters": [{"name": k.replace("_", " "), "value": _parameter_text(v)} for k, v in reg.parameters.items()],
+        "matrix": matrix(reg, results, inp.checks, inp.run, inp.csv_path.name),
+        "requirements": [{"id": r.id, "title": r.title, "text": r.text, "rationale": r.rationale,
+                          "source": "; ".join(r.source), "method": r.verification_method,
+                          "acceptance": r.acceptance, "domain": r.domain} for r in reg],
+        "sources": [{"key": k, "text": " ".join(v.split())} for k, v in reg.sources.items()],
+        "checks": [check_view(ev) for ev in inp.checks.values()],
+        "results": campaign["results"],
+        "deployed": campaign["deployed"], "bound": campaign["bound"],
+        "sample_size": sample_size(inp.table, reg, n_boot),
+        "plots": campaign["plots"],
+        "gallery": campaign["gallery"], "gallery_key": campaign["gallery_key"],
+        "examples": campaign["examples"], "unsafe": campaign["unsafe"], "n_unsafe": campaign["n_unsafe"],
+        "n_unsafe_pictures": campaign["n_unsafe_pictures"],
+        "scenes_error": campaign["scenes_error"],
+        "limitations": limitations(inp.manifest, reg, results, campaign["synthetic"], inp.table),
+        "baseline": base,
+        "commands": commands(inp),
+        "faults": faults_table(inp.out, inp.warnings),
+    }

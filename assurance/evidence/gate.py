@@ -1,0 +1,153 @@
+"""The evidence gate: are the requirement results bound to this run, what do waivers cover, what is the verdict.
+
+FAILED (exit 1) when a requirement failed and is not waived, or when there is an integrity problem
+(results not bound to this run, code and registry; a state contradicting its own tests or this
+report's check of the run; an expired waiver); WAIVED (exit 0) when every failure is waived;
+INCOMPLETE when some are not verified (exit 1 only with ``strict``, which also ignores waivers and
+fails on a missing PDF); PASSED otherwise.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from assurance import requirements as rq
+from assurance.evidence.waivers import load_waivers, waiver_expired
+from assurance.integrity import RunCheck, code_sha256
+
+GATE_CLASS = {"FAILED": "failed", "WAIVED": "failed", "INCOMPLETE": "not-verified", "PASSED": "verified"}
+
+
+@dataclass
+class EvidenceReport:
+    """What ``generate`` wrote and what the gate says."""
+
+    out: Path
+    html: Path
+    json: Path
+    pdf: Path | None
+    pdf_error: str | None
+    states: dict[str, str]
+    exit_code: int
+    warnings: list[str] = field(default_factory=list)
+    problems: list[str] = field(default_factory=list)
+    waived: list[str] = field(default_factory=list)
+
+    def ids(self, state: str) -> list[str]:
+        """The requirement ids in ``state``."""
+        return [rid for rid, s in self.states.items() if s == state]
+
+    def summary_lines(self) -> list[str]:
+        """One line per state (with the ids of the failed and not-verified ones) and where the report is."""
+        lines = []
+        for state in rq.STATES:
+            ids = self.ids(state)
+            shown = [f"{i} (waived)" if i in self.waived else i for i in ids]
+            tail = f"  {', '.join(shown)}" if ids and state != rq.VERIFIED else ""
+            lines.append(f"{state + ':':<14}{len(ids):3d}{tail}")
+        lines += [f"gate problem: {p}" for p in self.problems]
+        files = [self.html] + ([self.pdf] if self.pdf else []) + [self.json]
+        lines.append("report: " + ", ".join(str(f) for f in files))
+        if self.pdf_error:
+            lines.append(self.pdf_error)
+        return lines
+
+
+def requirement_results(registry: rq.Registry, path: Path | None, run: Path, warnings: list[str],
+                         problems: list[str], check: RunCheck | None = None,
+                         ) -> tuple[dict[str, rq.RequirementResult], dict[str, Any] | None]:
+    """The requirement results of ``path`` and what they say about the gate.
+
+    ``problems`` (each fails the gate) gets: results not bound to this run's digest, this code or this
+    registry; a state that is not the one its own test outcomes give.
+    """
+    if path is None:
+        warnings.append("no requirement test results were given: every requirement is 'not verified' "
+                        f"(run: pytest -m requirements --uav-el-run {run} "
+                        "--requirements-report <out>/requirements.json)")
+        results = {r.id: rq.RequirementResult(r.id, r.title, rq.NOT_VERIFIED, "no test results given")
+                   for r in registry}
+        return results, None
+    results, doc = rq.load_results(path, registry)
+    ctx = doc.get("context") or {}
+    if ctx.get("run") and Path(ctx["run"]).resolve() != run.resolve():
+        warnings.append(f"the requirement results were produced on run {ctx['run']}, not on {run}")
+    if check is not None:
+        problems.extend(binding_problems(doc, check.digest, code_sha256(), registry.sha256, path))
+    for rid, res in results.items():
+        if not res.tests:
+            if res.state != rq.NOT_VERIFIED:
+                problems.append(f"{path}: {rid} is '{res.state}' with no test outcome behind it")
+            continue
+        own, _ = rq.requirement_state(res.tests)
+        if own != res.state:
+            problems.append(f"{path}: {rid} is '{res.state}' but its own test outcomes give '{own}'")
+    if doc.get("collection_errors"):
+        warnings.append(f"the test session had {len(doc['collection_errors'])} collection error(s): "
+                        + "; ".join(doc["collection_errors"][:3]))
+    if doc.get("ignored_ids"):
+        warnings.append(f"ids in the test results that the registry lacks: {', '.join(doc['ignored_ids'])}")
+    return results, doc
+
+
+def binding_problems(doc: Mapping[str, Any], digest: str, code: str, registry_sha: str, path: Path) -> list[str]:
+    """Why requirement results do not belong to this run, code and registry (empty when they do)."""
+    ctx = doc.get("context") or {}
+    out = []
+    given = ctx.get("run_digest")
+    if not given:
+        out.append(f"{path}: the requirement results are not bound to a run (no run digest recorded)")
+    elif given != digest:
+        out.append(f"{path}: the requirement results were produced on other readouts (run digest {str(given)[:12]}, "
+                   f"this run {digest[:12]})")
+    if ctx.get("code_sha256") != code:
+        out.append(f"{path}: the requirement results were produced on other code (code hash "
+                   f"{str(ctx.get('code_sha256'))[:12]}, this checkout {code[:12]})")
+    if (doc.get("registry") or {}).get("sha256") != registry_sha:
+        out.append(f"{path}: the requirement results were produced with another requirement registry")
+    return out
+
+
+@dataclass
+class Gate:
+    """The gate's verdict on a set of requirement results."""
+
+    result: str
+    text: str
+    states: dict[str, str]
+    failed: list[str]
+    not_verified: list[str]
+    waived: list[str]
+    blocking: list[str]
+    waivers: dict[str, dict[str, str]]
+    problems: list[str]
+
+    def exit_code(self, strict: bool, pdf_error: str | None) -> int:
+        """1 when a failure is not waived or there is a problem; with ``strict`` also when a requirement is not
+        verified or the PDF is missing; else 0."""
+        return 1 if self.blocking or self.problems or (strict and (self.not_verified or pdf_error)) else 0
+
+
+def decide_gate(results: Mapping[str, rq.RequirementResult], problems: list[str], waivers: str | Path | None,
+                strict: bool) -> Gate:
+    """The gate's verdict; an expired waiver is added to ``problems`` (the caller's list)."""
+    states = {rid: r.state for rid, r in results.items()}
+    failed = [rid for rid, s in states.items() if s == rq.FAILED]
+    not_verified = [rid for rid, s in states.items() if s == rq.NOT_VERIFIED]
+    waiver_list = load_waivers(waivers) if waivers else {}
+    expired = {rid for rid, w in waiver_list.items() if waiver_expired(w)}
+    problems += [f"the waiver of {rid} (owner: {waiver_list[rid]['owner']}) expired ({waiver_list[rid]['expires']})"
+                 for rid in sorted(expired)]
+    waived = [rid for rid in failed if rid in waiver_list and rid not in expired and not strict]
+    blocking = [rid for rid in failed if rid not in waived]
+    result = "FAILED" if blocking or problems else ("WAIVED" if waived else "INCOMPLETE" if not_verified else "PASSED")
+    text = (f"{len(failed)} requirement(s) failed" + (f", {len(waived)} waived" if waived else "")
+            if failed else
+            f"{len(not_verified)} requirement(s) not verified" if not_verified else
+            "every requirement verified")
+    if problems:
+        text = f"{len(problems)} integrity problem(s) (below); " + text
+    return Gate(result, text, states, failed, not_verified, waived, blocking, waiver_list, problems)

@@ -1,0 +1,124 @@
+"""Rendering and writing the evidence report: Jinja2 HTML, the PDF/A-3b with its attachments, CSV and text files."""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[2]
+"""The project root (paths under it are written relative to it)."""
+TEMPLATES_DIR = Path(__file__).resolve().parents[1] / "templates"  # package data: found by an installed wheel too
+TEMPLATE = "report.html.j2"
+PDF_HINT = ("install WeasyPrint (`pip install weasyprint`, or `pip install -e '.[pdf]'`) and the Pango "
+            "library it needs (Debian/Ubuntu: `apt-get install libpango-1.0-0 libpangoft2-1.0-0`)")
+
+
+FAULTS_CSV = "faults.csv"
+
+
+def faults_table(out: Path, warnings: list[str]) -> list[dict[str, str]] | None:
+    """The fault-injection table (``uav-el fault-table``) found next to the report, for its appendix."""
+    from assurance.fault_injection import read_table
+
+    path = out / FAULTS_CSV
+    if not path.is_file():
+        return None
+    try:
+        return read_table(path)
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        warnings.append(f"{path}: fault-injection table not shown: {exc}")
+        return None
+
+
+def environment(templates: str | Path | None = None) -> Any:
+    """The Jinja2 environment of the report: autoescape on for every template, strict undefined."""
+    from jinja2 import Environment, FileSystemLoader, StrictUndefined
+
+    return Environment(loader=FileSystemLoader(str(templates or TEMPLATES_DIR)), autoescape=True,
+                       undefined=StrictUndefined, trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True)
+
+
+def render_html(context: Mapping[str, Any], templates: str | Path | None = None) -> str:
+    """The report's HTML from its finished context."""
+    return environment(templates).get_template(TEMPLATE).render(**context)
+
+
+def rel(path: str | Path | None) -> str | None:
+    """A path relative to the project root when it lies under it (as written elsewhere otherwise)."""
+    if path is None:
+        return None
+    p = Path(path)
+    try:
+        return p.resolve().relative_to(ROOT).as_posix()
+    except ValueError:
+        return str(path)
+
+
+PDF_VARIANT = "pdf/a-3b"
+
+
+def write_pdf(html: str, path: Path, attachments: Sequence[Path] = ()) -> str | None:
+    """Write the PDF/A-3b of ``html`` (WeasyPrint) with ``attachments`` embedded; returns None, or why no
+    PDF was written."""
+    try:
+        with warnings.catch_warnings():  # e.g. "HarfBuzz-Subset will be required by future versions"
+            warnings.simplefilter("ignore", DeprecationWarning)
+            from weasyprint import HTML
+    except Exception as exc:  # ImportError, or OSError when the Pango library is missing
+        return f"PDF not written: WeasyPrint cannot be loaded ({type(exc).__name__}: {exc}); {PDF_HINT}"
+    from weasyprint import Attachment
+
+    tmp = path.with_name(f".{path.name}.tmp")
+    try:
+        files = [Attachment(filename=str(a), name=a.name, description=f"{a.name} of this evidence report",
+                            relationship="Data" if a.suffix in (".json", ".csv", ".xml") else "Supplement")
+                 for a in attachments if a.is_file()]
+        HTML(string=html, base_url=str(path.parent)).write_pdf(str(tmp), pdf_variant=PDF_VARIANT, attachments=files)
+        tmp.replace(path)
+    except Exception as exc:
+        tmp.unlink(missing_ok=True)
+        return f"PDF not written: WeasyPrint failed ({type(exc).__name__}: {exc})"
+    return None
+
+
+def pdf_attachment_names(path: str | Path) -> list[str]:
+    """Names of the files embedded in a PDF (its EmbeddedFiles name tree), read without a PDF library:
+    the objects are searched in the file and in its compressed object streams."""
+    import re
+    import zlib
+
+    data = Path(path).read_bytes()
+    chunks = [data]
+    for m in re.finditer(rb"stream\r?\n", data):
+        try:
+            chunks.append(zlib.decompressobj().decompress(data[m.end():m.end() + 4_000_000]))
+        except zlib.error:
+            continue
+    names: list[str] = []
+    for chunk in chunks:
+        for m in re.finditer(rb"/Type\s*/Filespec(.{0,400}?)>>", chunk, re.S):
+            f = re.search(rb"/UF\s*\((.*?)\)|/F\s*\((.*?)\)", m.group(1))
+            if f:
+                names.append((f.group(1) or f.group(2)).decode("latin-1"))
+    return list(dict.fromkeys(names))
+
+
+def write_csv_rows(path: Path, rows: Sequence[Mapping[str, str]], columns: Sequence[str]) -> None:
+    """Write records as CSV (atomically)."""
+    import csv
+    import io
+
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=list(columns), lineterminator="\n")
+    w.writeheader()
+    w.writerows(rows)
+    write_text(path, buf.getvalue())
+
+
+def write_text(path: Path, text: str) -> None:
+    """Write UTF-8 text atomically."""
+    from el.uavid import atomic_write_bytes
+
+    atomic_write_bytes(path, text.encode("utf-8"))

@@ -1,0 +1,125 @@
+"""``generate``: read the run and the requirement results, decide the gate, render and write the evidence report."""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+from pathlib import Path
+from typing import Any
+
+from assurance import requirements as rq
+from assurance.evidence.context import Inputs, campaign_context, read_inputs, template_context
+from assurance.evidence.gate import EvidenceReport, Gate, decide_gate
+from assurance.evidence.identity import baseline_view
+from assurance.evidence.matrix import TRACE_COLUMNS, traceability_rows
+from assurance.evidence.render import FAULTS_CSV, rel, render_html, write_csv_rows, write_pdf, write_text
+from assurance.evidence.text import jsonable
+from el.hashing import sha256_file
+
+EVIDENCE_FORMAT = "uav-el-evidence/1"
+
+
+class _Files:
+    """The files of a report folder."""
+
+    def __init__(self, out: Path, csv_path: Path) -> None:
+        self.html, self.json, self.pdf = out / "evidence.html", out / "evidence.json", out / "evidence.pdf"
+        self.trace, self.junit, self.sums = out / "traceability.csv", out / "junit.xml", out / "SHA256SUMS"
+        self.faults, self.csv = out / FAULTS_CSV, csv_path
+
+    def hashed(self) -> tuple[Path, ...]:
+        """The files SHA256SUMS lists (those present)."""
+        return (self.html, self.pdf, self.json, self.csv, self.trace, self.junit, self.faults)
+
+    def attachments(self, faults: bool) -> list[Path]:
+        """The files the PDF embeds."""
+        return [self.json, self.csv, self.trace, self.junit, self.sums] + ([self.faults] if faults else [])
+
+
+def evidence_document(inp: Inputs, gate: Gate, ident: dict[str, Any], base: dict[str, Any] | None, *,
+                      created: str, strict: bool, files: _Files, faults: bool, n_unsafe: int,
+                      pdf_error: str | None, exit_code: int) -> dict[str, Any]:
+    """``evidence.json``: identity, gate, requirement states, the report's checks and the results table."""
+    reg, results = inp.registry, inp.results
+    return {
+        "format": EVIDENCE_FORMAT, "created": created, "run": rel(inp.run), "strict": strict,
+        "gate": {"result": gate.result, "exit_code": exit_code, "counts": rq.summary_counts(gate.states.values()),
+                 "failed": gate.failed, "waived": {rid: gate.waivers[rid] for rid in gate.waived},
+                 "not_verified": gate.not_verified, "problems": inp.problems},
+        "identity": ident,
+        "parameters": reg.parameters,
+        "requirements": {rid: {**results[rid].to_dict(), "text": reg[rid].text, "source": list(reg[rid].source),
+                               "acceptance": reg[rid].acceptance} for rid in reg.ids},
+        "checks": {ev.requirement: {"name": ev.name, "status": ev.status, "summary": ev.summary,
+                                    "rows": list(ev.rows)} for ev in inp.checks.values()},
+        "results": inp.table.to_dict("records"),
+        "unsafe_landings": n_unsafe,
+        "baseline": base and {k: v for k, v in base.items() if k != "figures"},
+        "warnings": inp.warnings,
+        "files": {"html": rel(files.html), "pdf": None if pdf_error else rel(files.pdf), "csv": rel(files.csv),
+                  "traceability": rel(files.trace), "junit": rel(files.junit) if files.junit.is_file() else None,
+                  "faults": rel(files.faults) if faults else None},
+        "pdf_error": pdf_error,
+    }
+
+
+def _finish(files: _Files, document: dict[str, Any]) -> None:
+    """Write evidence.json, then SHA256SUMS over every file of the report present."""
+    write_text(files.json, json.dumps(jsonable(document), indent=2, allow_nan=False) + "\n")
+    sums = [(p, sha256_file(p)) for p in files.hashed() if p.is_file()]
+    write_text(files.sums, "".join(f"{h}  {p.name}\n" for p, h in sums))
+
+
+def generate(
+    run: str | Path,
+    out: str | Path,
+    *,
+    requirements: str | Path | None = None,
+    baseline: str | Path | None = None,
+    baseline_requirements: str | Path | None = None,
+    registry: str | Path | None = None,
+    strict: bool = False,
+    waivers: str | Path | None = None,
+    pdf: bool = True,
+    n_boot: int = 2000,
+    templates: str | Path | None = None,
+) -> EvidenceReport:
+    """Write the evidence report of ``run`` into ``out`` and return what the gate says.
+
+    ``requirements``: the plugin's results JSON; None looks for ``out/requirements.json`` and, without
+    one, leaves every requirement "not verified". ``baseline``: an earlier run to compare with;
+    ``baseline_requirements``: that run's results JSON (for requirement state changes).
+    """
+    run, out = Path(run), Path(out)
+    inp = read_inputs(run, out, requirements=requirements, baseline=baseline, registry=registry, n_boot=n_boot,
+                      templates=templates)
+    campaign = campaign_context(inp)
+    gate = decide_gate(inp.results, inp.problems, waivers, strict)
+    base = (baseline_view(Path(baseline), inp.manifest, campaign["ident"], inp.table, inp.results, inp.registry,
+                          Path(baseline_requirements) if baseline_requirements else None, n_boot)
+            if baseline else None)
+    created = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
+    context = template_context(inp, gate, campaign, base, created, n_boot)
+    html = render_html(context, inp.templates)
+    files = _Files(out, inp.csv_path)
+    write_text(files.html, html)
+    write_csv_rows(files.trace, traceability_rows(inp.registry, inp.results, run, inp.csv_path), TRACE_COLUMNS)
+    if files.pdf.exists():
+        files.pdf.unlink()  # never leave a PDF of an earlier report beside this one
+    pdf_error = None if pdf else "PDF not written (--no-pdf)"
+    faults = bool(context["faults"])
+
+    def finish(pdf_error: str | None) -> int:
+        exit_code = gate.exit_code(strict, pdf_error)
+        _finish(files, evidence_document(inp, gate, campaign["ident"], base, created=created, strict=strict,
+                                         files=files, faults=faults, n_unsafe=campaign["n_unsafe"],
+                                         pdf_error=pdf_error, exit_code=exit_code))
+        return exit_code
+
+    exit_code = finish(pdf_error)  # the JSON says the PDF will be there; rewritten if it could not be
+    if pdf:
+        pdf_error = write_pdf(html, files.pdf, files.attachments(faults))
+        exit_code = finish(pdf_error)
+    return EvidenceReport(out=out, html=files.html, json=files.json, pdf=None if pdf_error else files.pdf,
+                          pdf_error=pdf_error, states=gate.states, exit_code=exit_code, warnings=inp.warnings,
+                          problems=inp.problems, waived=gate.waived)

@@ -1,0 +1,70 @@
+"""Waivers: accepted deviations from failed requirements (``assurance/waivers.yaml``), and when they expire."""
+
+from __future__ import annotations
+
+import datetime as _dt
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from assurance import __version__
+
+WAIVER_FIELDS = ("id", "reason", "tracked_by", "owner", "expires")
+
+
+def load_waivers(path: str | Path) -> dict[str, dict[str, str]]:
+    """Accepted deviations: requirement id -> {reason, tracked_by, owner, expires} (``assurance/waivers.yaml``).
+
+    ``expires`` is a date (YYYY-MM-DD: the waiver holds until the end of that day) or a toolkit version
+    (X.Y.Z: it holds for versions before that one). ValueError naming the file for a malformed file, an
+    entry without one of the fields, an expiry that is neither, or a requirement waived twice.
+    """
+    import yaml
+
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+        raise ValueError(f"{path}: unreadable waivers file: {exc}") from None
+    if not isinstance(data, dict) or not isinstance(data.get("waivers") or [], list):
+        raise ValueError(f"{path}: a waivers file is a mapping with a list 'waivers'")
+    out: dict[str, dict[str, str]] = {}
+    for i, w in enumerate(data.get("waivers") or []):
+        if not isinstance(w, dict) or not all(str(w.get(k) or "").strip() for k in WAIVER_FIELDS):
+            raise ValueError(f"{path}: waiver {i + 1} needs an id, a reason, tracked_by, an owner and expires "
+                             "(a date YYYY-MM-DD or a version X.Y.Z)")
+        expires = str(w["expires"]).strip()
+        _expiry(expires, path, i)
+        rid = str(w["id"])
+        if rid in out:
+            raise ValueError(f"{path}: {rid} is waived twice")
+        out[rid] = {"reason": " ".join(str(w["reason"]).split()), "tracked_by": str(w["tracked_by"]),
+                    "owner": str(w["owner"]), "expires": expires}
+    return out
+
+
+def _version_tuple(text: str) -> tuple[int, ...]:
+    """A version X.Y.Z as a tuple of integers."""
+    return tuple(int(x) for x in text.split("."))
+
+
+def _expiry(expires: str, path: Path, i: int) -> tuple[str, Any]:
+    """A waiver's expiry as ('date', date) or ('version', tuple); ValueError naming the file and the waiver."""
+    import re
+
+    if re.fullmatch(r"\d{4}-\d{2}-\d{2}", expires):
+        try:
+            return "date", _dt.date.fromisoformat(expires)
+        except ValueError:
+            pass
+    elif re.fullmatch(r"\d+(\.\d+){0,2}", expires):
+        return "version", _version_tuple(expires)
+    raise ValueError(f"{path}: waiver {i + 1}: expires must be a date YYYY-MM-DD or a version X.Y.Z, got {expires!r}")
+
+
+def waiver_expired(waiver: Mapping[str, str], *, today: _dt.date | None = None, version: str = __version__) -> bool:
+    """Whether a waiver no longer holds: its date has passed, or this toolkit's version reached its version."""
+    kind, value = _expiry(waiver["expires"], Path("waivers"), 0)
+    if kind == "date":
+        return (today or _dt.datetime.now(_dt.UTC).date()) > value
+    return _version_tuple(version) >= value

@@ -1,0 +1,346 @@
+"""The campaign checks: plain functions of a run's readouts, results table or manifest (docs/architecture.md 4.6).
+
+Each returns an ``Evidence`` record (pass, fail or insufficient) and knows nothing of requirement ids:
+``assurance.requirements.catalogue`` ties each to its requirement (``@check``) and the registry's
+parameters. The determinism checks (re-run, recomputation) are in ``determinism``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import re
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from assurance.requirements.records import FAIL, INSUFFICIENT, PASS, Evidence
+from el.monitors.spec import walk_of
+from el.monitors.walk import walk_order
+
+
+def _ok_images(images: Any) -> Any:
+    if images is None or len(images) == 0:
+        return images
+    return images[images["fault"].fillna("") == ""]
+
+
+def _num(v: Any) -> float | None:
+    """A plain float for records (None for NaN, so JSON stays valid)."""
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        return None
+    return f if math.isfinite(f) else None
+
+
+def check_monitor_coverage(images: Any, candidates: Any) -> Evidence:
+    """EL-R04 on campaign readouts: every 'land' decision is on an accepted candidate, every candidate
+    walked before it (in the configuration's walk order, ``el.monitors.walk``) was rejected, and the two
+    readout tables agree on the decision.
+
+    ``images`` / ``candidates``: the run's tables (``assurance.readouts.load_table``).
+    """
+    name = "monitor coverage of every decision"
+    ok = _ok_images(images)
+    if ok is None or len(ok) == 0:
+        return Evidence(name, INSUFFICIENT, "no evaluated image in the readouts")
+    groups: dict[tuple, Any] = {}
+    if candidates is not None and len(candidates):
+        for key, g in candidates.groupby(["perturbation", "severity", "monitor", "key"], sort=False):
+            groups[key] = g.sort_values("rank")
+    violations: list[dict[str, Any]] = []
+    lands = 0
+    for row in ok.itertuples(index=False):
+        key = (row.perturbation, row.severity, row.monitor, row.key)
+        g = groups.get(key)
+        n = 0 if g is None else len(g)
+        accepted = np.zeros(0, bool) if g is None else g["accepted"].to_numpy(bool)
+        scores = g["score"].to_numpy(float) if g is not None and "score" in g.columns else np.zeros(n)
+        order = walk_order(list(scores), walk_of(row.monitor)) if n else []
+        flagged = np.zeros(0, bool) if g is None else g["selected"].to_numpy(bool)
+        ranks = np.zeros(0, int) if g is None else g["rank"].to_numpy(int)
+        sel = int(row.selected)
+        problem = ""
+        if int(row.candidates) != n:
+            problem = f"images table says {int(row.candidates)} candidates, candidates table has {n}"
+        elif row.action == "land":
+            lands += 1
+            if not 0 <= sel < n:
+                problem = f"landed on candidate {sel}, which does not exist"
+            elif not accepted[sel]:
+                problem = f"landed on candidate {sel}, which the monitor rejected"
+            elif any(accepted[k] for k in order[:order.index(sel)]):
+                first = next(k for k in order if accepted[k])
+                problem = f"landed on candidate {sel} although candidate {first}, walked before, was accepted"
+            elif not np.array_equal(flagged, ranks == sel):
+                problem = "candidates table disagrees with the images table on the selected candidate"
+        else:
+            if flagged.any():
+                problem = "default action but a candidate is flagged as selected"
+            elif accepted.any():
+                problem = f"default action although candidate {int(np.flatnonzero(accepted)[0])} was accepted"
+        if problem:
+            violations.append({"perturbation": row.perturbation, "severity": int(row.severity),
+                               "monitor": row.monitor, "image": row.key, "action": row.action, "problem": problem})
+    cols = ("perturbation", "severity", "monitor", "image", "action", "problem")
+    if violations:
+        return Evidence(name, FAIL, f"{len(violations)} decision(s) of {len(ok)} break monitor coverage "
+                        f"({lands} landings)", tuple(violations), cols)
+    return Evidence(name, PASS, f"all {lands} landing(s) of {len(ok)} decisions are on a monitor-accepted "
+                    "candidate with every candidate ranked before rejected", (), cols)
+
+
+def check_perturbation_coverage(images: Any, required: Sequence[str], min_images: int) -> Evidence:
+    """EL-R08 on campaign readouts: each required perturbation has >= ``min_images`` non-faulted images.
+
+    A missing perturbation or too few images is insufficient evidence (not a failure of the system).
+    """
+    name = "perturbation coverage"
+    ok = _ok_images(images)
+    rows = []
+    for p in required:
+        if ok is None or len(ok) == 0:
+            n, sev = 0, ""
+        else:
+            sub = ok[ok["perturbation"] == p]
+            n = int(sub["key"].nunique())
+            sev = ", ".join(str(int(s)) for s in sorted(sub["severity"].unique()))
+        faults = 0 if images is None or len(images) == 0 else int(
+            ((images["perturbation"] == p) & (images["fault"].fillna("") != "")).sum())
+        rows.append({"perturbation": p, "severities": sev or "-", "images": n, "faulted": faults,
+                     "enough": n >= min_images})
+    cols = ("perturbation", "severities", "images", "faulted", "enough")
+    short = [r["perturbation"] for r in rows if not r["enough"]]
+    if short:
+        return Evidence(name, INSUFFICIENT, f"insufficient evidence: {', '.join(short)} missing or with fewer "
+                        f"than {min_images} evaluated images", tuple(rows), cols)
+    return Evidence(name, PASS, f"all {len(required)} perturbations evaluated with >= {min_images} images each",
+                    tuple(rows), cols)
+
+
+def _deployed_rows(table: Any, monitor: str) -> Any:
+    if table is None or len(table) == 0:
+        return table
+    return table[table["monitor"] == monitor]
+
+
+def _finite(v: Any) -> bool:
+    try:
+        return math.isfinite(float(v))
+    except (TypeError, ValueError):
+        return False
+
+
+def check_safety_gain(table: Any, monitor: str, required: Sequence[str], min_images: int) -> Evidence:
+    """EL-R09: G* 95% lower bound > 0 for ``monitor`` in every evaluated scenario.
+
+    Insufficient when the monitor was not evaluated, a required perturbation is missing or has fewer
+    than ``min_images`` images, or a lower bound is undefined.
+    """
+    name = f"safety gain G* of the deployed monitor ({monitor})"
+    rows_df = _deployed_rows(table, monitor)
+    cols = ("perturbation", "severity", "images", "g_star", "g_star_lo95", "g_star_hi95", "verdict")
+    if rows_df is None or len(rows_df) == 0:
+        return Evidence(name, INSUFFICIENT, f"insufficient evidence: monitor {monitor!r} was not evaluated")
+    rows, fails, short = [], [], []
+    for r in rows_df.itertuples(index=False):
+        lo = r.g_star_lo95
+        if int(r.images) < min_images or not _finite(lo):
+            verdict = "insufficient"
+            short.append(f"{r.perturbation} (s{int(r.severity)})")
+        elif float(lo) > 0:
+            verdict = "pass"
+        else:
+            verdict = "fail"
+            fails.append(f"{r.perturbation} (s{int(r.severity)})")
+        rows.append({"perturbation": r.perturbation, "severity": int(r.severity), "images": int(r.images),
+                     "g_star": _num(r.g_star), "g_star_lo95": _num(lo), "g_star_hi95": _num(r.g_star_hi95),
+                     "verdict": verdict})
+    missing = [p for p in required if p not in set(rows_df["perturbation"])]
+    if fails:
+        return Evidence(name, FAIL, f"G* 95% lower bound <= 0 under {', '.join(fails)}", tuple(rows), cols)
+    if missing or short:
+        what = [f"{p} not evaluated" for p in missing] + [f"{s} has too few images or no interval" for s in short]
+        return Evidence(name, INSUFFICIENT, "insufficient evidence: " + "; ".join(what), tuple(rows), cols)
+    return Evidence(name, PASS, f"G* 95% lower bound > 0 in all {len(rows)} scenario(s)", tuple(rows), cols)
+
+
+def images_needed(bound: float, conf: float = 0.95) -> int:
+    """The fewest images for which zero unsafe landings give a one-sided upper bound <= ``bound``.
+
+    >>> images_needed(0.05)
+    59
+    """
+    if not 0 < bound < 1:
+        raise ValueError(f"bound must lie in (0, 1), got {bound!r}")
+    # Clopper-Pearson with k = 0: ub = 1 - (1 - conf) ** (1 / n)  <=  bound
+    return int(math.ceil(math.log(1.0 - conf) / math.log(1.0 - bound) - 1e-12))
+
+
+def _images_needed_text(rate: float, bound: float, conf: float) -> str:
+    n = images_needed_at(rate, bound, conf)
+    return "none at this rate" if n is None else str(n)
+
+
+def images_needed_at(rate: float, bound: float, conf: float = 0.95, limit: int = 10**6) -> int | None:
+    """The fewest images at which an observed unsafe-landing rate of ``rate`` would show ``bound`` (one-sided
+    Clopper-Pearson upper bound <= ``bound``); None when no sample can (``rate >= bound``, or past ``limit``).
+
+    >>> images_needed_at(0.0, 0.05), images_needed_at(0.06, 0.05)
+    (59, None)
+    """
+    from assurance.metrics import clopper_pearson_upper
+
+    if not 0 <= rate < bound:
+        return None
+
+    def shows(n: int) -> bool:
+        return clopper_pearson_upper(int(math.floor(rate * n + 1e-9)), n, conf) <= bound
+
+    hi = images_needed(bound, conf)
+    while not shows(hi):
+        hi *= 2
+        if hi > limit:
+            return None
+    lo = 1
+    while lo < hi:  # the smallest n that shows it (the bound falls with n at a fixed rate, floors aside)
+        mid = (lo + hi) // 2
+        lo, hi = (lo, mid) if shows(mid) else (mid + 1, hi)
+    return hi
+
+
+def check_unsafe_landing_bound(table: Any, monitor: str, bound: float, required: Sequence[str],
+                               conf: float = 0.95) -> Evidence:
+    """EL-R10: the unsafe-landing rate's one-sided upper bound <= ``bound`` for ``monitor``, per scenario.
+
+    A scenario whose bound exceeds ``bound`` fails when the sample was large enough for zero unsafe
+    landings to meet it; otherwise the sample is too small to decide (insufficient).
+    """
+    from assurance.metrics import clopper_pearson_upper
+
+    name = f"unsafe-landing rate of the deployed monitor ({monitor}), bound {bound:g}"
+    rows_df = _deployed_rows(table, monitor)
+    cols = ("perturbation", "severity", "images", "unsafe_landings", "unsafe_landing_rate", "unsafe_landing_ub95",
+            "over_bound_by", "images_needed", "verdict")
+    if rows_df is None or len(rows_df) == 0:
+        return Evidence(name, INSUFFICIENT, f"insufficient evidence: monitor {monitor!r} was not evaluated")
+    need = images_needed(bound, conf)
+    rows, fails, short = [], [], []
+    for r in rows_df.itertuples(index=False):
+        n = int(r.images)
+        k = int(round(float(r.unsafe_landing_rate) * n)) if n and _finite(r.unsafe_landing_rate) else 0
+        ub = float(r.unsafe_landing_ub95) if _finite(r.unsafe_landing_ub95) else math.nan
+        scen = f"{r.perturbation} (s{int(r.severity)})"
+        if n == 0 or not math.isfinite(ub):
+            verdict = "insufficient"
+            short.append(scen)
+        elif ub <= bound:
+            verdict = "pass"
+        elif clopper_pearson_upper(0, n, conf) > bound:
+            verdict = "insufficient"
+            short.append(scen)
+        else:
+            verdict = "fail"
+            fails.append(scen)
+        rows.append({"perturbation": r.perturbation, "severity": int(r.severity), "images": n,
+                     "unsafe_landings": k, "unsafe_landing_rate": _num(r.unsafe_landing_rate),
+                     "unsafe_landing_ub95": _num(ub),
+                     "over_bound_by": _num(ub - bound) if math.isfinite(ub) and ub > bound else 0.0,
+                     "images_needed": _images_needed_text(k / n if n else 0.0, bound, conf), "verdict": verdict})
+    missing = [p for p in required if p not in set(rows_df["perturbation"])]
+    if fails:
+        return Evidence(name, FAIL, f"upper bound > {bound:g} under {', '.join(fails)} (images_needed: the images "
+                        "at which the observed rate would show the bound)", tuple(rows), cols)
+    if missing or short:
+        what = [f"{p} not evaluated" for p in missing]
+        if short:
+            what.append(f"{', '.join(short)}: too few images to show {bound:g} (needs >= {need} images with no "
+                        "unsafe landing)")
+        return Evidence(name, INSUFFICIENT, "insufficient evidence: " + "; ".join(what), tuple(rows), cols)
+    return Evidence(name, PASS, f"upper bound <= {bound:g} in all {len(rows)} scenario(s)", tuple(rows), cols)
+
+
+def check_decision_time(images: Any, monitor: str, budget_s: float) -> Evidence:
+    """EL-R13: every image's decision time with ``monitor`` (segmentation + candidates + the walk's
+    monitoring overhead) is within ``budget_s`` on the campaign's machine."""
+    name = f"decision time of the deployed monitor ({monitor}) within {budget_s:g} s"
+    ok = _ok_images(images)
+    cols = ("perturbation", "severity", "images", "mean_s", "p95_s", "max_s", "over_budget")
+    if ok is None or len(ok) == 0 or not (ok["monitor"] == monitor).any():
+        return Evidence(name, INSUFFICIENT, f"insufficient evidence: monitor {monitor!r} was not evaluated")
+    sub = ok[ok["monitor"] == monitor]
+    t = (sub["segmentation_s"].astype(float) + sub["candidates_s"].astype(float) + sub["overhead_s"].astype(float))
+    sub = sub.assign(decision_s=t)
+    rows = []
+    for (p, s), g in sub.groupby(["perturbation", "severity"], sort=False):
+        d = g["decision_s"].to_numpy(float)
+        rows.append({"perturbation": p, "severity": int(s), "images": len(d), "mean_s": _num(d.mean()),
+                     "p95_s": _num(np.percentile(d, 95)), "max_s": _num(d.max()),
+                     "over_budget": int((d > budget_s).sum())})
+    over = int((t > budget_s).sum())
+    if over:
+        return Evidence(name, FAIL, f"{over} of {len(t)} decisions took longer than {budget_s:g} s "
+                        f"(max {t.max():.2f} s)", tuple(rows), cols)
+    return Evidence(name, PASS, f"all {len(t)} decisions within {budget_s:g} s (max {t.max():.2f} s)",
+                    tuple(rows), cols)
+
+
+def pose_margin(core: Any, size: tuple[int, int], pose_error: Mapping[str, float]) -> tuple[dict[str, Any], float]:
+    """The pose-error margin at working resolution: (a row with beta and the required beta rounded, the required
+    beta) for the pose-error box.
+
+    ``core``: a CoreConfig or its dict (``CoreConfig.to_dict``); ``size``: the input image (W, H).
+    """
+    from el.camera import CameraGeometry, required_beta, working_size
+    from el.config import CoreConfig
+
+    cfg = core if isinstance(core, CoreConfig) else CoreConfig.from_dict(dict(core))
+    w, h = working_size(int(size[0]), int(size[1]), cfg.working_width)
+    geo = CameraGeometry(width=w, height=h, intrinsics=cfg.intrinsics, pose=cfg.pose)
+    he, pe = float(pose_error["height"]), float(pose_error["pitch"])
+    need = required_beta(geo, height_error=he, pitch_error=pe)
+    return {"working_size": f"{w}x{h}", "height_m": cfg.pose.height_m, "pitch_deg": cfg.pose.pitch_deg,
+            "height_error": he, "pitch_error": pe, "beta": float(cfg.safety.beta),
+            "required_beta": round(need, 4)}, need
+
+
+def check_pose_margin(core: Any, size: tuple[int, int], pose_error: Mapping[str, float]) -> Evidence:
+    """EL-R14: beta >= the beta required for the pose-error box, at working resolution (``pose_margin``)."""
+    row, need = pose_margin(core, size, pose_error)
+    beta, he, pe = row["beta"], row["height_error"], row["pitch_error"]
+    rel = ">=" if beta >= need else "<"
+    verdict = f"beta {beta:g} {rel} required {need:.3f} for +-{he:.0%} height, +-{pe:.0%} pitch"
+    return Evidence("pose-error margin of beta", PASS if beta >= need else FAIL, verdict, (row,), tuple(row))
+
+
+def _sha(v: Any) -> bool:
+    return isinstance(v, str) and re.fullmatch(r"[0-9a-f]{64}", v) is not None
+
+
+def check_artefacts_identified(manifest: Mapping[str, Any]) -> Evidence:
+    """EL-R12 on a run: its manifest identifies weights and data by SHA-256, and the code by version and commit."""
+    rows = [
+        {"artefact": "weights", "identity": (manifest.get("weights") or {}).get("sha256")},
+        {"artefact": "data", "identity": (manifest.get("data") or {}).get("sha256")},
+        {"artefact": "configuration", "identity": config_sha256(manifest.get("config") or {})
+         if manifest.get("config") else None},
+        {"artefact": "code", "identity": (manifest.get("code") or {}).get("git_commit")},
+    ]
+    bad = [r["artefact"] for r in rows[:3] if not _sha(r["identity"])]
+    if not rows[3]["identity"]:
+        bad.append("code (no git commit recorded)")
+    cols = ("artefact", "identity")
+    if bad:
+        return Evidence("artefacts identified by the run manifest", FAIL,
+                        f"the run manifest does not identify: {', '.join(bad)}", tuple(rows), cols)
+    return Evidence("artefacts identified by the run manifest", PASS,
+                    "weights, data and configuration identified by SHA-256, code by git commit", tuple(rows), cols)
+
+
+def config_sha256(config: Mapping[str, Any]) -> str:
+    """SHA-256 of a configuration as canonical JSON (sorted keys, no spaces)."""
+    text = json.dumps(config, sort_keys=True, separators=(",", ":"), default=str)
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
