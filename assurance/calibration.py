@@ -171,8 +171,8 @@ def check_calibrated_miss_rate(candidates: Any, card: Any, perturbation: str = "
 
     Reads the calibrated configuration's rows, or else the base monitor's scores judged at the card's threshold.
     """
-    from assurance import requirements as rq
     from assurance.metrics import clopper_pearson_interval
+    from assurance.requirements import records as rq
 
     name = f"miss rate of the calibrated monitor ({card.spec}) <= {card.body['miss_rate']:g}"
     if candidates is None or len(candidates) == 0:

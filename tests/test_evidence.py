@@ -394,7 +394,8 @@ def test_shipped_waivers_name_an_owner_and_have_not_expired():
     from assurance.evidence import ROOT, load_waivers, waiver_expired
 
     waivers = load_waivers(ROOT / "assurance" / "waivers.yaml")
-    assert waivers["EL-R09"]["owner"] == "segmentation maintainers"
+    assert waivers and all(w["owner"] and w["tracked_by"] for w in waivers.values())
+    assert "EL-R09" not in waivers  # decided on the release run: no waiver needed (issue 21)
     assert not [rid for rid, w in waivers.items() if waiver_expired(w)], "a shipped waiver expired: fix or renew it"
 
 
