@@ -50,6 +50,7 @@ class Inputs:
 
     @property
     def deployed(self) -> str:
+        """The deployed monitor configuration (the registry's parameter)."""
         return self.registry.parameters["deployed_monitor"]
 
 
