@@ -15,7 +15,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from assurance.campaign import preset_config, run_campaign
+from assurance.campaign import run_campaign
+from assurance.presets import preset_config
 from el.monitors import DEMO_GRID
 
 

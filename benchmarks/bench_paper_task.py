@@ -31,7 +31,8 @@ def main(argv: list[str] | None = None) -> int:
 
     import torch
 
-    from assurance.campaign import plan, preset_config, run_task
+    from assurance.campaign import plan, run_task
+    from assurance.presets import preset_config
     from el.segmentation import Segmenter
 
     torch.set_num_threads(1)

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from assurance.campaign import preset_config, resolve_monitors
 from assurance.headline import BEGIN, END, HeadlineError, current_block, headline_markdown, write_block
+from assurance.presets import preset_config, resolve_monitors
 from assurance.table import results_table
 from el.monitors import DEMO_GRID
 from el.pipeline import PipelineConfig

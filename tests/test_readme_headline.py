@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from assurance.campaign import preset_config
 from assurance.headline import current_block, headline_markdown, release_parameters
+from assurance.presets import preset_config
 from assurance.readouts import read_manifest
 from assurance.table import results_table
 

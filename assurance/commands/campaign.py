@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import argparse
 
-from assurance.campaign import describe, load_presets, preset_config, run_campaign
+from assurance.campaign import describe, run_campaign
 from assurance.errors import CommandError
+from assurance.presets import load_presets, preset_config
 
 HELP = "run or resume an evaluation campaign (perturbations x test images x monitor configurations)"
 

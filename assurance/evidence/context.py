@@ -170,7 +170,7 @@ def _parameter_text(v: Any) -> str:
 def run_scope(inp: Inputs, states: dict[str, str]) -> dict[str, Any] | None:
     """For a run smaller than the release preset (e.g. the demo): its size, the requirements it leaves
     undecided and the command that decides them; None for a release-sized run."""
-    from assurance.campaign import preset_config
+    from assurance.presets import preset_config
 
     release = preset_config("release")
     ok = inp.images[inp.images["fault"].fillna("") == ""] if inp.images is not None and len(inp.images) else None
