@@ -23,7 +23,8 @@ $(VENV)/.installed: pyproject.toml constraints.txt
 
 ## The main job on the embedded default: synthetic test scenes -> shipped model -> demo campaign
 ## -> requirement tests -> evidence report (reports/evidence.html and .pdf).
-demo: setup scenes campaign evidence
+demo: setup scenes campaign
+	@$(MAKE) --no-print-directory evidence DEMO_GATE=report
 	@echo "Evidence report: $(REPORTS)/evidence.html and $(REPORTS)/evidence.pdf"
 
 scenes: setup
@@ -38,14 +39,19 @@ campaign: setup
 requirements: setup
 	$(PY) -m pytest -q -m requirements --uav-el-run $(RUN) --requirements-report $(REPORTS)/requirements.json
 
-## The evidence step (also run by CI): requirement tests (a failure is reported by the gate; their JUnit XML
+## The evidence step (also run by CI; `make demo` reports a failed gate of its demo-sized run without failing,
+## any other error still fails): requirement tests (a failure is reported by the gate; their JUnit XML
 ## carries one comma-joined `requirements` property per test), then the report (HTML, PDF/A-3b with the
 ## JSON, CSVs, JUnit XML and SHA256SUMS attached, traceability.csv).
 evidence: setup
 	-$(PY) -m pytest -q -m requirements --uav-el-run $(RUN) --requirements-report $(REPORTS)/requirements.json \
 		--junitxml $(REPORTS)/junit.xml
 	$(PY) -m assurance fault-table --out $(REPORTS)/faults.csv
-	$(PY) -m assurance evidence --run $(RUN) --out $(REPORTS) --waivers assurance/waivers.yaml
+	@rc=0; $(PY) -m assurance evidence --run $(RUN) --out $(REPORTS) --waivers assurance/waivers.yaml || rc=$$?; \
+	if [ $$rc -eq 1 ] && [ "$(DEMO_GATE)" = report ]; then \
+		echo "The gate failed on this demo-sized run (page 1 of the report says why); it is reported, not enforced:"; \
+		echo "the gate that decides is the release run's (make release-evidence, CI)."; \
+	elif [ $$rc -ne 0 ]; then exit $$rc; fi
 
 ## The release evidence (CI's gate): the 70 test scenes x 6 perturbations x the deployed configuration and the
 ## paper's 4 headline ones (about 20 min on 2 cores), its requirement tests and report, and the check that the
