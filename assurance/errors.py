@@ -1,4 +1,8 @@
-"""The harness's own exceptions, on the project's one root (``el.errors.UavElError``)."""
+"""The harness's own exceptions, on the project's one root (``el.errors.UavElError``).
+
+The harness's other expected failures derive from the same root where they are defined:
+``readouts.RunError`` / ``DamagedRunError``, ``requirements.RegistryError``, ``headline.HeadlineError``,
+``sweep.SweepError`` (each also a ``ValueError``)."""
 
 from __future__ import annotations
 

@@ -14,6 +14,7 @@ from typing import Any
 import pandas as pd
 
 from assurance import readouts
+from el.errors import UavElError
 from el.hashing import sha256_file
 from el.uavid import atomic_write_bytes
 
@@ -21,7 +22,7 @@ BEGIN = "<!-- headline-table:begin (written by `uav-el table RUN --readme README
 END = "<!-- headline-table:end -->"
 
 
-class HeadlineError(ValueError):
+class HeadlineError(UavElError, ValueError):
     """A README without the markers, or a run without the deployed configuration."""
 
 

@@ -29,6 +29,7 @@ from typing import Any
 
 import pandas as pd
 
+from el.errors import UavElError
 from el.hashing import sha256_file
 from el.uavid import atomic_write_bytes, public_mode
 
@@ -53,7 +54,7 @@ COLUMNS: dict[str, tuple[str, ...]] = {
 _SAFE = re.compile(r"[^A-Za-z0-9_.-]+")
 
 
-class RunError(ValueError):
+class RunError(UavElError, ValueError):
     """A run folder is missing, not a run, or belongs to another campaign."""
 
 

@@ -15,13 +15,14 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from el.errors import UavElError
 from el.monitors.spec import walk_of
 from el.monitors.walk import HAZARD, check_walk
 
 IMAGE_KEYS = ["perturbation", "severity", "key"]
 
 
-class SweepError(ValueError):
+class SweepError(UavElError, ValueError):
     """A run that cannot be swept for this monitor (no scores, no such configuration)."""
 
 

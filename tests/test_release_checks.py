@@ -38,3 +38,16 @@ def test_unsafe_landing_failure_says_by_how_much():
     row = ev.rows[0]
     assert ev.status == FAIL and abs(row["over_bound_by"] - 0.1296) < 1e-9
     assert row["images_needed"] == "none at this rate" and row["unsafe_landings"] == 7
+
+
+def test_harness_errors_share_the_project_root():
+    from assurance.errors import CommandError
+    from assurance.headline import HeadlineError
+    from assurance.readouts import DamagedRunError, RunError
+    from assurance.requirements import RegistryError
+    from assurance.sweep import SweepError
+    from el.errors import UavElError
+
+    for cls in (CommandError, HeadlineError, RunError, DamagedRunError, RegistryError, SweepError):
+        assert issubclass(cls, UavElError), cls
+    assert all(issubclass(c, ValueError) for c in (HeadlineError, RunError, RegistryError, SweepError))

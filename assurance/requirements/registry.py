@@ -16,6 +16,8 @@ from typing import Any
 
 import yaml
 
+from el.errors import UavElError
+
 REGISTRY_FORMAT = "uav-el-requirements/1"
 KNOWN_SOURCES: tuple[str, ...] = ("SORA", "SSIV21", "ICRA22", "PROJECT")
 """The only sources a requirement may cite (docs/architecture.md section 4.6: never invent a citation)."""
@@ -34,7 +36,7 @@ _PARAMETERS: dict[str, type | tuple[type, ...]] = {
 }
 
 
-class RegistryError(ValueError):
+class RegistryError(UavElError, ValueError):
     """The requirement registry is missing, malformed or inconsistent; the message names file and entry."""
 
 
