@@ -26,7 +26,8 @@ from el.uavid import iter_samples
 CONFIGS = ("none", "lhd", "lhd+ch:tau=0.25", "lhd+mcd:n=10,rho=0.9", "lhd+mcd:n=30,rho=0.9",
            DEPLOYED_MONITOR)
 LABELS = {"none": "CM only", "lhd": "CM + LHD", "lhd+ch:tau=0.25": "CM + LHD + CH (0.25)",
-          "lhd+mcd:n=10,rho=0.9": "CM + LHD + MCD n=10", "lhd+mcd:n=30,rho=0.9": "CM + LHD + MCD n=30"}
+          "lhd+mcd:n=10,rho=0.9": "CM + LHD + MCD n=10", "lhd+mcd:n=30,rho=0.9": "CM + LHD + MCD n=30",
+          DEPLOYED_MONITOR: "CM + learned, score walk (deployed)"}
 
 
 def peak_rss_mb() -> float:
