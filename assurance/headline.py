@@ -38,8 +38,7 @@ def headline_markdown(run: str | Path, table: pd.DataFrame, deployed: str,
         raise HeadlineError(f"{run}: the run has no configuration {deployed!r} (the deployed monitor)")
     images = readouts.load_table(run, "images")
     mine = images[(images["monitor"] == deployed) & (images["fault"].fillna("") == "")]
-    cm_alone = mine["h_top"].fillna(mine["h_default"])  # no candidate: the CM alone takes the default action
-    cm_unsafe = (cm_alone >= 1.0).groupby(mine["perturbation"]).sum().astype(int)
+    cm_unsafe = (readouts.core_hazard(mine) >= 1.0).groupby(mine["perturbation"]).sum().astype(int)
     man = readouts.read_manifest(run)
     card = ""
     if calibration_card:

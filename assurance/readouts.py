@@ -232,6 +232,12 @@ def read_manifest(run_dir: str | Path) -> dict[str, Any]:
     return json.loads(path.read_text())
 
 
+def core_hazard(images: pd.DataFrame) -> pd.Series:
+    """Per image row, the true hazard of the core model's choice ``c~``: its top candidate, or the default
+    area when it found none (``h_top`` is NaN then), as ``assurance.metrics.ImageReadout.h_core``."""
+    return images["h_top"].fillna(images["h_default"])
+
+
 def load_table(run_dir: str | Path, table: str) -> pd.DataFrame:
     """Concatenate one table over every finished shard, in a fixed (sorted) order."""
     if table not in TABLES:

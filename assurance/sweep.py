@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from assurance.readouts import core_hazard
 from el.errors import UavElError
 from el.monitors.spec import walk_of
 from el.monitors.walk import HAZARD, check_walk
@@ -93,7 +94,7 @@ def sweep(images: pd.DataFrame, candidates: pd.DataFrame, monitor: str,
                 "unsafe_landings": int((g["h_decision"] >= 1.0).sum()),
                 "unsafe_landing_rate": float((g["h_decision"] >= 1.0).mean()),
                 "g_star": float((g["h_default"] - g["h_decision"]).mean()),
-                "g_rm": float((g["h_top"] - g["h_decision"]).mean()),
+                "g_rm": float((core_hazard(g) - g["h_decision"]).mean()),
                 "default_rate": float((g["action"] == "default").mean()),
                 "miss_rate": float((~rej & u).sum() / u.sum()) if u.any() else float("nan"),
                 "fp_rate": float((rej & s).sum() / s.sum()) if s.any() else float("nan"),

@@ -80,3 +80,13 @@ def test_sweep_files_are_written(tmp_path):
     assert "m (chosen)" in md and "m (run)" in md
     assert (tmp_path / "sweep.png").stat().st_size > 1000
     assert pd.read_csv(tmp_path / "sweep.csv")["threshold"].nunique() == table["threshold"].nunique()
+
+
+def test_g_rm_counts_an_image_without_candidates_against_the_default_area():
+    images, cands = _toy()
+    empty = images.iloc[[1]].assign(key="c", h_top=float("nan"), h_default=1.0)
+    table = sweep(pd.concat([images, empty], ignore_index=True), cands, "m", thresholds=[0.5])
+    row = table.iloc[0]
+    assert row["images"] == 3 and row["unsafe_landings"] == 1  # c's default area
+    # a: 1.0 -> 0.1 (the unsafe top candidate rejected), b: 0.3 -> 0.3, c: no candidate, 1.0 -> 1.0
+    assert row["g_rm"] == pytest.approx((0.9 + 0.0 + 0.0) / 3)
