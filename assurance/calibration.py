@@ -88,8 +88,10 @@ def calibrate_threshold(unsafe_scores: Any, miss_rate: float, confidence: float)
 
 
 def calibration_body(scores: Any, unsafe: Any, *, monitor: str, miss_rate: float, confidence: float,
-                     split: dict[str, Any], weights: dict[str, Any]) -> dict[str, Any]:
-    """The card body: the calibrated threshold from the candidates' scores and truths, with what it rests on."""
+                     split: dict[str, Any], weights: dict[str, Any],
+                     monitor_model: str | None = None) -> dict[str, Any]:
+    """The card body: the calibrated threshold from the candidates' scores and truths, with what it rests on
+    (``monitor_model``: the SHA-256 of the monitor's fitted model file, if it has one)."""
     base = parse_monitor_spec(monitor)
     if base is None:
         raise CalibrationError("'none' has no threshold to calibrate")
@@ -112,7 +114,7 @@ def calibration_body(scores: Any, unsafe: Any, *, monitor: str, miss_rate: float
                       f"from the calibration distribution is accepted with probability at most {miss_rate:g} "
                       f"(Clopper-Pearson bound of this sample: {res['bound']:.4f})"),
         "method": "order statistic + binomial tail (Wilks 1941; Clopper-Pearson 1934); assurance/calibration.py",
-        "split": split, "weights": weights,
+        "split": split, "weights": weights, "monitor_model": {"sha256": monitor_model},
         "created": _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC"),
     }
 
@@ -133,6 +135,9 @@ def calibrate_on_data(data: str | Path, monitor: str, *, miss_rate: float, confi
     base = parse_monitor_spec(monitor)
     if base is None:
         raise CalibrationError("'none' has no threshold to calibrate")
+    from el.monitors import build_monitor
+
+    monitor_model = build_monitor(base.base.name).model_sha256  # a missing or altered model file fails here
     config = CampaignConfig(perturbations=("none",), monitors=(base.base.name,), images=images, weights=weights,
                             core=core or CoreConfig())
     tasks = plan(data, config)
@@ -161,15 +166,19 @@ def calibrate_on_data(data: str | Path, monitor: str, *, miss_rate: float, confi
                "perturbation": "none"},
         weights={"path": shown_path(w), "sha256": sha256_file(w) if w.is_file() else None,
                  "segmenter": "weights" if weights or w.is_file() else type(segmenter).__name__},
+        monitor_model=monitor_model,
     )
     return card_document(body)
 
 
-def check_calibrated_miss_rate(candidates: Any, card: Any, perturbation: str = "none") -> Any:
+def check_calibrated_miss_rate(candidates: Any, card: Any, perturbation: str = "none",
+                               run_models: dict[str, str] | None = None) -> Any:
     """EL-R16: on a campaign's readouts (the test split), the calibrated monitor's empirical miss rate (truly
     unsafe candidates it accepts) is at most the card's miss rate.
 
     Reads the calibrated configuration's rows, or else the base monitor's scores judged at the card's threshold.
+    ``run_models`` (the run manifest's ``monitor_models``): a card calibrated on another fitted model than
+    the one that scored the rows fails; its threshold does not mean the same on that model's scores.
     """
     from assurance.metrics import clopper_pearson_interval
     from assurance.requirements import records as rq
@@ -186,6 +195,11 @@ def check_calibrated_miss_rate(candidates: Any, card: Any, perturbation: str = "
     if sub.empty:
         return rq.Evidence(name, rq.INSUFFICIENT, f"insufficient evidence: neither {card.spec!r} nor the scores "
                            f"of {card.monitor!r} were recorded under {perturbation!r}")
+    used = str(sub["monitor"].iloc[0])
+    card_model = (card.body.get("monitor_model") or {}).get("sha256")
+    if run_models is not None and (run_models.get(used) or None) != card_model:
+        return rq.Evidence(name, rq.FAIL, f"the card was calibrated on monitor model {card_model!r}, the run's "
+                           f"{used!r} scored with {run_models.get(used)!r}: recalibrate or re-run the campaign")
     unsafe = sub[sub["true_unsafe"].astype(bool)]
     n, k = len(unsafe), int(unsafe["accepted"].astype(bool).sum())
     if n == 0:

@@ -261,6 +261,7 @@ def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *,
                  "sha256": h.hexdigest()},
         "weights": {"path": str(weights), "sha256": sha256_file(weights) if weights.is_file() else None,
                     **_frame_protocol(weights)},
+        "monitor_models": monitor_models(config.monitors),
         "tasks": len(tasks),
         "integrity": readouts.INTEGRITY,
         "shard_order": [t.shard_name for t in tasks],
@@ -270,6 +271,21 @@ def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *,
         "versions": {"python": sys.version.split()[0], "numpy": np.__version__, "torch": torch.__version__,
                      "platform": platform.platform()},
     }
+
+
+def monitor_models(specs: Sequence[str]) -> dict[str, str]:
+    """SHA-256 of the fitted model file each configuration's scores rest on (learned monitors), by spec.
+
+    Recorded in the manifest: a resumed run must score with the same models, and a calibration card
+    is checked against the model the run used (EL-R16)."""
+    from el.monitors import build_monitor
+
+    out: dict[str, str] = {}
+    for spec in specs:
+        digest = getattr(build_monitor(spec), "model_sha256", None)
+        if digest:
+            out[spec] = digest
+    return out
 
 
 def _frame_protocol(weights: Path) -> dict[str, Any]:

@@ -33,7 +33,7 @@ from el.uavid import read_image
 
 Clock = Callable[[], float]
 DEFAULT_TIME_BUDGET_S = 10.0
-DEPLOYED_MONITOR = "learned:walk=score,threshold=0.8311235265072014"
+DEPLOYED_MONITOR = "learned:walk=score,threshold=0.8563253044730293"
 """The shipped runtime monitor, chosen on the validation split (README, "The deployed monitor"): the learned
 candidate monitor (``el/monitors/data/learned.json``), candidates walked by its score (``el.monitors.walk``),
 at the threshold of its calibration card :data:`DEPLOYED_CALIBRATION` (a test checks they agree)."""
@@ -183,6 +183,10 @@ class EmergencyLanding:
                 spec, margin=self.config.patch_margin,
                 max_side=self.config.patch_max_side, clock=clock,
             )
+            if self.config.calibration:
+                from el.monitors.calibration import check_card_monitor, load_calibration
+
+                check_card_monitor(load_calibration(self.config.calibration), self.monitor)
         except Exception as exc:
             self.fault = self.fault or f"fault: monitor: {type(exc).__name__}: {exc}"
             logger.exception("runtime monitor %r not built; every decision will be the default action",

@@ -28,7 +28,8 @@ def test_flight_default_registry_and_card_name_the_same_configuration():
 def test_shipped_monitor_files_rest_on_the_shipped_weights():
     weights = sha256_file(DEFAULT_WEIGHTS)
     assert load_calibration(DEPLOYED_CALIBRATION).body["weights"]["sha256"] == weights
-    body, _ = read_signed(DEFAULT_MODEL, "uav-el-learned-monitor/1", "learned monitor", ValueError)
+    body, digest = read_signed(DEFAULT_MODEL, "uav-el-learned-monitor/1", "learned monitor", ValueError)
     assert body["weights"]["sha256"] == weights
+    assert load_calibration(DEPLOYED_CALIBRATION).body["monitor_model"]["sha256"] == digest  # calibrated on it
     for f in (DEPLOYED_CALIBRATION, DEFAULT_MODEL, DEFAULT_MODEL.with_name("ood.json")):
         assert "/work/" not in f.read_text() and "\\\\" not in f.read_text()  # no machine paths recorded

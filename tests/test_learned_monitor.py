@@ -108,6 +108,39 @@ def test_features_are_what_the_frame_and_patch_show():
     assert f["hd_forbidden_fraction"] == 0 and f["lr_forbidden_fraction"] == 0 and f["hd_max_margin"] < 0
     assert f["edge_distance_radii"] == pytest.approx(np.hypot(40.5 - 24, 0.5) / 8 - 1)
     assert f["row"] == 0.5 and f["radius"] == 8 / 64 and f["hazard"] == 0.1
+    # Context: the road starts 8 px (one radius) beyond the disc's edge, so only the 3-radii disc reaches it.
+    assert f["ctx1.5_max_forbidden_p"] == 0 and f["ctx2_max_forbidden_p"] == 0
+    assert f["ctx3_max_forbidden_p"] == pytest.approx(1) and 0 < f["ctx3_mean_forbidden_p"] < 0.5
+    assert f["hd_max_p_road"] == 0 and f["lr_max_p_road"] == 0 and f["hd_max_p_building"] == 0
+    ids[28:36, 20:28] = CLASS_IDS["static_car"]  # a car in the disc
+    rgb = ids_to_colors(ids)
+    patch = extract_patch(rgb, cand, margin=1.5)
+    g = dict(zip(BASE_FEATURES, candidate_features(seg.predict_patch(patch.rgb), patch,
+                                                   CandidateContext(cand, seg.predict_frame(rgb), (64, 64)),
+                                                   margin=1.5), strict=True))
+    assert g["hd_max_p_static_car"] == 1 and g["lr_max_p_static_car"] == pytest.approx(1)
+    assert g["ctx1.5_max_forbidden_p"] == pytest.approx(1) and g["hd_max_p_road"] == 0
+
+
+def test_a_model_on_a_subset_of_the_features_still_loads_and_unknown_ones_are_refused(model_file, tmp_path):
+    from el.monitors.learned import BASE_FEATURES, CORE_FEATURES, LearnedModelError, load_learned_model, model_document
+
+    body = json.loads(model_file.read_text())["body"]
+    full = load_learned_model(model_file)
+    x = np.linspace(0.0, 1.0, len(BASE_FEATURES))
+    keep = [BASE_FEATURES.index(n) for n in CORE_FEATURES]  # a model fitted before the context features
+    old = dict(body, features=list(CORE_FEATURES), **{k: [body[k][i] for i in keep] for k in ("mean", "scale", "coef")})
+    path = tmp_path / "old.json"
+    path.write_text(json.dumps(model_document(old)))
+    m = load_learned_model(path)
+    z = ((x[keep] - full.mean[keep]) / full.scale[keep]) @ full.coef[keep] + full.intercept
+    assert m.predict(x) == pytest.approx(1 / (1 + np.exp(-z)))
+    with pytest.raises(ValueError, match="expected candidate feature vectors"):
+        m.predict(x[keep])
+    for names in (["no_such_feature"] + list(CORE_FEATURES[1:]), list(CORE_FEATURES[:1]) * 12):
+        path.write_text(json.dumps(model_document(dict(old, features=names))))
+        with pytest.raises(LearnedModelError, match="not a subset"):
+            load_learned_model(path)
 
 
 def test_pipeline_uses_it_by_name_and_a_bad_file_is_the_default_action(model_file, splits, tmp_path):
@@ -165,3 +198,73 @@ def test_campaign_and_calibration_by_name(model_file, splits, tmp_path):
     assert len(mine) and mine["score"].between(0, 1).all()
     doc = calibrate_on_data(val, spec, miss_rate=0.3, confidence=0.7, segmenter=RoadBlindFrame(WW), core=CORE)
     assert doc["body"]["monitor"] == spec and doc["body"]["spec"].startswith(spec + ",threshold=")
+
+
+def test_card_run_and_monitor_must_rest_on_the_same_learned_model(model_file, splits, tmp_path):
+    """A threshold calibrated on one learned model is refused on another: in flight (default action), at the
+    campaign (resuming with another model), and by EL-R16 (the run scored with another model)."""
+    from assurance import readouts
+    from assurance.calibration import calibrate_on_data, check_calibrated_miss_rate
+    from assurance.campaign import CampaignConfig, run_campaign
+    from el.monitors.calibration import load_calibration
+    from el.monitors.learned import load_learned_model, model_document
+    from el.pipeline import EmergencyLanding, PipelineConfig
+
+    _, val = splits
+    spec = f"learned:model={model_file}"
+    card_path = tmp_path / "card.json"
+    card_path.write_text(json.dumps(calibrate_on_data(val, spec, miss_rate=0.3, confidence=0.7,
+                                                      segmenter=RoadBlindFrame(WW), core=CORE)))
+    card = load_calibration(card_path)
+    assert card.body["monitor_model"]["sha256"] == load_learned_model(model_file).sha256
+    run = tmp_path / "run"
+    config = CampaignConfig(perturbations=("none",), monitors=(spec,), core=CORE)
+    assert run_campaign(val, run, config, progress=False, segmenter=RoadBlindFrame(WW))["faults"] == []
+    assert readouts.read_manifest(run)["monitor_models"] == {spec: card.body["monitor_model"]["sha256"]}
+    cands = readouts.load_table(run, "candidates")
+    models = readouts.read_manifest(run)["monitor_models"]
+    same = check_calibrated_miss_rate(cands, card, run_models=models)
+    assert same.rows and "unsafe candidates accepted" in same.summary  # judged on its miss rate
+
+    # Refit in place (another model under the same path): the card, the run and the monitor no longer agree.
+    body = json.loads(model_file.read_text())["body"]
+    other = tmp_path / "learned.json"
+    other.write_text(json.dumps(model_document(dict(body, intercept=body["intercept"] + 0.5))))
+    foreign = check_calibrated_miss_rate(cands, card, run_models={spec: load_learned_model(other).sha256})
+    assert foreign.status == "fail" and "calibrated on monitor model" in foreign.summary
+    image = next(val.glob("**/Images/*.png"))
+    original = model_file.read_text()
+    try:
+        model_file.write_text(other.read_text())
+        d = EmergencyLanding(PipelineConfig(core=CORE, monitor=spec, calibration=str(card_path)),
+                             segmenter=RoadBlindFrame(WW)).decide(image)
+        assert d.action == "default" and "recalibrate" in d.reason, d.reason
+        with pytest.raises(readouts.RunError, match="monitor_models"):
+            run_campaign(val, run, config, progress=False, segmenter=RoadBlindFrame(WW))
+    finally:
+        model_file.write_text(original)
+    d = EmergencyLanding(PipelineConfig(core=CORE, monitor=spec, calibration=str(card_path)),
+                         segmenter=RoadBlindFrame(WW)).decide(image)
+    assert not d.reason.startswith("fault"), d.reason
+
+
+def test_context_windows_give_what_the_whole_frame_gives():
+    """The context statistics are read from a window around the candidate: the same numbers, bit for bit,
+    as masking the whole frame (discs near the border, and smaller than a working pixel, included)."""
+    from el.decision import Candidate, Disc
+    from el.monitors.learned import _FORBIDDEN, CONTEXT_SCALES, context_stats, frame_disc_mask
+    from el.monitors.lhd import take_disc
+
+    rng = np.random.default_rng(3)
+    frame = rng.random((8, 36, 64)).astype(np.float32)
+    frame /= frame.sum(axis=0)
+    scale = 64 / 256
+    for _ in range(60):
+        cand = Candidate(0, float(rng.uniform(0, 256)), float(rng.uniform(0, 144)), float(rng.uniform(0.5, 60)),
+                         0.1, 0.1, 0.1)
+        want = []
+        for k in CONTEXT_SCALES:
+            mask = frame_disc_mask(frame.shape[1:], Disc(cand.x, cand.y, cand.radius_px * k), scale)
+            p = take_disc(frame, mask)[_FORBIDDEN].astype(np.float64).sum(axis=0)
+            want += [float(p.max()), float(p.mean())]
+        assert context_stats(frame, cand, scale) == want

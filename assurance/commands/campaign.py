@@ -37,10 +37,14 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError("--scheduler needs --backend dask")
     monitors = tuple(args.monitors) if args.monitors else None
     if args.calibration:
-        from el.monitors.calibration import load_calibration
+        from el.monitors import build_monitor
+        from el.monitors.calibration import check_card_monitor, load_calibration
 
+        cards = [load_calibration(c) for c in args.calibration]
+        for card in cards:
+            check_card_monitor(card, build_monitor(card.spec))
         base = monitors or tuple(preset_config(args.preset).monitors)
-        monitors = tuple(dict.fromkeys((*base, *(load_calibration(c).spec for c in args.calibration))))
+        monitors = tuple(dict.fromkeys((*base, *(card.spec for card in cards))))
     config = preset_config(
         args.preset,
         perturbations=tuple(args.perturbations) if args.perturbations else None,

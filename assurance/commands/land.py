@@ -136,7 +136,11 @@ def run_model(args: argparse.Namespace) -> int:
         calibrated_spec(monitor, str(args.calibration))
     from el.monitors import build_monitor
 
-    build_monitor(monitor)  # a monitor that cannot be built (e.g. a missing model file): one line, exit 2
+    built = build_monitor(monitor)  # a monitor that cannot be built (e.g. a missing model file): one line, exit 2
+    if args.calibration is not None:
+        from el.monitors.calibration import check_card_monitor
+
+        check_card_monitor(load_calibration(args.calibration), built)
     if args.ood is not None:
         from el.monitors.ood import load_ood
 

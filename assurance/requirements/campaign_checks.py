@@ -93,4 +93,5 @@ def calibrated_miss_rate(ctx: CheckContext) -> Evidence:
     if not card:
         return Evidence("miss rate of the calibrated monitor", INSUFFICIENT,
                         "insufficient evidence: no calibration card chosen (parameters.calibration_card)")
-    return check_calibrated_miss_rate(ctx.candidates, load_calibration(card))
+    return check_calibrated_miss_rate(ctx.candidates, load_calibration(card),
+                                      run_models=(ctx.manifest or {}).get("monitor_models"))

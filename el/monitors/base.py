@@ -184,6 +184,13 @@ class Monitor(ABC):
     def features(self, rgb_patch: np.ndarray, segmenter: PatchSegmenter, *, seed: int = 0) -> np.ndarray:
         """Segment a patch: softmax (8, h, w), or MC samples (n, 8, h, w) for MCD monitors."""
 
+    @property
+    def model_sha256(self) -> str | None:
+        """SHA-256 of the fitted file this monitor's scores rest on (a learned model); None for a rule.
+
+        A calibration card records it: a threshold calibrated on one model means nothing on another."""
+        return None
+
     @abstractmethod
     def judge(self, reduced: Any) -> Judgement:
         """Score, verdict at :attr:`threshold` and reason, from :meth:`reduce`'s output. Validates."""

@@ -5,7 +5,8 @@ is JSON ``{"format", "body", "sha256"}`` where ``sha256`` is the SHA-256 of the 
 (sorted keys, no spaces): an altered or truncated card is refused, as altered weights are. The body
 names the monitor (``monitor``, at its default threshold), the calibrated ``threshold``, the
 calibrated ``spec`` (the monitor with that threshold), the miss rate, confidence and bound, the
-split, hashes and counts.
+split, hashes and counts, and (``monitor_model``) the SHA-256 of the fitted file the monitor's scores
+rest on, if any: :func:`check_card_monitor` refuses to run the card's threshold on another model.
 """
 
 from __future__ import annotations
@@ -69,3 +70,23 @@ def load_calibration(path: str | Path) -> CalibrationCard:
         raise CalibrationError(f"{p}: calibration card's spec {body['spec']!r} is not {body['monitor']!r} at "
                                f"threshold {threshold!r}")
     return CalibrationCard(str(p), digest, body)
+
+
+def check_card_monitor(card: CalibrationCard, monitor: Any) -> None:
+    """Refuse a card whose monitor rested on another fitted model than ``monitor`` (built from its spec).
+
+    Raises
+    ------
+    CalibrationError
+        The card records a model hash (``monitor_model.sha256``) that is not the monitor's, or the monitor
+        rests on a model the card does not record (a card written before, or edited to hide it).
+    """
+    want = (card.body.get("monitor_model") or {}).get("sha256")
+    have = getattr(monitor, "model_sha256", None)
+    if want != have:
+        raise CalibrationError(f"{card.path}: calibrated on monitor model {_short(want)}, but the monitor runs "
+                               f"{_short(have)}: recalibrate (uav-el calibrate) for this model")
+
+
+def _short(digest: str | None) -> str:
+    return f"{digest[:12]}..." if digest else "none"

@@ -10,9 +10,14 @@ softmax (``lr_*``, working resolution, from :class:`CandidateContext`) and on th
 (``hd_*``): the largest and mean forbidden probability (sum of the forbidden classes), the share of
 pixels whose top class is forbidden, and the largest (top forbidden - top safe) margin; the distance
 from the disc's edge to the nearest predicted-forbidden pixel of the HD patch, in radii (< 0 inside
-the disc); the candidate's row (over the frame height), radius (over the frame height) and hazard.
-Optional (:data:`MCD_FEATURES`, when the model file asks for ``mcd.n`` > 0 samples): the mean and
-largest standard deviation of the forbidden probability over MC-dropout samples in the disc.
+the disc); the candidate's row (over the frame height), radius (over the frame height) and hazard
+(:data:`CORE_FEATURES`); then (:data:`CONTEXT_FEATURES`) the largest and mean forbidden probability of
+the frame's softmax in discs of 1.5, 2 and 3 radii around the candidate, and the largest probability
+of each forbidden class in the disc, on the HD patch and on the frame. (The context features raised
+the held-out AUROC from 0.772 to 0.797 on the validation candidates of model ``0d3dab88``; a ring on
+the HD patch, probability quantiles and entropies added nothing there.) Optional
+(:data:`MCD_FEATURES`, when the model file asks for ``mcd.n`` > 0 samples): the mean and largest
+standard deviation of the forbidden probability over MC-dropout samples in the disc.
 
 The model file is plain JSON (no pickle), a card like the calibration card: ``{"format", "body",
 "sha256"}`` with the SHA-256 of the body's canonical JSON; the body holds the feature names, the
@@ -37,7 +42,7 @@ from el.decision import Disc
 from el.discs import disc_window_mask
 from el.errors import LearnedModelError
 from el.forbidden import argmax_slack, forbidden_pixels
-from el.labels import FORBIDDEN_IDS
+from el.labels import CLASS_NAMES, FORBIDDEN_IDS
 from el.monitors.base import CandidateContext, Judgement, PatchSegmenter, validate_scores
 from el.monitors.lhd import LHDMonitor, take_disc
 from el.monitors.patches import Patch
@@ -48,13 +53,21 @@ MODEL_FORMAT = "uav-el-learned-monitor/1"
 DEFAULT_MODEL = Path(__file__).resolve().parent / "data" / "learned.json"
 
 _DISC_STATS = ("max_forbidden_p", "mean_forbidden_p", "forbidden_fraction", "max_margin")
-BASE_FEATURES: tuple[str, ...] = (
+CONTEXT_SCALES: tuple[float, ...] = (1.5, 2.0, 3.0)  # context discs, in radii of the safe disc
+_FORBIDDEN = np.array(FORBIDDEN_IDS)
+_FORBIDDEN_NAMES = tuple(CLASS_NAMES[i] for i in FORBIDDEN_IDS)
+CORE_FEATURES: tuple[str, ...] = (
     *(f"lr_{s}" for s in _DISC_STATS),
     *(f"hd_{s}" for s in _DISC_STATS),
     "edge_distance_radii", "row", "radius", "hazard",
 )
+CONTEXT_FEATURES: tuple[str, ...] = (
+    *(f"ctx{k:g}_{s}" for k in CONTEXT_SCALES for s in ("max_forbidden_p", "mean_forbidden_p")),
+    *(f"hd_max_p_{c}" for c in _FORBIDDEN_NAMES),
+    *(f"lr_max_p_{c}" for c in _FORBIDDEN_NAMES),
+)
+BASE_FEATURES: tuple[str, ...] = CORE_FEATURES + CONTEXT_FEATURES
 MCD_FEATURES: tuple[str, ...] = ("mcd_mean_std", "mcd_max_std")
-_FORBIDDEN = np.array(FORBIDDEN_IDS)
 
 
 # -- features ------------------------------------------------------------------------------------
@@ -66,6 +79,32 @@ def disc_stats(pixel_scores: np.ndarray) -> list[float]:
     forbidden_p = p[_FORBIDDEN].sum(axis=0)
     return [float(forbidden_p.max()), float(forbidden_p.mean()),
             float(np.count_nonzero(forbidden_pixels(p)) / p.shape[1]), float(argmax_slack(p).max())]
+
+
+def class_max(pixel_scores: np.ndarray) -> list[float]:
+    """The largest probability of each forbidden class over the disc's pixels (8, m)."""
+    if pixel_scores.shape[1] == 0:
+        return [1.0] * len(FORBIDDEN_IDS)
+    return [float(v) for v in pixel_scores[_FORBIDDEN].max(axis=1)]
+
+
+def context_stats(frame: np.ndarray, candidate: Any, scale: float) -> list[float]:
+    """Largest and mean forbidden probability of the frame's softmax in discs of
+    :data:`CONTEXT_SCALES` radii around the candidate (what lies just beyond its safe disc)."""
+    h, w = frame.shape[1:]
+    cx, cy, r = candidate.x * scale, candidate.y * scale, candidate.radius_px * scale
+    reach = r * max(CONTEXT_SCALES) + 1.0  # one window around the largest disc, so the masks stay small
+    x0, y0 = min(max(int(cx - reach), 0), w - 1), min(max(int(cy - reach), 0), h - 1)
+    x1, y1 = max(min(int(cx + reach) + 1, w), x0 + 1), max(min(int(cy + reach) + 1, h), y0 + 1)
+    window = frame[:, y0:y1, x0:x1]
+    out: list[float] = []
+    for k in CONTEXT_SCALES:
+        mask = disc_window_mask(Disc(cx, cy, r * k), x0, y0, x1, y1)
+        if not mask.any():  # a disc smaller than a working pixel: the pixel under its centre
+            mask[min(max(int(cy), y0), y1 - 1) - y0, min(max(int(cx), x0), x1 - 1) - x0] = True
+        forbidden_p = take_disc(window, mask)[_FORBIDDEN].astype(np.float64).sum(axis=0)
+        out += [float(forbidden_p.max()), float(forbidden_p.mean())]
+    return out
 
 
 def frame_disc_mask(shape: tuple[int, int], candidate: Any, scale: float) -> np.ndarray:
@@ -121,12 +160,17 @@ def candidate_features(patch_probs: np.ndarray, patch: Patch, context: Candidate
     validate_scores(frame, frame.shape[1:], "frame softmax")
     cand = context.candidate
     width, height = context.frame_size
-    lr_mask = frame_disc_mask(frame.shape[1:], cand, frame.shape[2] / width)
+    scale = frame.shape[2] / width
+    lr_disc = take_disc(frame, frame_disc_mask(frame.shape[1:], cand, scale))
+    hd_disc = take_disc(patch_probs, patch.disc_mask)
     values = [
-        *disc_stats(take_disc(frame, lr_mask)),
-        *disc_stats(take_disc(patch_probs, patch.disc_mask)),
+        *disc_stats(lr_disc),
+        *disc_stats(hd_disc),
         edge_distance(patch_probs, patch, cand, margin),
         cand.y / height, cand.radius_px / height, float(cand.hazard),
+        *context_stats(frame, cand, scale),
+        *class_max(hd_disc),
+        *class_max(lr_disc),
     ]
     if mcd_samples is not None:
         values += mcd_spread(mcd_samples, patch.disc_mask)
@@ -148,6 +192,7 @@ class LearnedModel:
     scale: np.ndarray
     coef: np.ndarray
     intercept: float
+    columns: np.ndarray  # where each of the model's features lies in the vector :func:`candidate_features` gives
 
     @property
     def features(self) -> tuple[str, ...]:
@@ -158,6 +203,11 @@ class LearnedModel:
         return float(self.body["threshold"])
 
     @property
+    def width(self) -> int:
+        """Length of the feature vector the monitor computes for this model (with MC dropout or not)."""
+        return len(BASE_FEATURES) + (len(MCD_FEATURES) if self.mcd_n > 0 else 0)
+
+    @property
     def mcd_n(self) -> int:
         return int(self.body.get("mcd", {}).get("n", 0))
 
@@ -166,9 +216,23 @@ class LearnedModel:
         return float(self.body.get("mcd", {}).get("rho", 0.9))
 
     def predict(self, x: np.ndarray) -> np.ndarray:
-        """P(truly unsafe) of feature rows ``x`` (n, d) or one row (d,)."""
-        z = ((np.asarray(x, np.float64) - self.mean) / self.scale) @ self.coef + self.intercept
+        """P(truly unsafe) of rows ``x`` (n, D) or one row (D,) of :func:`candidate_features` vectors."""
+        x = np.asarray(x, np.float64)
+        if x.shape[-1] != self.width:
+            raise ValueError(f"expected candidate feature vectors of {self.width} values, got {x.shape}")
+        z = ((x[..., self.columns] - self.mean) / self.scale) @ self.coef + self.intercept
         return 1.0 / (1.0 + np.exp(-np.clip(z, -500.0, 500.0)))
+
+
+def feature_columns(names: tuple[str, ...], mcd_n: int) -> np.ndarray:
+    """Positions of a model's feature names in the computed vector; any subset of this version's
+    features, in any order (a model fitted before the context features were added keeps working)."""
+    known = BASE_FEATURES + (MCD_FEATURES if mcd_n > 0 else ())
+    unknown = [n for n in names if n not in known]
+    if unknown or not names or len(set(names)) != len(names):
+        raise ValueError(f"features {list(names)} are not a subset of this version's {list(known)}"
+                         + (f" (unknown: {unknown})" if unknown else ""))
+    return np.array([known.index(n) for n in names], dtype=np.int64)
 
 
 def model_document(body: dict[str, Any]) -> dict[str, Any]:
@@ -197,9 +261,7 @@ def load_learned_model(path: str | Path | None = None) -> LearnedModel:
     try:
         names = tuple(body["features"])
         mcd_n = int(body.get("mcd", {}).get("n", 0))
-        want = BASE_FEATURES + (MCD_FEATURES if mcd_n > 0 else ())
-        if names != want:
-            raise ValueError(f"features {list(names)} are not this version's {list(want)}")
+        columns = feature_columns(names, mcd_n)
         d = len(names)
         mean, scale, coef = (_vector(body, k, d) for k in ("mean", "scale", "coef"))
         if (scale <= 0).any():
@@ -210,7 +272,7 @@ def load_learned_model(path: str | Path | None = None) -> LearnedModel:
             raise ValueError("intercept and threshold must be finite")
     except (KeyError, TypeError, ValueError) as exc:
         raise LearnedModelError(f"{p}: inconsistent learned monitor model ({exc})") from None
-    return LearnedModel(str(p), digest, body, mean, scale, coef, intercept)
+    return LearnedModel(str(p), digest, body, mean, scale, coef, intercept, columns)
 
 
 # -- the monitor -----------------------------------------------------------------------------------
@@ -238,6 +300,10 @@ class LearnedMonitor(LHDMonitor):
     def feature_key(self) -> Hashable:
         return ("learned", self.model.sha256, self.margin, self.max_side)
 
+    @property
+    def model_sha256(self) -> str:
+        return self.model.sha256
+
     def patch_features(self, patch: Patch, segmenter: PatchSegmenter, *, seed: int = 0, size: int | None = None,
                        trunk: Any = None, context: CandidateContext | None = None) -> tuple[Any, np.ndarray]:
         if context is None:
@@ -262,8 +328,8 @@ class LearnedMonitor(LHDMonitor):
 
     def reduce(self, features: Any, disc_mask: np.ndarray) -> float:
         x = np.asarray(features, dtype=np.float64)
-        if x.shape != (len(self.model.features),) or not np.isfinite(x).all():
-            raise ValueError(f"learned monitor: expected {len(self.model.features)} finite features, got {x.shape}")
+        if x.shape != (self.model.width,) or not np.isfinite(x).all():
+            raise ValueError(f"learned monitor: expected {self.model.width} finite features, got {x.shape}")
         return float(self.model.predict(x))
 
     def judge(self, reduced: Any) -> Judgement:
