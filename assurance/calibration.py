@@ -197,6 +197,9 @@ def check_calibrated_miss_rate(candidates: Any, card: Any, perturbation: str = "
                            f"of {card.monitor!r} were recorded under {perturbation!r}")
     used = str(sub["monitor"].iloc[0])
     card_model = (card.body.get("monitor_model") or {}).get("sha256")
+    if run_models is None and card_model:
+        return rq.Evidence(name, rq.INSUFFICIENT, "insufficient evidence: the run's manifest does not record "
+                           "its monitors' models, so it cannot be shown to have scored with the card's")
     if run_models is not None and (run_models.get(used) or None) != card_model:
         return rq.Evidence(name, rq.FAIL, f"the card was calibrated on monitor model {card_model!r}, the run's "
                            f"{used!r} scored with {run_models.get(used)!r}: recalibrate or re-run the campaign")

@@ -115,8 +115,12 @@ def task_seed(seed: int, key: str, perturbation: str, severity: int) -> list[int
 
 
 def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Callable[[], float] = time.perf_counter,
-             world_clearance: Callable[..., Any] | None = None) -> dict[str, list[dict[str, Any]]]:
-    """Evaluate one task: readout rows for its images table and candidates table (see readouts)."""
+             world_clearance: Callable[..., Any] | None = None,
+             expected_models: dict[str, str] | None = None) -> dict[str, list[dict[str, Any]]]:
+    """Evaluate one task: readout rows for its images table and candidates table (see readouts).
+
+    ``expected_models`` (the manifest's ``monitor_models``): a monitor whose fitted model is not the one the
+    run recorded (its file changed during the run) makes the task a fault instead of mixing two models."""
     s = task.sample
     base = {"key": s.key, "sequence": s.sequence, "frame": s.frame,
             "perturbation": task.perturbation, "severity": task.severity}
@@ -136,6 +140,8 @@ def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Calla
         core, timings["candidates_s"] = _timed(clock, run_core, probs, (W, H), config.core)
         monitors = [build_monitor(m, margin=config.patch_margin, max_side=config.patch_max_side, clock=clock)
                     for m in config.monitors]
+        if expected_models is not None:
+            _check_models(config.monitors, monitors, expected_models)
         t = clock()
         verdicts = judge_candidates(hd, core.candidates, monitors, segmenter, seed=config.seed, clock=clock,
                                     frame_probs=probs)
@@ -216,14 +222,23 @@ def _worker_segmenter(weights: str | None, threads: int) -> Any:
     return _WORKER_STATE["segmenter"]
 
 
-def execute(task: Task, config: CampaignConfig, run_dir: str, threads: int, segmenter: Any = None) -> dict[str, Any]:
+def _check_models(names: Sequence[str], monitors: Sequence[Any], expected: dict[str, str]) -> None:
+    for name, monitor in zip(names, monitors, strict=True):
+        have, want = getattr(monitor, "model_sha256", None), expected.get(name)
+        if have != want:
+            raise ValueError(f"monitor {name!r} runs model {have}, the run recorded {want} "
+                             "(its model file changed during the run)")
+
+
+def execute(task: Task, config: CampaignConfig, run_dir: str, threads: int, segmenter: Any = None,
+            expected_models: dict[str, str] | None = None) -> dict[str, Any]:
     """Worker entry point: run one task and write its shard; returns a small summary."""
     if segmenter is None:
         segmenter = _worker_segmenter(config.weights, threads)
     t = time.perf_counter()
     from assurance.clearance import sample_clearance_m
 
-    rows = run_task(task, config, segmenter, world_clearance=sample_clearance_m)
+    rows = run_task(task, config, segmenter, world_clearance=sample_clearance_m, expected_models=expected_models)
     hashes = readouts.write_shard(Path(run_dir), task.shard_name, rows)
     faults = [r["fault"] for r in rows["images"] if r.get("fault")]
     return {"shard": task.shard_name, "seconds": time.perf_counter() - t, "fault": faults[0] if faults else "",
@@ -360,7 +375,8 @@ def run_campaign(
     t0 = time.perf_counter()
     results: list[dict[str, Any]] = []
     for res in _dispatch(todo, config, run_dir, jobs=jobs, backend=backend, scheduler=scheduler,
-                         threads=threads, progress=progress, segmenter=segmenter):
+                         threads=threads, progress=progress, segmenter=segmenter,
+                         expected_models=man["monitor_models"]):
         results.append(res)
         if res.get("hashes"):
             readouts.record_shards(run_dir, {res["shard"]: res["hashes"]})
@@ -410,25 +426,28 @@ def _set_aside_damaged(run_dir: Path, tasks: Sequence[Task]) -> list[str]:
 
 
 def _dispatch(todo: list[Task], config: CampaignConfig, run_dir: Path, *, jobs: int, backend: str,
-              scheduler: str | None, threads: int, progress: bool, segmenter: Any) -> Iterator[dict[str, Any]]:
+              scheduler: str | None, threads: int, progress: bool, segmenter: Any,
+              expected_models: dict[str, str] | None = None) -> Iterator[dict[str, Any]]:
     from assurance.progress import progress as bar
 
     if not todo:
         return
     if backend == "dask":
-        yield from bar(_dask_map(todo, config, run_dir, jobs, scheduler, threads, segmenter), total=len(todo),
+        yield from bar(_dask_map(todo, config, run_dir, jobs, scheduler, threads, segmenter, expected_models),
+                       total=len(todo),
                        desc="campaign", enabled=progress)
         return
     if backend != "loky":
         raise ValueError(f"unknown backend {backend!r}; valid: loky, dask")
     if jobs <= 1:
-        yield from bar((execute(t, config, str(run_dir), threads, segmenter) for t in todo), total=len(todo),
+        yield from bar((execute(t, config, str(run_dir), threads, segmenter, expected_models) for t in todo),
+                       total=len(todo),
                        desc="campaign", enabled=progress)
         return
     from joblib import Parallel, delayed
 
     par = Parallel(n_jobs=jobs, backend="loky", return_as="generator_unordered")
-    gen = par(delayed(execute)(t, config, str(run_dir), threads, segmenter) for t in todo)
+    gen = par(delayed(execute)(t, config, str(run_dir), threads, segmenter, expected_models) for t in todo)
     with warnings.catch_warnings():
         # loky replaces a worker whose resident memory grew by 300 MB (its leak guard); MC-dropout
         # batches grow the allocator's arenas that much once. The task is not lost (the replacement
@@ -439,7 +458,8 @@ def _dispatch(todo: list[Task], config: CampaignConfig, run_dir: Path, *, jobs: 
 
 
 def _dask_map(todo: list[Task], config: CampaignConfig, run_dir: Path, jobs: int, scheduler: str | None,
-              threads: int, segmenter: Any) -> Iterable[dict[str, Any]]:
+              threads: int, segmenter: Any, expected_models: dict[str, str] | None = None
+              ) -> Iterable[dict[str, Any]]:
     from dask.distributed import Client, LocalCluster, as_completed
 
     cluster = None
@@ -451,7 +471,7 @@ def _dask_map(todo: list[Task], config: CampaignConfig, run_dir: Path, jobs: int
         client = Client(cluster)
     try:
         futures = client.map(execute, todo, config=config, run_dir=str(run_dir), threads=threads,
-                             segmenter=segmenter, pure=False)
+                             segmenter=segmenter, expected_models=expected_models, pure=False)
         for fut in as_completed(futures):
             yield fut.result()
     finally:

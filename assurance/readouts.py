@@ -93,10 +93,13 @@ def init_run(run_dir: Path, manifest: dict[str, Any]) -> None:
             if key in now and before != now[key]:
                 raise RunError(f"{run_dir}: holds a campaign run with other weights (weights.{key}: {before} "
                                f"recorded, {now[key]} now); use a new --out folder or delete this one")
-        if "monitor_models" in old and old["monitor_models"] != manifest.get("monitor_models"):
+        # the same fitted monitor models (a run recorded before this key: none, so one with a learned
+        # monitor is refused, as its model cannot be shown to be today's)
+        was_models, now_models = old.get("monitor_models") or {}, manifest.get("monitor_models") or {}
+        if was_models != now_models:
             raise RunError(f"{run_dir}: holds a campaign run whose monitors rest on other fitted models "
-                           f"(monitor_models: {old['monitor_models']} recorded, {manifest.get('monitor_models')} "
-                           "now); use a new --out folder or delete this one")
+                           f"(monitor_models: {was_models or 'not recorded'} then, {now_models} now); use a new "
+                           "--out folder or delete this one")
         return
     shards = run_dir / SHARDS
     if shards.is_dir() and any(shards.iterdir()):  # e.g. a half-deleted run: its shards may be another campaign's

@@ -183,10 +183,11 @@ class EmergencyLanding:
                 spec, margin=self.config.patch_margin,
                 max_side=self.config.patch_max_side, clock=clock,
             )
-            if self.config.calibration:
+            card = self.config.calibration or (DEPLOYED_CALIBRATION if is_deployed(spec) else None)
+            if card:  # the threshold must be the one calibrated on the model the monitor runs
                 from el.monitors.calibration import check_card_monitor, load_calibration
 
-                check_card_monitor(load_calibration(self.config.calibration), self.monitor)
+                check_card_monitor(load_calibration(card), self.monitor)
         except Exception as exc:
             self.fault = self.fault or f"fault: monitor: {type(exc).__name__}: {exc}"
             logger.exception("runtime monitor %r not built; every decision will be the default action",
@@ -368,6 +369,15 @@ class EmergencyLanding:
         timings["total_s"] = budget.elapsed()
         return Decision(action="default", reason=reason, selected=None, candidates=list(candidates),
                         default_area=area, timings=timings, input=info, config=self.config.to_dict())
+
+
+def is_deployed(spec: str | None) -> bool:
+    """Whether ``spec`` names the deployed configuration (:data:`DEPLOYED_MONITOR`), however it is written."""
+    try:
+        parsed = parse_monitor_spec(spec)
+    except ValueError:
+        return False
+    return parsed is not None and parsed.name == parse_monitor_spec(DEPLOYED_MONITOR).name
 
 
 def calibrated_spec(monitor: str | None, calibration: str | None) -> str | None:

@@ -137,9 +137,10 @@ def test_a_model_on_a_subset_of_the_features_still_loads_and_unknown_ones_are_re
     assert m.predict(x) == pytest.approx(1 / (1 + np.exp(-z)))
     with pytest.raises(ValueError, match="expected candidate feature vectors"):
         m.predict(x[keep])
-    for names in (["no_such_feature"] + list(CORE_FEATURES[1:]), list(CORE_FEATURES[:1]) * 12):
+    for names, needle in ((["no_such_feature"] + list(CORE_FEATURES[1:]), "'no_such_feature'.*not among"),
+                          (list(CORE_FEATURES[:1]) * 12, "listed twice"), ([], "empty")):
         path.write_text(json.dumps(model_document(dict(old, features=names))))
-        with pytest.raises(LearnedModelError, match="not a subset"):
+        with pytest.raises(LearnedModelError, match=needle):
             load_learned_model(path)
 
 
@@ -205,7 +206,7 @@ def test_card_run_and_monitor_must_rest_on_the_same_learned_model(model_file, sp
     campaign (resuming with another model), and by EL-R16 (the run scored with another model)."""
     from assurance import readouts
     from assurance.calibration import calibrate_on_data, check_calibrated_miss_rate
-    from assurance.campaign import CampaignConfig, run_campaign
+    from assurance.campaign import CampaignConfig, plan, run_campaign, run_task
     from el.monitors.calibration import load_calibration
     from el.monitors.learned import load_learned_model, model_document
     from el.pipeline import EmergencyLanding, PipelineConfig
@@ -226,6 +227,8 @@ def test_card_run_and_monitor_must_rest_on_the_same_learned_model(model_file, sp
     same = check_calibrated_miss_rate(cands, card, run_models=models)
     assert same.rows and "unsafe candidates accepted" in same.summary  # judged on its miss rate
 
+    assert check_calibrated_miss_rate(cands, card, run_models=None).status == "insufficient"  # an older run
+
     # Refit in place (another model under the same path): the card, the run and the monitor no longer agree.
     body = json.loads(model_file.read_text())["body"]
     other = tmp_path / "learned.json"
@@ -241,6 +244,10 @@ def test_card_run_and_monitor_must_rest_on_the_same_learned_model(model_file, sp
         assert d.action == "default" and "recalibrate" in d.reason, d.reason
         with pytest.raises(readouts.RunError, match="monitor_models"):
             run_campaign(val, run, config, progress=False, segmenter=RoadBlindFrame(WW))
+        # A model file that changes while a run goes on: the task is a fault, not a mix of two models.
+        task = plan(val, config)[0]
+        rows = run_task(task, config, RoadBlindFrame(WW), expected_models=models)
+        assert "its model file changed during the run" in rows["images"][0]["fault"]
     finally:
         model_file.write_text(original)
     d = EmergencyLanding(PipelineConfig(core=CORE, monitor=spec, calibration=str(card_path)),
@@ -268,3 +275,50 @@ def test_context_windows_give_what_the_whole_frame_gives():
             p = take_disc(frame, mask)[_FORBIDDEN].astype(np.float64).sum(axis=0)
             want += [float(p.max()), float(p.mean())]
         assert context_stats(frame, cand, scale) == want
+
+
+def test_a_run_recorded_before_monitor_models_is_not_resumed_with_a_learned_monitor(model_file, splits, tmp_path):
+    from assurance import readouts
+    from assurance.campaign import CampaignConfig, run_campaign
+
+    _, val = splits
+    config = CampaignConfig(perturbations=("none",), monitors=(f"learned:model={model_file}",), core=CORE,
+                            images=1)
+    run = tmp_path / "run"
+    run_campaign(val, run, config, progress=False, segmenter=RoadBlindFrame(WW))
+    man = json.loads((run / "manifest.json").read_text())
+    del man["monitor_models"]  # as a run of an earlier version recorded it
+    (run / "manifest.json").write_text(json.dumps(man))
+    with pytest.raises(readouts.RunError, match="not recorded"):
+        run_campaign(val, run, config, progress=False, segmenter=RoadBlindFrame(WW))
+
+
+def test_the_deployed_default_is_checked_against_the_deployed_card(splits, tmp_path, monkeypatch):
+    """Without --calibration, the deployed spec runs the deployed card's threshold: a swapped model file
+    under the default path makes every decision the default action, with the reason."""
+    import el.monitors.learned as learned
+    from el.monitors.learned import DEFAULT_MODEL, model_document
+    from el.pipeline import EmergencyLanding, PipelineConfig
+
+    _, val = splits
+    image = next(val.glob("**/Images/*.png"))
+    body = json.loads(DEFAULT_MODEL.read_text())["body"]
+    swapped = tmp_path / "learned.json"
+    swapped.write_text(json.dumps(model_document(dict(body, intercept=body["intercept"] - 1.0))))
+    config = PipelineConfig(core=CORE, time_budget_s=None)
+    assert not EmergencyLanding(config, segmenter=RoadBlindFrame(WW)).fault
+    monkeypatch.setattr(learned, "DEFAULT_MODEL", swapped)
+    d = EmergencyLanding(config, segmenter=RoadBlindFrame(WW)).decide(image)
+    assert d.action == "default" and d.reason.startswith("fault: monitor") and "recalibrate" in d.reason
+
+
+def test_a_card_with_a_malformed_model_record_is_refused(tmp_path):
+    from el.monitors.calibration import CalibrationError, card_document, load_calibration
+    from el.pipeline import DEPLOYED_CALIBRATION
+
+    body = json.loads(DEPLOYED_CALIBRATION.read_text())["body"]
+    for bad in ("ead9566c", {"sha256": "XYZ"}, {"sha256": 5}):
+        path = tmp_path / "card.json"
+        path.write_text(json.dumps(card_document(dict(body, monitor_model=bad))))
+        with pytest.raises(CalibrationError, match="monitor_model must be"):
+            load_calibration(path)

@@ -100,6 +100,15 @@ def _replan(man: Mapping[str, Any], config: Any, own_model: bool) -> list[Any] |
             return f"insufficient evidence: the run's weights {weights} are gone"
         if sha256_file(weights) != man["weights"].get("sha256"):
             return f"insufficient evidence: the weights file {weights} changed since the run"
+    from assurance.campaign import monitor_models
+
+    try:
+        models = monitor_models(config.monitors)
+    except Exception as exc:  # e.g. a learned monitor's model file is gone or altered
+        return f"insufficient evidence: the run's monitors cannot be built now: {exc}"
+    if models != (man.get("monitor_models") or {}):
+        return (f"insufficient evidence: the monitors' fitted models changed since the run (recorded "
+                f"{man.get('monitor_models') or 'none'}, now {models})")
     try:
         planned = plan(data, config)
         data_sha = make_manifest(data, config, planned)["data"]["sha256"]

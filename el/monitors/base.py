@@ -168,6 +168,11 @@ class Monitor(ABC):
         self.threshold = validate_threshold(self.DEFAULT_THRESHOLD if threshold is None else threshold)
         validate_patch_params(margin, max_side)  # now, not at the first candidate
 
+    #: SHA-256 of the fitted file this monitor's scores rest on (a learned model); None for a rule. A
+    #: monitor with a model sets or overrides it: calibration cards and campaign manifests record it,
+    #: since a threshold calibrated on one model means nothing on another.
+    model_sha256: str | None = None
+
     # -- what a subclass defines -------------------------------------------------------------
     @property
     @abstractmethod
@@ -184,12 +189,6 @@ class Monitor(ABC):
     def features(self, rgb_patch: np.ndarray, segmenter: PatchSegmenter, *, seed: int = 0) -> np.ndarray:
         """Segment a patch: softmax (8, h, w), or MC samples (n, 8, h, w) for MCD monitors."""
 
-    @property
-    def model_sha256(self) -> str | None:
-        """SHA-256 of the fitted file this monitor's scores rest on (a learned model); None for a rule.
-
-        A calibration card records it: a threshold calibrated on one model means nothing on another."""
-        return None
 
     @abstractmethod
     def judge(self, reduced: Any) -> Judgement:

@@ -69,7 +69,16 @@ def load_calibration(path: str | Path) -> CalibrationCard:
     if spec is None or base is None or spec.base != base.base or spec.threshold not in (threshold, None):
         raise CalibrationError(f"{p}: calibration card's spec {body['spec']!r} is not {body['monitor']!r} at "
                                f"threshold {threshold!r}")
+    model = body.get("monitor_model")
+    if model is not None and not (isinstance(model, dict) and _is_digest_or_none(model.get("sha256"))):
+        raise CalibrationError(f"{p}: calibration card's monitor_model must be {{\"sha256\": null or 64 hex "
+                               f"digits}}, got {model!r}")
     return CalibrationCard(str(p), digest, body)
+
+
+def _is_digest_or_none(value: object) -> bool:
+    return value is None or (isinstance(value, str) and len(value) == 64
+                             and all(c in "0123456789abcdef" for c in value))
 
 
 def check_card_monitor(card: CalibrationCard, monitor: Any) -> None:

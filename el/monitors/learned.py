@@ -89,8 +89,8 @@ def class_max(pixel_scores: np.ndarray) -> list[float]:
 
 
 def context_stats(frame: np.ndarray, candidate: Any, scale: float) -> list[float]:
-    """Largest and mean forbidden probability of the frame's softmax in discs of
-    :data:`CONTEXT_SCALES` radii around the candidate (what lies just beyond its safe disc)."""
+    """Largest and mean forbidden probability of the frame's softmax in discs of :data:`CONTEXT_SCALES`
+    radii centred on the candidate (its safe disc and what lies just beyond it)."""
     h, w = frame.shape[1:]
     cx, cy, r = candidate.x * scale, candidate.y * scale, candidate.radius_px * scale
     reach = r * max(CONTEXT_SCALES) + 1.0  # one window around the largest disc, so the masks stay small
@@ -228,10 +228,14 @@ def feature_columns(names: tuple[str, ...], mcd_n: int) -> np.ndarray:
     """Positions of a model's feature names in the computed vector; any subset of this version's
     features, in any order (a model fitted before the context features were added keeps working)."""
     known = BASE_FEATURES + (MCD_FEATURES if mcd_n > 0 else ())
+    if not names:
+        raise ValueError("the feature list is empty")
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise ValueError(f"features listed twice: {twice}")
     unknown = [n for n in names if n not in known]
-    if unknown or not names or len(set(names)) != len(names):
-        raise ValueError(f"features {list(names)} are not a subset of this version's {list(known)}"
-                         + (f" (unknown: {unknown})" if unknown else ""))
+    if unknown:
+        raise ValueError(f"features {unknown} are not among this version's {list(known)}")
     return np.array([known.index(n) for n in names], dtype=np.int64)
 
 
