@@ -183,11 +183,7 @@ class EmergencyLanding:
                 spec, margin=self.config.patch_margin,
                 max_side=self.config.patch_max_side, clock=clock,
             )
-            card = self.config.calibration or (DEPLOYED_CALIBRATION if is_deployed(spec) else None)
-            if card:  # the threshold must be the one calibrated on the model the monitor runs
-                from el.monitors.calibration import check_card_monitor, load_calibration
-
-                check_card_monitor(load_calibration(card), self.monitor)
+            check_monitor_card(self.monitor, spec, self.config.calibration)
         except Exception as exc:
             self.fault = self.fault or f"fault: monitor: {type(exc).__name__}: {exc}"
             logger.exception("runtime monitor %r not built; every decision will be the default action",
@@ -369,6 +365,16 @@ class EmergencyLanding:
         timings["total_s"] = budget.elapsed()
         return Decision(action="default", reason=reason, selected=None, candidates=list(candidates),
                         default_area=area, timings=timings, input=info, config=self.config.to_dict())
+
+
+def check_monitor_card(monitor: Monitor | None, spec: str | None, calibration: str | Path | None) -> None:
+    """Refuse a monitor whose threshold was calibrated on another fitted model: the card given, else the
+    deployed card when ``spec`` is the deployed configuration (``CalibrationError``)."""
+    card = calibration or (DEPLOYED_CALIBRATION if is_deployed(spec) else None)
+    if card:
+        from el.monitors.calibration import check_card_monitor, load_calibration
+
+        check_card_monitor(load_calibration(card), monitor)
 
 
 def is_deployed(spec: str | None) -> bool:

@@ -135,16 +135,10 @@ def run_model(args: argparse.Namespace) -> int:
         monitor = args.monitor or load_calibration(args.calibration).monitor
         calibrated_spec(monitor, str(args.calibration))
     from el.monitors import build_monitor
+    from el.pipeline import check_monitor_card
 
     built = build_monitor(monitor)  # a monitor that cannot be built (e.g. a missing model file): one line, exit 2
-    from el.pipeline import DEPLOYED_CALIBRATION, is_deployed
-
-    card = args.calibration if args.calibration is not None else (DEPLOYED_CALIBRATION if is_deployed(monitor)
-                                                                  else None)
-    if card is not None:  # a threshold calibrated on another model than the monitor runs: one line, exit 2
-        from el.monitors.calibration import check_card_monitor, load_calibration
-
-        check_card_monitor(load_calibration(card), built)
+    check_monitor_card(built, monitor, args.calibration)  # a card on another model than it runs: one line, exit 2
     if args.ood is not None:
         from el.monitors.ood import load_ood
 

@@ -92,32 +92,34 @@ def context_stats(frame: np.ndarray, candidate: Any, scale: float) -> list[float
     """Largest and mean forbidden probability of the frame's softmax in discs of :data:`CONTEXT_SCALES`
     radii centred on the candidate (its safe disc and what lies just beyond it)."""
     h, w = frame.shape[1:]
-    cx, cy, r = candidate.x * scale, candidate.y * scale, candidate.radius_px * scale
-    reach = r * max(CONTEXT_SCALES) + 1.0  # one window around the largest disc, so the masks stay small
+    cx, cy = candidate.x * scale, candidate.y * scale
+    reach = candidate.radius_px * scale * max(CONTEXT_SCALES) + 1.0  # one window around the largest disc
     x0, y0 = min(max(int(cx - reach), 0), w - 1), min(max(int(cy - reach), 0), h - 1)
     x1, y1 = max(min(int(cx + reach) + 1, w), x0 + 1), max(min(int(cy + reach) + 1, h), y0 + 1)
     window = frame[:, y0:y1, x0:x1]
     out: list[float] = []
     for k in CONTEXT_SCALES:
-        mask = disc_window_mask(Disc(cx, cy, r * k), x0, y0, x1, y1)
-        if not mask.any():  # a disc smaller than a working pixel: the pixel under its centre
-            mask[min(max(int(cy), y0), y1 - 1) - y0, min(max(int(cx), x0), x1 - 1) - x0] = True
+        mask = frame_disc_mask((h, w), candidate, scale, radii=k, window=(x0, y0, x1, y1))
         forbidden_p = take_disc(window, mask)[_FORBIDDEN].astype(np.float64).sum(axis=0)
         out += [float(forbidden_p.max()), float(forbidden_p.mean())]
     return out
 
 
-def frame_disc_mask(shape: tuple[int, int], candidate: Any, scale: float) -> np.ndarray:
-    """Pixels (h, w) of a working-resolution grid whose centres lie in the candidate's disc.
+def frame_disc_mask(shape: tuple[int, int], candidate: Any, scale: float, *, radii: float = 1.0,
+                    window: tuple[int, int, int, int] | None = None) -> np.ndarray:
+    """Pixels of a working-resolution grid (h, w) whose centres lie in the candidate's disc.
 
-    ``scale``: working pixels per full-resolution pixel. At least the pixel under the centre is kept
+    ``scale``: working pixels per full-resolution pixel; ``radii``: the disc's radius in radii of the
+    candidate's; ``window`` ``(x0, y0, x1, y1)``: only that part of the grid (it must hold the pixel
+    under the centre), so the mask is (y1 - y0, x1 - x0). At least the pixel under the centre is kept
     (a disc smaller than one working pixel).
     """
     h, w = shape
-    cx, cy, r = candidate.x * scale, candidate.y * scale, candidate.radius_px * scale
-    mask = disc_window_mask(Disc(cx, cy, r), 0, 0, w, h)  # the one disc rasterisation, on the working grid
+    x0, y0, x1, y1 = window or (0, 0, w, h)
+    cx, cy, r = candidate.x * scale, candidate.y * scale, candidate.radius_px * scale * radii
+    mask = disc_window_mask(Disc(cx, cy, r), x0, y0, x1, y1)  # the one disc rasterisation, on the working grid
     if not mask.any():
-        mask[min(max(int(cy), 0), h - 1), min(max(int(cx), 0), w - 1)] = True
+        mask[min(max(int(cy), 0), h - 1) - y0, min(max(int(cx), 0), w - 1) - x0] = True
     return mask
 
 
