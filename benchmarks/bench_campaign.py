@@ -15,8 +15,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from assurance.campaign import run_campaign
-from assurance.presets import preset_config
+from assurance.campaign.presets import preset_config
+from assurance.campaign.run import run_campaign
 from el.monitors import DEMO_GRID
 
 

@@ -19,9 +19,9 @@ import time
 
 import numpy as np
 
+from assurance.scenes.uavid import iter_samples
 from el.pipeline import DEPLOYED_MONITOR, EmergencyLanding, PipelineConfig
 from el.segmentation import Segmenter
-from el.uavid import iter_samples
 
 CONFIGS = ("none", "lhd", "lhd+ch:tau=0.25", "lhd+mcd:n=10,rho=0.9", "lhd+mcd:n=30,rho=0.9",
            DEPLOYED_MONITOR)

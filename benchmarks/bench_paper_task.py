@@ -31,8 +31,8 @@ def main(argv: list[str] | None = None) -> int:
 
     import torch
 
-    from assurance.campaign import plan, run_task
-    from assurance.presets import preset_config
+    from assurance.campaign.presets import preset_config
+    from assurance.campaign.run import plan, run_task
     from el.segmentation import Segmenter
 
     torch.set_num_threads(1)

@@ -58,8 +58,8 @@ def _current_rss_kb() -> int:
 def _setup(weights: str | None, threads: int):
     import torch
 
+    from assurance.fitting.network.training import init_untrained
     from el.segmentation.inference import Segmenter
-    from el.segmentation.training import init_untrained
 
     torch.set_num_threads(threads)
     return Segmenter.load(weights) if weights else Segmenter(init_untrained(seed=0))

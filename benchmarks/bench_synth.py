@@ -21,15 +21,16 @@ from pathlib import Path  # noqa: E402
 
 import cv2  # noqa: E402
 
-from el.synth.generate import (  # noqa: E402
+from assurance.files import atomic_write_bytes  # noqa: E402
+from assurance.scenes.generate import (  # noqa: E402
     default_geometry,
     encode_labels,
     generate_world,
     scene_meta,
     scene_seed,
 )
-from el.synth.renderer import render  # noqa: E402
-from el.uavid import atomic_write_bytes, sample_paths, write_image  # noqa: E402
+from assurance.scenes.renderer import render  # noqa: E402
+from assurance.scenes.uavid import sample_paths, write_image  # noqa: E402
 
 
 def one_scene(root: Path, index: int, seed: int, size: tuple[int, int]) -> dict[str, float]:

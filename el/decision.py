@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import asdict, dataclass, field
+from importlib import resources
 from typing import Any, Literal
 
 Action = Literal["land", "default"]
@@ -104,3 +105,9 @@ def _finite(obj: Any) -> Any:
     if isinstance(obj, list | tuple):
         return [_finite(v) for v in obj]
     return obj
+
+
+def decision_schema() -> dict[str, Any]:
+    """The JSON Schema of a decision (``el/data/decision.schema.json``)."""
+    text = resources.files("el").joinpath("data/decision.schema.json").read_text(encoding="utf-8")
+    return json.loads(text)

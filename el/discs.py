@@ -3,7 +3,7 @@
 A full-resolution pixel (row r, column c) covers [c, c+1) x [r, r+1); it belongs to a disc when its
 centre ``(c + 0.5, r + 0.5)`` lies within ``radius_px`` of the disc's centre (boundary included).
 The LHD monitor judges exactly these pixels of its HD patch (``el.monitors.patches``) and the true
-hazard of a readout counts exactly these pixels of the ground truth (``assurance.truth``): if the
+hazard of a readout counts exactly these pixels of the ground truth (``assurance.campaign.truth``): if the
 two differed, a monitor could be scored on pixels it never saw (docs/architecture.md section 3.6).
 """
 

@@ -2,7 +2,7 @@
 
 The core model reads the working-resolution softmax by it (``el.candidates.forbidden_from_probs``),
 the monitors read their HD patch scores by it (``el.monitors.lhd``) and the harness's evidence scores
-use it too (``assurance.separation``): one definition, so that "forbidden" means the same pixels
+use it too (``assurance.fitting.separation``): one definition, so that "forbidden" means the same pixels
 everywhere (docs/architecture.md sections 3.3 and 3.6).
 """
 

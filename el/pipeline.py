@@ -26,10 +26,10 @@ from el.core import default_area, run_core
 from el.decision import Candidate, Decision, Disc, MonitorVerdict
 from el.errors import BudgetExceeded
 from el.hashing import sha256_bytes
+from el.imageio import read_image
 from el.monitors import CandidateContext, Monitor, build_monitor, monitor_name, parse_monitor_spec
 from el.monitors.walk import HAZARD, SCORE, select
 from el.rgb import check_rgb
-from el.uavid import read_image
 
 Clock = Callable[[], float]
 DEFAULT_TIME_BUDGET_S = 10.0
@@ -201,7 +201,7 @@ class EmergencyLanding:
     def decide(self, image: np.ndarray | str | Path) -> Decision:
         """Decide where to land for one frame (an RGB uint8 array or an image file); never raises.
 
-        (The ground-truth pipeline, with a label map instead of the model, is ``el.gt_pipeline``.)
+        (The ground-truth pipeline, with a label map instead of the model, is ``assurance.campaign.gt_pipeline``.)
         """
         cfg = self.config
         budget = _Budget(self.clock, cfg.time_budget_s)

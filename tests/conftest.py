@@ -18,7 +18,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))  # tests/helpers.py for
 
 # Imported once here: the run verification in pytest_configure needs them, and pytester's in-process
 # sessions would otherwise import pandas inside a session and drop it afterwards (two copies of its types).
-import assurance.integrity  # noqa: E402, F401
+import assurance.campaign.integrity  # noqa: E402, F401
 
 DEFAULT_RUN = Path("runs") / "demo"
 
@@ -32,14 +32,14 @@ def campaign_run_path(config: pytest.Config) -> Path:
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    from assurance.pytest_plugin import set_context
+    from assurance.requirements.pytest_plugin import set_context
 
     run = campaign_run_path(config)
     exists = (run / "manifest.json").is_file()
     set_context(config, run=str(run), run_exists=exists)
     if exists:  # bind the requirement results to the readouts they are about (assurance.evidence checks it)
-        from assurance.integrity import verify_run
-        from assurance.readouts import RunError
+        from assurance.campaign.integrity import verify_run
+        from assurance.campaign.readouts import RunError
 
         try:
             check = verify_run(run)
@@ -52,7 +52,7 @@ def pytest_configure(config: pytest.Config) -> None:
 @pytest.fixture(scope="session")
 def requirement_registry(pytestconfig: pytest.Config):
     """The session's validated requirement registry (the plugin's; --requirements-registry to change it)."""
-    from assurance.pytest_plugin import registry
+    from assurance.requirements.pytest_plugin import registry
 
     return registry(pytestconfig)
 
@@ -60,7 +60,7 @@ def requirement_registry(pytestconfig: pytest.Config):
 @pytest.fixture(scope="session")
 def campaign_run(pytestconfig: pytest.Config) -> Path:
     """The campaign run folder; skips (requirement not verified) when there is none."""
-    from assurance.pytest_plugin import get_context
+    from assurance.requirements.pytest_plugin import get_context
 
     run = campaign_run_path(pytestconfig)
     if not (run / "manifest.json").is_file():
@@ -131,14 +131,14 @@ def tiny_campaign(tmp_path_factory):
     import torch
     from helpers import OracleSegmenter
 
-    from assurance.campaign import CampaignConfig, run_campaign
-    from assurance.perturbations import PAPER_PERTURBATIONS
+    from assurance.campaign.perturbations import PAPER_PERTURBATIONS
+    from assurance.campaign.run import CampaignConfig, run_campaign
+    from assurance.fitting.network.weights_io import save_weights
+    from assurance.scenes.uavid import write_sample
     from el.config import CoreConfig
     from el.labels import ids_to_colors
     from el.segmentation.architectures import build_model
     from el.segmentation.model import ArchConfig
-    from el.segmentation.weights import save_weights
-    from el.uavid import write_sample
 
     root = tmp_path_factory.mktemp("tiny_campaign")
     for i in range(TINY_IMAGES):
@@ -168,7 +168,7 @@ def tiny_run_without(tiny_campaign, tmp_path_factory):
             return made[perturbation]
         run = tmp_path_factory.mktemp(f"without_{perturbation}") / "run"
         shutil.copytree(tiny_campaign["run"], run)
-        from assurance.readouts import record_shards
+        from assurance.campaign.readouts import record_shards
 
         for shard in (run / "shards").iterdir():
             if shard.name.startswith(f"{perturbation}-s"):
@@ -187,8 +187,8 @@ def tiny_run_without(tiny_campaign, tmp_path_factory):
 def monitor_runs(tiny_campaign, tmp_path_factory):
     """Two small runs whose monitor rejects every candidate on grass: 'good' (the real decision loop)
     and 'broken' (a pipeline variant that ignores the monitor and lands on rank 0 regardless)."""
-    from assurance import campaign
-    from assurance.campaign import CampaignConfig, run_campaign
+    from assurance.campaign import run as campaign
+    from assurance.campaign.run import CampaignConfig, run_campaign
 
     root = tmp_path_factory.mktemp("monitor_runs")
     config = CampaignConfig(perturbations=("none",), monitors=("lhd",), images=3,

@@ -94,7 +94,7 @@ def reseal_shard(run, name: str) -> None:
     that way: for tests that need a run with odd readouts that still verifies."""
     from pathlib import Path
 
-    from assurance import readouts
+    from assurance.campaign import readouts
     from el.hashing import sha256_file
 
     folder = Path(run) / readouts.SHARDS / name

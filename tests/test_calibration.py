@@ -12,9 +12,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import stats
 
-from assurance.calibration import CalibrationError, calibrate_threshold, min_unsafe_needed
+from assurance.fitting.calibration import CalibrationError, calibrate_threshold, min_unsafe_needed
+from assurance.scenes.uavid import write_sample
 from el.labels import CLASS_IDS, ids_to_colors
-from el.uavid import write_sample
 
 DISTS = {
     "normal": (lambda rng, size: rng.normal(0.3, 0.2, size), lambda t: stats.norm.cdf(t, 0.3, 0.2)),
@@ -136,9 +136,9 @@ def test_pipeline_and_land_use_the_card_and_refuse_an_altered_one(card, val, tmp
 
 
 def test_campaign_with_the_card_and_the_el_r16_check(card, val, tmp_path):
-    from assurance import readouts
-    from assurance.calibration import check_calibrated_miss_rate
-    from assurance.campaign import CampaignConfig, run_campaign
+    from assurance.campaign import readouts
+    from assurance.campaign.run import CampaignConfig, run_campaign
+    from assurance.fitting.calibration import check_calibrated_miss_rate
     from el.config import CoreConfig
     from el.monitors.calibration import load_calibration
 

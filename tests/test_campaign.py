@@ -11,18 +11,19 @@ import pytest
 import torch
 from helpers import OracleSegmenter, scene_ids
 
-from assurance import readouts
-from assurance.campaign import CampaignConfig, plan, run_campaign
+from assurance.analysis.table import results_table
+from assurance.campaign import readouts
+from assurance.campaign.run import CampaignConfig, plan, run_campaign
+from assurance.campaign.stages import stage_table, wall_seconds
 from assurance.cli import main
-from assurance.stages import stage_table, wall_seconds
-from assurance.table import results_table
+from assurance.fitting.network.weights_io import save_weights, write_card
+from assurance.scenes.uavid import read_image, write_sample
 from el.config import CoreConfig
 from el.labels import ids_to_colors
 from el.pipeline import EmergencyLanding, PipelineConfig
 from el.segmentation.architectures import build_model
 from el.segmentation.model import ArchConfig
-from el.segmentation.weights import read_card, save_weights, write_card
-from el.uavid import read_image, write_sample
+from el.segmentation.weights import read_card
 
 W, H = 512, 288
 MONITORS = ("lhd", "lhd+ch:tau=0.25", "lhd+mcd:n=10,rho=0.9", "lhd+mcd:n=30,rho=0.9")
@@ -212,7 +213,7 @@ def test_dask_local_cluster_gives_the_same_readouts(tmp_path, data, weights):
 
 def test_a_task_that_left_no_shard_is_reported_and_rerun(tmp_path, data, weights, monkeypatch):
     """A worker that dies after its task (no shard written) is named in the summary; re-running completes it."""
-    from assurance import campaign as C
+    from assurance.campaign import run as C
 
     write = readouts.write_shard
     lost = []
@@ -233,7 +234,7 @@ def test_a_task_that_left_no_shard_is_reported_and_rerun(tmp_path, data, weights
 
 
 def test_candidate_audit_of_a_perfect_segmenter_finds_no_unsafe_candidate(data):
-    from assurance.candidate_audit import candidate_audit
+    from assurance.fitting.candidate_audit import candidate_audit
 
     core = CoreConfig(n_star=6, working_width=256)
     audit = candidate_audit(ORACLE, data, core=core)
@@ -252,7 +253,7 @@ class _BlindSegmenter:
 
 
 def test_candidate_audit_says_what_makes_the_unsafe_candidates_unsafe(data):
-    from assurance.candidate_audit import _unsafe_cause, candidate_audit
+    from assurance.fitting.candidate_audit import _unsafe_cause, candidate_audit
 
     assert _unsafe_cause(np.array([5, 5, 0, 4], np.uint8)) is None
     assert _unsafe_cause(np.array([5, 2, 2, 1], np.uint8)) == ("road", 0.75)

@@ -16,13 +16,13 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy.spatial import cKDTree
 
+from assurance.campaign.gt_pipeline import decide_from_labels, decision_schema
 from el import candidates as cand
 from el import regions as reg
 from el.camera import CameraGeometry, working_size
 from el.config import CoreConfig
 from el.core import probs_from_labels, reachable_working_row, run_core
 from el.decision import Candidate, Decision, Disc, MonitorVerdict
-from el.gt_pipeline import decide_from_labels, decision_schema
 from el.labels import CLASS_IDS, forbidden_mask
 
 SETTINGS = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -284,7 +284,7 @@ def test_no_valid_pixel_gives_the_default_action():
 
 @pytest.mark.requirements("EL-R06")
 def test_a_fault_inside_the_cm_gives_the_default_action_with_its_reason(monkeypatch):
-    import el.gt_pipeline as gt
+    import assurance.campaign.gt_pipeline as gt
 
     def broken(*args, **kwargs):
         raise RuntimeError("injected")

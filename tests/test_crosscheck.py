@@ -15,7 +15,7 @@ import pytest
 from scipy import ndimage, stats
 from threadpoolctl import threadpool_limits
 
-from assurance.metrics import bootstrap_ci, clopper_pearson_interval, clopper_pearson_upper
+from assurance.analysis.metrics import bootstrap_ci, clopper_pearson_interval, clopper_pearson_upper
 from el.candidates import DIST_CAP, _exact_edt
 from el.representatives import _kmeans_pp, kmeans
 

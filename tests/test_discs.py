@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from assurance.truth import disc_pixels
+from assurance.campaign.truth import disc_pixels
 from el.decision import Disc
 from el.discs import disc_bounds, disc_window_mask
 from el.monitors.patches import extract_patch

@@ -13,8 +13,9 @@ import pandas as pd
 import pytest
 from helpers import reseal_shard
 
-from assurance import cli, readouts
+from assurance import cli
 from assurance import requirements as rq
+from assurance.campaign import readouts
 from assurance.evidence import generate
 
 pytest_plugins = ["pytester"]
@@ -296,7 +297,7 @@ def test_hostile_2_altered_shard_is_named_and_gets_no_report(tiny_campaign, tmp_
     from conftest import TINY_WW
     from helpers import OracleSegmenter
 
-    from assurance.campaign import describe, run_campaign
+    from assurance.campaign.run import describe, run_campaign
 
     run = tmp_path / "run"
     shutil.copytree(tiny_campaign["run"], run)

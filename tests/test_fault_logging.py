@@ -7,8 +7,8 @@ import logging
 import numpy as np
 from helpers import OracleSegmenter, scene_ids, scene_image
 
+from assurance.campaign.gt_pipeline import decide_from_labels
 from el.config import CoreConfig
-from el.gt_pipeline import decide_from_labels
 from el.pipeline import EmergencyLanding, PipelineConfig
 
 WW = 128
@@ -42,16 +42,16 @@ def test_missing_weights_are_logged_once_at_construction(tmp_path, caplog) -> No
 
 
 def test_ground_truth_pipeline_fault_is_logged(caplog, monkeypatch) -> None:
-    import el.gt_pipeline
+    import assurance.campaign.gt_pipeline
 
     def broken_core(*args, **kwargs):
         raise ValueError("no candidates today")
 
-    monkeypatch.setattr(el.gt_pipeline, "run_core", broken_core)
-    with caplog.at_level(logging.ERROR, logger="el.gt_pipeline"):
+    monkeypatch.setattr(assurance.campaign.gt_pipeline, "run_core", broken_core)
+    with caplog.at_level(logging.ERROR, logger="assurance.campaign.gt_pipeline"):
         d = decide_from_labels(scene_ids(), config=CoreConfig(working_width=WW))
     assert d.action == "default" and d.reason == "fault: ValueError: no candidates today"
-    (rec,) = _records(caplog, "el.gt_pipeline")
+    (rec,) = _records(caplog, "assurance.campaign.gt_pipeline")
     assert rec.exc_info is not None and rec.exc_info[0] is ValueError
 
 

@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from assurance import fault_injection as fi
+from assurance.campaign import fault_injection as fi
 from assurance.cli import main
 from assurance.evidence import generate
 

@@ -7,8 +7,8 @@ import math
 import pandas as pd
 import pytest
 
-from assurance.findings import findings, findings_markdown
-from assurance.reference import load_reference
+from assurance.analysis.findings import findings, findings_markdown
+from assurance.analysis.reference import load_reference
 
 MONITORS = ("lhd", "lhd+ch:tau=0.25", "lhd+mcd:n=10,rho=0.9")
 

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from assurance.headline import BEGIN, END, HeadlineError, current_block, headline_markdown, write_block
-from assurance.presets import preset_config, resolve_monitors
-from assurance.table import results_table
+from assurance.analysis.headline import BEGIN, END, HeadlineError, current_block, headline_markdown, write_block
+from assurance.analysis.table import results_table
+from assurance.campaign.presets import preset_config, resolve_monitors
 from el.monitors import DEMO_GRID
 from el.pipeline import PipelineConfig
 

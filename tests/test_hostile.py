@@ -12,7 +12,7 @@ import stat
 import pytest
 import torch
 
-from assurance import readouts
+from assurance.campaign import readouts
 from assurance.cli import EXIT_BAD_INPUT, EXIT_DAMAGED_RUN, main
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
@@ -68,7 +68,7 @@ def test_case_5_negative_seed_is_refused_and_faulted_runs_read(small, tmp_path, 
     assert code == EXIT_BAD_INPUT and "seed must be an integer >= 0, got -1" in err
     assert not run.exists()
     # a run whose every task faulted: table and evidence read it (no KeyError), evidence says nothing verified
-    from assurance.campaign import CampaignConfig, run_campaign
+    from assurance.campaign.run import CampaignConfig, run_campaign
 
     class Broken:
         def predict_frame(self, rgb):

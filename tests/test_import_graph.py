@@ -5,7 +5,7 @@ What counts as an edge A -> B (module A imports module B):
 - every ``import`` / ``from ... import`` statement in A, at module level *and* inside functions: a
   function-level import only defers the cycle to call time, it does not remove it;
 - ``importlib.import_module("x.y")`` with a literal name, or an f-string with a literal prefix
-  (``f"assurance.commands.{name}"``: an edge to every module under that prefix);
+  (``f"assurance.cli.{name}"``: an edge to every module under that prefix);
 - not the imports under ``if TYPE_CHECKING:`` (never executed);
 - not the implicit import of a module's parent packages (``import el.monitors.lhd`` runs
   ``el/monitors/__init__.py``): a package's ``__init__`` re-exporting its submodules is the usual
@@ -163,18 +163,18 @@ def test_cycle_finder_reports_a_cycle() -> None:
 
 def test_graph_sees_function_level_and_dynamic_imports(tmp_path: Path) -> None:
     (tmp_path / "el").mkdir()
-    (tmp_path / "assurance" / "commands").mkdir(parents=True)
-    for init in ("el", "assurance", "assurance/commands"):
+    (tmp_path / "assurance" / "cli").mkdir(parents=True)
+    for init in ("el", "assurance"):
         (tmp_path / init / "__init__.py").write_text("")
     (tmp_path / "el" / "a.py").write_text("def f():\n    from el import b\n")
     (tmp_path / "el" / "b.py").write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    import el.a\n")
-    (tmp_path / "assurance" / "cli.py").write_text(
-        "import importlib\nimportlib.import_module(f'assurance.commands.{x}')\n")
-    (tmp_path / "assurance" / "commands" / "run.py").write_text("from ..cli import main\n")
+    (tmp_path / "assurance" / "cli" / "__init__.py").write_text(
+        "import importlib\nimportlib.import_module(f'assurance.cli.{x}')\n")
+    (tmp_path / "assurance" / "cli" / "run.py").write_text("def f():\n    from . import main\n")
     graph = import_graph(tmp_path)
     assert graph["el.a"] == {"el.b"} and graph["el.b"] == set()
-    assert graph["assurance.cli"] == {"assurance.commands.run"}
-    assert find_cycles(graph) == [["assurance.cli", "assurance.commands.run", "assurance.cli"]]
+    assert graph["assurance.cli"] == {"assurance.cli.run"}
+    assert find_cycles(graph) == [["assurance.cli", "assurance.cli.run", "assurance.cli"]]
 
 
 def test_no_import_cycles() -> None:

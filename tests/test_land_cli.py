@@ -8,11 +8,10 @@ import numpy as np
 import pytest
 
 from assurance import cli
-from assurance.overlay import STATUS_COLOURS, draw_decision
-from el.decision import Candidate, Decision, Disc, MonitorVerdict
-from el.gt_pipeline import decision_schema
+from assurance.evidence.overlay import STATUS_COLOURS, draw_decision
+from assurance.scenes.uavid import read_image, write_image, write_labels
+from el.decision import Candidate, Decision, Disc, MonitorVerdict, decision_schema
 from el.labels import CLASS_IDS
-from el.uavid import read_image, write_image, write_labels
 
 W, H = 256, 144
 
@@ -164,9 +163,9 @@ def test_model_pipeline_without_weights_takes_default_action(main, scene, tmp_pa
 def test_model_pipeline_with_weights(main, scene, tmp_path, capsys, monkeypatch):
     import torch
 
+    from assurance.fitting.network.weights_io import save_weights
     from el.segmentation.architectures import build_model
     from el.segmentation.model import ArchConfig
-    from el.segmentation.weights import save_weights
 
     torch.manual_seed(0)
     weights = tmp_path / "tiny.pt"

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from helpers import OracleSegmenter, nearest_class, scene_ids
 
+from assurance.scenes.uavid import write_sample
 from el.config import CoreConfig
 from el.labels import CLASS_IDS, ids_to_colors
-from el.uavid import write_sample
 
 WW = 256
 CORE = CoreConfig(working_width=WW)
@@ -42,7 +42,7 @@ def splits(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def model_file(splits, tmp_path_factory):
-    from assurance.learned_monitor import fit_learned_monitor
+    from assurance.fitting.learned_monitor import fit_learned_monitor
 
     train, val = splits
     doc = fit_learned_monitor(train, RoadBlindFrame(WW), val=val, core=CORE, weights={"sha256": None})
@@ -65,7 +65,7 @@ def test_fit_records_a_plain_json_model_with_what_it_rests_on(model_file):
 
 
 def test_recall_threshold():
-    from assurance.learned_monitor import recall_threshold
+    from assurance.fitting.learned_monitor import recall_threshold
 
     s = np.linspace(0, 1, 101)
     t = recall_threshold(s, np.ones(101, bool), 0.95)
@@ -185,9 +185,9 @@ def test_cli_fit_monitor_and_land_fail_loud(splits, tmp_path, capsys, monkeypatc
 
 
 def test_campaign_and_calibration_by_name(model_file, splits, tmp_path):
-    from assurance import readouts
-    from assurance.calibration import calibrate_on_data
-    from assurance.campaign import CampaignConfig, run_campaign
+    from assurance.campaign import readouts
+    from assurance.campaign.run import CampaignConfig, run_campaign
+    from assurance.fitting.calibration import calibrate_on_data
 
     _, val = splits
     spec = f"learned:model={model_file}"
@@ -204,9 +204,9 @@ def test_campaign_and_calibration_by_name(model_file, splits, tmp_path):
 def test_card_run_and_monitor_must_rest_on_the_same_learned_model(model_file, splits, tmp_path):
     """A threshold calibrated on one learned model is refused on another: in flight (default action), at the
     campaign (resuming with another model), and by EL-R16 (the run scored with another model)."""
-    from assurance import readouts
-    from assurance.calibration import calibrate_on_data, check_calibrated_miss_rate
-    from assurance.campaign import CampaignConfig, plan, run_campaign, run_task
+    from assurance.campaign import readouts
+    from assurance.campaign.run import CampaignConfig, plan, run_campaign, run_task
+    from assurance.fitting.calibration import calibrate_on_data, check_calibrated_miss_rate
     from el.monitors.calibration import load_calibration
     from el.monitors.learned import load_learned_model, model_document
     from el.pipeline import EmergencyLanding, PipelineConfig
@@ -278,8 +278,8 @@ def test_context_windows_give_what_the_whole_frame_gives():
 
 
 def test_a_run_recorded_before_monitor_models_is_not_resumed_with_a_learned_monitor(model_file, splits, tmp_path):
-    from assurance import readouts
-    from assurance.campaign import CampaignConfig, run_campaign
+    from assurance.campaign import readouts
+    from assurance.campaign.run import CampaignConfig, run_campaign
 
     _, val = splits
     config = CampaignConfig(perturbations=("none",), monitors=(f"learned:model={model_file}",), core=CORE,

@@ -10,6 +10,8 @@ import numpy as np
 import pytest
 import torch
 
+from assurance.fitting.network.losses import segmentation_loss
+from assurance.fitting.network.weights_io import save_weights
 from el.labels import NUM_CLASSES
 from el.segmentation.architectures import arch_from_dict, build_model
 from el.segmentation.inference import Segmenter
@@ -21,9 +23,8 @@ from el.segmentation.lite import (
     pretrained_provenance,
     pretrained_weights_path,
 )
-from el.segmentation.losses import segmentation_loss
 from el.segmentation.model import ArchConfig
-from el.segmentation.weights import WeightsError, load_weights, save_weights
+from el.segmentation.weights import WeightsError, load_weights
 
 
 @pytest.fixture(autouse=True, scope="module")

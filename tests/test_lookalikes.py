@@ -5,14 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from assurance.scenes import default_geometry, generate_world, render
+from assurance.scenes.builder import Builder
+from assurance.scenes.lookalikes import low_building, shared_street, stray_cars, track
+from assurance.scenes.rand import Rand
+from assurance.scenes.styles import STYLES
+from assurance.scenes.view import coverage_domain
+from assurance.scenes.world import Look, Sun, World
 from el.labels import CLASS_IDS
-from el.synth import default_geometry, generate_world, render
-from el.synth.builder import Builder
-from el.synth.lookalikes import low_building, shared_street, stray_cars, track
-from el.synth.rand import Rand
-from el.synth.styles import STYLES
-from el.synth.view import coverage_domain
-from el.synth.world import Look, Sun, World
 
 SIZE = (480, 270)
 GROUND_MATERIALS = {"roof_green", "roof_gravel", "roof_concrete", "grass"}

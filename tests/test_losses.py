@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import torch
 
-from el.segmentation.evaluation import confusion, iou_from_confusion
-from el.segmentation.losses import LOSSES, lovasz_softmax, segmentation_loss
+from assurance.fitting.network.evaluation import confusion, iou_from_confusion
+from assurance.fitting.network.losses import LOSSES, lovasz_softmax, segmentation_loss
 
 
 def _one_hot_probs(pred: torch.Tensor, classes: int) -> torch.Tensor:
@@ -66,7 +66,7 @@ def test_segmentation_loss_kinds() -> None:
 def test_the_command_line_offers_every_loss() -> None:
     import argparse
 
-    from assurance.commands.train import add_arguments
+    from assurance.cli.train import add_arguments
 
     parser = argparse.ArgumentParser()
     add_arguments(parser)

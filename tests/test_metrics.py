@@ -16,7 +16,7 @@ from sklearn.metrics import (
     recall_score,
 )
 
-from assurance.metrics import (
+from assurance.analysis.metrics import (
     CI_METRICS,
     METRIC_NAMES,
     RESULT_COLUMNS,
@@ -32,8 +32,8 @@ from assurance.metrics import (
     rows_to_frame,
     safety_gains,
 )
-from assurance.perturbations import PAPER_PERTURBATIONS
-from assurance.reference import PERTURBATION_NAMES, load_reference, monitor_spec_name
+from assurance.analysis.reference import PERTURBATION_NAMES, load_reference, monitor_spec_name
+from assurance.campaign.perturbations import PAPER_PERTURBATIONS
 
 DESIGN_COLUMNS = (
     "perturbation, severity, monitor, images, candidates, g_cm, mcc, f1, precision, recall, "

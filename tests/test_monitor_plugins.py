@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 from helpers import OracleSegmenter, scene_ids
 
+from assurance.scenes.uavid import write_image, write_sample
 from el.labels import ids_to_colors
 from el.monitors import build_monitor, monitor_names, parse_monitor_spec, registry
-from el.uavid import write_image, write_sample
 
 PLUGIN = Path(__file__).parent / "plugins" / "toy_uav_monitor.py"
 
@@ -80,12 +80,12 @@ def test_land_and_campaign_run_the_plugin_monitor_by_name(toy_installed, tmp_pat
     import torch
 
     from assurance import cli
-    from assurance.campaign import CampaignConfig, run_campaign
-    from assurance.readouts import load_table
+    from assurance.campaign.readouts import load_table
+    from assurance.campaign.run import CampaignConfig, run_campaign
+    from assurance.fitting.network.weights_io import save_weights
     from el.config import CoreConfig
     from el.segmentation.architectures import build_model
     from el.segmentation.model import ArchConfig
-    from el.segmentation.weights import save_weights
 
     torch.manual_seed(0)
     weights = tmp_path / "tiny.pt"

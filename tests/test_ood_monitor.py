@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from helpers import TINY_ARCH, OracleSegmenter, scene_ids
 
+from assurance.scenes.uavid import write_sample
 from el.labels import ids_to_colors
-from el.uavid import write_sample
 
 W, H, WW = 128, 72, 64
 
@@ -29,7 +29,7 @@ def _frames(root, seeds):
 def setup(tmp_path_factory, one_torch_thread):
     import torch
 
-    from assurance.ood import fit_ood
+    from assurance.fitting.ood_gate import fit_ood
     from el.segmentation.architectures import build_model
     from el.segmentation.inference import Segmenter
 
@@ -44,8 +44,8 @@ def setup(tmp_path_factory, one_torch_thread):
 
 
 def _far_frames(val):
-    from assurance.perturbations import perturb
-    from el.uavid import read_image
+    from assurance.campaign.perturbations import perturb
+    from assurance.scenes.uavid import read_image
 
     normal = read_image(next(val.glob("**/Images/*.png")))
     rng = np.random.default_rng(0)
@@ -55,8 +55,8 @@ def _far_frames(val):
 
 
 def test_gate_flags_constant_noise_and_heavy_fog(setup):
+    from assurance.scenes.uavid import read_image
     from el.monitors.ood import load_ood
-    from el.uavid import read_image
 
     gate = load_ood(setup["gate"])
     assert gate.kind == "trunk" and gate.body["dims"] == 2 * TINY_ARCH.widths[-1]
@@ -68,9 +68,9 @@ def test_gate_flags_constant_noise_and_heavy_fog(setup):
 
 
 def test_pipeline_takes_the_default_action_out_of_domain(setup, tmp_path):
+    from assurance.scenes.uavid import read_image
     from el.monitors.ood import load_ood
     from el.pipeline import EmergencyLanding, PipelineConfig
-    from el.uavid import read_image
 
     gate = load_ood(setup["gate"])
     frames = sorted(setup["val"].glob("**/Images/*.png"))
@@ -95,7 +95,7 @@ def test_pipeline_takes_the_default_action_out_of_domain(setup, tmp_path):
 
 
 def test_softmax_fallback_for_segmenters_without_a_trunk(setup):
-    from assurance.ood import embed_frames, fit_ood_body
+    from assurance.fitting.ood_gate import embed_frames, fit_ood_body
     from el.monitors.ood import SOFTMAX, OODGate, embedding_kind, frame_embedding
 
     seg = OracleSegmenter(WW)

@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from assurance.perturbations import (
+from assurance.campaign.perturbations import (
     PAPER_PERTURBATIONS,
     PERTURBATIONS,
     TRAITS,

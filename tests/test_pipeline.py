@@ -11,10 +11,10 @@ from helpers import FakeClock, OracleSegmenter, scene_ids, scene_image
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from assurance.scenes.uavid import write_image
 from el.config import CoreConfig
-from el.gt_pipeline import decision_schema
+from el.decision import decision_schema
 from el.pipeline import EmergencyLanding, PipelineConfig
-from el.uavid import write_image
 
 W, H, WW = 256, 144, 128
 

@@ -2,7 +2,7 @@
 
 import pytest
 
-from assurance.pose_study import PoseCase, candidate_clearances, summarise
+from assurance.fitting.pose_study import PoseCase, candidate_clearances, summarise
 
 
 @pytest.mark.requirements("EL-R02")

@@ -41,11 +41,11 @@ def test_unsafe_landing_failure_says_by_how_much():
 
 
 def test_harness_errors_share_the_project_root():
+    from assurance.analysis.headline import HeadlineError
+    from assurance.analysis.sweep import SweepError
+    from assurance.campaign.readouts import DamagedRunError, RunError
     from assurance.errors import CommandError
-    from assurance.headline import HeadlineError
-    from assurance.readouts import DamagedRunError, RunError
     from assurance.requirements import RegistryError
-    from assurance.sweep import SweepError
     from el.errors import UavElError
 
     for cls in (CommandError, HeadlineError, RunError, DamagedRunError, RegistryError, SweepError):

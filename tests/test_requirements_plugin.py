@@ -12,7 +12,7 @@ import pytest
 import yaml
 
 from assurance import requirements as rq
-from assurance.perturbations import PAPER_PERTURBATIONS
+from assurance.campaign.perturbations import PAPER_PERTURBATIONS
 
 pytest_plugins = ["pytester"]
 
@@ -326,8 +326,8 @@ def test_without_a_run_the_campaign_requirements_are_not_verified(pytester, tmp_
 # ------------------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def tiny_tables(tiny_campaign):
-    from assurance import readouts
-    from assurance.table import results_table
+    from assurance.analysis.table import results_table
+    from assurance.campaign import readouts
 
     run = tiny_campaign["run"]
     return (readouts.load_table(run, "images"), readouts.load_table(run, "candidates"),
@@ -335,7 +335,7 @@ def tiny_tables(tiny_campaign):
 
 
 def test_monitor_coverage_catches_a_pipeline_that_ignores_the_monitor(monitor_runs):
-    from assurance import readouts
+    from assurance.campaign import readouts
 
     good = rq.check_monitor_coverage(*(readouts.load_table(monitor_runs["good"], t) for t in readouts.TABLES))
     bad = rq.check_monitor_coverage(*(readouts.load_table(monitor_runs["broken"], t) for t in readouts.TABLES))
@@ -367,7 +367,7 @@ def test_safety_gain_and_unsafe_landing_bound(tiny_tables):
     # 10 images cannot show 5% even with no unsafe landing: not verified, never failed
     small = rq.check_unsafe_landing_bound(table, "lhd", 0.05, PAPER_PERTURBATIONS)
     assert small.status == rq.INSUFFICIENT and "needs >= 59 images" in small.summary
-    from assurance.metrics import clopper_pearson_upper
+    from assurance.analysis.metrics import clopper_pearson_upper
 
     for bound in (0.05, 0.0419, 0.01, 0.2):
         n = rq.images_needed(bound)

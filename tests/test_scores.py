@@ -10,12 +10,12 @@ import pandas as pd
 import pytest
 from helpers import OracleSegmenter, scene_ids
 
-from assurance import readouts
-from assurance.campaign import CampaignConfig, run_campaign
-from assurance.scores import auroc, auroc_table, roc_curve
+from assurance.analysis.scores import auroc, auroc_table, roc_curve
+from assurance.campaign import readouts
+from assurance.campaign.run import CampaignConfig, run_campaign
+from assurance.scenes.uavid import write_sample
 from el.config import CoreConfig
 from el.labels import ids_to_colors
-from el.uavid import write_sample
 
 MONITORS = ("lhd", "lhd+ch:tau=0.25", "lhd+mcd:n=10,rho=0.9", "msp", "entropy:threshold=0.5")
 
@@ -69,7 +69,7 @@ def test_runs_without_scores_still_load(run, tmp_path, capsys):
     import shutil
 
     from assurance.cli import main
-    from assurance.evidence_plots import roc_figure
+    from assurance.evidence.plots import roc_figure
 
     old = tmp_path / "old"
     shutil.copytree(run, old)

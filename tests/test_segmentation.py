@@ -13,6 +13,7 @@ from helpers import TINY_ARCH as TINY
 from torch import nn
 
 import el.segmentation.inference as inference_module
+from assurance.fitting.network.weights_io import save_weights, state_dict_bytes
 from el.labels import NUM_CLASSES
 from el.segmentation import (
     ArchConfig,
@@ -20,10 +21,9 @@ from el.segmentation import (
     WeightsError,
     build_model,
     load_weights,
-    save_weights,
 )
 from el.segmentation.model import MCSpec, count_parameters
-from el.segmentation.weights import card_path, read_card, sha256_file, state_dict_bytes
+from el.segmentation.weights import card_path, read_card, sha256_file
 
 
 @pytest.fixture(autouse=True, scope="module")

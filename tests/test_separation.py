@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from sklearn.metrics import roc_auc_score
 
-from assurance.separation import SCORES, auroc, disc_scores, separation
+from assurance.fitting.separation import SCORES, auroc, disc_scores, separation
 from el.decision import Disc
 from el.monitors.lhd import lhd_rule
 from el.monitors.patches import extract_patch

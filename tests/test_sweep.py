@@ -6,9 +6,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from assurance.readouts import load_table
-from assurance.sweep import SweepError, choose, replay, sweep
-from assurance.sweep_report import sweep_run, write_sweep
+from assurance.analysis.sweep import SweepError, choose, replay, sweep
+from assurance.analysis.sweep_report import sweep_run, write_sweep
+from assurance.campaign.readouts import load_table
 
 KEYS = ["perturbation", "severity", "key"]
 

@@ -8,9 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from el.camera import CameraGeometry, Pose
-from el.labels import CLASS_IDS, NUM_CLASSES, PALETTE
-from el.synth import (
+from assurance.scenes import (
     SPLIT_BASE,
     World,
     default_geometry,
@@ -21,11 +19,13 @@ from el.synth import (
     scene_seed,
     write_dataset,
 )
-from el.synth.generate import write_scene
-from el.synth.geom import PolygonSet, rect
-from el.synth.styles import HELD_OUT_STYLES, STYLES, choose_style
-from el.synth.world import Block, Crown, Look, Sun
-from el.uavid import iter_samples, read_image, read_labels
+from assurance.scenes.generate import write_scene
+from assurance.scenes.geom import PolygonSet, rect
+from assurance.scenes.styles import HELD_OUT_STYLES, STYLES, choose_style
+from assurance.scenes.uavid import iter_samples, read_image, read_labels
+from assurance.scenes.world import Block, Crown, Look, Sun
+from el.camera import CameraGeometry, Pose
+from el.labels import CLASS_IDS, NUM_CLASSES, PALETTE
 
 SIZE = (480, 270)
 BATCH = [(0, "downtown"), (1, "residential"), (2, "park"), (3, "campus"), (4, "industrial"), (5, "downtown")]

@@ -12,19 +12,19 @@ import torch
 from helpers import TINY_ARCH
 
 import assurance.cli as cli
+from assurance.fitting.network import data as D
+from assurance.fitting.network.card import verify_card
+from assurance.fitting.network.checkpoint import checkpoint_path, load_checkpoint
+from assurance.fitting.network.evaluation import compare_figures, confusion, summarise
+from assurance.fitting.network.train_config import TrainConfig, steps_for_epochs
+from assurance.fitting.network.training import prefetched, resolve_device, sample_batch, train, training_loss
+from assurance.scenes.uavid import write_sample
 from el.labels import NUM_CLASSES, PALETTE
-from el.segmentation import data as D
 from el.segmentation.architectures import build_model
-from el.segmentation.card import verify_card
-from el.segmentation.checkpoint import checkpoint_path, load_checkpoint
-from el.segmentation.evaluation import compare_figures, confusion, summarise
 from el.segmentation.inference import Segmenter
 from el.segmentation.model import ArchConfig
 from el.segmentation.protocol import EvalProtocol
-from el.segmentation.train_config import TrainConfig, steps_for_epochs
-from el.segmentation.training import prefetched, resolve_device, sample_batch, train, training_loss
 from el.segmentation.weights import card_path, read_card
-from el.uavid import write_sample
 
 
 @pytest.fixture(autouse=True, scope="module")

@@ -7,7 +7,7 @@ from helpers import OracleSegmenter, scene_ids, scene_image
 from hypothesis import given
 from hypothesis import strategies as st
 
-from assurance.campaign import walk, walk_of
+from assurance.campaign.run import walk, walk_of
 from el.config import CoreConfig
 from el.decision import MonitorVerdict
 from el.monitors import parse_monitor_spec

@@ -2,7 +2,7 @@
 
 ``generate(run, out, ...)`` reads a campaign run (manifest, readouts, results table), the requirement
 registry and the requirement results of a test session (``pytest -m requirements --uav-el-run RUN``, JSON
-written by ``assurance.pytest_plugin``), and writes into ``out``:
+written by ``assurance.requirements.pytest_plugin``), and writes into ``out``:
 
 - ``evidence.html``: self-contained (CSS inline, images as data URIs), rendered from the Jinja2
   templates in ``assurance/templates/`` (autoescape on, undefined variables are errors);

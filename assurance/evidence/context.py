@@ -7,8 +7,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from assurance import readouts
 from assurance import requirements as rq
+from assurance.analysis.table import results_table, write_csv
+from assurance.campaign import readouts
+from assurance.campaign.integrity import RunCheck, verify_run
 from assurance.evidence.gate import GATE_CLASS, Gate, requirement_results
 from assurance.evidence.identity import identity
 from assurance.evidence.matrix import check_problems, check_view, matrix, run_checks
@@ -23,8 +25,6 @@ from assurance.evidence.sections import (
     unsafe_picks,
 )
 from assurance.evidence.text import STATE_CLASS, pct
-from assurance.integrity import RunCheck, verify_run
-from assurance.table import results_table, write_csv
 
 
 @dataclass
@@ -93,7 +93,7 @@ def read_inputs(run: Path, out: Path, *, requirements: str | Path | None, baseli
 
 def _plots(inp: Inputs) -> list[dict[str, str]]:
     """The report's figures (none for an empty results table)."""
-    from assurance.evidence_plots import gains_figure, monitor_metrics_figure, overhead_figure, roc_figure
+    from assurance.evidence.plots import gains_figure, monitor_metrics_figure, overhead_figure, roc_figure
 
     table, deployed, monitors = inp.table, inp.deployed, list(inp.manifest["config"]["monitors"])
     if not len(table):
@@ -112,8 +112,8 @@ def _plots(inp: Inputs) -> list[dict[str, str]]:
 
 def campaign_context(inp: Inputs) -> dict[str, Any]:
     """The run's part of the context: identity, operating domain, pictures, plots, results and limitations."""
-    from assurance.evidence_gallery import Scenes, decision_examples, perturbation_gallery
-    from assurance.perturbations import PAPER_PERTURBATIONS
+    from assurance.campaign.perturbations import PAPER_PERTURBATIONS
+    from assurance.evidence.gallery import Scenes, decision_examples, perturbation_gallery
 
     man, images, candidates, reg = inp.manifest, inp.images, inp.candidates, inp.registry
     identity_rows, ident = identity(inp.run, man, reg, inp.req_path, inp.req_doc, inp.csv_path, inp.templates,
@@ -170,7 +170,7 @@ def _parameter_text(v: Any) -> str:
 def run_scope(inp: Inputs, states: dict[str, str]) -> dict[str, Any] | None:
     """For a run smaller than the release preset (e.g. the demo): its size, the requirements it leaves
     undecided and the command that decides them; None for a release-sized run."""
-    from assurance.presets import preset_config
+    from assurance.campaign.presets import preset_config
 
     release = preset_config("release")
     ok = inp.images[inp.images["fault"].fillna("") == ""] if inp.images is not None and len(inp.images) else None

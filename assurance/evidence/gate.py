@@ -15,8 +15,8 @@ from pathlib import Path
 from typing import Any
 
 from assurance import requirements as rq
+from assurance.campaign.integrity import RunCheck, code_sha256
 from assurance.evidence.waivers import load_waivers, waiver_expired
-from assurance.integrity import RunCheck, code_sha256
 
 GATE_CLASS = {"FAILED": "failed", "WAIVED": "failed", "INCOMPLETE": "not-verified", "PASSED": "verified"}
 

@@ -12,12 +12,13 @@ from typing import Any
 
 import numpy as np
 
-from assurance import __version__, readouts
+from assurance import __version__
 from assurance import requirements as rq
+from assurance.analysis.table import results_table
+from assurance.campaign import readouts
+from assurance.campaign.integrity import RunCheck, tree_sha256
 from assurance.evidence.render import ROOT
 from assurance.evidence.text import STATE_CLASS, fmt, to_float
-from assurance.integrity import RunCheck, tree_sha256
-from assurance.table import results_table
 from el.hashing import sha256_file
 
 HIGHER_IS_BETTER = {"g_cm": True, "g_rm": True, "g_star": True, "mcc": True, "f1": True, "precision": True,
@@ -31,7 +32,7 @@ def identity(run: Path, man: Mapping[str, Any], registry: rq.Registry, req_path:
               req_doc: Mapping[str, Any] | None, csv_path: Path, templates: Path,
               check: RunCheck) -> tuple[list[dict], dict]:
     """What was assessed: (the report's identity rows, the same facts for evidence.json)."""
-    from assurance.campaign import git_commit
+    from assurance.campaign.run import git_commit
 
     weights = man.get("weights") or {}
     wpath = weights.get("path")

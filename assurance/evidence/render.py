@@ -20,7 +20,7 @@ FAULTS_CSV = "faults.csv"
 
 def faults_table(out: Path, warnings: list[str]) -> list[dict[str, str]] | None:
     """The fault-injection table (``uav-el fault-table``) found next to the report, for its appendix."""
-    from assurance.fault_injection import read_table
+    from assurance.campaign.fault_injection import read_table
 
     path = out / FAULTS_CSV
     if not path.is_file():
@@ -119,6 +119,6 @@ def write_csv_rows(path: Path, rows: Sequence[Mapping[str, str]], columns: Seque
 
 def write_text(path: Path, text: str) -> None:
     """Write UTF-8 text atomically."""
-    from el.uavid import atomic_write_bytes
+    from assurance.files import atomic_write_bytes
 
     atomic_write_bytes(path, text.encode("utf-8"))

@@ -10,8 +10,8 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from assurance import requirements as rq
+from assurance.analysis.metrics import clopper_pearson_upper
 from assurance.evidence.text import ci, fmt, pct, to_float
-from assurance.metrics import clopper_pearson_upper
 
 
 def scene_types(scenes: Any, keys: Sequence[str]) -> tuple[str, bool]:
@@ -146,7 +146,7 @@ def sample_size(table: Any, registry: rq.Registry, n_boot: int) -> list[str]:
 def limitations(man: Mapping[str, Any], registry: rq.Registry, results: Mapping[str, rq.RequirementResult],
                  synthetic: bool, table: Any) -> list[str]:
     """What the evidence does not cover: synthetic scenes, geometry, timings, what was not evaluated or verified."""
-    from assurance.perturbations import PERTURBATIONS, SEVERITIES
+    from assurance.campaign.perturbations import PERTURBATIONS, SEVERITIES
     from el.monitors import PAPER_GRID
 
     cfg = man["config"]

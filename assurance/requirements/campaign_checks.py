@@ -86,7 +86,7 @@ def pose_error_margin(ctx: CheckContext) -> Evidence:
 @check("EL-R16", parameters=("calibration_card",), in_report=False)
 def calibrated_miss_rate(ctx: CheckContext) -> Evidence:
     """The calibrated monitor's miss rate on the test split is within its card's (no card: not verified)."""
-    from assurance.calibration import check_calibrated_miss_rate
+    from assurance.fitting.calibration import check_calibrated_miss_rate
     from el.monitors.calibration import load_calibration
 
     card = ctx.parameters.get("calibration_card")

@@ -41,7 +41,7 @@ def check_monitor_coverage(images: Any, candidates: Any) -> Evidence:
     walked before it (in the configuration's walk order, ``el.monitors.walk``) was rejected, and the two
     readout tables agree on the decision.
 
-    ``images`` / ``candidates``: the run's tables (``assurance.readouts.load_table``).
+    ``images`` / ``candidates``: the run's tables (``assurance.campaign.readouts.load_table``).
     """
     name = "monitor coverage of every decision"
     ok = _ok_images(images)
@@ -192,7 +192,7 @@ def images_needed_at(rate: float, bound: float, conf: float = 0.95, limit: int =
     >>> images_needed_at(0.0, 0.05), images_needed_at(0.06, 0.05)
     (59, None)
     """
-    from assurance.metrics import clopper_pearson_upper
+    from assurance.analysis.metrics import clopper_pearson_upper
 
     if not 0 <= rate < bound:
         return None
@@ -219,7 +219,7 @@ def check_unsafe_landing_bound(table: Any, monitor: str, bound: float, required:
     A scenario whose bound exceeds ``bound`` fails when the sample was large enough for zero unsafe
     landings to meet it; otherwise the sample is too small to decide (insufficient).
     """
-    from assurance.metrics import clopper_pearson_upper
+    from assurance.analysis.metrics import clopper_pearson_upper
 
     name = f"unsafe-landing rate of the deployed monitor ({monitor}), bound {bound:g}"
     rows_df = _deployed_rows(table, monitor)

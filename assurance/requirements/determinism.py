@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from assurance.perturbations import TRAITS
+from assurance.campaign.perturbations import TRAITS
 from assurance.requirements.records import FAIL, INSUFFICIENT, PASS, Evidence
 
 TIMING_COLUMNS: frozenset[str] = frozenset({
@@ -29,9 +29,9 @@ def check_table_recomputation(run: str | Path, *, n_boot: int = 500) -> Evidence
     the shards are read, and equals the run's stored ``results.csv`` (if any), timing columns aside."""
     import pandas as pd
 
-    from assurance import readouts
-    from assurance.metrics import ScenarioMetrics, rows_to_frame
-    from assurance.table import image_readouts, results_table
+    from assurance.analysis.metrics import ScenarioMetrics, rows_to_frame
+    from assurance.analysis.table import image_readouts, results_table
+    from assurance.campaign import readouts
 
     run = Path(run)
     name = "results table recomputed from the readouts"
@@ -74,7 +74,7 @@ def check_table_recomputation(run: str | Path, *, n_boot: int = 500) -> Evidence
 
 def _campaign_config(man: Mapping[str, Any]) -> Any:
     """The CampaignConfig a run's manifest records."""
-    from assurance.campaign import CampaignConfig
+    from assurance.campaign.run import CampaignConfig
     from el.config import CoreConfig
 
     cfg_d = dict(man["config"])
@@ -86,8 +86,8 @@ def _campaign_config(man: Mapping[str, Any]) -> Any:
 
 def _replan(man: Mapping[str, Any], config: Any, own_model: bool) -> list[Any] | str:
     """The run's tasks planned again on its data folder, or why they cannot be (data or weights gone or changed)."""
-    from assurance.campaign import manifest as make_manifest
-    from assurance.campaign import plan
+    from assurance.campaign.run import manifest as make_manifest
+    from assurance.campaign.run import plan
 
     data = Path(man["data"]["path"])
     if not data.is_dir():
@@ -100,7 +100,7 @@ def _replan(man: Mapping[str, Any], config: Any, own_model: bool) -> list[Any] |
             return f"insufficient evidence: the run's weights {weights} are gone"
         if sha256_file(weights) != man["weights"].get("sha256"):
             return f"insufficient evidence: the weights file {weights} changed since the run"
-    from assurance.campaign import monitor_models
+    from assurance.campaign.run import monitor_models
 
     try:
         models = monitor_models(config.monitors)
@@ -125,7 +125,7 @@ def _differing_columns(stored: Any, again: Any) -> list[str]:
     Columns the code added since the run (in ``readouts.COLUMNS`` but not in the stored table, e.g. the
     image width and height) are left out, so a run recorded before them can still be re-run.
     """
-    from assurance import readouts
+    from assurance.campaign import readouts
 
     added = [c for c in again.columns if c not in stored.columns and c in set().union(*readouts.COLUMNS.values())]
     again = again.drop(columns=added)
@@ -154,8 +154,8 @@ def check_rerun(run: str | Path, *, shards: int = 1, work_dir: str | Path, threa
     """
     import pandas as pd
 
-    from assurance import readouts
-    from assurance.campaign import execute
+    from assurance.campaign import readouts
+    from assurance.campaign.run import execute
 
     run = Path(run)
     man = readouts.read_manifest(run)

@@ -1,6 +1,6 @@
 """Calibration cards: a monitor's threshold chosen on held-out data, with the guarantee it carries.
 
-``uav-el calibrate`` (``assurance.calibration``) writes the card; the flight code only reads it. A card
+``uav-el calibrate`` (``assurance.fitting.calibration``) writes the card; the flight code only reads it. A card
 is JSON ``{"format", "body", "sha256"}`` where ``sha256`` is the SHA-256 of the body's canonical JSON
 (sorted keys, no spaces): an altered or truncated card is refused, as altered weights are. The body
 names the monitor (``monitor``, at its default threshold), the calibrated ``threshold``, the

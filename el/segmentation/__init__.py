@@ -10,7 +10,7 @@ Public entry points::
 from el.segmentation.architectures import build_model
 from el.segmentation.inference import MIN_SIZE, Segmenter
 from el.segmentation.model import ArchConfig, MSDLite
-from el.segmentation.weights import DEFAULT_WEIGHTS, WeightsError, load_weights, save_weights
+from el.segmentation.weights import DEFAULT_WEIGHTS, WeightsError, load_weights
 
 __all__ = [
     "DEFAULT_WEIGHTS",
@@ -21,5 +21,4 @@ __all__ = [
     "WeightsError",
     "build_model",
     "load_weights",
-    "save_weights",
 ]

@@ -1,7 +1,7 @@
 """The evaluation protocol a model card records, which is also how the network is deployed.
 
 The protocol is data (recorded in the model card) so that ``uav-el model-card --verify`` can redo
-exactly the same computation (:mod:`el.segmentation.evaluation`), and :meth:`Segmenter.load
+exactly the same computation (:mod:`assurance.fitting.network.evaluation`), and :meth:`Segmenter.load
 <el.segmentation.inference.Segmenter.load>` segments frames the way the card's figures were measured.
 """
 
@@ -10,7 +10,6 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 from typing import Any
 
-from el.segmentation.data import PrepParams
 from el.segmentation.pooling import check_pooling
 
 
@@ -47,10 +46,6 @@ class EvalProtocol:
             raise ValueError(f"frame_flip must be true or false, got {self.frame_flip!r}")
         object.__setattr__(self, "frame_scales", check_frame_scales(self.frame_scales))
         check_pooling(self.frame_pooling)
-
-    def prep_params(self) -> PrepParams:
-        return PrepParams(working_width=self.working_width, regions=self.hd_patches,
-                          region_size=self.hd_patch_size, seed=self.seed)
 
     def to_dict(self) -> dict[str, Any]:
         return {**asdict(self), **self.frame_options()}

@@ -1,4 +1,6 @@
-"""Weights files and their model cards: save atomically, check the SHA-256 before loading.
+"""Weights files and their model cards: check the SHA-256 before loading.
+
+Writing them is ``assurance.fitting.network.weights_io``.
 
 A weights file ``NAME.pt`` is a float32 ``state_dict`` written with ``torch.save``. Next to it,
 ``NAME.json`` is its model card: the file's SHA-256, the architecture hyper-parameters needed to
@@ -21,8 +23,6 @@ import torch
 from el.errors import WeightsError
 from el.hashing import sha256_bytes, sha256_file  # noqa: F401  (re-exported)
 from el.segmentation.architectures import build_model
-from el.segmentation.model import count_parameters
-from el.uavid import atomic_write_bytes
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
 DEFAULT_WEIGHTS = WEIGHTS_DIR / "model.pt"
@@ -34,48 +34,6 @@ def card_path(weights_path: str | Path) -> Path:
     return Path(weights_path).with_suffix(".json")
 
 
-
-
-def state_dict_bytes(model: torch.nn.Module) -> bytes:
-    """The model's float32 CPU state dict, serialised as ``torch.save`` writes it."""
-    state = {k: (v.detach().to("cpu", torch.float32) if v.is_floating_point() else v.detach().cpu())
-             for k, v in model.state_dict().items()}
-    buf = io.BytesIO()
-    torch.save(state, buf)
-    return buf.getvalue()
-
-
-def write_card(weights_path: str | Path, card: dict[str, Any]) -> Path:
-    """Write the model card next to the weights (atomically); returns its path."""
-    path = card_path(weights_path)
-    text = json.dumps(card, indent=2, allow_nan=False) + "\n"
-    atomic_write_bytes(path, text.encode("utf-8"))
-    return path
-
-
-def save_weights(model: torch.nn.Module, weights_path: str | Path,
-                 card: dict[str, Any] | None = None) -> dict[str, Any]:
-    """Write the weights file and its card; returns the card as written.
-
-    The card gets ``format``, ``weights_file``, ``weights_sha256``, ``architecture`` and
-    ``parameters`` filled in from the model; other keys of ``card`` are kept as given.
-    """
-    weights_path = Path(weights_path)
-    data = state_dict_bytes(model)
-    atomic_write_bytes(weights_path, data)
-    full = {
-        "format": CARD_FORMAT,
-        "weights_file": weights_path.name,
-        "weights_sha256": sha256_bytes(data),
-        "weights_bytes": len(data),
-        "architecture": model.config.to_dict(),
-        "parameters": count_parameters(model),
-    }
-    for key, value in (card or {}).items():
-        if key not in full:
-            full[key] = value
-    write_card(weights_path, full)
-    return full
 
 
 def read_card(weights_path: str | Path) -> dict[str, Any]:

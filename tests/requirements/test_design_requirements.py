@@ -7,12 +7,13 @@ import torch
 from helpers import scene_ids, scene_image
 
 from assurance import requirements as rq
+from assurance.fitting.network.weights_io import save_weights
 from el.config import CoreConfig
 from el.pipeline import EmergencyLanding, PipelineConfig
 from el.segmentation import Segmenter
 from el.segmentation.architectures import build_model
 from el.segmentation.model import ArchConfig
-from el.segmentation.weights import WeightsError, load_weights, save_weights
+from el.segmentation.weights import WeightsError, load_weights
 
 
 @pytest.mark.requirements("EL-R14")

@@ -1,0 +1,1 @@
+"""Analysis of campaign readouts: metrics, intervals, results tables, threshold sweeps and the paper's findings."""

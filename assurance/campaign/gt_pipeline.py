@@ -1,0 +1,111 @@
+"""The ground-truth pipeline: a label map -> the CM -> a landing decision, without a model or monitor.
+
+It answers "what would the EL system decide if the segmentation were perfect?": the structural
+check of EL-R01 on whole scenes, and the reference for the model pipeline. The full-resolution
+label map is pooled conservatively to the working resolution (``el.core.probs_from_labels``), the
+CM ranks the candidates, and the decision is to land on rank 0 (no runtime monitor: every
+candidate's ``monitor`` is None), or the default action when there is no candidate. A fault inside
+the CM ends in the default action with reason ``"fault: ..."`` (EL-R06).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from assurance.scenes.uavid import DataError, check_same_size, read_labels
+from el.camera import working_size
+from el.config import CoreConfig
+from el.core import default_area, probs_from_labels, run_core
+from el.decision import Decision, decision_schema  # noqa: F401  (re-exported)
+from el.hashing import sha256_file
+from el.labels import NUM_CLASSES
+
+PIPELINE = "ground_truth"
+logger = logging.getLogger(__name__)  # faults with their tracebacks; the decision keeps only the reason
+
+
+def _check_ids(ids: np.ndarray) -> tuple[int, int]:
+    ids = np.asarray(ids)
+    if ids.ndim != 2 or not np.issubdtype(ids.dtype, np.integer):
+        raise ValueError(f"label map must be a 2-D array of integer class ids, got {ids.dtype} {ids.shape}")
+    h, w = ids.shape
+    if w < 8 or h < 8:
+        raise ValueError(f"label map must be at least 8x8, got {w}x{h}")
+    if ids.min() < 0 or ids.max() >= NUM_CLASSES:
+        raise ValueError(f"class ids must lie in 0..{NUM_CLASSES - 1}, got {ids.min()}..{ids.max()}")
+    return w, h
+
+
+def decide_from_labels(
+    ids: np.ndarray,
+    *,
+    config: CoreConfig | None = None,
+    input_info: dict[str, Any] | None = None,
+    read_s: float = 0.0,
+    clock: Callable[[], float] = time.perf_counter,
+) -> Decision:
+    """The decision for a full-resolution class-id map (H, W) under a perfect segmentation.
+
+    ``input_info`` goes to the decision's ``"input"`` (path, sha256; width and height are filled
+    in). ``read_s`` is the time already spent reading the input. ValueError for a malformed map;
+    a failure inside the CM gives the default action with reason ``"fault: <error>"``.
+    """
+    config = config or CoreConfig()
+    W, H = _check_ids(ids)
+    t0 = clock()
+    info = dict(input_info or {})
+    info.update(width=W, height=H)
+    cfg = {"pipeline": PIPELINE, "monitor": None, "core": config.to_dict()}
+    area = default_area(W, H, config)
+    timings = {"read_s": float(read_s), "segmentation_s": 0.0, "candidates_s": 0.0, "monitoring_s": 0.0}
+    try:
+        probs = probs_from_labels(ids, working_size(W, H, config.working_width))
+        t1 = clock()
+        core = run_core(probs, (W, H), config, clock=clock)
+        t2 = clock()
+    except Exception as exc:  # fail safe: any fault ends in the default action, with its reason
+        logger.exception("fault in the core model on %s; default action", info.get("path", "?"))
+        timings["total_s"] = float(read_s) + clock() - t0
+        return Decision(action="default", reason=f"fault: {type(exc).__name__}: {exc}", selected=None,
+                        candidates=[], default_area=area, timings=timings, input=info, config=cfg)
+    timings["segmentation_s"] = t1 - t0
+    timings["candidates_s"] = t2 - t1
+    timings.update({k: v for k, v in core.timings.items() if k != "total_s"})
+    timings["total_s"] = float(read_s) + clock() - t0
+    if core.candidates:
+        return Decision(action="land", reason="accepted", selected=0, candidates=core.candidates,
+                        default_area=area, timings=timings, input=info, config=cfg)
+    return Decision(action="default", reason="no_candidate", selected=None, candidates=[],
+                    default_area=area, timings=timings, input=info, config=cfg)
+
+
+def decide_from_label_file(
+    labels_path: str | Path,
+    *,
+    image_path: str | Path | None = None,
+    config: CoreConfig | None = None,
+) -> tuple[Decision, np.ndarray]:
+    """Read a UAVid colour label PNG and decide; returns (decision, class ids).
+
+    The optional image is only checked for size (it is for drawing) and identified in
+    ``input["image"]``. DataError (from ``assurance.scenes.uavid``) for a missing, unreadable or inconsistent file.
+    """
+    labels_path = Path(labels_path)
+    t0 = time.perf_counter()
+    ids = read_labels(labels_path)
+    info: dict[str, Any] = {"path": str(labels_path), "sha256": sha256_file(labels_path), "kind": "labels"}
+    if image_path is not None:
+        image_path = Path(image_path)
+        if not image_path.is_file():
+            raise DataError(f"{image_path}: no such file")
+        check_same_size(image_path, labels_path)
+        info["image"] = {"path": str(image_path), "sha256": sha256_file(image_path)}
+    read_s = time.perf_counter() - t0
+    return decide_from_labels(ids, config=config, input_info=info, read_s=read_s), ids
+

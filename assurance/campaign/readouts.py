@@ -1,0 +1,289 @@
+"""The readouts store of a campaign run: a manifest and one Parquet shard per (perturbation, image).
+
+Layout of a run folder::
+
+    RUN/manifest.json            what was evaluated (config, seeds, versions, hashes)
+    RUN/shards/<name>/images.parquet       one row per (image, monitor configuration)
+    RUN/shards/<name>/candidates.parquet   one row per (candidate, monitor configuration)
+    RUN/shards/<name>/SHA256SUMS           the SHA-256 of both files, taken when they were written
+    RUN/shards.json              the shard index: every finished shard's hashes, recorded by the runner
+    RUN/log.jsonl                one line per campaign invocation
+
+A shard folder is written under a temporary name and renamed into place, so it is either
+complete or absent: an interrupted campaign never leaves half a shard, and a re-run skips the
+shards that exist **and verify**. The hashes make a run tamper-evident: ``check_shard`` names the
+file of a shard that no longer matches its SHA256SUMS or the index (altered, truncated, missing),
+and ``assurance.campaign.integrity.verify_run`` checks a whole run and computes its digest.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import tempfile
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from assurance.files import atomic_write_bytes, public_mode
+from el.errors import UavElError
+from el.hashing import sha256_file
+
+FORMAT_VERSION = "uav-el-readouts/1"
+INTEGRITY = "uav-el-shard-sha256/1"
+"""Recorded in the manifest (``integrity``) of runs whose shards carry hashes: such a run's shard
+without a valid SHA256SUMS is damaged, not a legacy shard."""
+SHARDS = "shards"
+SUMS = "SHA256SUMS"
+INDEX = "shards.json"
+TABLES = ("images", "candidates")
+COLUMNS: dict[str, tuple[str, ...]] = {
+    "images": ("key", "sequence", "frame", "perturbation", "severity", "monitor", "fault", "candidates", "action",
+               "reason", "selected", "h_default", "h_top", "h_decision", "decision_unsafe", "clearance_decision_m",
+               "overhead_s", "default_x", "default_y", "default_r", "width", "height", "read_s", "perturb_s",
+               "segmentation_s", "candidates_s", "monitoring_s", "total_s"),
+    "candidates": ("key", "sequence", "frame", "perturbation", "severity", "monitor", "rank", "x", "y", "radius_px",
+                   "hazard", "hazard_semantic", "hazard_distance", "true_hazard", "true_unsafe", "clearance_m",
+                   "accepted", "reason", "seconds", "selected", "examined"),
+}
+"""Columns every loaded table has (a faulted task's row holds only the task's keys and the fault)."""
+_SAFE = re.compile(r"[^A-Za-z0-9_.-]+")
+
+
+class RunError(UavElError, ValueError):
+    """A run folder is missing, not a run, or belongs to another campaign."""
+
+
+class DamagedRunError(RunError):
+    """A run's readouts fail verification (a shard altered, truncated or missing): ``problems`` names them."""
+
+    def __init__(self, run_dir: str | Path, problems: list[str]) -> None:
+        self.run_dir, self.problems = Path(run_dir), list(problems)
+        shown = "; ".join(problems[:5]) + (f"; ... {len(problems) - 5} more" if len(problems) > 5 else "")
+        super().__init__(f"{run_dir}: damaged run, {len(problems)} shard problem(s): {shown} "
+                         "(re-run the same `uav-el campaign` command to re-compute the damaged shards)")
+
+
+def shard_name(perturbation: str, severity: int, key: str) -> str:
+    """Folder name of a task's shard, e.g. ``fog-s3__seq00_000012``."""
+    return _SAFE.sub("_", f"{perturbation}-s{severity}__{key.replace('/', '_')}")
+
+
+def init_run(run_dir: Path, manifest: dict[str, Any]) -> None:
+    """Create the run folder with its manifest, or check that an existing one is the same campaign."""
+    run_dir.mkdir(parents=True, exist_ok=True)
+    path = run_dir / "manifest.json"
+    if path.exists():
+        old = json.loads(path.read_text())
+        for key in ("format", "config", "data"):
+            if old.get(key) != json.loads(json.dumps(manifest.get(key), default=str)):
+                raise RunError(f"{run_dir}: holds another campaign (its manifest differs in '{key}'); "
+                               "use a new --out folder or delete this one")
+        # the same weights, segmenting frames the same way (a run recorded before these keys: the frame alone)
+        was, now = old.get("weights") or {}, manifest.get("weights") or {}
+        flip = was.get("frame_flip", False if was.get("sha256") else None)  # None: no readable card then
+        recorded = {"sha256": was.get("sha256"), "frame_flip": flip,
+                    "frame_scales": was.get("frame_scales", None if flip is None else [1.0]),
+                    "frame_pooling": was.get("frame_pooling", None if flip is None else "area")}
+        for key, before in recorded.items():
+            if key in now and before != now[key]:
+                raise RunError(f"{run_dir}: holds a campaign run with other weights (weights.{key}: {before} "
+                               f"recorded, {now[key]} now); use a new --out folder or delete this one")
+        # the same fitted monitor models (a run recorded before this key: none, so one with a learned
+        # monitor is refused, as its model cannot be shown to be today's)
+        was_models, now_models = old.get("monitor_models") or {}, manifest.get("monitor_models") or {}
+        if was_models != now_models:
+            raise RunError(f"{run_dir}: holds a campaign run whose monitors rest on other fitted models "
+                           f"(monitor_models: {was_models or 'not recorded'} then, {now_models} now); use a new "
+                           "--out folder or delete this one")
+        return
+    shards = run_dir / SHARDS
+    if shards.is_dir() and any(shards.iterdir()):  # e.g. a half-deleted run: its shards may be another campaign's
+        raise RunError(f"{run_dir}: has shards but no manifest.json, so they cannot be checked against this "
+                       "campaign; use a new --out folder or delete this one")
+    shards.mkdir(exist_ok=True)
+    atomic_write_bytes(path, json.dumps(manifest, indent=2, sort_keys=True, default=str).encode())
+
+
+def shard_files() -> tuple[str, ...]:
+    """The data files of a shard, in the order their hashes are listed."""
+    return tuple(f"{t}.parquet" for t in TABLES)
+
+
+def read_sums(shard_dir: Path) -> dict[str, str] | None:
+    """A shard's SHA256SUMS as {file: sha256}; None when it is missing or malformed."""
+    try:
+        lines = (shard_dir / SUMS).read_text(encoding="utf-8").splitlines()
+    except (OSError, UnicodeDecodeError):
+        return None
+    out: dict[str, str] = {}
+    for line in lines:
+        parts = line.split("  ", 1)
+        if len(parts) != 2 or not re.fullmatch(r"[0-9a-f]{64}", parts[0]):
+            return None
+        out[parts[1]] = parts[0]
+    return out if set(out) == set(shard_files()) else None
+
+
+def check_shard(run_dir: str | Path, name: str, expected: Mapping[str, str] | None = None) -> str | None:
+    """Why a shard fails verification (one phrase naming the file), or None when it verifies.
+
+    Every data file must hash to its SHA256SUMS line and, when ``expected`` (the index's entry) is
+    given, the SHA256SUMS must be the index's.
+    """
+    folder = Path(run_dir) / SHARDS / name
+    if not folder.is_dir():
+        return "shard folder missing"
+    sums = read_sums(folder)
+    if sums is None:
+        return f"{SUMS} missing or malformed"
+    for f in shard_files():
+        path = folder / f
+        if not path.is_file():
+            return f"{f} missing"
+        if sha256_file(path) != sums[f]:
+            return f"{f} differs from its {SUMS} (altered or truncated)"
+    if expected is not None and dict(expected) != sums:
+        diff = sorted(f for f in shard_files() if expected.get(f) != sums.get(f))
+        return f"{SUMS} differs from the run's shard index ({', '.join(diff)})"
+    return None
+
+
+def has_integrity(run_dir: str | Path) -> bool:
+    """Whether the run was written with shard hashes (its manifest says so)."""
+    try:
+        return read_manifest(run_dir).get("integrity") == INTEGRITY
+    except (RunError, ValueError):
+        return False
+
+
+def shard_done(run_dir: Path, name: str) -> bool:
+    """A shard is done when it verifies (a run written before shard hashes: when its tables read)."""
+    folder = Path(run_dir) / SHARDS / name
+    if not (folder / "images.parquet").is_file():
+        return False
+    if (folder / SUMS).exists() or has_integrity(run_dir):
+        return check_shard(run_dir, name) is None
+    try:  # a legacy shard: done if both tables read (a truncated file does not)
+        for f in shard_files():
+            pd.read_parquet(folder / f)
+    except Exception:
+        return False
+    return True
+
+
+def write_shard(run_dir: Path, name: str, rows: dict[str, list[dict[str, Any]]]) -> dict[str, str] | None:
+    """Write a shard atomically (temporary folder, then rename), its SHA256SUMS last; returns the
+    hashes {file: sha256} (None when a finished shard of that name was already there)."""
+    final = run_dir / SHARDS / name
+    if final.exists():
+        return None
+    tmp = Path(tempfile.mkdtemp(dir=run_dir / SHARDS, prefix=f".{name}."))
+    try:
+        sums = {}
+        for table in TABLES:
+            path = tmp / f"{table}.parquet"
+            pd.DataFrame(rows.get(table, [])).to_parquet(path, index=False)
+            os.chmod(path, public_mode(0o666))
+            sums[path.name] = sha256_file(path)
+        (tmp / SUMS).write_text("".join(f"{h}  {f}\n" for f, h in sums.items()), encoding="utf-8")
+        os.chmod(tmp / SUMS, public_mode(0o666))
+        os.chmod(tmp, public_mode(0o777))
+        try:
+            tmp.rename(final)
+        except OSError:
+            if not final.exists():
+                raise
+            return None
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
+    return sums
+
+
+def read_index(run_dir: str | Path) -> dict[str, dict[str, str]]:
+    """The run's shard index {shard: {file: sha256}} (empty when there is none yet)."""
+    path = Path(run_dir) / INDEX
+    if not path.is_file():
+        return {}
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+        shards = doc["shards"]
+        if not isinstance(shards, dict):
+            raise TypeError
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise DamagedRunError(run_dir, [f"{INDEX}: unreadable shard index ({exc})"]) from None
+    return {str(k): dict(v) for k, v in shards.items()}
+
+
+def record_shards(run_dir: str | Path, hashes: Mapping[str, Mapping[str, str] | None]) -> None:
+    """Add (or, with None, remove) shards' hashes to the run's shard index (the runner's process only)."""
+    index = read_index(run_dir)
+    for name, h in hashes.items():
+        if h is None:
+            index.pop(name, None)
+        else:
+            index[name] = dict(h)
+    doc = {"format": INTEGRITY, "shards": dict(sorted(index.items()))}
+    atomic_write_bytes(Path(run_dir) / INDEX, (json.dumps(doc, indent=1) + "\n").encode())
+
+
+def read_manifest(run_dir: str | Path) -> dict[str, Any]:
+    path = Path(run_dir) / "manifest.json"
+    if not path.is_file():
+        raise RunError(f"{run_dir}: not a campaign run (no manifest.json)")
+    return json.loads(path.read_text())
+
+
+def core_hazard(images: pd.DataFrame) -> pd.Series:
+    """Per image row, the true hazard of the core model's choice ``c~``: its top candidate, or the default
+    area when it found none (``h_top`` is NaN then), as ``assurance.analysis.metrics.ImageReadout.h_core``."""
+    return images["h_top"].fillna(images["h_default"])
+
+
+def load_table(run_dir: str | Path, table: str) -> pd.DataFrame:
+    """Concatenate one table over every finished shard, in a fixed (sorted) order."""
+    if table not in TABLES:
+        raise ValueError(f"unknown table {table!r}; valid: {TABLES}")
+    read_manifest(run_dir)
+    frames = [pd.read_parquet(p / f"{table}.parquet") for p in shard_dirs(run_dir)
+              if (p / "images.parquet").is_file()]
+    frames = [f for f in frames if len(f)]
+    if not frames:
+        return pd.DataFrame(columns=list(COLUMNS[table]))
+    df = pd.concat(frames, ignore_index=True)
+    missing = [c for c in COLUMNS[table] if c not in df.columns]
+    return df.assign(**dict.fromkeys(missing, float("nan"))) if missing else df
+
+
+def image_size(row: Mapping[str, Any]) -> tuple[int, int]:
+    """The input image's (width, height) of an images-table row: its ``width`` / ``height`` readouts or, in a
+    run recorded before them, worked back from the default disc (centred, tangent to the bottom edge)."""
+    w, h = row.get("width"), row.get("height")
+    if w is not None and h is not None and not (pd.isna(w) or pd.isna(h)):
+        return int(w), int(h)
+    return (int(round(2 * float(row["default_x"]))),
+            int(round(float(row["default_y"]) + float(row["default_r"]))))
+
+
+def input_size(images: pd.DataFrame) -> tuple[int, int] | None:
+    """The input size (W, H) of a run's first evaluated (non-faulted) image; None when there is none."""
+    ok = images[images["fault"].fillna("") == ""] if len(images) else images
+    return image_size(ok.iloc[0]) if len(ok) else None
+
+
+def shard_dirs(run_dir: str | Path) -> list[Path]:
+    """The run's shard folders (not the temporary ones), sorted by name."""
+    root = Path(run_dir) / SHARDS
+    if not root.is_dir():
+        return []
+    return sorted(p for p in root.iterdir() if p.is_dir() and not p.name.startswith("."))
+
+
+def append_log(run_dir: Path, entry: dict[str, Any]) -> None:
+    with open(run_dir / "log.jsonl", "a", encoding="utf-8") as f:
+        f.write(json.dumps(entry, default=str) + "\n")

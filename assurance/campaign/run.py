@@ -1,0 +1,498 @@
+"""Evaluation campaigns (docs/architecture.md 4.2): perturbation x image tasks, every monitor configuration per task.
+
+One task = one (perturbation, severity, image). It perturbs the HD frame (seeded per image), segments
+it and finds the CM's candidates **once**, then judges every candidate with every monitor
+configuration, sharing work between them: each HD patch is segmented once for every tau, MC-dropout
+samples are drawn once per rho (the largest n; smaller n use the prefix). Each configuration is
+charged the monitoring time it would have spent alone (see ``_attributed_costs``).
+
+Results go to a readouts store (``assurance.campaign.readouts``): one shard per task, written atomically, so
+an interrupted campaign resumes where it stopped, and a bad image is a recorded fault, not a crash.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import platform
+import subprocess
+import sys
+import time
+import traceback
+import warnings
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from assurance.campaign import readouts
+from assurance.campaign.judging import _timed, judge_candidates, walk
+from assurance.campaign.perturbations import PERTURBATIONS, perturb, severities_of
+from assurance.campaign.truth import true_hazard
+from assurance.scenes.uavid import Sample, iter_samples, read_image, read_labels
+from el.config import CoreConfig
+from el.core import run_core
+from el.decision import Candidate
+from el.monitors import DEMO_GRID, build_monitor, parse_monitor_spec
+from el.monitors.spec import walk_of
+from el.monitors.walk import SCORE
+
+
+# ------------------------------------------------------------------------------------------------
+# Configuration
+# ------------------------------------------------------------------------------------------------
+@dataclass(frozen=True, kw_only=True)
+class CampaignConfig:
+    """What a campaign evaluates. Recorded in the run manifest; a resumed run must match it."""
+
+    perturbations: tuple[str, ...]
+    severities: tuple[int, ...] = (3,)
+    monitors: tuple[str, ...] = DEMO_GRID
+    images: int | None = None  # the first N images of the data set (sorted); None: all
+    seed: int = 0
+    patch_margin: float = 0.25
+    patch_max_side: int | None = None
+    weights: str | None = None  # None: the shipped weights
+    core: CoreConfig = field(default_factory=CoreConfig)
+
+    def __post_init__(self) -> None:
+        unknown = [p for p in self.perturbations if p not in PERTURBATIONS]
+        if unknown:
+            raise ValueError(f"unknown perturbation(s) {unknown}; valid: {', '.join(PERTURBATIONS)}")
+        if not self.perturbations:
+            raise ValueError("a campaign needs at least one perturbation")
+        bad = [s for s in self.severities if not (isinstance(s, int) and 1 <= s <= 5)]
+        if bad or not self.severities:
+            raise ValueError(f"severities must be integers in 1..5, got {list(self.severities)}")
+        if not self.monitors:
+            raise ValueError("a campaign needs at least one monitor configuration")
+        canon = []
+        for m in self.monitors:
+            spec = parse_monitor_spec(m)
+            if spec is None:
+                raise ValueError("'none' is not a monitor configuration to evaluate (the CM alone is in every row)")
+            canon.append(spec.name)
+        if len(set(canon)) != len(canon):
+            raise ValueError(f"duplicate monitor configurations in {list(self.monitors)}")
+        object.__setattr__(self, "monitors", tuple(canon))
+        if self.images is not None and self.images < 1:
+            raise ValueError(f"images must be >= 1, got {self.images}")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
+            raise ValueError(f"seed must be an integer >= 0, got {self.seed!r}")
+
+    def scenarios(self) -> list[tuple[str, int]]:
+        """(perturbation, severity) pairs; one not graded by severity ('none') is evaluated once, at the first."""
+        return [(p, s) for p in self.perturbations for s in severities_of(p, self.severities)]
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["core"] = self.core.to_dict()
+        return d
+
+
+# ------------------------------------------------------------------------------------------------
+# One task
+# ------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Task:
+    """One (perturbation, severity, image) of a campaign."""
+
+    perturbation: str
+    severity: int
+    sample: Sample
+
+    @property
+    def shard_name(self) -> str:
+        return readouts.shard_name(self.perturbation, self.severity, self.sample.key)
+
+
+def task_seed(seed: int, key: str, perturbation: str, severity: int) -> list[int]:
+    """Seed sequence of a task's perturbation: independent of the order and place tasks run."""
+    digest = hashlib.sha256(f"{key}|{perturbation}|{severity}".encode()).digest()
+    return [seed, int.from_bytes(digest[:8], "little")]
+
+
+def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Callable[[], float] = time.perf_counter,
+             world_clearance: Callable[..., Any] | None = None,
+             expected_models: dict[str, str] | None = None) -> dict[str, list[dict[str, Any]]]:
+    """Evaluate one task: readout rows for its images table and candidates table (see readouts).
+
+    ``expected_models`` (the manifest's ``monitor_models``): a monitor whose fitted model is not the one the
+    run recorded (its file changed during the run) makes the task a fault instead of mixing two models."""
+    s = task.sample
+    base = {"key": s.key, "sequence": s.sequence, "frame": s.frame,
+            "perturbation": task.perturbation, "severity": task.severity}
+    timings: dict[str, float] = {}
+    t0 = clock()
+    try:
+        rgb, timings["read_s"] = _timed(clock, read_image, s.image_path)
+        if s.label_path is None:
+            raise ValueError(f"{s.image_path}: no label map (the campaign needs ground truth)")
+        ids = read_labels(s.label_path)
+        if ids.shape != rgb.shape[:2]:
+            raise ValueError(f"{s.label_path}: label size differs from the image")
+        rng = np.random.default_rng(task_seed(config.seed, s.key, task.perturbation, task.severity))
+        hd, timings["perturb_s"] = _timed(clock, perturb, rgb, task.perturbation, task.severity, rng)
+        probs, timings["segmentation_s"] = _timed(clock, segmenter.predict_frame, hd)
+        H, W = hd.shape[:2]
+        core, timings["candidates_s"] = _timed(clock, run_core, probs, (W, H), config.core)
+        monitors = [build_monitor(m, margin=config.patch_margin, max_side=config.patch_max_side, clock=clock)
+                    for m in config.monitors]
+        if expected_models is not None:
+            _check_models(config.monitors, monitors, expected_models)
+        t = clock()
+        verdicts = judge_candidates(hd, core.candidates, monitors, segmenter, seed=config.seed, clock=clock,
+                                    frame_probs=probs)
+        timings["monitoring_s"] = clock() - t
+    except Exception as exc:  # a bad image is a recorded fault, never a crash of the campaign
+        fault = f"{type(exc).__name__}: {exc}"
+        row = {**base, "monitor": "", "fault": fault, "traceback": traceback.format_exc(limit=3)}
+        return {"images": [row], "candidates": []}
+
+    cands = core.candidates
+    truth = [true_hazard(ids, c.disc) for c in cands]
+    clearance = _clearance(world_clearance, s, (W, H), cands)
+    h_default = true_hazard(ids, core.default_area)
+    thresholds = [m.threshold for m in monitors]
+    image_rows, cand_rows = [], []
+    for j, name in enumerate(config.monitors):
+        accepted = [verdicts[k][j][0] for k in range(len(cands))]
+        seconds = [verdicts[k][j][2] for k in range(len(cands))]
+        order = walk_of(name)
+        sel = walk(accepted, [verdicts[k][j][3] for k in range(len(cands))], order)
+        examined = len(cands) if sel is None or order == SCORE else sel + 1
+        h_decision = h_default if sel is None else truth[sel]
+        image_rows.append({
+            **base, "monitor": name, "fault": "",
+            "candidates": len(cands),
+            "action": "default" if sel is None else "land",
+            "reason": ("no_candidate" if not cands else "all_rejected") if sel is None else "accepted",
+            "selected": -1 if sel is None else sel,
+            "h_default": h_default,
+            "h_top": truth[0] if cands else float("nan"),
+            "h_decision": h_decision,
+            "decision_unsafe": bool(h_decision >= 1.0),
+            "clearance_decision_m": clearance[sel] if sel is not None else float("nan"),
+            "overhead_s": float(sum(seconds[:examined])),
+            "default_x": core.default_area.x, "default_y": core.default_area.y,
+            "default_r": core.default_area.radius_px, "width": W, "height": H,
+            **timings,
+            "total_s": clock() - t0,
+        })
+        for k, c in enumerate(cands):
+            cand_rows.append({
+                **base, "monitor": name, "rank": k, "x": c.x, "y": c.y, "radius_px": c.radius_px,
+                "hazard": c.hazard, "hazard_semantic": c.hazard_semantic, "hazard_distance": c.hazard_distance,
+                "true_hazard": truth[k], "true_unsafe": bool(truth[k] >= 1.0), "clearance_m": clearance[k],
+                "accepted": bool(accepted[k]), "reason": verdicts[k][j][1], "seconds": float(seconds[k]),
+                "score": verdicts[k][j][3], "threshold": thresholds[j],
+                "selected": sel == k, "examined": k < examined,
+            })
+    return {"images": image_rows, "candidates": cand_rows}
+
+
+def _clearance(fn: Callable[..., Any] | None, sample: Sample, size: tuple[int, int],
+               cands: Sequence[Candidate]) -> list[float]:
+    """Metric clearance (m) of each candidate's centre from the scene's world model, NaN without one."""
+    if fn is None or not cands:
+        return [float("nan")] * len(cands)
+    try:
+        vals = fn(sample, size, np.array([c.x for c in cands]), np.array([c.y for c in cands]))
+        return [float(v) for v in vals]
+    except Exception:  # no meta or no world model: the readout says NaN
+        return [float("nan")] * len(cands)
+
+
+# ------------------------------------------------------------------------------------------------
+# The runner
+# ------------------------------------------------------------------------------------------------
+_WORKER_STATE: dict[str, Any] = {}
+
+
+def _worker_segmenter(weights: str | None, threads: int) -> Any:
+    """One segmenter per worker process (loaded once, cached)."""
+    key = f"{weights}|{threads}"
+    if _WORKER_STATE.get("key") != key:
+        from el.segmentation import Segmenter
+
+        _WORKER_STATE["segmenter"] = Segmenter.load(weights, threads=threads)
+        _WORKER_STATE["key"] = key
+    return _WORKER_STATE["segmenter"]
+
+
+def _check_models(names: Sequence[str], monitors: Sequence[Any], expected: dict[str, str]) -> None:
+    for name, monitor in zip(names, monitors, strict=True):
+        have, want = getattr(monitor, "model_sha256", None), expected.get(name)
+        if have != want:
+            raise ValueError(f"monitor {name!r} runs model {have}, the run recorded {want} "
+                             "(its model file changed during the run)")
+
+
+def execute(task: Task, config: CampaignConfig, run_dir: str, threads: int, segmenter: Any = None,
+            expected_models: dict[str, str] | None = None) -> dict[str, Any]:
+    """Worker entry point: run one task and write its shard; returns a small summary."""
+    if segmenter is None:
+        segmenter = _worker_segmenter(config.weights, threads)
+    t = time.perf_counter()
+    from assurance.analysis.clearance import sample_clearance_m
+
+    rows = run_task(task, config, segmenter, world_clearance=sample_clearance_m, expected_models=expected_models)
+    hashes = readouts.write_shard(Path(run_dir), task.shard_name, rows)
+    faults = [r["fault"] for r in rows["images"] if r.get("fault")]
+    return {"shard": task.shard_name, "seconds": time.perf_counter() - t, "fault": faults[0] if faults else "",
+            "hashes": hashes}
+
+
+def plan(data: str | Path, config: CampaignConfig) -> list[Task]:
+    """All tasks of a campaign, in a fixed order (scenario-major)."""
+    samples = list(iter_samples(data, require_labels=True))
+    if config.images is not None:
+        samples = samples[: config.images]
+    return [Task(p, s, sample) for p, s in config.scenarios() for sample in samples]
+
+
+def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *, threads: int | None = None,
+             segmenter: str = "weights") -> dict[str, Any]:
+    """Identity of a campaign: config, seeds, versions, git commit, hashes of weights and data.
+
+    ``threads`` (torch threads per worker) is recorded because floating-point sums, hence the
+    readouts' last digits, depend on it: a re-run reproduces the readouts with the same count.
+    """
+    import torch
+
+    from el.segmentation.weights import DEFAULT_WEIGHTS, sha256_file
+
+    weights = Path(config.weights) if config.weights else DEFAULT_WEIGHTS
+    files = sorted({t.sample.image_path for t in tasks} | {t.sample.label_path for t in tasks if t.sample.label_path})
+    h = hashlib.sha256()
+    for f in files:
+        h.update(f"{Path(f).relative_to(data)}:{sha256_file(f)}\n".encode())
+    return {
+        "format": readouts.FORMAT_VERSION,
+        "config": config.to_dict(),
+        "data": {"path": str(Path(data).resolve()), "images": len({t.sample.key for t in tasks}),
+                 "sha256": h.hexdigest()},
+        "weights": {"path": str(weights), "sha256": sha256_file(weights) if weights.is_file() else None,
+                    **_frame_protocol(weights)},
+        "monitor_models": monitor_models(config.monitors),
+        "tasks": len(tasks),
+        "integrity": readouts.INTEGRITY,
+        "shard_order": [t.shard_name for t in tasks],
+        "threads_per_worker": threads,
+        "segmenter": segmenter,
+        "code": {"version": _version(), "git_commit": git_commit()},
+        "versions": {"python": sys.version.split()[0], "numpy": np.__version__, "torch": torch.__version__,
+                     "platform": platform.platform()},
+    }
+
+
+def monitor_models(specs: Sequence[str]) -> dict[str, str]:
+    """SHA-256 of the fitted model file each configuration's scores rest on (learned monitors), by spec.
+
+    Recorded in the manifest: a resumed run must score with the same models, and a calibration card
+    is checked against the model the run used (EL-R16)."""
+    from el.monitors import build_monitor
+
+    out: dict[str, str] = {}
+    for spec in specs:
+        digest = getattr(build_monitor(spec), "model_sha256", None)
+        if digest:
+            out[spec] = digest
+    return out
+
+
+def _frame_protocol(weights: Path) -> dict[str, Any]:
+    """How the weights' card has frames segmented (``frame_flip``, ``frame_scales``); None without a card."""
+    from el.segmentation.protocol import FRAME_OPTIONS, card_protocol
+    from el.segmentation.weights import read_card
+
+    try:
+        return card_protocol(read_card(weights)).frame_options()
+    except (OSError, ValueError):  # WeightsError is a ValueError
+        return dict.fromkeys(FRAME_OPTIONS)
+
+
+def _version() -> str:
+    from assurance import __version__
+
+    return __version__
+
+
+def git_commit() -> str | None:
+    """The git commit of the checkout the code runs from (with '-dirty' if it has changes), or None."""
+    root = Path(__file__).resolve().parents[2]
+    try:
+        commit = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True,
+                                timeout=10, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+                               capture_output=True, text=True, timeout=10).stdout.strip()
+        return commit + ("-dirty" if dirty else "")
+    except Exception:
+        return None
+
+
+def run_campaign(
+    data: str | Path,
+    run_dir: str | Path,
+    config: CampaignConfig,
+    *,
+    jobs: int = 1,
+    backend: str = "loky",
+    scheduler: str | None = None,
+    progress: bool = True,
+    on_result: Callable[[dict[str, Any]], None] | None = None,
+    segmenter: Any = None,
+) -> dict[str, Any]:
+    """Run (or resume) a campaign; returns a summary {tasks, done, skipped, faults, missing, repaired, seconds}.
+
+    ``segmenter`` replaces the model loaded from ``config.weights`` (any object with
+    ``predict_frame``, ``predict_patch`` and ``mc_dropout``; picklable for parallel backends).
+
+    Finished shards that verify are skipped, so re-running an interrupted campaign completes it; a
+    shard that fails verification (altered, truncated, missing though recorded) is moved to
+    ``RUN/damaged/`` and run again (``summary["repaired"]`` says which and why). The run's manifest
+    must match the config (a different campaign in the same folder is an error). Nothing is
+    written before the configuration, the data and the weights have been checked.
+    """
+    run_dir = Path(run_dir)
+    if run_dir.exists() and not run_dir.is_dir():
+        raise readouts.RunError(f"{run_dir}: exists and is not a folder (--out names the run folder)")
+    tasks = plan(data, config)
+    if not tasks:
+        raise ValueError(f"{data}: no images to evaluate")
+    if segmenter is None:  # bad weights are refused before the run folder exists
+        from el.segmentation.weights import load_weights
+
+        load_weights(config.weights)
+    threads = max(1, (os.cpu_count() or 1) // max(1, jobs))
+    man = manifest(data, config, tasks, threads=threads,
+                   segmenter="weights" if segmenter is None else type(segmenter).__name__)
+    readouts.init_run(run_dir, man)
+    repaired = _set_aside_damaged(run_dir, tasks)
+    todo = [t for t in tasks if not readouts.shard_done(run_dir, t.shard_name)]
+    t0 = time.perf_counter()
+    results: list[dict[str, Any]] = []
+    for res in _dispatch(todo, config, run_dir, jobs=jobs, backend=backend, scheduler=scheduler,
+                         threads=threads, progress=progress, segmenter=segmenter,
+                         expected_models=man["monitor_models"]):
+        results.append(res)
+        if res.get("hashes"):
+            readouts.record_shards(run_dir, {res["shard"]: res["hashes"]})
+        if on_result:
+            on_result(res)
+    faults = [r for r in results if r["fault"]]
+    missing = [t.shard_name for t in todo if not readouts.shard_done(run_dir, t.shard_name)]
+    summary = {"tasks": len(tasks), "done": len(results), "skipped": len(tasks) - len(todo),
+               "faults": [f"{r['shard']}: {r['fault']}" for r in faults], "missing": missing,
+               "repaired": repaired, "seconds": time.perf_counter() - t0}
+    readouts.append_log(run_dir, summary)
+    return summary
+
+
+def _set_aside_damaged(run_dir: Path, tasks: Sequence[Task]) -> list[str]:
+    """Move the shards that fail verification to ``RUN/damaged/`` (kept for inspection) so they are run
+    again; record the verified shards the index lacks. Returns one line per damaged shard."""
+    if not readouts.has_integrity(run_dir):
+        return []
+    index = readouts.read_index(run_dir)
+    out: list[str] = []
+    found: dict[str, dict[str, str] | None] = {}
+    for t in tasks:
+        name = t.shard_name
+        folder = run_dir / readouts.SHARDS / name
+        if not folder.exists():
+            if name in index:
+                out.append(f"{name}: shard folder missing")
+                found[name] = None
+            continue
+        why = readouts.check_shard(run_dir, name, index.get(name))
+        if why is None:
+            if name not in index:
+                found[name] = readouts.read_sums(folder)
+            continue
+        out.append(f"{name}: {why}")
+        found[name] = None
+        aside = run_dir / "damaged"
+        aside.mkdir(exist_ok=True)
+        k = 0
+        while (aside / f"{name}.{k}").exists():
+            k += 1
+        folder.rename(aside / f"{name}.{k}")
+    if found:
+        readouts.record_shards(run_dir, found)
+    return out
+
+
+def _dispatch(todo: list[Task], config: CampaignConfig, run_dir: Path, *, jobs: int, backend: str,
+              scheduler: str | None, threads: int, progress: bool, segmenter: Any,
+              expected_models: dict[str, str] | None = None) -> Iterator[dict[str, Any]]:
+    from assurance.progress import progress as bar
+
+    if not todo:
+        return
+    if backend == "dask":
+        yield from bar(_dask_map(todo, config, run_dir, jobs, scheduler, threads, segmenter, expected_models),
+                       total=len(todo),
+                       desc="campaign", enabled=progress)
+        return
+    if backend != "loky":
+        raise ValueError(f"unknown backend {backend!r}; valid: loky, dask")
+    if jobs <= 1:
+        yield from bar((execute(t, config, str(run_dir), threads, segmenter, expected_models) for t in todo),
+                       total=len(todo),
+                       desc="campaign", enabled=progress)
+        return
+    from joblib import Parallel, delayed
+
+    par = Parallel(n_jobs=jobs, backend="loky", return_as="generator_unordered")
+    gen = par(delayed(execute)(t, config, str(run_dir), threads, segmenter, expected_models) for t in todo)
+    with warnings.catch_warnings():
+        # loky replaces a worker whose resident memory grew by 300 MB (its leak guard); MC-dropout
+        # batches grow the allocator's arenas that much once. The task is not lost (the replacement
+        # runs it and every shard is checked at the end), so the warning would only alarm.
+        warnings.filterwarnings("ignore", message="A worker stopped while some jobs were given",
+                                category=UserWarning)
+        yield from bar(gen, total=len(todo), desc="campaign", enabled=progress)
+
+
+def _dask_map(todo: list[Task], config: CampaignConfig, run_dir: Path, jobs: int, scheduler: str | None,
+              threads: int, segmenter: Any, expected_models: dict[str, str] | None = None
+              ) -> Iterable[dict[str, Any]]:
+    from dask.distributed import Client, LocalCluster, as_completed
+
+    cluster = None
+    if scheduler:
+        client = Client(scheduler)
+    else:
+        cluster = LocalCluster(n_workers=max(1, jobs), threads_per_worker=1, processes=True,
+                               dashboard_address=None)
+        client = Client(cluster)
+    try:
+        futures = client.map(execute, todo, config=config, run_dir=str(run_dir), threads=threads,
+                             segmenter=segmenter, expected_models=expected_models, pure=False)
+        for fut in as_completed(futures):
+            yield fut.result()
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def describe(summary: dict[str, Any]) -> str:
+    """One paragraph for the terminal."""
+    lines = [f"{summary['done']} task(s) run, {summary['skipped']} already done, of {summary['tasks']}"
+             f" in {summary['seconds']:.1f} s"]
+    if summary.get("repaired"):
+        lines.append(f"{len(summary['repaired'])} damaged shard(s) failed verification and were run again "
+                     "(the damaged copies are in RUN/damaged/):")
+        lines += [f"  {r}" for r in summary["repaired"][:10]]
+    if summary["faults"]:
+        lines.append(f"{len(summary['faults'])} fault(s) recorded:")
+        lines += [f"  {f}" for f in summary["faults"][:10]]
+    if summary.get("missing"):
+        lines.append(f"{len(summary['missing'])} task(s) left no shard (a worker died?); run the same command "
+                     f"again to complete them: {', '.join(summary['missing'][:5])}")
+    return "\n".join(lines)
+

@@ -1,0 +1,113 @@
+"""``uav-el``: the command line. A thin layer: parse arguments, call the library, format output.
+
+Each sub-command lives in ``assurance/cli/<name>.py`` and exposes ``HELP``,
+``add_arguments(parser)`` and ``run(args) -> int``. Expected errors (bad input files, bad
+options) are printed as one line naming the file and the problem, with a non-zero exit code.
+
+Exit codes (the same for every sub-command, ``EXIT_CODES``): 0 success; 1 a requirement failed (the
+evidence gate); 2 bad input or options; 3 ``land`` hit a fault in the flight path and took the default
+action; 4 a damaged run (a shard altered, truncated or missing: its readouts fail verification);
+70 an internal error (a bug: one line, the traceback with ``UAV_EL_DEBUG=1``); 130 interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import os
+import sys
+from collections.abc import Sequence
+
+from assurance import __version__
+from assurance.errors import CommandError
+
+# Sub-command name -> module under assurance.cli. Order is the order of `uav-el --help`.
+COMMANDS: dict[str, str] = {
+    "synth": "synth",
+    "preview": "preview",
+    "land": "land",
+    "train": "train",
+    "model-card": "model_card",
+    "campaign": "campaign",
+    "calibrate": "calibrate",
+    "fit-monitor": "fit_monitor",
+    "fit-ood": "fit_ood",
+    "table": "table",
+    "sweep": "sweep",
+    "evidence": "evidence",
+    "fault-table": "fault_table",
+}
+
+
+EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_FLIGHT_FAULT, EXIT_DAMAGED_RUN, EXIT_INTERNAL = 0, 1, 2, 3, 4, 70
+EXIT_CODES: dict[int, str] = {
+    EXIT_OK: "success",
+    EXIT_FAILED: "a requirement failed (evidence gate; with --strict also one not verified)",
+    EXIT_BAD_INPUT: "bad input or options (one line naming the file and the problem)",
+    EXIT_FLIGHT_FAULT: "land: a fault in the flight path; the default action was taken",
+    EXIT_DAMAGED_RUN: "damaged run: a shard altered, truncated or missing (its readouts fail verification)",
+    EXIT_INTERNAL: "internal error (a bug; UAV_EL_DEBUG=1 shows the traceback)",
+    130: "interrupted",
+}
+EPILOG = "exit codes: " + "; ".join(f"{k} {v}" for k, v in EXIT_CODES.items())
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="uav-el",
+        description="Safety-assurance toolkit for UAV emergency landing.",
+        epilog=EPILOG,
+    )
+    parser.add_argument("--version", action="version", version=f"uav-el {__version__}")
+    parser.add_argument("-v", "--verbose", action="count", default=0,
+                        help="log (-v: INFO, -vv: DEBUG), e.g. the tracebacks behind a fault reason; by default "
+                             "faults show as their one-line reason only")
+    parser.add_argument("--log-level", choices=("DEBUG", "INFO", "WARNING", "ERROR"),
+                        help="logging level (overrides -v)")
+    # A command that replays the command line (fault-table) gets it here: importing this module would
+    # close an import cycle (this module imports every command).
+    parser.set_defaults(cli_main=main)
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name, module_name in COMMANDS.items():
+        module = importlib.import_module(f"assurance.cli.{module_name}")
+        p = sub.add_parser(name, help=module.HELP, description=module.HELP, epilog=EPILOG)
+        module.add_arguments(p)
+        p.set_defaults(_run=module.run)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of ``uav-el``; returns the exit code."""
+    from assurance.campaign.readouts import DamagedRunError
+    from el.errors import DataError, LabelColourError
+
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    level = args.log_level or ("DEBUG" if args.verbose >= 2 else "INFO" if args.verbose else "CRITICAL")
+    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
+    try:
+        return int(args._run(args) or 0)
+    except DamagedRunError as exc:
+        print(f"uav-el {args.command}: error: {exc}", file=sys.stderr)
+        return EXIT_DAMAGED_RUN
+    except (CommandError, DataError, LabelColourError, FileNotFoundError, ValueError) as exc:
+        print(f"uav-el {args.command}: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except OSError as exc:  # e.g. a folder given where a file is written, a full disk, no permission
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"uav-el {args.command}: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print(f"uav-el {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # a bug: still one line, never a traceback for the user
+        if os.environ.get("UAV_EL_DEBUG"):
+            raise
+        print(f"uav-el {args.command}: internal error: {type(exc).__name__}: {exc} "
+              "(a bug; UAV_EL_DEBUG=1 shows the traceback)", file=sys.stderr)
+        return EXIT_INTERNAL
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

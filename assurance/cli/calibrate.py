@@ -1,0 +1,43 @@
+"""``uav-el calibrate``: choose a monitor's threshold on held-out scenes with a stated miss-rate guarantee."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from assurance.cli.fit_monitor import write_json
+from assurance.errors import CommandError
+
+HELP = ("calibrate a monitor's threshold on held-out scenes: P(accept an unsafe candidate) <= --miss-rate "
+        "with --confidence (order statistic + Clopper-Pearson)")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--data", required=True, help="calibration scenes in the UAVid layout, with labels (e.g. data/val)")
+    p.add_argument("--monitor", required=True, metavar="SPEC", help="monitor to calibrate, e.g. lhd, msp")
+    p.add_argument("--miss-rate", type=float, default=0.05, help="largest P(accept an unsafe candidate) (0.05)")
+    p.add_argument("--confidence", type=float, default=0.95, help="confidence of the bound (0.95)")
+    p.add_argument("--out", required=True, type=Path, help="calibration card to write (JSON)")
+    p.add_argument("--weights", help="segmentation weights (default: the shipped model)")
+    p.add_argument("--images", type=int, help="use the first N scenes of --data")
+
+
+def run(args: argparse.Namespace) -> int:
+    from assurance.fitting.calibration import calibrate_on_data
+
+    if not Path(args.data).is_dir():
+        raise CommandError(f"{args.data}: no such folder")
+    try:
+        doc = calibrate_on_data(args.data, args.monitor, miss_rate=args.miss_rate, confidence=args.confidence,
+                                weights=args.weights, images=args.images)
+    except ValueError as exc:  # CalibrationError, WeightsError, a bad spec: one line
+        raise CommandError(str(exc)) from None
+    write_json(args.out, doc, indent=2)
+    b = doc["body"]
+    c = b["counts"]
+    print(f"{b['spec']}: threshold {b['threshold']:.6g} from {c['unsafe']} truly unsafe of {c['candidates']} "
+          f"candidates ({b['split']['images']} scenes); {c['unsafe_accepted']} unsafe accepted, "
+          f"{c['safe_rejected']} of {c['safe']} safe rejected")
+    print(f"guarantee: {b['guarantee']}")
+    print(f"card written to {args.out}")
+    return 0

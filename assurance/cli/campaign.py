@@ -1,0 +1,59 @@
+"""``uav-el campaign``: run (or resume) an evaluation campaign over perturbations x images x monitors."""
+
+from __future__ import annotations
+
+import argparse
+
+from assurance.campaign.presets import load_presets, preset_config
+from assurance.campaign.run import describe, run_campaign
+from assurance.errors import CommandError
+
+HELP = "run or resume an evaluation campaign (perturbations x test images x monitor configurations)"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--data", required=True, help="test scenes in the UAVid layout (with Labels)")
+    p.add_argument("--out", required=True, help="run folder (created; re-running resumes it)")
+    p.add_argument("--preset", default="demo", choices=sorted(load_presets()),
+                   help="campaign preset (default: demo); the options below override its fields")
+    p.add_argument("--perturbations", nargs="+", metavar="NAME", help="perturbations to apply")
+    p.add_argument("--severities", nargs="+", type=int, metavar="S", help="severities 1-5")
+    p.add_argument("--monitors", nargs="+", metavar="SPEC", help="monitor configurations, e.g. lhd 'lhd+ch:tau=0.25'")
+    p.add_argument("--calibration", nargs="+", metavar="CALIB.json",
+                   help="calibration card(s) (uav-el calibrate): also evaluate each calibrated monitor")
+    p.add_argument("--images", type=int, help="use the first N images of --data")
+    p.add_argument("--weights", help="segmentation weights (default: the shipped model)")
+    p.add_argument("--seed", type=int, help="campaign seed (perturbations, MC dropout)")
+    p.add_argument("--jobs", type=int, default=1, help="parallel workers (default 1)")
+    p.add_argument("--backend", choices=("loky", "dask"), default="loky", help="parallel backend (default loky)")
+    p.add_argument("--scheduler", help="address of a running dask.distributed scheduler (with --backend dask)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.jobs < 1:
+        raise CommandError("--jobs must be >= 1")
+    if args.scheduler and args.backend != "dask":
+        raise CommandError("--scheduler needs --backend dask")
+    monitors = tuple(args.monitors) if args.monitors else None
+    if args.calibration:
+        from el.monitors import build_monitor
+        from el.monitors.calibration import check_card_monitor, load_calibration
+
+        cards = [load_calibration(c) for c in args.calibration]
+        for card in cards:
+            check_card_monitor(card, build_monitor(card.spec))
+        base = monitors or tuple(preset_config(args.preset).monitors)
+        monitors = tuple(dict.fromkeys((*base, *(card.spec for card in cards))))
+    config = preset_config(
+        args.preset,
+        perturbations=tuple(args.perturbations) if args.perturbations else None,
+        severities=tuple(args.severities) if args.severities else None,
+        monitors=monitors,
+        images=args.images, weights=args.weights, seed=args.seed,
+    )
+    summary = run_campaign(args.data, args.out, config, jobs=args.jobs, backend=args.backend,
+                           scheduler=args.scheduler, progress=not args.quiet)
+    print(describe(summary))
+    print(f"readouts in {args.out}; results table: uav-el table {args.out}")
+    return 1 if summary["missing"] else 0

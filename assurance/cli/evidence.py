@@ -1,0 +1,70 @@
+"""``uav-el evidence``: the evidence report of a campaign run, and the gate on the requirement states."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from assurance.errors import CommandError
+
+HELP = ("write the evidence report (HTML, PDF, JSON) of a campaign run; exit 1 when a requirement failed, "
+        "when the requirement results are not bound to this run, code and registry or contradict the run, or "
+        "when a waiver expired (with --strict also when one is not verified); exit 4 for a damaged run")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--run", required=True, help="campaign run folder (uav-el campaign --out)")
+    p.add_argument("--out", default="reports", help="output folder (default: reports/)")
+    p.add_argument("--requirements", metavar="JSON",
+                   help="requirement results of `pytest -m requirements --uav-el-run RUN` (default: "
+                        "OUT/requirements.json if present; without one every requirement is 'not verified')")
+    p.add_argument("--baseline", metavar="RUN0", help="an earlier run: adds a 'what changed' section")
+    p.add_argument("--baseline-requirements", metavar="JSON", help="the baseline's requirement results")
+    p.add_argument("--registry", metavar="YAML", help="requirement registry (default: assurance/requirements.yaml)")
+    p.add_argument("--waivers", help="accepted deviations (e.g. assurance/waivers.yaml): a failed requirement "
+                   "listed there does not fail the gate; ignored with --strict")
+    p.add_argument("--strict", action="store_true",
+                   help="also exit 1 when a requirement is not verified or the PDF cannot be written")
+    p.add_argument("--no-pdf", action="store_true", help="write the HTML and JSON only")
+    p.add_argument("--boot", type=int, default=2000, help="bootstrap resamples of the results table (default 2000)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from assurance.campaign.readouts import DamagedRunError, RunError
+    from assurance.evidence import generate
+    from assurance.requirements import RegistryError
+
+    if args.baseline_requirements and not args.baseline:
+        raise CommandError("--baseline-requirements needs --baseline")
+    for flag, value in (("--run", args.run), ("--baseline", args.baseline)):
+        if value and not (Path(value) / "manifest.json").is_file():
+            raise CommandError(f"{flag} {value}: not a campaign run (no manifest.json)")
+    if args.boot < 1:
+        raise CommandError("--boot must be >= 1")
+    try:
+        report = generate(args.run, args.out, requirements=args.requirements, baseline=args.baseline,
+                          baseline_requirements=args.baseline_requirements, registry=args.registry,
+                          strict=args.strict, pdf=not args.no_pdf, n_boot=args.boot, waivers=args.waivers)
+    except DamagedRunError:
+        raise  # exit 4: the run's readouts fail verification
+    except (RegistryError, RunError, ValueError) as exc:
+        raise CommandError(str(exc)) from None
+    for w in report.warnings:
+        print(f"warning: {w}", file=sys.stderr)
+    for line in report.summary_lines():
+        print(line)
+    if report.exit_code:
+        blocking = [r for r in report.ids("failed") if r not in report.waived]
+        why = "requirement(s) failed" if blocking else "--strict: not everything verified"
+        if not blocking and report.pdf_error and not report.ids("not verified"):
+            why = "--strict: no PDF"
+        if report.problems:
+            why = "the requirement results are not bound to this run or contradict it" + (
+                "; requirement(s) failed" if blocking else "")
+        print(f"gate: FAILED ({why})")
+    else:
+        waived = " (failed but waived: " + ", ".join(report.waived) + ")" if report.waived else ""
+        print("gate: passed" + waived + (" (not everything verified; --strict would fail)"
+                                         if report.ids("not verified") else ""))
+    return report.exit_code

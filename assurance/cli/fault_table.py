@@ -1,0 +1,57 @@
+"""``uav-el fault-table``: replay the fault-injection cases through the command line and write the table."""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+from pathlib import Path
+
+from assurance.errors import CommandError
+
+HELP = ("replay the fault-injection cases (issue 19's hostile cases, bad inputs) through the command line in a "
+        "scratch workspace and write the table (case, exit code, outcome) as CSV and Markdown; exit 1 when a "
+        "case does not behave as expected")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--out", type=Path, default=Path("reports") / "faults.csv", metavar="FAULTS.csv",
+                   help="the table (CSV; the Markdown is written beside it as .md) (default: %(default)s)")
+    p.add_argument("--cases", nargs="+", metavar="ID", help="replay only these cases (default: all)")
+    p.add_argument("--list", action="store_true", help="list the cases and exit")
+
+
+def run(args: argparse.Namespace) -> int:
+    import torch
+
+    from assurance.campaign import fault_injection as fi
+
+    if args.list:
+        for c in fi.CASES:
+            print(f"{c.id}: {c.injected} (expected exit {c.expected})")
+        return 0
+    if args.out.suffix != ".csv":
+        raise CommandError(f"--out {args.out}: expected a .csv file name")
+    if args.out.is_dir():
+        raise CommandError(f"--out {args.out}: is a folder")
+    cases = fi.CASES
+    if args.cases:
+        known = {c.id for c in fi.CASES}
+        unknown = [c for c in args.cases if c not in known]
+        if unknown:
+            raise CommandError(f"unknown case(s): {', '.join(unknown)} (see --list)")
+        cases = tuple(c for c in fi.CASES if c.id in args.cases)
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # tiny tensors: one thread is faster
+    try:
+        with tempfile.TemporaryDirectory(prefix="uav-el-faults-") as tmp:
+            ws = fi.build_workspace(tmp, main=args.cli_main)
+            rows = fi.run_cases(ws, cases, main=args.cli_main)
+    finally:
+        torch.set_num_threads(threads)
+    csv_path, md_path = fi.write_table(rows, args.out)
+    print(fi.to_markdown(rows))
+    failed = [r["case"] for r in rows if r["result"] != "pass"]
+    print(f"{len(rows) - len(failed)} of {len(rows)} case(s) behaved as expected"
+          + (f"; not: {', '.join(failed)}" if failed else ""))
+    print(f"written: {csv_path}, {md_path}")
+    return 1 if failed else 0

@@ -1,0 +1,66 @@
+"""``uav-el fit-monitor``: train the learned candidate monitor and write its hash-checked JSON model."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from assurance.errors import CommandError
+from assurance.files import atomic_write_bytes
+from assurance.paths import shown_path
+
+HELP = ("train the learned candidate monitor (logistic regression on candidate features) on a split, select it "
+        "on --val, and write its JSON model (no pickle, SHA-256 checked at load)")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--data", required=True, help="training scenes with labels (e.g. data/train)")
+    p.add_argument("--val", help="held-out scenes for C and the threshold (default: every 5th scene of --data)")
+    p.add_argument("--out", required=True, type=Path, help="model file to write (e.g. el/monitors/data/learned.json)")
+    p.add_argument("--weights", help="segmentation weights (default: the shipped model)")
+    p.add_argument("--recall", type=float, default=0.95,
+                   help="threshold: the largest with this recall of unsafe held-out candidates (0.95)")
+    p.add_argument("--mcd", type=int, default=0, metavar="N",
+                   help="add MC-dropout spread features from N samples (0: off, the cheap default)")
+    p.add_argument("--images", type=int, help="use the first N scenes of each split")
+    p.add_argument("--working-width", type=int, help="working resolution width (default: the flight code's)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from assurance.fitting.learned_monitor import fit_learned_monitor
+    from el.config import CoreConfig
+    from el.segmentation import Segmenter
+    from el.segmentation.weights import DEFAULT_WEIGHTS, sha256_file
+
+    for d in (args.data, args.val):
+        if d is not None and not Path(d).is_dir():
+            raise CommandError(f"{d}: no such folder")
+    if not 0.0 < args.recall < 1.0:
+        raise CommandError(f"--recall must lie in (0, 1), got {args.recall}")
+    if args.mcd < 0:
+        raise CommandError(f"--mcd must be >= 0, got {args.mcd}")
+    try:
+        segmenter = Segmenter.load(args.weights)
+        core = CoreConfig(working_width=args.working_width) if args.working_width else CoreConfig()
+        w = Path(args.weights) if args.weights else DEFAULT_WEIGHTS
+        doc = fit_learned_monitor(args.data, segmenter, val=args.val, core=core, mcd_n=args.mcd, recall=args.recall,
+                                  images=args.images, weights={"path": shown_path(w), "sha256": sha256_file(w)})
+    except ValueError as exc:
+        raise CommandError(str(exc)) from None
+    write_json(args.out, doc)
+    b = doc["body"]
+    s = b["selection"]
+    print(f"learned monitor: C={b['C']:g}, held-out AUROC {s['held_out_auroc']:.3f}; threshold {b['threshold']:.4g} "
+          f"(recall {s['held_out_recall']:.3f}, safe rejected {s['held_out_safe_rejected']:.3f}); trained on "
+          f"{b['training']['candidates']} candidates ({b['training']['unsafe']} unsafe)")
+    print(f"model written to {args.out} (sha256 {doc['sha256'][:12]}...)")
+    return 0
+
+
+def write_json(path: Path, doc: dict, *, indent: int = 1) -> None:
+    """Write a JSON document atomically; an unwritable path is one line, exit 2."""
+    try:
+        atomic_write_bytes(path, (json.dumps(doc, indent=indent, sort_keys=True) + "\n").encode())
+    except OSError as exc:
+        raise CommandError(f"{path}: cannot write: {exc.strerror or exc}") from None

@@ -1,0 +1,204 @@
+"""``uav-el land``: decide where to land for one frame, and say why.
+
+Two pipelines (docs/architecture.md section 3.7):
+- ground truth: ``uav-el land --labels LABELS.png [--image IMAGE.png]`` runs the CM on the label
+  map (a perfect segmentation), without a monitor; the image is only for drawing;
+- model: ``uav-el land IMAGE.png [--monitor SPEC]`` segments the image with the shipped CNN (or
+  ``--weights``), ranks the candidates and walks them with the runtime monitor (el.pipeline).
+
+Exit codes: 0 a decision was made (land or default action); 2 bad input or options (one line naming
+the file and the problem); 3 the flight path hit a fault (e.g. missing weights) and took the
+default action, which is still written and drawn.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from assurance.errors import CommandError
+from assurance.files import atomic_write_bytes
+from assurance.scenes.uavid import read_image, write_image
+from el.camera import CAMERAS, Pose
+from el.config import MODES, CoreConfig, camera_intrinsics
+from el.decision import Decision
+from el.pipeline import DEFAULT_TIME_BUDGET_S
+
+HELP = "decide where to land for one frame (model pipeline, or the ground-truth pipeline with --labels)"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("image_arg", nargs="?", metavar="IMAGE",
+                        help="input image (the model pipeline; with --labels, the image to draw on)")
+    parser.add_argument("--labels", type=Path, metavar="LABELS.png",
+                        help="UAVid colour label map: run the ground-truth pipeline on it")
+    parser.add_argument("--image", type=Path, metavar="IMAGE.png", help="image to draw the overlay on")
+    parser.add_argument("--json", type=Path, metavar="OUT.json", help="write the decision as JSON")
+    parser.add_argument("--overlay", type=Path, metavar="OUT.png", help="draw the decision into a PNG")
+    parser.add_argument("--height", type=float, default=Pose().height_m, metavar="M",
+                        help="flight height above the ground in metres (default: %(default)s)")
+    parser.add_argument("--pitch", type=float, default=Pose().pitch_deg, metavar="DEG",
+                        help="camera pitch below the horizon in degrees (default: %(default)s)")
+    parser.add_argument("--camera", choices=sorted(CAMERAS), default="phantom4",
+                        help="camera intrinsics (default: %(default)s)")
+    parser.add_argument(
+        "--mode", choices=MODES, default="exact",
+        help="valid pixels: exact disc, or the paper's stripes and squares (default: %(default)s)",
+    )
+    parser.add_argument("--working-width", type=int, default=CoreConfig().working_width, metavar="PX",
+                        help="working resolution width (default: %(default)s)")
+    parser.add_argument("--monitor", default=None, metavar="SPEC",
+                        help="runtime monitor: none, lhd, 'lhd+ch:tau=0.25', 'lhd+mcd:n=10,rho=0.9', "
+                             "'lhd+ch+mcd:tau=0.125,n=30,rho=0.5', a registered monitor such as msp "
+                             "(default: the deployed monitor, el.pipeline.DEPLOYED_MONITOR, or the "
+                             "--calibration card's monitor; model pipeline)")
+    parser.add_argument("--calibration", type=Path, metavar="CALIB.json",
+                        help="calibration card (uav-el calibrate): run the monitor at its calibrated threshold")
+    parser.add_argument("--ood", type=Path, metavar="GATE.json",
+                        help="out-of-domain gate (uav-el fit-ood): a frame above its threshold takes the "
+                             "default action")
+    parser.add_argument("--weights", type=Path, help="segmentation weights (default: the shipped model)")
+    parser.add_argument("--budget", type=float, default=DEFAULT_TIME_BUDGET_S, metavar="S",
+                        help="time budget in seconds; past it, the default action (default: %(default)s)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of MC dropout (default: %(default)s)")
+    parser.add_argument("--threads", type=int, help="CPU threads for the CNN (default: torch's choice)")
+    parser.add_argument("--all", action="store_true", dest="evaluate_all",
+                        help="evaluation mode: run the monitor on every candidate (the decision is unchanged)")
+
+
+def config_from_args(args: argparse.Namespace) -> CoreConfig:
+    """The CM configuration of the command-line options (ValueError names a bad value)."""
+    return CoreConfig(
+        mode=args.mode,
+        working_width=args.working_width,
+        pose=Pose(height_m=args.height, pitch_deg=args.pitch),
+        intrinsics=camera_intrinsics(args.camera),
+    )
+
+
+OVERLAY_SUFFIXES = (".png", ".jpg", ".jpeg")
+
+
+def check_outputs(args: argparse.Namespace) -> None:
+    """Refuse output paths that cannot be written, before anything is computed or written."""
+    for flag, path in (("--json", args.json), ("--overlay", args.overlay)):
+        if path is None:
+            continue
+        if path.is_dir():
+            raise CommandError(f"{flag} {path}: is a folder; give a file name")
+        if path.parent.exists() and not path.parent.is_dir():
+            raise CommandError(f"{flag} {path}: cannot write: {path.parent} is not a folder")
+    if args.overlay is not None and args.overlay.suffix.lower() not in OVERLAY_SUFFIXES:
+        raise CommandError(f"--overlay {args.overlay}: unknown image type {args.overlay.suffix or '(none)'!r}; "
+                           f"give a {', '.join(OVERLAY_SUFFIXES)} file")
+    if args.json is not None and args.overlay is not None and args.json.resolve() == args.overlay.resolve():
+        raise CommandError(f"--json and --overlay name the same file {args.json}")
+
+
+def run(args: argparse.Namespace) -> int:
+    from assurance.campaign.gt_pipeline import decide_from_label_file
+
+    check_outputs(args)
+
+    if args.labels is None:
+        if args.image_arg is None:
+            raise CommandError("give an IMAGE (model pipeline) or --labels LABELS.png (ground truth)")
+        return run_model(args)
+    image_path = args.image
+    if args.image_arg is not None:
+        if image_path is not None and Path(args.image_arg) != image_path:
+            raise CommandError(f"two images given ({args.image_arg} and {image_path}): give one")
+        image_path = Path(args.image_arg)
+
+    config = config_from_args(args)
+    decision, ids = decide_from_label_file(args.labels, image_path=image_path, config=config)
+    image = read_image(image_path) if image_path is not None else None  # a bad image is an error too
+
+    _write_outputs(args, decision, image=image, labels=ids)
+    print(summary(decision))
+    return 0
+
+
+def run_model(args: argparse.Namespace) -> int:
+    """The model pipeline: segmentation -> candidates -> monitored walk (el.pipeline)."""
+    from el.pipeline import EmergencyLanding, PipelineConfig
+    from el.segmentation import Segmenter
+
+    if args.image is not None:
+        raise CommandError("--image is for the ground-truth pipeline; give the image as IMAGE")
+    image_path = Path(args.image_arg)
+    read_image(image_path)  # bad input is a usage error here (in flight it is the default action)
+    monitor = args.monitor or PipelineConfig().monitor
+    if args.calibration is not None:  # a bad card is a usage error here (in flight it is the default action)
+        from el.monitors.calibration import load_calibration
+        from el.pipeline import calibrated_spec
+
+        monitor = args.monitor or load_calibration(args.calibration).monitor
+        calibrated_spec(monitor, str(args.calibration))
+    from el.monitors import build_monitor
+    from el.pipeline import check_monitor_card
+
+    built = build_monitor(monitor)  # a monitor that cannot be built (e.g. a missing model file): one line, exit 2
+    check_monitor_card(built, monitor, args.calibration)  # a card on another model than it runs: one line, exit 2
+    if args.ood is not None:
+        from el.monitors.ood import load_ood
+
+        load_ood(args.ood)  # a bad gate is a usage error here (in flight it is the default action)
+    config = PipelineConfig(core=config_from_args(args), monitor=monitor, time_budget_s=args.budget,
+                            seed=args.seed, evaluate_all=args.evaluate_all,
+                            calibration=str(args.calibration) if args.calibration else None,
+                            ood=str(args.ood) if args.ood else None)
+    segmenter = None
+    if args.threads is not None or args.weights is not None:
+        try:
+            segmenter = Segmenter.load(args.weights, threads=args.threads)
+        except ValueError as exc:  # WeightsError: a clear one-line error at the command line
+            raise CommandError(str(exc)) from None
+    decision = EmergencyLanding(config, segmenter=segmenter).decide(image_path)
+    _write_outputs(args, decision, image=read_image(image_path) if args.overlay else None, labels=None)
+    print(summary(decision))
+    return 3 if decision.reason.startswith("fault") else 0
+
+
+def _write_outputs(args: argparse.Namespace, decision: Decision, *, image, labels) -> None:
+    try:
+        if args.json is not None:
+            atomic_write_bytes(args.json, (decision.to_json() + "\n").encode("utf-8"))
+            print(f"decision written to {args.json}")
+        if args.overlay is not None:
+            from assurance.evidence.overlay import draw_decision
+
+            write_image(args.overlay, draw_decision(decision, image=image, labels=labels))
+            print(f"overlay written to {args.overlay}")
+    except OSError as exc:
+        where = exc.filename or args.json or args.overlay
+        raise CommandError(f"{where}: cannot write: {exc.strerror or exc}") from None
+
+
+def summary(decision: Decision) -> str:
+    """A few human-readable lines: the decision, the best candidates, the time spent."""
+    info = decision.input
+    lines = [f"{info.get('path', '<array>')} ({info.get('width')}x{info.get('height')}): "
+             f"{len(decision.candidates)} candidate(s)"]
+    if decision.selected is not None:
+        c = decision.candidates[decision.selected]
+        lines.append(
+            f"decision: LAND on candidate #{c.rank} at x={c.x:.1f} y={c.y:.1f} r={c.radius_px:.1f} px, "
+            f"hazard {c.hazard:.3f} (semantic {c.hazard_semantic:.3f}, distance {c.hazard_distance:.3f}); "
+            f"reason: {decision.reason}" + ("" if c.monitor else " (no monitor)")
+        )
+    else:
+        a = decision.default_area
+        lines.append(
+            f"decision: DEFAULT action (parachute) at x={a.x:.1f} y={a.y:.1f} r={a.radius_px:.1f} px; "
+            f"reason: {decision.reason}"
+        )
+    for c in decision.candidates[1:5]:
+        lines.append(f"  #{c.rank}: x={c.x:.1f} y={c.y:.1f} r={c.radius_px:.1f} hazard {c.hazard:.3f}")
+    if len(decision.candidates) > 5:
+        lines.append(f"  ... {len(decision.candidates) - 5} more")
+    total = decision.timings.get("total_s")
+    if total is not None:
+        cand_ms = 1000 * (decision.timings.get("candidates_s") or 0.0)
+        lines.append(f"time: {1000 * total:.0f} ms (candidates {cand_ms:.0f} ms)")
+    return "\n".join(lines)

@@ -1,0 +1,117 @@
+"""``uav-el table``: the results table of a campaign run (CSV + Markdown, optionally beside the paper's)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from assurance.analysis.findings import findings, findings_markdown
+from assurance.analysis.reference import load_reference
+from assurance.analysis.scores import auroc_markdown, auroc_table
+from assurance.analysis.table import compare, compare_markdown, results_table, to_markdown, write_csv
+from assurance.campaign import readouts
+from assurance.campaign.stages import monitor_costs, monitor_costs_markdown, stage_table, stages_markdown, wall_seconds
+from assurance.errors import CommandError
+from assurance.files import atomic_write_bytes
+
+HELP = "print and write the results table of a campaign run (CSV and Markdown, paper's Table I layout)"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("run", help="campaign run folder")
+    p.add_argument("--out", help="folder for results.csv and results.md (default: the run folder)")
+    p.add_argument("--compare", action="store_true",
+                   help="also put the figures beside the published ones (Guerin et al., ICRA 2022) and ask "
+                        "the paper's findings of both")
+    p.add_argument("--no-intervals", action="store_true", help="print point values only")
+    p.add_argument("--boot", type=int, default=2000, help="bootstrap resamples (default 2000)")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--readme", metavar="README.md", help="also write the headline table of the deployed "
+                                                         "configuration between the file's headline markers")
+    g.add_argument("--check-readme", metavar="README.md", help="only check that the file's headline table is "
+                                                               "the run's (exit 1 naming the difference)")
+
+
+def run(args: argparse.Namespace) -> int:
+    import sys
+
+    from assurance.campaign.integrity import verify_run
+    from assurance.campaign.readouts import read_manifest
+
+    if args.boot < 1:
+        raise CommandError("--boot must be >= 1")
+    check = verify_run(args.run).raise_if_damaged()  # exit 4 naming the shard and file
+    planned = read_manifest(args.run).get("tasks")
+    if isinstance(planned, int) and check.shards < planned:
+        print(f"warning: {args.run}: {check.shards} of {planned} task(s) finished (an unfinished campaign: "
+              "run the same `uav-el campaign` command to complete it)", file=sys.stderr)
+    if check.legacy:
+        print(f"warning: {args.run}: written before shard hashes; its readouts cannot be verified", file=sys.stderr)
+    df = results_table(args.run, n_boot=args.boot)
+    if args.check_readme:
+        return check_readme(args.run, df, args.check_readme)
+    faulted = int(df.drop_duplicates(["perturbation", "severity"])["faults"].sum()) if len(df) else 0
+    if faulted:
+        print(f"warning: {args.run}: {faulted} faulted task(s) are left out of the table (see the faults column "
+              "and the run's log)", file=sys.stderr)
+    out = Path(args.out or args.run)
+    write_csv(df, out / "results.csv")
+    md = to_markdown(df, intervals=not args.no_intervals)
+    if args.compare:
+        merged = compare(df)
+        write_csv(merged, out / "comparison.csv")
+        md += "\n### Beside the published results (Guerin et al., ICRA 2022)\n\n" + compare_markdown(merged)
+        md += "\n### The paper's findings, asked of both tables\n\n" + findings_markdown(findings(df, load_reference()))
+    md += "\n### Monitor scores: AUROC (unsafe candidates as positives, 95% bootstrap interval over images)\n\n"
+    md += auroc_markdown(auroc_table(readouts.load_table(args.run, "candidates"), n_boot=min(args.boot, 1000)))
+    md += "\n### Where the time went\n\n" + stages_markdown(stage_table(args.run), wall_seconds(args.run))
+    md += "\nMonitoring time per candidate, by configuration:\n\n" + monitor_costs_markdown(monitor_costs(args.run))
+    atomic_write_bytes(out / "results.md", md.encode())
+    print(md)
+    written = [out / "results.csv", out / "results.md"] + ([out / "comparison.csv"] if args.compare else [])
+    if args.readme:
+        written.append(write_readme(args.run, df, args.readme))
+    print("written: " + ", ".join(map(str, written)))
+    return 0
+
+
+def _headline(run: str, df: Any) -> str:
+    from assurance.analysis.headline import HeadlineError, headline_markdown, release_parameters
+
+    try:
+        return headline_markdown(run, df, **release_parameters())
+    except HeadlineError as exc:
+        raise CommandError(str(exc)) from None
+
+
+def write_readme(run: str, df: Any, readme: str) -> str:
+    """Write the headline block into ``readme``; the file's name."""
+    from assurance.analysis.headline import HeadlineError, write_block
+
+    block = _headline(run, df)
+    try:
+        changed = write_block(readme, block)
+    except (HeadlineError, OSError) as exc:
+        raise CommandError(str(exc)) from None
+    print(f"{readme}: headline table {'updated' if changed else 'already up to date'}")
+    return readme
+
+
+def check_readme(run: str, df: Any, readme: str) -> int:
+    """0 when ``readme`` shows the run's headline table, else 1 with both versions printed."""
+    import sys
+
+    from assurance.analysis.headline import HeadlineError, current_block
+
+    block = _headline(run, df)
+    try:
+        shown = current_block(readme)
+    except (HeadlineError, OSError) as exc:
+        raise CommandError(str(exc)) from None
+    if shown == block:
+        print(f"{readme}: the headline table matches {run}")
+        return 0
+    print(f"{readme}: the headline table differs from {run}; run `uav-el table {run} --readme {readme}`\n"
+          f"--- README\n{shown}--- run\n{block}", file=sys.stderr)
+    return 1

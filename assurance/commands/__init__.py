@@ -1,1 +1,0 @@
-"""Sub-commands of ``uav-el``, one module each (see ``assurance.cli``)."""

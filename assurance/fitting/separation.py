@@ -1,0 +1,91 @@
+"""How well the evidence a runtime monitor reads separates truly unsafe candidates from safe ones.
+
+For every core-model candidate of a clean scene, the HD patch around its disc is segmented (the LHD
+monitor's view) and three scores are read from the disc's pixels, higher meaning "more likely unsafe":
+
+- ``max_forbidden_probability``: the largest probability of any forbidden class at any disc pixel;
+- ``lhd_margin``: the largest (top forbidden probability - top safe probability) over the disc. LHD
+  rejects a disc exactly when this is >= 0, so its threshold 0 is the LHD rule;
+- ``forbidden_fraction``: the share of disc pixels whose top class is forbidden (ties forbidden).
+
+Their AUROC for "the disc holds a forbidden ground-truth pixel" is reported with a 95% percentile
+bootstrap interval over **scenes** (candidates of one scene are not independent), beside the LHD
+rule's recall and false-positive rate. With no separation (AUROC near 0.5) no threshold can make a
+monitor add safety, which is why a model card records this figure.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from assurance.analysis.scores import auroc as scores_auroc
+from el.forbidden import top_scores
+from el.monitors.lhd import disc_pixels
+from el.monitors.patches import extract_patch
+
+SCORES = ("max_forbidden_probability", "lhd_margin", "forbidden_fraction")
+
+
+def disc_scores(segmenter: Any, rgb: np.ndarray, disc: Any, *, margin: float = 0.25) -> dict[str, float]:
+    """The three evidence scores of one candidate's disc on its HD patch (see the module docstring)."""
+    patch = extract_patch(rgb, disc, margin=margin)
+    pixels = disc_pixels(segmenter.predict_patch(patch.rgb), patch.disc_mask)  # (8, m)
+    top_f, top_s = top_scores(pixels)
+    return {"max_forbidden_probability": float(top_f.max()), "lhd_margin": float((top_f - top_s).max()),
+            "forbidden_fraction": float((top_f >= top_s).mean())}
+
+
+def auroc(unsafe: np.ndarray, score: np.ndarray) -> float | None:
+    """Area under the ROC curve (ties count one half, :func:`assurance.analysis.scores.auroc`); None without both
+    classes."""
+    area = scores_auroc(score, unsafe)
+    return None if math.isnan(area) else area
+
+
+def separation(rows: list[dict[str, Any]], *, n_boot: int = 1000, seed: int = 0, conf: float = 0.95
+               ) -> dict[str, Any]:
+    """AUROC of each score with a scene-level bootstrap interval, and the LHD rule's recall / FP rate.
+
+    ``rows``: one per candidate, with ``scene`` (any hashable), ``unsafe`` (bool) and the scores.
+    """
+    if not rows:
+        return {"candidates": 0, "unsafe": 0, "scores": {}, "lhd_rule": None}
+    unsafe = np.array([r["unsafe"] for r in rows], bool)
+    scenes = np.array([str(r["scene"]) for r in rows])
+    names, scene_idx = np.unique(scenes, return_inverse=True)
+    members = [np.flatnonzero(scene_idx == i) for i in range(names.size)]
+    rng = np.random.default_rng(seed)
+    draws = [np.concatenate([members[j] for j in rng.integers(0, names.size, names.size)]) for _ in range(n_boot)]
+    out: dict[str, Any] = {"candidates": int(unsafe.size), "unsafe": int(unsafe.sum()), "scenes": int(names.size),
+                           "bootstrap": {"resamples": n_boot, "unit": "scene", "seed": seed, "conf": conf},
+                           "scores": {}}
+    for name in SCORES:
+        score = np.array([r[name] for r in rows], np.float64)
+        point = auroc(unsafe, score)
+        reps = [a for a in (auroc(unsafe[d], score[d]) for d in draws) if a is not None]
+        lo, hi = (np.quantile(reps, [(1 - conf) / 2, (1 + conf) / 2]).tolist() if reps else (None, None))
+        out["scores"][name] = {"auroc": point, "ci": [lo, hi]}
+    rejected = np.array([r["lhd_margin"] >= 0 for r in rows], bool)
+    out["lhd_rule"] = {
+        "recall": float(rejected[unsafe].mean()) if unsafe.any() else None,
+        "fp_rate": float(rejected[~unsafe].mean()) if (~unsafe).any() else None,
+    }
+    return out
+
+
+def describe_separation(sep: dict[str, Any]) -> str:
+    """One line for the model card printout."""
+    if not sep or not sep.get("scores"):
+        return "no candidates"
+    s = sep["scores"]["max_forbidden_probability"]
+    rule = sep["lhd_rule"] or {}
+
+    def f(v: float | None) -> str:
+        return "-" if v is None else f"{v:.3f}"
+
+    return (f"AUROC of the HD disc's max forbidden probability for 'truly unsafe' {f(s['auroc'])} "
+            f"[{f(s['ci'][0])}, {f(s['ci'][1])}] ({sep['unsafe']} unsafe of {sep['candidates']}); "
+            f"LHD rule recall {f(rule.get('recall'))}, FP rate {f(rule.get('fp_rate'))}")

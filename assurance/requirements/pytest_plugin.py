@@ -1,0 +1,259 @@
+"""pytest plugin: the ``requirements`` marker that ties tests to safety requirements (docs/architecture.md section 4.6).
+
+Registered with the ``pytest11`` entry point ``uav_el_requirements``, so every pytest run of the
+project has it.
+
+- ``@pytest.mark.requirements("EL-R01", ...)`` claims requirements of the registry
+  (``assurance/requirements.yaml``, or ``--requirements-registry PATH``). An id the registry does not
+  know, or a marker without ids, stops the session at collection (``pytest.UsageError`` naming the
+  test and the id). A test may carry several markers (function, class, module): all count.
+  ``pytest -m requirements`` runs exactly the tests that claim a requirement.
+- The claimed ids are added to the test's ``user_properties`` as one property named ``requirements``
+  (comma-joined, e.g. ``EL-R03,EL-R04``), so ``pytest --junitxml=...`` carries them.
+- At the end of the session each requirement of the registry gets a state (verified / failed /
+  not verified, see ``assurance.requirements.requirement_state``) and the results go to a JSON file:
+  ``--requirements-report PATH``, or ``reports/requirements.json`` under the rootdir when the marker
+  expression selects the requirement tests (``-m requirements``).
+
+State lives in ``config.stash``. ``set_context(config, **values)`` lets a conftest add facts to the
+report (e.g. the campaign run the campaign tests read).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+MARKER = "requirements"
+DEFAULT_REPORT = Path("reports") / "requirements.json"
+
+_REGISTRY = pytest.StashKey[Any]()
+_CLAIMS = pytest.StashKey[dict[str, tuple[str, ...]]]()
+_PHASES = pytest.StashKey[dict[str, list[Any]]]()
+_DESELECTED = pytest.StashKey[set[str]]()
+_CONTEXT = pytest.StashKey[dict[str, Any]]()
+_ERRORS = pytest.StashKey[list[str]]()
+_WRITTEN = pytest.StashKey[Any]()
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    group = parser.getgroup("uav-el requirements", "safety requirements (assurance/requirements.yaml)")
+    group.addoption("--requirements-report", metavar="PATH", default=None,
+                    help="write the per-requirement results (tests, outcomes, state) to this JSON file "
+                         f"(default with -m requirements: {DEFAULT_REPORT} under the rootdir)")
+    group.addoption("--requirements-registry", metavar="PATH", default=None,
+                    help="requirement registry to check marker ids against (default: assurance/requirements.yaml)")
+    group.addoption("--uav-el-run", dest="uav_el_run", metavar="RUN", default=None,
+                    help="campaign run folder for the campaign requirement tests "
+                         "(default: $UAV_EL_RUN, else runs/demo under the rootdir)")
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line(
+        "markers",
+        f"{MARKER}(*ids): the test verifies these safety requirements (ids of assurance/requirements.yaml, "
+        "e.g. 'EL-R01'); select them with -m requirements",
+    )
+    for key, empty in ((_REGISTRY, None), (_CLAIMS, {}), (_PHASES, {}), (_DESELECTED, set()), (_CONTEXT, {}),
+                       (_ERRORS, []), (_WRITTEN, None)):
+        config.stash.setdefault(key, empty)  # a conftest may have set its context first
+    config.pluginmanager.register(_Recorder(config), "uav_el_requirements_recorder")
+    if config.getoption("requirements_registry"):
+        registry(config)  # a bad registry given on the command line is a usage error at once
+
+
+def registry(config: pytest.Config) -> Any:
+    """The session's validated requirement registry (loaded once; UsageError if it is invalid)."""
+    from assurance.requirements import RegistryError, load_registry
+
+    reg = config.stash.get(_REGISTRY, None)
+    if reg is None:
+        try:
+            reg = load_registry(config.getoption("requirements_registry"))
+        except RegistryError as exc:
+            raise pytest.UsageError(f"requirement registry: {exc}") from None
+        config.stash[_REGISTRY] = reg
+    return reg
+
+
+def set_context(config: pytest.Config, **values: Any) -> None:
+    """Record facts about the session in the requirement report (``context``), e.g. ``run=...``."""
+    config.stash.setdefault(_CONTEXT, {}).update(values)
+
+
+def get_context(config: pytest.Config) -> dict[str, Any]:
+    """The facts recorded so far for the requirement report (a copy)."""
+    return dict(config.stash.get(_CONTEXT, {}))
+
+
+def claimed_ids(item: pytest.Item) -> tuple[str, ...]:
+    """Every requirement id claimed by the test's ``requirements`` markers (all levels), in order."""
+    ids: list[str] = []
+    for mark in item.iter_markers(MARKER):
+        ids.extend(mark.args)
+    return tuple(dict.fromkeys(ids))
+
+
+class _Recorder:
+    """The plugin's per-session hooks (one instance per config, so nested pytester sessions stay apart)."""
+
+    def __init__(self, config: pytest.Config) -> None:
+        self.config = config
+
+    @pytest.hookimpl(tryfirst=True)
+    def pytest_collection_modifyitems(self, session: pytest.Session, config: pytest.Config,
+                                      items: list[pytest.Item]) -> None:
+        claims = config.stash[_CLAIMS]
+        problems: list[str] = []
+        for item in items:
+            marks = list(item.iter_markers(MARKER))
+            if not marks:
+                continue
+            reg = registry(config)
+            for mark in marks:
+                if not mark.args:
+                    problems.append(f"{item.nodeid}: @pytest.mark.{MARKER}() names no requirement id")
+                for rid in mark.args:
+                    if not isinstance(rid, str):
+                        problems.append(f"{item.nodeid}: requirement id {rid!r} is not a string")
+                    elif rid not in reg:
+                        problems.append(f"{item.nodeid}: unknown requirement id {rid!r}")
+            ids = tuple(r for r in claimed_ids(item) if isinstance(r, str))
+            claims[item.nodeid] = ids
+            if ids:  # one comma-joined property (the form test-management tools import from JUnit XML)
+                item.user_properties.append((MARKER, ",".join(ids)))
+        if problems:
+            reg = registry(config)
+            raise pytest.UsageError(
+                f"requirements marker: {len(problems)} problem(s) (registry {reg.path}, "
+                f"ids {reg.ids[0]}..{reg.ids[-1]}):\n  " + "\n  ".join(problems))
+
+    def pytest_deselected(self, items: list[pytest.Item]) -> None:
+        self.config.stash[_DESELECTED].update(i.nodeid for i in items)
+
+    def pytest_collectreport(self, report: pytest.CollectReport) -> None:
+        if report.failed:
+            self.config.stash[_ERRORS].append(f"{report.nodeid or '<session>'}: {_crash_message(report)}")
+
+    def pytest_runtest_logreport(self, report: pytest.TestReport) -> None:
+        if any(k == MARKER for k, _ in report.user_properties):
+            self.config.stash[_PHASES].setdefault(report.nodeid, []).append(report)
+
+    def pytest_sessionstart(self, session: pytest.Session) -> None:
+        self.config.stash[_CONTEXT].setdefault("started", time.strftime("%Y-%m-%dT%H:%M:%S%z"))
+
+    def pytest_sessionfinish(self, session: pytest.Session, exitstatus: int) -> None:
+        config = self.config
+        if hasattr(config, "workerinput") or config.getoption("collectonly"):
+            return  # an xdist worker (the controller writes the report), or nothing was run
+        path = _report_path(config)
+        if path is None:
+            return
+        from assurance.requirements import results_document
+
+        results = session_results(config)
+        context = dict(config.stash[_CONTEXT])
+        from assurance.campaign.integrity import code_sha256
+
+        context.setdefault("run_digest", None)  # the evidence gate refuses results bound to no run
+        context.update(code_sha256=code_sha256(), finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                       rootdir=str(config.rootpath),
+                       args=list(config.invocation_params.args), markexpr=config.getoption("markexpr", "") or "",
+                       python=sys.version.split()[0], pytest=pytest.__version__)
+        doc = results_document(registry(config), results, context=context,
+                               collection_errors=config.stash[_ERRORS], exitstatus=int(exitstatus))
+        from assurance.files import atomic_write_bytes
+
+        atomic_write_bytes(path, (json.dumps(doc, indent=2, sort_keys=False, allow_nan=False) + "\n").encode())
+        config.stash[_WRITTEN] = (path, doc["summary"], results)
+
+    def pytest_terminal_summary(self, terminalreporter: Any, exitstatus: int, config: pytest.Config) -> None:
+        written = config.stash.get(_WRITTEN, None)
+        if not written:
+            return
+        path, summary, results = written
+        tr = terminalreporter
+        tr.write_sep("-", "safety requirements")
+        for state, markup in (("verified", {"green": True}), ("failed", {"red": True}),
+                              ("not verified", {"yellow": True})):
+            ids = [rid for rid, r in results.items() if r.state == state]
+            tr.write_line(f"{state:>13}: {summary[state]:2d}  {' '.join(ids)}", **markup)
+        tr.write_line(f"requirement results written to {path}")
+
+
+def _skip_reason(report: Any) -> str:
+    lr = report.longrepr
+    if isinstance(lr, tuple) and len(lr) == 3:
+        reason = str(lr[2])
+    else:
+        reason = str(lr or "")
+    return re.sub(r"^Skipped: ", "", reason).strip()
+
+
+def _crash_message(report: Any, limit: int = 2000) -> str:
+    lr = report.longrepr
+    crash = getattr(lr, "reprcrash", None)
+    text = getattr(crash, "message", None) if crash is not None else None
+    if not text:
+        text = str(lr or "").strip().splitlines()[-1:] or [""]
+        text = text[0] if isinstance(text, list) else text
+    text = str(text).strip()
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def outcome_of(nodeid: str, reports: list[Any]) -> Any:
+    """One TestOutcome from the setup / call / teardown reports of a test."""
+    from assurance.requirements import TestOutcome
+
+    duration = float(sum(getattr(r, "duration", 0.0) for r in reports))
+    for r in reports:
+        if r.failed:
+            kind = "failed" if r.when == "call" else "error"
+            return TestOutcome(nodeid, kind, duration, _crash_message(r))
+    for r in reports:
+        if r.skipped:
+            if hasattr(r, "wasxfail"):
+                return TestOutcome(nodeid, "xfailed", duration, f"expected failure: {r.wasxfail}".rstrip(": "))
+            return TestOutcome(nodeid, "skipped", duration, _skip_reason(r))
+    call = [r for r in reports if r.when == "call"]
+    if call and call[0].passed:
+        return TestOutcome(nodeid, "xpassed" if hasattr(call[0], "wasxfail") else "passed", duration)
+    return TestOutcome(nodeid, "not run", duration)
+
+
+def session_results(config: pytest.Config) -> dict[str, Any]:
+    """Every requirement's RequirementResult for this session so far."""
+    from assurance.requirements import TestOutcome, evaluate
+
+    reg = registry(config)
+    claims = dict(config.stash[_CLAIMS])
+    deselected = config.stash[_DESELECTED]
+    pairs = []
+    seen = set()
+    for nodeid, reports in config.stash[_PHASES].items():
+        ids = claims.get(nodeid) or tuple(dict.fromkeys(
+            rid for r in reports for k, v in r.user_properties if k == MARKER for rid in str(v).split(",") if rid))
+        pairs.append((ids, outcome_of(nodeid, reports)))
+        seen.add(nodeid)
+    for nodeid, ids in claims.items():
+        if nodeid in seen or not ids:
+            continue
+        outcome = "deselected" if nodeid in deselected else "not run"
+        pairs.append((ids, TestOutcome(nodeid, outcome, 0.0, "")))
+    return evaluate(reg, pairs)
+
+
+def _report_path(config: pytest.Config) -> Path | None:
+    given = config.getoption("requirements_report")
+    if given:
+        return Path(given)
+    markexpr = config.getoption("markexpr", "") or ""
+    if re.search(rf"(?<!not )\b{MARKER}\b", markexpr):
+        return config.rootpath / DEFAULT_REPORT
+    return None

@@ -1,0 +1,225 @@
+"""Scene generation: seeded worlds, rendered scenes with meta, and UAVid-layout datasets on disk.
+
+Splits use disjoint seed ranges (``SPLIT_BASE``): scene ``i`` of a split with offset ``seed``
+has seed ``SPLIT_BASE[split] + seed + i``. The same seed always gives the same PNG bytes.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+from collections.abc import Iterator
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from assurance.files import atomic_write_bytes
+from assurance.scenes.builder import Builder
+from assurance.scenes.layout import build_city
+from assurance.scenes.rand import Rand
+from assurance.scenes.renderer import render
+from assurance.scenes.styles import ALL_STYLES, HELD_OUT_STYLES, LIGHTINGS, Style, choose_style, get_style
+from assurance.scenes.uavid import sample_paths, write_image
+from assurance.scenes.view import coverage_domain, visible_ground
+from assurance.scenes.world import Sun, World
+from el.camera import CameraGeometry, Intrinsics, Pose
+from el.labels import CLASS_NAMES, NUM_CLASSES, PALETTE
+
+GENERATOR_VERSION = "1.1"  # 1.1: look-alike hazards (tracks, shared streets, low sheds, stray and verge cars)
+SPLIT_BASE: dict[str, int] = {"train": 0, "val": 1_000_000, "test": 2_000_000}
+FRAMES_PER_SEQUENCE = 100
+FOOTPRINT_MARGIN_M = 25.0
+DEFAULT_SIZE = (3840, 2160)
+
+
+@dataclass
+class Scene:
+    """A generated scene: RGB image (H, W, 3) uint8, class ids (H, W) uint8, meta dict and its world."""
+
+    image: np.ndarray
+    labels: np.ndarray
+    meta: dict[str, Any]
+    world: World
+
+
+def scene_seed(split: str, index: int, seed: int = 0) -> int:
+    """Seed of scene ``index`` of a split (disjoint ranges per split)."""
+    if split not in SPLIT_BASE:
+        raise ValueError(f"split must be one of {', '.join(SPLIT_BASE)}, got {split!r}")
+    if not 0 <= seed + index < 1_000_000:
+        raise ValueError(f"seed + index must lie in [0, 1000000), got {seed + index}")
+    return SPLIT_BASE[split] + seed + index
+
+
+def split_of_seed(seed: int) -> str:
+    """The split a scene seed belongs to."""
+    for name, base in sorted(SPLIT_BASE.items(), key=lambda kv: -kv[1]):
+        if seed >= base:
+            return name
+    return "train"
+
+
+def default_geometry(size: tuple[int, int] = DEFAULT_SIZE, pose: Pose | None = None,
+                     intrinsics: Intrinsics | None = None) -> CameraGeometry:
+    """Camera of a scene: Phantom 4 at 50 m and 45 degrees unless told otherwise."""
+    return CameraGeometry(width=int(size[0]), height=int(size[1]), intrinsics=intrinsics or Intrinsics(),
+                          pose=pose or Pose())
+
+
+def generate_world(seed: int, *, style: str | Style | None = None, split: str | None = None,
+                   geometry: CameraGeometry | None = None) -> World:
+    """A seeded world covering every view of ``geometry`` with height and pitch within +-20%."""
+    geometry = geometry or default_geometry()
+    rng = np.random.default_rng([seed, 7031])
+    split = split or split_of_seed(seed)
+    st = choose_style(rng, split) if style is None else (get_style(style) if isinstance(style, str) else style)
+    lights = [name for name in st.lightings if split != "train" or st.name in HELD_OUT_STYLES or name != "golden"]
+    lighting = LIGHTINGS[lights[int(rng.integers(len(lights)))]]
+    sun = Sun(float(rng.uniform(0, 360)), float(rng.uniform(*lighting.elevation_deg)))
+    world = World(seed=seed, style=st.name, lighting=lighting.name, sun=sun)
+    world.grade = _grade(rng, lighting)
+    domain = coverage_domain(geometry)
+    world.domain = domain
+    build_city(Builder(world, Rand(int(rng.integers(2**62))), st, domain))
+    return world
+
+
+def _grade(rng: np.random.Generator, lighting: Any) -> dict[str, Any]:
+    """Per-scene camera response: exposure, white balance, contrast, saturation, haze, blur, noise."""
+    return {
+        "exposure": float(rng.uniform(*lighting.exposure)),
+        "white_balance": tuple(float(x) for x in 1 + rng.uniform(-0.05, 0.05, 3)),
+        "contrast": float(rng.uniform(0.88, 1.15)),
+        "saturation": float(rng.uniform(0.75, 1.1)),
+        "gamma": float(rng.uniform(0.9, 1.1)),
+        "haze": float(lighting.haze * rng.uniform(0.5, 1.6)),
+        "haze_rgb": tuple(float(x) for x in np.array([0.72, 0.75, 0.80]) + rng.uniform(-0.04, 0.04, 3)),
+        "blur_px": float(rng.uniform(0.45, 0.85)),
+        "sensor_noise": float(rng.uniform(0.006, 0.02)),
+        "vignette": float(rng.uniform(0.03, 0.25)),
+    }
+
+
+def scene_meta(world: World, geometry: CameraGeometry, labels: np.ndarray, split: str | None) -> dict[str, Any]:
+    """The meta record of a rendered scene (JSON-ready)."""
+    counts = np.bincount(labels.ravel(), minlength=NUM_CLASSES).astype(np.float64)
+    shares = {name: round(float(c / labels.size), 6) for name, c in zip(CLASS_NAMES, counts, strict=True)}
+    vis = visible_ground(geometry)
+    m = FOOTPRINT_MARGIN_M
+    region = (float(vis[:, 0].min() - m), float(vis[:, 0].max() + m), float(vis[:, 1].min() - m),
+              float(vis[:, 1].max() + m))
+    return {
+        "generator": "assurance.scenes",
+        "version": GENERATOR_VERSION,
+        "seed": int(world.seed),
+        "split": split or split_of_seed(world.seed),
+        "style": world.style,
+        "held_out_style": world.style in HELD_OUT_STYLES,
+        "lighting": world.lighting,
+        "sun": {"azimuth_deg": round(world.sun.azimuth_deg, 3), "elevation_deg": round(world.sun.elevation_deg, 3)},
+        "pose": {"height_m": geometry.pose.height_m, "pitch_deg": geometry.pose.pitch_deg},
+        "intrinsics": {"sensor_width_mm": geometry.intrinsics.sensor_width_mm,
+                       "focal_mm": geometry.intrinsics.focal_mm, "name": geometry.intrinsics.name},
+        "image_size": [geometry.width, geometry.height],
+        "class_shares": shares,
+        "footprints_region": [round(x, 3) for x in region],
+        "footprints_margin_m": m,
+        "footprints": world.footprints_meta(region),
+    }
+
+
+def generate_scene(seed: int, *, size: tuple[int, int] = DEFAULT_SIZE, pose: Pose | None = None,
+                   style: str | None = None, split: str | None = None) -> Scene:
+    """Generate and render one scene. The world covers poses within +-20% of ``pose``."""
+    if style is not None and style not in ALL_STYLES:
+        raise ValueError(f"unknown style {style!r}; known: {', '.join(ALL_STYLES)}")
+    geometry = default_geometry(size, pose)
+    world = generate_world(seed, style=style, split=split, geometry=geometry)
+    out = render(world, geometry)
+    return Scene(out.image, out.labels, scene_meta(world, geometry, out.labels, split), world)
+
+
+# -- datasets on disk ---------------------------------------------------------------------------
+def frame_location(index: int) -> tuple[str, str]:
+    """(sequence, frame) names of dataset item ``index``: seq00/000000 ... 100 frames per sequence."""
+    return f"seq{index // FRAMES_PER_SEQUENCE:02d}", f"{index % FRAMES_PER_SEQUENCE:06d}"
+
+
+def scene_complete(root: str | Path, index: int) -> bool:
+    """Whether image, labels and meta of item ``index`` all exist (the meta is written last)."""
+    seq, frame = frame_location(index)
+    return all(p.is_file() and p.stat().st_size > 0 for p in sample_paths(root, seq, frame))
+
+
+def write_scene(root: str | Path, index: int, seed: int, split: str, size: tuple[int, int],
+                compression: int = 1) -> str:
+    """Generate scene ``seed`` and write it as item ``index`` (image, labels, then meta); returns its key."""
+    seq, frame = frame_location(index)
+    img_path, lab_path, meta_path = sample_paths(root, seq, frame)
+    scene = generate_scene(seed, size=size, split=split)
+    write_image(img_path, scene.image, compression=compression)
+    atomic_write_bytes(lab_path, encode_labels(scene.labels))
+    atomic_write_bytes(meta_path, (json.dumps(scene.meta, separators=(",", ":")) + "\n").encode())
+    return f"{seq}/{frame}"
+
+
+def encode_labels(ids: np.ndarray) -> bytes:
+    """Class ids (H, W) as a colour-coded UAVid label PNG (RGB), run-length encoded: fast and small."""
+    lut = np.zeros((256, 3), np.uint8)
+    lut[: len(PALETTE)] = PALETTE
+    bgr = cv2.merge([cv2.LUT(ids, lut[:, c].copy()) for c in (2, 1, 0)])
+    ok, buf = cv2.imencode(".png", bgr, [cv2.IMWRITE_PNG_COMPRESSION, 1,
+                                         cv2.IMWRITE_PNG_STRATEGY, cv2.IMWRITE_PNG_STRATEGY_RLE])
+    if not ok:
+        raise RuntimeError("could not encode the label PNG")
+    return buf.tobytes()
+
+
+def _write_job(args: tuple[str, int, int, str, tuple[int, int]]) -> str:
+    root, index, seed, split, size = args
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    import cv2
+
+    cv2.setNumThreads(1)
+    return write_scene(root, index, seed, split, size)
+
+
+def _iterate(items: Iterator[str], total: int, desc: str, enabled: bool) -> Iterator[str]:
+    """Progress bar on stderr when enabled."""
+    if not enabled:
+        yield from items
+        return
+    from tqdm import tqdm
+
+    yield from tqdm(items, total=total, desc=desc, file=sys.stderr, dynamic_ncols=True,
+                    mininterval=0.5 if sys.stderr.isatty() else 5.0)
+
+
+def write_dataset(out: str | Path, n: int, seed: int = 0, split: str = "train",
+                  size: tuple[int, int] = DEFAULT_SIZE, *, progress: bool = True, jobs: int = 1) -> list[str]:
+    """Write ``n`` scenes of ``split`` under ``out`` in the UAVid layout; complete ones are skipped.
+
+    Returns the keys (``seqNN/NNNNNN``) of the scenes written or found complete.
+    """
+    if n < 0:
+        raise ValueError(f"number of scenes must be >= 0, got {n}")
+    out = Path(out)
+    todo = [(str(out), i, scene_seed(split, i, seed), split, tuple(size)) for i in range(n)
+            if not scene_complete(out, i)]
+    keys = ["/".join(frame_location(i)) for i in range(n)]
+    if not todo:
+        return keys
+    if jobs <= 1:
+        results: Iterator[str] = (_write_job(t) for t in todo)
+        for _ in _iterate(results, total=len(todo), desc=f"synth {split}", enabled=progress):
+            pass
+    else:
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            for _ in _iterate(pool.map(_write_job, todo), total=len(todo), desc=f"synth {split}", enabled=progress):
+                pass
+    return keys

@@ -1,0 +1,138 @@
+"""Images and label maps in the UAVid layout, ``ROOT/seqNN/{Images,Labels}/NNNNNN.png`` (a frame: ``el.imageio``).
+
+Images cross the API as RGB uint8 arrays (H, W, 3); OpenCV's BGR order stays inside this module.
+Every error names the file and the problem, so a command line can print it as one line.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from assurance.files import atomic_write_bytes, public_mode  # noqa: F401  (re-exported)
+from el.errors import DataError
+from el.imageio import read_image
+from el.labels import colors_to_ids, ids_to_colors
+from el.rgb import check_rgb
+
+IMAGE_DIR = "Images"
+LABEL_DIR = "Labels"
+META_DIR = "meta"
+_SEQ = re.compile(r"^seq\d+$")
+_EXTS = (".png", ".jpg", ".jpeg")
+
+
+def write_image(path: str | Path, rgb: np.ndarray, *, compression: int = 3) -> None:
+    """Write an RGB uint8 image atomically (temp file + rename); the format follows the suffix."""
+    path = Path(path)
+    rgb = np.asarray(rgb)
+    check_rgb(rgb, f"{path}: image")
+    params = [cv2.IMWRITE_PNG_COMPRESSION, compression] if path.suffix.lower() == ".png" else []
+    ok, buf = cv2.imencode(path.suffix or ".png", np.ascontiguousarray(rgb[:, :, ::-1]), params)
+    if not ok:
+        raise DataError(f"{path}: could not encode image")
+    atomic_write_bytes(path, buf.tobytes())
+
+
+def read_labels(path: str | Path) -> np.ndarray:
+    """Read a colour-coded UAVid label PNG as class ids (H, W) uint8; unknown colours are an error."""
+    return colors_to_ids(read_image(path), source=path)
+
+
+def write_labels(path: str | Path, ids: np.ndarray) -> None:
+    """Write class ids (H, W) as a colour-coded UAVid label PNG."""
+    write_image(path, ids_to_colors(ids))
+
+
+@dataclass(frozen=True)
+class Sample:
+    """One image of a UAVid-layout dataset and its label file (None when the set is unlabelled)."""
+
+    sequence: str
+    frame: str
+    image_path: Path
+    label_path: Path | None
+
+    @property
+    def key(self) -> str:
+        return f"{self.sequence}/{self.frame}"
+
+    def meta_path(self) -> Path:
+        return self.image_path.parent.parent / META_DIR / f"{self.frame}.json"
+
+
+def iter_samples(root: str | Path, *, require_labels: bool = True, check_sizes: bool = False) -> Iterator[Sample]:
+    """Yield the samples of ``ROOT/seqNN/{Images,Labels}`` in sorted order.
+
+    Raises DataError for a missing root, a root without sequences, an image without its label
+    (or a label without its image) and, with ``check_sizes``, an image and label of different sizes.
+    """
+    root = Path(root)
+    if not root.is_dir():
+        raise DataError(f"{root}: dataset folder not found")
+    seqs = sorted(p for p in root.iterdir() if p.is_dir() and _SEQ.match(p.name))
+    if not seqs:
+        raise DataError(f"{root}: no seqNN folders (expected ROOT/seqNN/{IMAGE_DIR} and ROOT/seqNN/{LABEL_DIR})")
+    for seq in seqs:
+        img_dir, lab_dir = seq / IMAGE_DIR, seq / LABEL_DIR
+        if not img_dir.is_dir():
+            raise DataError(f"{img_dir}: missing {IMAGE_DIR} folder")
+        images = {p.stem: p for p in img_dir.iterdir() if p.suffix.lower() in _EXTS}
+        labels: dict[str, Path] = {}
+        if lab_dir.is_dir():
+            labels = {p.stem: p for p in lab_dir.iterdir() if p.suffix.lower() == ".png"}
+        elif require_labels:
+            raise DataError(f"{lab_dir}: missing {LABEL_DIR} folder")
+        if require_labels or labels:
+            unpaired_img = sorted(set(images) - set(labels))
+            unpaired_lab = sorted(set(labels) - set(images))
+            if unpaired_img:
+                raise DataError(f"{img_dir / unpaired_img[0]}.*: image has no label in {lab_dir}"
+                                + (f" ({len(unpaired_img)} unpaired)" if len(unpaired_img) > 1 else ""))
+            if unpaired_lab:
+                raise DataError(f"{labels[unpaired_lab[0]]}: label has no image in {img_dir}"
+                                + (f" ({len(unpaired_lab)} unpaired)" if len(unpaired_lab) > 1 else ""))
+        for frame in sorted(images):
+            sample = Sample(seq.name, frame, images[frame], labels.get(frame))
+            if check_sizes and sample.label_path is not None:
+                check_same_size(sample.image_path, sample.label_path)
+            yield sample
+
+
+def image_size(path: str | Path) -> tuple[int, int]:
+    """(width, height) of a PNG from its header without decoding it; other formats are decoded."""
+    path = Path(path)
+    with open(path, "rb") as f:
+        head = f.read(24)
+    if head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR":
+        return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+    img = read_image(path)
+    return img.shape[1], img.shape[0]
+
+
+def check_same_size(image_path: str | Path, label_path: str | Path) -> None:
+    """DataError when an image and its label map differ in size."""
+    si, sl = image_size(image_path), image_size(label_path)
+    if si != sl:
+        raise DataError(f"{label_path}: label size {sl[0]}x{sl[1]} differs from image {image_path} ({si[0]}x{si[1]})")
+
+
+def sample_paths(root: str | Path, sequence: str, frame: str) -> tuple[Path, Path, Path]:
+    """Image, label and meta paths of a sample in the UAVid layout (folders not created)."""
+    seq = Path(root) / sequence
+    return seq / IMAGE_DIR / f"{frame}.png", seq / LABEL_DIR / f"{frame}.png", seq / META_DIR / f"{frame}.json"
+
+
+def write_sample(root: str | Path, sequence: str, frame: str, image: np.ndarray, ids: np.ndarray) -> Sample:
+    """Write an image and its class-id map into the UAVid layout; returns the written sample."""
+    if image.shape[:2] != ids.shape:
+        raise ValueError(f"image {image.shape[:2]} and labels {ids.shape} differ in size")
+    img_path, lab_path, _ = sample_paths(root, sequence, frame)
+    write_image(img_path, image)
+    write_labels(lab_path, ids)
+    return Sample(sequence, frame, img_path, lab_path)
