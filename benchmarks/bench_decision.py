@@ -21,7 +21,7 @@ import numpy as np
 
 from assurance.scenes.uavid import iter_samples
 from el.pipeline import DEPLOYED_MONITOR, EmergencyLanding, PipelineConfig
-from el.segmentation import Segmenter
+from el.segmentation.factory import load_model
 
 CONFIGS = ("none", "lhd", "lhd+ch:tau=0.25", "lhd+mcd:n=10,rho=0.9", "lhd+mcd:n=30,rho=0.9",
            DEPLOYED_MONITOR)
@@ -46,7 +46,7 @@ def main(argv: list[str] | None = None) -> int:
     if not samples:
         print(f"{args.data}: no scenes (generate them with `uav-el synth`)", file=sys.stderr)
         return 2
-    seg = Segmenter.load(args.weights, threads=args.threads)
+    seg = load_model(args.weights, threads=args.threads)
     rss0 = peak_rss_mb()
     EmergencyLanding(PipelineConfig(monitor="lhd", time_budget_s=None), segmenter=seg).decide(samples[0].image_path)
 

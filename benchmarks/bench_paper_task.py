@@ -33,11 +33,11 @@ def main(argv: list[str] | None = None) -> int:
 
     from assurance.campaign.presets import preset_config
     from assurance.campaign.run import plan, run_task
-    from el.segmentation import Segmenter
+    from el.segmentation.factory import load_model
 
     torch.set_num_threads(1)
     cfg = preset_config("paper", images=args.images, perturbations=(args.perturbation,), weights=args.weights)
-    segmenter = Segmenter.load(args.weights, threads=1)
+    segmenter = load_model(args.weights, threads=1)
     rows = []
     for task in plan(args.data, cfg):
         t = time.perf_counter()

@@ -97,3 +97,12 @@ def ids_to_colors(ids: np.ndarray) -> np.ndarray:
 def forbidden_mask(ids: np.ndarray) -> np.ndarray:
     """True where the class id is a forbidden class (building, road, static or moving car)."""
     return FORBIDDEN_LUT[np.asarray(ids)]
+
+
+class LabelSet:  # placeholder: replaced by the label-set seam (merge takes the other side)
+    def __init__(self, name: str, classes: tuple[UavidClass, ...]) -> None:
+        self.name, self.classes = name, classes
+        self.num_classes = len(classes)
+
+
+UAVID = LabelSet("uavid", CLASSES)

@@ -15,12 +15,13 @@ import logging
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from el.camera import Pose
 from el.config import CoreConfig
 from el.core import default_area, run_core
 from el.decision import Candidate, Decision, Disc, MonitorVerdict
@@ -28,14 +29,15 @@ from el.errors import BudgetExceeded
 from el.hashing import sha256_bytes
 from el.imageio import read_image
 from el.monitors import CandidateContext, Monitor, build_monitor, monitor_name, parse_monitor_spec
-from el.monitors.walk import HAZARD, SCORE, select
 from el.rgb import check_rgb
+from el.segmentation.contract import check_model
+from el.walk import HAZARD, WalkOutcome, walk_candidates
 
 Clock = Callable[[], float]
 DEFAULT_TIME_BUDGET_S = 10.0
 DEPLOYED_MONITOR = "learned:walk=score,threshold=0.8563253044730293"
 """The shipped runtime monitor, chosen on the validation split (README, "The deployed monitor"): the learned
-candidate monitor (``el/monitors/data/learned.json``), candidates walked by its score (``el.monitors.walk``),
+candidate monitor (``el/monitors/data/learned.json``), candidates walked by its score (``el.walk``),
 at the threshold of its calibration card :data:`DEPLOYED_CALIBRATION` (a test checks they agree)."""
 DEPLOYED_CALIBRATION = Path(__file__).resolve().parent / "monitors" / "data" / "calibration.json"
 MIN_FRAME_SIZE = 16  # px: the smallest frame side the segmenter takes (el.segmentation.inference.MIN_SIZE)
@@ -168,14 +170,16 @@ class EmergencyLanding:
         self.monitor: Monitor | None = None
         self.walk = HAZARD
         self.ood: Any = None
-        if segmenter is None:
-            try:
-                from el.segmentation import Segmenter
+        try:
+            if segmenter is None:
+                from el.segmentation.factory import load_model
 
-                self.segmenter = Segmenter.load(weights)
-            except Exception as exc:  # missing/altered weights: every decision is the default action
-                self.fault = f"fault: model: {type(exc).__name__}: {exc}"
-                logger.exception("segmentation model not loaded; every decision will be the default action")
+                self.segmenter = load_model(weights)
+            else:
+                check_model(segmenter)
+        except Exception as exc:  # missing/altered weights: every decision is the default action
+            self.fault = f"fault: model: {type(exc).__name__}: {exc}"
+            logger.exception("segmentation model not loaded; every decision will be the default action")
         try:
             spec = calibrated_spec(self.config.monitor, self.config.calibration)
             self.walk = getattr(parse_monitor_spec(spec), "walk", HAZARD)
@@ -183,7 +187,9 @@ class EmergencyLanding:
                 spec, margin=self.config.patch_margin,
                 max_side=self.config.patch_max_side, clock=clock,
             )
-            check_monitor_card(self.monitor, spec, self.config.calibration)
+            if self.monitor is not None and self.segmenter is not None:
+                self.monitor.check_network(self.segmenter)  # a fitted monitor on another network: refused
+            check_monitor_card(self.monitor, spec, self.config.calibration, self.segmenter)
         except Exception as exc:
             self.fault = self.fault or f"fault: monitor: {type(exc).__name__}: {exc}"
             logger.exception("runtime monitor %r not built; every decision will be the default action",
@@ -193,20 +199,36 @@ class EmergencyLanding:
                 from el.monitors.ood import load_ood
 
                 self.ood = load_ood(self.config.ood)
+                self.ood.check_network(self.segmenter)
             except Exception as exc:
                 self.fault = self.fault or f"fault: ood: {type(exc).__name__}: {exc}"
-                logger.exception("out-of-domain gate not loaded; every decision will be the default action")
+                logger.exception("out-of-domain gate not usable; every decision will be the default action")
 
     # -- the decision ----------------------------------------------------------------------------
-    def decide(self, image: np.ndarray | str | Path) -> Decision:
+    def decide(self, image: np.ndarray | str | Path, pose: Pose | None = None) -> Decision:
         """Decide where to land for one frame (an RGB uint8 array or an image file); never raises.
 
-        (The ground-truth pipeline, with a label map instead of the model, is ``assurance.campaign.gt_pipeline``.)
+        ``pose``: the camera's height and pitch when the frame was taken (from the flight log); None is
+        the configured nominal pose (``config.core.pose``). It sets the safety radius in pixels and is
+        recorded in the decision's ``input.pose``. (The ground-truth pipeline, with a label map instead
+        of the model, is ``assurance.campaign.gt_pipeline``.)
         """
-        cfg = self.config
-        budget = _Budget(self.clock, cfg.time_budget_s)
+        budget = _Budget(self.clock, self.config.time_budget_s)
         timings: dict[str, float] = {}
         info: dict[str, Any] = {}
+        candidates: list[Candidate] = []
+        try:
+            core = frame_core(self.config.core, pose)
+        except Exception as exc:
+            return self._default(f"fault: pose: {type(exc).__name__}: {exc}", candidates, self.config.nominal_size,
+                                 timings, info, budget, self.config.core)
+        info["pose"] = pose_record(core.pose, nominal=pose is None)
+        return self._decide(image, core, budget, timings, info)
+
+    def _decide(self, image: np.ndarray | str | Path, core_cfg: CoreConfig, budget: _Budget,
+                timings: dict[str, float], info: dict[str, Any]) -> Decision:
+        """The stages of one decision at the frame's core configuration; every fault ends in the default."""
+        cfg = self.config
         size = cfg.nominal_size
         stage = "read"
         candidates: list[Candidate] = []
@@ -216,7 +238,7 @@ class EmergencyLanding:
             size = (rgb.shape[1], rgb.shape[0])
             timings["read_s"] = self.clock() - t
             if self.fault:
-                return self._default(self.fault, candidates, size, timings, info, budget)
+                return self._default(self.fault, candidates, size, timings, info, budget, core_cfg)
             budget.check(stage)
 
             stage = "segmentation"
@@ -232,37 +254,34 @@ class EmergencyLanding:
                 info["ood_threshold"] = self.ood.threshold
                 timings["ood_s"] = self.clock() - t
                 if not info["ood_score"] <= self.ood.threshold:
-                    return self._default("out_of_domain", candidates, size, timings, info, budget)
+                    return self._default("out_of_domain", candidates, size, timings, info, budget, core_cfg)
                 budget.check(stage)
 
             stage = "candidates"
             t = self.clock()
-            core = run_core(probs, size, cfg.core, clock=self.clock)
-            candidates = core.candidates
+            candidates = run_core(probs, size, core_cfg, clock=self.clock).candidates
             timings["candidates_s"] = self.clock() - t
             budget.check(stage)
 
             stage = "monitoring"
             t = self.clock()
-            candidates, selected, overhead = self._walk(rgb, candidates, budget, probs)
+            candidates, outcome = self._walk(rgb, candidates, budget, probs)
             timings["monitoring_s"] = self.clock() - t
-            timings["overhead_s"] = overhead
+            timings["overhead_s"] = outcome.overhead_s
             budget.check(stage)
         except BudgetExceeded:
-            return self._default("timeout", candidates, size, timings, info, budget)
+            return self._default("timeout", candidates, size, timings, info, budget, core_cfg)
         except Exception as exc:
             reason = f"fault: {stage}: {type(exc).__name__}: {exc}"
             logger.exception("fault in stage %s of the decision (input %s); default action", stage,
                              info.get("path", "?"))
-            return self._default(reason, candidates, size, timings, info, budget)
+            return self._default(reason, candidates, size, timings, info, budget, core_cfg)
 
-        if not candidates:
-            return self._default("no_candidate", candidates, size, timings, info, budget)
-        if selected is None:
-            return self._default("all_rejected", candidates, size, timings, info, budget)
+        if outcome.selected is None:
+            return self._default(outcome.reason, candidates, size, timings, info, budget, core_cfg)
         timings["total_s"] = budget.elapsed()
-        return Decision(action="land", reason="accepted", selected=selected, candidates=candidates,
-                        default_area=default_area(*size, cfg.core), timings=timings, input=info,
+        return Decision(action="land", reason=outcome.reason, selected=outcome.selected, candidates=candidates,
+                        default_area=default_area(*size, core_cfg), timings=timings, input=info,
                         config=cfg.to_dict())
 
     # -- stages ----------------------------------------------------------------------------------
@@ -290,61 +309,34 @@ class EmergencyLanding:
 
     def _walk(
         self, rgb: np.ndarray, candidates: list[Candidate], budget: _Budget, probs: np.ndarray | None = None
-    ) -> tuple[list[Candidate], int | None, float]:
-        """Monitor candidates in rank order; returns (candidates with verdicts, selected, overhead s).
-
-        Normal mode stops at the first accepted candidate (later ones stay unmonitored). Evaluation
-        mode judges every candidate; the overhead is the time the real walk would have spent.
-        """
+    ) -> tuple[list[Candidate], WalkOutcome]:
+        """Monitor candidates with the one decision walk (``el.walk``); returns the candidates with their
+        verdicts and the outcome. The budget is checked before and after each judgement of the deciding
+        walk; evaluation-only judgements past the decision (``evaluate_all``) are not budgeted."""
         if self.monitor is None:  # no runtime monitor: the CM's top candidate
-            return candidates, (0 if candidates else None), 0.0
-        out: list[Candidate] = []
-        selected: int | None = None
-        overhead = 0.0
-        if hasattr(self.monitor, "between"):  # MC dropout: the budget binds between its chunks too
-            self.monitor.between = budget.ahead if self.config.time_budget_s is not None else None
-        if self.walk == SCORE:
-            return self._score_walk(rgb, candidates, budget, probs)
-        for k, cand in enumerate(candidates):
-            if selected is not None and not self.config.evaluate_all:
-                out.append(cand)
-                continue
-            if selected is None:
-                budget.check("monitoring")  # before each candidate of the real walk
-            elif hasattr(self.monitor, "between"):
-                self.monitor.between = None  # evaluation-only checks past the decision are not budgeted
-            out.append(self._judge(rgb, cand, k, probs))
-            verdict = out[-1].monitor
-            if selected is None:
-                overhead += verdict.seconds
-                if verdict.accepted:
-                    selected = k
-                # the budget binds the real walk; evaluation-only checks past the decision do not count
-                budget_left = self.config.time_budget_s
-                if budget_left is not None and budget.elapsed() - _extra(out, selected) > budget_left:
-                    raise BudgetExceeded("time budget exceeded during monitoring")
-        return out, selected, overhead
+            return candidates, walk_candidates(len(candidates), None)
+        budgeted = self.config.time_budget_s is not None
+        has_chunks = hasattr(self.monitor, "between")  # MC dropout: the budget binds between its chunks too
 
-    def _judge(self, rgb: np.ndarray, cand: Candidate, k: int, probs: np.ndarray | None) -> Candidate:
-        """One candidate with the monitor's verdict attached."""
-        context = None if probs is None else CandidateContext(cand, probs, (rgb.shape[1], rgb.shape[0]))
-        verdict = self.monitor.check(rgb, cand, self.segmenter, seed=self.config.seed + k, context=context)
-        if not isinstance(verdict, MonitorVerdict):
-            raise ValueError(f"monitor returned {type(verdict).__name__}, not a MonitorVerdict")
-        return replace(cand, monitor=verdict)
+        def before(k: int, real: bool) -> None:
+            if has_chunks:
+                self.monitor.between = budget.ahead if (budgeted and real) else None
+            if real:
+                budget.check("monitoring")
 
-    def _score_walk(
-        self, rgb: np.ndarray, candidates: list[Candidate], budget: _Budget, probs: np.ndarray | None
-    ) -> tuple[list[Candidate], int | None, float]:
-        """The ``score`` walk (``el.monitors.walk``): judge every candidate inside the budget, then land on
-        the accepted one with the lowest score. Every judgement is part of the real walk's overhead."""
-        out = []
-        for k, cand in enumerate(candidates):
-            budget.check("monitoring")
-            out.append(self._judge(rgb, cand, k, probs))
-        verdicts = [c.monitor for c in out]
-        selected = select([v.accepted for v in verdicts], [v.score for v in verdicts], SCORE)
-        return out, selected, float(sum(v.seconds for v in verdicts))
+        def after(k: int, real: bool) -> None:
+            if real and budgeted and budget.elapsed() > self.config.time_budget_s:
+                raise BudgetExceeded("time budget exceeded during monitoring")
+
+        def judge(k: int) -> MonitorVerdict:
+            cand = candidates[k]
+            context = None if probs is None else CandidateContext(cand, probs, (rgb.shape[1], rgb.shape[0]))
+            return self.monitor.check(rgb, cand, self.segmenter, seed=self.config.seed + k, context=context)
+
+        outcome = walk_candidates(len(candidates), judge, self.walk, evaluate_all=self.config.evaluate_all,
+                                  before=before, after=after)
+        judged = [c if v is None else replace(c, monitor=v) for c, v in zip(candidates, outcome.verdicts, strict=True)]
+        return judged, outcome
 
     def _default(
         self,
@@ -354,27 +346,47 @@ class EmergencyLanding:
         timings: dict[str, float],
         info: dict[str, Any],
         budget: _Budget,
+        core: CoreConfig,
     ) -> Decision:
         try:
-            area = default_area(*size, self.config.core)
+            area = default_area(*size, core)
         except Exception:  # the default area of the nominal frame: the decision itself must not fail
             logger.exception("default area of a %dx%d frame failed; using the nominal %dx%d frame", *size,
                              *self.config.nominal_size)
-            area = default_area(*self.config.nominal_size, self.config.core)
+            area = default_area(*self.config.nominal_size, core)
         timings = dict(timings)
         timings["total_s"] = budget.elapsed()
         return Decision(action="default", reason=reason, selected=None, candidates=list(candidates),
                         default_area=area, timings=timings, input=info, config=self.config.to_dict())
 
 
-def check_monitor_card(monitor: Monitor | None, spec: str | None, calibration: str | Path | None) -> None:
-    """Refuse a monitor whose threshold was calibrated on another fitted model: the card given, else the
-    deployed card when ``spec`` is the deployed configuration (``CalibrationError``)."""
+def check_monitor_card(monitor: Monitor | None, spec: str | None, calibration: str | Path | None,
+                       segmenter: Any = None) -> None:
+    """Refuse a monitor whose threshold was calibrated on another fitted model or another network: the card
+    given, else the deployed card when ``spec`` is the deployed configuration (``CalibrationError``).
+    ``segmenter``: the network the card must have been calibrated on (None: not checked here)."""
     card = calibration or (DEPLOYED_CALIBRATION if is_deployed(spec) else None)
     if card:
         from el.monitors.calibration import check_card_monitor, load_calibration
 
-        check_card_monitor(load_calibration(card), monitor)
+        loaded = load_calibration(card)
+        check_card_monitor(loaded, monitor)
+        if segmenter is not None:
+            loaded.check_network(segmenter)
+
+
+def frame_core(core: CoreConfig, pose: Pose | None) -> CoreConfig:
+    """The core configuration of one frame: the nominal one, at the frame's pose when it brings one."""
+    if pose is None:
+        return core
+    if not isinstance(pose, Pose):
+        raise ValueError(f"pose must be an el.camera.Pose, got {type(pose).__name__}")
+    return replace(core, pose=pose)
+
+
+def pose_record(pose: Pose, *, nominal: bool) -> dict[str, Any]:
+    """The pose a decision was planned with, as its JSON records it (``input.pose``)."""
+    return {**{f.name: getattr(pose, f.name) for f in fields(pose)}, "source": "nominal" if nominal else "frame"}
 
 
 def is_deployed(spec: str | None) -> bool:
@@ -399,16 +411,10 @@ def calibrated_spec(monitor: str | None, calibration: str | None) -> str | None:
     return card.spec
 
 
-def _extra(done: list[Candidate], selected: int | None) -> float:
-    """Monitoring time spent on candidates after the selected one (evaluation mode only)."""
-    if selected is None:
-        return 0.0
-    return sum(c.monitor.seconds for c in done[selected + 1 :] if c.monitor is not None)
-
-
-def decide(image: np.ndarray | str | Path, config: PipelineConfig | None = None, **kwargs: Any) -> Decision:
+def decide(image: np.ndarray | str | Path, config: PipelineConfig | None = None, *, pose: Pose | None = None,
+           **kwargs: Any) -> Decision:
     """One-shot convenience: build an ``EmergencyLanding`` and decide for one frame; never raises."""
-    return EmergencyLanding(config, **kwargs).decide(image)
+    return EmergencyLanding(config, **kwargs).decide(image, pose=pose)
 
 
 __all__ = [

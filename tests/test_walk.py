@@ -1,4 +1,4 @@
-"""The decision loop's walk order (el.monitors.walk): hazard rank (the paper's) or ascending monitor score."""
+"""The one decision walk (el.walk): hazard rank (the paper's) or ascending monitor score, for every caller."""
 
 from __future__ import annotations
 
@@ -7,12 +7,12 @@ from helpers import OracleSegmenter, scene_ids, scene_image
 from hypothesis import given
 from hypothesis import strategies as st
 
-from assurance.campaign.run import walk, walk_of
+from assurance.campaign.run import walk_of
 from el.config import CoreConfig
 from el.decision import MonitorVerdict
 from el.monitors import parse_monitor_spec
-from el.monitors.walk import select, walk_order
 from el.pipeline import EmergencyLanding, PipelineConfig
+from el.walk import ALL_REJECTED, NO_CANDIDATE, select, walk_candidates, walk_order
 
 WW = 128
 
@@ -34,9 +34,27 @@ def test_score_walk_lands_on_the_accepted_candidate_with_the_lowest_score(items)
     accepted, scores = [a for a, _ in items], [s for _, s in items]
     ok = [k for k in range(len(items)) if accepted[k]]
     want = min(ok, key=lambda k: (scores[k], k)) if ok else None
-    assert select(accepted, scores, "score") == want == walk(accepted, scores, "score")
-    assert select(accepted, scores, "hazard") == (ok[0] if ok else None) == walk(accepted)
+    verdicts = [MonitorVerdict("m", a, "test", 0.5, s, 0.0) for a, s in items]
+    by_score = walk_candidates(len(items), verdicts.__getitem__, "score")
+    by_hazard = walk_candidates(len(items), verdicts.__getitem__, "hazard")
+    assert select(accepted, scores, "score") == want == by_score.selected
+    assert select(accepted, scores, "hazard") == (ok[0] if ok else None) == by_hazard.selected
     assert sorted(walk_order(scores, "score")) == list(range(len(items)))
+    assert by_score.examined == len(items) and by_score.overhead_s == 0.5 * len(items)
+    assert by_hazard.examined == (ok[0] + 1 if ok else len(items))
+    assert sum(v is not None for v in by_hazard.verdicts) == by_hazard.examined  # nothing judged past it
+    assert by_hazard.reason == ("accepted" if ok else (NO_CANDIDATE if not items else ALL_REJECTED))
+
+
+def test_evaluation_mode_judges_every_candidate_without_changing_the_decision():
+    verdicts = [MonitorVerdict("m", a, "test", 1.0, 0.0, 0.0) for a in (False, True, False, True)]
+    seen = []
+    outcome = walk_candidates(4, verdicts.__getitem__, evaluate_all=True, before=lambda k, real: seen.append(real))
+    assert outcome.selected == 1 and outcome.examined == 2 and outcome.overhead_s == 2.0
+    assert seen == [True, True, False, False] and None not in outcome.verdicts
+    assert walk_candidates(3, None).selected == 0 and walk_candidates(0, None).reason == NO_CANDIDATE
+    with pytest.raises(ValueError, match="not a MonitorVerdict"):
+        walk_candidates(1, lambda k: (True, "ok"))
 
 
 class ByIndex:

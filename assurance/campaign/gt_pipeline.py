@@ -25,6 +25,7 @@ from el.core import default_area, probs_from_labels, run_core
 from el.decision import Decision, decision_schema  # noqa: F401  (re-exported)
 from el.hashing import sha256_file
 from el.labels import NUM_CLASSES
+from el.walk import walk_candidates
 
 PIPELINE = "ground_truth"
 logger = logging.getLogger(__name__)  # faults with their tracebacks; the decision keeps only the reason
@@ -78,11 +79,9 @@ def decide_from_labels(
     timings["candidates_s"] = t2 - t1
     timings.update({k: v for k, v in core.timings.items() if k != "total_s"})
     timings["total_s"] = float(read_s) + clock() - t0
-    if core.candidates:
-        return Decision(action="land", reason="accepted", selected=0, candidates=core.candidates,
-                        default_area=area, timings=timings, input=info, config=cfg)
-    return Decision(action="default", reason="no_candidate", selected=None, candidates=[],
-                    default_area=area, timings=timings, input=info, config=cfg)
+    outcome = walk_candidates(len(core.candidates), None)  # no monitor: the top candidate, as the pipeline
+    return Decision(action=outcome.action, reason=outcome.reason, selected=outcome.selected,
+                    candidates=core.candidates, default_area=area, timings=timings, input=info, config=cfg)
 
 
 def decide_from_label_file(

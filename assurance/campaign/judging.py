@@ -1,23 +1,45 @@
-"""Every monitor's verdict on every candidate of one frame, sharing work, and the walk that decides."""
+"""Every monitor's verdict on every candidate of one frame, sharing work: the campaign's side of the monitors.
+
+The flight interface (``el.monitors.Monitor``) judges one candidate at a time. A campaign judges every
+candidate with many configurations, so for the monitors written as ``PatchMonitor`` steps it crops
+each patch once, runs the segmenter's trunk once, computes each kind of features once (drawn by the
+monitor that needs the most samples) and each reduction once, and charges every configuration what it
+would have spent alone. Any other monitor is judged on its own through ``check``.
+"""
 
 from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Hashable, Sequence
 from typing import Any
 
 import numpy as np
 
-from el.decision import Candidate
-from el.monitors import CandidateContext, Monitor
-from el.monitors.walk import HAZARD, select
+from el.decision import Candidate, MonitorVerdict
+from el.monitors import CandidateContext, Monitor, PatchMonitor
 
 
 def _timed(clock: Callable[[], float], fn: Callable[..., Any], *args: Any, **kwargs: Any) -> tuple[Any, float]:
     t = clock()
     out = fn(*args, **kwargs)
     return out, clock() - t
+
+
+def share_seconds(seconds: float, needed: int, drawn: int) -> float:
+    """What features of ``needed`` samples cost alone, from ``seconds`` for ``drawn`` shared samples
+    (MC dropout runs the head once per sample: a monitor pays its share of the batch)."""
+    return seconds if drawn <= needed else seconds * needed / drawn
+
+
+def feature_owners(monitors: Sequence[PatchMonitor]) -> dict[Hashable, PatchMonitor]:
+    """Feature key -> the monitor that draws the most samples of it (the others take a prefix)."""
+    owners: dict[Hashable, PatchMonitor] = {}
+    for m in monitors:
+        held = owners.get(m.feature_key)
+        if held is None or m.feature_size > held.feature_size:
+            owners[m.feature_key] = m
+    return owners
 
 
 def judge_candidates(
@@ -29,55 +51,59 @@ def judge_candidates(
     seed: int,
     clock: Callable[[], float] = time.perf_counter,
     frame_probs: np.ndarray | None = None,
-) -> list[list[tuple[bool, str, float, float]]]:
-    """Every monitor's verdict on every candidate, sharing work; [candidate][monitor] ->
-    (accepted, reason, attributed seconds, score).
+) -> list[list[MonitorVerdict]]:
+    """Every monitor's verdict on every candidate; ``[candidate][monitor]`` (in the order given).
 
-    Only the monitor interface is used: per candidate, the HD patch and the segmenter's trunk once
-    (when it has ``patch_trunk``), then the features once per ``feature_key`` (drawn by the monitor
-    that needs the most samples), the ``reduce`` step once per ``reduce_key``, and each monitor's
-    ``judge``. Each configuration is charged what it would have spent alone: the patch, the trunk,
-    its share of its features (``feature_seconds``), the reduction and its judgement.
     ``frame_probs`` (the frame's softmax) reaches monitors that read it (``CandidateContext``).
     """
-    margins = {(m.margin, m.max_side) for m in monitors}
-    if len(margins) != 1:
+    shared = [m for m in monitors if isinstance(m, PatchMonitor)]
+    if len({(m.margin, m.max_side) for m in shared}) > 1:
         raise ValueError("monitors of one campaign must share the patch margin and max_side")
-    owners: dict[Any, Monitor] = {}  # feature key -> the monitor that draws the most samples of it
-    for m in monitors:
-        held = owners.get(m.feature_key)
-        if held is None or m.feature_size > held.feature_size:
-            owners[m.feature_key] = m
-    # Optional Segmenter speed-up; any object with the PatchSegmenter methods still works.
-    has_trunk = callable(getattr(segmenter, "patch_trunk", None))
+    owners = feature_owners(shared)
+    has_trunk = callable(getattr(segmenter, "patch_trunk", None))  # optional capability of the segmenter
     size = (hd.shape[1], hd.shape[0])
-    out: list[list[tuple[bool, str, float, float]]] = []
+    out: list[list[MonitorVerdict]] = []
     for k, cand in enumerate(candidates):
-        patch, t_patch = _timed(clock, monitors[0].patch, hd, cand)
-        trunk, t_trunk = _timed(clock, segmenter.patch_trunk, patch.rgb) if has_trunk else (None, 0.0)
         context = None if frame_probs is None else CandidateContext(cand, frame_probs, size)
-        features = {}
-        for key, owner in owners.items():
-            (feats, mask), t_feat = _timed(clock, owner.patch_features, patch, segmenter, seed=seed + k,
-                                           size=owner.feature_size, trunk=trunk, context=context)
-            features[key] = (feats, mask, t_feat, owner.feature_size)
-        reduced: dict[Any, tuple[Any, float]] = {}
-        row = []
+        row: dict[int, MonitorVerdict] = {}
+        if shared:
+            row.update(_judge_shared(hd, cand, shared, owners, segmenter, seed=seed + k, clock=clock,
+                                     context=context, has_trunk=has_trunk))
         for m in monitors:
-            feats, mask, t_feat, drawn = features[m.feature_key]
-            rkey = (m.feature_key, m.reduce_key)
-            if rkey not in reduced:  # e.g. LHD and the CH taus read the same disc pixels: take them once
-                reduced[rkey] = _timed(clock, m.reduce, feats, mask)
-            red, t_red = reduced[rkey]
-            judgement, t_judge = _timed(clock, m.judge, red)
-            if math.isnan(judgement.score):
-                raise ValueError(f"{m.name}: non-finite score (NaN)")
-            seconds = t_patch + t_trunk + m.feature_seconds(t_feat, drawn) + t_red + t_judge
-            row.append((bool(judgement.accepted), judgement.reason, seconds, float(judgement.score)))
-        out.append(row)
+            if not isinstance(m, PatchMonitor):
+                row[id(m)] = m.check(hd, cand, segmenter, seed=seed + k, context=context)
+        out.append([_finite(row[id(m)]) for m in monitors])
     return out
 
 
-def walk(verdicts: Sequence[bool], scores: Sequence[float] | None = None, order: str = HAZARD) -> int | None:
-    """The decision loop's walk (``el.monitors.walk``): the candidate it lands on, or None (default)."""
-    return select(verdicts, scores if scores is not None else [0.0] * len(verdicts), order)
+def _judge_shared(hd: np.ndarray, cand: Candidate, monitors: Sequence[PatchMonitor],
+                  owners: dict[Hashable, PatchMonitor], segmenter: Any, *, seed: int, clock: Callable[[], float],
+                  context: CandidateContext | None, has_trunk: bool) -> dict[int, MonitorVerdict]:
+    """The patch monitors' verdicts on one candidate, each step computed once for all of them."""
+    patch, t_patch = _timed(clock, monitors[0].patch, hd, cand)
+    trunk, t_trunk = _timed(clock, segmenter.patch_trunk, patch.rgb) if has_trunk else (None, 0.0)
+    features = {}
+    for key, owner in owners.items():
+        (feats, mask), t_feat = _timed(clock, owner.patch_features, patch, segmenter, seed=seed,
+                                       size=owner.feature_size, trunk=trunk, context=context)
+        features[key] = (feats, mask, t_feat, owner.feature_size)
+    reduced: dict[Any, tuple[Any, float]] = {}
+    verdicts = {}
+    for m in monitors:
+        feats, mask, t_feat, drawn = features[m.feature_key]
+        rkey = (m.feature_key, m.reduce_key)
+        if rkey not in reduced:  # e.g. LHD and the CH taus read the same disc pixels: take them once
+            reduced[rkey] = _timed(clock, m.reduce, feats, mask)
+        red, t_red = reduced[rkey]
+        judgement, t_judge = _timed(clock, m.judge, red)
+        seconds = t_patch + t_trunk + share_seconds(t_feat, m.feature_size, drawn) + t_red + t_judge
+        verdicts[id(m)] = MonitorVerdict(m.name, bool(judgement.accepted), judgement.reason, seconds,
+                                         float(judgement.score), m.threshold)
+    return verdicts
+
+
+def _finite(verdict: MonitorVerdict) -> MonitorVerdict:
+    if math.isnan(verdict.score):
+        raise ValueError(f"{verdict.name}: non-finite score (NaN)")
+    return verdict
+

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from assurance.campaign import readouts
-from assurance.campaign.judging import _timed, judge_candidates, walk
+from assurance.campaign.judging import _timed, judge_candidates
 from assurance.campaign.perturbations import PERTURBATIONS, perturb, severities_of
 from assurance.campaign.truth import true_hazard
 from assurance.scenes.uavid import Sample, iter_samples, read_image, read_labels
@@ -37,7 +37,7 @@ from el.core import run_core
 from el.decision import Candidate
 from el.monitors import DEMO_GRID, build_monitor, parse_monitor_spec
 from el.monitors.spec import walk_of
-from el.monitors.walk import SCORE
+from el.walk import walk_candidates
 
 
 # ------------------------------------------------------------------------------------------------
@@ -158,24 +158,22 @@ def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Calla
     thresholds = [m.threshold for m in monitors]
     image_rows, cand_rows = [], []
     for j, name in enumerate(config.monitors):
-        accepted = [verdicts[k][j][0] for k in range(len(cands))]
-        seconds = [verdicts[k][j][2] for k in range(len(cands))]
-        order = walk_of(name)
-        sel = walk(accepted, [verdicts[k][j][3] for k in range(len(cands))], order)
-        examined = len(cands) if sel is None or order == SCORE else sel + 1
+        column = [verdicts[k][j] for k in range(len(cands))]
+        outcome = walk_candidates(len(cands), column.__getitem__, walk_of(name), evaluate_all=True)
+        sel, examined = outcome.selected, outcome.examined
         h_decision = h_default if sel is None else truth[sel]
         image_rows.append({
             **base, "monitor": name, "fault": "",
             "candidates": len(cands),
-            "action": "default" if sel is None else "land",
-            "reason": ("no_candidate" if not cands else "all_rejected") if sel is None else "accepted",
+            "action": outcome.action,
+            "reason": outcome.reason,
             "selected": -1 if sel is None else sel,
             "h_default": h_default,
             "h_top": truth[0] if cands else float("nan"),
             "h_decision": h_decision,
             "decision_unsafe": bool(h_decision >= 1.0),
             "clearance_decision_m": clearance[sel] if sel is not None else float("nan"),
-            "overhead_s": float(sum(seconds[:examined])),
+            "overhead_s": float(outcome.overhead_s),
             "default_x": core.default_area.x, "default_y": core.default_area.y,
             "default_r": core.default_area.radius_px, "width": W, "height": H,
             **timings,
@@ -186,8 +184,8 @@ def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Calla
                 **base, "monitor": name, "rank": k, "x": c.x, "y": c.y, "radius_px": c.radius_px,
                 "hazard": c.hazard, "hazard_semantic": c.hazard_semantic, "hazard_distance": c.hazard_distance,
                 "true_hazard": truth[k], "true_unsafe": bool(truth[k] >= 1.0), "clearance_m": clearance[k],
-                "accepted": bool(accepted[k]), "reason": verdicts[k][j][1], "seconds": float(seconds[k]),
-                "score": verdicts[k][j][3], "threshold": thresholds[j],
+                "accepted": bool(column[k].accepted), "reason": column[k].reason, "seconds": float(column[k].seconds),
+                "score": column[k].score, "threshold": thresholds[j],
                 "selected": sel == k, "examined": k < examined,
             })
     return {"images": image_rows, "candidates": cand_rows}
@@ -215,9 +213,9 @@ def _worker_segmenter(weights: str | None, threads: int) -> Any:
     """One segmenter per worker process (loaded once, cached)."""
     key = f"{weights}|{threads}"
     if _WORKER_STATE.get("key") != key:
-        from el.segmentation import Segmenter
+        from el.segmentation.factory import load_model
 
-        _WORKER_STATE["segmenter"] = Segmenter.load(weights, threads=threads)
+        _WORKER_STATE["segmenter"] = load_model(weights, threads=threads)
         _WORKER_STATE["key"] = key
     return _WORKER_STATE["segmenter"]
 

@@ -36,6 +36,7 @@ def run(args: argparse.Namespace) -> int:
     if args.scheduler and args.backend != "dask":
         raise CommandError("--scheduler needs --backend dask")
     monitors = tuple(args.monitors) if args.monitors else None
+    cards = []
     if args.calibration:
         from el.monitors import build_monitor
         from el.monitors.calibration import check_card_monitor, load_calibration
@@ -52,8 +53,28 @@ def run(args: argparse.Namespace) -> int:
         monitors=monitors,
         images=args.images, weights=args.weights, seed=args.seed,
     )
+    check_network(config.monitors, cards, config.weights)
     summary = run_campaign(args.data, args.out, config, jobs=args.jobs, backend=args.backend,
                            scheduler=args.scheduler, progress=not args.quiet)
     print(describe(summary))
     print(f"readouts in {args.out}; results table: uav-el table {args.out}")
     return 1 if summary["missing"] else 0
+
+
+def check_network(monitors: tuple[str, ...], cards: list, weights: str | None) -> None:
+    """Refuse, before any task, fitted monitors and calibration cards on another network than the campaign's
+    (each task would otherwise be a fault): ``CalibrationError`` / ``LearnedModelError``, exit 2."""
+    from el.monitors import build_monitor
+    from el.segmentation.factory import load_model
+
+    fitted = [m for m in (build_monitor(s) for s in monitors) if m is not None and m.model_sha256]
+    if not fitted and not cards:
+        return
+    try:
+        segmenter = load_model(weights)
+    except ValueError as exc:
+        raise CommandError(str(exc)) from None
+    for monitor in fitted:
+        monitor.check_network(segmenter)
+    for card in cards:
+        card.check_network(segmenter)

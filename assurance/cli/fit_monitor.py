@@ -8,7 +8,6 @@ from pathlib import Path
 
 from assurance.errors import CommandError
 from assurance.files import atomic_write_bytes
-from assurance.paths import shown_path
 
 HELP = ("train the learned candidate monitor (logistic regression on candidate features) on a split, select it "
         "on --val, and write its JSON model (no pickle, SHA-256 checked at load)")
@@ -29,9 +28,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from assurance.fitting.learned_monitor import fit_learned_monitor
+    from assurance.fitting.network_identity import network_record
     from el.config import CoreConfig
-    from el.segmentation import Segmenter
-    from el.segmentation.weights import DEFAULT_WEIGHTS, sha256_file
+    from el.segmentation.factory import load_model
 
     for d in (args.data, args.val):
         if d is not None and not Path(d).is_dir():
@@ -41,11 +40,10 @@ def run(args: argparse.Namespace) -> int:
     if args.mcd < 0:
         raise CommandError(f"--mcd must be >= 0, got {args.mcd}")
     try:
-        segmenter = Segmenter.load(args.weights)
+        segmenter = load_model(args.weights)
         core = CoreConfig(working_width=args.working_width) if args.working_width else CoreConfig()
-        w = Path(args.weights) if args.weights else DEFAULT_WEIGHTS
         doc = fit_learned_monitor(args.data, segmenter, val=args.val, core=core, mcd_n=args.mcd, recall=args.recall,
-                                  images=args.images, weights={"path": shown_path(w), "sha256": sha256_file(w)})
+                                  images=args.images, weights=network_record(segmenter, args.weights))
     except ValueError as exc:
         raise CommandError(str(exc)) from None
     write_json(args.out, doc)

@@ -7,7 +7,6 @@ from pathlib import Path
 
 from assurance.cli.fit_monitor import write_json
 from assurance.errors import CommandError
-from assurance.paths import shown_path
 
 HELP = ("fit the out-of-domain frame gate (Mahalanobis distance of pooled encoder features, Ledoit-Wolf) on a "
         "split, threshold at a quantile of --val distances; --report DIR adds the distances under each perturbation")
@@ -26,19 +25,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from assurance.fitting.network_identity import network_record
     from assurance.fitting.ood_gate import fit_ood, ood_shift_report
     from el.monitors.ood import load_ood
-    from el.segmentation import Segmenter
-    from el.segmentation.weights import DEFAULT_WEIGHTS, sha256_file
+    from el.segmentation.factory import load_model
 
     for d in (args.data, args.val):
         if not Path(d).is_dir():
             raise CommandError(f"{d}: no such folder")
     try:
-        segmenter = Segmenter.load(args.weights)
-        w = Path(args.weights) if args.weights else DEFAULT_WEIGHTS
+        segmenter = load_model(args.weights)
         doc = fit_ood(args.data, args.val, segmenter, quantile=args.quantile, images=args.images,
-                      weights={"path": shown_path(w), "sha256": sha256_file(w)})
+                      weights=network_record(segmenter, args.weights))
     except ValueError as exc:
         raise CommandError(str(exc)) from None
     write_json(args.out, doc)

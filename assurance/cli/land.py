@@ -122,7 +122,6 @@ def run(args: argparse.Namespace) -> int:
 def run_model(args: argparse.Namespace) -> int:
     """The model pipeline: segmentation -> candidates -> monitored walk (el.pipeline)."""
     from el.pipeline import EmergencyLanding, PipelineConfig
-    from el.segmentation import Segmenter
 
     if args.image is not None:
         raise CommandError("--image is for the ground-truth pipeline; give the image as IMAGE")
@@ -137,23 +136,26 @@ def run_model(args: argparse.Namespace) -> int:
         calibrated_spec(monitor, str(args.calibration))
     from el.monitors import build_monitor
     from el.pipeline import check_monitor_card
+    from el.segmentation.factory import load_model
 
+    try:
+        segmenter = load_model(args.weights, threads=args.threads)
+    except ValueError as exc:  # WeightsError: a clear one-line error at the command line
+        raise CommandError(str(exc)) from None
     built = build_monitor(monitor)  # a monitor that cannot be built (e.g. a missing model file): one line, exit 2
-    check_monitor_card(built, monitor, args.calibration)  # a card on another model than it runs: one line, exit 2
+    if built is not None:
+        built.check_network(segmenter)  # a monitor fitted on another network: one line, exit 2
+    # a card on another monitor model or another network than it runs: one line, exit 2
+    check_monitor_card(built, monitor, args.calibration, segmenter)
     if args.ood is not None:
         from el.monitors.ood import load_ood
 
-        load_ood(args.ood)  # a bad gate is a usage error here (in flight it is the default action)
+        # a bad gate, or one fitted on another network, is a usage error here (in flight: the default action)
+        load_ood(args.ood).check_network(segmenter)
     config = PipelineConfig(core=config_from_args(args), monitor=monitor, time_budget_s=args.budget,
                             seed=args.seed, evaluate_all=args.evaluate_all,
                             calibration=str(args.calibration) if args.calibration else None,
                             ood=str(args.ood) if args.ood else None)
-    segmenter = None
-    if args.threads is not None or args.weights is not None:
-        try:
-            segmenter = Segmenter.load(args.weights, threads=args.threads)
-        except ValueError as exc:  # WeightsError: a clear one-line error at the command line
-            raise CommandError(str(exc)) from None
     decision = EmergencyLanding(config, segmenter=segmenter).decide(image_path)
     _write_outputs(args, decision, image=read_image(image_path) if args.overlay else None, labels=None)
     print(summary(decision))

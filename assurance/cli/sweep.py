@@ -17,7 +17,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--monitors", nargs="+", metavar="NAME",
                    help="configurations to sweep, as named in the run (default: every one with scores)")
     p.add_argument("--walks", nargs="+", choices=("hazard", "score"),
-                   help="walk orders to replay (el.monitors.walk; default: each configuration's own)")
+                   help="walk orders to replay (el.walk; default: each configuration's own)")
     p.add_argument("--out", type=Path, help="folder for sweep.csv, sweep.md and sweep.png (default: the run folder)")
     p.add_argument("--ood", metavar="GATE.json", help="also replay the out-of-domain gate (uav-el fit-ood): the "
                                                        "run's frames are re-perturbed with its seeds and scored; "
@@ -64,14 +64,14 @@ def ood_section(run_dir: Path, data: Path, gate: str, images, candidates, best, 
     from assurance.analysis.ood_replay import frame_distances, gate_effect
     from assurance.analysis.sweep import monitor_rows, replay
     from assurance.files import atomic_write_bytes
-    from el.segmentation.inference import Segmenter
+    from el.segmentation.factory import load_model
 
     cache = out / "ood_distances.csv"
     if cache.is_file():
         dist = pd.read_csv(cache, dtype={"key": str})
     else:
         try:
-            dist = frame_distances(run_dir, data, gate, Segmenter.load())
+            dist = frame_distances(run_dir, data, gate, load_model())
         except ValueError as exc:
             raise CommandError(str(exc)) from None
         atomic_write_bytes(cache, dist.to_csv(index=False).encode())

@@ -129,8 +129,9 @@ def calibrate_on_data(data: str | Path, monitor: str, *, miss_rate: float, confi
     ``none``), so a calibrated threshold means on test readouts what it meant here.
     """
     from assurance.campaign.run import CampaignConfig, Task, plan, run_task
+    from assurance.fitting.network_identity import network_record
     from el.config import CoreConfig
-    from el.segmentation.weights import DEFAULT_WEIGHTS, sha256_file
+    from el.hashing import sha256_file
 
     _check_rates(miss_rate, confidence)
     base = parse_monitor_spec(monitor)
@@ -144,10 +145,11 @@ def calibrate_on_data(data: str | Path, monitor: str, *, miss_rate: float, confi
     tasks = plan(data, config)
     if not tasks:
         raise CalibrationError(f"{data}: no labelled scenes to calibrate on")
-    if segmenter is None:
-        from el.segmentation import Segmenter
+    loaded = segmenter is None
+    if loaded:
+        from el.segmentation.factory import load_model
 
-        segmenter = Segmenter.load(weights)
+        segmenter = load_model(weights)
     scores, unsafe, faults = [], [], []
     for task in tasks:
         rows = run_task(Task(task.perturbation, task.severity, task.sample), config, segmenter)
@@ -160,13 +162,11 @@ def calibrate_on_data(data: str | Path, monitor: str, *, miss_rate: float, confi
     for t in tasks:
         for f in (t.sample.image_path, t.sample.label_path):
             h.update(f"{Path(f).relative_to(data)}:{sha256_file(f)}\n".encode())
-    w = Path(weights) if weights else DEFAULT_WEIGHTS
     body = calibration_body(
         scores, unsafe, monitor=base.base.name, miss_rate=miss_rate, confidence=confidence,
         split={"path": shown_path(data), "images": len(tasks), "sha256": h.hexdigest(),
                "perturbation": "none"},
-        weights={"path": shown_path(w), "sha256": sha256_file(w) if w.is_file() else None,
-                 "segmenter": "weights" if weights or w.is_file() else type(segmenter).__name__},
+        weights=network_record(segmenter, weights, loaded=loaded),
         monitor_model=monitor_model,
     )
     return card_document(body)

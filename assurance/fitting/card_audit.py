@@ -36,7 +36,7 @@ def describe_audit(a: dict[str, Any]) -> str:
 def audit(path: Path, data: Path | None, threads: int | None, quiet: bool) -> dict[str, Any]:
     """The candidate audit of a weights file on its validation data (or ``data``)."""
     from assurance.fitting.candidate_audit import candidate_audit
-    from el.segmentation import Segmenter
+    from el.segmentation.factory import load_model
     from el.segmentation.weights import read_card
 
     card = read_card(path)
@@ -46,7 +46,7 @@ def audit(path: Path, data: Path | None, threads: int | None, quiet: bool) -> di
     folder = data or Path((evaluated_on or selected_on or {}).get("path", ""))
     if not str(folder) or not folder.is_dir():
         raise ValueError(f"{path}: no validation folder to audit (give --data)")
-    return candidate_audit(Segmenter.load(path, threads=threads), folder,
+    return candidate_audit(load_model(path, threads=threads), folder,
                            progress=functools.partial(progress, enabled=not quiet))
 
 

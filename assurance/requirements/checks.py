@@ -18,7 +18,7 @@ import numpy as np
 
 from assurance.requirements.records import FAIL, INSUFFICIENT, PASS, Evidence
 from el.monitors.spec import walk_of
-from el.monitors.walk import walk_order
+from el.walk import walk_order
 
 
 def _ok_images(images: Any) -> Any:
@@ -38,7 +38,7 @@ def _num(v: Any) -> float | None:
 
 def check_monitor_coverage(images: Any, candidates: Any) -> Evidence:
     """EL-R04 on campaign readouts: every 'land' decision is on an accepted candidate, every candidate
-    walked before it (in the configuration's walk order, ``el.monitors.walk``) was rejected, and the two
+    walked before it (in the configuration's walk order, ``el.walk``) was rejected, and the two
     readout tables agree on the decision.
 
     ``images`` / ``candidates``: the run's tables (``assurance.campaign.readouts.load_table``).

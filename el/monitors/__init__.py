@@ -18,7 +18,7 @@ the registry (``el.monitors.registry``: built-ins and the ``uav_el.monitors`` en
 """
 
 from el.forbidden import forbidden_pixels
-from el.monitors.base import CandidateContext, Judgement, Monitor, PatchSegmenter
+from el.monitors.base import CandidateContext, Judgement, Monitor, PatchMonitor, PatchSegmenter
 from el.monitors.build import build_monitor
 from el.monitors.ch import CHMonitor, ch_rule, rejected_label_counts
 from el.monitors.hierarchy import ClassHierarchy, default_hierarchy
@@ -48,6 +48,7 @@ __all__ = [
     "LHDMonitor",
     "MCDMonitor",
     "Monitor",
+    "PatchMonitor",
     "MonitorSpec",
     "Patch",
     "PatchSegmenter",

@@ -1,11 +1,10 @@
-"""The runtime-monitor interface: a segmenter protocol, one small base class, input validation.
+"""The runtime-monitor interface: a segmenter protocol, two small base classes, input validation.
 
-Two levels, as pytorch-ood's detectors (STYLE.md):
-
-- ``Monitor.check(hd_image, candidate, segmenter, seed=...)`` does everything for one candidate
-  (crop the HD patch, segment it, apply the rule) and times it: what the decision loop calls.
-- ``Monitor.check_scores(scores, disc_mask)`` applies the rule to scores already computed
-  (``Monitor.features(...)``): a campaign segments a patch once and feeds every configuration.
+- :class:`Monitor` is what flight needs, and all it sees: ``check(hd_image, candidate, segmenter, seed=...)``
+  judges one candidate and times it, with a name, a threshold and the fitted model it rests on.
+- :class:`PatchMonitor` is how the built-in monitors are written: crop the HD patch, compute its
+  features, reduce them, judge. A campaign (``assurance.campaign.judging``) uses these steps to segment a
+  patch once and feed every configuration; a monitor that is only a :class:`Monitor` is judged alone.
 
 Every monitor returns a real-valued score per candidate (higher = more likely unsafe) and rejects
 the candidate iff its score is above its threshold (``Monitor.accepts``).
@@ -128,17 +127,68 @@ def validate_threshold(threshold: object) -> float:
 
 
 class Monitor(ABC):
-    """A runtime monitor: scores one candidate's safe disc on the segmented HD patch.
+    """A runtime monitor as the decision loop sees it: it judges one candidate on the HD frame.
 
-    The one interface the decision loop and the campaign talk to, in three steps:
+    A verdict carries a real-valued score (higher = more likely unsafe), and the candidate is rejected
+    **iff score > threshold** (:meth:`accepts`). A score may be ``+inf`` (always rejected), never NaN.
 
-    1. **features** of a patch (:meth:`patch_features`), with a shareable :attr:`feature_key`:
-       monitors with equal keys can use one computation (of :attr:`feature_size` samples, the
-       largest any of them needs; :meth:`feature_seconds` says what a smaller one would have cost);
-    2. a **score** from the features: :meth:`reduce` (shared by monitors with equal
+    Parameters
+    ----------
+    threshold : float or None
+        None: the monitor's :attr:`DEFAULT_THRESHOLD` (for the paper's rules, the one that gives the
+        paper's verdicts); a calibration card sets another.
+    """
+
+    DEFAULT_THRESHOLD: ClassVar[float] = 0.0
+
+    #: SHA-256 of the fitted file this monitor's scores rest on (a learned model); None for a rule. A
+    #: monitor with a model sets or overrides it: calibration cards and campaign manifests record it,
+    #: since a threshold calibrated on one model means nothing on another.
+    model_sha256: str | None = None
+
+    def __init__(self, *, threshold: float | None = None) -> None:
+        self.threshold = validate_threshold(self.DEFAULT_THRESHOLD if threshold is None else threshold)
+
+    @property
+    @abstractmethod
+    def spec(self) -> MonitorSpec | GenericSpec:
+        """The configuration this monitor implements."""
+
+    @property
+    def name(self) -> str:
+        """Canonical configuration name, e.g. ``lhd+ch:tau=0.25``."""
+        return self.spec.name
+
+    def accepts(self, score: float) -> bool:
+        """The verdict at this monitor's threshold: accepted iff ``score <= threshold``."""
+        if math.isnan(score):
+            raise ValueError(f"{self.name}: non-finite score (NaN)")
+        return not score > self.threshold
+
+    def check_network(self, segmenter: Any) -> None:
+        """Refuse a segmentation network this monitor was not fitted on (a rule fits every network)."""
+        return None
+
+    @abstractmethod
+    def check(
+        self, hd_image: np.ndarray, candidate: Candidate | Disc, segmenter: PatchSegmenter, *, seed: int = 0,
+        context: CandidateContext | None = None,
+    ) -> MonitorVerdict:
+        """Judge one candidate (or Disc) on the HD image; ``seconds`` is the time it took.
+
+        ``seed`` drives any randomness (MC dropout); ``context`` is for monitors that read the frame's
+        segmentation. Raises on bad input or a segmenter that returns the wrong shape or non-finite scores.
+        """
+
+
+class PatchMonitor(Monitor):
+    """A monitor that judges the segmented HD patch around a candidate, in steps a campaign can share:
+
+    1. **features** of a patch (:meth:`patch_features`), described by :attr:`feature_key`: monitors with
+       equal keys compute the same features (of :attr:`feature_size` samples);
+    2. a **score** from the features: :meth:`reduce` (the same for monitors with equal
        :attr:`reduce_key`), then :meth:`judge`, real-valued, higher = more likely unsafe;
-    3. a **threshold**: the candidate is rejected **iff score > threshold** (:meth:`accepts`). A
-       score may be ``+inf`` (always rejected), never NaN.
+    3. the threshold of :class:`Monitor`.
 
     Parameters
     ----------
@@ -149,36 +199,23 @@ class Monitor(ABC):
     clock : callable returning seconds, default ``time.perf_counter``
         Injectable for tests of time budgets.
     threshold : float or None
-        None: the monitor's :attr:`DEFAULT_THRESHOLD` (for the paper's rules, the one that gives
-        the paper's verdicts); a calibration card sets another.
+        See :class:`Monitor`.
 
     Subclasses implement ``spec``, ``feature_key``, ``features`` and ``judge`` (pure and untimed);
     a registered monitor also takes ``threshold`` and the patch keywords in its constructor.
     """
 
-    DEFAULT_THRESHOLD: ClassVar[float] = 0.0
-
     def __init__(
         self, *, margin: float = 0.25, max_side: int | None = None, clock: Clock = time.perf_counter,
         threshold: float | None = None,
     ) -> None:
+        super().__init__(threshold=threshold)
         self.margin = margin
         self.max_side = max_side
         self.clock = clock
-        self.threshold = validate_threshold(self.DEFAULT_THRESHOLD if threshold is None else threshold)
         validate_patch_params(margin, max_side)  # now, not at the first candidate
 
-    #: SHA-256 of the fitted file this monitor's scores rest on (a learned model); None for a rule. A
-    #: monitor with a model sets or overrides it: calibration cards and campaign manifests record it,
-    #: since a threshold calibrated on one model means nothing on another.
-    model_sha256: str | None = None
-
     # -- what a subclass defines -------------------------------------------------------------
-    @property
-    @abstractmethod
-    def spec(self) -> MonitorSpec | GenericSpec:
-        """The configuration this monitor implements."""
-
     @property
     @abstractmethod
     def feature_key(self) -> Hashable:
@@ -211,10 +248,6 @@ class Monitor(ABC):
         """
         return self.features(patch.rgb, segmenter, seed=seed), patch.disc_mask
 
-    def feature_seconds(self, seconds: float, size: int) -> float:
-        """What this monitor's features would have cost alone, from ``seconds`` for ``size`` samples."""
-        return seconds
-
     @property
     def reduce_key(self) -> Hashable:
         """Monitors with equal keys compute the same :meth:`reduce` (default: shared with none)."""
@@ -225,17 +258,6 @@ class Monitor(ABC):
         return features, disc_mask
 
     # -- shared behaviour --------------------------------------------------------------------
-    @property
-    def name(self) -> str:
-        """Canonical configuration name, e.g. ``lhd+ch:tau=0.25``."""
-        return self.spec.name
-
-    def accepts(self, score: float) -> bool:
-        """The verdict at this monitor's threshold: accepted iff ``score <= threshold``."""
-        if math.isnan(score):
-            raise ValueError(f"{self.name}: non-finite score (NaN)")
-        return not score > self.threshold
-
     def threshold_note(self, score: float, accepted: bool) -> str:
         """Reason suffix when the threshold, not the rule's default, decided."""
         return f"score {score:.6g} {'<=' if accepted else '>'} threshold {self.threshold:.6g}"

@@ -13,27 +13,22 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 from el.errors import CalibrationError
-from el.monitors.signed import read_signed, signed_document
 from el.monitors.spec import parse_monitor_spec
+from el.records import HashedRecord, short
 
 CARD_FORMAT = "uav-el-calibration/1"
 
 
-def card_document(body: dict[str, Any]) -> dict[str, Any]:
-    """The JSON document of a card with this body (format and hash added)."""
-    return signed_document(CARD_FORMAT, body)
-
-
 @dataclass(frozen=True)
-class CalibrationCard:
+class CalibrationCard(HashedRecord):
     """A checked calibration card (``load_calibration``)."""
 
-    path: str
-    sha256: str
-    body: dict[str, Any]
+    FORMAT: ClassVar[str] = CARD_FORMAT
+    WHAT: ClassVar[str] = "calibration card"
+    ERROR: ClassVar[type[ValueError]] = CalibrationError
 
     @property
     def spec(self) -> str:
@@ -59,7 +54,7 @@ def load_calibration(path: str | Path) -> CalibrationCard:
         One line naming the file and the problem.
     """
     p = Path(path)
-    body, digest = read_signed(p, CARD_FORMAT, "calibration card", CalibrationError)
+    body, digest = CalibrationCard.read_body(p)
     try:
         spec = parse_monitor_spec(body["spec"])
         base = parse_monitor_spec(body["monitor"])
@@ -93,9 +88,10 @@ def check_card_monitor(card: CalibrationCard, monitor: Any) -> None:
     want = (card.body.get("monitor_model") or {}).get("sha256")
     have = getattr(monitor, "model_sha256", None)
     if want != have:
-        raise CalibrationError(f"{card.path}: calibrated on monitor model {_short(want)}, but the monitor runs "
-                               f"{_short(have)}: recalibrate (uav-el calibrate) for this model")
+        raise CalibrationError(f"{card.path}: calibrated on monitor model {short(want)}, but the monitor runs "
+                               f"{short(have)}: recalibrate (uav-el calibrate) for this model")
 
 
-def _short(digest: str | None) -> str:
-    return f"{digest[:12]}..." if digest else "none"
+def card_document(body: dict[str, Any]) -> dict[str, Any]:
+    """The JSON document of a card with this body (format and hash added)."""
+    return CalibrationCard.document(body)

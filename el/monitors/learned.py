@@ -46,8 +46,8 @@ from el.labels import CLASS_NAMES, FORBIDDEN_IDS
 from el.monitors.base import CandidateContext, Judgement, PatchSegmenter, validate_scores
 from el.monitors.lhd import LHDMonitor, take_disc
 from el.monitors.patches import Patch
-from el.monitors.signed import read_signed, signed_document
 from el.monitors.spec import GenericSpec
+from el.records import HashedRecord
 
 MODEL_FORMAT = "uav-el-learned-monitor/1"
 DEFAULT_MODEL = Path(__file__).resolve().parent / "data" / "learned.json"
@@ -184,12 +184,13 @@ def candidate_features(patch_probs: np.ndarray, patch: Patch, context: Candidate
 
 # -- the model file --------------------------------------------------------------------------------
 @dataclass(frozen=True)
-class LearnedModel:
+class LearnedModel(HashedRecord):
     """A checked learned-monitor model (:func:`load_learned_model`): standardised logistic regression."""
 
-    path: str
-    sha256: str
-    body: dict[str, Any]
+    FORMAT: ClassVar[str] = MODEL_FORMAT
+    WHAT: ClassVar[str] = "learned monitor model"
+    ERROR: ClassVar[type[ValueError]] = LearnedModelError
+
     mean: np.ndarray
     scale: np.ndarray
     coef: np.ndarray
@@ -243,7 +244,7 @@ def feature_columns(names: tuple[str, ...], mcd_n: int) -> np.ndarray:
 
 def model_document(body: dict[str, Any]) -> dict[str, Any]:
     """The JSON document of a model with this body (format and hash added)."""
-    return signed_document(MODEL_FORMAT, body)
+    return LearnedModel.document(body)
 
 
 def _vector(body: dict[str, Any], key: str, d: int) -> np.ndarray:
@@ -263,7 +264,7 @@ def load_learned_model(path: str | Path | None = None) -> LearnedModel:
     """
     p = Path(path) if path else DEFAULT_MODEL
     hint = " (train one with: uav-el fit-monitor --data data/train --val data/val --out FILE)"
-    body, digest = read_signed(p, MODEL_FORMAT, "learned monitor model", LearnedModelError, hint=hint)
+    body, digest = LearnedModel.read_body(p, hint=hint)
     try:
         names = tuple(body["features"])
         mcd_n = int(body.get("mcd", {}).get("n", 0))
@@ -287,7 +288,7 @@ class LearnedMonitor(LHDMonitor):
 
     Needs the candidate's :class:`CandidateContext` (the decision loop and the campaign give it). The
     default threshold is the model file's; the segmenter must be the one the model was trained on
-    when both say which weights they are (``weights_sha256``).
+    (:meth:`check_network`: its ``weights_sha256`` is the one the model file records).
     """
 
     PARAMS: ClassVar[dict[str, Any]] = {"model": str}
@@ -314,19 +315,17 @@ class LearnedMonitor(LHDMonitor):
                        trunk: Any = None, context: CandidateContext | None = None) -> tuple[Any, np.ndarray]:
         if context is None:
             raise ValueError("the learned monitor needs the candidate's context (frame softmax)")
-        self._check_weights(segmenter)
+        self.check_network(segmenter)
         probs, mask = super().patch_features(patch, segmenter, seed=seed, trunk=trunk)
         samples = None
         if self.model.mcd_n > 0:
             samples = segmenter.mc_dropout(patch.rgb, self.model.mcd_n, self.model.mcd_rho, seed)
         return candidate_features(probs, patch, context, margin=self.margin, mcd_samples=samples), mask
 
-    def _check_weights(self, segmenter: Any) -> None:
-        want = self.model.body.get("weights", {}).get("sha256")
-        have = getattr(segmenter, "weights_sha256", None)
-        if want and isinstance(have, str) and have != want:
-            raise ValueError(f"learned monitor {self.model.path} was trained on weights {want[:12]}..., "
-                             f"the segmenter runs {have[:12]}...")
+    def check_network(self, segmenter: Any) -> None:
+        """Refuse a network the model was not fitted on: the segmenter must report the weights hash the model
+        file records (``weights.sha256``); a model fitted on an unidentified network needs an unidentified one."""
+        self.model.check_network(segmenter)
 
     @property
     def reduce_key(self) -> Hashable:

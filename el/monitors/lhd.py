@@ -13,7 +13,7 @@ from el.labels import CLASS_NAMES, FORBIDDEN_IDS
 from el.monitors.base import (
     CandidateContext,
     Judgement,
-    Monitor,
+    PatchMonitor,
     PatchSegmenter,
     format_counts,
     validate_mask,
@@ -91,7 +91,7 @@ def fraction_score(rejected: np.ndarray, slack: np.ndarray) -> float:
     return float(slack.max())
 
 
-class LHDMonitor(Monitor):
+class LHDMonitor(PatchMonitor):
     """LHD: segment the HD patch; reject if any disc pixel's top class is forbidden.
 
     Score: :func:`fraction_score` (fraction of forbidden pixels, or the best safe margin when

@@ -14,7 +14,14 @@ from typing import Any
 
 import numpy as np
 
-from el.monitors.base import CandidateContext, Judgement, Monitor, PatchSegmenter, validate_mask, validate_samples
+from el.monitors.base import (
+    CandidateContext,
+    Judgement,
+    PatchMonitor,
+    PatchSegmenter,
+    validate_mask,
+    validate_samples,
+)
 from el.monitors.lhd import LHDMonitor, take_disc
 from el.monitors.mc_chunks import Between, mc_samples
 from el.monitors.patches import Patch, accepts_keyword, disc_box
@@ -55,7 +62,7 @@ def mcd_score(samples: np.ndarray, k: float = MCD_SIGMAS) -> np.ndarray:
     return mu + k * np.sqrt(var)
 
 
-class MCDMonitor(Monitor):
+class MCDMonitor(PatchMonitor):
     """Wraps an LHD or LHD+CH monitor and feeds it the MCD score instead of the softmax.
 
     Parameters
@@ -118,10 +125,6 @@ class MCDMonitor(Monitor):
         if window is None:
             return segmenter.mc_dropout(patch.rgb, n, self.rho, seed, **shared), box_mask
         return segmenter.mc_dropout(patch.rgb, n, self.rho, seed, window=window, **shared), box_mask
-
-    def feature_seconds(self, seconds: float, size: int) -> float:
-        """The head runs once per sample: ``n`` of ``size`` samples cost their share of the batch."""
-        return seconds if size <= self.n else seconds * self.n / size
 
     @property
     def reduce_key(self) -> Hashable:

@@ -23,14 +23,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import cv2
 import numpy as np
 
 from el.errors import OODError
 from el.labels import NUM_CLASSES
-from el.monitors.signed import read_signed, signed_document
+from el.records import HashedRecord
 
 OOD_FORMAT = "uav-el-ood/1"
 TRUNK, SOFTMAX = "trunk", "softmax"
@@ -95,12 +95,14 @@ def frame_embedding(segmenter: Any, rgb: np.ndarray, probs: np.ndarray | None = 
 
 
 @dataclass(frozen=True)
-class OODGate:
+class OODGate(HashedRecord):
     """A checked gate (:func:`load_ood`): mean, precision, threshold and the embedding kind."""
 
-    path: str
-    sha256: str
-    body: dict[str, Any]
+    FORMAT: ClassVar[str] = OOD_FORMAT
+    WHAT: ClassVar[str] = "out-of-domain gate"
+    ARTICLE: ClassVar[str] = "an"
+    ERROR: ClassVar[type[ValueError]] = OODError
+
     mean: np.ndarray
     precision: np.ndarray
 
@@ -128,7 +130,7 @@ class OODGate:
 
 def ood_document(body: dict[str, Any]) -> dict[str, Any]:
     """The JSON document of a gate with this body (format and hash added)."""
-    return signed_document(OOD_FORMAT, body)
+    return OODGate.document(body)
 
 
 def load_ood(path: str | Path) -> OODGate:
@@ -140,7 +142,7 @@ def load_ood(path: str | Path) -> OODGate:
         One line naming the file and the problem.
     """
     p = Path(path)
-    body, digest = read_signed(p, OOD_FORMAT, "out-of-domain gate", OODError, a="an")
+    body, digest = OODGate.read_body(p)
     try:
         mean = np.asarray(body["mean"], np.float64)
         precision = np.asarray(body["precision"], np.float64)

@@ -1,0 +1,74 @@
+"""What the flight code needs from a segmentation model: the one typed seam a user's network plugs into.
+
+A model maps a full-resolution RGB frame to class probabilities over its system's label set at the
+working resolution, and a full-resolution patch to probabilities at the patch's own resolution. It may
+offer capabilities that some monitors need (MC dropout for MCD, a trunk shared between calls for
+faster campaigns, trunk features for the out-of-domain gate); a monitor that needs a missing one fails
+loudly, which the decision loop turns into the default action. :class:`el.segmentation.Segmenter`
+(any ``torch.nn.Module``) is the built-in implementation; :func:`el.segmentation.factory.load_model`
+builds one from a spec.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from el.labels import UAVID, LabelSet
+
+MC_DROPOUT = "mc_dropout"
+"""Capability ``mc_dropout(rgb_patch, n, keep_prob, seed, *, features=None, window=None) -> (n, C, h, w)``:
+seeded, prefix-consistent samples with dropout active (see ``el.monitors.base.PatchSegmenter``)."""
+PATCH_TRUNK = "patch_trunk"
+"""Capability ``patch_trunk(rgb_patch)``: the deterministic part of the network on a patch, computed once
+and passed as ``features=`` to ``predict_patch`` and ``mc_dropout`` (None when the network has no split)."""
+TRUNK_FEATURES = "trunk"
+"""Capability: the network's trunk (``model.trunk``) and ``working_size(W, H)``, read by the out-of-domain
+gate's trunk embedding."""
+CAPABILITIES = (MC_DROPOUT, PATCH_TRUNK, TRUNK_FEATURES)
+
+
+@runtime_checkable
+class SegmentationModel(Protocol):
+    """The segmentation seam: frame and patch in, class probabilities (C, h, w) out, C = the label set's size.
+
+    ``predict_frame(rgb)``: (H, W, 3) uint8 frame -> (C, h, w) float32 probabilities at the working
+    resolution ``(w, h) = working_size(W, H)``. ``predict_patch(rgb_patch)``: (h, w, 3) uint8 -> (C, h, w)
+    at the patch's resolution, deterministic. Optional attributes, read with :func:`labels_of` and
+    :func:`weights_sha256_of`: ``labels`` (a :class:`el.labels.LabelSet`; UAVid when absent) and
+    ``weights_sha256`` (the identity cards and fitted monitors are bound to; None when absent).
+    """
+
+    def predict_frame(self, rgb: np.ndarray) -> np.ndarray: ...
+
+    def predict_patch(self, rgb_patch: np.ndarray) -> np.ndarray: ...
+
+
+def labels_of(model: Any) -> LabelSet:
+    """The label set a model segments into (UAVid for a model that does not say)."""
+    labels = getattr(model, "labels", None)
+    return UAVID if labels is None else labels
+
+
+def weights_sha256_of(model: Any) -> str | None:
+    """The identity of a model's weights (None when it has none)."""
+    value = getattr(model, "weights_sha256", None)
+    return value if isinstance(value, str) else None
+
+
+def has_capability(model: Any, capability: str) -> bool:
+    """Whether a model offers an optional capability (:data:`CAPABILITIES`)."""
+    if capability not in CAPABILITIES:
+        raise ValueError(f"unknown capability {capability!r}; known: {', '.join(CAPABILITIES)}")
+    if capability == TRUNK_FEATURES:
+        return callable(getattr(getattr(model, "model", None), "trunk", None))
+    return callable(getattr(model, capability, None))
+
+
+def check_model(model: Any, what: str = "segmentation model") -> Any:
+    """``model`` if it implements :class:`SegmentationModel`, else a ValueError naming what is missing."""
+    missing = [m for m in ("predict_frame", "predict_patch") if not callable(getattr(model, m, None))]
+    if missing:
+        raise ValueError(f"{what} {type(model).__name__} lacks {', '.join(missing)} (see el.segmentation.contract)")
+    return model

@@ -1,0 +1,74 @@
+"""One factory for segmentation models: the shipped network, a project weights file, or a plugin.
+
+A model spec is what a user writes in a command or a system file:
+
+- None, ``""`` or ``"shipped"``: the shipped weights (``el/segmentation/weights/model.pt``);
+- a path to a ``.pt`` weights file with its model card beside it (``uav-el train`` writes both);
+- ``NAME`` or ``NAME:ARG``: a factory registered in the ``uav_el.models`` entry-point group (a package's
+  ``pyproject.toml``: ``[project.entry-points."uav_el.models"] mynet = "mypkg.models:build"``), called as
+  ``factory(ARG or None, threads=..., device=...)``; it returns any object implementing
+  :class:`el.segmentation.contract.SegmentationModel` (an ONNX runtime session wrapper, a remote
+  accelerator, a torch module wrapped in :class:`~el.segmentation.inference.Segmenter`).
+
+Weights files are SHA-256 checked against their card before ``torch.load(weights_only=True)``; every
+problem raises ``WeightsError`` naming the file or the spec.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+from el.errors import WeightsError
+from el.segmentation.contract import check_model
+from el.segmentation.inference import Segmenter
+
+ENTRY_POINT_GROUP = "uav_el.models"
+SHIPPED = "shipped"
+_NAME = re.compile(r"^[A-Za-z_][\w.-]*$")
+
+
+def model_factories() -> dict[str, Any]:
+    """The registered model factories: entry-point name -> entry point (loaded when used)."""
+    return {ep.name: ep for ep in metadata.entry_points(group=ENTRY_POINT_GROUP)}
+
+
+def is_weights_file(spec: str | Path) -> bool:
+    """Whether a spec names a weights file rather than a registered factory."""
+    text = str(spec)
+    return text.endswith(".pt") or "/" in text or "\\" in text or Path(text).is_file()
+
+
+def load_model(spec: str | Path | None = None, *, threads: int | None = None, device: str = "cpu") -> Any:
+    """The segmentation model a spec names (see the module docstring); ``WeightsError`` naming the problem."""
+    if spec is None or str(spec) in ("", SHIPPED):
+        return _segmenter(None, threads, device)
+    if is_weights_file(spec):
+        return _segmenter(spec, threads, device)
+    name, _, arg = str(spec).partition(":")
+    if not _NAME.match(name):
+        raise WeightsError(f"model spec {str(spec)!r}: neither a .pt weights file nor a registered model name")
+    factories = model_factories()
+    if name not in factories:
+        known = ", ".join(sorted(factories)) or "none installed"
+        raise WeightsError(f"model {name!r} is not registered in the {ENTRY_POINT_GROUP!r} entry points "
+                           f"(registered: {known}); give a .pt weights file or install the plugin")
+    try:
+        factory: Callable[..., Any] = factories[name].load()
+        model = factory(arg or None, threads=threads, device=device)
+    except WeightsError:
+        raise
+    except Exception as exc:
+        raise WeightsError(f"model {name!r} ({factories[name].value}) failed to build: "
+                           f"{type(exc).__name__}: {exc}") from exc
+    try:
+        return check_model(model, f"model {name!r}")
+    except ValueError as exc:
+        raise WeightsError(str(exc)) from None
+
+
+def _segmenter(path: str | Path | None, threads: int | None, device: str) -> Segmenter:
+    return Segmenter.load(path, threads=threads, device=device)

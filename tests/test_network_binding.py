@@ -1,0 +1,92 @@
+"""A fitted record is bound to the network it was fitted on: the learned monitor, the calibration card and the
+out-of-domain gate refuse a segmenter with another weights hash (flight: default action with the reason;
+command line: one line, exit 2)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from helpers import OracleSegmenter, scene_ids, scene_image
+
+from assurance.cli import main
+from el.config import CoreConfig
+from el.errors import CalibrationError, LearnedModelError, OODError
+from el.monitors import build_monitor
+from el.monitors.calibration import card_document, load_calibration
+from el.monitors.learned import DEFAULT_MODEL, load_learned_model
+from el.monitors.ood import load_ood
+from el.pipeline import DEPLOYED_CALIBRATION, DEPLOYED_MONITOR, EmergencyLanding, PipelineConfig
+from el.segmentation.weights import DEFAULT_WEIGHTS, read_card
+
+WW = 128
+SHIPPED = read_card(DEFAULT_WEIGHTS)["weights_sha256"]
+OTHER = "ab" * 32
+SHIPPED_OOD = DEFAULT_MODEL.with_name("ood.json")
+
+
+class Network(OracleSegmenter):
+    """A perfect segmenter that reports a weights hash, as a user's network loaded from a file would."""
+
+    def __init__(self, weights_sha256: str | None) -> None:
+        super().__init__(WW)
+        self.weights_sha256 = weights_sha256
+
+
+def _decide(segmenter, **config):
+    return EmergencyLanding(PipelineConfig(core=CoreConfig(working_width=WW), **config),
+                            segmenter=segmenter).decide(scene_image(scene_ids()))
+
+
+def test_shipped_records_are_bound_to_the_shipped_network():
+    for record in (load_learned_model(), load_calibration(DEPLOYED_CALIBRATION), load_ood(SHIPPED_OOD)):
+        assert record.network_sha256 == SHIPPED
+        record.check_network(Network(SHIPPED))  # the network they were fitted on passes
+    errors = (LearnedModelError, CalibrationError, OODError)
+    for record, error in zip((load_learned_model(), load_calibration(DEPLOYED_CALIBRATION), load_ood(SHIPPED_OOD)),
+                             errors, strict=True):
+        for other in (OTHER, None):  # another network, or one that cannot say which it is
+            with pytest.raises(error, match="fitted on network 0d3dab88c2b0"):
+                record.check_network(Network(other))
+
+
+@pytest.mark.parametrize("other", [OTHER, None])
+def test_the_deployed_learned_monitor_refuses_another_network_in_flight(other):
+    d = _decide(Network(other))  # the default configuration: the deployed learned monitor and its card
+    assert d.action == "default" and d.reason.startswith("fault: monitor: LearnedModelError")
+    assert "fitted on network 0d3dab88c2b0" in d.reason and "refit" in d.reason
+    with pytest.raises(LearnedModelError):
+        build_monitor(DEPLOYED_MONITOR).check_network(Network(other))
+
+
+def test_a_calibration_card_refuses_another_network_in_flight(tmp_path):
+    body = dict(json.loads(DEPLOYED_CALIBRATION.read_text())["body"])
+    body.update(monitor="lhd", spec="lhd:threshold=0.05", threshold=0.05, monitor_model={"sha256": None},
+                weights={"path": None, "sha256": OTHER, "segmenter": "weights"})
+    card = tmp_path / "card.json"
+    card.write_text(json.dumps(card_document(body)))
+    assert _decide(Network(OTHER), monitor="lhd", calibration=str(card)).action == "land"  # its own network
+    d = _decide(Network(SHIPPED), monitor="lhd", calibration=str(card))
+    assert d.action == "default" and d.reason.startswith("fault: monitor: CalibrationError")
+    assert "calibration card fitted on network abababababab" in d.reason
+
+
+def test_an_out_of_domain_gate_refuses_another_network_in_flight():
+    d = _decide(Network(OTHER), monitor="lhd", ood=str(SHIPPED_OOD))
+    assert d.action == "default" and d.reason.startswith("fault: ood: OODError") and "fitted on network" in d.reason
+
+
+def test_the_command_line_refuses_another_network_with_exit_2(tiny_campaign, tmp_path, capsys):
+    image = next((tiny_campaign["data"]).glob("**/Images/*.png"))
+    weights = str(tiny_campaign["weights"])  # a real weights file with its card: another network
+    cases = [
+        ["land", str(image), "--weights", weights],  # the deployed learned monitor
+        ["land", str(image), "--weights", weights, "--monitor", "lhd", "--ood", str(SHIPPED_OOD)],
+        ["campaign", "--data", str(tiny_campaign["data"]), "--out", str(tmp_path / "run"), "--weights", weights,
+         "--monitors", "lhd", "--calibration", str(DEPLOYED_CALIBRATION), "--quiet"],
+    ]
+    for argv in cases:
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "fitted on network 0d3dab88c2b0" in err[0], err
+    assert not (tmp_path / "run").exists()  # refused before any task ran
