@@ -60,14 +60,40 @@ class _Context:
     """Per-image constants (lookup tables, light, grading) and the per-band shading routine."""
 
     def __init__(self, g: CameraGeometry, inp: ShadeInputs, faces: FaceArrays) -> None:
-        grade = inp.world.grade
-        light = LIGHTINGS.get(inp.world.lighting, LIGHTINGS["noon"])
         self.g, self.inp, self.faces = g, inp, faces
         self.W, self.H = g.width, g.height
         self.Hc = g.pose.height_m
         self.st, self.ct = math.sin(g.theta), math.cos(g.theta)
         self.f = g.f_px
         W = self.W
+        self._set_shadow_maps(inp)
+        phi = math.radians(inp.world.grid_angle_deg)
+        cols = np.arange(W, dtype=np.float32) - W / 2 + 0.5
+        self.h = cols
+        self.h_c = _f32(cols * math.cos(phi))
+        self.h_ms = _f32(-cols * math.sin(phi))
+        self.cphi, self.sphi = math.cos(phi), math.sin(phi)
+        self._set_grading(inp, cols)
+        self._set_face_tables(faces, float(inp.world.grade.get("saturation", 1.0)))
+        # textures and screen grain
+        seed = int(inp.world.seed)
+        rs = np.random.default_rng(seed + 99)
+        self.tex_off = rs.uniform(0, TILE, (2, 2))
+        self.grain_rows = (int(rs.integers(0, 64)), int(rs.integers(0, 64)))
+        self.fine_tiles, self.coarse_tiles = octave_tiles()
+        self.grain_field = grain_field(BAND_ROWS + 64, W + 64)
+        _, along, _ = g.pixel_size(np.arange(self.H))
+        self.pix_along = np.nan_to_num(along, nan=10.0, posinf=10.0).astype(np.float32)
+        # camera axes in world coordinates (x right, y down, z forward) and the sun in them
+        x_c = np.array([1.0, 0.0, 0.0])
+        y_c = np.array([0.0, -self.st, -self.ct])
+        z_c = np.array([0.0, self.ct, -self.st])
+        sun = inp.sun
+        self.sun_cam = np.array([sun @ x_c, sun @ y_c, sun @ z_c], np.float32)
+
+    def _set_shadow_maps(self, inp: ShadeInputs) -> None:
+        """Soften the ground shadow masks (foliage more than solids) and spread the contact darkening."""
+        W, g = self.W, self.g
         self.soft = cv2.GaussianBlur(inp.soft, (0, 0), max(0.6, 1.6 * W / 3840))
         self.hard = cv2.GaussianBlur(inp.hard, (0, 0), max(0.5, 1.2 * W / 3840))
         self.contact = None
@@ -75,13 +101,12 @@ class _Context:
             small = cv2.resize(inp.ao, (max(1, W // 4), max(1, g.height // 4)), interpolation=cv2.INTER_AREA)
             small = cv2.GaussianBlur(small, (0, 0), max(0.8, 3.0 * W / 3840))
             self.contact = cv2.resize(small, (W, g.height), interpolation=cv2.INTER_LINEAR)
-        phi = math.radians(inp.world.grid_angle_deg)
-        cols = np.arange(W, dtype=np.float32) - W / 2 + 0.5
-        self.h = cols
-        self.h_c = _f32(cols * math.cos(phi))
-        self.h_ms = _f32(-cols * math.sin(phi))
-        self.cphi, self.sphi = math.cos(phi), math.sin(phi)
-        # lights (white balance and exposure folded in)
+
+    def _set_grading(self, inp: ShadeInputs, cols: np.ndarray) -> None:
+        """Sun, sky and haze colours (white balance and exposure folded in), sensor noise, vignette, tone curve."""
+        grade = inp.world.grade
+        light = LIGHTINGS.get(inp.world.lighting, LIGHTINGS["noon"])
+        W = self.W
         # auto-exposure: a mid-grey lit ground reads the same under every light, then the grade varies it
         lum = np.array([0.299, 0.587, 0.114])
         ref = float(lum @ light.ambient + (lum @ light.sun) * max(float(inp.sun[2]), 0.0))
@@ -100,8 +125,9 @@ class _Context:
         x = np.arange(256) / 255.0
         tone = np.clip((x - 0.45) * contrast + 0.45, 0, 1) ** gamma
         self.tone_lut = np.clip(tone * 255 + 0.5, 0, 255).astype(np.uint8)
-        # per-face lookup tables (saturation applied to the albedo)
-        sat = float(grade.get("saturation", 1.0))
+
+    def _set_face_tables(self, faces: FaceArrays, sat: float) -> None:
+        """Per-face lookup tables (albedo with the grade's saturation, cells, noise, light, planes) for ``take``."""
         lum = faces.rgb @ np.array([0.299, 0.587, 0.114], np.float32)
         rgb = lum[:, None] + (faces.rgb - lum[:, None]) * sat
         self.rgb = [_f32(np.clip(rgb[:, c], 0, 1)) for c in range(3)]
@@ -130,31 +156,36 @@ class _Context:
         self.has_cell = (faces.cell[:, 0] > 0).astype(np.uint8)
         self.plane_cols = [_f32(faces.plane[:, k]) for k in range(12)]
         self.tint = np.array([0.4, 0.15, -0.45], np.float32)
-        # textures and screen grain
-        seed = int(inp.world.seed)
-        rs = np.random.default_rng(seed + 99)
-        self.tex_off = rs.uniform(0, TILE, (2, 2))
-        self.grain_rows = (int(rs.integers(0, 64)), int(rs.integers(0, 64)))
-        self.fine_tiles, self.coarse_tiles = octave_tiles()
-        self.grain_field = grain_field(BAND_ROWS + 64, W + 64)
-        _, along, _ = g.pixel_size(np.arange(self.H))
-        self.pix_along = np.nan_to_num(along, nan=10.0, posinf=10.0).astype(np.float32)
-        # camera axes in world coordinates (x right, y down, z forward) and the sun in them
-        x_c = np.array([1.0, 0.0, 0.0])
-        y_c = np.array([0.0, -self.st, -self.ct])
-        z_c = np.array([0.0, self.ct, -self.st])
-        sun = inp.sun
-        self.sun_cam = np.array([sun @ x_c, sun @ y_c, sun @ z_c], np.float32)
 
     def band(self, fm: np.ndarray, r0: int, r1: int) -> np.ndarray:
+        """RGB uint8 of image rows ``r0:r1`` from their face ids (the tone curve and blur come after)."""
         fm = fm.astype(np.intp)  # numpy's take converts indices to intp on every call otherwise
-        nrows, W = fm.shape
         rows = np.arange(r0, r1, dtype=np.float32)
+        su, sv, kind = self._surface_coords(fm, rows, r0)
+        col = [self.rgb[c].take(fm) for c in range(3)]
+        cells = np.flatnonzero(self.has_cell.take(fm))
+        if len(cells):
+            self._cells(fm, cells, su, sv, col, r0)
+        # noise octaves (with level of detail per row), grain and colour drift
+        n3, n2 = sample(self.fine_tiles, su, sv, FINE_SCALE_M, tuple(self.tex_off[0]))
+        n1, n0, drift = sample(self.coarse_tiles, su, sv, COARSE_SCALE_M, tuple(self.tex_off[1]))
+        del su, sv
+        go = (self.grain_rows[0] + r0 * 7) % 64
+        self._texture(fm, (n0, n1, n2, n3), drift, col, r0, r1, go)
+        lit, ao = self._light(fm, kind, n1, r0, r1)
+        self._expose(col, lit, ao, rows, r0, r1, go)
+        img = cv2.merge(col)
+        return cv2.convertScaleAbs(img, alpha=255.0)
+
+    def _surface_coords(self, fm: np.ndarray, rows: np.ndarray, r0: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Surface coordinates (m) of each pixel of the band, and its face kind.
+
+        Ground and flat tops are in the street frame (tops scaled to their height), walls in their plane.
+        """
         v = rows - self.H / 2 + 0.5
         den = v * self.ct + self.f * self.st
         t = np.where(den > 1e-6, self.Hc / np.maximum(den, 1e-6), 1e4).astype(np.float32)
         yrow = t * (self.f * self.ct - v * self.st)
-        # surface coordinates (m): ground and flat tops in the street frame, walls in their plane
         su = t[:, None] * self.h_c[None, :]
         su += (yrow * self.sphi)[:, None]
         sv = t[:, None] * self.h_ms[None, :]
@@ -169,17 +200,18 @@ class _Context:
         planar = np.flatnonzero(kind == PLANAR)
         if len(planar):
             self._planar_coords(fm, planar, r0, su, sv)
-        col = [self.rgb[c].take(fm) for c in range(3)]
-        cells = np.flatnonzero(self.has_cell.take(fm))
-        if len(cells):
-            self._cells(fm, cells, su, sv, col, r0)
-        # noise octaves (with level of detail per row), grain and colour drift
-        n3, n2 = sample(self.fine_tiles, su, sv, FINE_SCALE_M, tuple(self.tex_off[0]))
-        n1, n0, drift = sample(self.coarse_tiles, su, sv, COARSE_SCALE_M, tuple(self.tex_off[1]))
-        del su, sv
+        return su, sv, kind
+
+    def _texture(self, fm: np.ndarray, octaves: tuple[np.ndarray, ...], drift: np.ndarray, col: list[np.ndarray],
+                 r0: int, r1: int, go: int) -> None:
+        """Modulate the albedo ``col`` in place by the noise octaves (fading with distance), grain and drift.
+
+        The second octave is copied before scaling: the caller reuses it for the foliage shadow dapple.
+        """
+        nrows, W = fm.shape
         pix = self.pix_along[r0:r1]
         m = np.ones(fm.shape, np.float32)
-        for k, (scale, n) in enumerate(zip(OCTAVE_SCALES_M, (n0, n1, n2, n3), strict=True)):
+        for k, (scale, n) in enumerate(zip(OCTAVE_SCALES_M, octaves, strict=True)):
             lod = np.clip(scale / (2.5 * pix) - 0.3, 0.0, 1.0).astype(np.float32)
             if k >= 2:
                 n = n * lod[:, None]
@@ -187,9 +219,7 @@ class _Context:
                 n = n.copy() if k == 1 else n
             n *= self.amp[k].take(fm)
             m += n
-        go = (self.grain_rows[0] + r0 * 7) % 64
-        gf = self.grain_field
-        grain = gf[0, go:go + nrows, 32:32 + W]
+        grain = self.grain_field[0, go:go + nrows, 32:32 + W]
         m += self.grain.take(fm) * grain
         np.maximum(m, 0.05, out=m)
         drift *= self.chroma.take(fm)
@@ -198,8 +228,10 @@ class _Context:
             f += 1
             f *= m
             col[c] *= f
-        del m, drift
-        # light: sun (Lambert, shadows) and sky (ambient occlusion)
+
+    def _light(self, fm: np.ndarray, kind: np.ndarray, n1: np.ndarray, r0: int, r1: int
+               ) -> tuple[np.ndarray, np.ndarray]:
+        """Direct sun (Lambert, shadows dappled by the noise octave ``n1``) and sky light (ambient occlusion)."""
         direct = self.lambert.take(fm)
         ao = self.ao.take(fm)
         canopy = np.flatnonzero(kind == CANOPY)
@@ -224,8 +256,13 @@ class _Context:
             shadow = np.where(roof > 0, self.inp.roof[r0:r1] * np.float32(1 / 255), shadow)
         lit = 1 - shadow
         lit *= direct
-        del shadow, direct
-        # haze grows with range; vignetting
+        return lit, ao
+
+    def _expose(self, col: list[np.ndarray], lit: np.ndarray, ao: np.ndarray, rows: np.ndarray, r0: int, r1: int,
+                go: int) -> None:
+        """Light ``col`` in place, with haze growing with range, vignetting and sensor noise."""
+        nrows, W = lit.shape
+        gf = self.grain_field
         dist = self.Hc / np.clip(np.sin(self.g.depression(np.arange(r0, r1))), 0.05, 1.0)
         haze = (self.haze * np.clip(dist / 120.0, 0, 2)).astype(np.float32)
         ys = (rows - self.H / 2) / (self.H / 2)
@@ -239,8 +276,6 @@ class _Context:
             col[c] *= light
             col[c] += (haze * self.haze_rgb[c])[:, None]
             col[c] += sens * gf[c, go:go + nrows, 16:16 + W]
-        img = cv2.merge(col)
-        return cv2.convertScaleAbs(img, alpha=255.0)
 
     def _planar_coords(self, fm: np.ndarray, idx: np.ndarray, r0: int, su: np.ndarray, sv: np.ndarray) -> None:
         """In-plane (u, v) metres of walls and roof slopes from their plane coefficients."""

@@ -26,9 +26,7 @@ from __future__ import annotations
 import functools
 import math
 import time
-from collections import deque
-from collections.abc import Callable, Iterable, Iterator
-from concurrent.futures import ThreadPoolExecutor
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -38,6 +36,7 @@ import torch
 
 from assurance.fitting.network import data as D
 from assurance.fitting.network.baseline import evaluate_baseline
+from assurance.fitting.network.batches import prefetched, sample_batch
 from assurance.fitting.network.checkpoint import checkpoint_path, config_changes, load_checkpoint, save_checkpoint
 from assurance.fitting.network.evaluation import evaluate, selection_score
 from assurance.fitting.network.losses import describe as describe_loss
@@ -51,64 +50,6 @@ from el.segmentation.weights import load_weights, read_card
 
 Progress = Callable[..., Iterable]
 Log = Callable[[str], None]
-
-
-def _to_tensor(images: list[np.ndarray]) -> torch.Tensor:
-    batch = np.stack(images).astype(np.float32) / np.float32(255.0)
-    return torch.from_numpy(batch).permute(0, 3, 1, 2).contiguous()
-
-
-def _labels_tensor(labels: list[np.ndarray]) -> torch.Tensor:
-    return torch.from_numpy(np.stack(labels).astype(np.int64))
-
-
-def sample_batch(samples: list[D.Prepared], config: TrainConfig, step: int
-                 ) -> tuple[tuple[torch.Tensor, torch.Tensor], tuple[torch.Tensor, torch.Tensor] | None]:
-    """The two mini-batches of a step (working resolution, HD or None), a pure function of ``(seed, step)``."""
-    rng = np.random.default_rng([config.seed, 1, step])
-    imgs, labs = [], []
-    for _ in range(config.batch):
-        s = samples[int(rng.integers(len(samples)))]
-        img, lab = D.random_crop(s.image, s.labels, config.crop, rng, config.augment)
-        imgs.append(img)
-        labs.append(lab)
-    working = (_to_tensor(imgs), _labels_tensor(labs))
-    with_regions = [s for s in samples if len(s.regions)]
-    if not config.hd_pixels or not with_regions:
-        return working, None
-    side = D.hd_crop_side(rng, config.hd_crop_min, config.hd_crop_max)
-    imgs, labs = [], []
-    for _ in range(D.hd_crop_count(side, config.hd_pixels)):
-        s = with_regions[int(rng.integers(len(with_regions)))]
-        k = int(rng.integers(len(s.regions)))
-        img, lab = D.random_crop(s.regions[k], s.region_labels[k], side, rng, config.augment)
-        imgs.append(img)
-        labs.append(lab)
-    return working, (_to_tensor(imgs), _labels_tensor(labs))
-
-
-def prefetched(fn: Callable[[int], Any], steps: Iterable[int], *, workers: int, depth: int) -> Iterator[Any]:
-    """``fn(step)`` for each step, in order, computed ``depth`` steps ahead by ``workers`` threads.
-
-    ``fn`` must be a pure function of the step (as :func:`sample_batch` is), so the results do not
-    depend on the number of workers; with ``workers < 1`` nothing runs ahead.
-    """
-    if workers < 1:
-        yield from (fn(s) for s in steps)
-        return
-    pending: deque = deque()
-    todo = iter(steps)
-    with ThreadPoolExecutor(workers, thread_name_prefix="batches") as pool:
-        try:
-            for s in todo:
-                pending.append(pool.submit(fn, s))
-                if len(pending) > depth:
-                    yield pending.popleft().result()
-            while pending:
-                yield pending.popleft().result()
-        finally:
-            for future in pending:
-                future.cancel()
 
 
 def resolve_device(device: str | torch.device) -> torch.device:
@@ -188,9 +129,7 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
     if threads is not None:
         torch.set_num_threads(threads)
     io_threads = threads or torch.get_num_threads()
-    ckpt_path = Path(checkpoint_file) if checkpoint_file is not None else checkpoint_path(weights_path)
-    if ckpt_path.exists() and not resume:
-        raise ValueError(f"{ckpt_path}: a checkpoint exists; resume it (--resume) or delete it")
+    ckpt_path = _checkpoint_target(weights_path, checkpoint_file, resume)
 
     started = time.perf_counter()
     data_ids, train_set, val_set, state = _load_data(train_dir, val_dir, config, ckpt_path if resume else None,
@@ -200,45 +139,12 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
     weights = torch.from_numpy(D.class_weights(freq))
 
     model, parent, encoder_init = _build_model(config, init_weights, device, say)
-    optimizer = torch.optim.AdamW(_param_groups(model, config), lr=config.lr, weight_decay=config.weight_decay)
-    early = list(model.early_parameters()) if hasattr(model, "early_parameters") else []
-    scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, lambda s: lr_factor(s, config))
-    run = _RunState()
-    if state is not None:
-        run = _restore(state, model, optimizer, scheduler, device)
-        say(f"resuming from step {run.step} of {config.steps}")
-
+    optimizer, scheduler, early, run = _optimiser(model, config, state, device, say)
     end = _end_step(config, stop_at, run.step, ckpt_path)
     card_base = functools.partial(_card_base, config, data_ids, freq, weights, parent, encoder_init, device, end)
-    interval = config.evaluation_interval
-    window: list[float] = []
-    steps = range(run.step, end)
-    iterator = progress(steps, total=len(steps), desc="train") if progress is not None else steps
-    draws = prefetched(lambda s: sample_batch(train_set, config, s), steps, workers=prefetch, depth=2 * prefetch)
-    loss_weights = weights.to(device)
-    model.train()
-    for step, batches in zip(iterator, draws, strict=True):
-        loss, seconds = _optimise(model, optimizer, scheduler, early, batches, loss_weights, config, step, device)
-        run.train_seconds += seconds
-        window.append(loss.item())
-        done = step + 1
-        last = done == end
-        improved = False
-        if done % interval == 0 or last:
-            entry: dict[str, Any] = {"step": done, "loss": float(np.mean(window)),
-                                     "seconds_per_step": run.train_seconds / done}
-            window = []
-            if val_set:
-                improved = _select(run, entry, model, val_set, config, device, weights_path, card_base, data_ids)
-            run.history.append(entry)
-            if on_eval is not None:
-                on_eval(run.history)
-            say(" ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in entry.items()))
-        if improved or done % config.checkpoint_every == 0 or last:
-            save_checkpoint(ckpt_path, {
-                "step": done, "model": model.state_dict(), "optimizer": optimizer.state_dict(),
-                "scheduler": scheduler.state_dict(), "config": config.to_dict(), "data": data_ids,
-                **_checkpoint_record(run)})
+    fit = _Fit(config, device, model, optimizer, scheduler, early, weights.to(device), weights_path, ckpt_path,
+               data_ids, card_base)
+    _run_steps(fit, run, train_set, val_set, end, prefetch=prefetch, progress=progress, on_eval=on_eval, say=say)
     card = _final_card(model, run, config, weights_path, card_base(), val_set, device, say)
     card["training"].update(_run_record(run, model, config, end, prep_seconds))
     if config.baseline_pixels and val_set:
@@ -246,6 +152,14 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
         card["baseline"] = _baseline(train_set, val_set, config, card["evaluation"]["working_resolution"]["miou"])
     write_card(weights_path, card)
     return card
+
+
+def _checkpoint_target(weights_path: Path, checkpoint_file: str | Path | None, resume: bool) -> Path:
+    """The checkpoint file of the run; ValueError if one exists and the run does not resume it."""
+    ckpt_path = Path(checkpoint_file) if checkpoint_file is not None else checkpoint_path(weights_path)
+    if ckpt_path.exists() and not resume:
+        raise ValueError(f"{ckpt_path}: a checkpoint exists; resume it (--resume) or delete it")
+    return ckpt_path
 
 
 @dataclass
@@ -257,6 +171,73 @@ class _RunState:
     best_step: int | None = None
     history: list[dict[str, Any]] = field(default_factory=list)
     train_seconds: float = 0.0
+
+
+@dataclass
+class _Fit:
+    """What every step of a run uses: the network, its optimiser, the loss weights, and where the run writes."""
+
+    config: TrainConfig
+    device: torch.device
+    model: torch.nn.Module
+    optimizer: torch.optim.Optimizer
+    scheduler: torch.optim.lr_scheduler.LRScheduler
+    early: list[torch.nn.Parameter]  # frozen for the first ``freeze_early_steps`` steps
+    loss_weights: torch.Tensor  # the class weights, on ``device``
+    weights_path: Path
+    ckpt_path: Path
+    data_ids: dict[str, Any]
+    card_base: Callable[[], dict[str, Any]]
+
+
+def _optimiser(model: torch.nn.Module, config: TrainConfig, state: dict[str, Any] | None, device: torch.device,
+               say: Log) -> tuple[torch.optim.Optimizer, torch.optim.lr_scheduler.LRScheduler,
+                                  list[torch.nn.Parameter], _RunState]:
+    """AdamW with its learning-rate schedule, the early parameters, and the run's state (from ``state`` if resuming)."""
+    optimizer = torch.optim.AdamW(_param_groups(model, config), lr=config.lr, weight_decay=config.weight_decay)
+    early = list(model.early_parameters()) if hasattr(model, "early_parameters") else []
+    scheduler = torch.optim.lr_scheduler.LambdaLR(optimizer, lambda s: lr_factor(s, config))
+    run = _RunState()
+    if state is not None:
+        run = _restore(state, model, optimizer, scheduler, device)
+        say(f"resuming from step {run.step} of {config.steps}")
+    return optimizer, scheduler, early, run
+
+
+def _run_steps(fit: _Fit, run: _RunState, train_set: list[D.Prepared], val_set: list[D.Prepared], end: int, *,
+               prefetch: int, progress: Progress | None, on_eval: Callable[[list[dict[str, Any]]], None] | None,
+               say: Log) -> None:
+    """Optimise steps ``run.step`` to ``end``, evaluating (and selecting) every ``evaluation_interval`` steps
+    and at the end, and checkpointing every ``checkpoint_every`` steps, after an improvement and at the end."""
+    config = fit.config
+    interval = config.evaluation_interval
+    window: list[float] = []
+    steps = range(run.step, end)
+    iterator = progress(steps, total=len(steps), desc="train") if progress is not None else steps
+    draws = prefetched(lambda s: sample_batch(train_set, config, s), steps, workers=prefetch, depth=2 * prefetch)
+    fit.model.train()
+    for step, batches in zip(iterator, draws, strict=True):
+        loss, seconds = _optimise(fit, batches, step)
+        run.train_seconds += seconds
+        window.append(loss.item())
+        done = step + 1
+        last = done == end
+        improved = False
+        if done % interval == 0 or last:
+            entry: dict[str, Any] = {"step": done, "loss": float(np.mean(window)),
+                                     "seconds_per_step": run.train_seconds / done}
+            window = []
+            if val_set:
+                improved = _select(fit, run, entry, val_set)
+            run.history.append(entry)
+            if on_eval is not None:
+                on_eval(run.history)
+            say(" ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in entry.items()))
+        if improved or done % config.checkpoint_every == 0 or last:
+            save_checkpoint(fit.ckpt_path, {
+                "step": done, "model": fit.model.state_dict(), "optimizer": fit.optimizer.state_dict(),
+                "scheduler": fit.scheduler.state_dict(), "config": config.to_dict(), "data": fit.data_ids,
+                **_checkpoint_record(run)})
 
 
 def _checkpoint_record(run: _RunState) -> dict[str, Any]:
@@ -359,34 +340,32 @@ def _card_base(config: TrainConfig, data_ids: dict[str, Any], freq: np.ndarray, 
     }}
 
 
-def _optimise(model: torch.nn.Module, optimizer: torch.optim.Optimizer, scheduler: torch.optim.lr_scheduler.LRScheduler,
-              early: list[torch.nn.Parameter], batches: tuple, loss_weights: torch.Tensor, config: TrainConfig,
-              step: int, device: torch.device) -> tuple[torch.Tensor, float]:
+def _optimise(fit: _Fit, batches: tuple, step: int) -> tuple[torch.Tensor, float]:
     """One optimisation step (dropout masks seeded by ``(seed, step)``); its loss and its seconds."""
     tick = time.perf_counter()
+    config, device, model = fit.config, fit.device, fit.model
     torch.manual_seed(int(np.random.default_rng([config.seed, 2, step]).integers(2**62)))  # dropout masks
     batches = tuple(None if b is None else (b[0].to(device, non_blocking=True), b[1].to(device, non_blocking=True))
                     for b in batches)
-    for p in early:  # the early encoder stays as pretrained for the first steps (a pure function of the step)
+    for p in fit.early:  # the early encoder stays as pretrained for the first steps (a pure function of the step)
         p.requires_grad_(step >= config.freeze_early_steps)
-    loss = training_loss(model, batches, loss_weights, config.loss)
+    loss = training_loss(model, batches, fit.loss_weights, config.loss)
     if not torch.isfinite(loss):
         raise ValueError(f"training diverged at step {step}: loss is {float(loss)}")
-    optimizer.zero_grad(set_to_none=True)
+    fit.optimizer.zero_grad(set_to_none=True)
     loss.backward()
     torch.nn.utils.clip_grad_norm_(model.parameters(), 5.0)
-    optimizer.step()
-    scheduler.step()
+    fit.optimizer.step()
+    fit.scheduler.step()
     return loss, time.perf_counter() - tick
 
 
-def _select(run: _RunState, entry: dict[str, Any], model: torch.nn.Module, val_set: list[D.Prepared],
-            config: TrainConfig, device: torch.device, weights_path: Path, card_base: Callable[[], dict[str, Any]],
-            data_ids: dict[str, Any]) -> bool:
+def _select(fit: _Fit, run: _RunState, entry: dict[str, Any], val_set: list[D.Prepared]) -> bool:
     """Evaluate on the validation set into ``entry``; write the weights and card if best so far (True)."""
     tick = time.perf_counter()
+    config, model = fit.config, fit.model
     model.eval()
-    figures = evaluate(Segmenter.for_protocol(model, config.eval_protocol, device=device), val_set)
+    figures = evaluate(Segmenter.for_protocol(model, config.eval_protocol, device=fit.device), val_set)
     model.train()
     score = selection_score(figures)
     entry.update({"val_miou_working": figures["working_resolution"]["miou"],
@@ -395,8 +374,8 @@ def _select(run: _RunState, entry: dict[str, Any], model: torch.nn.Module, val_s
     if not score > run.best_score:  # (a NaN score never wins)
         return False
     run.best_score, run.best_step = score, entry["step"]
-    save_weights(model, weights_path, card={**card_base(), "evaluation": {
-        "data": data_ids["val"], "protocol": config.eval_protocol.to_dict(), "step": entry["step"], **figures}})
+    save_weights(model, fit.weights_path, card={**fit.card_base(), "evaluation": {
+        "data": fit.data_ids["val"], "protocol": config.eval_protocol.to_dict(), "step": entry["step"], **figures}})
     return True
 
 
