@@ -195,12 +195,20 @@ def monitor_runs(tiny_campaign, tmp_path_factory):
                             core=tiny_campaign["config"].core, weights=tiny_campaign["config"].weights)
     seg = GrassIsRoadOracle(TINY_WW)
     run_campaign(tiny_campaign["data"], root / "good", config, progress=False, segmenter=seg)
-    real_walk = campaign.walk
-    campaign.walk = lambda verdicts, *_: 0 if len(verdicts) else None  # lands on the top candidate, accepted or not
+    from el.walk import WalkOutcome
+
+    real_walk = campaign.walk_candidates
+
+    def lands_on_top(n, judge, *args, **kwargs):  # lands on the top candidate, accepted or not
+        out = real_walk(n, judge, *args, **kwargs)
+        return WalkOutcome(0 if n else None, "accepted" if n else "no_candidate", out.verdicts, out.examined,
+                           out.overhead_s)
+
+    campaign.walk_candidates = lands_on_top
     try:
         run_campaign(tiny_campaign["data"], root / "broken", config, progress=False, segmenter=seg)
     finally:
-        campaign.walk = real_walk
+        campaign.walk_candidates = real_walk
     return {"good": root / "good", "broken": root / "broken"}
 
 

@@ -9,8 +9,8 @@ from el.hashing import sha256_file
 from el.monitors import build_monitor, parse_monitor_spec
 from el.monitors.calibration import load_calibration
 from el.monitors.learned import DEFAULT_MODEL
-from el.records import read_signed
 from el.pipeline import DEPLOYED_CALIBRATION, DEPLOYED_MONITOR, PipelineConfig
+from el.records import read_signed
 from el.segmentation.weights import DEFAULT_WEIGHTS
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -22,7 +22,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--calibration", nargs="+", metavar="CALIB.json",
                    help="calibration card(s) (uav-el calibrate): also evaluate each calibrated monitor")
     p.add_argument("--images", type=int, help="use the first N images of --data")
-    p.add_argument("--weights", help="segmentation weights (default: the shipped model)")
+    p.add_argument("--weights", "--model", dest="weights", metavar="MODEL",
+                   help="segmentation model: a .pt weights file with its card, or a registered uav_el.models "
+                        "name (NAME or NAME:ARG); default: the shipped model")
     p.add_argument("--seed", type=int, help="campaign seed (perturbations, MC dropout)")
     p.add_argument("--jobs", type=int, default=1, help="parallel workers (default 1)")
     p.add_argument("--backend", choices=("loky", "dask"), default="loky", help="parallel backend (default loky)")

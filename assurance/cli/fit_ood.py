@@ -16,7 +16,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--data", required=True, help="training scenes (e.g. data/train)")
     p.add_argument("--val", required=True, help="validation scenes for the threshold (e.g. data/val)")
     p.add_argument("--out", required=True, type=Path, help="gate file to write (JSON)")
-    p.add_argument("--weights", help="segmentation weights (default: the shipped model)")
+    p.add_argument("--weights", "--model", dest="weights", metavar="MODEL",
+                   help="segmentation model: a .pt weights file with its card, or a registered uav_el.models "
+                        "name (NAME or NAME:ARG); default: the shipped model")
     p.add_argument("--quantile", type=float, default=0.995, help="threshold quantile of validation distances")
     p.add_argument("--images", type=int, help="use the first N scenes of each split")
     p.add_argument("--report", type=Path, metavar="DIR",

@@ -57,7 +57,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--ood", type=Path, metavar="GATE.json",
                         help="out-of-domain gate (uav-el fit-ood): a frame above its threshold takes the "
                              "default action")
-    parser.add_argument("--weights", type=Path, help="segmentation weights (default: the shipped model)")
+    parser.add_argument("--weights", "--model", dest="weights", metavar="MODEL",
+                        help="segmentation model: a .pt weights file with its card, or a name registered in the "
+                             "uav_el.models entry points (NAME or NAME:ARG); default: the shipped model")
     parser.add_argument("--budget", type=float, default=DEFAULT_TIME_BUDGET_S, metavar="S",
                         help="time budget in seconds; past it, the default action (default: %(default)s)")
     parser.add_argument("--seed", type=int, default=0, help="seed of MC dropout (default: %(default)s)")

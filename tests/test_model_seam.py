@@ -1,0 +1,76 @@
+"""The segmentation-model seam: any object with ``predict_frame``/``predict_patch`` flies, built by name
+through the ``uav_el.models`` entry points, and the factory refuses what it cannot build with a clear error."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import sys
+from pathlib import Path
+
+import pytest
+from helpers import scene_ids, scene_image
+
+from assurance.scenes.uavid import write_image
+from el.config import CoreConfig
+from el.errors import WeightsError
+from el.pipeline import EmergencyLanding, PipelineConfig
+from el.segmentation import SegmentationModel, Segmenter, load_model
+from el.segmentation.contract import MC_DROPOUT, PATCH_TRUNK, check_model, has_capability, labels_of
+from el.segmentation.factory import ENTRY_POINT_GROUP
+
+PLUGIN = Path(__file__).parent / "plugins" / "colour_model.py"
+WW = 128
+
+
+@pytest.fixture
+def colour_installed(tmp_path, monkeypatch):
+    """The colour model as an installed distribution: its module and a dist-info with the entry point."""
+    site = tmp_path / "site"
+    site.mkdir()
+    shutil.copy(PLUGIN, site / "colour_model.py")
+    info = site / "colour_model-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: colour-model\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text(f"[{ENTRY_POINT_GROUP}]\ncolour = colour_model:build\n")
+    monkeypatch.syspath_prepend(str(site))
+    yield
+    sys.modules.pop("colour_model", None)
+
+
+def test_a_plugin_model_is_built_by_name_and_flies(colour_installed):
+    model = load_model(f"colour:{WW}")
+    assert isinstance(model, SegmentationModel) and not isinstance(model, Segmenter)
+    assert not has_capability(model, MC_DROPOUT) and not has_capability(model, PATCH_TRUNK)
+    assert labels_of(model).name == "uavid"
+    d = EmergencyLanding(PipelineConfig(core=CoreConfig(working_width=WW), monitor="lhd"),
+                         segmenter=model).decide(scene_image(scene_ids()))
+    assert d.action == "land" and d.reason == "accepted"
+    # a monitor that needs a capability the model lacks: the default action, with the reason
+    d = EmergencyLanding(PipelineConfig(core=CoreConfig(working_width=WW), monitor="lhd+mcd:n=10,rho=0.9"),
+                         segmenter=model).decide(scene_image(scene_ids()))
+    assert d.action == "default" and d.reason.startswith("fault: monitoring: AttributeError")
+
+
+def test_land_takes_a_plugin_model_by_name(colour_installed, tmp_path, capsys):
+    from assurance.cli import main
+
+    image = tmp_path / "frame.png"
+    write_image(image, scene_image(scene_ids()))
+    out = tmp_path / "d.json"
+    assert main(["land", str(image), "--weights", f"colour:{WW}", "--monitor", "lhd", "--working-width", str(WW),
+                 "--json", str(out)]) == 0, capsys.readouterr().err
+    assert json.loads(out.read_text())["action"] == "land"
+
+
+def test_the_factory_refuses_clearly(tmp_path):
+    with pytest.raises(WeightsError, match="'nosuch' is not registered in the 'uav_el.models' entry points"):
+        load_model("nosuch")
+    with pytest.raises(WeightsError, match="neither a .pt weights file nor a registered model name"):
+        load_model("no such thing!")
+    with pytest.raises(WeightsError, match="nope.pt"):
+        load_model(tmp_path / "nope.pt")
+    with pytest.raises(ValueError, match="lacks predict_frame, predict_patch"):
+        check_model(object())
+    d = EmergencyLanding(PipelineConfig(monitor="lhd"), segmenter=object()).decide(scene_image(scene_ids()))
+    assert d.action == "default" and d.reason.startswith("fault: model: ValueError: segmentation model object lacks")

@@ -1,0 +1,38 @@
+"""A frame brings its own pose: ``decide(frame, pose=...)`` plans with it and records it; None is the nominal."""
+
+from __future__ import annotations
+
+import jsonschema
+from helpers import OracleSegmenter, scene_ids, scene_image
+
+from el.camera import Pose
+from el.config import CoreConfig
+from el.decision import decision_schema
+from el.pipeline import EmergencyLanding, PipelineConfig
+
+WW = 128
+
+
+def _landing() -> EmergencyLanding:
+    return EmergencyLanding(PipelineConfig(core=CoreConfig(working_width=WW), monitor="lhd"),
+                            segmenter=OracleSegmenter(WW))
+
+
+def test_the_frame_pose_sets_the_safety_radius_and_is_recorded():
+    el, image = _landing(), scene_image(scene_ids())
+    nominal = el.decide(image)
+    assert nominal.input["pose"] == {"height_m": 50.0, "pitch_deg": 45.0, "source": "nominal"}
+    same = el.decide(image, pose=Pose())
+    assert [(c.x, c.y, c.radius_px, c.hazard) for c in same.candidates] == \
+        [(c.x, c.y, c.radius_px, c.hazard) for c in nominal.candidates] and same.input["pose"]["source"] == "frame"
+    low = el.decide(image, pose=Pose(height_m=25.0, pitch_deg=45.0))  # closer to the ground: larger discs
+    assert low.input["pose"] == {"height_m": 25.0, "pitch_deg": 45.0, "source": "frame"}
+    assert low.default_area.radius_px > nominal.default_area.radius_px
+    assert low.config == nominal.config  # the configuration is the nominal one; the pose is the frame's
+    for d in (nominal, low):
+        jsonschema.validate(d.to_dict(), decision_schema())
+
+
+def test_a_malformed_pose_ends_in_the_default_action():
+    d = _landing().decide(scene_image(scene_ids()), pose={"height_m": 30})
+    assert d.action == "default" and d.reason.startswith("fault: pose: ValueError: pose must be an el.camera.Pose")
