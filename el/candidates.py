@@ -17,6 +17,8 @@ Conservative pooling (``pool_label_counts``, ``pool_forbidden``) brings full-res
 maps or forbidden masks down to working resolution: a working pixel is forbidden if **any**
 source pixel overlapping it is forbidden, so thin roads and small cars survive.
 
+Which classes are forbidden is the label set's word (``labels``, default :data:`el.labels.UAVID`).
+
 Why a margin of sqrt(2)/2 px in the clearance: the requirement holds at full resolution. Every
 full-resolution forbidden pixel lies inside the square of a forbidden working pixel (conservative
 pooling), and the distance from a centre to any point of a pixel's square is at least the distance
@@ -34,7 +36,7 @@ import numpy as np
 
 from el.camera import NUM_STRIPES, CameraGeometry, SafetyParams
 from el.forbidden import forbidden_pixels
-from el.labels import FORBIDDEN_IDS, NUM_CLASSES, SAFE_IDS
+from el.labels import UAVID, LabelSet
 
 # Distance from a pixel centre to the farthest point of its square, plus a float32 guard.
 CELL_MARGIN = math.sqrt(2.0) / 2.0 + 1e-4
@@ -47,15 +49,16 @@ DIST_CAP = 1024.0
 # ----------------------------------------------------------------------------------------------
 # 1. Forbidden pixels and conservative pooling
 # ----------------------------------------------------------------------------------------------
-def forbidden_from_probs(probs: np.ndarray) -> np.ndarray:
+def forbidden_from_probs(probs: np.ndarray, *, labels: LabelSet = UAVID) -> np.ndarray:
     """(H, W) bool: True where a forbidden class has the highest probability.
 
     A tie between a forbidden and a safe class counts as forbidden (the conservative side): the one
     rule, :func:`el.forbidden.forbidden_pixels`, here for a whole frame.
     """
-    if probs.ndim != 3 or probs.shape[0] != NUM_CLASSES:
-        raise ValueError(f"probs must have shape ({NUM_CLASSES}, H, W), got {probs.shape}")
-    return forbidden_pixels(probs)
+    n = labels.num_classes
+    if probs.ndim != 3 or probs.shape[0] != n:
+        raise ValueError(f"probs must have shape ({n}, H, W), got {probs.shape}")
+    return forbidden_pixels(probs, labels)
 
 
 def _overlap_ranges(src: int, dst: int) -> tuple[np.ndarray, np.ndarray]:
@@ -92,34 +95,35 @@ def pool_forbidden(forbidden: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     return _box_counts(forbidden, ry, rx) > 0
 
 
-def pool_label_counts(ids: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+def pool_label_counts(ids: np.ndarray, size: tuple[int, int], *, labels: LabelSet = UAVID) -> np.ndarray:
     """Per class, how many source pixels of the class overlap each target pixel: (C, h, w) int32."""
     ids = np.asarray(ids)
+    n = labels.num_classes
     if ids.ndim != 2:
         raise ValueError(f"label map must be 2-D class ids, got shape {ids.shape}")
-    if ids.size and (ids.min() < 0 or ids.max() >= NUM_CLASSES):
-        raise ValueError(f"class ids must lie in 0..{NUM_CLASSES - 1}, got {ids.min()}..{ids.max()}")
+    if ids.size and (ids.min() < 0 or ids.max() >= n):
+        raise ValueError(f"class ids must lie in 0..{n - 1}, got {ids.min()}..{ids.max()}")
     w, h = size
     if w < 1 or h < 1:
         raise ValueError(f"target size must be positive, got {size}")
     ry, rx = _overlap_ranges(ids.shape[0], h), _overlap_ranges(ids.shape[1], w)
-    present = np.bincount(ids.ravel(), minlength=NUM_CLASSES) > 0
-    out = np.zeros((NUM_CLASSES, h, w), dtype=np.int32)
+    present = np.bincount(ids.ravel(), minlength=n) > 0
+    out = np.zeros((n, h, w), dtype=np.int32)
     for c in np.flatnonzero(present):
         out[c] = _box_counts(ids == c, ry, rx)
     return out
 
 
-def pooled_label_ids(ids: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+def pooled_label_ids(ids: np.ndarray, size: tuple[int, int], *, labels: LabelSet = UAVID) -> np.ndarray:
     """Class ids at ``size = (w, h)`` with conservative pooling: (h, w) uint8.
 
     A target pixel that any forbidden source pixel overlaps takes the forbidden class with the
     largest overlapping count (ties: lowest id); the others take the safe class with the largest
     count (ties: lowest id).
     """
-    counts = pool_label_counts(ids, size)
-    fids = np.array(FORBIDDEN_IDS)
-    sids = np.array(SAFE_IDS)
+    counts = pool_label_counts(ids, size, labels=labels)
+    fids = np.array(labels.forbidden_ids)
+    sids = np.array(labels.safe_ids)
     fcounts = counts[fids]
     any_forbidden = fcounts.sum(axis=0) > 0
     out = sids[np.argmax(counts[sids], axis=0)]

@@ -2,7 +2,8 @@
 
 ``run_core`` takes the softmax of the segmentation at working resolution, (8, h, w) float, and
 returns the candidates in **full-resolution** pixel coordinates of the input image, ranked by
-increasing hazard (docs/architecture.md sections 3.3-3.5).
+increasing hazard (docs/architecture.md sections 3.3-3.5). The classes, which of them are forbidden
+and their hazard scores are a label set's (``labels``, default :data:`el.labels.UAVID`, 8 classes).
 
 Coordinates: continuous image coordinates; the full-resolution pixel at (row r, col c) covers
 [c, c+1) x [r, r+1), so its centre is (c + 0.5, r + 0.5) and the image spans [0, W] x [0, H].
@@ -31,7 +32,7 @@ from el import representatives as reps
 from el.camera import working_size
 from el.config import CoreConfig
 from el.decision import Candidate, Disc
-from el.labels import NUM_CLASSES
+from el.labels import UAVID, LabelSet
 
 PROB_TOLERANCE = 1e-3  # how far a probability may stray from [0, 1], and a pixel's sum from 1
 
@@ -59,13 +60,15 @@ class CoreResult:
     valid: np.ndarray = field(repr=False)
 
 
-def check_probs(probs: np.ndarray, input_size: tuple[int, int], working_width: int | None = None) -> None:
-    """ValueError unless ``probs`` is a finite (8, h, w) probability map whose size keeps the aspect
-    ratio of ``input_size = (W, H)`` (and, if given, has width ``working_width``)."""
+def check_probs(probs: np.ndarray, input_size: tuple[int, int], working_width: int | None = None, *,
+                labels: LabelSet = UAVID) -> None:
+    """ValueError unless ``probs`` is a finite (C, h, w) probability map (C = ``labels.num_classes``)
+    whose size keeps the aspect ratio of ``input_size = (W, H)`` (and, if given, has width ``working_width``)."""
+    n = labels.num_classes
     if not isinstance(probs, np.ndarray):
         raise ValueError(f"class probabilities must be a numpy array, got {type(probs).__name__}")
-    if probs.ndim != 3 or probs.shape[0] != NUM_CLASSES:
-        raise ValueError(f"class probabilities must have shape ({NUM_CLASSES}, h, w), got {probs.shape}")
+    if probs.ndim != 3 or probs.shape[0] != n:
+        raise ValueError(f"class probabilities must have shape ({n}, h, w), got {probs.shape}")
     if not np.issubdtype(probs.dtype, np.floating):
         raise ValueError(f"class probabilities must be floating point, got {probs.dtype}")
     W, H = _check_size(input_size)
@@ -87,7 +90,7 @@ def check_probs(probs: np.ndarray, input_size: tuple[int, int], working_width: i
     if lo < -PROB_TOLERANCE:
         raise ValueError(f"class probabilities must lie in [0, 1], got a value of {lo:.4g} (logits?)")
     worst = max(abs(lo_sum - 1), abs(hi_sum - 1))
-    if worst > PROB_TOLERANCE * NUM_CLASSES:
+    if worst > PROB_TOLERANCE * n:
         raise ValueError(f"class probabilities must sum to 1 per pixel, off by up to {worst:.4g} (logits?)")
 
 
@@ -129,6 +132,7 @@ def run_core(
     config: CoreConfig | None = None,
     *,
     clock: Callable[[], float] = time.perf_counter,
+    labels: LabelSet = UAVID,
 ) -> CoreResult:
     """The CM post-processing: class probabilities (8, h, w) at working resolution -> candidates.
 
@@ -143,6 +147,9 @@ def run_core(
         Parameters; defaults to ``CoreConfig()``.
     clock : callable
         Time source for the stage timings (injectable for tests).
+    labels : LabelSet
+        The classes of ``probs`` (its first axis), which are forbidden and their hazard scores;
+        defaults to UAVid (``el.labels.UAVID``).
 
     Returns
     -------
@@ -156,14 +163,14 @@ def run_core(
     """
     config = config or CoreConfig()
     t0 = clock()
-    check_probs(probs, input_size, config.working_width)
+    check_probs(probs, input_size, config.working_width, labels=labels)
     W, H = _check_size(input_size)
     _, h, w = probs.shape
     geo = config.geometry(w, h)
     min_row, full_first = reachable_working_row((W, H), (w, h), config)
 
     radii = cand.row_radii(geo, config.safety, config.mode)
-    forbidden = cand.forbidden_from_probs(probs)
+    forbidden = cand.forbidden_from_probs(probs, labels=labels)
     vp = cand.valid_pixels(forbidden, radii, mode=config.mode, min_row=min_row)
     t1 = clock()
 
@@ -177,7 +184,7 @@ def run_core(
     )
     t3 = clock()
 
-    out = _ranked_candidates(probs, vp, rows, cols, config, (W, H))
+    out = _ranked_candidates(probs, vp, rows, cols, config, (W, H), labels)
     t4 = clock()
     return CoreResult(
         candidates=out,
@@ -194,12 +201,12 @@ def run_core(
 
 
 def _ranked_candidates(probs: np.ndarray, vp: cand.ValidPixels, rows: np.ndarray, cols: np.ndarray,
-                       config: CoreConfig, input_size: tuple[int, int]) -> list[Candidate]:
+                       config: CoreConfig, input_size: tuple[int, int], labels: LabelSet = UAVID) -> list[Candidate]:
     """Rank the representatives by hazard, prune overlaps, map to full-resolution coordinates (3.5, 3.1)."""
     W, H = input_size
     _, h, w = probs.shape
     r = vp.radii[rows]
-    h_s = ranking.semantic_hazard(probs, rows, cols, r)
+    h_s = ranking.semantic_hazard(probs, rows, cols, r, labels=labels)
     h_d = ranking.distance_hazard(vp.clearance[rows, cols], r, config.d_max_factor)
     hazard = ranking.combined_hazard(h_s, h_d, config.alpha)
     order = ranking.rank_order(hazard, rows, cols)
@@ -237,8 +244,9 @@ def default_area(width: int, height: int, config: CoreConfig | None = None) -> D
     return Disc(x=W / 2.0, y=H - r, radius_px=r)
 
 
-def probs_from_labels(ids: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """One-hot class probabilities (8, h, w) float32 at ``size = (w, h)`` from full-resolution ids.
+def probs_from_labels(ids: np.ndarray, size: tuple[int, int], *, labels: LabelSet = UAVID) -> np.ndarray:
+    """One-hot class probabilities (C, h, w) float32 at ``size = (w, h)`` from full-resolution ids of ``labels``
+    (C = ``labels.num_classes``, 8 for the default UAVid).
 
     Conservative pooling: a working pixel that any forbidden source pixel overlaps takes a
     forbidden class (the most frequent forbidden one); the others take the most frequent class.
@@ -248,8 +256,8 @@ def probs_from_labels(ids: np.ndarray, size: tuple[int, int]) -> np.ndarray:
         raise ValueError(f"label map must be 2-D class ids, got shape {ids.shape}")
     if not np.issubdtype(ids.dtype, np.integer):
         raise ValueError(f"label map must hold integer class ids, got {ids.dtype}")
-    pooled = cand.pooled_label_ids(ids, size)
+    pooled = cand.pooled_label_ids(ids, size, labels=labels)
     w, h = size
-    probs = np.zeros((NUM_CLASSES, h, w), dtype=np.float32)
+    probs = np.zeros((labels.num_classes, h, w), dtype=np.float32)
     np.put_along_axis(probs, pooled[None].astype(np.intp), 1.0, axis=0)
     return probs

@@ -28,9 +28,10 @@ from el.decision import Candidate, Decision, Disc, MonitorVerdict
 from el.errors import BudgetExceeded
 from el.hashing import sha256_bytes
 from el.imageio import read_image
+from el.labels import UAVID
 from el.monitors import CandidateContext, Monitor, build_monitor, monitor_name, parse_monitor_spec
 from el.rgb import check_rgb
-from el.segmentation.contract import check_model
+from el.segmentation.contract import check_model, labels_of
 from el.walk import HAZARD, WalkOutcome, walk_candidates
 
 Clock = Callable[[], float]
@@ -170,6 +171,7 @@ class EmergencyLanding:
         self.monitor: Monitor | None = None
         self.walk = HAZARD
         self.ood: Any = None
+        self.labels = UAVID
         try:
             if segmenter is None:
                 from el.segmentation.factory import load_model
@@ -177,6 +179,7 @@ class EmergencyLanding:
                 self.segmenter = load_model(weights)
             else:
                 check_model(segmenter)
+            self.labels = labels_of(self.segmenter)  # the system's label set is the one its network segments into
         except Exception as exc:  # missing/altered weights: every decision is the default action
             self.fault = f"fault: model: {type(exc).__name__}: {exc}"
             logger.exception("segmentation model not loaded; every decision will be the default action")
@@ -185,7 +188,7 @@ class EmergencyLanding:
             self.walk = getattr(parse_monitor_spec(spec), "walk", HAZARD)
             self.monitor = build_monitor(
                 spec, margin=self.config.patch_margin,
-                max_side=self.config.patch_max_side, clock=clock,
+                max_side=self.config.patch_max_side, clock=clock, labels=self.labels,
             )
             if self.monitor is not None and self.segmenter is not None:
                 self.monitor.check_network(self.segmenter)  # a fitted monitor on another network: refused
@@ -259,7 +262,7 @@ class EmergencyLanding:
 
             stage = "candidates"
             t = self.clock()
-            candidates = run_core(probs, size, core_cfg, clock=self.clock).candidates
+            candidates = run_core(probs, size, core_cfg, clock=self.clock, labels=self.labels).candidates
             timings["candidates_s"] = self.clock() - t
             budget.check(stage)
 

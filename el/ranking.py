@@ -4,7 +4,8 @@ Pure functions on arrays, no state. Coordinates are working-resolution pixel ind
 a disc of radius R around pixel (i, j) holds the pixels whose centres lie within R of its centre.
 
 - ``H_s = sum_l m_l s_l / max_l s_l`` with ``m_l`` the mean probability of class l over the disc
-  and ``s_l`` the hazard score of class l (``el.labels.HAZARD_SCORES``; 0 for forbidden classes).
+  and ``s_l`` the hazard score of class l (the label set's ``hazard_scores``, default
+  ``el.labels.UAVID``; 0 for forbidden classes).
 - ``H_d = (d - d_max) / (R - d_max)`` if ``d < d_max`` else 0, ``d_max = d_max_factor * R``,
   with ``d`` the clearance (px) from the centre to the nearest forbidden pixel.
 
@@ -18,7 +19,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from el.labels import HAZARD_SCORES
+from el.labels import UAVID, LabelSet
 
 
 @lru_cache(maxsize=256)
@@ -41,15 +42,18 @@ def semantic_hazard(
     rows: np.ndarray,
     cols: np.ndarray,
     radii: np.ndarray,
-    scores: np.ndarray = HAZARD_SCORES,
+    scores: np.ndarray | None = None,
+    *,
+    labels: LabelSet = UAVID,
 ) -> np.ndarray:
     """H_s of discs centred on pixels (rows, cols) with radii ``radii`` (px), shape (n,).
 
     ``probs`` is (C, H, W) class probabilities; the part of a disc outside the image is ignored
     (a valid candidate's disc lies inside it). Only a crop around each disc is touched, and only
-    the classes with a non-zero score.
+    the classes with a non-zero score. ``scores``: the hazard score per class, by default
+    ``labels.hazard_scores``.
     """
-    scores = np.asarray(scores, dtype=np.float64)
+    scores = np.asarray(labels.hazard_scores if scores is None else scores, dtype=np.float64)
     if probs.ndim != 3 or probs.shape[0] != scores.shape[0]:
         raise ValueError(f"probs must be ({scores.shape[0]}, H, W), got {probs.shape}")
     smax = float(scores.max())

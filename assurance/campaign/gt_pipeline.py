@@ -24,22 +24,22 @@ from el.config import CoreConfig
 from el.core import default_area, probs_from_labels, run_core
 from el.decision import Decision, decision_schema  # noqa: F401  (re-exported)
 from el.hashing import sha256_file
-from el.labels import NUM_CLASSES
+from el.labels import UAVID, LabelSet
 from el.walk import walk_candidates
 
 PIPELINE = "ground_truth"
 logger = logging.getLogger(__name__)  # faults with their tracebacks; the decision keeps only the reason
 
 
-def _check_ids(ids: np.ndarray) -> tuple[int, int]:
+def _check_ids(ids: np.ndarray, labels: LabelSet = UAVID) -> tuple[int, int]:
     ids = np.asarray(ids)
     if ids.ndim != 2 or not np.issubdtype(ids.dtype, np.integer):
         raise ValueError(f"label map must be a 2-D array of integer class ids, got {ids.dtype} {ids.shape}")
     h, w = ids.shape
     if w < 8 or h < 8:
         raise ValueError(f"label map must be at least 8x8, got {w}x{h}")
-    if ids.min() < 0 or ids.max() >= NUM_CLASSES:
-        raise ValueError(f"class ids must lie in 0..{NUM_CLASSES - 1}, got {ids.min()}..{ids.max()}")
+    if ids.min() < 0 or ids.max() >= labels.num_classes:
+        raise ValueError(f"class ids must lie in 0..{labels.num_classes - 1}, got {ids.min()}..{ids.max()}")
     return w, h
 
 
@@ -50,15 +50,17 @@ def decide_from_labels(
     input_info: dict[str, Any] | None = None,
     read_s: float = 0.0,
     clock: Callable[[], float] = time.perf_counter,
+    labels: LabelSet = UAVID,
 ) -> Decision:
     """The decision for a full-resolution class-id map (H, W) under a perfect segmentation.
 
     ``input_info`` goes to the decision's ``"input"`` (path, sha256; width and height are filled
-    in). ``read_s`` is the time already spent reading the input. ValueError for a malformed map;
-    a failure inside the CM gives the default action with reason ``"fault: <error>"``.
+    in). ``read_s`` is the time already spent reading the input. ``labels``: the label set of the
+    ids (default UAVid). ValueError for a malformed map; a failure inside the CM gives the default
+    action with reason ``"fault: <error>"``.
     """
     config = config or CoreConfig()
-    W, H = _check_ids(ids)
+    W, H = _check_ids(ids, labels)
     t0 = clock()
     info = dict(input_info or {})
     info.update(width=W, height=H)
@@ -66,9 +68,9 @@ def decide_from_labels(
     area = default_area(W, H, config)
     timings = {"read_s": float(read_s), "segmentation_s": 0.0, "candidates_s": 0.0, "monitoring_s": 0.0}
     try:
-        probs = probs_from_labels(ids, working_size(W, H, config.working_width))
+        probs = probs_from_labels(ids, working_size(W, H, config.working_width), labels=labels)
         t1 = clock()
-        core = run_core(probs, (W, H), config, clock=clock)
+        core = run_core(probs, (W, H), config, clock=clock, labels=labels)
         t2 = clock()
     except Exception as exc:  # fail safe: any fault ends in the default action, with its reason
         logger.exception("fault in the core model on %s; default action", info.get("path", "?"))
@@ -89,15 +91,16 @@ def decide_from_label_file(
     *,
     image_path: str | Path | None = None,
     config: CoreConfig | None = None,
+    labels: LabelSet = UAVID,
 ) -> tuple[Decision, np.ndarray]:
-    """Read a UAVid colour label PNG and decide; returns (decision, class ids).
+    """Read a colour label PNG (``labels``' palette, UAVid by default) and decide; returns (decision, class ids).
 
     The optional image is only checked for size (it is for drawing) and identified in
     ``input["image"]``. DataError (from ``assurance.scenes.uavid``) for a missing, unreadable or inconsistent file.
     """
     labels_path = Path(labels_path)
     t0 = time.perf_counter()
-    ids = read_labels(labels_path)
+    ids = read_labels(labels_path, labels)
     info: dict[str, Any] = {"path": str(labels_path), "sha256": sha256_file(labels_path), "kind": "labels"}
     if image_path is not None:
         image_path = Path(image_path)
@@ -106,5 +109,5 @@ def decide_from_label_file(
         check_same_size(image_path, labels_path)
         info["image"] = {"path": str(image_path), "sha256": sha256_file(image_path)}
     read_s = time.perf_counter() - t0
-    return decide_from_labels(ids, config=config, input_info=info, read_s=read_s), ids
+    return decide_from_labels(ids, config=config, input_info=info, read_s=read_s, labels=labels), ids
 

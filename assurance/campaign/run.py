@@ -37,6 +37,7 @@ from el.core import run_core
 from el.decision import Candidate
 from el.monitors import DEMO_GRID, build_monitor, parse_monitor_spec
 from el.monitors.spec import walk_of
+from el.segmentation.contract import labels_of
 from el.walk import walk_candidates
 
 
@@ -130,15 +131,17 @@ def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Calla
         rgb, timings["read_s"] = _timed(clock, read_image, s.image_path)
         if s.label_path is None:
             raise ValueError(f"{s.image_path}: no label map (the campaign needs ground truth)")
-        ids = read_labels(s.label_path)
+        labels = labels_of(segmenter)
+        ids = read_labels(s.label_path, labels=labels)
         if ids.shape != rgb.shape[:2]:
             raise ValueError(f"{s.label_path}: label size differs from the image")
         rng = np.random.default_rng(task_seed(config.seed, s.key, task.perturbation, task.severity))
         hd, timings["perturb_s"] = _timed(clock, perturb, rgb, task.perturbation, task.severity, rng)
         probs, timings["segmentation_s"] = _timed(clock, segmenter.predict_frame, hd)
         H, W = hd.shape[:2]
-        core, timings["candidates_s"] = _timed(clock, run_core, probs, (W, H), config.core)
-        monitors = [build_monitor(m, margin=config.patch_margin, max_side=config.patch_max_side, clock=clock)
+        core, timings["candidates_s"] = _timed(clock, run_core, probs, (W, H), config.core, labels=labels)
+        monitors = [build_monitor(m, margin=config.patch_margin, max_side=config.patch_max_side, clock=clock,
+                                  labels=labels)
                     for m in config.monitors]
         if expected_models is not None:
             _check_models(config.monitors, monitors, expected_models)
@@ -152,9 +155,9 @@ def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Calla
         return {"images": [row], "candidates": []}
 
     cands = core.candidates
-    truth = [true_hazard(ids, c.disc) for c in cands]
+    truth = [true_hazard(ids, c.disc, labels=labels) for c in cands]
     clearance = _clearance(world_clearance, s, (W, H), cands)
-    h_default = true_hazard(ids, core.default_area)
+    h_default = true_hazard(ids, core.default_area, labels=labels)
     thresholds = [m.threshold for m in monitors]
     image_rows, cand_rows = [], []
     for j, name in enumerate(config.monitors):

@@ -12,7 +12,7 @@ import numpy as np
 
 from el.decision import Disc
 from el.discs import disc_bounds, disc_window_mask
-from el.labels import FORBIDDEN_LUT, HAZARD_SCORES, MAX_HAZARD_SCORE, NUM_CLASSES
+from el.labels import UAVID, LabelSet
 
 KAPPA = 0.5
 
@@ -26,11 +26,14 @@ def disc_pixels(ids: np.ndarray, disc: Disc) -> np.ndarray:
     return ids[y0:y1, x0:x1][disc_window_mask(disc, x0, y0, x1, y1)]
 
 
-def true_hazard(ids: np.ndarray, disc: Disc, *, kappa: float = KAPPA) -> float:
-    """True hazard in [0, 1] of landing on ``disc`` given the full-resolution class ids (H, W)."""
+def true_hazard(ids: np.ndarray, disc: Disc, *, kappa: float = KAPPA, labels: LabelSet = UAVID) -> float:
+    """True hazard in [0, 1] of landing on ``disc`` given the full-resolution class ids (H, W) of ``labels``
+    (default UAVid). A set whose safe classes all score 0 gives a safe disc a hazard of 0."""
     pix = disc_pixels(ids, disc)
-    if pix.size == 0 or FORBIDDEN_LUT[pix].any():
+    if pix.size == 0 or labels.forbidden_lut[pix].any():
         return 1.0
-    shares = np.bincount(pix, minlength=NUM_CLASSES) / pix.size
-    return float((1.0 - kappa) * (shares @ HAZARD_SCORES) / MAX_HAZARD_SCORE)
+    if labels.max_hazard_score <= 0:
+        return 0.0
+    shares = np.bincount(pix, minlength=labels.num_classes) / pix.size
+    return float((1.0 - kappa) * (shares @ labels.hazard_scores) / labels.max_hazard_score)
 

@@ -17,7 +17,7 @@ import numpy as np
 from assurance.files import atomic_write_bytes, public_mode  # noqa: F401  (re-exported)
 from el.errors import DataError
 from el.imageio import read_image
-from el.labels import colors_to_ids, ids_to_colors
+from el.labels import UAVID, LabelSet
 from el.rgb import check_rgb
 
 IMAGE_DIR = "Images"
@@ -39,14 +39,15 @@ def write_image(path: str | Path, rgb: np.ndarray, *, compression: int = 3) -> N
     atomic_write_bytes(path, buf.tobytes())
 
 
-def read_labels(path: str | Path) -> np.ndarray:
-    """Read a colour-coded UAVid label PNG as class ids (H, W) uint8; unknown colours are an error."""
-    return colors_to_ids(read_image(path), source=path)
+def read_labels(path: str | Path, labels: LabelSet = UAVID) -> np.ndarray:
+    """Read a colour-coded label PNG (``labels``' palette, UAVid by default) as class ids (H, W) uint8;
+    unknown colours are an error."""
+    return labels.colors_to_ids(read_image(path), source=path)
 
 
-def write_labels(path: str | Path, ids: np.ndarray) -> None:
-    """Write class ids (H, W) as a colour-coded UAVid label PNG."""
-    write_image(path, ids_to_colors(ids))
+def write_labels(path: str | Path, ids: np.ndarray, labels: LabelSet = UAVID) -> None:
+    """Write class ids (H, W) as a colour-coded label PNG (``labels``' palette, UAVid by default)."""
+    write_image(path, labels.ids_to_colors(ids))
 
 
 @dataclass(frozen=True)

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
 import numpy as np
 
 from el.decision import Candidate, Disc, MonitorVerdict
-from el.labels import NUM_CLASSES
+from el.labels import UAVID, LabelSet
 from el.monitors.patches import Patch, extract_patch, validate_patch_params
 
 if TYPE_CHECKING:
@@ -66,12 +66,25 @@ def validate_mask(disc_mask: object) -> np.ndarray:
     return disc_mask
 
 
-def validate_scores(scores: object, shape: tuple[int, int], what: str = "scores") -> np.ndarray:
-    """Check per-class scores: ndarray of shape (8, h, w), real, finite."""
+def _num_classes(labels: LabelSet | None, array: np.ndarray, axis: int) -> int:
+    """The class count a monitor checks against: its label set's, or (None) the array's own, at least 1."""
+    if labels is not None:
+        return labels.num_classes
+    return max(1, array.shape[axis]) if array.ndim > axis else 1
+
+
+def validate_scores(scores: object, shape: tuple[int, int], what: str = "scores", *,
+                    labels: LabelSet | None = UAVID) -> np.ndarray:
+    """Check per-class scores: ndarray of shape (C, h, w), real, finite.
+
+    C is ``labels.num_classes`` (the monitor's label set; 8 for the default UAVid), or, with
+    ``labels=None``, whatever the array holds.
+    """
     if not isinstance(scores, np.ndarray):
         raise ValueError(f"{what} must be a numpy array, got {type(scores).__name__}")
-    if scores.shape != (NUM_CLASSES, *shape):
-        raise ValueError(f"{what} must have shape {(NUM_CLASSES, *shape)}, got {scores.shape}")
+    n = _num_classes(labels, scores, 0)
+    if scores.shape != (n, *shape):
+        raise ValueError(f"{what} must have shape {(n, *shape)}, got {scores.shape}")
     if not np.issubdtype(scores.dtype, np.floating):
         raise ValueError(f"{what} must be floating point, got {scores.dtype}")
     if not np.isfinite(scores).all():
@@ -79,13 +92,19 @@ def validate_scores(scores: object, shape: tuple[int, int], what: str = "scores"
     return scores
 
 
-def validate_samples(samples: object, shape: tuple[int, int], n: int) -> np.ndarray:
-    """Check MC-dropout samples: ndarray of shape (n', 8, h, w) with n' >= n, real, finite."""
+def validate_samples(samples: object, shape: tuple[int, int], n: int, *,
+                     labels: LabelSet | None = UAVID) -> np.ndarray:
+    """Check MC-dropout samples: ndarray of shape (n', C, h, w) with n' >= n, real, finite.
+
+    C as in :func:`validate_scores`: ``labels.num_classes``, or the array's own with ``labels=None``.
+    """
     if not isinstance(samples, np.ndarray) or samples.ndim != 4:
         got = getattr(samples, "shape", samples)
-        raise ValueError(f"MC samples must be a 4-D array (n, {NUM_CLASSES}, h, w), got {got!r}")
-    if samples.shape[1:] != (NUM_CLASSES, *shape):
-        want = f"(n, {NUM_CLASSES}, {shape[0]}, {shape[1]})"
+        c = "C" if labels is None else labels.num_classes
+        raise ValueError(f"MC samples must be a 4-D array (n, {c}, h, w), got {got!r}")
+    c = _num_classes(labels, samples, 1)
+    if samples.shape[1:] != (c, *shape):
+        want = f"(n, {c}, {shape[0]}, {shape[1]})"
         raise ValueError(f"MC samples must have shape {want}, got {samples.shape}")
     if samples.shape[0] < n:
         raise ValueError(f"{n} MC samples needed, got {samples.shape[0]}")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 
+from el.labels import UAVID, LabelSet
 from el.monitors.base import Clock, Monitor
 from el.monitors.ch import CHMonitor
 from el.monitors.hierarchy import ClassHierarchy
@@ -13,14 +14,29 @@ from el.monitors.registry import monitor_entry
 from el.monitors.spec import GenericSpec, MonitorSpec, parse_monitor_spec
 
 
-def _build_registered(spec: GenericSpec, **common: object) -> Monitor:
-    """A registered monitor from its spec; checks that it is a Monitor and names itself as asked."""
+def _build_registered(spec: GenericSpec, labels: LabelSet = UAVID, **common: object) -> Monitor:
+    """A registered monitor from its spec; checks that it is a Monitor and names itself as asked.
+
+    A label set other than the default is passed as ``labels=`` (a monitor that does not take one
+    is refused for it); with the default, the factory is called as before, without it.
+    """
     entry = monitor_entry(spec.kind)
-    monitor = entry.factory(**spec.kwargs(), **common)
+    if labels == UAVID:
+        monitor = entry.factory(**spec.kwargs(), **common)
+    else:
+        try:
+            monitor = entry.factory(**spec.kwargs(), **common, labels=labels)
+        except TypeError as exc:
+            if "labels" not in str(exc):
+                raise
+            raise ValueError(f"monitor {spec.kind!r} ({entry.source}) does not take a label set "
+                             f"(asked for {labels.name!r})") from None
     if not isinstance(monitor, Monitor):
         raise ValueError(f"monitor {spec.kind!r} ({entry.source}) built a {type(monitor).__name__}, not a Monitor")
     if getattr(monitor.spec, "kind", None) != spec.kind:
         raise ValueError(f"monitor {spec.kind!r} ({entry.source}) names itself {monitor.name!r}")
+    if getattr(monitor, "labels", UAVID) != labels:
+        raise ValueError(f"monitor {spec.kind!r} ({entry.source}) ignored the label set {labels.name!r}")
     return monitor
 
 
@@ -31,6 +47,7 @@ def build_monitor(
     max_side: int | None = None,
     clock: Clock = time.perf_counter,
     hierarchy: ClassHierarchy | None = None,
+    labels: LabelSet = UAVID,
 ) -> Monitor | None:
     """Build the monitor a spec names; ``"none"`` (or None) gives None: no runtime monitor.
 
@@ -42,7 +59,9 @@ def build_monitor(
     margin, max_side, clock
         Patch geometry and timing, shared by every monitor kind (see ``Monitor``).
     hierarchy : ClassHierarchy, optional
-        For CH; defaults to the shipped ``hierarchy.yaml``.
+        For CH; defaults to the label set's (the shipped ``hierarchy.yaml`` for UAVid).
+    labels : LabelSet, default ``el.labels.UAVID``
+        The label set of the segmenter's scores (``segmenter.labels``), given to the monitor.
 
     Raises
     ------
@@ -60,8 +79,8 @@ def build_monitor(
     if parsed is None:
         return None
     if isinstance(parsed, GenericSpec):
-        return _build_registered(parsed, margin=margin, max_side=max_side, clock=clock)
-    common = {"margin": margin, "max_side": max_side, "clock": clock, "threshold": parsed.threshold}
+        return _build_registered(parsed, labels, margin=margin, max_side=max_side, clock=clock)
+    common = {"margin": margin, "max_side": max_side, "clock": clock, "threshold": parsed.threshold, "labels": labels}
     rule: LHDMonitor
     if parsed.tau is not None:
         rule = CHMonitor(tau=parsed.tau, hierarchy=hierarchy, **common)

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from el.forbidden import forbidden_pixels
-from el.labels import NUM_CLASSES
+from el.labels import UAVID, LabelSet
 from el.monitors.base import format_counts
 from el.monitors.hierarchy import ClassHierarchy, default_hierarchy
 from el.monitors.lhd import EMPTY_DISC, LHDMonitor, forbidden_counts, lhd_reason
@@ -19,13 +19,13 @@ from el.monitors.spec import MonitorSpec, validate_tau
 
 
 def rejected_label_counts(pixel_scores: np.ndarray, tau: float, hierarchy: ClassHierarchy) -> dict[str, int]:
-    """Count of pixels per rejected hierarchy label, for pixel scores (8, m).
+    """Count of pixels per rejected hierarchy label, for pixel scores (C, m) of the hierarchy's label set.
 
     Only inner nodes are counted (``any``, ``unsafe``): a pixel labelled with a forbidden class
     has that class as its only one above tau, hence as its top class, and LHD already counts it.
     """
     labels = hierarchy.label(pixel_scores, tau)
-    bad = labels[hierarchy.rejected[labels] & (labels >= NUM_CLASSES)]
+    bad = labels[hierarchy.rejected[labels] & (labels >= hierarchy.labels.num_classes)]
     if bad.size == 0:
         return {}
     ids, counts = np.unique(bad, return_counts=True)
@@ -33,12 +33,12 @@ def rejected_label_counts(pixel_scores: np.ndarray, tau: float, hierarchy: Class
 
 
 def ch_rule(pixel_scores: np.ndarray, tau: float, hierarchy: ClassHierarchy) -> tuple[bool, str]:
-    """LHD + CH on the disc's pixel scores (8, m): ``(accepted, reason)``."""
+    """LHD + CH on the disc's pixel scores (C, m) of the hierarchy's label set: ``(accepted, reason)``."""
     m = pixel_scores.shape[1]
     if m == 0:
         return False, EMPTY_DISC
     parts = []
-    forbidden = forbidden_counts(pixel_scores)
+    forbidden = forbidden_counts(pixel_scores, hierarchy.labels)
     if forbidden:
         parts.append(lhd_reason(forbidden))
     uncertain = rejected_label_counts(pixel_scores, tau, hierarchy)
@@ -57,15 +57,21 @@ class CHMonitor(LHDMonitor):
     tau : float in (0, 1)
         A class takes part in a pixel's label when its score is strictly above tau.
     hierarchy : ClassHierarchy, optional
-        Defaults to the shipped ``hierarchy.yaml``.
+        Defaults to the label set's (``default_hierarchy(labels)``: the shipped ``hierarchy.yaml`` for UAVid);
+        one given must be over ``labels``.
+    labels : LabelSet, default ``el.labels.UAVID``
+        The label set of the segmenter's scores.
     margin, max_side, clock
         See ``Monitor``.
     """
 
-    def __init__(self, *, tau: float, hierarchy: ClassHierarchy | None = None, **kwargs):
-        super().__init__(**kwargs)
+    def __init__(self, *, tau: float, hierarchy: ClassHierarchy | None = None, labels: LabelSet = UAVID, **kwargs):
+        super().__init__(labels=labels, **kwargs)
         self.tau = validate_tau(tau)
-        self.hierarchy = hierarchy if hierarchy is not None else default_hierarchy()
+        self.hierarchy = hierarchy if hierarchy is not None else default_hierarchy(labels)
+        if self.hierarchy.labels != labels:
+            raise ValueError(f"the CH hierarchy is over the label set {self.hierarchy.labels.name!r}, "
+                             f"the monitor's is {labels.name!r}")
 
     @property
     def spec(self) -> MonitorSpec:
@@ -77,5 +83,5 @@ class CHMonitor(LHDMonitor):
     def rejected_pixels(self, pixel_scores: np.ndarray) -> np.ndarray:
         """(m,) bool: forbidden by argmax, or labelled with a hierarchy node that has a forbidden class under it."""
         labels = self.hierarchy.label(pixel_scores, self.tau)
-        return forbidden_pixels(pixel_scores) | self.hierarchy.rejected[labels]
+        return forbidden_pixels(pixel_scores, self.labels) | self.hierarchy.rejected[labels]
 

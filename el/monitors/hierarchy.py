@@ -5,6 +5,9 @@ With 8 classes a pixel's "classes above tau" is an 8-bit mask, so the LCA of eve
 precomputed once (256 entries) and labelling a patch is a table look-up (docs/architecture.md section 3.6).
 
 Node ids: the leaves keep their class ids (0..7, el/labels.py); inner nodes follow (8, 9, ...).
+
+A hierarchy belongs to a label set (``labels``, default :data:`el.labels.UAVID`): its classes are the
+leaves. :func:`default_hierarchy` gives the set's own tree (the shipped file for UAVid).
 """
 
 from __future__ import annotations
@@ -18,28 +21,31 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from el.labels import CLASS_NAMES, FORBIDDEN_LUT, NUM_CLASSES
+from el.labels import UAVID, LabelSet
 
 HIERARCHY_FILE = "hierarchy.yaml"
+MAX_HIERARCHY_CLASSES = 16  # a pixel's classes above tau are a 16-bit mask; the LCA table has 2**n entries
 
 
 @dataclass(frozen=True, eq=False)
 class ClassHierarchy:
-    """A class tree over the UAVid classes, with its LCA table and the nodes a monitor rejects.
+    """A class tree over a label set's classes (UAVid by default), with its LCA table and the nodes a monitor rejects.
 
     Parameters
     ----------
     nodes : tuple of str
-        Node names; ``nodes[i]`` is node id ``i``. The first ``NUM_CLASSES`` are the classes, in
+        Node names; ``nodes[i]`` is node id ``i``. The first ``num_classes`` are the classes, in
         class-id order.
     parents : tuple of int
         Parent node id of each node, ``-1`` for the root.
+    labels : LabelSet, default UAVID
+        The label set whose classes are the leaves (at most 16 classes).
 
     Attributes
     ----------
     root : int
         The root's node id (the label of a pixel with no class above tau).
-    lca_table : ndarray of shape (2**NUM_CLASSES,), int16
+    lca_table : ndarray of shape (2**num_classes,), int16
         ``lca_table[m]`` is the LCA of the classes whose bits are set in ``m`` (the root for ``m = 0``).
     rejected : ndarray of shape (len(nodes),), bool
         True for nodes with a forbidden class under them (the root, ``unsafe`` and the forbidden
@@ -48,13 +54,18 @@ class ClassHierarchy:
 
     nodes: tuple[str, ...]
     parents: tuple[int, ...]
+    labels: LabelSet = field(default=UAVID, repr=False)
     root: int = field(init=False)
     lca_table: np.ndarray = field(init=False, repr=False)
     rejected: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        if tuple(self.nodes[:NUM_CLASSES]) != CLASS_NAMES:
-            raise ValueError(f"the first {NUM_CLASSES} nodes must be the classes {CLASS_NAMES}")
+        n_classes, class_names = self.labels.num_classes, self.labels.names
+        if n_classes > MAX_HIERARCHY_CLASSES:
+            raise ValueError(f"a class hierarchy supports at most {MAX_HIERARCHY_CLASSES} classes, "
+                             f"the label set {self.labels.name!r} has {n_classes}")
+        if tuple(self.nodes[:n_classes]) != class_names:
+            raise ValueError(f"the first {n_classes} nodes must be the classes {class_names}")
         if len(set(self.nodes)) != len(self.nodes):
             raise ValueError(f"node names must be unique, got {self.nodes}")
         if len(self.parents) != len(self.nodes):
@@ -63,16 +74,16 @@ class ClassHierarchy:
         if len(roots) != 1:
             raise ValueError(f"the hierarchy needs exactly one root, got {[self.nodes[i] for i in roots]}")
         paths = [self._path_to_root(i) for i in range(len(self.nodes))]
-        for i in range(NUM_CLASSES, len(self.nodes)):
+        for i in range(n_classes, len(self.nodes)):
             if i not in self.parents:
                 raise ValueError(f"inner node {self.nodes[i]!r} has no children")
-        for i in range(NUM_CLASSES):
+        for i in range(n_classes):
             if i in self.parents:
                 raise ValueError(f"class {self.nodes[i]!r} must be a leaf")
 
-        table = np.empty(2**NUM_CLASSES, dtype=np.int16)
-        for m in range(2**NUM_CLASSES):
-            leaves = [k for k in range(NUM_CLASSES) if m >> k & 1]
+        table = np.empty(2**n_classes, dtype=np.int16)
+        for m in range(2**n_classes):
+            leaves = [k for k in range(n_classes) if m >> k & 1]
             if not leaves:
                 table[m] = roots[0]
                 continue
@@ -81,8 +92,8 @@ class ClassHierarchy:
                 common &= set(paths[k])
             # The LCA is the deepest common ancestor: the first one met on a leaf's way up.
             table[m] = next(a for a in paths[leaves[0]] if a in common)
-        under = [[k for k in range(NUM_CLASSES) if i in paths[k]] for i in range(len(self.nodes))]
-        rejected = np.array([bool(FORBIDDEN_LUT[leaves].any()) for leaves in under], dtype=bool)
+        under = [[k for k in range(n_classes) if i in paths[k]] for i in range(len(self.nodes))]
+        rejected = np.array([bool(self.labels.forbidden_lut[leaves].any()) for leaves in under], dtype=bool)
         table.setflags(write=False)
         rejected.setflags(write=False)
         object.__setattr__(self, "root", roots[0])
@@ -100,9 +111,11 @@ class ClassHierarchy:
 
     # -- construction -------------------------------------------------------------------------
     @classmethod
-    def from_mapping(cls, root: str, children: Mapping[str, Sequence[str]]) -> ClassHierarchy:
-        """Build from a root name and ``{parent: [children]}``; every class must be a leaf, once."""
-        names = list(CLASS_NAMES)
+    def from_mapping(cls, root: str, children: Mapping[str, Sequence[str]], *,
+                     labels: LabelSet = UAVID) -> ClassHierarchy:
+        """Build from a root name and ``{parent: [children]}``; every class of ``labels`` must be a leaf, once."""
+        class_names = labels.names
+        names = list(class_names)
         parent_of: dict[str, str] = {}
         for parent, kids in children.items():
             if isinstance(kids, str) or not isinstance(kids, Sequence):
@@ -115,9 +128,9 @@ class ClassHierarchy:
         for kid in parent_of:
             if kid not in names and kid not in inner:
                 raise ValueError(
-                    f"node {kid!r} is neither a class {CLASS_NAMES} nor an inner node with children"
+                    f"node {kid!r} is neither a class {class_names} nor an inner node with children"
                 )
-        missing = [c for c in CLASS_NAMES if c not in parent_of]
+        missing = [c for c in class_names if c not in parent_of]
         if missing:
             raise ValueError(f"classes missing from the hierarchy: {missing}")
         if root in parent_of:
@@ -128,21 +141,21 @@ class ClassHierarchy:
         names += [p for p in inner if p not in names]
         index = {n: i for i, n in enumerate(names)}
         parents = tuple(-1 if n == root else index[parent_of[n]] for n in names)
-        return cls(nodes=tuple(names), parents=parents)
+        return cls(nodes=tuple(names), parents=parents, labels=labels)
 
     @classmethod
-    def from_yaml(cls, path: str | Path) -> ClassHierarchy:
+    def from_yaml(cls, path: str | Path, *, labels: LabelSet = UAVID) -> ClassHierarchy:
         """Load a hierarchy file: ``root: NAME`` and ``children: {parent: [children]}``."""
         text = Path(path).read_text(encoding="utf-8")
-        return cls._from_text(text, str(path))
+        return cls._from_text(text, str(path), labels=labels)
 
     @classmethod
-    def _from_text(cls, text: str, source: str) -> ClassHierarchy:
+    def _from_text(cls, text: str, source: str, *, labels: LabelSet = UAVID) -> ClassHierarchy:
         data = yaml.safe_load(text)
         if not isinstance(data, dict) or "root" not in data or not isinstance(data.get("children"), dict):
             raise ValueError(f"{source}: a hierarchy needs 'root: NAME' and 'children: {{parent: [...]}}'")
         try:
-            return cls.from_mapping(str(data["root"]), data["children"])
+            return cls.from_mapping(str(data["root"]), data["children"], labels=labels)
         except ValueError as err:
             raise ValueError(f"{source}: {err}") from None
 
@@ -152,7 +165,7 @@ class ClassHierarchy:
 
         Parameters
         ----------
-        scores : ndarray of shape (NUM_CLASSES, ...), float
+        scores : ndarray of shape (num_classes, ...), float
             Per-class scores (softmax, or the MCD score ``mu + 3 sigma``).
         tau : float
             Threshold.
@@ -162,10 +175,11 @@ class ClassHierarchy:
         ndarray of shape (...), int16
         """
         scores = np.asarray(scores)
-        if scores.ndim < 1 or scores.shape[0] != NUM_CLASSES:
-            raise ValueError(f"scores must have shape ({NUM_CLASSES}, ...), got {scores.shape}")
+        n_classes = self.labels.num_classes
+        if scores.ndim < 1 or scores.shape[0] != n_classes:
+            raise ValueError(f"scores must have shape ({n_classes}, ...), got {scores.shape}")
         bits = np.zeros(scores.shape[1:], dtype=np.uint16)
-        for k in range(NUM_CLASSES):
+        for k in range(n_classes):
             bits |= (scores[k] > tau).astype(np.uint16) << k
         return self.lca_table[bits]
 
@@ -184,8 +198,29 @@ class ClassHierarchy:
         return tuple(n for n, r in zip(self.nodes, self.rejected, strict=True) if r)
 
 
-@lru_cache(maxsize=1)
-def default_hierarchy() -> ClassHierarchy:
-    """The shipped tree (``el/monitors/hierarchy.yaml``), loaded once."""
-    text = resources.files("el.monitors").joinpath(HIERARCHY_FILE).read_text(encoding="utf-8")
-    return ClassHierarchy._from_text(text, f"el/monitors/{HIERARCHY_FILE}")
+def default_hierarchy(labels: LabelSet = UAVID) -> ClassHierarchy:
+    """A label set's tree, built once per set.
+
+    UAVid (the default): the shipped ``el/monitors/hierarchy.yaml``. Another set: its own
+    ``hierarchy`` when it has one, else ``any -> {safe, unsafe}`` with the safe and the forbidden
+    classes under them (the shape of the shipped tree).
+    """
+    return _hierarchy_of(labels)
+
+
+@lru_cache(maxsize=16)
+def _hierarchy_of(labels: LabelSet) -> ClassHierarchy:
+    if labels == UAVID:
+        text = resources.files("el.monitors").joinpath(HIERARCHY_FILE).read_text(encoding="utf-8")
+        return ClassHierarchy._from_text(text, f"el/monitors/{HIERARCHY_FILE}")
+    if labels.hierarchy is not None:
+        return ClassHierarchy.from_mapping(labels.hierarchy["root"], labels.hierarchy["children"], labels=labels)
+    inner = ("any", "safe", "unsafe")
+    taken = [n for n in inner if n in labels.names]
+    if taken:
+        raise ValueError(f"label set {labels.name!r} has classes named {taken}: give it a 'hierarchy' for CH")
+    return ClassHierarchy.from_mapping("any", {
+        "any": ["safe", "unsafe"],
+        "safe": [labels.names[i] for i in labels.safe_ids],
+        "unsafe": [labels.names[i] for i in labels.forbidden_ids],
+    }, labels=labels)

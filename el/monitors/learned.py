@@ -19,6 +19,10 @@ the HD patch, probability quantiles and entropies added nothing there.) Optional
 (:data:`MCD_FEATURES`, when the model file asks for ``mcd.n`` > 0 samples): the mean and largest
 standard deviation of the forbidden probability over MC-dropout samples in the disc.
 
+"Forbidden" is the label set's word (``labels``, default :data:`el.labels.UAVID`); the per-class
+features are named after its forbidden classes (:func:`base_features`), so a model is fitted and
+flown with one label set.
+
 The model file is plain JSON (no pickle), a card like the calibration card: ``{"format", "body",
 "sha256"}`` with the SHA-256 of the body's canonical JSON; the body holds the feature names, the
 standardisation (``mean``, ``scale``), the logistic regression's ``coef`` and ``intercept``, the
@@ -42,7 +46,7 @@ from el.decision import Disc
 from el.discs import disc_window_mask
 from el.errors import LearnedModelError
 from el.forbidden import argmax_slack, forbidden_pixels
-from el.labels import CLASS_NAMES, FORBIDDEN_IDS
+from el.labels import UAVID, LabelSet
 from el.monitors.base import CandidateContext, Judgement, PatchSegmenter, validate_scores
 from el.monitors.lhd import LHDMonitor, take_disc
 from el.monitors.patches import Patch
@@ -54,41 +58,53 @@ DEFAULT_MODEL = Path(__file__).resolve().parent / "data" / "learned.json"
 
 _DISC_STATS = ("max_forbidden_p", "mean_forbidden_p", "forbidden_fraction", "max_margin")
 CONTEXT_SCALES: tuple[float, ...] = (1.5, 2.0, 3.0)  # context discs, in radii of the safe disc
-_FORBIDDEN = np.array(FORBIDDEN_IDS)
-_FORBIDDEN_NAMES = tuple(CLASS_NAMES[i] for i in FORBIDDEN_IDS)
+_FORBIDDEN = np.array(UAVID.forbidden_ids)  # the default set's
 CORE_FEATURES: tuple[str, ...] = (
     *(f"lr_{s}" for s in _DISC_STATS),
     *(f"hd_{s}" for s in _DISC_STATS),
     "edge_distance_radii", "row", "radius", "hazard",
 )
-CONTEXT_FEATURES: tuple[str, ...] = (
-    *(f"ctx{k:g}_{s}" for k in CONTEXT_SCALES for s in ("max_forbidden_p", "mean_forbidden_p")),
-    *(f"hd_max_p_{c}" for c in _FORBIDDEN_NAMES),
-    *(f"lr_max_p_{c}" for c in _FORBIDDEN_NAMES),
-)
+
+
+def context_features(labels: LabelSet = UAVID) -> tuple[str, ...]:
+    """The context feature names (:data:`CONTEXT_FEATURES` for the default set): per forbidden class of ``labels``."""
+    names = tuple(labels.names[i] for i in labels.forbidden_ids)
+    return (
+        *(f"ctx{k:g}_{s}" for k in CONTEXT_SCALES for s in ("max_forbidden_p", "mean_forbidden_p")),
+        *(f"hd_max_p_{c}" for c in names),
+        *(f"lr_max_p_{c}" for c in names),
+    )
+
+
+def base_features(labels: LabelSet = UAVID) -> tuple[str, ...]:
+    """The names of :func:`candidate_features`' vector without MC dropout (:data:`BASE_FEATURES` for UAVid)."""
+    return CORE_FEATURES + context_features(labels)
+
+
+CONTEXT_FEATURES: tuple[str, ...] = context_features(UAVID)
 BASE_FEATURES: tuple[str, ...] = CORE_FEATURES + CONTEXT_FEATURES
 MCD_FEATURES: tuple[str, ...] = ("mcd_mean_std", "mcd_max_std")
 
 
 # -- features ------------------------------------------------------------------------------------
-def disc_stats(pixel_scores: np.ndarray) -> list[float]:
-    """The four disc statistics (:data:`_DISC_STATS`) of the softmax of the disc's pixels (8, m)."""
+def disc_stats(pixel_scores: np.ndarray, labels: LabelSet = UAVID) -> list[float]:
+    """The four disc statistics (:data:`_DISC_STATS`) of the softmax of the disc's pixels (C, m)."""
     if pixel_scores.shape[1] == 0:
         return [1.0, 1.0, 1.0, 1.0]  # nothing seen: as bad as it gets
     p = pixel_scores.astype(np.float64)
-    forbidden_p = p[_FORBIDDEN].sum(axis=0)
+    forbidden_p = p[np.array(labels.forbidden_ids)].sum(axis=0)
     return [float(forbidden_p.max()), float(forbidden_p.mean()),
-            float(np.count_nonzero(forbidden_pixels(p)) / p.shape[1]), float(argmax_slack(p).max())]
+            float(np.count_nonzero(forbidden_pixels(p, labels)) / p.shape[1]), float(argmax_slack(p, labels).max())]
 
 
-def class_max(pixel_scores: np.ndarray) -> list[float]:
-    """The largest probability of each forbidden class over the disc's pixels (8, m)."""
+def class_max(pixel_scores: np.ndarray, labels: LabelSet = UAVID) -> list[float]:
+    """The largest probability of each forbidden class over the disc's pixels (C, m)."""
     if pixel_scores.shape[1] == 0:
-        return [1.0] * len(FORBIDDEN_IDS)
-    return [float(v) for v in pixel_scores[_FORBIDDEN].max(axis=1)]
+        return [1.0] * len(labels.forbidden_ids)
+    return [float(v) for v in pixel_scores[np.array(labels.forbidden_ids)].max(axis=1)]
 
 
-def context_stats(frame: np.ndarray, candidate: Any, scale: float) -> list[float]:
+def context_stats(frame: np.ndarray, candidate: Any, scale: float, labels: LabelSet = UAVID) -> list[float]:
     """Largest and mean forbidden probability of the frame's softmax in discs of :data:`CONTEXT_SCALES`
     radii centred on the candidate (its safe disc and what lies just beyond it)."""
     h, w = frame.shape[1:]
@@ -97,10 +113,11 @@ def context_stats(frame: np.ndarray, candidate: Any, scale: float) -> list[float
     x0, y0 = min(max(int(cx - reach), 0), w - 1), min(max(int(cy - reach), 0), h - 1)
     x1, y1 = max(min(int(cx + reach) + 1, w), x0 + 1), max(min(int(cy + reach) + 1, h), y0 + 1)
     window = frame[:, y0:y1, x0:x1]
+    forbidden = np.array(labels.forbidden_ids)
     out: list[float] = []
     for k in CONTEXT_SCALES:
         mask = frame_disc_mask((h, w), candidate, scale, radii=k, window=(x0, y0, x1, y1))
-        forbidden_p = take_disc(window, mask)[_FORBIDDEN].astype(np.float64).sum(axis=0)
+        forbidden_p = take_disc(window, mask)[forbidden].astype(np.float64).sum(axis=0)
         out += [float(forbidden_p.max()), float(forbidden_p.mean())]
     return out
 
@@ -123,14 +140,15 @@ def frame_disc_mask(shape: tuple[int, int], candidate: Any, scale: float, *, rad
     return mask
 
 
-def edge_distance(patch_probs: np.ndarray, patch: Patch, candidate: Any, margin: float) -> float:
+def edge_distance(patch_probs: np.ndarray, patch: Patch, candidate: Any, margin: float,
+                  labels: LabelSet = UAVID) -> float:
     """Distance from the disc's edge to the nearest predicted-forbidden pixel of the HD patch, in radii.
 
     < 0 when one lies inside the disc (-1 at the centre); the patch's reach ``(1 + margin) sqrt(2) - 1``
     when the patch holds none. Patch pixel centres are mapped back to full-resolution coordinates.
     """
     cap = (1.0 + margin) * math.sqrt(2.0) - 1.0
-    ys, xs = np.nonzero(forbidden_pixels(patch_probs))
+    ys, xs = np.nonzero(forbidden_pixels(patch_probs, labels))
     if ys.size == 0:
         return cap
     x = patch.offset[0] + (xs + 0.5) / patch.scale - candidate.x
@@ -139,43 +157,45 @@ def edge_distance(patch_probs: np.ndarray, patch: Patch, candidate: Any, margin:
     return min(max(d, -1.0), cap)
 
 
-def mcd_spread(samples: np.ndarray, disc_mask: np.ndarray) -> list[float]:
-    """Mean and largest standard deviation, over MC-dropout samples (n, 8, h, w), of the disc's
+def mcd_spread(samples: np.ndarray, disc_mask: np.ndarray, labels: LabelSet = UAVID) -> list[float]:
+    """Mean and largest standard deviation, over MC-dropout samples (n, C, h, w), of the disc's
     forbidden probability (:data:`MCD_FEATURES`)."""
     p = take_disc(samples, disc_mask).astype(np.float64)  # (n, 8, m)
     if p.shape[-1] == 0:
         return [0.0, 0.0]
-    std = p[:, _FORBIDDEN].sum(axis=1).std(axis=0)
+    std = p[:, np.array(labels.forbidden_ids)].sum(axis=1).std(axis=0)
     return [float(std.mean()), float(std.max())]
 
 
 def candidate_features(patch_probs: np.ndarray, patch: Patch, context: CandidateContext, *, margin: float,
-                       mcd_samples: np.ndarray | None = None) -> np.ndarray:
-    """The feature vector of one candidate: :data:`BASE_FEATURES`, then :data:`MCD_FEATURES` with samples.
+                       mcd_samples: np.ndarray | None = None, labels: LabelSet = UAVID) -> np.ndarray:
+    """The feature vector of one candidate: :func:`base_features` (:data:`BASE_FEATURES` for UAVid), then
+    :data:`MCD_FEATURES` with samples.
 
-    ``patch_probs``: the HD patch's softmax (8, h, w); ``context``: the candidate and the frame's softmax.
+    ``patch_probs``: the HD patch's softmax (C, h, w) over ``labels``; ``context``: the candidate and the
+    frame's softmax.
     """
-    validate_scores(patch_probs, patch.shape, "patch softmax")
+    validate_scores(patch_probs, patch.shape, "patch softmax", labels=labels)
     frame = context.frame_probs
     if not isinstance(frame, np.ndarray) or frame.ndim != 3 or frame.shape[0] != patch_probs.shape[0]:
-        raise ValueError(f"frame softmax must be (8, h, w), got {getattr(frame, 'shape', frame)!r}")
-    validate_scores(frame, frame.shape[1:], "frame softmax")
+        raise ValueError(f"frame softmax must be ({labels.num_classes}, h, w), got {getattr(frame, 'shape', frame)!r}")
+    validate_scores(frame, frame.shape[1:], "frame softmax", labels=labels)
     cand = context.candidate
     width, height = context.frame_size
     scale = frame.shape[2] / width
     lr_disc = take_disc(frame, frame_disc_mask(frame.shape[1:], cand, scale))
     hd_disc = take_disc(patch_probs, patch.disc_mask)
     values = [
-        *disc_stats(lr_disc),
-        *disc_stats(hd_disc),
-        edge_distance(patch_probs, patch, cand, margin),
+        *disc_stats(lr_disc, labels),
+        *disc_stats(hd_disc, labels),
+        edge_distance(patch_probs, patch, cand, margin, labels),
         cand.y / height, cand.radius_px / height, float(cand.hazard),
-        *context_stats(frame, cand, scale),
-        *class_max(hd_disc),
-        *class_max(lr_disc),
+        *context_stats(frame, cand, scale, labels),
+        *class_max(hd_disc, labels),
+        *class_max(lr_disc, labels),
     ]
     if mcd_samples is not None:
-        values += mcd_spread(mcd_samples, patch.disc_mask)
+        values += mcd_spread(mcd_samples, patch.disc_mask, labels)
     out = np.asarray(values, dtype=np.float64)
     if not np.isfinite(out).all():
         raise ValueError("non-finite candidate features")
@@ -196,6 +216,7 @@ class LearnedModel(HashedRecord):
     coef: np.ndarray
     intercept: float
     columns: np.ndarray  # where each of the model's features lies in the vector :func:`candidate_features` gives
+    labels: LabelSet = UAVID  # the label set whose features the model reads
 
     @property
     def features(self) -> tuple[str, ...]:
@@ -208,7 +229,7 @@ class LearnedModel(HashedRecord):
     @property
     def width(self) -> int:
         """Length of the feature vector the monitor computes for this model (with MC dropout or not)."""
-        return len(BASE_FEATURES) + (len(MCD_FEATURES) if self.mcd_n > 0 else 0)
+        return len(base_features(self.labels)) + (len(MCD_FEATURES) if self.mcd_n > 0 else 0)
 
     @property
     def mcd_n(self) -> int:
@@ -227,10 +248,10 @@ class LearnedModel(HashedRecord):
         return 1.0 / (1.0 + np.exp(-np.clip(z, -500.0, 500.0)))
 
 
-def feature_columns(names: tuple[str, ...], mcd_n: int) -> np.ndarray:
+def feature_columns(names: tuple[str, ...], mcd_n: int, labels: LabelSet = UAVID) -> np.ndarray:
     """Positions of a model's feature names in the computed vector; any subset of this version's
     features, in any order (a model fitted before the context features were added keeps working)."""
-    known = BASE_FEATURES + (MCD_FEATURES if mcd_n > 0 else ())
+    known = base_features(labels) + (MCD_FEATURES if mcd_n > 0 else ())
     if not names:
         raise ValueError("the feature list is empty")
     twice = sorted({n for n in names if names.count(n) > 1})
@@ -254,8 +275,9 @@ def _vector(body: dict[str, Any], key: str, d: int) -> np.ndarray:
     return v
 
 
-def load_learned_model(path: str | Path | None = None) -> LearnedModel:
-    """Read and check a model file (default: the shipped ``el/monitors/data/learned.json``).
+def load_learned_model(path: str | Path | None = None, *, labels: LabelSet = UAVID) -> LearnedModel:
+    """Read and check a model file (default: the shipped ``el/monitors/data/learned.json``), whose
+    features are those of ``labels`` (default UAVid).
 
     Raises
     ------
@@ -268,7 +290,7 @@ def load_learned_model(path: str | Path | None = None) -> LearnedModel:
     try:
         names = tuple(body["features"])
         mcd_n = int(body.get("mcd", {}).get("n", 0))
-        columns = feature_columns(names, mcd_n)
+        columns = feature_columns(names, mcd_n, labels)
         d = len(names)
         mean, scale, coef = (_vector(body, k, d) for k in ("mean", "scale", "coef"))
         if (scale <= 0).any():
@@ -279,7 +301,7 @@ def load_learned_model(path: str | Path | None = None) -> LearnedModel:
             raise ValueError("intercept and threshold must be finite")
     except (KeyError, TypeError, ValueError) as exc:
         raise LearnedModelError(f"{p}: inconsistent learned monitor model ({exc})") from None
-    return LearnedModel(str(p), digest, body, mean, scale, coef, intercept, columns)
+    return LearnedModel(str(p), digest, body, mean, scale, coef, intercept, columns, labels)
 
 
 # -- the monitor -----------------------------------------------------------------------------------
@@ -293,11 +315,12 @@ class LearnedMonitor(LHDMonitor):
 
     PARAMS: ClassVar[dict[str, Any]] = {"model": str}
 
-    def __init__(self, *, model: str | None = None, threshold: float | None = None, **common: Any) -> None:
+    def __init__(self, *, model: str | None = None, threshold: float | None = None, labels: LabelSet = UAVID,
+                 **common: Any) -> None:
         self.model_path = model
-        self.model = load_learned_model(model)
+        self.model = load_learned_model(model, labels=labels)
         self.DEFAULT_THRESHOLD = self.model.threshold  # type: ignore[misc]  # per model file, not per class
-        super().__init__(threshold=threshold, **common)
+        super().__init__(threshold=threshold, labels=labels, **common)
 
     @property
     def spec(self) -> GenericSpec:  # type: ignore[override]
@@ -320,7 +343,8 @@ class LearnedMonitor(LHDMonitor):
         samples = None
         if self.model.mcd_n > 0:
             samples = segmenter.mc_dropout(patch.rgb, self.model.mcd_n, self.model.mcd_rho, seed)
-        return candidate_features(probs, patch, context, margin=self.margin, mcd_samples=samples), mask
+        return candidate_features(probs, patch, context, margin=self.margin, mcd_samples=samples,
+                                  labels=self.labels), mask
 
     def check_network(self, segmenter: Any) -> None:
         """Refuse a network the model was not fitted on: the segmenter must report the weights hash the model

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from el.forbidden import argmax_slack, forbidden_pixels
-from el.labels import CLASS_NAMES, FORBIDDEN_IDS
+from el.labels import UAVID, LabelSet
 from el.monitors.base import (
     CandidateContext,
     Judgement,
@@ -22,29 +22,28 @@ from el.monitors.base import (
 from el.monitors.patches import Patch
 from el.monitors.spec import MonitorSpec
 
-_FORBIDDEN = np.array(FORBIDDEN_IDS)
 
-
-def forbidden_counts(pixel_scores: np.ndarray) -> dict[str, int]:
+def forbidden_counts(pixel_scores: np.ndarray, labels: LabelSet = UAVID) -> dict[str, int]:
     """Forbidden-pixel count per forbidden class among pixels, each named by its top forbidden class.
 
     Parameters
     ----------
-    pixel_scores : ndarray of shape (8, m), float
-        Scores of the ``m`` pixels to judge (the disc).
+    pixel_scores : ndarray of shape (C, m), float
+        Scores of the ``m`` pixels to judge (the disc), over the classes of ``labels`` (default UAVid).
     """
-    hit = forbidden_pixels(pixel_scores)
+    hit = forbidden_pixels(pixel_scores, labels)
     if not hit.any():
         return {}
-    top = _FORBIDDEN[np.argmax(pixel_scores[_FORBIDDEN][:, hit], axis=0)]
+    forbidden = np.array(labels.forbidden_ids)
+    top = forbidden[np.argmax(pixel_scores[forbidden][:, hit], axis=0)]
     ids, counts = np.unique(top, return_counts=True)
-    return {CLASS_NAMES[i]: int(c) for i, c in zip(ids, counts, strict=True)}
+    return {labels.names[i]: int(c) for i, c in zip(ids, counts, strict=True)}
 
 
-def disc_pixels(scores: np.ndarray, disc_mask: np.ndarray) -> np.ndarray:
-    """Validate scores (8, h, w) against a mask (h, w) and return the disc's scores (8, m)."""
+def disc_pixels(scores: np.ndarray, disc_mask: np.ndarray, labels: LabelSet = UAVID) -> np.ndarray:
+    """Validate scores (C, h, w) against a mask (h, w) and return the disc's scores (C, m); C from ``labels``."""
     validate_mask(disc_mask)
-    validate_scores(scores, disc_mask.shape)
+    validate_scores(scores, disc_mask.shape, labels=labels)
     return take_disc(scores, disc_mask)
 
 
@@ -96,7 +95,9 @@ class LHDMonitor(PatchMonitor):
 
     Score: :func:`fraction_score` (fraction of forbidden pixels, or the best safe margin when
     there is none); threshold 0 is the paper's rule. Parameters: see ``Monitor`` (``margin``,
-    ``max_side``, ``clock``, ``threshold``). An empty disc is rejected.
+    ``max_side``, ``clock``, ``threshold``), and ``labels`` (keyword, default ``el.labels.UAVID``):
+    the label set of the segmenter's scores, which says which classes are forbidden. An empty
+    disc is rejected.
 
     Examples
     --------
@@ -108,6 +109,15 @@ class LHDMonitor(PatchMonitor):
     >>> round(LHDMonitor().score(scores, np.ones((3, 3), bool)), 4)     # 1 pixel of 9
     0.1111
     """
+
+    #: The label set of the scores; a class default too, for subclasses that do not call this ``__init__``.
+    labels: LabelSet = UAVID
+
+    def __init__(self, *, labels: LabelSet = UAVID, **kwargs: Any) -> None:
+        if not isinstance(labels, LabelSet):
+            raise ValueError(f"labels must be a LabelSet, got {type(labels).__name__}")
+        self.labels = labels
+        super().__init__(**kwargs)
 
     @property
     def spec(self) -> MonitorSpec:
@@ -131,19 +141,19 @@ class LHDMonitor(PatchMonitor):
         return ("disc_pixels", self.feature_key)
 
     def reduce(self, features: Any, disc_mask: np.ndarray) -> np.ndarray:
-        """The disc's pixel scores (8, m), validated: shared by LHD, CH and the softmax-family monitors."""
-        return disc_pixels(features, disc_mask)
+        """The disc's pixel scores (C, m), validated: shared by LHD, CH and the softmax-family monitors."""
+        return disc_pixels(features, disc_mask, self.labels)
 
     def judge(self, reduced: Any) -> Judgement:
         return self.judge_pixels(reduced)
 
     def rule(self, pixel_scores: np.ndarray) -> tuple[bool, str]:
         """The paper's rule on the disc's pixels: ``(accepted, reason)``."""
-        return lhd_rule(pixel_scores)
+        return lhd_rule(pixel_scores, self.labels)
 
     def rejected_pixels(self, pixel_scores: np.ndarray) -> np.ndarray:
         """(m,) bool: the disc pixels the rule rejects."""
-        return forbidden_pixels(pixel_scores)
+        return forbidden_pixels(pixel_scores, self.labels)
 
     def judge_pixels(self, pixel_scores: np.ndarray, threshold: float | None = None) -> Judgement:
         """Score, verdict and reason on the disc's pixels only: scores (8, m), already validated.
@@ -153,7 +163,7 @@ class LHDMonitor(PatchMonitor):
         accepted_by_rule, reason = self.rule(pixel_scores)
         if pixel_scores.shape[1] == 0:
             return Judgement(math.inf, False, reason)
-        score = fraction_score(self.rejected_pixels(pixel_scores), argmax_slack(pixel_scores))
+        score = fraction_score(self.rejected_pixels(pixel_scores), argmax_slack(pixel_scores, self.labels))
         t = self.threshold if threshold is None else threshold
         accepted = not score > t
         if accepted != accepted_by_rule:
@@ -161,12 +171,12 @@ class LHDMonitor(PatchMonitor):
         return Judgement(score, accepted, reason)
 
 
-def lhd_rule(pixel_scores: np.ndarray) -> tuple[bool, str]:
-    """LHD on the disc's pixel scores (8, m): ``(accepted, reason)``."""
+def lhd_rule(pixel_scores: np.ndarray, labels: LabelSet = UAVID) -> tuple[bool, str]:
+    """LHD on the disc's pixel scores (C, m) of ``labels`` (default UAVid): ``(accepted, reason)``."""
     m = pixel_scores.shape[1]
     if m == 0:
         return False, EMPTY_DISC
-    counts = forbidden_counts(pixel_scores)
+    counts = forbidden_counts(pixel_scores, labels)
     if counts:
         return False, lhd_reason(counts)
     return True, f"no forbidden pixel in disc ({m} px)"

@@ -68,7 +68,7 @@ class MCDMonitor(PatchMonitor):
     Parameters
     ----------
     rule : LHDMonitor or CHMonitor
-        The rule applied to ``S``; its ``margin``, ``max_side``, ``clock`` and ``threshold`` are used.
+        The rule applied to ``S``; its ``margin``, ``max_side``, ``clock``, ``threshold`` and ``labels`` are used.
     n : int
         MC-dropout samples (keyword-only).
     rho : float
@@ -86,6 +86,7 @@ class MCDMonitor(PatchMonitor):
             raise ValueError(f"MCD wraps an LHD or LHD+CH monitor, got {type(rule).__name__}")
         super().__init__(margin=rule.margin, max_side=rule.max_side, clock=rule.clock, threshold=rule.threshold)
         self.rule = rule
+        self.labels = rule.labels  # the label set of the samples: the wrapped rule's
         self.n = validate_n(n)
         self.rho = validate_rho(rho)
         self.between: Between | None = None  # the decision loop's budget check between MC chunks
@@ -143,6 +144,6 @@ class MCDMonitor(PatchMonitor):
         rule (LHD or a CH tau) can share it (a campaign does).
         """
         validate_mask(disc_mask)
-        validate_samples(scores, disc_mask.shape, self.n)
+        validate_samples(scores, disc_mask.shape, self.n, labels=self.labels)
         pixel_samples = take_disc(scores[: self.n], disc_mask)  # (n, 8, m): only the disc's pixels
         return mcd_score(pixel_samples)

@@ -14,8 +14,9 @@ pixels as LHD and CH, so a campaign computes them once for all of them):
 The default threshold 1 is therefore LHD's verdict exactly; a calibrated threshold below 1 also
 rejects discs with an uncertain pixel. ``u`` per monitor:
 
-- ``msp``: ``1 - max_c p_c`` (divided by its largest value ``1 - 1/8``);
-- ``entropy``: ``-sum_c p_c log p_c / log 8``;
+- ``msp``: ``1 - max_c p_c`` (divided by its largest value ``1 - 1/C``, C = 8 classes for UAVid: the
+  monitor's label set's count);
+- ``entropy``: ``-sum_c p_c log p_c / log C``;
 - ``energy``: the segmenter returns softmax, not logits, and the free energy ``-logsumexp`` of
   log-softmax is 0 at temperature 1, so the energy is taken at temperature ``T = 2`` on the
   log-softmax: ``T log sum_c p_c^(1/T)`` (the Renyi entropy of order 1/2), over its largest value.
@@ -29,7 +30,6 @@ from typing import Any, ClassVar
 import numpy as np
 
 from el.forbidden import forbidden_pixels
-from el.labels import NUM_CLASSES
 from el.monitors.base import Judgement
 from el.monitors.lhd import LHDMonitor
 from el.monitors.spec import GenericSpec
@@ -54,7 +54,7 @@ class SoftmaxScoreMonitor(LHDMonitor):
         m = pixel_scores.shape[1]
         if m == 0:
             return Judgement(math.inf, False, "empty disc: no pixel to check")
-        forbidden = forbidden_pixels(pixel_scores)
+        forbidden = forbidden_pixels(pixel_scores, self.labels)
         k = int(np.count_nonzero(forbidden))
         if k:
             score, what = 1.0 + k / m, f"forbidden top class on {k} of {m} px"
@@ -71,7 +71,7 @@ class MSPMonitor(SoftmaxScoreMonitor):
     KIND = "msp"
 
     def uncertainty(self, pixel_scores: np.ndarray) -> np.ndarray:
-        return (1.0 - pixel_scores.max(axis=0)) / (1.0 - 1.0 / NUM_CLASSES)
+        return (1.0 - pixel_scores.max(axis=0)) / (1.0 - 1.0 / self.labels.num_classes)
 
 
 class EntropyMonitor(SoftmaxScoreMonitor):
@@ -82,7 +82,7 @@ class EntropyMonitor(SoftmaxScoreMonitor):
     def uncertainty(self, pixel_scores: np.ndarray) -> np.ndarray:
         p = pixel_scores / np.maximum(pixel_scores.sum(axis=0, keepdims=True), 1e-12)
         logp = np.log(np.where(p > 0, p, 1.0))
-        return np.maximum(-(p * logp).sum(axis=0), 0.0) / math.log(NUM_CLASSES)
+        return np.maximum(-(p * logp).sum(axis=0), 0.0) / math.log(self.labels.num_classes)
 
 
 class EnergyMonitor(SoftmaxScoreMonitor):
@@ -95,4 +95,4 @@ class EnergyMonitor(SoftmaxScoreMonitor):
         t = self.TEMPERATURE
         p = pixel_scores / np.maximum(pixel_scores.sum(axis=0, keepdims=True), 1e-12)
         e = t * np.log(np.maximum((p ** (1.0 / t)).sum(axis=0), 1e-300))
-        return np.maximum(e, 0.0) / ((t - 1.0) * math.log(NUM_CLASSES))
+        return np.maximum(e, 0.0) / ((t - 1.0) * math.log(self.labels.num_classes))

@@ -21,8 +21,9 @@ Plugging in another network::
     seg = Segmenter(my_module)          # any torch.nn.Module with the contract below
 
 The contract: ``my_module(x)`` maps float RGB images ``x`` of shape (B, 3, H, W), values in
-[0, 1], to logits (B, 8, H, W) for any H, W >= 16 (normalisation and padding are the module's
-business). If the module has ``supports_mc_spec = True`` and ``trunk(x)``,
+[0, 1], to logits (B, C, H, W) for any H, W >= 16, C the number of classes of the segmenter's
+label set ``labels`` (8 for the default UAVid); normalisation and padding are the module's
+business. If the module has ``supports_mc_spec = True`` and ``trunk(x)``,
 ``head(features, mc, crop=False)`` (logits of at least the input size; the top-left H x W are kept)
 and ``mc_spec(n, keep_prob, seed)`` methods (as :class:`el.segmentation.model.MSDLite`), MC dropout
 computes the trunk once and runs the head as one batch of N. Otherwise MC dropout falls back to N
@@ -44,12 +45,13 @@ import torch
 from torch import nn
 
 from el.camera import working_size
-from el.labels import NUM_CLASSES
+from el.errors import WeightsError
+from el.labels import UAVID, LabelSet
 from el.rgb import check_rgb
 from el.segmentation.model import MCDropout, upsample_logits
 from el.segmentation.pooling import check_pooling, downsample_probs
 from el.segmentation.protocol import EvalProtocol, card_protocol, check_frame_scales
-from el.segmentation.weights import load_weights
+from el.segmentation.weights import DEFAULT_WEIGHTS, card_path, load_weights
 
 MIN_SIZE = 16  # smallest patch side (px) a Segmenter accepts
 
@@ -122,6 +124,10 @@ class Segmenter:
     frame_pooling : str
         How such a softmax comes back to the working resolution: ``"area"`` (footprint mean) or
         ``"conservative"`` (a forbidden class any source pixel shows is kept, :mod:`el.segmentation.pooling`).
+    labels : LabelSet
+        The classes the network's outputs are (``el.labels.UAVID`` by default; :meth:`load` takes
+        them from the card's ``labels`` entry). The core model and the monitors read them from
+        the attribute :attr:`labels`.
 
     Examples
     --------
@@ -133,9 +139,12 @@ class Segmenter:
     (8, 36, 64)
     """
 
+    labels: LabelSet = UAVID  # the class default, for instances pickled before segmenters had a label set
+
     def __init__(self, model: nn.Module, *, threads: int | None = None, device: str | torch.device = "cpu",
                  card: dict[str, Any] | None = None, working_width: int = 1024, frame_flip: bool = False,
-                 frame_scales: Sequence[float] = (1.0,), frame_pooling: str = "area") -> None:
+                 frame_scales: Sequence[float] = (1.0,), frame_pooling: str = "area",
+                 labels: LabelSet = UAVID) -> None:
         if not isinstance(model, nn.Module):
             raise ValueError(f"model must be a torch.nn.Module, got {type(model).__name__}")
         if threads is not None:
@@ -153,6 +162,9 @@ class Segmenter:
         self.frame_flip = frame_flip
         self.frame_scales = check_frame_scales(frame_scales)
         self.frame_pooling = check_pooling(frame_pooling)
+        if not isinstance(labels, LabelSet):
+            raise ValueError(f"labels must be a LabelSet, got {type(labels).__name__}")
+        self.labels = labels
         self.fast_mc = bool(getattr(model, "supports_mc_spec", False)
                             and all(callable(getattr(model, a, None)) for a in ("trunk", "head", "mc_spec")))
         self._lock = threading.Lock()  # the fallback MC path mutates dropout modules
@@ -165,11 +177,20 @@ class Segmenter:
         The file's SHA-256 is checked against its model card before ``torch.load(weights_only=True)``;
         a missing or altered file raises :class:`el.segmentation.weights.WeightsError`. Frames are
         segmented as the card's evaluation protocol says (``frame_flip``, ``frame_scales``; a card
-        without them: the frame alone).
+        without them: the frame alone). The label set is the card's ``labels`` entry
+        (:meth:`el.labels.LabelSet.from_dict`) when it has one, else UAVid.
         """
         model, card = load_weights(weights_path, device=device)
+        labels = UAVID
+        if card.get("labels") is not None:
+            try:
+                labels = LabelSet.from_dict(card["labels"])
+            except ValueError as err:
+                where = card_path(weights_path if weights_path is not None else DEFAULT_WEIGHTS)
+                raise WeightsError(f"{where}: model card 'labels': {err}") from None
         # the card's working_width is the evaluation's; the flight code keeps its own
-        return cls(model, threads=threads, device=device, card=card, **card_protocol(card).frame_options())
+        return cls(model, threads=threads, device=device, card=card, labels=labels,
+                   **card_protocol(card).frame_options())
 
     @classmethod
     def for_protocol(cls, model: nn.Module, protocol: EvalProtocol, **kwargs: Any) -> Segmenter:
@@ -247,7 +268,7 @@ class Segmenter:
             pair = self._predict([view, np.ascontiguousarray(view[:, ::-1])], "frame")
             probs = 0.5 * (pair[0] + pair[1][:, :, ::-1])
         if size != (w, h):  # back to the working resolution, over each pixel's footprint
-            probs = downsample_probs(probs, (w, h), self.frame_pooling)
+            probs = downsample_probs(probs, (w, h), self.frame_pooling, labels=self.labels)
         return np.ascontiguousarray(probs, dtype=np.float32)
 
     def predict_patch(self, rgb_patch: np.ndarray, *, features: Any = None) -> np.ndarray:
@@ -261,7 +282,7 @@ class Segmenter:
         h, w = rgb_patch.shape[:2]
         with torch.inference_mode():
             logits = self.model.head(features)
-            return np.ascontiguousarray(self._probs(logits, (1, NUM_CLASSES, h, w), "patch")[0])
+            return np.ascontiguousarray(self._probs(logits, (1, self.labels.num_classes, h, w), "patch")[0])
 
     def patch_trunk(self, rgb_patch: np.ndarray) -> Any:
         """The deterministic part of the network on a patch, computed once for several calls.
@@ -295,7 +316,7 @@ class Segmenter:
         with torch.inference_mode():
             logits = self.model(self._to_tensor(images))
             # C-contiguous: frames feed the core model's OpenCV and numpy code.
-            return np.ascontiguousarray(self._probs(logits, (len(images), NUM_CLASSES, h, w), what))
+            return np.ascontiguousarray(self._probs(logits, (len(images), self.labels.num_classes, h, w), what))
 
     # -- Monte-Carlo dropout -------------------------------------------------------------------
     def mc_dropout(self, rgb_patch: np.ndarray, n: int, keep_prob: float, seed: int, *,
@@ -337,7 +358,7 @@ class Segmenter:
             raise ValueError(f"seed must be an integer, got {seed!r}")
         n, keep, seed = int(n), float(keep_prob), int(seed)
         h, w = rgb_patch.shape[:2]
-        shape = (n, NUM_CLASSES, h, w)
+        shape = (n, self.labels.num_classes, h, w)
         y0, y1, x0, x1 = _check_window(window, h, w)
         if keep == 1.0:  # no dropout: every sample is the deterministic softmax (exactly, std 0)
             probs = self.predict_patch(rgb_patch, features=features)[None, :, y0:y1, x0:x1]
@@ -352,14 +373,14 @@ class Segmenter:
             if window is not None and hasattr(self.model, "head_logits") and hasattr(self.model, "logit_stride"):
                 low = self.model.head_logits(features.repeat(n), spec)
                 probs = upsample_logits(low.float(), self.model.logit_stride, (y0, y1, x0, x1), then=softmax_classes)
-                return self._probs_checked(probs, (n, NUM_CLASSES, y1 - y0, x1 - x0), "MC dropout")
+                return self._probs_checked(probs, (n, self.labels.num_classes, y1 - y0, x1 - x0), "MC dropout")
             # Softmax of the padded logits (dense channels-last), then the crop: the fast order.
             logits = self.model.head(features.repeat(n), spec, crop=False)
             if logits.ndim != 4 or logits.shape[2] < h or logits.shape[3] < w:
                 raise ValueError(f"MC dropout: model returned {tuple(logits.shape)}, expected logits "
                                  f"of at least {shape}")
             probs = softmax_classes(logits.float())[:, :, y0:y1, x0:x1]
-            return self._probs_checked(probs, (n, NUM_CLASSES, y1 - y0, x1 - x0), "MC dropout")
+            return self._probs_checked(probs, (n, self.labels.num_classes, y1 - y0, x1 - x0), "MC dropout")
 
     def _mc_fallback(self, x: torch.Tensor, n: int, p: float, seed: int, shape: tuple[int, ...]) -> np.ndarray:
         drops = [m for m in self.model.modules() if _is_dropout(m)]

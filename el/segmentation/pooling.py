@@ -17,11 +17,9 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from el.labels import FORBIDDEN_IDS, NUM_CLASSES, SAFE_IDS
+from el.labels import UAVID, LabelSet
 
 POOLINGS = ("area", "conservative")
-_F = list(FORBIDDEN_IDS)
-_S = list(SAFE_IDS)
 
 
 def check_pooling(name: object) -> str:
@@ -30,12 +28,14 @@ def check_pooling(name: object) -> str:
     return str(name)
 
 
-def downsample_probs(probs: np.ndarray, size: tuple[int, int], pooling: str = "area") -> np.ndarray:
+def downsample_probs(probs: np.ndarray, size: tuple[int, int], pooling: str = "area", *,
+                     labels: LabelSet = UAVID) -> np.ndarray:
     """Softmax (C, H, W) -> (C, h, w) for ``size = (w, h)`` no larger than the input, by ``pooling``.
 
     ``area``: mean over each output pixel's footprint (OpenCV ``INTER_AREA``). ``conservative``: see
     the module docstring; footprints are the source rows ``floor(i H / h) .. ceil((i + 1) H / h) - 1``
-    (and likewise columns), every source pixel that overlaps the output pixel.
+    (and likewise columns), every source pixel that overlaps the output pixel. ``labels``: which
+    classes are forbidden (default UAVid; C must be its class count for ``conservative``).
     """
     check_pooling(pooling)
     c, h_in, w_in = probs.shape
@@ -46,11 +46,12 @@ def downsample_probs(probs: np.ndarray, size: tuple[int, int], pooling: str = "a
         import cv2
 
         return np.stack([cv2.resize(ch, (w, h), interpolation=cv2.INTER_AREA) for ch in probs])
-    if c != NUM_CLASSES:
-        raise ValueError(f"conservative pooling needs the {NUM_CLASSES} classes, got {c}")
+    if c != labels.num_classes:
+        raise ValueError(f"conservative pooling needs the {labels.num_classes} classes, got {c}")
+    forbidden, safe = list(labels.forbidden_ids), list(labels.safe_ids)
     t = torch.from_numpy(np.ascontiguousarray(probs, dtype=np.float32))[None]
     out = torch.empty((1, c, h, w), dtype=torch.float32)
-    out[:, _F] = F.adaptive_max_pool2d(t[:, _F], (h, w))
-    out[:, _S] = -F.adaptive_max_pool2d(-t[:, _S], (h, w))
+    out[:, forbidden] = F.adaptive_max_pool2d(t[:, forbidden], (h, w))
+    out[:, safe] = -F.adaptive_max_pool2d(-t[:, safe], (h, w))
     out /= out.sum(dim=1, keepdim=True).clamp_min(1e-12)
     return out[0].numpy()
