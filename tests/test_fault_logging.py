@@ -24,7 +24,8 @@ def _records(caplog, name: str) -> list[logging.LogRecord]:
 
 
 def test_segmentation_fault_is_logged_with_traceback(caplog) -> None:
-    system = EmergencyLanding(PipelineConfig(core=CoreConfig(working_width=WW)), segmenter=_Exploding(WW))
+    system = EmergencyLanding(PipelineConfig(core=CoreConfig(working_width=WW), monitor="lhd"),
+                              segmenter=_Exploding(WW))
     with caplog.at_level(logging.ERROR, logger="el.pipeline"):
         d = system.decide(scene_image(scene_ids()))
     assert d.action == "default"
@@ -56,7 +57,8 @@ def test_ground_truth_pipeline_fault_is_logged(caplog, monkeypatch) -> None:
 
 
 def test_a_good_decision_logs_nothing(caplog) -> None:
-    system = EmergencyLanding(PipelineConfig(core=CoreConfig(working_width=WW)), segmenter=OracleSegmenter(WW))
+    system = EmergencyLanding(PipelineConfig(core=CoreConfig(working_width=WW), monitor="lhd"),
+                              segmenter=OracleSegmenter(WW))
     with caplog.at_level(logging.DEBUG, logger="el"):
         d = system.decide(np.ascontiguousarray(scene_image(scene_ids())))
     assert not d.reason.startswith("fault")

@@ -305,10 +305,15 @@ def test_the_deployed_default_is_checked_against_the_deployed_card(splits, tmp_p
     body = json.loads(DEFAULT_MODEL.read_text())["body"]
     swapped = tmp_path / "learned.json"
     swapped.write_text(json.dumps(model_document(dict(body, intercept=body["intercept"] - 1.0))))
+    from el.segmentation.weights import DEFAULT_WEIGHTS, read_card
+
     config = PipelineConfig(core=CORE, time_budget_s=None)
-    assert not EmergencyLanding(config, segmenter=RoadBlindFrame(WW)).fault
+    shipped = RoadBlindFrame(WW)
+    shipped.weights_sha256 = read_card(DEFAULT_WEIGHTS)["weights_sha256"]  # as the shipped network reports
+    assert not EmergencyLanding(config, segmenter=shipped).fault
+    assert "fitted on network" in EmergencyLanding(config, segmenter=RoadBlindFrame(WW)).fault  # no hash: refused
     monkeypatch.setattr(learned, "DEFAULT_MODEL", swapped)
-    d = EmergencyLanding(config, segmenter=RoadBlindFrame(WW)).decide(image)
+    d = EmergencyLanding(config, segmenter=shipped).decide(image)
     assert d.action == "default" and d.reason.startswith("fault: monitor") and "recalibrate" in d.reason
 
 

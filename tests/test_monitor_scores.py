@@ -95,6 +95,6 @@ def test_campaign_sharing_gives_the_same_scores_as_each_monitor_alone(cases):
     assert monitors[0].patch(hd, discs[0]).disc_mask.tolist() == disc_mask().tolist()
     rows = judge_candidates(hd, discs, monitors, Fixed(), seed=0)
     for j, spec in enumerate(PAPER_GRID):
-        assert [[r[j][0], r[j][1]] for r in rows] == FROZEN[spec]
+        assert [[r[j].accepted, r[j].reason] for r in rows] == FROZEN[spec]
         alone = [monitors[j].check_scores(_features(spec, c), disc_mask()).score for c in cases]
-        assert [r[j][3] for r in rows] == alone
+        assert [r[j].score for r in rows] == alone

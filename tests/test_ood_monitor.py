@@ -77,7 +77,7 @@ def test_pipeline_takes_the_default_action_out_of_domain(setup, tmp_path):
     inside = min(frames, key=lambda p: gate.score(setup["seg"], read_image(p)))
     from el.config import CoreConfig
 
-    cfg = PipelineConfig(core=CoreConfig(working_width=WW), ood=str(setup["gate"]), time_budget_s=None)
+    cfg = PipelineConfig(core=CoreConfig(working_width=WW), monitor="lhd", ood=str(setup["gate"]), time_budget_s=None)
     el = EmergencyLanding(cfg, segmenter=setup["seg"])
     d = el.decide(inside)
     assert d.reason != "out_of_domain" and not d.reason.startswith("fault"), d.reason
@@ -90,7 +90,7 @@ def test_pipeline_takes_the_default_action_out_of_domain(setup, tmp_path):
     doc["body"]["threshold"] = 1e9
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps(doc))
-    d = EmergencyLanding(PipelineConfig(ood=str(bad)), segmenter=setup["seg"]).decide(inside)
+    d = EmergencyLanding(PipelineConfig(monitor="lhd", ood=str(bad)), segmenter=setup["seg"]).decide(inside)
     assert d.action == "default" and d.reason.startswith("fault: ood") and "altered" in d.reason
 
 

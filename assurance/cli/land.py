@@ -142,18 +142,23 @@ def run_model(args: argparse.Namespace) -> int:
 
     try:
         segmenter = load_model(args.weights, threads=args.threads)
-    except ValueError as exc:  # WeightsError: a clear one-line error at the command line
-        raise CommandError(str(exc)) from None
+    except ValueError as exc:  # WeightsError: a model named here is a usage error (one line, exit 2); the
+        if args.weights is not None:  # shipped one missing is a flight fault: the default action, exit 3
+            raise CommandError(str(exc)) from None
+        segmenter = None
     built = build_monitor(monitor)  # a monitor that cannot be built (e.g. a missing model file): one line, exit 2
-    if built is not None:
-        built.check_network(segmenter)  # a monitor fitted on another network: one line, exit 2
-    # a card on another monitor model or another network than it runs: one line, exit 2
-    check_monitor_card(built, monitor, args.calibration, segmenter)
+    gate = None
     if args.ood is not None:
         from el.monitors.ood import load_ood
 
-        # a bad gate, or one fitted on another network, is a usage error here (in flight: the default action)
-        load_ood(args.ood).check_network(segmenter)
+        gate = load_ood(args.ood)  # a bad gate is a usage error here (in flight it is the default action)
+    if segmenter is not None:  # fitted on another network: one line, exit 2 (in flight: the default action)
+        if built is not None:
+            built.check_network(segmenter)
+        if gate is not None:
+            gate.check_network(segmenter)
+    # a card on another monitor model or another network than it runs: one line, exit 2
+    check_monitor_card(built, monitor, args.calibration, segmenter)
     config = PipelineConfig(core=config_from_args(args), monitor=monitor, time_budget_s=args.budget,
                             seed=args.seed, evaluate_all=args.evaluate_all,
                             calibration=str(args.calibration) if args.calibration else None,
