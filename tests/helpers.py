@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from el.camera import working_size
@@ -101,3 +103,16 @@ def reseal_shard(run, name: str) -> None:
     sums = {f: sha256_file(folder / f) for f in readouts.shard_files()}
     (folder / readouts.SUMS).write_text("".join(f"{h}  {f}\n" for f, h in sums.items()), encoding="utf-8")
     readouts.record_shards(run, {name: sums})
+
+
+def install_distribution(site: Path, module: Path, group: str, entry: str) -> None:
+    """Lay ``module`` out in folder ``site`` as an installed distribution whose entry point ``entry``
+    (``name = module:attr``) is in ``group``; the caller puts ``site`` on ``sys.path``."""
+    import shutil
+
+    site.mkdir(parents=True, exist_ok=True)
+    shutil.copy(module, site / module.name)
+    info = site / f"{module.stem}-0.1.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {module.stem.replace('_', '-')}\nVersion: 0.1\n")
+    (info / "entry_points.txt").write_text(f"[{group}]\n{entry}\n")

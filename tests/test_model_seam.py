@@ -4,12 +4,11 @@ through the ``uav_el.models`` entry points, and the factory refuses what it cann
 from __future__ import annotations
 
 import json
-import shutil
 import sys
 from pathlib import Path
 
 import pytest
-from helpers import scene_ids, scene_image
+from helpers import install_distribution, scene_ids, scene_image
 
 from assurance.scenes.uavid import write_image
 from el.config import CoreConfig
@@ -27,12 +26,7 @@ WW = 128
 def colour_installed(tmp_path, monkeypatch):
     """The colour model as an installed distribution: its module and a dist-info with the entry point."""
     site = tmp_path / "site"
-    site.mkdir()
-    shutil.copy(PLUGIN, site / "colour_model.py")
-    info = site / "colour_model-0.1.dist-info"
-    info.mkdir()
-    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: colour-model\nVersion: 0.1\n")
-    (info / "entry_points.txt").write_text(f"[{ENTRY_POINT_GROUP}]\ncolour = colour_model:build\n")
+    install_distribution(site, PLUGIN, ENTRY_POINT_GROUP, "colour = colour_model:build")
     monkeypatch.syspath_prepend(str(site))
     yield
     sys.modules.pop("colour_model", None)

@@ -4,13 +4,12 @@ entry points, and it works by name in ``uav-el land``, the pipeline and a campai
 from __future__ import annotations
 
 import json
-import shutil
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import OracleSegmenter, scene_ids
+from helpers import OracleSegmenter, install_distribution, scene_ids
 
 from assurance.scenes.uavid import write_image, write_sample
 from el.labels import ids_to_colors
@@ -23,12 +22,7 @@ PLUGIN = Path(__file__).parent / "plugins" / "toy_uav_monitor.py"
 def toy_installed(tmp_path, monkeypatch):
     """The toy monitor as an installed distribution: its module and a dist-info with the entry point."""
     site = tmp_path / "site"
-    site.mkdir()
-    shutil.copy(PLUGIN, site / "toy_uav_monitor.py")
-    info = site / "toy_uav_monitor-0.1.dist-info"
-    info.mkdir()
-    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: toy-uav-monitor\nVersion: 0.1\n")
-    (info / "entry_points.txt").write_text(f"[{registry.ENTRY_POINT_GROUP}]\ntoy = toy_uav_monitor:ToyMonitor\n")
+    install_distribution(site, PLUGIN, registry.ENTRY_POINT_GROUP, "toy = toy_uav_monitor:ToyMonitor")
     monkeypatch.syspath_prepend(str(site))
     registry.reload_plugins()
     yield
