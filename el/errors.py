@@ -1,8 +1,9 @@
-"""Every exception the project raises on purpose, under one root (:class:`UavElError`).
+"""The project's own exception classes, under one root (:class:`UavElError`).
 
-One module so that a caller can catch the project's expected failures with one ``except``
-(``assurance.errors`` adds the harness's on the same root). The input errors are also
-``ValueError`` so existing ``except ValueError`` handlers keep catching them.
+A caller catches the project's named failures (bad data, weights, cards, models, budget) with one
+``except UavElError`` (``assurance.errors`` adds the harness's on the same root). The input errors are
+also ``ValueError``, and a bad argument to a function raises a plain ``ValueError`` or ``TypeError``:
+``except ValueError`` catches both, ``except UavElError`` only the named ones.
 """
 
 from __future__ import annotations

@@ -176,7 +176,7 @@ class EmergencyLanding:
             if segmenter is None:
                 from el.segmentation.factory import load_model
 
-                self.segmenter = load_model(weights)
+                self.segmenter = load_model(weights, working_width=self.config.core.working_width)
             else:
                 check_model(segmenter)
             self.labels = labels_of(self.segmenter)  # the system's label set is the one its network segments into

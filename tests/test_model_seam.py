@@ -68,3 +68,27 @@ def test_the_factory_refuses_clearly(tmp_path):
         check_model(object())
     d = EmergencyLanding(PipelineConfig(monitor="lhd"), segmenter=object()).decide(scene_image(scene_ids()))
     assert d.action == "default" and d.reason.startswith("fault: model: ValueError: segmentation model object lacks")
+
+
+def test_a_campaign_runs_a_plugin_model_by_name_and_records_it(colour_installed, tiny_campaign, tmp_path, capsys):
+    from assurance.campaign import readouts
+    from assurance.cli import main
+
+    run = tmp_path / "run"
+    argv = ["campaign", "--data", str(tiny_campaign["data"]), "--out", str(run), "--model", "colour",
+            "--perturbations", "none", "--images", "2", "--monitors", "lhd", "--quiet"]
+    assert main(argv) == 0, capsys.readouterr().err
+    man = readouts.read_manifest(run)
+    assert man["weights"]["model"] == "colour" and man["weights"]["path"] is None
+    assert readouts.load_table(run, "images")["fault"].eq("").all()
+
+
+def test_the_softmax_embedding_follows_the_label_set_size():
+    import numpy as np
+
+    from el.monitors.ood import softmax_embedding
+
+    probs = np.full((4, 6, 8), 0.25, np.float32)
+    assert softmax_embedding(probs).shape == (2 * 4 + 2,)
+    with pytest.raises(ValueError, match=r"\(C, h, w\)"):
+        softmax_embedding(np.ones((6, 8)))

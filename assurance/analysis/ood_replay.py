@@ -27,6 +27,7 @@ def frame_distances(run: str | Path, data: str | Path, gate_path: str | Path, se
                     progress: Callable[[int, int], None] | None = None) -> pd.DataFrame:
     """One row per (perturbation, severity, key) of ``run``: the gate's distance and whether it fires."""
     gate = load_ood(gate_path)
+    gate.check_network(segmenter)  # a gate fitted on another network than the run's is refused
     man = readouts.read_manifest(run)
     seed = int(man["config"]["seed"])
     images = readouts.load_table(run, "images")

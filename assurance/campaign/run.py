@@ -255,17 +255,18 @@ def plan(data: str | Path, config: CampaignConfig) -> list[Task]:
 
 
 def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *, threads: int | None = None,
-             segmenter: str = "weights") -> dict[str, Any]:
+             segmenter: str = "weights", model: Any = None) -> dict[str, Any]:
     """Identity of a campaign: config, seeds, versions, git commit, hashes of weights and data.
 
     ``threads`` (torch threads per worker) is recorded because floating-point sums, hence the
     readouts' last digits, depend on it: a re-run reproduces the readouts with the same count.
+    ``model``: the loaded model, for the weights hash a model registered by name reports.
     """
     import torch
 
-    from el.segmentation.weights import DEFAULT_WEIGHTS, sha256_file
+    from el.hashing import sha256_file
 
-    weights = Path(config.weights) if config.weights else DEFAULT_WEIGHTS
+    weights_record = _weights_record(config.weights, model)
     files = sorted({t.sample.image_path for t in tasks} | {t.sample.label_path for t in tasks if t.sample.label_path})
     h = hashlib.sha256()
     for f in files:
@@ -275,8 +276,7 @@ def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *,
         "config": config.to_dict(),
         "data": {"path": str(Path(data).resolve()), "images": len({t.sample.key for t in tasks}),
                  "sha256": h.hexdigest()},
-        "weights": {"path": str(weights), "sha256": sha256_file(weights) if weights.is_file() else None,
-                    **_frame_protocol(weights)},
+        "weights": weights_record,
         "monitor_models": monitor_models(config.monitors),
         "tasks": len(tasks),
         "integrity": readouts.INTEGRITY,
@@ -302,6 +302,21 @@ def monitor_models(specs: Sequence[str]) -> dict[str, str]:
         if digest:
             out[spec] = digest
     return out
+
+
+def _weights_record(spec: str | None, model: Any) -> dict[str, Any]:
+    """The manifest's ``weights``: path, SHA-256 and frame options of a weights file (the shipped one for
+    None); for a model registered by name, the name and the weights hash the model reports."""
+    from el.segmentation.contract import weights_sha256_of
+    from el.segmentation.factory import is_weights_file
+    from el.segmentation.protocol import FRAME_OPTIONS
+    from el.segmentation.weights import DEFAULT_WEIGHTS, sha256_file
+
+    if spec is not None and not is_weights_file(spec):
+        return {"path": None, "model": spec, "sha256": weights_sha256_of(model), **dict.fromkeys(FRAME_OPTIONS)}
+    weights = Path(spec) if spec else DEFAULT_WEIGHTS
+    return {"path": str(weights), "sha256": sha256_file(weights) if weights.is_file() else None,
+            **_frame_protocol(weights)}
 
 
 def _frame_protocol(weights: Path) -> dict[str, Any]:
@@ -363,13 +378,14 @@ def run_campaign(
     tasks = plan(data, config)
     if not tasks:
         raise ValueError(f"{data}: no images to evaluate")
-    if segmenter is None:  # bad weights are refused before the run folder exists
-        from el.segmentation.weights import load_weights
+    model = None
+    if segmenter is None:  # bad weights or an unknown model name are refused before the run folder exists
+        from el.segmentation.factory import load_model
 
-        load_weights(config.weights)
+        model = load_model(config.weights)
     threads = max(1, (os.cpu_count() or 1) // max(1, jobs))
     man = manifest(data, config, tasks, threads=threads,
-                   segmenter="weights" if segmenter is None else type(segmenter).__name__)
+                   segmenter="weights" if segmenter is None else type(segmenter).__name__, model=model)
     readouts.init_run(run_dir, man)
     repaired = _set_aside_damaged(run_dir, tasks)
     todo = [t for t in tasks if not readouts.shard_done(run_dir, t.shard_name)]

@@ -141,7 +141,7 @@ def run_model(args: argparse.Namespace) -> int:
     from el.segmentation.factory import load_model
 
     try:
-        segmenter = load_model(args.weights, threads=args.threads)
+        segmenter = load_model(args.weights, threads=args.threads, working_width=args.working_width)
     except ValueError as exc:  # WeightsError: a model named here is a usage error (one line, exit 2); the
         if args.weights is not None:  # shipped one missing is a flight fault: the default action, exit 3
             raise CommandError(str(exc)) from None

@@ -57,6 +57,13 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def run_model(run_dir: Path) -> str | None:
+    """The model spec a campaign run scored with, from its manifest (None: the shipped weights)."""
+    from assurance.campaign import readouts
+
+    return readouts.read_manifest(run_dir).get("config", {}).get("weights")
+
+
 def ood_section(run_dir: Path, data: Path, gate: str, images, candidates, best, out: Path) -> str:
     """Markdown: what the gate would change for the best choice (its distances cached in ood_distances.csv)."""
     import pandas as pd
@@ -71,7 +78,7 @@ def ood_section(run_dir: Path, data: Path, gate: str, images, candidates, best, 
         dist = pd.read_csv(cache, dtype={"key": str})
     else:
         try:
-            dist = frame_distances(run_dir, data, gate, load_model())
+            dist = frame_distances(run_dir, data, gate, load_model(run_model(run_dir)))
         except ValueError as exc:
             raise CommandError(str(exc)) from None
         atomic_write_bytes(cache, dist.to_csv(index=False).encode())

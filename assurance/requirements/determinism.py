@@ -93,7 +93,18 @@ def _replan(man: Mapping[str, Any], config: Any, own_model: bool) -> list[Any] |
     if not data.is_dir():
         return f"insufficient evidence: the run's data folder {data} is gone"
     weights = (man.get("weights") or {}).get("path")
-    if not own_model:
+    named = (man.get("weights") or {}).get("model")
+    if not own_model and named:  # a model registered by name: it must still load and report the same weights
+        from el.segmentation.contract import weights_sha256_of
+        from el.segmentation.factory import load_model
+
+        try:
+            now = weights_sha256_of(load_model(named))
+        except Exception as exc:
+            return f"insufficient evidence: the run's model {named!r} cannot be loaded now: {exc}"
+        if now != man["weights"].get("sha256"):
+            return f"insufficient evidence: the model {named!r} reports other weights than in the run"
+    elif not own_model:
         from el.segmentation.weights import sha256_file
 
         if not weights or not Path(weights).is_file():

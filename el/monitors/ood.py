@@ -29,7 +29,6 @@ import cv2
 import numpy as np
 
 from el.errors import OODError
-from el.labels import NUM_CLASSES
 from el.records import HashedRecord
 
 OOD_FORMAT = "uav-el-ood/1"
@@ -55,9 +54,13 @@ def embedding_kind(segmenter: Any) -> str:
 
 def softmax_embedding(probs: np.ndarray) -> np.ndarray:
     """Mean class probability (8), top-class shares (8), mean and std of the normalised entropy (2)."""
-    p = np.clip(np.asarray(probs, np.float64), 0.0, 1.0).reshape(NUM_CLASSES, -1)
-    top = np.bincount(p.argmax(axis=0), minlength=NUM_CLASSES) / p.shape[1]
-    ent = -(p * np.log(np.where(p > 0, p, 1.0))).sum(axis=0) / math.log(NUM_CLASSES)
+    probs = np.asarray(probs, np.float64)
+    if probs.ndim != 3 or probs.shape[0] < 2:
+        raise ValueError(f"frame probabilities must be (C, h, w) with C >= 2 classes, got {probs.shape}")
+    c = probs.shape[0]  # the label set's size, as the network gives it
+    p = np.clip(probs, 0.0, 1.0).reshape(c, -1)
+    top = np.bincount(p.argmax(axis=0), minlength=c) / p.shape[1]
+    ent = -(p * np.log(np.where(p > 0, p, 1.0))).sum(axis=0) / math.log(c)
     return np.concatenate([p.mean(axis=1), top, [ent.mean(), ent.std()]])
 
 

@@ -42,12 +42,16 @@ def is_weights_file(spec: str | Path) -> bool:
     return text.endswith(".pt") or "/" in text or "\\" in text or Path(text).is_file()
 
 
-def load_model(spec: str | Path | None = None, *, threads: int | None = None, device: str = "cpu") -> Any:
-    """The segmentation model a spec names (see the module docstring); ``WeightsError`` naming the problem."""
+def load_model(spec: str | Path | None = None, *, threads: int | None = None, device: str = "cpu",
+               working_width: int | None = None) -> Any:
+    """The segmentation model a spec names (see the module docstring); ``WeightsError`` naming the problem.
+
+    ``working_width``: the core model's working width, for a weights file (a plugin keeps its own).
+    """
     if spec is None or str(spec) in ("", SHIPPED):
-        return _segmenter(None, threads, device)
+        return _segmenter(None, threads, device, working_width)
     if is_weights_file(spec):
-        return _segmenter(spec, threads, device)
+        return _segmenter(spec, threads, device, working_width)
     name, _, arg = str(spec).partition(":")
     if not _NAME.match(name):
         raise WeightsError(f"model spec {str(spec)!r}: neither a .pt weights file nor a registered model name")
@@ -70,5 +74,6 @@ def load_model(spec: str | Path | None = None, *, threads: int | None = None, de
         raise WeightsError(str(exc)) from None
 
 
-def _segmenter(path: str | Path | None, threads: int | None, device: str) -> Segmenter:
-    return Segmenter.load(path, threads=threads, device=device)
+def _segmenter(path: str | Path | None, threads: int | None, device: str, working_width: int | None) -> Segmenter:
+    width = {} if working_width is None else {"working_width": working_width}
+    return Segmenter.load(path, threads=threads, device=device, **width)

@@ -171,7 +171,7 @@ class Segmenter:
 
     @classmethod
     def load(cls, weights_path: str | Path | None = None, *, threads: int | None = None,
-             device: str | torch.device = "cpu") -> Segmenter:
+             device: str | torch.device = "cpu", working_width: int = 1024) -> Segmenter:
         """The shipped network (``el/segmentation/weights/model.pt``) or another weights file.
 
         The file's SHA-256 is checked against its model card before ``torch.load(weights_only=True)``;
@@ -189,7 +189,7 @@ class Segmenter:
                 where = card_path(weights_path if weights_path is not None else DEFAULT_WEIGHTS)
                 raise WeightsError(f"{where}: model card 'labels': {err}") from None
         # the card's working_width is the evaluation's; the flight code keeps its own
-        return cls(model, threads=threads, device=device, card=card, labels=labels,
+        return cls(model, threads=threads, device=device, card=card, labels=labels, working_width=working_width,
                    **card_protocol(card).frame_options())
 
     @classmethod
