@@ -217,21 +217,13 @@ class EmergencyLanding:
         of the model, is ``assurance.campaign.gt_pipeline``.)
         """
         budget = _Budget(self.clock, self.config.time_budget_s)
-        timings: dict[str, float] = {}
-        info: dict[str, Any] = {}
-        candidates: list[Candidate] = []
-        try:
-            core = frame_core(self.config.core, pose)
-        except Exception as exc:
-            return self._default(f"fault: pose: {type(exc).__name__}: {exc}", candidates, self.config.nominal_size,
-                                 timings, info, budget, self.config.core)
-        info["pose"] = pose_record(core.pose, nominal=pose is None)
-        return self._decide(image, core, budget, timings, info)
+        return self._decide(image, pose, budget, {}, {})
 
-    def _decide(self, image: np.ndarray | str | Path, core_cfg: CoreConfig, budget: _Budget,
+    def _decide(self, image: np.ndarray | str | Path, pose: Pose | None, budget: _Budget,
                 timings: dict[str, float], info: dict[str, Any]) -> Decision:
         """The stages of one decision at the frame's core configuration; every fault ends in the default."""
         cfg = self.config
+        core_cfg = cfg.core
         size = cfg.nominal_size
         stage = "read"
         candidates: list[Candidate] = []
@@ -240,6 +232,10 @@ class EmergencyLanding:
             rgb = self._read(image, info)
             size = (rgb.shape[1], rgb.shape[0])
             timings["read_s"] = self.clock() - t
+            stage = "pose"
+            core_cfg = frame_core(cfg.core, pose)
+            info["pose"] = pose_record(core_cfg.pose, nominal=pose is None)
+            stage = "read"
             if self.fault:
                 return self._default(self.fault, candidates, size, timings, info, budget, core_cfg)
             budget.check(stage)
@@ -327,8 +323,8 @@ class EmergencyLanding:
             if real:
                 budget.check("monitoring")
 
-        def after(k: int, real: bool) -> None:
-            if real and budgeted and budget.elapsed() > self.config.time_budget_s:
+        def after(k: int, real: bool) -> None:  # the hazard walk stops as soon as its judgement overran
+            if real and budgeted and self.walk == HAZARD and budget.elapsed() > self.config.time_budget_s:
                 raise BudgetExceeded("time budget exceeded during monitoring")
 
         def judge(k: int) -> MonitorVerdict:
@@ -384,7 +380,11 @@ def frame_core(core: CoreConfig, pose: Pose | None) -> CoreConfig:
         return core
     if not isinstance(pose, Pose):
         raise ValueError(f"pose must be an el.camera.Pose, got {type(pose).__name__}")
-    return replace(core, pose=pose)
+    values = {f.name: getattr(pose, f.name) for f in fields(pose)}
+    for name, value in values.items():
+        if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
+            raise ValueError(f"pose {name} must be a number, got {value!r}")
+    return replace(core, pose=Pose(**{k: float(v) for k, v in values.items()}))  # checked again, plain floats
 
 
 def pose_record(pose: Pose, *, nominal: bool) -> dict[str, Any]:

@@ -89,12 +89,14 @@ class HashedRecord:
         return weights.get("sha256") if isinstance(weights, dict) else None
 
     def check_network(self, segmenter: Any) -> None:
-        """Refuse a segmentation network the record was not fitted on (its ``weights_sha256`` differs).
-
-        A record fitted on an unidentified network only runs on an unidentified one, and the reverse: a
-        threshold or a feature scale measured on one network means nothing on another.
+        """Refuse a segmentation network the record was not fitted on: the segmenter's ``weights_sha256`` must
+        be the one the record holds. A network that cannot say which it is (no hash), and a record that does
+        not say, are refused too: a threshold or a feature scale measured on one network means nothing on
+        another, and two unidentified networks cannot be told apart.
         """
         have = getattr(segmenter, "weights_sha256", None)
-        if have != self.network_sha256:
-            raise self.ERROR(f"{self.path}: {self.WHAT} fitted on network {short(self.network_sha256)}, but the "
-                             f"segmenter runs {short(have)}: refit it for this network")
+        want = self.network_sha256
+        if not (isinstance(want, str) and want and have == want):
+            raise self.ERROR(f"{self.path}: {self.WHAT} fitted on network {short(want)}, but the "
+                             f"segmenter runs {short(have if isinstance(have, str) else None)}: refit it for this "
+                             f"network" + ("" if want else " (the record names no network)"))

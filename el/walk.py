@@ -19,6 +19,8 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
+import numpy as np
+
 from el.decision import MonitorVerdict
 
 HAZARD, SCORE = "hazard", "score"
@@ -127,6 +129,15 @@ def _call(step: Step | None, k: int, real: bool) -> None:
 
 
 def _checked(verdict: object) -> MonitorVerdict:
+    """A verdict the walk may act on: a MonitorVerdict whose boolean verdict is its score at its threshold."""
     if not isinstance(verdict, MonitorVerdict):
         raise ValueError(f"monitor returned {type(verdict).__name__}, not a MonitorVerdict")
+    if not isinstance(verdict.accepted, bool | np.bool_):
+        raise ValueError(f"{verdict.name}: verdict must be true or false, got {verdict.accepted!r}")
+    score, threshold = float(verdict.score), float(verdict.threshold)
+    if math.isnan(score):
+        raise ValueError(f"{verdict.name}: non-finite score (NaN)")
+    if not math.isnan(threshold) and bool(verdict.accepted) != (not score > threshold):
+        raise ValueError(f"{verdict.name}: verdict {'accepted' if verdict.accepted else 'rejected'} contradicts "
+                         f"score {score:.6g} at threshold {threshold:.6g}")
     return verdict

@@ -24,8 +24,11 @@ def nearest_class(rgb: np.ndarray) -> np.ndarray:
 class OracleSegmenter:
     """Segments a colour-coded label image perfectly (colour -> class), at frame and patch level.
 
-    MC dropout returns ``n`` copies of the one-hot (no uncertainty). Fault knobs let tests break it.
+    MC dropout returns ``n`` copies of the one-hot (no uncertainty). Fault knobs let tests break it. It
+    reports a weights hash of its own, as a real network does, so records fitted on it are bound to it.
     """
+
+    weights_sha256 = "0e" * 32
 
     def __init__(self, working_width: int, *, nan: bool = False) -> None:
         self.working_width = working_width

@@ -45,7 +45,7 @@ def model_file(splits, tmp_path_factory):
     from assurance.fitting.learned_monitor import fit_learned_monitor
 
     train, val = splits
-    doc = fit_learned_monitor(train, RoadBlindFrame(WW), val=val, core=CORE, weights={"sha256": None})
+    doc = fit_learned_monitor(train, RoadBlindFrame(WW), val=val, core=CORE, weights={"sha256": RoadBlindFrame.weights_sha256})
     out = tmp_path_factory.mktemp("model") / "learned.json"
     out.write_text(json.dumps(doc))
     return out
@@ -175,7 +175,7 @@ def test_cli_fit_monitor_and_land_fail_loud(splits, tmp_path, capsys, monkeypatc
     assert main(["fit-monitor", "--data", str(train), "--val", str(val), "--out", str(out),
                  "--working-width", str(WW)]) == 0, capsys.readouterr().err
     assert "held-out AUROC" in capsys.readouterr().out
-    assert json.loads(out.read_text())["body"]["weights"]["sha256"] is None  # what the segmenter reports: none
+    assert json.loads(out.read_text())["body"]["weights"]["sha256"] == RoadBlindFrame.weights_sha256  # its own
     assert main(["fit-monitor", "--data", str(tmp_path / "nope"), "--out", str(out)]) == 2
     assert len(capsys.readouterr().err.strip().splitlines()) == 1
     image = next(val.glob("**/Images/*.png"))

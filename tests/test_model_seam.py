@@ -92,3 +92,12 @@ def test_the_softmax_embedding_follows_the_label_set_size():
     assert softmax_embedding(probs).shape == (2 * 4 + 2,)
     with pytest.raises(ValueError, match=r"\(C, h, w\)"):
         softmax_embedding(np.ones((6, 8)))
+
+
+def test_a_registered_name_wins_over_a_path_like_argument(colour_installed):
+    from el.segmentation.factory import FILE, PLUGIN, model_kind
+
+    assert model_kind("colour:/models/net.onnx") == PLUGIN and model_kind("C:\\models\\net.pt") == FILE
+    assert model_kind("models/net.pt") == FILE and model_kind("unregistered") == PLUGIN
+    with pytest.raises(WeightsError, match=r"model 'colour' \(colour_model:build\) failed to build: ValueError"):
+        load_model("colour:/models/net.onnx")  # the plugin got its argument (not the weights loader)

@@ -90,3 +90,39 @@ def test_the_command_line_refuses_another_network_with_exit_2(tiny_campaign, tmp
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and "fitted on network 0d3dab88c2b0" in err[0], err
     assert not (tmp_path / "run").exists()  # refused before any task ran
+
+
+def test_a_record_that_names_no_network_is_refused_everywhere(tmp_path):
+    from el.monitors.learned import model_document
+
+    body = dict(json.loads(DEFAULT_MODEL.read_text())["body"], weights={"path": None, "sha256": None})
+    unbound = tmp_path / "learned.json"
+    unbound.write_text(json.dumps(model_document(body)))
+    for network in (Network(None), Network(OTHER), Network(SHIPPED)):  # two unidentified networks are not one
+        with pytest.raises(LearnedModelError, match="the record names no network"):
+            load_learned_model(unbound).check_network(network)
+
+
+def test_el_r16_fails_on_a_run_made_with_another_network():
+    import pandas as pd
+
+    from assurance.fitting.calibration import check_calibrated_miss_rate
+
+    card = load_calibration(DEPLOYED_CALIBRATION)
+    rows = pd.DataFrame({"perturbation": ["none"] * 2, "monitor": [card.spec] * 2, "true_unsafe": [True, True],
+                         "accepted": [False, False], "score": [0.99, 0.98]})
+    models = {card.spec: card.body["monitor_model"]["sha256"]}
+    assert check_calibrated_miss_rate(rows, card, run_models=models, run_network=SHIPPED).status == "pass"
+    other = check_calibrated_miss_rate(rows, card, run_models=models, run_network=OTHER)
+    assert other.status == "fail" and "calibrated on network 0d3dab88c2b0" in other.summary
+    assert check_calibrated_miss_rate(rows, card, run_models=models, run_network=None).status == "insufficient"
+
+
+def test_a_campaign_refuses_a_monitor_bound_to_another_network(tiny_campaign, tmp_path):
+    from assurance.campaign.run import CampaignConfig, run_campaign
+
+    config = CampaignConfig(perturbations=("none",), monitors=(DEPLOYED_MONITOR,), images=1,
+                            core=tiny_campaign["config"].core)
+    with pytest.raises(LearnedModelError, match="fitted on network 0d3dab88c2b0"):
+        run_campaign(tiny_campaign["data"], tmp_path / "run", config, progress=False, segmenter=Network(OTHER))
+    assert not (tmp_path / "run").exists()

@@ -36,3 +36,19 @@ def test_the_frame_pose_sets_the_safety_radius_and_is_recorded():
 def test_a_malformed_pose_ends_in_the_default_action():
     d = _landing().decide(scene_image(scene_ids()), pose={"height_m": 30})
     assert d.action == "default" and d.reason.startswith("fault: pose: ValueError: pose must be an el.camera.Pose")
+
+
+def test_a_pose_is_checked_and_recorded_as_plain_numbers():
+    import json
+
+    import numpy as np
+
+    el, image = _landing(), scene_image(scene_ids())
+    d = el.decide(image, pose=Pose(height_m=np.float32(40.0), pitch_deg=np.int64(50)))
+    assert d.input["pose"] == {"height_m": 40.0, "pitch_deg": 50.0, "source": "frame"}
+    json.loads(d.to_json())  # numpy scalars would not serialise
+    bad = el.decide(image, pose=Pose(height_m=True))
+    assert bad.reason.startswith("fault: pose: ValueError: pose height_m must be a number")
+    assert bad.input["width"] == image.shape[1]  # the frame was read: its own size and default area
+    assert bad.default_area.y < image.shape[0]
+    jsonschema.validate(bad.to_dict(), decision_schema())

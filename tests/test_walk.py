@@ -34,7 +34,7 @@ def test_score_walk_lands_on_the_accepted_candidate_with_the_lowest_score(items)
     accepted, scores = [a for a, _ in items], [s for _, s in items]
     ok = [k for k in range(len(items)) if accepted[k]]
     want = min(ok, key=lambda k: (scores[k], k)) if ok else None
-    verdicts = [MonitorVerdict("m", a, "test", 0.5, s, 0.0) for a, s in items]
+    verdicts = [MonitorVerdict("m", a, "test", 0.5, s) for a, s in items]  # no threshold: any verdict
     by_score = walk_candidates(len(items), verdicts.__getitem__, "score")
     by_hazard = walk_candidates(len(items), verdicts.__getitem__, "hazard")
     assert select(accepted, scores, "score") == want == by_score.selected
@@ -47,7 +47,7 @@ def test_score_walk_lands_on_the_accepted_candidate_with_the_lowest_score(items)
 
 
 def test_evaluation_mode_judges_every_candidate_without_changing_the_decision():
-    verdicts = [MonitorVerdict("m", a, "test", 1.0, 0.0, 0.0) for a in (False, True, False, True)]
+    verdicts = [MonitorVerdict("m", a, "test", 1.0, 0.0) for a in (False, True, False, True)]
     seen = []
     outcome = walk_candidates(4, verdicts.__getitem__, evaluate_all=True, before=lambda k, real: seen.append(real))
     assert outcome.selected == 1 and outcome.examined == 2 and outcome.overhead_s == 2.0
@@ -88,3 +88,14 @@ def test_pipeline_walks_as_its_spec_says(monitor, expected):
         assert d.timings["overhead_s"] == pytest.approx(0.001 * n)
     else:
         assert d.selected == 1 and el.monitor.seen == [0, 1]  # the walk stops at the first accepted
+
+
+@pytest.mark.parametrize("verdict, message", [
+    (MonitorVerdict("m", True, "x", 0.1, float("nan"), 0.5), "non-finite score"),
+    (MonitorVerdict("m", "False", "x", 0.1, 0.2, 0.5), "must be true or false"),
+    (MonitorVerdict("m", True, "x", 0.1, 0.9, 0.5), "contradicts score 0.9 at threshold 0.5"),
+])
+def test_the_walk_refuses_a_verdict_it_cannot_act_on(verdict, message):
+    """Any monitor's verdict (a plugin's too) is checked where the walk acts on it: flight and campaign alike."""
+    with pytest.raises(ValueError, match=message):
+        walk_candidates(1, lambda k: verdict)

@@ -55,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
         monitors=monitors,
         images=args.images, weights=args.weights, seed=args.seed,
     )
-    check_network(config.monitors, cards, config.weights)
+    check_cards_network(cards, config.weights)
     summary = run_campaign(args.data, args.out, config, jobs=args.jobs, backend=args.backend,
                            scheduler=args.scheduler, progress=not args.quiet)
     print(describe(summary))
@@ -63,20 +63,16 @@ def run(args: argparse.Namespace) -> int:
     return 1 if summary["missing"] else 0
 
 
-def check_network(monitors: tuple[str, ...], cards: list, weights: str | None) -> None:
-    """Refuse, before any task, fitted monitors and calibration cards on another network than the campaign's
-    (each task would otherwise be a fault): ``CalibrationError`` / ``LearnedModelError``, exit 2."""
-    from el.monitors import build_monitor
+def check_cards_network(cards: list, weights: str | None) -> None:
+    """Refuse, before any task, calibration cards on another network than the campaign's (``CalibrationError``,
+    exit 2); ``run_campaign`` refuses monitors fitted on another network the same way."""
+    if not cards:
+        return
     from el.segmentation.factory import load_model
 
-    fitted = [m for m in (build_monitor(s) for s in monitors) if m is not None and m.model_sha256]
-    if not fitted and not cards:
-        return
     try:
         segmenter = load_model(weights)
     except ValueError as exc:
         raise CommandError(str(exc)) from None
-    for monitor in fitted:
-        monitor.check_network(segmenter)
     for card in cards:
         card.check_network(segmenter)

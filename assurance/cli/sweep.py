@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 from assurance.errors import CommandError
 
@@ -41,11 +42,14 @@ def run(args: argparse.Namespace) -> int:
     except (SweepError, RunError) as exc:
         raise CommandError(f"{run_dir}: {exc}") from None
     out = args.out or run_dir
-    md = write_sweep(out, table, choices)
+    gate = None
     if args.ood:
         if not args.data:
             raise CommandError("--ood needs --data (the run's scenes)")
-        md += ood_section(run_dir, Path(args.data), args.ood, images, candidates, choices[0], out)
+        gate = bound_gate(args.ood, run_dir)  # refused before anything is written
+    md = write_sweep(out, table, choices)
+    if gate is not None:
+        md += ood_section(run_dir, Path(args.data), gate, images, candidates, choices[0], out)
         from assurance.files import atomic_write_bytes
 
         atomic_write_bytes(out / "sweep.md", md.encode())
@@ -64,21 +68,36 @@ def run_model(run_dir: Path) -> str | None:
     return readouts.read_manifest(run_dir).get("config", {}).get("weights")
 
 
-def ood_section(run_dir: Path, data: Path, gate: str, images, candidates, best, out: Path) -> str:
-    """Markdown: what the gate would change for the best choice (its distances cached in ood_distances.csv)."""
+def bound_gate(path: str, run_dir: Path) -> tuple[str, Any, Any]:
+    """(path, gate, the run's model) for a gate fitted on the network the run segmented with; else exit 2."""
+    from el.monitors.ood import load_ood
+    from el.segmentation.factory import load_model
+
+    try:
+        gate = load_ood(path)
+        model = load_model(run_model(run_dir))
+        gate.check_network(model)
+    except ValueError as exc:
+        raise CommandError(str(exc)) from None
+    return path, gate, model
+
+
+def ood_section(run_dir: Path, data: Path, bound: tuple[str, Any, Any], images, candidates, best, out: Path) -> str:
+    """Markdown: what the gate would change for the best choice (its distances cached per gate in
+    ood_distances-<gate sha256>.csv)."""
     import pandas as pd
 
     from assurance.analysis.ood_replay import frame_distances, gate_effect
     from assurance.analysis.sweep import monitor_rows, replay
     from assurance.files import atomic_write_bytes
-    from el.segmentation.factory import load_model
 
-    cache = out / "ood_distances.csv"
+    gate, loaded, model = bound
+    cache = out / f"ood_distances-{loaded.sha256[:12]}.csv"
     if cache.is_file():
         dist = pd.read_csv(cache, dtype={"key": str})
     else:
         try:
-            dist = frame_distances(run_dir, data, gate, load_model(run_model(run_dir)))
+            dist = frame_distances(run_dir, data, gate, model)
         except ValueError as exc:
             raise CommandError(str(exc)) from None
         atomic_write_bytes(cache, dist.to_csv(index=False).encode())

@@ -150,6 +150,7 @@ def calibrate_on_data(data: str | Path, monitor: str, *, miss_rate: float, confi
         from el.segmentation.factory import load_model
 
         segmenter = load_model(weights)
+    network = network_record(segmenter, weights, loaded=loaded)  # an unidentified network is refused here
     scores, unsafe, faults = [], [], []
     for task in tasks:
         rows = run_task(Task(task.perturbation, task.severity, task.sample), config, segmenter)
@@ -166,20 +167,22 @@ def calibrate_on_data(data: str | Path, monitor: str, *, miss_rate: float, confi
         scores, unsafe, monitor=base.base.name, miss_rate=miss_rate, confidence=confidence,
         split={"path": shown_path(data), "images": len(tasks), "sha256": h.hexdigest(),
                "perturbation": "none"},
-        weights=network_record(segmenter, weights, loaded=loaded),
+        weights=network,
         monitor_model=monitor_model,
     )
     return card_document(body)
 
 
 def check_calibrated_miss_rate(candidates: Any, card: Any, perturbation: str = "none",
-                               run_models: dict[str, str] | None = None) -> Any:
+                               run_models: dict[str, str] | None = None, run_network: Any = False) -> Any:
     """EL-R16: on a campaign's readouts (the test split), the calibrated monitor's empirical miss rate (truly
     unsafe candidates it accepts) is at most the card's miss rate.
 
     Reads the calibrated configuration's rows, or else the base monitor's scores judged at the card's threshold.
     ``run_models`` (the run manifest's ``monitor_models``): a card calibrated on another fitted model than
     the one that scored the rows fails; its threshold does not mean the same on that model's scores.
+    ``run_network`` (the manifest's ``weights.sha256``): a card calibrated on another network fails, and a run
+    that does not record its network is insufficient evidence (False: not checked, for callers without a run).
     """
     from assurance.analysis.metrics import clopper_pearson_interval
     from assurance.requirements import records as rq
@@ -197,6 +200,12 @@ def check_calibrated_miss_rate(candidates: Any, card: Any, perturbation: str = "
         return rq.Evidence(name, rq.INSUFFICIENT, f"insufficient evidence: neither {card.spec!r} nor the scores "
                            f"of {card.monitor!r} were recorded under {perturbation!r}")
     used = str(sub["monitor"].iloc[0])
+    if run_network is not False and run_network != card.network_sha256:
+        if not run_network:
+            return rq.Evidence(name, rq.INSUFFICIENT, "insufficient evidence: the run does not record the network "
+                               "it segmented with, so it cannot be shown to be the card's")
+        return rq.Evidence(name, rq.FAIL, f"the card was calibrated on network {str(card.network_sha256)[:12]}, the "
+                           f"run segmented with {str(run_network)[:12]}: recalibrate or re-run the campaign")
     card_model = (card.body.get("monitor_model") or {}).get("sha256")
     if run_models is None and card_model:
         return rq.Evidence(name, rq.INSUFFICIENT, "insufficient evidence: the run's manifest does not record "

@@ -154,7 +154,12 @@ def fit_learned_monitor(data: str | Path, segmenter: Any, *, val: str | Path | N
                         mcd_n: int = 0, mcd_rho: float = 0.9, cs: Sequence[float] = DEFAULT_CS,
                         recall: float = 0.95, images: int | None = None,
                         weights: dict[str, Any] | None = None) -> dict[str, Any]:
-    """Train on the candidates of ``data``, select on ``val`` (else every 5th scene of ``data``): the JSON document."""
+    """Train on the candidates of ``data``, select on ``val`` (else every 5th scene of ``data``): the JSON document.
+
+    ``weights``: the network record (default: the one ``segmenter`` reports; ValueError if it reports none)."""
+    from assurance.fitting.network_identity import network_record
+
+    weights = weights if weights is not None else network_record(segmenter, loaded=False)
     kw = {"core": core, "margin": margin, "max_side": max_side, "mcd_n": mcd_n, "mcd_rho": mcd_rho}
     scenes = list(iter_samples(data, require_labels=True))[:images]
     if val is None:

@@ -70,11 +70,16 @@ def fit_ood_body(train: np.ndarray, val: np.ndarray, *, kind: str, quantile: flo
 
 def fit_ood(data: str | Path, val: str | Path, segmenter: Any, *, quantile: float = DEFAULT_QUANTILE,
             images: int | None = None, weights: dict[str, Any] | None = None) -> dict[str, Any]:
-    """Fit the gate on the frames of ``data``, threshold on ``val``: the JSON document (``uav-el fit-ood``)."""
+    """Fit the gate on the frames of ``data``, threshold on ``val``: the JSON document (``uav-el fit-ood``).
+
+    ``weights``: the network record (default: the one ``segmenter`` reports; ValueError if it reports none)."""
+    from assurance.fitting.network_identity import network_record
+
+    weights = weights if weights is not None else network_record(segmenter, loaded=False)
     kind = embedding_kind(segmenter)
     train = embed_frames(data, segmenter, kind=kind, images=images)
     held = embed_frames(val, segmenter, kind=kind, images=images)
-    body = fit_ood_body(train, held, kind=kind, quantile=quantile, weights=weights or {},
+    body = fit_ood_body(train, held, kind=kind, quantile=quantile, weights=weights,
                         training={"path": shown_path(data), "frames": int(train.shape[0]),
                                   "sha256": split_sha256(_samples(data, images), data, labels=False)},
                         validation={"path": shown_path(val), "frames": int(held.shape[0]),

@@ -93,5 +93,6 @@ def calibrated_miss_rate(ctx: CheckContext) -> Evidence:
     if not card:
         return Evidence("miss rate of the calibrated monitor", INSUFFICIENT,
                         "insufficient evidence: no calibration card chosen (parameters.calibration_card)")
-    return check_calibrated_miss_rate(ctx.candidates, load_calibration(card),
-                                      run_models=(ctx.manifest or {}).get("monitor_models"))
+    manifest = ctx.manifest or {}
+    return check_calibrated_miss_rate(ctx.candidates, load_calibration(card), run_models=manifest.get("monitor_models"),
+                                      run_network=(manifest.get("weights") or {}).get("sha256"))

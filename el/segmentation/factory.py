@@ -36,10 +36,29 @@ def model_factories() -> dict[str, Any]:
     return {ep.name: ep for ep in metadata.entry_points(group=ENTRY_POINT_GROUP)}
 
 
-def is_weights_file(spec: str | Path) -> bool:
-    """Whether a spec names a weights file rather than a registered factory."""
+SHIPPED_KIND, FILE, PLUGIN = "shipped", "file", "plugin"
+
+
+def model_kind(spec: str | Path | None) -> str:
+    """What a spec names: the shipped weights, a weights file, or a model factory (registered or not).
+
+    A registered name wins, whatever follows its colon (``onnx:/models/net.onnx``); a one-letter prefix is
+    a drive letter, never a name.
+    """
+    if spec is None or str(spec) in ("", SHIPPED):
+        return SHIPPED_KIND
     text = str(spec)
-    return text.endswith(".pt") or "/" in text or "\\" in text or Path(text).is_file()
+    name = text.partition(":")[0]
+    if len(name) > 1 and _NAME.match(name) and name in model_factories():
+        return PLUGIN
+    if text.endswith(".pt") or "/" in text or "\\" in text or Path(text).is_file():
+        return FILE
+    return PLUGIN
+
+
+def is_weights_file(spec: str | Path) -> bool:
+    """Whether a spec names a weights file (not the shipped default, not a model factory)."""
+    return model_kind(spec) == FILE
 
 
 def load_model(spec: str | Path | None = None, *, threads: int | None = None, device: str = "cpu",
@@ -48,9 +67,10 @@ def load_model(spec: str | Path | None = None, *, threads: int | None = None, de
 
     ``working_width``: the core model's working width, for a weights file (a plugin keeps its own).
     """
-    if spec is None or str(spec) in ("", SHIPPED):
+    kind = model_kind(spec)
+    if kind == SHIPPED_KIND:
         return _segmenter(None, threads, device, working_width)
-    if is_weights_file(spec):
+    if kind == FILE:
         return _segmenter(spec, threads, device, working_width)
     name, _, arg = str(spec).partition(":")
     if not _NAME.match(name):
@@ -65,7 +85,7 @@ def load_model(spec: str | Path | None = None, *, threads: int | None = None, de
         model = factory(arg or None, threads=threads, device=device)
     except WeightsError:
         raise
-    except Exception as exc:
+    except (Exception, SystemExit) as exc:  # a plugin must not end the process: the caller fails safe
         raise WeightsError(f"model {name!r} ({factories[name].value}) failed to build: "
                            f"{type(exc).__name__}: {exc}") from exc
     try:

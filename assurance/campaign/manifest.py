@@ -1,0 +1,127 @@
+"""The identity of a campaign run (its manifest): configuration, data, network, fitted monitor models, code.
+
+A resumed run must match it, the requirement checks read it, and the evidence report shows it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import platform
+import subprocess
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from assurance.campaign import readouts
+
+if TYPE_CHECKING:
+    from assurance.campaign.run import CampaignConfig, Task
+
+
+def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *, threads: int | None = None,
+             segmenter: str = "weights", model: Any = None) -> dict[str, Any]:
+    """Identity of a campaign: config, seeds, versions, git commit, hashes of weights and data.
+
+    ``threads`` (torch threads per worker) is recorded because floating-point sums, hence the
+    readouts' last digits, depend on it: a re-run reproduces the readouts with the same count.
+    ``model``: the loaded model, for the weights hash a model registered by name reports.
+    """
+    import torch
+
+    from el.hashing import sha256_file
+
+    weights_record = _weights_record(config.weights, model)
+    files = sorted({t.sample.image_path for t in tasks} | {t.sample.label_path for t in tasks if t.sample.label_path})
+    h = hashlib.sha256()
+    for f in files:
+        h.update(f"{Path(f).relative_to(data)}:{sha256_file(f)}\n".encode())
+    return {
+        "format": readouts.FORMAT_VERSION,
+        "config": config.to_dict(),
+        "data": {"path": str(Path(data).resolve()), "images": len({t.sample.key for t in tasks}),
+                 "sha256": h.hexdigest()},
+        "weights": weights_record,
+        "monitor_models": monitor_models(config.monitors),
+        "tasks": len(tasks),
+        "integrity": readouts.INTEGRITY,
+        "shard_order": [t.shard_name for t in tasks],
+        "threads_per_worker": threads,
+        "segmenter": segmenter,
+        "code": {"version": _version(), "git_commit": git_commit()},
+        "versions": {"python": sys.version.split()[0], "numpy": np.__version__, "torch": torch.__version__,
+                     "platform": platform.platform()},
+    }
+
+
+def check_monitor_networks(specs: Sequence[str], segmenter: Any) -> None:
+    """Refuse, before any task, a configuration whose monitor was fitted on another network than the
+    campaign's (the monitor's error: one line naming the file and both networks)."""
+    from el.monitors import build_monitor
+
+    for spec in specs:
+        monitor = build_monitor(spec)
+        if monitor is not None:
+            monitor.check_network(segmenter)
+
+
+def monitor_models(specs: Sequence[str]) -> dict[str, str]:
+    """SHA-256 of the fitted model file each configuration's scores rest on (learned monitors), by spec.
+
+    Recorded in the manifest: a resumed run must score with the same models, and a calibration card
+    is checked against the model the run used (EL-R16)."""
+    from el.monitors import build_monitor
+
+    out: dict[str, str] = {}
+    for spec in specs:
+        digest = getattr(build_monitor(spec), "model_sha256", None)
+        if digest:
+            out[spec] = digest
+    return out
+
+
+def _weights_record(spec: str | None, model: Any) -> dict[str, Any]:
+    """The manifest's ``weights``: path, SHA-256 and frame options of a weights file (the shipped one for
+    None); for a model registered by name, the name and the weights hash the model reports."""
+    from el.segmentation.contract import weights_sha256_of
+    from el.segmentation.factory import FILE, PLUGIN, model_kind
+    from el.segmentation.protocol import FRAME_OPTIONS
+    from el.segmentation.weights import DEFAULT_WEIGHTS, sha256_file
+
+    if model_kind(spec) == PLUGIN:
+        return {"path": None, "model": spec, "sha256": weights_sha256_of(model), **dict.fromkeys(FRAME_OPTIONS)}
+    weights = Path(spec) if model_kind(spec) == FILE else DEFAULT_WEIGHTS
+    return {"path": str(weights), "sha256": sha256_file(weights) if weights.is_file() else None,
+            **_frame_protocol(weights)}
+
+
+def _frame_protocol(weights: Path) -> dict[str, Any]:
+    """How the weights' card has frames segmented (``frame_flip``, ``frame_scales``); None without a card."""
+    from el.segmentation.protocol import FRAME_OPTIONS, card_protocol
+    from el.segmentation.weights import read_card
+
+    try:
+        return card_protocol(read_card(weights)).frame_options()
+    except (OSError, ValueError):  # WeightsError is a ValueError
+        return dict.fromkeys(FRAME_OPTIONS)
+
+
+def _version() -> str:
+    from assurance import __version__
+
+    return __version__
+
+
+def git_commit() -> str | None:
+    """The git commit of the checkout the code runs from (with '-dirty' if it has changes), or None."""
+    root = Path(__file__).resolve().parents[2]
+    try:
+        commit = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True,
+                                timeout=10, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+                               capture_output=True, text=True, timeout=10).stdout.strip()
+        return commit + ("-dirty" if dirty else "")
+    except Exception:
+        return None
