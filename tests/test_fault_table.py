@@ -12,7 +12,8 @@ from assurance.evidence import generate
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
-FAST = ("H5-negative-seed", "H6-deleted-shard", "H7-overlay-extension", "H8-json-is-a-folder", "B3-missing-weights")
+FAST = ("H5-negative-seed", "H6-deleted-shard", "H7-overlay-extension", "H8-json-is-a-folder", "H9-foreign-network",
+        "B3-missing-weights", "B4-nan-model")
 
 
 @pytest.fixture(scope="module")

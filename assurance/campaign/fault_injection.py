@@ -203,8 +203,8 @@ def _wrong_shape_labels(ws: Path) -> list[str]:
     return ["land", "--labels", small, "--image", _image(ws)]
 
 
-def _nan_model(ws: Path) -> list[str]:
-    return ["land", _image(ws), "--weights", save_tiny_weights(ws / "nan.pt", nan=True)]
+def _nan_model(ws: Path) -> list[str]:  # a rule monitor: the deployed one refuses a network it was not fitted on
+    return ["land", _image(ws), "--weights", save_tiny_weights(ws / "nan.pt", nan=True), "--monitor", "lhd"]
 
 
 CASES: tuple[Case, ...] = (
@@ -229,6 +229,8 @@ CASES: tuple[Case, ...] = (
     Case("H8-altered-weights", "one byte of the weights file flipped", _altered_weights, 2, "SHA-256 mismatch"),
     Case("H8-pickled-weights", "weights file holding a pickle that runs a shell command (card re-hashed)",
          _pickled_weights, 2, "refused: the file holds pickled objects"),
+    Case("H9-foreign-network", "land with the deployed learned monitor and its card on another network's weights",
+         lambda ws: ["land", _image(ws), "--weights", ws / "tiny.pt"], 2, "fitted on network"),
     Case("B1-unreadable-image", "land on a file that is not an image", _unreadable_image, 2),
     Case("B2-wrong-shape-labels", "land --labels of another size than --image", _wrong_shape_labels, 2),
     Case("B3-missing-weights", "land --weights NOT_THERE.pt",
