@@ -190,9 +190,7 @@ class EmergencyLanding:
                 spec, margin=self.config.patch_margin,
                 max_side=self.config.patch_max_side, clock=clock, labels=self.labels,
             )
-            if self.monitor is not None and self.segmenter is not None:
-                self.monitor.check_network(self.segmenter)  # a fitted monitor on another network: refused
-            check_monitor_card(self.monitor, spec, self.config.calibration, self.segmenter)
+            check_monitor_bindings(self.monitor, spec, self.config.calibration, self.segmenter)
         except Exception as exc:
             self.fault = self.fault or f"fault: monitor: {type(exc).__name__}: {exc}"
             logger.exception("runtime monitor %r not built; every decision will be the default action",
@@ -216,13 +214,10 @@ class EmergencyLanding:
         recorded in the decision's ``input.pose``. (The ground-truth pipeline, with a label map instead
         of the model, is ``assurance.campaign.gt_pipeline``.)
         """
-        budget = _Budget(self.clock, self.config.time_budget_s)
-        return self._decide(image, pose, budget, {}, {})
-
-    def _decide(self, image: np.ndarray | str | Path, pose: Pose | None, budget: _Budget,
-                timings: dict[str, float], info: dict[str, Any]) -> Decision:
-        """The stages of one decision at the frame's core configuration; every fault ends in the default."""
         cfg = self.config
+        budget = _Budget(self.clock, cfg.time_budget_s)
+        timings: dict[str, float] = {}
+        info: dict[str, Any] = {}
         core_cfg = cfg.core
         size = cfg.nominal_size
         stage = "read"
@@ -235,7 +230,6 @@ class EmergencyLanding:
             stage = "pose"
             core_cfg = frame_core(cfg.core, pose)
             info["pose"] = pose_record(core_cfg.pose, nominal=pose is None)
-            stage = "read"
             if self.fault:
                 return self._default(self.fault, candidates, size, timings, info, budget, core_cfg)
             budget.check(stage)
@@ -359,11 +353,13 @@ class EmergencyLanding:
                         default_area=area, timings=timings, input=info, config=self.config.to_dict())
 
 
-def check_monitor_card(monitor: Monitor | None, spec: str | None, calibration: str | Path | None,
-                       segmenter: Any = None) -> None:
-    """Refuse a monitor whose threshold was calibrated on another fitted model or another network: the card
-    given, else the deployed card when ``spec`` is the deployed configuration (``CalibrationError``).
-    ``segmenter``: the network the card must have been calibrated on (None: not checked here)."""
+def check_monitor_bindings(monitor: Monitor | None, spec: str | None, calibration: str | Path | None,
+                           segmenter: Any = None) -> None:
+    """Refuse a monitor fitted on another network than ``segmenter``, and a threshold calibrated on another
+    fitted model or another network: the card given, else the deployed card when ``spec`` is the deployed
+    configuration. ``segmenter`` None: the network is not checked here (it could not be loaded)."""
+    if monitor is not None and segmenter is not None:
+        monitor.check_network(segmenter)
     card = calibration or (DEPLOYED_CALIBRATION if is_deployed(spec) else None)
     if card:
         from el.monitors.calibration import check_card_monitor, load_calibration

@@ -50,6 +50,12 @@ def read_signed(path: Path, fmt: str, what: str, error: type[ValueError], *, a: 
     return body, digest
 
 
+def weights_sha256_of(model: Any) -> str | None:
+    """The identity a segmentation model reports for its weights (``weights_sha256``; None when it has none)."""
+    value = getattr(model, "weights_sha256", None)
+    return value if isinstance(value, str) and value else None
+
+
 def short(digest: str | None) -> str:
     """The first 12 hex digits of a digest and an ellipsis, or ``none``."""
     return f"{digest[:12]}..." if digest else "none"
@@ -94,9 +100,9 @@ class HashedRecord:
         not say, are refused too: a threshold or a feature scale measured on one network means nothing on
         another, and two unidentified networks cannot be told apart.
         """
-        have = getattr(segmenter, "weights_sha256", None)
+        have = weights_sha256_of(segmenter)
         want = self.network_sha256
         if not (isinstance(want, str) and want and have == want):
             raise self.ERROR(f"{self.path}: {self.WHAT} fitted on network {short(want)}, but the "
-                             f"segmenter runs {short(have if isinstance(have, str) else None)}: refit it for this "
-                             f"network" + ("" if want else " (the record names no network)"))
+                             f"segmenter runs {short(have)}: refit it for this network"
+                             + ("" if want else " (the record names no network)"))

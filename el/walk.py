@@ -100,7 +100,7 @@ def walk_candidates(n: int, judge: Judge | None, walk: str = HAZARD, *, evaluate
     if check_walk(walk) == SCORE:
         for k in range(n):
             _call(before, k, True)
-            verdicts[k] = _checked(judge(k))
+            verdicts[k] = check_verdict(judge(k))
             _call(after, k, True)
         judged = [v for v in verdicts if v is not None]
         selected = select([v.accepted for v in judged], [v.score for v in judged], SCORE)
@@ -114,7 +114,7 @@ def walk_candidates(n: int, judge: Judge | None, walk: str = HAZARD, *, evaluate
         if not real and not evaluate_all:
             break
         _call(before, k, real)
-        verdict = verdicts[k] = _checked(judge(k))
+        verdict = verdicts[k] = check_verdict(judge(k))
         if real:
             examined, overhead = k + 1, overhead + verdict.seconds
             if verdict.accepted:
@@ -128,7 +128,7 @@ def _call(step: Step | None, k: int, real: bool) -> None:
         step(k, real)
 
 
-def _checked(verdict: object) -> MonitorVerdict:
+def check_verdict(verdict: object) -> MonitorVerdict:
     """A verdict the walk may act on: a MonitorVerdict whose boolean verdict is its score at its threshold."""
     if not isinstance(verdict, MonitorVerdict):
         raise ValueError(f"monitor returned {type(verdict).__name__}, not a MonitorVerdict")

@@ -99,3 +99,30 @@ def test_the_walk_refuses_a_verdict_it_cannot_act_on(verdict, message):
     """Any monitor's verdict (a plugin's too) is checked where the walk acts on it: flight and campaign alike."""
     with pytest.raises(ValueError, match=message):
         walk_candidates(1, lambda k: verdict)
+
+
+def test_a_campaign_records_a_verdict_it_cannot_act_on_as_a_fault(tiny_campaign):
+    """The campaign checks verdicts inside the task (as the walk does), so a bad plugin verdict is a recorded
+    fault of that task, never a crash of the campaign."""
+    from assurance.campaign.run import CampaignConfig, plan, run_task
+    from el.monitors import Monitor, registry
+    from el.monitors.spec import GenericSpec
+
+    class Contradicts(Monitor):  # a plain flight Monitor, as a plugin may write one
+        spec = GenericSpec("contradicts", ())
+
+        def __init__(self, *, threshold=None, margin=0.25, max_side=None, clock=None):
+            super().__init__(threshold=threshold)
+
+        def check(self, hd, candidate, segmenter, *, seed=0, context=None):
+            return MonitorVerdict(self.name, True, "accepts above its threshold", 0.0, 1.0, 0.0)
+
+    registry.register_monitor("contradicts", Contradicts)
+    try:
+        config = CampaignConfig(perturbations=("none",), monitors=("contradicts",), images=1,
+                                core=tiny_campaign["config"].core)
+        rows = run_task(plan(tiny_campaign["data"], config)[0], config, OracleSegmenter(tiny_campaign["config"]
+                                                                                        .core.working_width))
+    finally:
+        registry.unregister_monitor("contradicts")
+    assert "contradicts score 1 at threshold 0" in rows["images"][0]["fault"] and rows["candidates"] == []

@@ -9,7 +9,6 @@ would have spent alone. Any other monitor is judged on its own through ``check``
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable, Hashable, Sequence
 from typing import Any
@@ -18,6 +17,8 @@ import numpy as np
 
 from el.decision import Candidate, MonitorVerdict
 from el.monitors import CandidateContext, Monitor, PatchMonitor
+from el.segmentation.contract import PATCH_TRUNK, has_capability
+from el.walk import check_verdict
 
 
 def _timed(clock: Callable[[], float], fn: Callable[..., Any], *args: Any, **kwargs: Any) -> tuple[Any, float]:
@@ -60,7 +61,7 @@ def judge_candidates(
     if len({(m.margin, m.max_side) for m in shared}) > 1:
         raise ValueError("monitors of one campaign must share the patch margin and max_side")
     owners = feature_owners(shared)
-    has_trunk = callable(getattr(segmenter, "patch_trunk", None))  # optional capability of the segmenter
+    has_trunk = has_capability(segmenter, PATCH_TRUNK)
     size = (hd.shape[1], hd.shape[0])
     out: list[list[MonitorVerdict]] = []
     for k, cand in enumerate(candidates):
@@ -72,7 +73,7 @@ def judge_candidates(
         for m in monitors:
             if not isinstance(m, PatchMonitor):
                 row[id(m)] = m.check(hd, cand, segmenter, seed=seed + k, context=context)
-        out.append([_finite(row[id(m)]) for m in monitors])
+        out.append([check_verdict(row[id(m)]) for m in monitors])  # the walk's own check, inside the task
     return out
 
 
@@ -100,10 +101,4 @@ def _judge_shared(hd: np.ndarray, cand: Candidate, monitors: Sequence[PatchMonit
         verdicts[id(m)] = MonitorVerdict(m.name, bool(judgement.accepted), judgement.reason, seconds,
                                          float(judgement.score), m.threshold)
     return verdicts
-
-
-def _finite(verdict: MonitorVerdict) -> MonitorVerdict:
-    if math.isnan(verdict.score):
-        raise ValueError(f"{verdict.name}: non-finite score (NaN)")
-    return verdict
 

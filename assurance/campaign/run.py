@@ -271,11 +271,15 @@ def run_campaign(
     progress: bool = True,
     on_result: Callable[[dict[str, Any]], None] | None = None,
     segmenter: Any = None,
+    records: Sequence[Any] = (),
 ) -> dict[str, Any]:
     """Run (or resume) a campaign; returns a summary {tasks, done, skipped, faults, missing, repaired, seconds}.
 
     ``segmenter`` replaces the model loaded from ``config.weights`` (any object with
     ``predict_frame``, ``predict_patch`` and ``mc_dropout``; picklable for parallel backends).
+    ``records`` (e.g. the calibration cards of the configurations): hash-checked records that, like the
+    fitted monitors, must have been fitted on the campaign's network (``check_network``), checked before
+    anything is written.
 
     Finished shards that verify are skipped, so re-running an interrupted campaign completes it; a
     shard that fails verification (altered, truncated, missing though recorded) is moved to
@@ -294,7 +298,10 @@ def run_campaign(
         from el.segmentation.factory import load_model
 
         model = load_model(config.weights)
-    check_monitor_networks(config.monitors, segmenter if segmenter is not None else model)
+    network = segmenter if segmenter is not None else model
+    check_monitor_networks(config.monitors, network)
+    for record in records:
+        record.check_network(network)
     threads = max(1, (os.cpu_count() or 1) // max(1, jobs))
     man = manifest(data, config, tasks, threads=threads,
                    segmenter="weights" if segmenter is None else type(segmenter).__name__, model=model)

@@ -55,24 +55,9 @@ def run(args: argparse.Namespace) -> int:
         monitors=monitors,
         images=args.images, weights=args.weights, seed=args.seed,
     )
-    check_cards_network(cards, config.weights)
     summary = run_campaign(args.data, args.out, config, jobs=args.jobs, backend=args.backend,
-                           scheduler=args.scheduler, progress=not args.quiet)
+                           scheduler=args.scheduler, progress=not args.quiet, records=cards)
     print(describe(summary))
     print(f"readouts in {args.out}; results table: uav-el table {args.out}")
     return 1 if summary["missing"] else 0
 
-
-def check_cards_network(cards: list, weights: str | None) -> None:
-    """Refuse, before any task, calibration cards on another network than the campaign's (``CalibrationError``,
-    exit 2); ``run_campaign`` refuses monitors fitted on another network the same way."""
-    if not cards:
-        return
-    from el.segmentation.factory import load_model
-
-    try:
-        segmenter = load_model(weights)
-    except ValueError as exc:
-        raise CommandError(str(exc)) from None
-    for card in cards:
-        card.check_network(segmenter)

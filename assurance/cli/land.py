@@ -137,7 +137,7 @@ def run_model(args: argparse.Namespace) -> int:
         monitor = args.monitor or load_calibration(args.calibration).monitor
         calibrated_spec(monitor, str(args.calibration))
     from el.monitors import build_monitor
-    from el.pipeline import check_monitor_card
+    from el.pipeline import check_monitor_bindings
     from el.segmentation.factory import load_model
 
     try:
@@ -152,13 +152,10 @@ def run_model(args: argparse.Namespace) -> int:
         from el.monitors.ood import load_ood
 
         gate = load_ood(args.ood)  # a bad gate is a usage error here (in flight it is the default action)
-    if segmenter is not None:  # fitted on another network: one line, exit 2 (in flight: the default action)
-        if built is not None:
-            built.check_network(segmenter)
-        if gate is not None:
-            gate.check_network(segmenter)
-    # a card on another monitor model or another network than it runs: one line, exit 2
-    check_monitor_card(built, monitor, args.calibration, segmenter)
+    # a monitor fitted, or a card calibrated, on another network or model than it runs: one line, exit 2
+    check_monitor_bindings(built, monitor, args.calibration, segmenter)
+    if gate is not None and segmenter is not None:
+        gate.check_network(segmenter)  # a gate fitted on another network: one line, exit 2
     config = PipelineConfig(core=config_from_args(args), monitor=monitor, time_budget_s=args.budget,
                             seed=args.seed, evaluate_all=args.evaluate_all,
                             calibration=str(args.calibration) if args.calibration else None,

@@ -30,6 +30,7 @@ import numpy as np
 
 from el.errors import OODError
 from el.records import HashedRecord
+from el.segmentation.contract import TRUNK_FEATURES, has_capability
 
 OOD_FORMAT = "uav-el-ood/1"
 TRUNK, SOFTMAX = "trunk", "softmax"
@@ -49,7 +50,7 @@ def deepest_level(features: Any) -> Any:
 
 def embedding_kind(segmenter: Any) -> str:
     """``trunk`` when the segmenter's network exposes ``trunk``, else ``softmax``."""
-    return TRUNK if callable(getattr(getattr(segmenter, "model", None), "trunk", None)) else SOFTMAX
+    return TRUNK if has_capability(segmenter, TRUNK_FEATURES) else SOFTMAX
 
 
 def softmax_embedding(probs: np.ndarray) -> np.ndarray:

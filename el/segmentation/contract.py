@@ -16,6 +16,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from el.labels import UAVID, LabelSet
+from el.records import weights_sha256_of  # noqa: F401  (re-exported: part of the seam)
 
 MC_DROPOUT = "mc_dropout"
 """Capability ``mc_dropout(rgb_patch, n, keep_prob, seed, *, features=None, window=None) -> (n, C, h, w)``:
@@ -49,12 +50,6 @@ def labels_of(model: Any) -> LabelSet:
     """The label set a model segments into (UAVid for a model that does not say)."""
     labels = getattr(model, "labels", None)
     return UAVID if labels is None else labels
-
-
-def weights_sha256_of(model: Any) -> str | None:
-    """The identity of a model's weights (None when it has none)."""
-    value = getattr(model, "weights_sha256", None)
-    return value if isinstance(value, str) else None
 
 
 def has_capability(model: Any, capability: str) -> bool:
