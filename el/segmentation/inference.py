@@ -144,7 +144,7 @@ class Segmenter:
     def __init__(self, model: nn.Module, *, threads: int | None = None, device: str | torch.device = "cpu",
                  card: dict[str, Any] | None = None, working_width: int = 1024, frame_flip: bool = False,
                  frame_scales: Sequence[float] = (1.0,), frame_pooling: str = "area",
-                 labels: LabelSet = UAVID) -> None:
+                 labels: LabelSet = UAVID, engine: Any = None) -> None:
         if not isinstance(model, nn.Module):
             raise ValueError(f"model must be a torch.nn.Module, got {type(model).__name__}")
         if threads is not None:
@@ -168,6 +168,8 @@ class Segmenter:
         self.fast_mc = bool(getattr(model, "supports_mc_spec", False)
                             and all(callable(getattr(model, a, None)) for a in ("trunk", "head", "mc_spec")))
         self._lock = threading.Lock()  # the fallback MC path mutates dropout modules
+        # ONNX Runtime for full passes (frames, patches), or None: torch (el.segmentation.onnx_engine)
+        self.engine = engine
 
     @classmethod
     def load(cls, weights_path: str | Path | None = None, *, threads: int | None = None,
@@ -180,6 +182,8 @@ class Segmenter:
         without them: the frame alone). The label set is the card's ``labels`` entry
         (:meth:`el.labels.LabelSet.from_dict`) when it has one, else UAVid.
         """
+        from el.segmentation.onnx_engine import engine_for
+
         model, card = load_weights(weights_path, device=device)
         labels = UAVID
         if card.get("labels") is not None:
@@ -188,9 +192,11 @@ class Segmenter:
             except ValueError as err:
                 where = card_path(weights_path if weights_path is not None else DEFAULT_WEIGHTS)
                 raise WeightsError(f"{where}: model card 'labels': {err}") from None
+        engine = None if torch.device(device).type != "cpu" else engine_for(
+            weights_path if weights_path is not None else DEFAULT_WEIGHTS, card.get("weights_sha256"), threads)
         # the card's working_width is the evaluation's; the flight code keeps its own
         return cls(model, threads=threads, device=device, card=card, labels=labels, working_width=working_width,
-                   **card_protocol(card).frame_options())
+                   engine=engine, **card_protocol(card).frame_options())
 
     @classmethod
     def for_protocol(cls, model: nn.Module, protocol: EvalProtocol, **kwargs: Any) -> Segmenter:
@@ -209,6 +215,11 @@ class Segmenter:
     @property
     def weights_sha256(self) -> str | None:
         return self.card.get("weights_sha256")
+
+    @property
+    def engine_name(self) -> str:
+        """What runs full passes (frames, patches): ``onnx`` (ONNX Runtime) or ``torch``."""
+        return "torch" if getattr(self, "engine", None) is None else "onnx"
 
     # -- helpers -------------------------------------------------------------------------------
     def _to_tensor(self, images: list[np.ndarray]) -> torch.Tensor:
@@ -277,8 +288,9 @@ class Segmenter:
         ``features``: the patch's :meth:`patch_trunk`, when the caller shares it with MC dropout.
         """
         _check_rgb(rgb_patch, "patch")
-        if features is None:
+        if features is None or getattr(self, "engine", None) is not None:  # ONNX Runtime runs the full pass
             return self._predict([rgb_patch], "patch")[0]
+        features = _resolve(features)
         h, w = rgb_patch.shape[:2]
         with torch.inference_mode():
             logits = self.model.head(features)
@@ -289,11 +301,14 @@ class Segmenter:
 
         Pass it as ``features=`` to :meth:`predict_patch` and :meth:`mc_dropout` on the **same** patch
         (a campaign judges a candidate with the softmax and three dropout rates: one trunk instead of
-        four). None for a network without the trunk/head split (the calls then run in full).
+        four). None for a network without the trunk/head split (the calls then run in full). With the ONNX
+        engine the trunk is computed only if MC dropout asks for it (the softmax runs in ONNX Runtime).
         """
         _check_rgb(rgb_patch, "patch")
         if not self.fast_mc:
             return None
+        if getattr(self, "engine", None) is not None:
+            return _LazyTrunk(self, rgb_patch)
         with torch.inference_mode():
             return self.model.trunk(self._to_tensor([rgb_patch]))
 
@@ -314,7 +329,11 @@ class Segmenter:
     def _predict(self, images: list[np.ndarray], what: str) -> np.ndarray:
         h, w = images[0].shape[:2]
         with torch.inference_mode():
-            logits = self.model(self._to_tensor(images))
+            if getattr(self, "engine", None) is not None:
+                batch = np.stack(images).astype(np.float32) / np.float32(255.0)
+                logits = torch.from_numpy(self.engine.logits(batch.transpose(0, 3, 1, 2)))
+            else:
+                logits = self.model(self._to_tensor(images))
             # C-contiguous: frames feed the core model's OpenCV and numpy code.
             return np.ascontiguousarray(self._probs(logits, (len(images), self.labels.num_classes, h, w), what))
 
@@ -367,6 +386,7 @@ class Segmenter:
         if not self.fast_mc:
             return self._mc_fallback(x, n, 1.0 - keep, seed, shape)[:, :, y0:y1, x0:x1]
         spec = self.model.mc_spec(n, keep, seed)
+        features = _resolve(features)
         with torch.inference_mode():
             if features is None:
                 features = self.model.trunk(x)
@@ -400,3 +420,21 @@ class Segmenter:
                     m.p = old_p
                     m.train(training)
         return self._probs(logits, shape, "MC dropout")
+
+
+class _LazyTrunk:
+    """A patch's trunk, computed by torch on first use (MC dropout) and kept: what ``patch_trunk`` hands out
+    when ONNX Runtime runs the full passes, so a campaign without MC dropout never runs the torch trunk."""
+
+    def __init__(self, segmenter: Segmenter, rgb_patch: np.ndarray) -> None:
+        self.segmenter, self.rgb_patch, self.value = segmenter, rgb_patch, None
+
+    def get(self) -> Any:
+        if self.value is None:
+            with torch.inference_mode():
+                self.value = self.segmenter.model.trunk(self.segmenter._to_tensor([self.rgb_patch]))
+        return self.value
+
+
+def _resolve(features: Any) -> Any:
+    return features.get() if isinstance(features, _LazyTrunk) else features
