@@ -101,19 +101,24 @@ def test_a_stale_or_altered_export_is_never_run(tiny, tmp_path, monkeypatch):
     assert _load(monkeypatch, "auto", copy).engine_name == "torch"
 
 
-def test_mc_dropout_stays_on_torch_with_the_same_numbers(tiny, monkeypatch):
+def test_mc_dropout_runs_its_head_on_the_onnx_trunk(tiny, monkeypatch):
+    """One ONNX Runtime pass gives a patch's softmax and the trunk that MC dropout's torch head runs on: the
+    same samples as torch's to float rounding."""
     weights, frame = tiny
     onnx_seg = _load(monkeypatch, "onnx", weights, working_width=64)
     torch_seg = _load(monkeypatch, "torch", weights, working_width=64)
+    assert onnx_seg.engine.trunk_names  # the export carries the trunk
     patch = np.ascontiguousarray(frame[3:40, 5:61])
-    shared = onnx_seg.patch_trunk(patch)  # lazy: computed only when MC dropout asks
-    assert shared.value is None
+    shared = onnx_seg.patch_trunk(patch)  # lazy: nothing computed yet
+    assert shared.value is None and shared.logits is None
     np.testing.assert_allclose(onnx_seg.predict_patch(patch, features=shared), torch_seg.predict_patch(patch),
                                atol=1e-5)
-    assert shared.value is None
+    assert shared.value is not None  # the same pass gave the trunk
     a = onnx_seg.mc_dropout(patch, 4, 0.9, 11, features=shared)
     b = torch_seg.mc_dropout(patch, 4, 0.9, 11, features=torch_seg.patch_trunk(patch))
-    np.testing.assert_allclose(a, b, atol=1e-6)
+    np.testing.assert_allclose(a, b, atol=1e-5)
+    np.testing.assert_allclose(onnx_seg.mc_dropout(patch, 4, 0.9, 11, window=(2, 30, 4, 50)),
+                               b[:, :, 2:30, 4:50], atol=1e-5)
     again = pickle.loads(pickle.dumps(onnx_seg))  # worker processes
     assert again.engine_name == "onnx"
     np.testing.assert_array_equal(again.predict_frame(frame), onnx_seg.predict_frame(frame))

@@ -206,6 +206,7 @@ class Segmenter:
     def __getstate__(self) -> dict[str, Any]:  # picklable (for worker processes): the lock is recreated
         state = self.__dict__.copy()
         del state["_lock"]
+        state.pop("_trunk_template", None)
         return state
 
     def __setstate__(self, state: dict[str, Any]) -> None:
@@ -288,7 +289,13 @@ class Segmenter:
         ``features``: the patch's :meth:`patch_trunk`, when the caller shares it with MC dropout.
         """
         _check_rgb(rgb_patch, "patch")
-        if features is None or getattr(self, "engine", None) is not None:  # ONNX Runtime runs the full pass
+        if getattr(self, "engine", None) is not None:  # ONNX Runtime runs the full pass
+            logits = features.patch_logits() if isinstance(features, _LazyTrunk) else None
+            if logits is None:
+                return self._predict([rgb_patch], "patch")[0]
+            h, w = rgb_patch.shape[:2]
+            return np.ascontiguousarray(self._probs(logits, (1, self.labels.num_classes, h, w), "patch")[0])
+        if features is None:
             return self._predict([rgb_patch], "patch")[0]
         features = _resolve(features)
         h, w = rgb_patch.shape[:2]
@@ -423,16 +430,42 @@ class Segmenter:
 
 
 class _LazyTrunk:
-    """A patch's trunk, computed by torch on first use (MC dropout) and kept: what ``patch_trunk`` hands out
-    when ONNX Runtime runs the full passes, so a campaign without MC dropout never runs the torch trunk."""
+    """A patch's trunk on first use, kept: what ``patch_trunk`` hands out when ONNX Runtime runs the full passes.
+
+    When the export carries the trunk (``engine.trunk_names``), one ONNX Runtime pass gives the patch's logits
+    (:meth:`patch_logits`, for ``predict_patch``) and its trunk (:meth:`get`, for MC dropout's torch head);
+    otherwise torch computes the trunk, and only if MC dropout asks."""
 
     def __init__(self, segmenter: Segmenter, rgb_patch: np.ndarray) -> None:
-        self.segmenter, self.rgb_patch, self.value = segmenter, rgb_patch, None
+        self.segmenter, self.rgb_patch, self.value, self.logits = segmenter, rgb_patch, None, None
+
+    def _onnx_pass(self) -> None:
+        from el.segmentation.onnx_engine import unflatten_features
+
+        seg = self.segmenter
+        batch = (self.rgb_patch[None].astype(np.float32) / np.float32(255.0)).transpose(0, 3, 1, 2)
+        logits, trunk = seg.engine.with_trunk(batch)
+        self.logits = torch.from_numpy(logits)
+        if "_trunk_template" not in seg.__dict__:  # the trunk's output type and fields, from a tiny torch pass
+            with torch.inference_mode():
+                side = 2 * int(getattr(seg.model, "stride", 16))
+                seg._trunk_template = seg.model.trunk(torch.zeros(1, 3, side, side, device=seg.device))
+        self.value = unflatten_features(seg._trunk_template, seg.engine.trunk_names,
+                                        [torch.from_numpy(t).to(seg.device) for t in trunk], self.rgb_patch.shape[:2])
+
+    def patch_logits(self) -> torch.Tensor | None:
+        """The patch's logits from the pass that gave its trunk (None when the export has no trunk outputs)."""
+        if self.logits is None and self.segmenter.engine.trunk_names:
+            self._onnx_pass()
+        return self.logits
 
     def get(self) -> Any:
         if self.value is None:
-            with torch.inference_mode():
-                self.value = self.segmenter.model.trunk(self.segmenter._to_tensor([self.rgb_patch]))
+            if self.segmenter.engine.trunk_names:
+                self._onnx_pass()
+            else:
+                with torch.inference_mode():
+                    self.value = self.segmenter.model.trunk(self.segmenter._to_tensor([self.rgb_patch]))
         return self.value
 
 

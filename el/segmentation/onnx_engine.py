@@ -110,8 +110,43 @@ def engine_record(weights_sha256: str, onnx_sha256: str, opset: int) -> dict[str
             "opset": int(opset)}
 
 
+def flatten_features(features: Any) -> tuple[list[str], list[Any]]:
+    """A trunk's output (a dataclass such as ``LiteFeatures``) as named tensors: each tensor field, and each
+    tensor of a tuple field (``trunk.levels.0``, ...), in field order; ``size`` is not a tensor and is left out."""
+    import dataclasses
+
+    names, tensors = [], []
+    for f in dataclasses.fields(features):
+        value = getattr(features, f.name)
+        if isinstance(value, tuple) and value and all(hasattr(v, "shape") for v in value):
+            names += [f"trunk.{f.name}.{i}" for i in range(len(value))]
+            tensors += list(value)
+        elif hasattr(value, "shape"):
+            names.append(f"trunk.{f.name}")
+            tensors.append(value)
+    return names, tensors
+
+
+def unflatten_features(template: Any, names: list[str], tensors: list[Any], size: tuple[int, int]) -> Any:
+    """The trunk's output rebuilt from :func:`flatten_features`' tensors, like ``template`` (same type and fields)."""
+    import dataclasses
+
+    by_name = dict(zip(names, tensors, strict=True))
+    values = {}
+    for f in dataclasses.fields(template):
+        value = getattr(template, f.name)
+        if f.name == "size":
+            values[f.name] = size
+        elif isinstance(value, tuple):
+            values[f.name] = tuple(by_name[f"trunk.{f.name}.{i}"] for i in range(len(value)))
+        else:
+            values[f.name] = by_name[f"trunk.{f.name}"] if f"trunk.{f.name}" in by_name else value
+    return type(template)(**values)
+
+
 class OnnxEngine:
-    """The logits of a project network under ONNX Runtime: float32 NCHW RGB in [0, 1] -> (B, C, H, W).
+    """The logits of a project network under ONNX Runtime: float32 NCHW RGB in [0, 1] -> (B, C, H, W), and the
+    trunk outputs an export of a trunk/head network carries (:attr:`trunk_names`).
 
     Picklable (worker processes): the session is opened again from the checked file's bytes."""
 
@@ -120,6 +155,15 @@ class OnnxEngine:
         data, _ = read_checked(path, sha256)
         self._session = open_session(data, path, threads)
         self._input = self._session.get_inputs()[0].name
+        outputs = [o.name for o in self._session.get_outputs()]
+        self._logits = outputs[0]
+        self.trunk_names = [n for n in outputs[1:] if n.startswith("trunk.")]
+
+    def with_trunk(self, batch: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
+        """Logits and the trunk outputs (:attr:`trunk_names`) of a batch, from one pass."""
+        out = self._session.run([self._logits, *self.trunk_names],
+                                {self._input: np.ascontiguousarray(batch, np.float32)})
+        return out[0], out[1:]
 
     def __getstate__(self) -> dict[str, Any]:
         return {"path": self.path, "sha256": self.sha256, "threads": self.threads}
@@ -129,7 +173,7 @@ class OnnxEngine:
 
     def logits(self, batch: np.ndarray) -> np.ndarray:
         """Logits of a (B, 3, H, W) float32 batch."""
-        return self._session.run(None, {self._input: np.ascontiguousarray(batch, np.float32)})[0]
+        return self._session.run([self._logits], {self._input: np.ascontiguousarray(batch, np.float32)})[0]
 
 
 def engine_for(weights_path: str | Path, weights_sha256: str | None, threads: int | None = None

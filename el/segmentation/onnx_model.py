@@ -226,6 +226,7 @@ class OnnxModel:
         if len(inputs) != 1:
             raise WeightsError(f"{path}: the ONNX model has {len(inputs)} inputs, one (the image) expected")
         self._input = inputs[0].name
+        self._output = self._session.get_outputs()[0].name  # the first output; an export's trunk outputs unused
         missing = sorted(set(labels.names) ^ set(contract.class_names))
         if len(contract.class_names) != labels.num_classes or missing:
             raise WeightsError(f"{path}: the contract's classes {list(contract.class_names)} are not the label "
@@ -234,7 +235,7 @@ class OnnxModel:
         self._order = np.array([contract.class_names.index(n) for n in labels.names])
 
     def __getstate__(self) -> dict[str, Any]:
-        return {k: v for k, v in self.__dict__.items() if k not in ("_session", "_input", "_order")}
+        return {k: v for k, v in self.__dict__.items() if k not in ("_session", "_input", "_output", "_order")}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__init__(state["path"], state["contract"], state["labels"], state["weights_sha256"],  # type: ignore[misc]
@@ -246,7 +247,7 @@ class OnnxModel:
 
     def _run(self, rgb: np.ndarray, what: str) -> np.ndarray:
         h, w = rgb.shape[:2]
-        out = self._session.run(None, {self._input: self.contract.to_input(rgb)})[0]
+        out = self._session.run([self._output], {self._input: self.contract.to_input(rgb)})[0]
         probs = self.contract.to_probs(out, w, h, what)[self._order]
         return np.ascontiguousarray(probs, dtype=np.float32)
 

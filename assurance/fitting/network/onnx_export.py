@@ -8,6 +8,9 @@ input to a multiple of the network's stride and crops the logits back with shape
 stays valid at every size (the networks' own Python-int padding would be frozen by the tracer). The
 contract (:class:`el.segmentation.onnx_model.OnnxContract`), the label set, the opset and the source weights'
 SHA-256 go into the ONNX ``metadata_props``: the file loads with ``load_onnx_model(path)`` and nothing else.
+Such a network's trunk (the deterministic part MC dropout shares) is exported too, as further outputs
+``trunk.<field>.<i>`` after ``logits`` (:func:`el.segmentation.onnx_engine.flatten_features`), so one ONNX
+Runtime pass on a patch gives its softmax and the features MC dropout's head runs on.
 
 After export the file is run under ONNX Runtime on a frame (a rendered synthetic scene at 1024x576 unless
 one is given) and on an odd-sized patch, and compared with torch: the largest logit difference is reported,
@@ -27,7 +30,7 @@ import numpy as np
 
 from assurance.files import atomic_write_bytes
 from el.segmentation.inference import Segmenter
-from el.segmentation.onnx_engine import engine_record, open_session, record_path
+from el.segmentation.onnx_engine import engine_record, flatten_features, open_session, record_path
 from el.segmentation.onnx_model import META_CONTRACT, META_LABELS, META_OPSET, META_SOURCE, OnnxContract
 
 DEFAULT_OPSET = 17
@@ -52,10 +55,22 @@ def _wrapped(module: Any) -> Any:
         def forward(self, x: Any) -> Any:
             h, w = x.shape[2], x.shape[3]
             ph, pw = (self.stride - h % self.stride) % self.stride, (self.stride - w % self.stride) % self.stride
-            logits = self.net.head(self.net.trunk(F.pad(x, (0, pw, 0, ph), mode="replicate")), crop=False)
-            return logits[:, :, :h, :w]
+            features = self.net.trunk(F.pad(x, (0, pw, 0, ph), mode="replicate"))
+            logits = self.net.head(features, crop=False)
+            return (logits[:, :, :h, :w], *flatten_features(features)[1])
 
     return PadCrop(module).eval()
+
+
+def trunk_output_names(module: Any) -> list[str]:
+    """Names of the trunk outputs the export adds after ``logits`` (none for a network without a trunk)."""
+    import torch
+
+    if _wrapped(module) is module:
+        return []
+    with torch.no_grad():
+        names, _ = flatten_features(module.trunk(torch.zeros(1, 3, 2 * module.stride, 2 * module.stride)))
+    return names
 
 
 def _as_segmenter(model: Any) -> Segmenter:
@@ -77,8 +92,11 @@ def _onnx_bytes(seg: Segmenter, opset: int, meta: dict[str, str]) -> bytes:
     dims = {0: "batch", 2: "height", 3: "width"}
     with torch.inference_mode(False), torch.no_grad(), warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the tracer's notes on the networks' own Python-int padding (bypassed)
-        torch.onnx.export(_wrapped(seg.model.eval()), (example,), buf, input_names=["rgb"], output_names=["logits"],
-                          dynamic_axes={"rgb": dims, "logits": dims}, opset_version=opset, dynamo=False)
+        outputs = ["logits", *trunk_output_names(seg.model)]
+        torch.onnx.export(_wrapped(seg.model.eval()), (example,), buf, input_names=["rgb"], output_names=outputs,
+                          dynamic_axes={"rgb": dims, "logits": dims, **{n: {0: "batch", 2: f"{n}.h", 3: f"{n}.w"}
+                                                                        for n in outputs[1:]}},
+                          opset_version=opset, dynamo=False)
     proto = onnx.load_from_string(buf.getvalue())
     for key, value in meta.items():
         entry = proto.metadata_props.add()
@@ -94,7 +112,7 @@ def _compare(seg: Segmenter, session: Any, image: np.ndarray) -> dict[str, Any]:
     x = np.ascontiguousarray((image.astype(np.float32) / np.float32(255.0)).transpose(2, 0, 1)[None])
     with torch.inference_mode():
         ref = seg.model(torch.from_numpy(x)).float().numpy()
-    out = session.run(None, {session.get_inputs()[0].name: x})[0]
+    out = session.run(["logits"], {session.get_inputs()[0].name: x})[0]
     if out.shape != ref.shape:
         raise ValueError(f"ONNX output {out.shape} differs from torch's {ref.shape}")
     top2 = np.sort(ref[0], axis=0)[-2:]
