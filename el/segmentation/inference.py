@@ -128,6 +128,9 @@ class Segmenter:
         The classes the network's outputs are (``el.labels.UAVID`` by default; :meth:`load` takes
         them from the card's ``labels`` entry). The core model and the monitors read them from
         the attribute :attr:`labels`.
+    engine : el.segmentation.onnx_engine.OnnxEngine, optional
+        ONNX Runtime for the full passes (frames, patches) of this network; None: torch. :meth:`load`
+        chooses (``UAV_EL_ENGINE``, docs/architecture.md section 3.2.1); MC dropout's head stays on torch.
 
     Examples
     --------

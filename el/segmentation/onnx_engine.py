@@ -92,7 +92,7 @@ def metadata(session: Any) -> dict[str, str]:
 
 
 def engine_choice() -> str:
-    """The engine ``UAV_EL_ENGINE`` asks for (``auto`` when unset); a ValueError for anything else."""
+    """The engine ``UAV_EL_ENGINE`` asks for (``auto`` when unset); a ``WeightsError`` for anything else."""
     value = os.environ.get(ENGINE_ENV, "auto").strip().lower() or "auto"
     if value not in ENGINES:
         raise WeightsError(f"{ENGINE_ENV}={value!r}: expected one of {', '.join(ENGINES)}")
