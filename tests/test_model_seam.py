@@ -63,7 +63,7 @@ def test_land_takes_a_plugin_model_by_name(colour_installed, tmp_path, capsys):
 def test_the_factory_refuses_clearly(tmp_path):
     with pytest.raises(WeightsError, match="'nosuch' is not registered in the 'uav_el.models' entry points"):
         load_model("nosuch")
-    with pytest.raises(WeightsError, match="neither a .pt weights file nor a registered model name"):
+    with pytest.raises(WeightsError, match="neither a .pt or .onnx file nor a registered model name"):
         load_model("no such thing!")
     with pytest.raises(WeightsError, match="nope.pt"):
         load_model(tmp_path / "nope.pt")

@@ -86,7 +86,7 @@ def load_model(spec: str | Path | None = None, *, threads: int | None = None, de
         return _segmenter(spec, threads, device, working_width)
     name, _, arg = str(spec).partition(":")
     if not _NAME.match(name):
-        raise WeightsError(f"model spec {str(spec)!r}: neither a .pt weights file nor a registered model name")
+        raise WeightsError(f"model spec {str(spec)!r}: neither a .pt or .onnx file nor a registered model name")
     factories = model_factories()
     if name not in factories:
         known = ", ".join(sorted(factories)) or "none installed"
