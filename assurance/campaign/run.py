@@ -58,7 +58,7 @@ class CampaignConfig:
     seed: int = 0
     patch_margin: float = 0.25
     patch_max_side: int | None = None
-    weights: str | None = None  # None: the shipped weights
+    weights: str | dict[str, Any] | None = None  # None: the shipped weights; a dict: a system file's model
     core: CoreConfig = field(default_factory=CoreConfig)
 
     def __post_init__(self) -> None:
@@ -218,13 +218,13 @@ def _clearance(fn: Callable[..., Any] | None, sample: Sample, size: tuple[int, i
 _WORKER_STATE: dict[str, Any] = {}
 
 
-def _worker_segmenter(weights: str | None, threads: int) -> Any:
+def _worker_segmenter(weights: str | dict[str, Any] | None, threads: int) -> Any:
     """One segmenter per worker process (loaded once, cached)."""
     key = f"{weights}|{threads}"
     if _WORKER_STATE.get("key") != key:
-        from el.segmentation.factory import load_model
+        from assurance.system.model import load_model_spec
 
-        _WORKER_STATE["segmenter"] = load_model(weights, threads=threads)
+        _WORKER_STATE["segmenter"] = load_model_spec(weights, threads=threads)
         _WORKER_STATE["key"] = key
     return _WORKER_STATE["segmenter"]
 
@@ -272,6 +272,7 @@ def run_campaign(
     on_result: Callable[[dict[str, Any]], None] | None = None,
     segmenter: Any = None,
     records: Sequence[Any] = (),
+    system: Any = None,
 ) -> dict[str, Any]:
     """Run (or resume) a campaign; returns a summary {tasks, done, skipped, faults, missing, repaired, seconds}.
 
@@ -295,16 +296,21 @@ def run_campaign(
         raise ValueError(f"{data}: no images to evaluate")
     model = None
     if segmenter is None:  # bad weights or an unknown model name are refused before the run folder exists
-        from el.segmentation.factory import load_model
+        from assurance.system.model import load_model_spec
 
-        model = load_model(config.weights)
+        model = load_model_spec(config.weights)
     network = segmenter if segmenter is not None else model
     check_monitor_networks(config.monitors, network)
     for record in records:
         record.check_network(network)
     threads = max(1, (os.cpu_count() or 1) // max(1, jobs))
+    if system is None:
+        from assurance.system import default_system
+
+        system = default_system()
     man = manifest(data, config, tasks, threads=threads,
-                   segmenter="weights" if segmenter is None else type(segmenter).__name__, model=model)
+                   segmenter="weights" if segmenter is None else type(segmenter).__name__, model=network,
+                   system=system.record())
     readouts.init_run(run_dir, man)
     repaired = _set_aside_damaged(run_dir, tasks)
     todo = [t for t in tasks if not readouts.shard_done(run_dir, t.shard_name)]
