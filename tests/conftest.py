@@ -47,6 +47,10 @@ def pytest_configure(config: pytest.Config) -> None:
             set_context(config, run_digest=None, run_problems=[str(exc)])
         else:
             set_context(config, run_digest=check.digest if check.ok else None, run_problems=check.problems)
+        import json
+
+        recorded = (json.loads((run / "manifest.json").read_text()).get("system") or {}).get("sha256")
+        set_context(config, system_sha256=recorded)  # the requirement results are about the run's system file
 
 
 @pytest.fixture(scope="session")

@@ -14,7 +14,7 @@ from assurance.campaign.integrity import RunCheck, verify_run
 from assurance.evidence.gate import GATE_CLASS, Gate, requirement_results
 from assurance.evidence.identity import identity
 from assurance.evidence.matrix import check_problems, check_view, matrix, run_checks
-from assurance.evidence.render import TEMPLATE, TEMPLATES_DIR, faults_table
+from assurance.evidence.render import TEMPLATE, TEMPLATES_DIR, faults_table, rel
 from assurance.evidence.sections import (
     domain,
     limitations,
@@ -47,6 +47,7 @@ class Inputs:
     checks: dict[str, rq.Evidence]
     warnings: list[str]
     problems: list[str]
+    system: Any = None  # the system file assessed (assurance.system.SystemFile)
 
     @property
     def deployed(self) -> str:
@@ -55,7 +56,7 @@ class Inputs:
 
 
 def read_inputs(run: Path, out: Path, *, requirements: str | Path | None, baseline: str | Path | None,
-                registry: str | Path | None, n_boot: int, templates: str | Path | None) -> Inputs:
+                registry: str | Path | None, n_boot: int, templates: str | Path | None, system: Any = None) -> Inputs:
     """Read and verify the run (and the baseline's shards), write ``results.csv``, read the requirement results
     and run the report's checks; a damaged run raises ``readouts.DamagedRunError``."""
     templates = Path(templates) if templates else TEMPLATES_DIR
@@ -84,11 +85,45 @@ def read_inputs(run: Path, out: Path, *, requirements: str | Path | None, baseli
                           table=table)
     checks = run_checks(reg, ctx)
     check_problems(checks, results, problems, warnings)
+    problems.extend(system_problems(system, man, req_doc, run))
     deployed = reg.parameters["deployed_monitor"]
     if deployed not in man["config"]["monitors"]:
         warnings.append(f"the deployed monitor {deployed!r} (registry) was not evaluated by this campaign")
     return Inputs(run, out, templates, reg, man, check, images, candidates, table, csv_path, req_path, results,
-                  req_doc, checks, warnings, problems)
+                  req_doc, checks, warnings, problems, system)
+
+
+def system_problems(system: Any, man: dict[str, Any], req_doc: dict[str, Any] | None, run: Path) -> list[str]:
+    """Why the report, the run and the requirement results are not about one system file (empty when they are):
+    a run records the system file it assessed; the requirement results record the run's."""
+    recorded = (man.get("system") or {}).get("sha256")
+    if system is None or not recorded:
+        return []
+    out = []
+    if recorded != system.sha256:
+        out.append(f"{run}: the campaign assessed another system file (SHA-256 {recorded[:12]}, "
+                   f"{(man.get('system') or {}).get('path') or 'the embedded default'}) than this report "
+                   f"({system.label}, {system.sha256[:12]}); give the run's system file with --system")
+    if req_doc is not None and (req_doc.get("context") or {}).get("system_sha256") != recorded:
+        out.append("the requirement results are not bound to the run's system file (system SHA-256 "
+                   f"{str((req_doc.get('context') or {}).get('system_sha256'))[:12]}, the run's {recorded[:12]})")
+    return out
+
+
+def _setting(inp: Inputs, key: str, default: str) -> str:
+    return str(inp.system.get(key, default)) if inp.system is not None else default
+
+
+def system_view(inp: Inputs) -> dict[str, Any] | None:
+    """The system file the report assesses: where, its hash, every value it sets, the model's hash."""
+    if inp.system is None:
+        return None
+    sysf = inp.system
+    weights = inp.manifest.get("weights") or {}
+    return {"label": sysf.label if sysf.path is None else str(rel(sysf.path)), "sha256": sysf.sha256,
+            "name": sysf.name, "values": [{"key": k, "value": v} for k, v in sysf.values()],
+            "model_sha256": weights.get("sha256") or "not recorded",
+            "model": weights.get("path") or weights.get("model") or "the shipped network"}
 
 
 def _plots(inp: Inputs) -> list[dict[str, str]]:
@@ -188,7 +223,9 @@ def template_context(inp: Inputs, gate: Gate, campaign: dict[str, Any], base: di
     reg, results = inp.registry, inp.results
     counts = rq.summary_counts(gate.states.values())
     return {
-        "title": "Evidence report: UAV emergency landing",
+        "title": _setting(inp, "report.title", "Evidence report: UAV emergency landing"),
+        "organisation": _setting(inp, "report.organisation", ""),
+        "system": system_view(inp),
         "run_name": inp.run.name, "run": str(inp.run), "created": created,
         "gate": gate.result, "gate_class": GATE_CLASS[gate.result], "gate_text": gate.text,
         "waivers": [{"id": rid, **gate.waivers[rid]} for rid in gate.waived],

@@ -83,16 +83,24 @@ def generate(
     pdf: bool = True,
     n_boot: int = 2000,
     templates: str | Path | None = None,
+    system: Any = None,
 ) -> EvidenceReport:
     """Write the evidence report of ``run`` into ``out`` and return what the gate says.
 
     ``requirements``: the plugin's results JSON; None looks for ``out/requirements.json`` and, without
     one, leaves every requirement "not verified". ``baseline``: an earlier run to compare with;
-    ``baseline_requirements``: that run's results JSON (for requirement state changes).
+    ``baseline_requirements``: that run's results JSON (for requirement state changes). ``system``: the system
+    file assessed (``assurance.system.SystemFile``): its waivers, report settings and identity; a run or
+    requirement results about another system file fail the gate.
     """
     run, out = Path(run), Path(out)
+    if system is not None:
+        from assurance.system import build as system_build
+
+        waivers = system_build.waivers(system, str(waivers) if waivers else None)
+        templates = templates or system_build.report_settings(system)["templates"]
     inp = read_inputs(run, out, requirements=requirements, baseline=baseline, registry=registry, n_boot=n_boot,
-                      templates=templates)
+                      templates=templates, system=system)
     campaign = campaign_context(inp)
     gate = decide_gate(inp.results, inp.problems, waivers, strict)
     base = (baseline_view(Path(baseline), inp.manifest, campaign["ident"], inp.table, inp.results, inp.registry,
