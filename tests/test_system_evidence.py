@@ -60,3 +60,22 @@ def test_requirement_results_of_another_system_file_are_refused(system_run, tmp_
     assert problems and "not bound to the run's system file" in problems[0]
     ok = {"context": {"system_sha256": system_run["system"].sha256}}
     assert system_problems(system_run["system"], man, ok, system_run["run"]) == []
+
+
+def test_a_template_folder_overrides_the_packaged_templates_file_by_file(system_run, tmp_path):
+    from assurance.evidence.render import TEMPLATES_DIR
+
+    tpl = system_run["root"] / "tpl"
+    tpl.mkdir(exist_ok=True)
+    css = (TEMPLATES_DIR / "evidence.css").read_text() + "\n/* ACME house style */\n"
+    (tpl / "evidence.css").write_text(css)
+    path = system_run["root"] / "styled.toml"
+    path.write_text(system_run["system"].path.read_text() + '\n[report]\ntemplates = "tpl"\n'
+                    if "[report]" not in system_run["system"].path.read_text() else
+                    system_run["system"].path.read_text().replace("[report]", '[report]\ntemplates = "tpl"'))
+    styled = load_system(path)
+    report = generate(system_run["run"], tmp_path / "styled", pdf=False, n_boot=50, system=styled,
+                      requirements=None)
+    html = report.html.read_text()
+    assert "ACME house style" in html and "What was assessed" in html  # the rest from the packaged templates
+    assert any("another system file" in p for p in report.problems)  # a different file than the run's

@@ -14,7 +14,7 @@ from assurance.campaign.integrity import RunCheck, verify_run
 from assurance.evidence.gate import GATE_CLASS, Gate, requirement_results
 from assurance.evidence.identity import identity
 from assurance.evidence.matrix import check_problems, check_view, matrix, run_checks
-from assurance.evidence.render import TEMPLATE, TEMPLATES_DIR, faults_table, rel
+from assurance.evidence.render import TEMPLATES_DIR, faults_table, rel
 from assurance.evidence.sections import (
     domain,
     limitations,
@@ -60,8 +60,8 @@ def read_inputs(run: Path, out: Path, *, requirements: str | Path | None, baseli
     """Read and verify the run (and the baseline's shards), write ``results.csv``, read the requirement results
     and run the report's checks; a damaged run raises ``readouts.DamagedRunError``."""
     templates = Path(templates) if templates else TEMPLATES_DIR
-    if not (templates / TEMPLATE).is_file():
-        raise FileNotFoundError(f"{templates / TEMPLATE}: report template not found")
+    if not templates.is_dir():
+        raise FileNotFoundError(f"{templates}: report template folder not found")
     warnings: list[str] = []
     reg = rq.load_registry(registry)
     man = readouts.read_manifest(run)
