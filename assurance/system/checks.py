@@ -88,8 +88,8 @@ def check_model(system: SystemFile, names: tuple[str, ...]) -> None:
             raise system.error("model.class_map", f"maps onto {unknown[0]!r}, not a class of the system's label set "
                                                   f"({', '.join(names)})")
     contract = system.get("model.onnx")
-    if contract and contract.get("scale") == "mean_std" and not (contract.get("mean") and contract.get("std")):
-        raise system.error("model.onnx", "scale 'mean_std' needs mean and std")
+    if contract and contract.get("scaling") == "mean_std" and not (contract.get("mean") and contract.get("std")):
+        raise system.error("model.onnx", "scaling 'mean_std' needs mean and std")
 
 
 def check_monitor(system: SystemFile) -> None:
