@@ -11,7 +11,8 @@ Capabilities pass through where the class map keeps their meaning: ``mc_dropout`
 mapped), ``patch_trunk`` (the trunk is class-free; ``predict_patch`` and ``mc_dropout`` take its
 ``features=`` and map their output) and the trunk features of the out-of-domain gate (``model.trunk``
 and ``working_size``: class-free). Not passed: ``fast_mc`` (the chunked MC path reads the network's
-head directly and would bypass the map; MC dropout goes through the mapped ``mc_dropout`` instead).
+head directly and would bypass the map), so MC dropout goes through the mapped ``mc_dropout`` in one
+draw: in flight, a large MCD ``n`` is not cut into budget-checked chunks.
 ``weights_sha256`` is the network's: records fitted on it stay bound to it. Beware that a record whose
 features are per class (a learned monitor's per-class features, a softmax-embedding out-of-domain gate)
 was fitted in the network's classes; the learned monitor refuses class names it does not know, a
@@ -58,7 +59,8 @@ def check_class_map(network: LabelSet, system: LabelSet, mapping: Mapping[str, s
         if u not in system.ids:
             raise ValueError(f"class map: unreachable {u!r} is not a class of the system's label set {system.name!r}")
         if u in reached:
-            raise ValueError(f"class map: system class {u!r} is listed unreachable but {sorted(k for k, v in mapping.items() if v == u)} map onto it")
+            onto = sorted(k for k, v in mapping.items() if v == u)
+            raise ValueError(f"class map: system class {u!r} is listed unreachable but {onto} map onto it")
     missing = [n for n in system.names if n not in reached and n not in unreachable]
     if missing:
         raise ValueError(f"class map: system class {missing[0]!r} is reached by no network class (list it "
@@ -159,6 +161,11 @@ class MappedModel:
         if inner is None:
             raise AttributeError(f"{type(self.network).__name__} exposes no model")
         return inner
+
+    @property
+    def device(self) -> Any:
+        """Where the network runs (read with the trunk features)."""
+        return getattr(self.network, "device", "cpu")
 
     def working_size(self, width: int, height: int) -> tuple[int, int]:
         """The network's working size for a frame (read with the trunk features)."""
