@@ -70,6 +70,17 @@ def scenes(tmp_path_factory, foreign):
     return root / "uavid", root / "foreign"
 
 
+@pytest.fixture(scope="module")
+def rendered(tmp_path_factory, foreign):
+    """Two scenes rendered by the synthetic city (with their meta: the world model the clearance reads), re-coloured."""
+    from assurance.scenes.generate import write_dataset
+
+    root = tmp_path_factory.mktemp("rendered")
+    write_dataset(root / "uavid", 2, seed=0, split="val", size=(320, 180), progress=False)
+    recolour_dataset(root / "uavid", root / "foreign", UAVID, foreign, TO_FOREIGN)
+    return root / "uavid", root / "foreign"
+
+
 def _tables(run):
     out = {}
     for name in ("images", "candidates"):
@@ -132,26 +143,31 @@ def test_campaign_readouts_equal_the_originals_with_the_oracle(tmp_path, scenes,
     _assert_same_readouts(a, b)
 
 
-def test_campaign_readouts_equal_the_originals_with_the_network(tmp_path, scenes, foreign):
-    """The built-in network (tiny, random weights): frame, patch, shared trunk and MC dropout through the map."""
-    src, dst = scenes
+def test_campaign_readouts_equal_the_originals_with_the_network(tmp_path, rendered, foreign):
+    """The built-in network (tiny, random weights) on rendered scenes: frame, patch, shared trunk and MC dropout
+    through the map, and the clearance from the scenes' copied meta."""
+    src, dst = rendered
     torch.manual_seed(0)
     model = build_model(TINY_ARCH)
     with torch.no_grad():
         model.classifier.weight *= 100.0  # sharper logits: a varied map (some forbidden pixels) from random weights
     path = tmp_path / "tiny.pt"
     save_weights(model, path)
-    seg = load_model(str(path), threads=1, working_width=256)
-    cfg = CampaignConfig(perturbations=("none",), monitors=MONITORS, core=CoreConfig(n_star=4, working_width=256))
+    seg = load_model(str(path), threads=1, working_width=160)
+    cfg = CampaignConfig(perturbations=("none",), monitors=MONITORS, core=CoreConfig(n_star=4, working_width=160))
     run_campaign(src, tmp_path / "a", cfg, progress=False, segmenter=seg)
     run_campaign(dst, tmp_path / "b", cfg, progress=False, segmenter=MappedModel(seg, TO_FOREIGN, foreign))
     a, b = _tables(tmp_path / "a"), _in_uavid_names(_tables(tmp_path / "b"))
     assert (a["images"]["fault"] == "").all() and len(a["candidates"]) > 0
-    # Bit for bit but the hazards: el.ranking.semantic_hazard sums the classes' weighted probabilities in id
-    # order (float32), so another id order rounds differently (measured: up to 2.3e-9). Decisions, ranks,
-    # positions, truth and every monitor score are identical.
+    assert np.isfinite(a["candidates"]["clearance_m"]).any()
+    # Bit for bit but sums over classes, which another id order rounds differently: the semantic hazard
+    # (el.ranking.semantic_hazard sums the weighted class planes in id order, float32; measured up to 3.7e-9)
+    # and the entropy score (measured 2.2e-16). Decisions, ranks, positions, truth, clearance, acceptances and
+    # every other monitor score are identical.
     differ = _assert_same_readouts(a, b, float_rtol=1e-6)
-    assert set(differ) <= {"candidates.hazard", "candidates.hazard_semantic"}
+    assert set(differ) <= {"candidates.hazard", "candidates.hazard_semantic", "candidates.score"}
+    ca, cb = a["candidates"], b["candidates"]
+    assert set(ca["monitor"][ca["score"].to_numpy() != cb["score"].to_numpy()]) <= {"entropy", "energy"}
 
 
 def test_recolouring_refuses_what_would_change_the_truth(tmp_path, scenes, foreign):
