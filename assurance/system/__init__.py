@@ -7,16 +7,8 @@ default (the shipped system); ``assurance.system.build`` turns its sections into
 
 from __future__ import annotations
 
-from assurance.system.loader import (
-    FORMAT,
-    SYSTEM_FILE,
-    SystemFile,
-    SystemFileError,
-    default_system,
-    find_system,
-    load_system,
-    schema,
-)
+from assurance.system.find import find_system, load_system
+from assurance.system.loader import FORMAT, SYSTEM_FILE, SystemFile, SystemFileError, default_system, schema
 
 __all__ = ["FORMAT", "SYSTEM_FILE", "SystemFile", "SystemFileError", "default_system", "find_system",
            "load_system", "schema"]

@@ -202,10 +202,9 @@ def default_system() -> SystemFile:
                       default=True)
 
 
-def load_system(path: str | Path) -> SystemFile:
-    """Read, validate and check a system file (``SystemFileError`` naming the file, key, value, allowed)."""
-    from assurance.system.checks import check_system
-
+def read_system(path: str | Path) -> SystemFile:
+    """Read and validate a system file against the schema (``SystemFileError`` naming file, key, value, allowed);
+    the checks beyond the schema are ``assurance.system.checks`` (``assurance.system.load_system`` runs both)."""
     path = Path(path)
     if not path.is_file():
         raise SystemFileError(f"{path}: no such system file" if not path.exists() else f"{path}: not a file")
@@ -218,15 +217,4 @@ def load_system(path: str | Path) -> SystemFile:
         raise SystemFileError(f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
     doc = parse_system(text, label=str(path))
     default = parse_system(_default_text(), label="the embedded default system")
-    system = SystemFile(path, hashlib.sha256(raw).hexdigest(), doc, merge(default, doc), path.resolve().parent)
-    check_system(system)
-    return system
-
-
-def find_system(explicit: str | Path | None = None, cwd: str | Path | None = None) -> SystemFile:
-    """The system a command assesses: ``--system FILE``, else ``uav-el.toml`` in the working directory, else the
-    embedded default."""
-    if explicit is not None:
-        return load_system(explicit)
-    here = Path(cwd or Path.cwd()) / SYSTEM_FILE
-    return load_system(here) if here.is_file() else default_system()
+    return SystemFile(path, hashlib.sha256(raw).hexdigest(), doc, merge(default, doc), path.resolve().parent)
