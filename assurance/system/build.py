@@ -147,7 +147,8 @@ def model_source(system: SystemFile) -> dict[str, Any]:
     path = system.path_of("model.path")
     return {"kind": kind, "path": None if path is None else str(path.resolve()), "name": system.get("model.name"),
             "sha256": system.get("model.sha256"), "onnx": system.get("model.onnx"),
-            "class_map": system.get("model.class_map"), "labels": label_set(system).to_dict(),
+            "class_map": system.get("model.class_map"), "unreachable": system.get("model.unreachable") or [],
+            "labels": label_set(system).to_dict(),
             "system": system.label}
 
 

@@ -87,6 +87,9 @@ def check_model(system: SystemFile, names: tuple[str, ...]) -> None:
         if unknown:
             raise system.error("model.class_map", f"maps onto {unknown[0]!r}, not a class of the system's label set "
                                                   f"({', '.join(names)})")
+    unknown = [u for u in system.get("model.unreachable") or () if u not in names]
+    if unknown:
+        raise system.error("model.unreachable", f"{unknown[0]!r} is not a class of the system's label set")
     contract = system.get("model.onnx")
     if contract and contract.get("scaling") == "mean_std" and not (contract.get("mean") and contract.get("std")):
         raise system.error("model.onnx", "scaling 'mean_std' needs mean and std")

@@ -34,7 +34,7 @@ def build_model(source: Mapping[str, Any], *, threads: int | None = None, device
         from el.segmentation.class_map import MappedModel
 
         try:
-            model = MappedModel(model, dict(class_map), labels)
+            model = MappedModel(model, dict(class_map), labels, unreachable=tuple(source.get("unreachable") or ()))
         except ValueError as exc:
             raise WeightsError(f"{where}: model.class_map: {exc}") from None
     have = labels_of(model)
