@@ -22,6 +22,7 @@ from assurance.evidence.sections import (
     results_view,
     sample_size,
     scene_types,
+    ub_label,
     unsafe_picks,
 )
 from assurance.evidence.text import STATE_CLASS, pct
@@ -174,8 +175,10 @@ def campaign_context(inp: Inputs) -> dict[str, Any]:
         "unsafe": unsafe, "n_unsafe": n_unsafe, "n_unsafe_pictures": len(unsafe),
         "scenes_error": scenes.error,
         "plots": _plots(inp),
-        "results": results_view(inp.table, inp.deployed, float(params["unsafe_landing_bound"])),
+        "results": results_view(inp.table, inp.deployed, float(params["unsafe_landing_bound"]),
+                                float(params["confidence"])),
         "deployed": inp.deployed, "bound": pct(params["unsafe_landing_bound"]),
+        "confidence": rq.confidence_text(params["confidence"]), "ub_label": ub_label(params["confidence"]),
     }
 
 
@@ -213,8 +216,12 @@ def run_scope(inp: Inputs, states: dict[str, str]) -> dict[str, Any] | None:
     if release.images is not None and n >= release.images:
         return None
     undecided = [rid for rid, st in states.items() if st == rq.NOT_VERIFIED]
+    p = inp.registry.parameters
+    bound, conf = float(p["unsafe_landing_bound"]), float(p["confidence"])
     return {"images": n, "release_images": release.images, "undecided": ", ".join(undecided) or "none",
-            "command": "make release-evidence"}
+            "command": "make release-evidence", "bound": pct(bound), "confidence": rq.confidence_text(conf),
+            "bound_images": rq.images_needed(bound, conf),
+            "bound_claims": ", ".join(rq.requirements_reading("unsafe_landing_bound")) or "the bound"}
 
 
 def template_context(inp: Inputs, gate: Gate, campaign: dict[str, Any], base: dict[str, Any] | None,
@@ -247,6 +254,7 @@ def template_context(inp: Inputs, gate: Gate, campaign: dict[str, Any], base: di
         "checks": [check_view(ev) for ev in inp.checks.values()],
         "results": campaign["results"],
         "deployed": campaign["deployed"], "bound": campaign["bound"],
+        "confidence": campaign["confidence"], "ub_label": campaign["ub_label"],
         "sample_size": sample_size(inp.table, reg, n_boot),
         "plots": campaign["plots"],
         "gallery": campaign["gallery"], "gallery_key": campaign["gallery_key"],
