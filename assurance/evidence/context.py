@@ -3,6 +3,7 @@ finished context its templates render."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -57,14 +58,17 @@ class Inputs:
 
 
 def read_inputs(run: Path, out: Path, *, requirements: str | Path | None, baseline: str | Path | None,
-                registry: str | Path | None, n_boot: int, templates: str | Path | None, system: Any = None) -> Inputs:
+                registry: str | Path | rq.Registry | None, n_boot: int, templates: str | Path | None,
+                system: Any = None, targets: Mapping[str, Any] | None = None,
+                targets_source: str | None = None) -> Inputs:
     """Read and verify the run (and the baseline's shards), write ``results.csv``, read the requirement results
     and run the report's checks; a damaged run raises ``readouts.DamagedRunError``."""
     templates = Path(templates) if templates else TEMPLATES_DIR
     if not templates.is_dir():
         raise FileNotFoundError(f"{templates}: report template folder not found")
     warnings: list[str] = []
-    reg = rq.load_registry(registry)
+    reg = (registry if isinstance(registry, rq.Registry) else rq.load_registry(registry)).with_targets(
+        targets, source=targets_source)
     man = readouts.read_manifest(run)
     check = verify_run(run).raise_if_damaged()
     if check.legacy:
@@ -185,14 +189,18 @@ def campaign_context(inp: Inputs) -> dict[str, Any]:
 def commands(inp: Inputs) -> list[str]:
     """The commands that reproduce the run, the requirement results and this report."""
     man, run, out, cfg = inp.manifest, inp.run, inp.out, inp.manifest["config"]
+    src = inp.registry.targets_source
+    tfile = src if inp.registry.targets and src and Path(src).suffix == ".json" else None
     return [
         f"uav-el campaign --data {man['data']['path']} --out {run} --perturbations {' '.join(cfg['perturbations'])} "
         f"--severities {' '.join(str(s) for s in cfg['severities'])} --monitors "
         + " ".join(f"'{m}'" for m in cfg["monitors"])
         + (f" --images {cfg['images']}" if cfg.get("images") else "") + f" --seed {cfg['seed']}"
         + (f" --weights {cfg['weights']}" if cfg.get("weights") else ""),
-        f"pytest -m requirements --uav-el-run {run} --requirements-report {out / 'requirements.json'}",
-        f"uav-el evidence --run {run} --out {out}" + (f" --requirements {inp.req_path}" if inp.req_path else ""),
+        f"pytest -m requirements --uav-el-run {run} --requirements-report {out / 'requirements.json'}"
+        + (f" --uav-el-targets {tfile}" if tfile else ""),
+        f"uav-el evidence --run {run} --out {out}" + (f" --requirements {inp.req_path}" if inp.req_path else "")
+        + (f" --targets {tfile}" if tfile else ""),
     ]
 
 

@@ -318,13 +318,25 @@ def pose_margin(core: Any, size: tuple[int, int], pose_error: Mapping[str, float
     he, pe = float(pose_error["height"]), float(pose_error["pitch"])
     need = required_beta(geo, height_error=he, pitch_error=pe)
     return {"working_size": f"{w}x{h}", "height_m": cfg.pose.height_m, "pitch_deg": cfg.pose.pitch_deg,
-            "height_error": he, "pitch_error": pe, "beta": float(cfg.safety.beta),
-            "required_beta": round(need, 4)}, need
+            "height_error": he, "pitch_error": pe, "radius_m": float(cfg.safety.radius_m),
+            "beta": float(cfg.safety.beta), "required_beta": round(need, 4)}, need
 
 
-def check_pose_margin(core: Any, size: tuple[int, int], pose_error: Mapping[str, float]) -> Evidence:
-    """EL-R14: beta >= the beta required for the pose-error box, at working resolution (``pose_margin``)."""
+def check_pose_margin(core: Any, size: tuple[int, int], pose_error: Mapping[str, float],
+                      safety: Mapping[str, float] | None = None) -> Evidence:
+    """EL-R14: beta >= the beta required for the pose-error box, at working resolution (``pose_margin``).
+
+    ``safety``: the declared targets ``{"radius_m": R, "beta": beta}`` (the registry's parameters); a
+    configuration planned with another R or beta does not judge them (insufficient, naming both).
+    """
     row, need = pose_margin(core, size, pose_error)
+    if safety is not None:
+        want_r, want_b = float(safety["radius_m"]), float(safety["beta"])
+        if not (math.isclose(row["radius_m"], want_r) and math.isclose(row["beta"], want_b)):
+            return Evidence("pose-error margin of beta", INSUFFICIENT,
+                            f"insufficient evidence: the campaign planned with R = {row['radius_m']:g} m, beta = "
+                            f"{row['beta']:g}; the targets declare R = {want_r:g} m, beta = {want_b:g}",
+                            (row,), tuple(row))
     beta, he, pe = row["beta"], row["height_error"], row["pitch_error"]
     rel = ">=" if beta >= need else "<"
     verdict = f"beta {beta:g} {rel} required {need:.3f} for +-{he:.0%} height, +-{pe:.0%} pitch"
