@@ -38,7 +38,7 @@ def test_report_on_the_same_targets_shows_them_and_the_bound_at_their_confidence
     assert doc["registry"]["targets"] == TARGETS
     rep = generate(run, tmp_path / "same", requirements=results, targets=rq.read_targets_file(tfile),
                    targets_source=str(tfile.resolve()), pdf=False, n_boot=50)
-    assert not [p for p in rep.problems if "targets" in p], rep.problems
+    assert not [p for p in rep.problems if "requirement targets" in p], rep.problems
     html = rep.html.read_text(encoding="utf-8")
     assert "UB99" in html and "UB95" not in html and "one-sided 99% upper bound" in html
     assert "Requirement targets" in html and "confidence = 0.99" in html
@@ -68,3 +68,28 @@ def test_report_on_other_targets_fails_the_gate(judged, tmp_path, monkeypatch, c
                      "--no-pdf"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "bad.json.confidence = 2" in err[0] and "[0.5, 1)" in err[0]
+
+
+def test_a_system_files_targets_bind_the_report(pytester, tiny_campaign, tmp_path):
+    """generate(system=...) judges with the system file's [targets] (assurance.system.build.targets): results
+    judged on the same targets pass the binding, the registry's defaults do not."""
+    from assurance.system import build as system_build
+    from assurance.system import load_system
+
+    sysfile = tmp_path / "uav-el.toml"
+    sysfile.write_text("[targets]\nconfidence = 0.99\nunsafe_landing_bound = 0.3\n")
+    system = load_system(sysfile)
+    targets = system_build.targets(system)
+    assert targets == {"confidence": 0.99, "unsafe_landing_bound": 0.3}
+    tfile = tmp_path / "t.json"
+    tfile.write_text(json.dumps(targets))
+    results = tmp_path / "requirements.json"
+    pytester.runpytest(str(CAMPAIGN_TESTS), "-p", "no:cacheprovider", "--uav-el-run", str(tiny_campaign["run"]),
+                       "--requirements-report", str(results), "--uav-el-targets", str(tfile), "-k", "coverage")
+    rep = generate(tiny_campaign["run"], tmp_path / "sys", requirements=results, system=system, pdf=False, n_boot=50)
+    assert not [p for p in rep.problems if "requirement targets" in p], rep.problems
+    ev = json.loads(rep.json.read_text())
+    assert ev["identity"]["targets"] == targets and ev["identity"]["targets_source"].endswith("[targets]")
+    assert {row["confidence"] for row in ev["checks"]["EL-R10"]["rows"]} == {"99%"}
+    rep = generate(tiny_campaign["run"], tmp_path / "plain", requirements=results, pdf=False, n_boot=50)
+    assert any("judged on other requirement targets" in p for p in rep.problems)

@@ -104,6 +104,8 @@ def generate(
 
         waivers = system_build.waivers(system, str(waivers) if waivers else None)
         templates = templates or system_build.report_settings(system)["templates"]
+        if targets is None:  # the system file's [targets] (and R, beta, deployed monitor) judge the requirements
+            targets, targets_source = system_build.targets(system), targets_source or f"{system.label} [targets]"
     inp = read_inputs(run, out, requirements=requirements, baseline=baseline, registry=registry, n_boot=n_boot,
                       templates=templates, system=system, targets=targets, targets_source=targets_source)
     campaign = campaign_context(inp)
