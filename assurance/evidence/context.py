@@ -3,6 +3,7 @@ finished context its templates render."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -22,6 +23,7 @@ from assurance.evidence.sections import (
     results_view,
     sample_size,
     scene_types,
+    ub_label,
     unsafe_picks,
 )
 from assurance.evidence.text import STATE_CLASS, pct
@@ -56,14 +58,17 @@ class Inputs:
 
 
 def read_inputs(run: Path, out: Path, *, requirements: str | Path | None, baseline: str | Path | None,
-                registry: str | Path | None, n_boot: int, templates: str | Path | None, system: Any = None) -> Inputs:
+                registry: str | Path | rq.Registry | None, n_boot: int, templates: str | Path | None,
+                system: Any = None, targets: Mapping[str, Any] | None = None,
+                targets_source: str | None = None) -> Inputs:
     """Read and verify the run (and the baseline's shards), write ``results.csv``, read the requirement results
     and run the report's checks; a damaged run raises ``readouts.DamagedRunError``."""
     templates = Path(templates) if templates else TEMPLATES_DIR
     if not templates.is_dir():
         raise FileNotFoundError(f"{templates}: report template folder not found")
     warnings: list[str] = []
-    reg = rq.load_registry(registry)
+    reg = (registry if isinstance(registry, rq.Registry) else rq.load_registry(registry)).with_targets(
+        targets, source=targets_source)
     man = readouts.read_manifest(run)
     check = verify_run(run).raise_if_damaged()
     if check.legacy:
@@ -174,22 +179,28 @@ def campaign_context(inp: Inputs) -> dict[str, Any]:
         "unsafe": unsafe, "n_unsafe": n_unsafe, "n_unsafe_pictures": len(unsafe),
         "scenes_error": scenes.error,
         "plots": _plots(inp),
-        "results": results_view(inp.table, inp.deployed, float(params["unsafe_landing_bound"])),
+        "results": results_view(inp.table, inp.deployed, float(params["unsafe_landing_bound"]),
+                                float(params["confidence"])),
         "deployed": inp.deployed, "bound": pct(params["unsafe_landing_bound"]),
+        "confidence": rq.confidence_text(params["confidence"]), "ub_label": ub_label(params["confidence"]),
     }
 
 
 def commands(inp: Inputs) -> list[str]:
     """The commands that reproduce the run, the requirement results and this report."""
     man, run, out, cfg = inp.manifest, inp.run, inp.out, inp.manifest["config"]
+    src = inp.registry.targets_source
+    tfile = src if inp.registry.targets and src and Path(src).suffix == ".json" else None
     return [
         f"uav-el campaign --data {man['data']['path']} --out {run} --perturbations {' '.join(cfg['perturbations'])} "
         f"--severities {' '.join(str(s) for s in cfg['severities'])} --monitors "
         + " ".join(f"'{m}'" for m in cfg["monitors"])
         + (f" --images {cfg['images']}" if cfg.get("images") else "") + f" --seed {cfg['seed']}"
         + (f" --weights {cfg['weights']}" if cfg.get("weights") else ""),
-        f"pytest -m requirements --uav-el-run {run} --requirements-report {out / 'requirements.json'}",
-        f"uav-el evidence --run {run} --out {out}" + (f" --requirements {inp.req_path}" if inp.req_path else ""),
+        f"pytest -m requirements --uav-el-run {run} --requirements-report {out / 'requirements.json'}"
+        + (f" --uav-el-targets {tfile}" if tfile else ""),
+        f"uav-el evidence --run {run} --out {out}" + (f" --requirements {inp.req_path}" if inp.req_path else "")
+        + (f" --targets {tfile}" if tfile else ""),
     ]
 
 
@@ -213,8 +224,12 @@ def run_scope(inp: Inputs, states: dict[str, str]) -> dict[str, Any] | None:
     if release.images is not None and n >= release.images:
         return None
     undecided = [rid for rid, st in states.items() if st == rq.NOT_VERIFIED]
+    p = inp.registry.parameters
+    bound, conf = float(p["unsafe_landing_bound"]), float(p["confidence"])
     return {"images": n, "release_images": release.images, "undecided": ", ".join(undecided) or "none",
-            "command": "make release-evidence"}
+            "command": "make release-evidence", "bound": pct(bound), "confidence": rq.confidence_text(conf),
+            "bound_images": rq.images_needed(bound, conf),
+            "bound_claims": ", ".join(rq.requirements_reading("unsafe_landing_bound")) or "the bound"}
 
 
 def template_context(inp: Inputs, gate: Gate, campaign: dict[str, Any], base: dict[str, Any] | None,
@@ -247,6 +262,7 @@ def template_context(inp: Inputs, gate: Gate, campaign: dict[str, Any], base: di
         "checks": [check_view(ev) for ev in inp.checks.values()],
         "results": campaign["results"],
         "deployed": campaign["deployed"], "bound": campaign["bound"],
+        "confidence": campaign["confidence"], "ub_label": campaign["ub_label"],
         "sample_size": sample_size(inp.table, reg, n_boot),
         "plots": campaign["plots"],
         "gallery": campaign["gallery"], "gallery_key": campaign["gallery_key"],
