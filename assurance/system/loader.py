@@ -202,6 +202,19 @@ def default_system() -> SystemFile:
                       default=True)
 
 
+def system_from_record(record: Mapping[str, Any]) -> SystemFile:
+    """The system file a run recorded (``SystemFile.record()`` in its manifest), validated again: what the
+    requirement checks of that run read (targets, R, the deployed monitor), whatever the file says today."""
+    if record.get("default"):
+        return default_system()
+    path = Path(str(record.get("path") or "recorded-system.toml"))
+    label = f"{path} (as recorded in the run)"
+    doc = dict(record.get("document") or {})
+    validate(doc, label=label)
+    default = parse_system(_default_text(), label="the embedded default system")
+    return SystemFile(path, str(record.get("sha256") or ""), doc, merge(default, doc), path.parent)
+
+
 def read_system(path: str | Path) -> SystemFile:
     """Read and validate a system file against the schema (``SystemFileError`` naming file, key, value, allowed);
     the checks beyond the schema are ``assurance.system.checks`` (``assurance.system.load_system`` runs both)."""
