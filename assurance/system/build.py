@@ -183,6 +183,7 @@ def targets(system: SystemFile) -> dict[str, Any]:
             out[key] = system.get(f"safety.{key}")
     if system.sets("monitor.spec"):
         out["deployed_monitor"] = system.get("monitor.spec")
+        out["calibration_card"] = None  # the shipped card calibrates the shipped monitor, not this one
     if system.sets("monitor.calibration"):
         out["calibration_card"] = str(system.path_of("monitor.calibration"))
     return out
