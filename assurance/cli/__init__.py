@@ -26,6 +26,7 @@ from assurance.errors import CommandError
 COMMANDS: dict[str, str] = {
     "synth": "synth",
     "preview": "preview",
+    "recolour": "recolour",
     "land": "land",
     "train": "train",
     "model-card": "model_card",
