@@ -75,6 +75,8 @@ def decide_from_labels(
     try:
         config = frame_core(config, pose)
         info["pose"] = pose_record(config.pose, nominal=pose is None)
+        if roll_deg:
+            info["pose"]["roll_deg"] = float(roll_deg)  # not modelled: a pose error within MAX_ROLL_DEG
         check_geometry(config.geometry(W, H), roll_deg=roll_deg)
     except Exception as exc:  # fail safe, as the flight pipeline: the default action, with the reason
         cfg = {"pipeline": PIPELINE, "monitor": None, "core": nominal.to_dict()}

@@ -18,9 +18,9 @@ from pathlib import Path
 
 from assurance.errors import CommandError
 from assurance.files import atomic_write_bytes
-from assurance.scenes.uavid import read_image, write_image
-from el.camera import CAMERAS, Pose
-from el.config import MODES, CoreConfig, camera_intrinsics
+from assurance.scenes.uavid import image_size, read_image, write_image
+from el.camera import CAMERAS, MAX_ROLL_DEG, Pose, geometry_problem
+from el.config import MODES, CoreConfig, make_intrinsics
 from el.decision import Decision
 from el.pipeline import DEFAULT_TIME_BUDGET_S
 
@@ -39,8 +39,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="flight height above the ground in metres (default: %(default)s)")
     parser.add_argument("--pitch", type=float, default=Pose().pitch_deg, metavar="DEG",
                         help="camera pitch below the horizon in degrees (default: %(default)s)")
-    parser.add_argument("--camera", choices=sorted(CAMERAS), default="phantom4",
-                        help="camera intrinsics (default: %(default)s)")
+    parser.add_argument("--roll", type=float, default=0.0, metavar="DEG",
+                        help=f"camera roll in degrees, not modelled: accepted within +-{MAX_ROLL_DEG:g} as a pose "
+                             "error, refused beyond (default: %(default)s)")
+    parser.add_argument("--camera", choices=sorted(CAMERAS), default=None,
+                        help="camera preset (default: phantom4 unless --sensor-width with --focal or --hfov "
+                             "describe another); the options below override its values")
+    parser.add_argument("--sensor-width", type=float, metavar="MM", help="sensor width in millimetres")
+    parser.add_argument("--sensor-height", type=float, metavar="MM",
+                        help="sensor height in millimetres (optional: when the image is taller than the sensor's "
+                             "proportions it spans the sensor's height)")
+    lens = parser.add_mutually_exclusive_group()
+    lens.add_argument("--focal", type=float, metavar="MM", help="focal length in millimetres")
+    lens.add_argument("--hfov", type=float, metavar="DEG", help="horizontal field of view in degrees")
     parser.add_argument(
         "--mode", choices=MODES, default="exact",
         help="valid pixels: exact disc, or the paper's stripes and squares (default: %(default)s)",
@@ -69,13 +80,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def config_from_args(args: argparse.Namespace) -> CoreConfig:
-    """The CM configuration of the command-line options (ValueError names a bad value)."""
-    return CoreConfig(
-        mode=args.mode,
-        working_width=args.working_width,
-        pose=Pose(height_m=args.height, pitch_deg=args.pitch),
-        intrinsics=camera_intrinsics(args.camera),
-    )
+    """The CM configuration of the command-line options (CommandError names a bad value)."""
+    try:
+        intrinsics = make_intrinsics(args.camera, sensor_width_mm=args.sensor_width,
+                                     sensor_height_mm=args.sensor_height, focal_mm=args.focal, hfov_deg=args.hfov)
+        return CoreConfig(mode=args.mode, working_width=args.working_width,
+                          pose=Pose(height_m=args.height, pitch_deg=args.pitch), intrinsics=intrinsics)
+    except ValueError as exc:
+        raise CommandError(f"camera/pose options: {exc}") from None
+
+
+def check_frame_geometry(config: CoreConfig, path: Path, roll_deg: float) -> None:
+    """Refuse (one line) a camera, pose and roll the flat-ground model cannot plan with on this frame's size."""
+    width, height = image_size(path)
+    problem = geometry_problem(config.geometry(width, height), roll_deg=roll_deg)
+    if problem:
+        raise CommandError(f"{path}: {problem}")
 
 
 OVERLAY_SUFFIXES = (".png", ".jpg", ".jpeg")
@@ -113,7 +133,9 @@ def run(args: argparse.Namespace) -> int:
         image_path = Path(args.image_arg)
 
     config = config_from_args(args)
-    decision, ids = decide_from_label_file(args.labels, image_path=image_path, config=config)
+    if args.labels.is_file():  # a missing file is the reader's one-line error
+        check_frame_geometry(config, args.labels, args.roll)
+    decision, ids = decide_from_label_file(args.labels, image_path=image_path, config=config, roll_deg=args.roll)
     image = read_image(image_path) if image_path is not None else None  # a bad image is an error too
 
     _write_outputs(args, decision, image=image, labels=ids)
@@ -129,6 +151,8 @@ def run_model(args: argparse.Namespace) -> int:
         raise CommandError("--image is for the ground-truth pipeline; give the image as IMAGE")
     image_path = Path(args.image_arg)
     read_image(image_path)  # bad input is a usage error here (in flight it is the default action)
+    core = config_from_args(args)
+    check_frame_geometry(core, image_path, args.roll)  # so is a pose the model cannot plan with
     monitor = args.monitor or PipelineConfig().monitor
     if args.calibration is not None:  # a bad card is a usage error here (in flight it is the default action)
         from el.monitors.calibration import load_calibration
@@ -156,7 +180,7 @@ def run_model(args: argparse.Namespace) -> int:
     check_monitor_bindings(built, monitor, args.calibration, segmenter)
     if gate is not None and segmenter is not None:
         gate.check_network(segmenter)  # a gate fitted on another network: one line, exit 2
-    config = PipelineConfig(core=config_from_args(args), monitor=monitor, time_budget_s=args.budget,
+    config = PipelineConfig(core=core, monitor=monitor, time_budget_s=args.budget,
                             seed=args.seed, evaluate_all=args.evaluate_all,
                             calibration=str(args.calibration) if args.calibration else None,
                             ood=str(args.ood) if args.ood else None)
