@@ -251,8 +251,8 @@ def geometry_problem(geometry: CameraGeometry, *, roll_deg: float = 0.0) -> str 
     """
     if isinstance(roll_deg, bool) or not isinstance(roll_deg, int | float | np.integer | np.floating) \
             or not math.isfinite(roll_deg) or abs(roll_deg) > MAX_ROLL_DEG:
-        return (f"roll_deg must lie in [-{MAX_ROLL_DEG:g}, {MAX_ROLL_DEG:g}] degrees (the flat-ground model "
-                f"plans without roll; a larger roll is not a pose error the safety coefficient absorbs), got {roll_deg!r}")
+        return (f"roll_deg must lie in [-{MAX_ROLL_DEG:g}, {MAX_ROLL_DEG:g}] degrees (the flat-ground model plans "
+                f"without roll; a larger roll is not a pose error the safety coefficient absorbs), got {roll_deg!r}")
     g = geometry
     half_hfov = math.atan(g.width / 2.0 / g.f_px)
     shift = math.degrees(math.atan(math.tan(half_hfov) * math.sin(math.radians(abs(float(roll_deg))))))

@@ -128,10 +128,9 @@ def task_seed(seed: int, key: str, perturbation: str, severity: int) -> list[int
 def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Callable[[], float] = time.perf_counter,
              world_clearance: Callable[..., Any] | None = None,
              expected_models: dict[str, str] | None = None) -> dict[str, list[dict[str, Any]]]:
-    """Evaluate one task: readout rows for its images table and candidates table (see readouts).
-
-    ``expected_models`` (the manifest's ``monitor_models``): a monitor whose fitted model is not the one the
-    run recorded (its file changed during the run) makes the task a fault instead of mixing two models."""
+    """Evaluate one task: readout rows for its images table and candidates table (see readouts), the frame
+    planned at its pose (``frame_config``). ``expected_models`` (the manifest's ``monitor_models``): a monitor
+    whose fitted model is not the one the run recorded (changed during the run) makes the task a fault."""
     s = task.sample
     base = {"key": s.key, "sequence": s.sequence, "frame": s.frame,
             "perturbation": task.perturbation, "severity": task.severity}

@@ -21,10 +21,10 @@ import numpy as np
 from assurance.files import atomic_write_bytes
 from assurance.scenes.builder import Builder
 from assurance.scenes.layout import build_city
+from assurance.scenes.poses import POSES_FILE, write_poses
 from assurance.scenes.rand import Rand
 from assurance.scenes.renderer import render
 from assurance.scenes.styles import ALL_STYLES, HELD_OUT_STYLES, LIGHTINGS, Style, choose_style, get_style
-from assurance.scenes.poses import POSES_FILE, write_poses
 from assurance.scenes.uavid import sample_paths, write_image
 from assurance.scenes.view import coverage_domain, visible_ground
 from assurance.scenes.world import Sun, World
