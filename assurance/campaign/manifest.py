@@ -36,7 +36,8 @@ def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *,
     from el.hashing import sha256_file
 
     weights_record = _weights_record(config.weights, model)
-    files = sorted({t.sample.image_path for t in tasks} | {t.sample.label_path for t in tasks if t.sample.label_path})
+    files = sorted({t.sample.image_path for t in tasks} | {t.sample.label_path for t in tasks if t.sample.label_path}
+                   | _pose_files(config, tasks))
     h = hashlib.sha256()
     for f in files:
         h.update(f"{Path(f).relative_to(data)}:{sha256_file(f)}\n".encode())
@@ -57,6 +58,18 @@ def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *,
         "versions": {"python": sys.version.split()[0], "numpy": np.__version__, "torch": torch.__version__,
                      "platform": platform.platform()},
     }
+
+
+def _pose_files(config: CampaignConfig, tasks: Sequence[Task]) -> set[Path]:
+    """The files per-frame poses are read from (none under the nominal policy): sidecars, else scene metas."""
+    if config.poses == "nominal":
+        return set()
+    out: set[Path] = set()
+    for t in tasks:
+        path = t.sample.poses_path or t.sample.meta_path()
+        if path.is_file():
+            out.add(path)
+    return out
 
 
 def check_monitor_networks(specs: Sequence[str], segmenter: Any) -> None:

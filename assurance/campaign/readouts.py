@@ -44,7 +44,8 @@ TABLES = ("images", "candidates")
 COLUMNS: dict[str, tuple[str, ...]] = {
     "images": ("key", "sequence", "frame", "perturbation", "severity", "monitor", "fault", "candidates", "action",
                "reason", "selected", "h_default", "h_top", "h_decision", "decision_unsafe", "clearance_decision_m",
-               "overhead_s", "default_x", "default_y", "default_r", "width", "height", "read_s", "perturb_s",
+               "overhead_s", "default_x", "default_y", "default_r", "width", "height", "height_m", "pitch_deg",
+               "roll_deg", "pose_source", "read_s", "perturb_s",
                "segmentation_s", "candidates_s", "monitoring_s", "total_s"),
     "candidates": ("key", "sequence", "frame", "perturbation", "severity", "monitor", "rank", "x", "y", "radius_px",
                    "hazard", "hazard_semantic", "hazard_distance", "true_hazard", "true_unsafe", "clearance_m",

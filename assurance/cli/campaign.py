@@ -7,6 +7,7 @@ import argparse
 from assurance.campaign.presets import load_presets, preset_config
 from assurance.campaign.run import describe, run_campaign
 from assurance.errors import CommandError
+from assurance.scenes.poses import POLICIES
 
 HELP = "run or resume an evaluation campaign (perturbations x test images x monitor configurations)"
 
@@ -27,6 +28,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="segmentation model: a .pt weights file with its card, or a registered uav_el.models "
                         "name (NAME or NAME:ARG); default: the shipped model")
     p.add_argument("--seed", type=int, help="campaign seed (perturbations, MC dropout)")
+    p.add_argument("--poses", choices=POLICIES, default=None,
+                   help="pose of each frame (default: the system file's [camera] poses, else nominal): nominal (the configured pose for all), sidecar (a frame's "
+                        "line of seqNN/poses.csv, else a synthetic scene's meta, else nominal), required (as sidecar, "
+                        "but a frame without its own pose is a recorded fault)")
     p.add_argument("--jobs", type=int, default=1, help="parallel workers (default 1)")
     p.add_argument("--backend", choices=("loky", "dask"), default="loky", help="parallel backend (default loky)")
     p.add_argument("--scheduler", help="address of a running dask.distributed scheduler (with --backend dask)")
@@ -63,6 +68,7 @@ def run(args: argparse.Namespace) -> int:
         severities=tuple(args.severities) if args.severities else None,
         monitors=monitors,
         images=args.images, weights=model_spec(args), seed=args.seed,
+        poses=args.poses or system_build.poses_policy(system),
     )
     summary = run_campaign(data, args.out, config, jobs=args.jobs, backend=args.backend,
                            scheduler=args.scheduler, progress=not args.quiet, records=cards, system=system)

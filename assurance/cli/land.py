@@ -19,9 +19,9 @@ from pathlib import Path
 
 from assurance.errors import CommandError
 from assurance.files import atomic_write_bytes
-from assurance.scenes.uavid import read_image, write_image
-from el.camera import CAMERAS, Pose
-from el.config import MODES, CoreConfig, camera_intrinsics
+from assurance.scenes.uavid import image_size, read_image, write_image
+from el.camera import CAMERAS, MAX_ROLL_DEG, Pose, geometry_problem
+from el.config import MODES, CoreConfig, make_intrinsics
 from el.decision import Decision
 from el.pipeline import DEFAULT_TIME_BUDGET_S
 
@@ -42,8 +42,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--pitch", type=float, default=None, metavar="DEG",
                         help=f"camera pitch below the horizon in degrees (default: the system file's, else "
                              f"{Pose().pitch_deg})")
+    parser.add_argument("--roll", type=float, default=0.0, metavar="DEG",
+                        help=f"camera roll in degrees, not modelled: accepted within +-{MAX_ROLL_DEG:g} as a pose "
+                             "error, refused beyond (default: %(default)s)")
     parser.add_argument("--camera", choices=sorted(CAMERAS), default=None,
-                        help="camera intrinsics preset (default: the system file's camera, else phantom4)")
+                        help="camera preset (default: the system file's camera, else phantom4); the options below "
+                             "override its values")
+    parser.add_argument("--sensor-width", type=float, metavar="MM", help="sensor width in millimetres")
+    parser.add_argument("--sensor-height", type=float, metavar="MM",
+                        help="sensor height in millimetres (optional: when the image is taller than the sensor's "
+                             "proportions it spans the sensor's height)")
+    lens = parser.add_mutually_exclusive_group()
+    lens.add_argument("--focal", type=float, metavar="MM", help="focal length in millimetres")
+    lens.add_argument("--hfov", type=float, metavar="DEG", help="horizontal field of view in degrees")
     parser.add_argument(
         "--mode", choices=MODES, default=None,
         help="valid pixels: exact disc, or the paper's stripes and squares (default: exact)",
@@ -74,15 +85,30 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def config_from_args(args: argparse.Namespace) -> CoreConfig:
     """The CM configuration: the system file's camera, pose and safety radius, with the options given on the
-    command line winning (ValueError names a bad value)."""
+    command line winning (CommandError names a bad value)."""
     from assurance.cli.system_options import system_of
     from assurance.system import build as system_build
 
     base = system_build.core_config(system_of(args))
-    pose = Pose(height_m=base.pose.height_m if args.height is None else args.height,
-                pitch_deg=base.pose.pitch_deg if args.pitch is None else args.pitch)
-    return replace(base, mode=args.mode or base.mode, working_width=args.working_width or base.working_width,
-                   pose=pose, intrinsics=base.intrinsics if args.camera is None else camera_intrinsics(args.camera))
+    lens = (args.camera, args.sensor_width, args.sensor_height, args.focal, args.hfov)
+    try:
+        intrinsics = base.intrinsics if all(v is None for v in lens) else make_intrinsics(
+            args.camera, sensor_width_mm=args.sensor_width, sensor_height_mm=args.sensor_height, focal_mm=args.focal,
+            hfov_deg=args.hfov)
+        pose = Pose(height_m=base.pose.height_m if args.height is None else args.height,
+                    pitch_deg=base.pose.pitch_deg if args.pitch is None else args.pitch)
+        return replace(base, mode=args.mode or base.mode, working_width=args.working_width or base.working_width,
+                       pose=pose, intrinsics=intrinsics)
+    except ValueError as exc:
+        raise CommandError(f"camera/pose options: {exc}") from None
+
+
+def check_frame_geometry(config: CoreConfig, path: Path, roll_deg: float) -> None:
+    """Refuse (one line) a camera, pose and roll the flat-ground model cannot plan with on this frame's size."""
+    width, height = image_size(path)
+    problem = geometry_problem(config.geometry(width, height), roll_deg=roll_deg)
+    if problem:
+        raise CommandError(f"{path}: {problem}")
 
 
 OVERLAY_SUFFIXES = (".png", ".jpg", ".jpeg")
@@ -123,7 +149,9 @@ def run(args: argparse.Namespace) -> int:
     from assurance.system import build as system_build
 
     config = config_from_args(args)
-    decision, ids = decide_from_label_file(args.labels, image_path=image_path, config=config,
+    if args.labels.is_file():  # a missing file is the reader's one-line error
+        check_frame_geometry(config, args.labels, args.roll)
+    decision, ids = decide_from_label_file(args.labels, image_path=image_path, config=config, roll_deg=args.roll,
                                            labels=system_build.label_set(system_of(args)))
     image = read_image(image_path) if image_path is not None else None  # a bad image is an error too
 
@@ -143,6 +171,8 @@ def run_model(args: argparse.Namespace) -> int:
 
     image_path = Path(args.image_arg)
     read_image(image_path)  # bad input is a usage error here (in flight it is the default action)
+    core = config_from_args(args)
+    check_frame_geometry(core, image_path, args.roll)  # so is a pose the model cannot plan with
     system = system_of(args)
     monitor = args.monitor or system_build.monitor_spec(system) or PipelineConfig().monitor
     calibration = args.calibration or system.path_of("monitor.calibration")
@@ -157,7 +187,6 @@ def run_model(args: argparse.Namespace) -> int:
     from el.monitors import build_monitor
     from el.pipeline import check_monitor_bindings
 
-    core = config_from_args(args)
     try:
         segmenter = load_model(args, threads=args.threads, working_width=core.working_width)
     except ValueError as exc:  # WeightsError: a model named here is a usage error (one line, exit 2); the

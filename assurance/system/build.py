@@ -72,7 +72,7 @@ def intrinsics(system: SystemFile) -> Intrinsics:
     custom = any(system.sets(f"camera.{k}") for k in ("sensor_width_mm", "focal_mm", "hfov_deg"))
     name = system.get("camera.name") or (f"{preset}-custom" if custom else base.name)
     kwargs: dict[str, Any] = {"sensor_width_mm": width, "focal_mm": focal, "name": str(name)}
-    if system.get("camera.sensor_height_mm") is not None and "sensor_height_mm" in Intrinsics.__dataclass_fields__:
+    if system.get("camera.sensor_height_mm") is not None:
         kwargs["sensor_height_mm"] = float(system.get("camera.sensor_height_mm"))
     try:
         return Intrinsics(**kwargs)

@@ -38,26 +38,15 @@ def check_system(system: SystemFile) -> None:
 def check_geometry(system: SystemFile) -> None:
     """The camera, nominal pose and image size must give a geometry the flat-ground model handles: every
     reachable row sees the ground at a finite footprint."""
-    import numpy as np
-
-    from el.camera import CameraGeometry
+    from el.camera import CameraGeometry, check_geometry
 
     intr, pose, width_height = build.intrinsics(system), build.nominal_pose(system), build.image_size(system)
     build.safety(system)
     geometry = CameraGeometry(width=width_height[0], height=width_height[1], intrinsics=intr, pose=pose)
-    checker = getattr(__import__("el.camera", fromlist=["check_geometry"]), "check_geometry", None)
-    if checker is not None:
-        try:
-            checker(geometry)
-        except ValueError as exc:
-            raise system.error("camera", str(exc)) from None
-        return
-    rows = np.arange(geometry.first_reachable_row, geometry.height)
-    _, _, delta = geometry.pixel_size(rows)
-    if not np.all(np.isfinite(delta)):
-        first = int(rows[~np.isfinite(delta)][0])
-        raise system.error("camera", f"pitch_deg = {pose.pitch_deg}: row {first} of the reachable image (below the "
-                                     f"top 20%) looks at or above the horizon with this lens; raise the pitch")
+    try:
+        check_geometry(geometry)
+    except ValueError as exc:
+        raise system.error("camera", str(exc)) from None
 
 
 def check_model(system: SystemFile, names: tuple[str, ...]) -> None:
