@@ -29,9 +29,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "name (NAME or NAME:ARG); default: the shipped model")
     p.add_argument("--seed", type=int, help="campaign seed (perturbations, MC dropout)")
     p.add_argument("--poses", choices=POLICIES, default=None,
-                   help="pose of each frame (default: the system file's [camera] poses, else nominal): nominal (the configured pose for all), sidecar (a frame's "
-                        "line of seqNN/poses.csv, else a synthetic scene's meta, else nominal), required (as sidecar, "
-                        "but a frame without its own pose is a recorded fault)")
+                   help="pose of each frame (default: the system file's [camera] poses, else nominal): nominal (the "
+                        "configured pose for all), sidecar (a frame's line of seqNN/poses.csv, else a synthetic "
+                        "scene's meta, else nominal), required (as sidecar, but a frame without its own pose is a "
+                        "recorded fault)")
     p.add_argument("--jobs", type=int, default=1, help="parallel workers (default 1)")
     p.add_argument("--backend", choices=("loky", "dask"), default="loky", help="parallel backend (default loky)")
     p.add_argument("--scheduler", help="address of a running dask.distributed scheduler (with --backend dask)")
