@@ -170,3 +170,21 @@ def test_missing_system_file(land, scene, tmp_path, capsys):
     labels, _ = scene
     assert land(["land", "--labels", str(labels), "--system", str(tmp_path / "nope.toml")]) == 2
     assert "nope.toml: no such system file" in capsys.readouterr().err
+
+
+def test_land_on_semantic_drone_labels_keeps_clear_of_unlabelled_ground(land, tmp_path):
+    from el.labels import load_label_set
+
+    sdd = load_label_set("semantic_drone")
+    ids = np.full((H, W), sdd.ids["grass"], dtype=np.uint8)
+    ids[:, :90] = sdd.ignore.id  # unlabelled: unknown ground
+    ids[70:74, :] = sdd.ids["paved-area"]
+    labels = tmp_path / "sdd.png"
+    write_labels(labels, ids, sdd)
+    system = write(tmp_path, '[labels]\npreset = "semantic_drone"\n[camera]\nheight_m = 20\npitch_deg = 80\n')
+    out = tmp_path / "d.json"
+    assert land(["land", "--labels", str(labels), "--system", str(system), "--json", str(out)]) == 0
+    decision = json.loads(out.read_text())
+    assert decision["candidates"], "grass on the right leaves room to land"
+    for c in decision["candidates"]:
+        assert c["x"] - c["radius_px"] >= 90 - 1, c  # no disc reaches into the unlabelled strip

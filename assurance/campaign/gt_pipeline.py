@@ -66,6 +66,7 @@ def decide_from_labels(
     a failure inside the CM with ``"fault: <error>"``.
     """
     config = config or CoreConfig()
+    ids = labels.planning_ids(ids)  # unknown (ignored) ground is never a landing site: planned as forbidden
     W, H = _check_ids(ids, labels)
     t0 = clock()
     info = dict(input_info or {})
@@ -145,7 +146,7 @@ def decide_sample(sample: Sample, *, config: CoreConfig | None = None, poses: st
     try:
         pose, roll, source = frame_pose(sample, poses, config.pose)
     except DataError as exc:
-        ids = read_labels(sample.label_path, labels)
+        ids = labels.planning_ids(read_labels(sample.label_path, labels))
         W, H = _check_ids(ids, labels)
         info = {"path": str(sample.label_path), "kind": "labels", "width": W, "height": H}
         return Decision(action="default", reason=f"fault: pose: {type(exc).__name__}: {exc}", selected=None,
