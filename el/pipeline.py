@@ -30,6 +30,7 @@ from el.hashing import sha256_bytes
 from el.imageio import read_image
 from el.labels import UAVID
 from el.monitors import CandidateContext, Monitor, build_monitor, monitor_name, parse_monitor_spec
+from el.monitors.capabilities import check_monitor_capabilities
 from el.rgb import check_rgb
 from el.segmentation.contract import check_model, labels_of
 from el.walk import HAZARD, WalkOutcome, walk_candidates
@@ -201,6 +202,7 @@ class EmergencyLanding:
 
                 self.ood = load_ood(self.config.ood)
                 self.ood.check_network(self.segmenter)
+                check_monitor_capabilities(None, self.segmenter, ood=self.ood)
             except Exception as exc:
                 self.fault = self.fault or f"fault: ood: {type(exc).__name__}: {exc}"
                 logger.exception("out-of-domain gate not usable; every decision will be the default action")
@@ -358,9 +360,11 @@ def check_monitor_bindings(monitor: Monitor | None, spec: str | None, calibratio
                            segmenter: Any = None) -> None:
     """Refuse a monitor fitted on another network than ``segmenter``, and a threshold calibrated on another
     fitted model or another network: the card given, else the deployed card when ``spec`` is the deployed
-    configuration. ``segmenter`` None: the network is not checked here (it could not be loaded)."""
+    configuration; and a monitor needing a capability the network lacks (MC dropout on an ONNX file).
+    ``segmenter`` None: the network is not checked here (it could not be loaded)."""
     if monitor is not None and segmenter is not None:
         monitor.check_network(segmenter)
+        check_monitor_capabilities(monitor, segmenter)
     card = calibration or (DEPLOYED_CALIBRATION if is_deployed(spec) else None)
     if card:
         from el.monitors.calibration import check_card_monitor, load_calibration

@@ -74,13 +74,16 @@ def _pose_files(config: CampaignConfig, tasks: Sequence[Task]) -> set[Path]:
 
 def check_monitor_networks(specs: Sequence[str], segmenter: Any) -> None:
     """Refuse, before any task, a configuration whose monitor was fitted on another network than the
-    campaign's (the monitor's error: one line naming the file and both networks)."""
+    campaign's (the monitor's error: one line naming the file and both networks), or needs a capability the
+    network lacks (``el.monitors.capabilities``: MC dropout on an ONNX file)."""
     from el.monitors import build_monitor
+    from el.monitors.capabilities import check_monitor_capabilities
 
     for spec in specs:
         monitor = build_monitor(spec)
         if monitor is not None:
             monitor.check_network(segmenter)
+            check_monitor_capabilities(monitor, segmenter)
 
 
 def monitor_models(specs: Sequence[str]) -> dict[str, str]:
@@ -100,9 +103,10 @@ def monitor_models(specs: Sequence[str]) -> dict[str, str]:
 
 def _weights_record(spec: str | dict[str, Any] | None, model: Any) -> dict[str, Any]:
     """The manifest's ``weights``: path, SHA-256 and frame options of a weights file (the shipped one for
-    None); for a model registered by name, the name and the weights hash the model reports."""
+    None) and the engine that ran its full passes (``torch`` or ``onnx``); for an ONNX file, its path, its
+    SHA-256 and its input contract; for a model registered by name, the name and the hash the model reports."""
     from el.segmentation.contract import weights_sha256_of
-    from el.segmentation.factory import FILE, PLUGIN, model_kind
+    from el.segmentation.factory import FILE, PLUGIN, is_onnx_file, model_kind
     from el.segmentation.protocol import FRAME_OPTIONS
     from el.segmentation.weights import DEFAULT_WEIGHTS, sha256_file
 
@@ -114,9 +118,17 @@ def _weights_record(spec: str | dict[str, Any] | None, model: Any) -> dict[str, 
                 "class_map": spec.get("class_map"), **dict.fromkeys(FRAME_OPTIONS)}
     if model_kind(spec) == PLUGIN:
         return {"path": None, "model": spec, "sha256": weights_sha256_of(model), **dict.fromkeys(FRAME_OPTIONS)}
+    if is_onnx_file(spec):
+        contract = getattr(model, "contract", None)
+        return {"path": str(spec), "sha256": sha256_file(spec) if Path(spec).is_file() else None, "format": "onnx",
+                "engine": "onnx", "contract": contract.to_dict() if contract is not None else None,
+                **dict.fromkeys(FRAME_OPTIONS)}
     weights = Path(spec) if model_kind(spec) == FILE else DEFAULT_WEIGHTS
-    return {"path": str(weights), "sha256": sha256_file(weights) if weights.is_file() else None,
-            **_frame_protocol(weights)}
+    record = {"path": str(weights), "sha256": sha256_file(weights) if weights.is_file() else None,
+              **_frame_protocol(weights)}
+    if model is not None:
+        record["engine"] = getattr(model, "engine_name", None)
+    return record
 
 
 def _is_shipped(model: Any) -> bool:

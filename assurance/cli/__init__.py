@@ -30,6 +30,7 @@ COMMANDS: dict[str, str] = {
     "land": "land",
     "train": "train",
     "model-card": "model_card",
+    "export-onnx": "export_onnx",
     "campaign": "campaign",
     "calibrate": "calibrate",
     "fit-monitor": "fit_monitor",

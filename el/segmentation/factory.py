@@ -4,6 +4,8 @@ A model spec is what a user writes in a command or a system file:
 
 - None, ``""`` or ``"shipped"``: the shipped weights (``el/segmentation/weights/model.pt``);
 - a path to a ``.pt`` weights file with its model card beside it (``uav-el train`` writes both);
+- a path to an ``.onnx`` file: a network from elsewhere under ONNX Runtime, its input contract read from
+  the file's metadata (:func:`el.segmentation.onnx_model.load_onnx_model`; ``uav-el export-onnx`` writes one);
 - ``NAME`` or ``NAME:ARG``: a factory registered in the ``uav_el.models`` entry-point group (a package's
   ``pyproject.toml``: ``[project.entry-points."uav_el.models"] mynet = "mypkg.models:build"``), called as
   ``factory(ARG or None, threads=..., device=...)``; it returns any object implementing
@@ -51,14 +53,19 @@ def model_kind(spec: str | Path | None) -> str:
     name = text.partition(":")[0]
     if len(name) > 1 and _NAME.match(name) and name in model_factories():
         return PLUGIN
-    if text.endswith(".pt") or "/" in text or "\\" in text or Path(text).is_file():
+    if text.endswith((".pt", ".onnx")) or "/" in text or "\\" in text or Path(text).is_file():
         return FILE
     return PLUGIN
 
 
 def is_weights_file(spec: str | Path) -> bool:
-    """Whether a spec names a weights file (not the shipped default, not a model factory)."""
+    """Whether a spec names a weights file, ``.pt`` or ``.onnx`` (not the shipped default, not a model factory)."""
     return model_kind(spec) == FILE
+
+
+def is_onnx_file(spec: str | Path | None) -> bool:
+    """Whether a spec names an ONNX file (a weights file ending in ``.onnx``)."""
+    return spec is not None and model_kind(spec) == FILE and str(spec).lower().endswith(".onnx")
 
 
 def load_model(spec: str | Path | None = None, *, threads: int | None = None, device: str = "cpu",
@@ -70,6 +77,11 @@ def load_model(spec: str | Path | None = None, *, threads: int | None = None, de
     kind = model_kind(spec)
     if kind == SHIPPED_KIND:
         return _segmenter(None, threads, device, working_width)
+    if kind == FILE and is_onnx_file(spec):
+        from el.segmentation.onnx_model import load_onnx_model
+
+        width = {} if working_width is None else {"working_width": working_width}
+        return load_onnx_model(spec, threads=threads, **width)  # type: ignore[arg-type]
     if kind == FILE:
         return _segmenter(spec, threads, device, working_width)
     name, _, arg = str(spec).partition(":")
