@@ -188,3 +188,18 @@ def test_land_on_semantic_drone_labels_keeps_clear_of_unlabelled_ground(land, tm
     assert decision["candidates"], "grass on the right leaves room to land"
     for c in decision["candidates"]:
         assert c["x"] - c["radius_px"] >= 90 - 1, c  # no disc reaches into the unlabelled strip
+
+
+def test_el_r14_is_judged_at_every_pose_a_run_planned_at():
+    from assurance.requirements.checks import check_pose_margins
+    from assurance.requirements.records import FAIL, PASS
+
+    core = CoreConfig().to_dict()
+    safety = {"radius_m": 2.0, "beta": 1.7}
+    one = check_pose_margins(core, (3840, 2160), [], {"height": 0.2, "pitch": 0.2}, safety)
+    many = check_pose_margins(core, (3840, 2160), [(30.0, 60.0), (80.0, 35.0)], {"height": 0.2, "pitch": 0.2}, safety)
+    assert one.status == PASS and len(one.rows) == 1
+    assert len(many.rows) == 3 and "worst of 3 poses" in many.summary
+    # a frame flown far flatter than the nominal pose needs a larger beta: the requirement fails on it
+    worst = check_pose_margins(core, (3840, 2160), [(50.0, 15.0)], {"height": 0.2, "pitch": 0.2}, safety)
+    assert worst.status == FAIL and "required 5.8" in worst.summary

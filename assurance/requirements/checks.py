@@ -343,6 +343,25 @@ def check_pose_margin(core: Any, size: tuple[int, int], pose_error: Mapping[str,
     return Evidence("pose-error margin of beta", PASS if beta >= need else FAIL, verdict, (row,), tuple(row))
 
 
+def check_pose_margins(core: Any, size: tuple[int, int], poses: Any, pose_error: Mapping[str, float],
+                       safety: Mapping[str, float] | None = None) -> Evidence:
+    """EL-R14 over every pose a run planned at: the nominal one and each frame's own (``poses``: distinct
+    (height_m, pitch_deg) pairs from the images readouts); fails when beta falls short at any of them."""
+    base = dict(core) if isinstance(core, Mapping) else core.to_dict()
+    evidences = [check_pose_margin(base, size, pose_error, safety)]
+    for height, pitch in poses:
+        framed = {**base, "pose": {"height_m": float(height), "pitch_deg": float(pitch)}}
+        evidences.append(check_pose_margin(framed, size, pose_error, safety))
+    rows = tuple(r for ev in evidences for r in ev.rows)
+    rank = {FAIL: 0, INSUFFICIENT: 1, PASS: 2}
+    worst = min(evidences, key=lambda ev: (rank.get(ev.status, 1),
+                                           -max((r.get("required_beta", 0.0) for r in ev.rows), default=0.0)))
+    if len(evidences) == 1:
+        return worst
+    summary = f"{worst.summary} (worst of {len(evidences)} poses: the nominal one and each frame's own)"
+    return Evidence(worst.name, worst.status, summary, rows, evidences[0].columns)
+
+
 def _sha(v: Any) -> bool:
     return isinstance(v, str) and re.fullmatch(r"[0-9a-f]{64}", v) is not None
 
