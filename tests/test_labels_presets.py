@@ -146,9 +146,9 @@ def test_planning_on_labels_with_unknown_ground_keeps_clear_of_it():
     sd = load_label_set("semantic_drone")
     ids = np.full((144, 256), sd.ids["grass"], np.uint8)
     ids[:, 100:180] = 255  # a wide unlabelled band
-    with pytest.raises(ValueError, match="class ids must lie in 0..22"):
-        decide_from_labels(ids, config=CoreConfig(working_width=128), labels=sd)  # raw ids: refused, not guessed
+    raw = decide_from_labels(ids, config=CoreConfig(working_width=128), labels=sd)  # the pipeline plans them too
     decision = decide_from_labels(sd.planning_ids(ids), config=CoreConfig(working_width=128), labels=sd)
+    assert [(c.x, c.y) for c in raw.candidates] == [(c.x, c.y) for c in decision.candidates]
     assert decision.action == "land" and decision.candidates
     for c in decision.candidates:
         assert not (disc_pixels(ids, Disc(c.x, c.y, c.radius_px)) == 255).any()
