@@ -89,7 +89,8 @@ RESULT_FIGURES = (("g_cm", "G_CM", 3), ("g_rm", "G_RM", 3), ("g_star", "G*", 3),
 
 def results_view(table: Any, deployed: str, bound: float, conf: float) -> dict[str, Any]:
     """The results table as the report shows it: figures with their intervals, the deployed monitor marked, and
-    the unsafe-landing rate's one-sided upper bound at ``conf`` (the registry's confidence parameter, not the table's fixed 95%)."""
+    the unsafe-landing rate's one-sided upper bound at ``conf`` (the registry's confidence parameter, not the
+    table's fixed 95%)."""
     headers = ["Scenario", "Monitor", "Img.", "Cand."] + [h for _, h, _ in RESULT_FIGURES] + [
         "Unsafe landings", ub_label(conf)]
     rows = []

@@ -65,21 +65,11 @@ class SystemFile:
 
     def get(self, key: str, default: Any = None) -> Any:
         """A setting in effect by dotted key (``"camera.height_m"``), or ``default``."""
-        value: Any = self.settings
-        for part in key.split("."):
-            if not isinstance(value, Mapping) or part not in value:
-                return default
-            value = value[part]
-        return value
+        return _lookup(self.settings, key, default)
 
     def sets(self, key: str) -> bool:
         """Whether the file itself (not the default) sets ``key``."""
-        value: Any = self.document
-        for part in key.split("."):
-            if not isinstance(value, Mapping) or part not in value:
-                return False
-            value = value[part]
-        return True
+        return _lookup(self.document, key, _UNSET) is not _UNSET
 
     def path_of(self, key: str) -> Path | None:
         """The setting ``key`` as a path, relative ones resolved against the file's folder; None when unset."""
@@ -101,6 +91,19 @@ class SystemFile:
         """The JSON record of this system file (manifests, requirement results, the report)."""
         return {"path": None if self.path is None else str(self.path.resolve()), "sha256": self.sha256,
                 "name": self.name, "default": self.default, "document": self.document}
+
+
+_UNSET = object()
+
+
+def _lookup(doc: Mapping[str, Any], key: str, default: Any) -> Any:
+    """``doc``'s value at a dotted key, or ``default`` when a part is missing."""
+    value: Any = doc
+    for part in key.split("."):
+        if not isinstance(value, Mapping) or part not in value:
+            return default
+        value = value[part]
+    return value
 
 
 def _flatten(doc: Mapping[str, Any], prefix: str = "") -> Iterator[tuple[str, Any]]:
