@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -16,19 +17,79 @@ UNREACHABLE_STRIPES = 2  # the top 2 of 10 horizontal stripes are never landing 
 NUM_STRIPES = 10
 
 
+# Bounds of what the flat-ground pinhole model is stated for (docs/architecture.md section 2.2).
+SENSOR_MM = (1.0, 100.0)  # sensor width / height: from phone sensors to medium format
+FOCAL_MM = (0.5, 2000.0)
+HFOV_DEG = (5.0, 120.0)  # beyond 120 degrees a lens is a fisheye the pinhole model does not describe
+HEIGHT_M = (1.0, 500.0)
+PITCH_DEG = (5.0, 90.0)
+MAX_ROLL_DEG = 5.0  # a larger roll is refused (check_geometry); up to it the pose-error box absorbs it
+MIN_DEPRESSION_DEG = 3.0  # every reachable row looks at least this far below the horizon
+FOV_SENSOR_WIDTH_MM = 36.0  # sensor width recorded for a camera given by its field of view (35 mm equivalent)
+
+
+def check_number(name: str, value: object, lo: float, hi: float, unit: str = "") -> float:
+    """``value`` as a float when it is a finite number in [lo, hi]; ValueError naming name, value and range."""
+    if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
+        raise ValueError(f"{name} must be a number in [{lo:g}, {hi:g}]{unit}, got {value!r}")
+    if not (math.isfinite(value) and lo <= value <= hi):
+        raise ValueError(f"{name} must lie in [{lo:g}, {hi:g}]{unit}, got {value!r}")
+    return float(value)
+
+
 @dataclass(frozen=True, kw_only=True)
 class Intrinsics:
-    """Lens and sensor. Defaults: DJI Phantom 4 (13.2 mm wide sensor, 8.8 mm focal length)."""
+    """Lens and sensor. Defaults: DJI Phantom 4 (13.2 mm wide sensor, 8.8 mm focal length).
+
+    Pixels are square and the image is the sensor's largest centred crop of its aspect ratio: it spans
+    the sensor's full width, or, when ``sensor_height_mm`` is given and the image is taller than the
+    sensor's proportions, its full height (``focal_px``). Without a sensor height the image spans the width.
+    """
 
     sensor_width_mm: float = 13.2
     focal_mm: float = 8.8
     name: str = "phantom4"
+    sensor_height_mm: float | None = None
 
     def __post_init__(self) -> None:
-        for attr in ("sensor_width_mm", "focal_mm"):
-            value = getattr(self, attr)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"{attr} must be a positive finite number, got {value!r}")
+        check_number("sensor_width_mm", self.sensor_width_mm, *SENSOR_MM, " mm")
+        check_number("focal_mm", self.focal_mm, *FOCAL_MM, " mm")
+        if self.sensor_height_mm is not None:
+            check_number("sensor_height_mm", self.sensor_height_mm, *SENSOR_MM, " mm")
+        if not isinstance(self.name, str) or not self.name.strip():
+            raise ValueError(f"camera name must be a non-empty string, got {self.name!r}")
+        lo, hi = HFOV_DEG
+        if not lo <= self.hfov_deg <= hi:
+            raise ValueError(f"horizontal field of view {self.hfov_deg:.1f} deg (sensor_width_mm "
+                             f"{self.sensor_width_mm:g}, focal_mm {self.focal_mm:g}) must lie in [{lo:g}, {hi:g}] deg")
+
+    @property
+    def hfov_deg(self) -> float:
+        """Horizontal field of view (degrees) across the sensor's width."""
+        return math.degrees(2.0 * math.atan(self.sensor_width_mm / (2.0 * self.focal_mm)))
+
+    def focal_px(self, width: int, height: int) -> float:
+        """Focal length in pixels of an image of ``width x height`` taken with this camera."""
+        sh = self.sensor_height_mm
+        if sh is not None and height * self.sensor_width_mm > width * sh:  # taller than the sensor: full height
+            return self.focal_mm * height / sh
+        return self.focal_mm * width / self.sensor_width_mm
+
+    @classmethod
+    def from_fov(cls, hfov_deg: float, *, sensor_width_mm: float = FOV_SENSOR_WIDTH_MM,
+                 sensor_height_mm: float | None = None, name: str = "custom") -> Intrinsics:
+        """A camera given by its horizontal field of view (the focal length follows from the sensor width)."""
+        hfov = check_number("hfov_deg", hfov_deg, *HFOV_DEG, " deg")
+        sw = check_number("sensor_width_mm", sensor_width_mm, *SENSOR_MM, " mm")
+        return cls(sensor_width_mm=sw, focal_mm=sw / (2.0 * math.tan(math.radians(hfov) / 2.0)), name=name,
+                   sensor_height_mm=sensor_height_mm)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready; ``sensor_height_mm`` only when set, so the default records as it always did."""
+        out: dict[str, Any] = {"sensor_width_mm": self.sensor_width_mm, "focal_mm": self.focal_mm, "name": self.name}
+        if self.sensor_height_mm is not None:
+            out["sensor_height_mm"] = self.sensor_height_mm
+        return out
 
 
 PHANTOM4 = Intrinsics()
@@ -38,16 +99,18 @@ CAMERAS: dict[str, Intrinsics] = {c.name: c for c in (PHANTOM4, PHANTOM3_PRO)}
 
 @dataclass(frozen=True, kw_only=True)
 class Pose:
-    """Camera height above the ground (m) and pitch below the horizon (degrees)."""
+    """Camera height above the ground (m) and pitch below the horizon (degrees), within HEIGHT_M and PITCH_DEG."""
 
     height_m: float = 50.0
     pitch_deg: float = 45.0
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.height_m) and 1.0 <= self.height_m <= 500.0):
-            raise ValueError(f"height_m must lie in [1, 500] m, got {self.height_m!r}")
-        if not (math.isfinite(self.pitch_deg) and 5.0 <= self.pitch_deg <= 90.0):
-            raise ValueError(f"pitch_deg must lie in [5, 90] degrees, got {self.pitch_deg!r}")
+        # ranges only: the flight path's frame_core checks the types of a pose handed in at run time
+        for name, (lo, hi), unit in (("height_m", HEIGHT_M, " m"), ("pitch_deg", PITCH_DEG, " degrees")):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float | np.integer | np.floating) and math.isfinite(value)
+                    and lo <= value <= hi):
+                raise ValueError(f"{name} must lie in [{lo:g}, {hi:g}]{unit}, got {value!r}")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -81,7 +144,7 @@ class CameraGeometry:
     @property
     def f_px(self) -> float:
         """Focal length in pixels."""
-        return self.intrinsics.focal_mm * self.width / self.intrinsics.sensor_width_mm
+        return self.intrinsics.focal_px(self.width, self.height)
 
     @property
     def theta(self) -> float:
@@ -176,6 +239,43 @@ class CameraGeometry:
     def scaled(self, width: int, height: int) -> CameraGeometry:
         """The same camera and pose for another image size of the same aspect ratio."""
         return CameraGeometry(width=width, height=height, intrinsics=self.intrinsics, pose=self.pose)
+
+
+def geometry_problem(geometry: CameraGeometry, *, roll_deg: float = 0.0) -> str | None:
+    """Why the flat-ground pinhole model cannot plan on this camera, pose and image size; None when it can.
+
+    Every reachable row (below the top 2 of 10 stripes) must look at least ``MIN_DEPRESSION_DEG`` below
+    the horizon, so it sees the ground at a finite footprint. A roll (from a flight log) is not modelled:
+    up to ``MAX_ROLL_DEG`` it is a pose error, which tilts the rows' depression at the image's side edges
+    by at most ``atan(tan(hfov / 2) sin|roll|)``, taken off the margin above; beyond, it is refused.
+    """
+    if isinstance(roll_deg, bool) or not isinstance(roll_deg, int | float | np.integer | np.floating) \
+            or not math.isfinite(roll_deg) or abs(roll_deg) > MAX_ROLL_DEG:
+        return (f"roll_deg must lie in [-{MAX_ROLL_DEG:g}, {MAX_ROLL_DEG:g}] degrees (the flat-ground model plans "
+                f"without roll; a larger roll is not a pose error the safety coefficient absorbs), got {roll_deg!r}")
+    g = geometry
+    half_hfov = math.atan(g.width / 2.0 / g.f_px)
+    shift = math.degrees(math.atan(math.tan(half_hfov) * math.sin(math.radians(abs(float(roll_deg))))))
+    row = g.first_reachable_row
+    top = math.degrees(float(g.depression(row - 0.5))) - shift  # the upper edge of the first reachable row
+    rows = np.arange(row, g.height)
+    _, _, delta = g.pixel_size(rows)
+    if top < MIN_DEPRESSION_DEG or not np.all(np.isfinite(delta) & (delta > 0)):
+        need = g.pose.pitch_deg + MIN_DEPRESSION_DEG - top
+        roll = f", roll {float(roll_deg):g} deg" if roll_deg else ""
+        return (f"pose height_m {g.pose.height_m:g}, pitch_deg {g.pose.pitch_deg:g}{roll} with camera "
+                f"{g.intrinsics.name!r} (horizontal field of view {math.degrees(2 * half_hfov):.1f} deg) on a "
+                f"{g.width}x{g.height} image: reachable row {row} looks {top:.1f} deg below the horizon, the "
+                f"flat-ground model needs at least {MIN_DEPRESSION_DEG:g} deg; allowed: pitch_deg >= "
+                f"{min(need, 90.0):.1f}" + (" (none: narrow the field of view)" if need > PITCH_DEG[1] else ""))
+    return None
+
+
+def check_geometry(geometry: CameraGeometry, *, roll_deg: float = 0.0) -> None:
+    """ValueError (naming the value and what is allowed) when ``geometry_problem`` finds one."""
+    problem = geometry_problem(geometry, roll_deg=roll_deg)
+    if problem:
+        raise ValueError(problem)
 
 
 def working_size(width: int, height: int, working_width: int = 1024) -> tuple[int, int]:

@@ -11,7 +11,7 @@ import math
 from dataclasses import dataclass, field, fields
 from typing import Any
 
-from el.camera import CAMERAS, CameraGeometry, Intrinsics, Pose, SafetyParams
+from el.camera import CAMERAS, FOV_SENSOR_WIDTH_MM, CameraGeometry, Intrinsics, Pose, SafetyParams
 
 MODES = ("exact", "paper")
 REGION_METHODS = ("fast", "dbscan")
@@ -101,7 +101,9 @@ class CoreConfig:
         out: dict[str, Any] = {}
         for f in fields(self):
             value = getattr(self, f.name)
-            if f.name in ("safety", "pose", "intrinsics"):
+            if f.name == "intrinsics":
+                value = value.to_dict()  # sensor_height_mm only when set: the default records as before
+            elif f.name in ("safety", "pose"):
                 value = {g.name: getattr(value, g.name) for g in fields(value)}
             out[f.name] = value
         return out
@@ -129,6 +131,41 @@ def camera_intrinsics(name: str) -> Intrinsics:
         return CAMERAS[name]
     except KeyError:
         raise ValueError(f"unknown camera {name!r}; known: {', '.join(sorted(CAMERAS))}") from None
+
+
+def make_intrinsics(
+    camera: str | None = None,
+    *,
+    sensor_width_mm: float | None = None,
+    sensor_height_mm: float | None = None,
+    focal_mm: float | None = None,
+    hfov_deg: float | None = None,
+    name: str | None = None,
+) -> Intrinsics:
+    """The intrinsics a camera sheet gives: a named preset, or a sensor with a focal length OR a field of view.
+
+    With a preset (``camera``), the other values override its own; without, ``focal_mm`` or ``hfov_deg``
+    is required (not both) and the sensor width is ``sensor_width_mm`` (for a field of view alone: the
+    35 mm-equivalent 36 mm). ValueError names the field, the value and the allowed range.
+    """
+    if focal_mm is not None and hfov_deg is not None:
+        raise ValueError(f"give focal_mm ({focal_mm!r}) or hfov_deg ({hfov_deg!r}), not both")
+    base = camera_intrinsics(camera) if camera is not None else None
+    if base is None and focal_mm is None and hfov_deg is None:
+        if sensor_width_mm is None and sensor_height_mm is None:
+            return Intrinsics()
+        raise ValueError("a custom sensor needs focal_mm or hfov_deg")
+    sw = sensor_width_mm if sensor_width_mm is not None else (base.sensor_width_mm if base else None)
+    sh = sensor_height_mm if sensor_height_mm is not None else (base.sensor_height_mm if base else None)
+    label = name or (base.name if base and sensor_width_mm is None and focal_mm is None and hfov_deg is None
+                     and sensor_height_mm is None else "custom")
+    if hfov_deg is not None:
+        return Intrinsics.from_fov(hfov_deg, sensor_width_mm=sw if sw is not None else FOV_SENSOR_WIDTH_MM,
+                                   sensor_height_mm=sh, name=label)
+    if sw is None:
+        raise ValueError("a focal length needs sensor_width_mm")
+    return Intrinsics(sensor_width_mm=sw, focal_mm=focal_mm if focal_mm is not None else base.focal_mm,  # type: ignore[union-attr]
+                      sensor_height_mm=sh, name=label)
 
 
 def _int_in(name: str, value: object, lo: int, hi: int) -> None:

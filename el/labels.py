@@ -9,9 +9,14 @@ not given. A user's own set is a YAML or JSON file (:func:`load_label_set`)::
     classes:
       - {id: 0, name: grass, rgb: [0, 160, 0], forbidden: false, hazard_score: 0}
       - {id: 1, name: road, rgb: [128, 64, 128], forbidden: true}
+    ignore: {rgb: [0, 0, 0], id: 255, counts_as: forbidden}   # optional "unlabelled" colour
     hierarchy:            # optional, for the CH monitor; default: any -> {safe, unsafe} -> classes
       root: any
       children: {any: [safe, unsafe], safe: [grass], unsafe: [road]}
+
+or in the compact form a system file uses (``palette`` in id order, ``forbidden``, ``hazard_scores``).
+Packaged sets load by name (``load_label_set("semantic_drone")``; ``el/data/labels/``). An ignored
+pixel is unknown ground: the ground truth counts it as forbidden unless the set says ``counts_as: excluded``.
 
 The module-level names (:data:`CLASSES`, :data:`NUM_CLASSES`, ..., :func:`colors_to_ids`) are the
 default set's, for code that is not handed a set.
@@ -20,7 +25,6 @@ default set's, for code that is not handed a set.
 from __future__ import annotations
 
 import json
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,24 +33,25 @@ from typing import Any
 import numpy as np
 
 from el.errors import LabelColourError
-
-MAX_CLASSES = 256  # class ids travel as uint8
-_CLASS_KEYS = ("id", "name", "rgb", "forbidden", "hazard_score")
-_SET_KEYS = ("name", "classes", "hierarchy")
-
-
-@dataclass(frozen=True)
-class LabelClass:
-    """One class: train id, name, label colour, EL category and hazard score."""
-
-    id: int
-    name: str
-    rgb: tuple[int, int, int]
-    forbidden: bool
-    hazard_score: float | None  # s_l for safe classes, None for forbidden ones
-
+from el.label_tables import (  # noqa: F401  (LabelClass, IgnoreLabel, MAX_CLASSES re-exported: part of the seam)
+    IGNORE_COUNTS_AS,
+    MAX_CLASSES,
+    IgnoreLabel,
+    LabelClass,
+    check_hierarchy_covers,
+    check_hierarchy_shape,
+    class_from_dict,
+    classes_from_palette,
+    freeze,
+    ignore_from_dict,
+    validate_classes,
+    validate_ignore,
+)
 
 UavidClass = LabelClass  # the name of the record when the UAVid classes were the only ones
+_SET_KEYS = ("name", "classes", "palette", "forbidden", "hazard_scores", "ignore", "hierarchy")
+PRESET_DIR = Path(__file__).parent / "data" / "labels"
+"""The packaged label sets (``NAME.yaml``), loaded by name with :func:`load_label_set`."""
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
@@ -57,32 +62,6 @@ def _readonly(a: np.ndarray) -> np.ndarray:
 def _pack(rgb: np.ndarray) -> np.ndarray:
     rgb = rgb.astype(np.uint32, copy=False)
     return (rgb[..., 0] << 16) | (rgb[..., 1] << 8) | rgb[..., 2]
-
-
-def _freeze(value: Any) -> Any:
-    """A hashable, order-insensitive form of a hierarchy mapping (for equality and hashing)."""
-    if isinstance(value, Mapping):
-        return tuple(sorted((str(k), _freeze(v)) for k, v in value.items()))
-    if isinstance(value, list | tuple):
-        return tuple(_freeze(v) for v in value)
-    return value
-
-
-def _check_hierarchy_shape(hierarchy: Any) -> dict[str, Any]:
-    """``{"root": NAME, "children": {parent: [children]}}`` as plain dicts and lists; ValueError otherwise.
-
-    Only the shape: whether it is a tree over the set's classes is checked by the CH monitor's
-    :class:`el.monitors.hierarchy.ClassHierarchy` (``LabelSet.from_dict`` builds one to check it).
-    """
-    if not isinstance(hierarchy, Mapping) or not isinstance(hierarchy.get("root"), str) \
-            or not isinstance(hierarchy.get("children"), Mapping) or set(hierarchy) - {"root", "children"}:
-        raise ValueError("hierarchy: needs 'root: NAME' and 'children: {parent: [children]}', nothing else")
-    children: dict[str, list[str]] = {}
-    for parent, kids in hierarchy["children"].items():
-        if isinstance(kids, str) or not isinstance(kids, Sequence) or not all(isinstance(k, str) for k in kids):
-            raise ValueError(f"hierarchy: children of {parent!r} must be a list of names, got {kids!r}")
-        children[str(parent)] = list(kids)
-    return {"root": hierarchy["root"], "children": children}
 
 
 @dataclass(frozen=True, eq=False)
@@ -100,6 +79,11 @@ class LabelSet:
         The CH monitor's class tree, ``{"root": NAME, "children": {parent: [children]}}`` with every
         class a leaf. None: the shipped ``hierarchy.yaml`` for :data:`UAVID`, else ``any -> {safe,
         unsafe} -> classes`` (``el.monitors.hierarchy.default_hierarchy``).
+    ignore : IgnoreLabel, optional
+        The "unlabelled" colour: :meth:`colors_to_ids` reads it as ``ignore.id`` (outside 0..n-1) instead
+        of refusing it, :meth:`ids_to_colors` writes it back, and the ground truth counts such a pixel
+        as forbidden unless ``ignore.counts_as == "excluded"`` (:meth:`forbidden_mask`,
+        ``assurance.campaign.truth.true_hazard``). None: every pixel must carry a class colour.
 
     Attributes (the default set's are the module-level names): ``num_classes``, ``names``, ``ids``
     (name -> id), ``forbidden_ids``, ``safe_ids``, ``palette`` (n, 3) uint8, ``forbidden_lut`` (n,)
@@ -119,6 +103,7 @@ class LabelSet:
     name: str
     classes: tuple[LabelClass, ...]
     hierarchy: Mapping[str, Any] | None = None
+    ignore: IgnoreLabel | None = None
     num_classes: int = field(init=False)
     names: tuple[str, ...] = field(init=False)
     ids: dict[str, int] = field(init=False, repr=False)
@@ -134,9 +119,11 @@ class LabelSet:
             raise ValueError(f"label set name must be a non-empty string, got {self.name!r}")
         classes = tuple(self.classes)
         object.__setattr__(self, "classes", classes)
-        _validate_classes(self.name, classes)
+        validate_classes(self.name, classes)
         if self.hierarchy is not None:
-            object.__setattr__(self, "hierarchy", _check_hierarchy_shape(self.hierarchy))
+            object.__setattr__(self, "hierarchy", check_hierarchy_shape(self.hierarchy))
+        if self.ignore is not None:
+            validate_ignore(self.ignore, classes)
         hazard = np.array([c.hazard_score or 0.0 for c in classes], dtype=np.float64)
         # Hazard score per class; forbidden classes get 0 because they never lie in a valid disc.
         derived = {
@@ -152,14 +139,27 @@ class LabelSet:
         }
         for k, v in derived.items():
             object.__setattr__(self, k, v)
-        keys = _pack(self.palette)
+        colours, values = self.palette, np.arange(len(classes))
+        colour_lut = np.zeros((MAX_CLASSES, 3), np.uint8)  # id -> colour, for ids_to_colors
+        colour_lut[: len(classes)] = self.palette
+        if self.ignore is not None:
+            colours = np.vstack([colours, np.array([self.ignore.rgb], np.uint8)])
+            values = np.append(values, int(self.ignore.id))
+            colour_lut[int(self.ignore.id)] = self.ignore.rgb
+        keys = _pack(colours)
         order = np.argsort(keys)
-        object.__setattr__(self, "_order", _readonly(order))
+        truth = np.zeros(MAX_CLASSES, bool)  # id -> counts as forbidden ground (ignore id included)
+        truth[: len(classes)] = self.forbidden_lut
+        if self.ignore is not None:
+            truth[int(self.ignore.id)] = self.ignore.counts_as == "forbidden"
+        object.__setattr__(self, "_values", _readonly(values[order].astype(np.uint8)))
         object.__setattr__(self, "_sorted_keys", _readonly(keys[order]))
+        object.__setattr__(self, "_colour_lut", _readonly(colour_lut))
+        object.__setattr__(self, "_truth_lut", _readonly(truth))
 
     # -- identity ------------------------------------------------------------------------------
     def _key(self) -> tuple[Any, ...]:
-        return self.name, self.classes, _freeze(self.hierarchy)
+        return self.name, self.classes, freeze(self.hierarchy), self.ignore
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, LabelSet):
@@ -199,23 +199,68 @@ class LabelSet:
                 + ", ".join(parts)
                 + more
             )
-        return self._order[pos].astype(np.uint8)  # type: ignore[attr-defined]
+        return self._values[pos]  # type: ignore[attr-defined]
 
     @property
     def _title(self) -> str:
         return "UAVid" if self.name == "uavid" else f"{self.name!r}"
 
-    def ids_to_colors(self, ids: np.ndarray) -> np.ndarray:
-        """Map class ids (H, W) to the RGB label image (H, W, 3) uint8."""
+    @property
+    def ignore_id(self) -> int | None:
+        """The id an ignored ("unlabelled") pixel reads as; None when the set has no ignore colour."""
+        return None if self.ignore is None else int(self.ignore.id)
+
+    def _check_ids(self, ids: np.ndarray) -> np.ndarray:
         ids = np.asarray(ids)
+        if not ids.size:
+            return ids
         n = self.num_classes
-        if ids.size and (ids.min() < 0 or ids.max() >= n):
-            raise ValueError(f"class ids must lie in 0..{n - 1}, got {ids.min()}..{ids.max()}")
-        return self.palette[ids]
+        if not np.issubdtype(ids.dtype, np.integer):
+            raise ValueError(f"class ids must be integers, got {ids.dtype}")
+        lo, hi = int(ids.min()), int(ids.max())
+        if lo < 0 or hi >= n:
+            outside = ids[(ids < 0) | (ids >= n)]
+            if self.ignore is None or lo < 0 or (outside != self.ignore.id).any():
+                extra = "" if self.ignore is None else f" or the ignore id {self.ignore.id}"
+                raise ValueError(f"class ids must lie in 0..{n - 1}{extra}, got {lo}..{hi}")
+        return ids
+
+    def ids_to_colors(self, ids: np.ndarray) -> np.ndarray:
+        """Map class ids (H, W) (and the ignore id, when the set has one) to the RGB label image (H, W, 3) uint8."""
+        return self._colour_lut[self._check_ids(ids)]  # type: ignore[attr-defined]
 
     def forbidden_mask(self, ids: np.ndarray) -> np.ndarray:
-        """True where the class id is a forbidden class."""
-        return self.forbidden_lut[np.asarray(ids)]
+        """True where the ground is forbidden: a forbidden class, or an ignored pixel unless the set's
+        ``ignore.counts_as`` is ``"excluded"`` (then see :meth:`ignored_mask`)."""
+        return self._truth_lut[self._check_ids(ids)]  # type: ignore[attr-defined]
+
+    def ignored_mask(self, ids: np.ndarray) -> np.ndarray:
+        """True where the pixel is ignored ("unlabelled"); all False for a set without an ignore colour."""
+        ids = np.asarray(ids)
+        return np.zeros(ids.shape, bool) if self.ignore is None else ids == self.ignore.id
+
+    def planning_ids(self, ids: np.ndarray) -> np.ndarray:
+        """Class ids 0..n-1 for code that plans on labels (``el.core.probs_from_labels``): an ignored pixel
+        becomes the first forbidden class, whatever ``counts_as`` says, since unknown ground is never a
+        landing site. The ids themselves when nothing is ignored."""
+        ids = self._check_ids(ids)
+        if self.ignore is None or not (ids == self.ignore.id).any():
+            return ids
+        return np.where(ids == self.ignore.id, self.forbidden_ids[0], ids).astype(ids.dtype)
+
+    def with_ignore(self, rgb: tuple[int, int, int] | Sequence[int], *, ignore_id: int = 255,
+                    counts_as: str = "forbidden", name: str = "unlabelled") -> LabelSet:
+        """This set with an ignore colour (replacing any it had); ValueError naming the key and the value."""
+        if isinstance(rgb, str) or not isinstance(rgb, Sequence) or len(rgb) != 3:
+            raise ValueError(f"ignore.rgb: must be 3 integers in 0..255, got {rgb!r}")
+        return LabelSet(self.name, self.classes, self.hierarchy,
+                        IgnoreLabel(tuple(rgb), ignore_id, counts_as, name))  # type: ignore[arg-type]
+
+    def class_by_name(self, name: str) -> LabelClass:
+        """The class called ``name``; ValueError naming it and the set's classes."""
+        if name not in self.ids:
+            raise ValueError(f"{name!r} is not a class of label set {self.name!r} (classes: {', '.join(self.names)})")
+        return self.classes[self.ids[name]]
 
     # -- files ---------------------------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
@@ -228,136 +273,75 @@ class LabelSet:
                 for c in self.classes
             ],
         }
+        if self.ignore is not None:
+            out["ignore"] = self.ignore.to_dict()
         if self.hierarchy is not None:
             out["hierarchy"] = json.loads(json.dumps(self.hierarchy))
         return out
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> LabelSet:
-        """A label set from :meth:`to_dict`'s form, checked: ValueError naming the first problem.
+        """A label set from :meth:`to_dict`'s form or the compact palette form, checked: ValueError naming
+        the first problem (the key and the value).
 
-        ``classes`` may list the classes in any order (they are sorted by id); a forbidden class has
-        no ``hazard_score`` (or null). A ``hierarchy`` is checked to be a tree over the classes.
+        Class-list form: ``classes`` may list the classes in any order (they are sorted by id); a
+        forbidden class has no ``hazard_score`` (or null). Palette form: ``palette`` (name -> RGB, ids
+        in order), ``forbidden`` (names), ``hazard_scores`` (safe name -> score). Either may add
+        ``ignore`` (``{rgb, id, counts_as, name}``) and a ``hierarchy`` (checked to be a tree over the classes).
         """
         if not isinstance(d, Mapping):
             raise ValueError(f"a label set must be a mapping, got {type(d).__name__}")
         unknown = sorted(set(map(str, d)) - set(_SET_KEYS))
         if unknown:
             raise ValueError(f"unknown label set keys {unknown} (allowed: {', '.join(_SET_KEYS)})")
-        if "name" not in d or "classes" not in d:
-            raise ValueError("a label set needs 'name' and 'classes'")
+        if "name" not in d or ("classes" in d) == ("palette" in d):
+            raise ValueError("a label set needs 'name' and 'classes' (a list), or 'name' and 'palette' "
+                             "(name -> RGB; the compact form), not both")
         name = d["name"]
         if not isinstance(name, str):
             raise ValueError(f"label set name must be a string, got {name!r}")
-        raw = d["classes"]
-        if isinstance(raw, str | bytes | Mapping) or not isinstance(raw, Sequence):
-            raise ValueError(f"'classes' must be a list of classes, got {type(raw).__name__}")
-        classes = [_class_from_dict(i, c) for i, c in enumerate(raw)]
-        labels = cls(name, tuple(sorted(classes, key=lambda c: c.id)), d.get("hierarchy"))
+        if "palette" in d:
+            classes = classes_from_palette(d)
+        else:
+            extra = sorted(k for k in ("forbidden", "hazard_scores") if k in d)
+            if extra:
+                raise ValueError(f"{', '.join(extra)}: belong to the palette form; with 'classes' each class says it")
+            raw = d["classes"]
+            if isinstance(raw, str | bytes | Mapping) or not isinstance(raw, Sequence):
+                raise ValueError(f"'classes' must be a list of classes, got {type(raw).__name__}")
+            classes = [class_from_dict(i, c) for i, c in enumerate(raw)]
+        ignore = None if d.get("ignore") is None else ignore_from_dict(d["ignore"])
+        labels = cls(name, tuple(sorted(classes, key=lambda c: c.id)), d.get("hierarchy"), ignore)
         if labels.hierarchy is not None:
-            _check_hierarchy_covers(labels.hierarchy, labels.names)
+            check_hierarchy_covers(labels.hierarchy, labels.names)
         return labels
 
 
-def _check_hierarchy_covers(hierarchy: Mapping[str, Any], names: Sequence[str]) -> None:
-    """Every class is a leaf of the hierarchy (its full check is the CH monitor's, when it is built:
-    ``el.monitors.hierarchy.ClassHierarchy``; this module must not import it, which imports this one)."""
-    children = hierarchy["children"]
-    listed = {str(k) for kids in children.values() for k in kids}
-    missing = [n for n in names if n not in listed]
-    if missing:
-        raise ValueError(f"hierarchy: classes missing from the hierarchy: {missing}")
+def label_presets() -> tuple[str, ...]:
+    """Names of the packaged label sets (``el/data/labels/NAME.yaml``), for :func:`load_label_set`."""
+    return tuple(sorted(p.stem for p in PRESET_DIR.glob("*.yaml")))
 
 
-def _class_from_dict(i: int, c: Any) -> LabelClass:
-    where = f"class #{i}"
-    if not isinstance(c, Mapping):
-        raise ValueError(f"{where} must be a mapping with keys {', '.join(_CLASS_KEYS)}, got {c!r}")
-    if isinstance(c.get("name"), str):
-        where = f"class #{i} ({c['name']!r})"
-    unknown = sorted(set(map(str, c)) - set(_CLASS_KEYS))
-    if unknown:
-        raise ValueError(f"{where}: unknown keys {unknown} (allowed: {', '.join(_CLASS_KEYS)})")
-    missing = [k for k in ("id", "name", "rgb", "forbidden") if k not in c]
-    if missing:
-        raise ValueError(f"{where}: missing {', '.join(missing)}")
-    if not _is_int(c["id"]):
-        raise ValueError(f"{where}: id must be an integer, got {c['id']!r}")
-    rgb = c["rgb"]
-    if isinstance(rgb, str) or not isinstance(rgb, Sequence):
-        raise ValueError(f"{where}: rgb must be a list of 3 integers in 0..255, got {rgb!r}")
-    return LabelClass(c["id"], c["name"], tuple(rgb), c["forbidden"], c.get("hazard_score"))  # type: ignore[arg-type]
+def load_label_set(source: str | Path) -> LabelSet:
+    """A label set by preset name (:func:`label_presets`: ``uavid``, ``semantic_drone``, ...) or from a YAML
+    (``.yaml``/``.yml``) or JSON file in :meth:`LabelSet.from_dict`'s forms.
 
-
-def _is_int(v: Any) -> bool:
-    return isinstance(v, int | np.integer) and not isinstance(v, bool)
-
-
-def _validate_classes(set_name: str, classes: tuple[LabelClass, ...]) -> None:
-    """ValueError naming the first problem of a class table (see :class:`LabelSet`)."""
-    if not classes:
-        raise ValueError(f"label set {set_name!r} has no classes")
-    if len(classes) > MAX_CLASSES:
-        raise ValueError(f"label set {set_name!r} has {len(classes)} classes, at most {MAX_CLASSES} are supported")
-    for c in classes:
-        if not isinstance(c, LabelClass):
-            raise ValueError(f"label set {set_name!r}: classes must be LabelClass records, got {c!r}")
-        what = f"class {c.name!r}"
-        if not isinstance(c.name, str) or not c.name.strip():
-            raise ValueError(f"class with id {c.id!r}: name must be a non-empty string, got {c.name!r}")
-        if not _is_int(c.id):
-            raise ValueError(f"{what}: id must be an integer, got {c.id!r}")
-        if len(c.rgb) != 3 or not all(_is_int(v) and 0 <= v <= 255 for v in c.rgb):
-            raise ValueError(f"{what}: rgb must be 3 integers in 0..255, got {c.rgb!r}")
-        if not isinstance(c.forbidden, bool | np.bool_):
-            raise ValueError(f"{what}: forbidden must be true or false, got {c.forbidden!r}")
-        if c.forbidden:
-            if c.hazard_score is not None:
-                raise ValueError(f"{what} is forbidden and must have no hazard score (it never lies in a "
-                                 f"landing disc), got {c.hazard_score!r}")
-        else:
-            s = c.hazard_score
-            if s is None:
-                raise ValueError(f"safe {what} needs a hazard score (a number >= 0)")
-            if isinstance(s, bool) or not isinstance(s, int | float | np.integer | np.floating) \
-                    or not math.isfinite(float(s)) or float(s) < 0:
-                raise ValueError(f"safe {what}: hazard score must be a finite number >= 0, got {s!r}")
-    ids = [int(c.id) for c in classes]
-    n = len(classes)
-    if sorted(ids) != list(range(n)):
-        dup = sorted({i for i in ids if ids.count(i) > 1})
-        missing = sorted(set(range(n)) - set(ids))
-        outside = sorted(i for i in set(ids) if not 0 <= i < n)
-        detail = "; ".join(p for p in (f"duplicate ids {dup}" if dup else "", f"missing ids {missing}" if missing
-                                        else "", f"ids out of range {outside}" if outside else "") if p)
-        raise ValueError(f"label set {set_name!r}: class ids must be 0..{n - 1}, each once ({detail})")
-    if ids != list(range(n)):
-        raise ValueError(f"label set {set_name!r}: classes must be listed in id order 0..{n - 1}, got {ids}")
-    names = [c.name for c in classes]
-    dup_names = sorted({x for x in names if names.count(x) > 1})
-    if dup_names:
-        raise ValueError(f"label set {set_name!r}: duplicate class names {dup_names}")
-    colours = [tuple(int(v) for v in c.rgb) for c in classes]
-    for k, rgb in enumerate(colours):
-        first = colours.index(rgb)
-        if first != k:
-            raise ValueError(f"label set {set_name!r}: classes {names[first]!r} and {names[k]!r} share the "
-                             f"colour RGB{rgb}")
-    if not any(c.forbidden for c in classes):
-        raise ValueError(f"label set {set_name!r} has no forbidden class (at least one is needed)")
-    if all(c.forbidden for c in classes):
-        raise ValueError(f"label set {set_name!r} has no safe class (at least one is needed)")
-
-
-def load_label_set(path: str | Path) -> LabelSet:
-    """A label set from a YAML (``.yaml``/``.yml``) or JSON file in :meth:`LabelSet.to_dict`'s form.
-
+    ``"uavid"`` is :data:`UAVID` itself (its file, ``el/data/labels/uavid.yaml``, is checked equal to it by
+    the tests). A value with one of those suffixes is a path; anything else must be a preset name.
     ``hierarchy`` may be a mapping or the name of a hierarchy YAML file (``root:`` and ``children:``,
     as ``el/monitors/hierarchy.yaml``), relative to the label set file. ValueError naming the file.
     """
     import yaml
 
-    p = Path(path)
+    p = Path(source)
+    if p.suffix.lower() not in (".yaml", ".yml", ".json"):
+        presets = label_presets()
+        if str(source) not in presets:
+            raise ValueError(f"{str(source)!r} is neither a label set preset ({', '.join(presets)}) nor a "
+                             ".yaml/.yml/.json file")
+        if str(source) == "uavid":
+            return UAVID
+        p = PRESET_DIR / f"{source}.yaml"
     try:
         text = p.read_text(encoding="utf-8")
     except OSError as err:

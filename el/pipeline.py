@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from el.camera import Pose
+from el.camera import Pose, check_geometry
 from el.config import CoreConfig
 from el.core import default_area, run_core
 from el.decision import Candidate, Decision, Disc, MonitorVerdict
@@ -232,6 +232,7 @@ class EmergencyLanding:
             stage = "pose"
             core_cfg = frame_core(cfg.core, pose)
             info["pose"] = pose_record(core_cfg.pose, nominal=pose is None)
+            check_geometry(core_cfg.geometry(*size))  # a pose the flat-ground model cannot plan with: a fault
             if self.fault:
                 return self._default(self.fault, candidates, size, timings, info, budget, core_cfg)
             budget.check(stage)

@@ -47,6 +47,23 @@ def pytest_configure(config: pytest.Config) -> None:
             set_context(config, run_digest=None, run_problems=[str(exc)])
         else:
             set_context(config, run_digest=check.digest if check.ok else None, run_problems=check.problems)
+        bind_system(config, run)
+
+
+def bind_system(config: pytest.Config, run: Path) -> None:
+    """The requirement results are about the run's system file: its hash is recorded, its targets judge."""
+    import json
+
+    from assurance.requirements.pytest_plugin import set_context, set_targets
+
+    record = json.loads((run / "manifest.json").read_text()).get("system") or {}
+    set_context(config, system_sha256=record.get("sha256"))
+    if record and not record.get("default"):
+        from assurance.system import build as system_build
+        from assurance.system.loader import system_from_record
+
+        system = system_from_record(record)
+        set_targets(config, system_build.targets(system), source=f"{system.label} [targets]")
 
 
 @pytest.fixture(scope="session")

@@ -112,7 +112,7 @@ def _set(d, k, v):
     (lambda d: _set(d, "classes", []), "has no classes"),
     (lambda d: _set(d, "name", ""), "name must be a non-empty string"),
     (lambda d: d.pop("classes"), "needs 'name' and 'classes'"),
-    (lambda d: _set(d, "palette", {}), r"unknown label set keys \['palette'\]"),
+    (lambda d: _set(d, "colours", {}), r"unknown label set keys \['colours'\]"),
     (lambda d: _set(d, "hierarchy", {"root": "any", "children": {"any": ["grass", "gravel", "road"]}}),
      r"hierarchy: classes missing from the hierarchy: \['water'\]"),
     (lambda d: _set(d, "hierarchy", {"root": "any"}), "hierarchy: needs 'root: NAME' and 'children"),

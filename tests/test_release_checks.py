@@ -33,10 +33,11 @@ def test_images_needed_at_an_observed_rate():
 
 def test_unsafe_landing_failure_says_by_how_much():
     table = pd.DataFrame([{"perturbation": "none", "severity": 3, "monitor": "m", "images": 70,
-                           "unsafe_landing_rate": 7 / 70, "unsafe_landing_ub95": 0.1796}])
-    ev = check_unsafe_landing_bound(table, "m", 0.05, ["none"])
+                           "unsafe_landing_rate": 7 / 70}])
+    ev = check_unsafe_landing_bound(table, "m", 0.05, ["none"], 0.95)
     row = ev.rows[0]
-    assert ev.status == FAIL and abs(row["over_bound_by"] - 0.1296) < 1e-9
+    assert ev.status == FAIL and abs(row["upper_bound"] - 0.17963) < 5e-5   # computed at 95%, not read
+    assert abs(row["over_bound_by"] - (row["upper_bound"] - 0.05)) < 1e-12 and row["confidence"] == "95%"
     assert row["images_needed"] == "none at this rate" and row["unsafe_landings"] == 7
 
 

@@ -272,6 +272,67 @@ def test_junit_xml_carries_the_requirements(pytester):
 
 
 # ------------------------------------------------------------------------------------------------
+# The requirement targets: --uav-el-targets, $UAV_EL_TARGETS, set_targets
+# ------------------------------------------------------------------------------------------------
+TARGET_TEST = """
+import pytest
+from assurance.requirements.pytest_plugin import registry
+
+@pytest.mark.requirements("EL-R10")
+def test_reads_the_targets(request):
+    reg = registry(request.config)
+    assert "shown with 99% confidence" in reg["EL-R10"].text
+"""
+
+
+def test_targets_option_reaches_the_checks_and_the_results(pytester, tmp_path):
+    (tmp_path / "t.json").write_text(json.dumps({"confidence": 0.99, "unsafe_landing_bound": 0.01}))
+    pytester.makepyfile(test_t=TARGET_TEST)
+    result, doc = _report(pytester, "--uav-el-targets", str(tmp_path / "t.json"))
+    result.assert_outcomes(passed=1)
+    reg = doc["registry"]
+    assert reg["targets"] == {"confidence": 0.99, "unsafe_landing_bound": 0.01}
+    assert reg["targets_source"] == str((tmp_path / "t.json").resolve())
+    want = rq.load_registry(targets={"confidence": 0.99, "unsafe_landing_bound": 0.01})
+    assert reg["parameters_sha256"] == want.parameters_sha256 and reg["parameters"]["confidence"] == 0.99
+
+
+def test_targets_from_the_environment_and_from_set_targets(pytester, tmp_path, monkeypatch):
+    (tmp_path / "env.json").write_text(json.dumps({"confidence": 0.99}))
+    monkeypatch.setenv("UAV_EL_TARGETS", str(tmp_path / "env.json"))
+    pytester.makepyfile(test_t=TARGET_TEST)
+    result, doc = _report(pytester)
+    result.assert_outcomes(passed=1)
+    assert doc["registry"]["targets"] == {"confidence": 0.99}
+    # a plugin or conftest binding targets in code (e.g. a system file's [targets]) replaces the file
+    pytester.makeconftest("""
+        from assurance.requirements.pytest_plugin import set_targets
+
+        def pytest_configure(config):
+            set_targets(config, {"confidence": 0.99, "radius_m": 2.5}, source="uav-el.toml [targets]")
+    """)
+    result, doc = _report(pytester)
+    result.assert_outcomes(passed=1)
+    assert doc["registry"]["targets"] == {"confidence": 0.99, "radius_m": 2.5}
+    assert doc["registry"]["targets_source"] == "uav-el.toml [targets]"
+
+
+@pytest.mark.parametrize("content,message", [
+    ('{"radius": 2.5}', "unknown target 'radius'; known: deployed_monitor"),
+    ('{"confidence": 1.5}', r"confidence = 1.5: must be a number in \[0.5, 1\)"),
+    ("[0.99]", "must hold a JSON object"),
+])
+def test_a_bad_targets_file_is_a_usage_error(pytester, tmp_path, content, message):
+    (tmp_path / "t.json").write_text(content)
+    pytester.makepyfile(test_x="def test_a():\n    pass\n")
+    result = pytester.runpytest("-p", "no:cacheprovider", "--uav-el-targets", str(tmp_path / "t.json"))
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    err = result.stderr.str()
+    assert "requirement registry" in err and "t.json" in err
+    result.stderr.re_match_lines([f".*{message}.*"])
+
+
+# ------------------------------------------------------------------------------------------------
 # The campaign requirement tests on tiny runs (the real tests/requirements file, run by pytester)
 # ------------------------------------------------------------------------------------------------
 def _campaign_report(pytester, run, *args):
@@ -311,6 +372,23 @@ def test_a_missing_perturbation_leaves_r08_r09_not_verified_not_failed(pytester,
         entry = doc["requirements"][rid]
         assert entry["state"] == rq.NOT_VERIFIED, entry
         assert "insufficient evidence" in entry["tests"][0]["message"] and "pixel_trap" in entry["tests"][0]["message"]
+
+
+def test_campaign_checks_judge_the_targets_given_on_the_command_line(pytester, tiny_campaign, tmp_path):
+    """End to end on the tiny run: the deployed monitor, EL-R10's confidence and R come from --uav-el-targets
+    (no registry copy): 10 images cannot show 0.05 at 99%, and a run planned with R = 2 m does not judge R = 2.5 m."""
+    targets = {"deployed_monitor": "lhd", "calibration_card": None, "unsafe_landing_bound": 0.05,
+               "confidence": 0.99, "radius_m": 2.5}
+    (tmp_path / "t.json").write_text(json.dumps(targets))
+    result, doc = _campaign_report(pytester, tiny_campaign["run"], "-k", "unsafe_landing_bound or pose_error_margin "
+                                   "or safety_gain", "--uav-el-targets", str(tmp_path / "t.json"))
+    result.assert_outcomes(passed=1, skipped=2)
+    reqs = doc["requirements"]
+    assert reqs["EL-R09"]["state"] == rq.VERIFIED  # the deployed monitor is the targets' "lhd"
+    r10, r14 = reqs["EL-R10"]["tests"][0]["message"], reqs["EL-R14"]["tests"][0]["message"]
+    assert reqs["EL-R10"]["state"] == rq.NOT_VERIFIED and "at 99% confidence (needs >= 90 images" in r10
+    assert reqs["EL-R14"]["state"] == rq.NOT_VERIFIED and "declare R = 2.5 m, beta = 1.7" in r14
+    assert doc["registry"]["targets"] == targets
 
 
 def test_without_a_run_the_campaign_requirements_are_not_verified(pytester, tmp_path):

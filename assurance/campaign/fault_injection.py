@@ -112,6 +112,10 @@ def _copy_weights(ws: Path, name: str) -> Path:
 # ------------------------------------------------------------------------------------------------
 # The cases
 # ------------------------------------------------------------------------------------------------
+def _run_system_sha(run: Path) -> str | None:
+    return (json.loads((run / "manifest.json").read_text()).get("system") or {}).get("sha256")
+
+
 def _forged_requirements(ws: Path) -> list[str]:
     """Results bound to this run, code and registry, with every state set to "verified" by hand."""
     from assurance import requirements as rq
@@ -120,8 +124,8 @@ def _forged_requirements(ws: Path) -> list[str]:
     reg = rq.load_registry(None)
     doc = {"format": rq.RESULTS_FORMAT,
            "context": {"run": str(ws / "run"), "run_digest": verify_run(ws / "run").digest,
-                       "code_sha256": code_sha256()},
-           "registry": {"sha256": reg.sha256},
+                       "code_sha256": code_sha256(), "system_sha256": _run_system_sha(ws / "run")},
+           "registry": {"sha256": reg.sha256, "parameters_sha256": reg.parameters_sha256},
            "requirements": {r.id: {"state": rq.VERIFIED, "reason": "forged", "tests": []} for r in reg}}
     forged = ws / "forged.json"
     forged.write_text(json.dumps(doc), encoding="utf-8")

@@ -18,13 +18,15 @@ from typing import Any
 
 import numpy as np
 
-from assurance.scenes.uavid import DataError, check_same_size, read_labels
-from el.camera import working_size
+from assurance.scenes.poses import NOMINAL, frame_pose
+from assurance.scenes.uavid import DataError, Sample, check_same_size, read_labels
+from el.camera import Pose, check_geometry, working_size
 from el.config import CoreConfig
 from el.core import default_area, probs_from_labels, run_core
 from el.decision import Decision, decision_schema  # noqa: F401  (re-exported)
 from el.hashing import sha256_file
 from el.labels import UAVID, LabelSet
+from el.pipeline import frame_core, pose_record
 from el.walk import walk_candidates
 
 PIPELINE = "ground_truth"
@@ -51,22 +53,40 @@ def decide_from_labels(
     read_s: float = 0.0,
     clock: Callable[[], float] = time.perf_counter,
     labels: LabelSet = UAVID,
+    pose: Pose | None = None,
+    roll_deg: float = 0.0,
 ) -> Decision:
     """The decision for a full-resolution class-id map (H, W) under a perfect segmentation.
 
     ``input_info`` goes to the decision's ``"input"`` (path, sha256; width and height are filled
     in). ``read_s`` is the time already spent reading the input. ``labels``: the label set of the
-    ids (default UAVid). ValueError for a malformed map; a failure inside the CM gives the default
-    action with reason ``"fault: <error>"``.
+    ids (default UAVid). ``pose`` (and ``roll_deg``): the frame's pose, as ``el.pipeline``'s; None is
+    ``config.pose``. ValueError for a malformed map; a pose the flat-ground model cannot plan with
+    (``el.camera.check_geometry``) gives the default action with reason ``"fault: pose: <error>"``,
+    a failure inside the CM with ``"fault: <error>"``.
     """
     config = config or CoreConfig()
+    ids = labels.planning_ids(ids)  # unknown (ignored) ground is never a landing site: planned as forbidden
     W, H = _check_ids(ids, labels)
     t0 = clock()
     info = dict(input_info or {})
     info.update(width=W, height=H)
+    timings = {"read_s": float(read_s), "segmentation_s": 0.0, "candidates_s": 0.0, "monitoring_s": 0.0}
+    nominal = config
+    try:
+        config = frame_core(config, pose)
+        info["pose"] = pose_record(config.pose, nominal=pose is None)
+        if roll_deg:
+            info["pose"]["roll_deg"] = float(roll_deg)  # not modelled: a pose error within MAX_ROLL_DEG
+        check_geometry(config.geometry(W, H), roll_deg=roll_deg)
+    except Exception as exc:  # fail safe, as the flight pipeline: the default action, with the reason
+        cfg = {"pipeline": PIPELINE, "monitor": None, "core": nominal.to_dict()}
+        timings["total_s"] = float(read_s) + clock() - t0
+        return Decision(action="default", reason=f"fault: pose: {type(exc).__name__}: {exc}", selected=None,
+                        candidates=[], default_area=default_area(W, H, nominal), timings=timings, input=info,
+                        config=cfg)
     cfg = {"pipeline": PIPELINE, "monitor": None, "core": config.to_dict()}
     area = default_area(W, H, config)
-    timings = {"read_s": float(read_s), "segmentation_s": 0.0, "candidates_s": 0.0, "monitoring_s": 0.0}
     try:
         probs = probs_from_labels(ids, working_size(W, H, config.working_width), labels=labels)
         t1 = clock()
@@ -92,6 +112,8 @@ def decide_from_label_file(
     image_path: str | Path | None = None,
     config: CoreConfig | None = None,
     labels: LabelSet = UAVID,
+    pose: Pose | None = None,
+    roll_deg: float = 0.0,
 ) -> tuple[Decision, np.ndarray]:
     """Read a colour label PNG (``labels``' palette, UAVid by default) and decide; returns (decision, class ids).
 
@@ -109,5 +131,28 @@ def decide_from_label_file(
         check_same_size(image_path, labels_path)
         info["image"] = {"path": str(image_path), "sha256": sha256_file(image_path)}
     read_s = time.perf_counter() - t0
-    return decide_from_labels(ids, config=config, input_info=info, read_s=read_s, labels=labels), ids
+    return decide_from_labels(ids, config=config, input_info=info, read_s=read_s, labels=labels, pose=pose,
+                              roll_deg=roll_deg), ids
+
+
+def decide_sample(sample: Sample, *, config: CoreConfig | None = None, poses: str = "nominal",
+                  labels: LabelSet = UAVID) -> Decision:
+    """The ground-truth decision for a UAVid-layout sample, planned at its pose under the policy ``poses``
+    (``assurance.scenes.poses``; read the samples with ``iter_samples(..., poses=True)``). A frame
+    without the pose the policy requires is the default action with reason ``"fault: pose: ..."``."""
+    config = config or CoreConfig()
+    if sample.label_path is None:
+        raise DataError(f"{sample.image_path}: no label map (the ground-truth pipeline needs one)")
+    try:
+        pose, roll, source = frame_pose(sample, poses, config.pose)
+    except DataError as exc:
+        ids = labels.planning_ids(read_labels(sample.label_path, labels))
+        W, H = _check_ids(ids, labels)
+        info = {"path": str(sample.label_path), "kind": "labels", "width": W, "height": H}
+        return Decision(action="default", reason=f"fault: pose: {type(exc).__name__}: {exc}", selected=None,
+                        candidates=[], default_area=default_area(W, H, config), timings={}, input=info,
+                        config={"pipeline": PIPELINE, "monitor": None, "core": config.to_dict()})
+    decision, _ = decide_from_label_file(sample.label_path, config=config, labels=labels,
+                                         pose=None if source == NOMINAL else pose, roll_deg=roll)
+    return decision
 

@@ -9,7 +9,7 @@ import hashlib
 import platform
 import subprocess
 import sys
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -22,19 +22,22 @@ if TYPE_CHECKING:
 
 
 def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *, threads: int | None = None,
-             segmenter: str = "weights", model: Any = None) -> dict[str, Any]:
+             segmenter: str = "weights", model: Any = None, system: Mapping[str, Any] | None = None
+             ) -> dict[str, Any]:
     """Identity of a campaign: config, seeds, versions, git commit, hashes of weights and data.
 
     ``threads`` (torch threads per worker) is recorded because floating-point sums, hence the
     readouts' last digits, depend on it: a re-run reproduces the readouts with the same count.
-    ``model``: the loaded model, for the weights hash a model registered by name reports.
+    ``model``: the loaded model, for the weights hash a model registered by name reports. ``system``: the
+    record of the system file the campaign assesses (``SystemFile.record()``).
     """
     import torch
 
     from el.hashing import sha256_file
 
     weights_record = _weights_record(config.weights, model)
-    files = sorted({t.sample.image_path for t in tasks} | {t.sample.label_path for t in tasks if t.sample.label_path})
+    files = sorted({t.sample.image_path for t in tasks} | {t.sample.label_path for t in tasks if t.sample.label_path}
+                   | _pose_files(config, tasks))
     h = hashlib.sha256()
     for f in files:
         h.update(f"{Path(f).relative_to(data)}:{sha256_file(f)}\n".encode())
@@ -50,10 +53,23 @@ def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *,
         "shard_order": [t.shard_name for t in tasks],
         "threads_per_worker": threads,
         "segmenter": segmenter,
+        **({"system": dict(system)} if system is not None else {}),
         "code": {"version": _version(), "git_commit": git_commit()},
         "versions": {"python": sys.version.split()[0], "numpy": np.__version__, "torch": torch.__version__,
                      "platform": platform.platform()},
     }
+
+
+def _pose_files(config: CampaignConfig, tasks: Sequence[Task]) -> set[Path]:
+    """The files per-frame poses are read from (none under the nominal policy): sidecars, else scene metas."""
+    if config.poses == "nominal":
+        return set()
+    out: set[Path] = set()
+    for t in tasks:
+        path = t.sample.poses_path or t.sample.meta_path()
+        if path.is_file():
+            out.add(path)
+    return out
 
 
 def check_monitor_networks(specs: Sequence[str], segmenter: Any) -> None:
@@ -85,7 +101,7 @@ def monitor_models(specs: Sequence[str]) -> dict[str, str]:
     return out
 
 
-def _weights_record(spec: str | None, model: Any) -> dict[str, Any]:
+def _weights_record(spec: str | dict[str, Any] | None, model: Any) -> dict[str, Any]:
     """The manifest's ``weights``: path, SHA-256 and frame options of a weights file (the shipped one for
     None) and the engine that ran its full passes (``torch`` or ``onnx``); for an ONNX file, its path, its
     SHA-256 and its input contract; for a model registered by name, the name and the hash the model reports."""
@@ -94,6 +110,12 @@ def _weights_record(spec: str | None, model: Any) -> dict[str, Any]:
     from el.segmentation.protocol import FRAME_OPTIONS
     from el.segmentation.weights import DEFAULT_WEIGHTS, sha256_file
 
+    if spec is None and model is not None and not _is_shipped(model):  # a model object given through the API
+        return {"path": None, "model": type(model).__name__, "sha256": weights_sha256_of(model),
+                **dict.fromkeys(FRAME_OPTIONS)}
+    if isinstance(spec, dict):  # a system file's model: its file (if any), kind and the hash the model reports
+        return {"path": spec.get("path"), "model": spec.get("kind"), "sha256": weights_sha256_of(model),
+                "class_map": spec.get("class_map"), **dict.fromkeys(FRAME_OPTIONS)}
     if model_kind(spec) == PLUGIN:
         return {"path": None, "model": spec, "sha256": weights_sha256_of(model), **dict.fromkeys(FRAME_OPTIONS)}
     if is_onnx_file(spec):
@@ -107,6 +129,14 @@ def _weights_record(spec: str | None, model: Any) -> dict[str, Any]:
     if model is not None:
         record["engine"] = getattr(model, "engine_name", None)
     return record
+
+
+def _is_shipped(model: Any) -> bool:
+    """Whether a model reports the shipped weights' hash (so the shipped file's record describes it)."""
+    from el.segmentation.contract import weights_sha256_of
+    from el.segmentation.weights import DEFAULT_WEIGHTS, sha256_file
+
+    return DEFAULT_WEIGHTS.is_file() and weights_sha256_of(model) == sha256_file(DEFAULT_WEIGHTS)
 
 
 def _frame_protocol(weights: Path) -> dict[str, Any]:

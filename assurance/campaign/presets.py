@@ -20,9 +20,11 @@ def load_presets() -> dict[str, dict[str, Any]]:
     return yaml.safe_load(text)
 
 
-def resolve_monitors(value: str | Sequence[str]) -> tuple[str, ...]:
+def resolve_monitors(value: str | Sequence[str], deployed: str | None = None) -> tuple[str, ...]:
     """A preset's monitor list with its keywords expanded: a grid name (``paper-grid``, ``demo-grid``) and
-    ``deployed``, the configuration the flight code ships with (``el.pipeline.PipelineConfig``)."""
+    ``deployed``: the system file's monitor (``deployed``), else the configuration the flight code ships with
+    (``el.pipeline.PipelineConfig``)."""
+    from el.monitors import monitor_name
     from el.pipeline import PipelineConfig
 
     out: list[str] = []
@@ -30,19 +32,20 @@ def resolve_monitors(value: str | Sequence[str]) -> tuple[str, ...]:
         if item in GRIDS:
             out.extend(GRIDS[item])
         elif item == "deployed":
-            out.append(PipelineConfig().monitor_name)
+            out.append(monitor_name(deployed) if deployed else PipelineConfig().monitor_name)
         else:
             out.append(item)
     return tuple(dict.fromkeys(out))
 
 
-def preset_config(name: str, **overrides: Any) -> CampaignConfig:
-    """The CampaignConfig of a named preset, with non-None overrides applied."""
+def preset_config(name: str, *, deployed: str | None = None, **overrides: Any) -> CampaignConfig:
+    """The CampaignConfig of a named preset, with non-None overrides applied; ``deployed``: the monitor the
+    preset's ``deployed`` keyword stands for (the system file's)."""
     presets = load_presets()
     if name not in presets:
         raise ValueError(f"unknown preset {name!r}; valid: {', '.join(presets)}")
     p = presets[name]
-    monitors = resolve_monitors(p["monitors"])
+    monitors = resolve_monitors(p["monitors"], deployed)
     kwargs: dict[str, Any] = {
         "perturbations": tuple(p["perturbations"]),
         "severities": tuple(p["severities"]),

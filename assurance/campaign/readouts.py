@@ -44,7 +44,8 @@ TABLES = ("images", "candidates")
 COLUMNS: dict[str, tuple[str, ...]] = {
     "images": ("key", "sequence", "frame", "perturbation", "severity", "monitor", "fault", "candidates", "action",
                "reason", "selected", "h_default", "h_top", "h_decision", "decision_unsafe", "clearance_decision_m",
-               "overhead_s", "default_x", "default_y", "default_r", "width", "height", "read_s", "perturb_s",
+               "overhead_s", "default_x", "default_y", "default_r", "width", "height", "height_m", "pitch_deg",
+               "roll_deg", "pose_source", "read_s", "perturb_s",
                "segmentation_s", "candidates_s", "monitoring_s", "total_s"),
     "candidates": ("key", "sequence", "frame", "perturbation", "severity", "monitor", "rank", "x", "y", "radius_px",
                    "hazard", "hazard_semantic", "hazard_distance", "true_hazard", "true_unsafe", "clearance_m",
@@ -83,6 +84,10 @@ def init_run(run_dir: Path, manifest: dict[str, Any]) -> None:
             if old.get(key) != json.loads(json.dumps(manifest.get(key), default=str)):
                 raise RunError(f"{run_dir}: holds another campaign (its manifest differs in '{key}'); "
                                "use a new --out folder or delete this one")
+        was_system, now_system = (old.get("system") or {}).get("sha256"), (manifest.get("system") or {}).get("sha256")
+        if was_system and now_system and was_system != now_system:
+            raise RunError(f"{run_dir}: holds a campaign run of another system file (SHA-256 {was_system[:12]} "
+                           f"then, {now_system[:12]} now); use a new --out folder or delete this one")
         # the same weights, segmenting frames the same way (a run recorded before these keys: the frame alone)
         was, now = old.get("weights") or {}, manifest.get("weights") or {}
         flip = was.get("frame_flip", False if was.get("sha256") else None)  # None: no readable card then

@@ -18,7 +18,7 @@ import time
 import traceback
 import warnings
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -34,7 +34,9 @@ from assurance.campaign.manifest import (  # noqa: F401  (re-exported)
 )
 from assurance.campaign.perturbations import PERTURBATIONS, perturb, severities_of
 from assurance.campaign.truth import true_hazard
+from assurance.scenes.poses import NOMINAL, check_policy, frame_pose
 from assurance.scenes.uavid import Sample, iter_samples, read_image, read_labels
+from el.camera import check_geometry
 from el.config import CoreConfig
 from el.core import run_core
 from el.decision import Candidate
@@ -58,8 +60,9 @@ class CampaignConfig:
     seed: int = 0
     patch_margin: float = 0.25
     patch_max_side: int | None = None
-    weights: str | None = None  # None: the shipped weights
+    weights: str | dict[str, Any] | None = None  # None: the shipped weights; a dict: a system file's model
     core: CoreConfig = field(default_factory=CoreConfig)
+    poses: str = "nominal"  # which pose plans each frame: assurance.scenes.poses.POLICIES
 
     def __post_init__(self) -> None:
         unknown = [p for p in self.perturbations if p not in PERTURBATIONS]
@@ -85,14 +88,18 @@ class CampaignConfig:
             raise ValueError(f"images must be >= 1, got {self.images}")
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
             raise ValueError(f"seed must be an integer >= 0, got {self.seed!r}")
+        check_policy(self.poses)
 
     def scenarios(self) -> list[tuple[str, int]]:
         """(perturbation, severity) pairs; one not graded by severity ('none') is evaluated once, at the first."""
         return [(p, s) for p in self.perturbations for s in severities_of(p, self.severities)]
 
     def to_dict(self) -> dict[str, Any]:
+        """The manifest's ``config``; ``poses`` only when not nominal, so a nominal run records as before."""
         d = asdict(self)
         d["core"] = self.core.to_dict()
+        if self.poses == "nominal":
+            del d["poses"]
         return d
 
 
@@ -121,10 +128,9 @@ def task_seed(seed: int, key: str, perturbation: str, severity: int) -> list[int
 def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Callable[[], float] = time.perf_counter,
              world_clearance: Callable[..., Any] | None = None,
              expected_models: dict[str, str] | None = None) -> dict[str, list[dict[str, Any]]]:
-    """Evaluate one task: readout rows for its images table and candidates table (see readouts).
-
-    ``expected_models`` (the manifest's ``monitor_models``): a monitor whose fitted model is not the one the
-    run recorded (its file changed during the run) makes the task a fault instead of mixing two models."""
+    """Evaluate one task: readout rows for its images table and candidates table (see readouts), the frame
+    planned at its pose (``frame_config``). ``expected_models`` (the manifest's ``monitor_models``): a monitor
+    whose fitted model is not the one the run recorded (changed during the run) makes the task a fault."""
     s = task.sample
     base = {"key": s.key, "sequence": s.sequence, "frame": s.frame,
             "perturbation": task.perturbation, "severity": task.severity}
@@ -132,6 +138,7 @@ def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Calla
     t0 = clock()
     try:
         rgb, timings["read_s"] = _timed(clock, read_image, s.image_path)
+        frame_cfg, pose_cols = frame_config(config, s, (rgb.shape[1], rgb.shape[0]))
         if s.label_path is None:
             raise ValueError(f"{s.image_path}: no label map (the campaign needs ground truth)")
         labels = labels_of(segmenter)
@@ -142,7 +149,7 @@ def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Calla
         hd, timings["perturb_s"] = _timed(clock, perturb, rgb, task.perturbation, task.severity, rng)
         probs, timings["segmentation_s"] = _timed(clock, segmenter.predict_frame, hd)
         H, W = hd.shape[:2]
-        core, timings["candidates_s"] = _timed(clock, run_core, probs, (W, H), config.core, labels=labels)
+        core, timings["candidates_s"] = _timed(clock, run_core, probs, (W, H), frame_cfg, labels=labels)
         monitors = [build_monitor(m, margin=config.patch_margin, max_side=config.patch_max_side, clock=clock,
                                   labels=labels)
                     for m in config.monitors]
@@ -184,7 +191,7 @@ def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Calla
             "clearance_decision_m": clearance[sel] if sel is not None else float("nan"),
             "overhead_s": float(outcome.overhead_s),
             "default_x": core.default_area.x, "default_y": core.default_area.y,
-            "default_r": core.default_area.radius_px, "width": W, "height": H,
+            "default_r": core.default_area.radius_px, "width": W, "height": H, **pose_cols,
             **timings,
             "total_s": clock() - t0,
         })
@@ -198,6 +205,18 @@ def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Calla
                 "selected": sel == k, "examined": k < examined,
             })
     return {"images": image_rows, "candidates": cand_rows}
+
+
+def frame_config(config: CampaignConfig, sample: Sample, size: tuple[int, int]) -> tuple[CoreConfig, dict[str, Any]]:
+    """The CM configuration of one frame under the campaign's pose policy, and its pose readouts.
+
+    ValueError (a fault of the task) when the policy requires a pose the frame lacks, or the frame's
+    camera, pose and size are outside what the flat-ground model handles (``el.camera.check_geometry``)."""
+    pose, roll, source = frame_pose(sample, config.poses, config.core.pose)
+    cfg = config.core if source == NOMINAL else replace(config.core, pose=pose)
+    check_geometry(cfg.geometry(*size), roll_deg=roll)
+    return cfg, {"height_m": float(pose.height_m), "pitch_deg": float(pose.pitch_deg), "roll_deg": float(roll),
+                 "pose_source": source}
 
 
 def _clearance(fn: Callable[..., Any] | None, sample: Sample, size: tuple[int, int],
@@ -218,13 +237,13 @@ def _clearance(fn: Callable[..., Any] | None, sample: Sample, size: tuple[int, i
 _WORKER_STATE: dict[str, Any] = {}
 
 
-def _worker_segmenter(weights: str | None, threads: int) -> Any:
+def _worker_segmenter(weights: str | dict[str, Any] | None, threads: int) -> Any:
     """One segmenter per worker process (loaded once, cached)."""
     key = f"{weights}|{threads}"
     if _WORKER_STATE.get("key") != key:
-        from el.segmentation.factory import load_model
+        from assurance.system.model import load_model_spec
 
-        _WORKER_STATE["segmenter"] = load_model(weights, threads=threads)
+        _WORKER_STATE["segmenter"] = load_model_spec(weights, threads=threads)
         _WORKER_STATE["key"] = key
     return _WORKER_STATE["segmenter"]
 
@@ -254,7 +273,7 @@ def execute(task: Task, config: CampaignConfig, run_dir: str, threads: int, segm
 
 def plan(data: str | Path, config: CampaignConfig) -> list[Task]:
     """All tasks of a campaign, in a fixed order (scenario-major)."""
-    samples = list(iter_samples(data, require_labels=True))
+    samples = list(iter_samples(data, require_labels=True, poses=config.poses != "nominal"))
     if config.images is not None:
         samples = samples[: config.images]
     return [Task(p, s, sample) for p, s in config.scenarios() for sample in samples]
@@ -272,6 +291,7 @@ def run_campaign(
     on_result: Callable[[dict[str, Any]], None] | None = None,
     segmenter: Any = None,
     records: Sequence[Any] = (),
+    system: Any = None,
 ) -> dict[str, Any]:
     """Run (or resume) a campaign; returns a summary {tasks, done, skipped, faults, missing, repaired, seconds}.
 
@@ -295,16 +315,21 @@ def run_campaign(
         raise ValueError(f"{data}: no images to evaluate")
     model = None
     if segmenter is None:  # bad weights or an unknown model name are refused before the run folder exists
-        from el.segmentation.factory import load_model
+        from assurance.system.model import load_model_spec
 
-        model = load_model(config.weights)
+        model = load_model_spec(config.weights)
     network = segmenter if segmenter is not None else model
     check_monitor_networks(config.monitors, network)
     for record in records:
         record.check_network(network)
     threads = max(1, (os.cpu_count() or 1) // max(1, jobs))
+    if system is None:
+        from assurance.system import default_system
+
+        system = default_system()
     man = manifest(data, config, tasks, threads=threads,
-                   segmenter="weights" if segmenter is None else type(segmenter).__name__, model=model)
+                   segmenter="weights" if segmenter is None else type(segmenter).__name__, model=network,
+                   system=system.record())
     readouts.init_run(run_dir, man)
     repaired = _set_aside_damaged(run_dir, tasks)
     todo = [t for t in tasks if not readouts.shard_done(run_dir, t.shard_name)]

@@ -4,6 +4,11 @@ True hazard of a disc: 1 if any forbidden ground-truth pixel lies in it, else
 ``(1 - kappa) * H_s_true`` with ``H_s_true`` the class shares in the disc weighted by the hazard
 scores (normalised by the largest score), ``kappa = 0.5``. Discs use continuous image coordinates
 (pixel (r, c) has its centre at (c + 0.5, r + 0.5)), as decisions do.
+
+Ignored ("unlabelled") pixels of a label set with an ignore colour (``LabelSet.ignore``) are unknown
+ground: by default (``counts_as: forbidden``) one in the disc makes it unsafe (1), as a forbidden pixel
+does; with ``counts_as: excluded`` they are left out and the shares are over the disc's labelled
+pixels. A disc with no labelled pixel, or none at all, is unsafe either way.
 """
 
 from __future__ import annotations
@@ -28,12 +33,16 @@ def disc_pixels(ids: np.ndarray, disc: Disc) -> np.ndarray:
 
 def true_hazard(ids: np.ndarray, disc: Disc, *, kappa: float = KAPPA, labels: LabelSet = UAVID) -> float:
     """True hazard in [0, 1] of landing on ``disc`` given the full-resolution class ids (H, W) of ``labels``
-    (default UAVid). A set whose safe classes all score 0 gives a safe disc a hazard of 0."""
+    (default UAVid; the ignore id included when the set has one). A set whose safe classes all score 0
+    gives a safe disc a hazard of 0."""
     pix = disc_pixels(ids, disc)
+    if pix.size and labels.ignore is not None:
+        if labels.forbidden_mask(pix).any():  # a forbidden class, or an ignored pixel counted as forbidden
+            return 1.0
+        pix = pix[~labels.ignored_mask(pix)]  # counts_as: excluded
     if pix.size == 0 or labels.forbidden_lut[pix].any():
         return 1.0
     if labels.max_hazard_score <= 0:
         return 0.0
     shares = np.bincount(pix, minlength=labels.num_classes) / pix.size
     return float((1.0 - kappa) * (shares @ labels.hazard_scores) / labels.max_hazard_score)
-

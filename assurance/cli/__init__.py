@@ -26,6 +26,7 @@ from assurance.errors import CommandError
 COMMANDS: dict[str, str] = {
     "synth": "synth",
     "preview": "preview",
+    "recolour": "recolour",
     "land": "land",
     "train": "train",
     "model-card": "model_card",
@@ -40,6 +41,12 @@ COMMANDS: dict[str, str] = {
     "fault-table": "fault_table",
 }
 
+
+# Commands that decide, evaluate or report: they take --system FILE (else ./uav-el.toml, else the embedded default).
+SYSTEM_COMMANDS = ("land", "campaign", "calibrate", "fit-monitor", "fit-ood", "evidence")
+SYSTEM_HELP = ("the system under assessment (uav-el.toml: model, camera, poses, labels, safety, monitor, data, "
+               "targets, waivers, report); default: ./uav-el.toml if present, else the embedded default (the "
+               "shipped system); options given here win over the file")
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_FLIGHT_FAULT, EXIT_DAMAGED_RUN, EXIT_INTERNAL = 0, 1, 2, 3, 4, 70
 EXIT_CODES: dict[int, str] = {
@@ -74,6 +81,8 @@ def build_parser() -> argparse.ArgumentParser:
         module = importlib.import_module(f"assurance.cli.{module_name}")
         p = sub.add_parser(name, help=module.HELP, description=module.HELP, epilog=EPILOG)
         module.add_arguments(p)
+        if name in SYSTEM_COMMANDS:
+            p.add_argument("--system", metavar="FILE", default=None, help=SYSTEM_HELP)
         p.set_defaults(_run=module.run)
     return parser
 
@@ -88,6 +97,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     level = args.log_level or ("DEBUG" if args.verbose >= 2 else "INFO" if args.verbose else "CRITICAL")
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
     try:
+        if args.command in SYSTEM_COMMANDS:
+            from assurance.system import find_system
+
+            args.system_file = find_system(args.system)
         return int(args._run(args) or 0)
     except DamagedRunError as exc:
         print(f"uav-el {args.command}: error: {exc}", file=sys.stderr)

@@ -13,8 +13,10 @@ HELP = ("calibrate a monitor's threshold on held-out scenes: P(accept an unsafe 
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--data", required=True, help="calibration scenes in the UAVid layout, with labels (e.g. data/val)")
-    p.add_argument("--monitor", required=True, metavar="SPEC", help="monitor to calibrate, e.g. lhd, msp")
+    p.add_argument("--data", help="calibration scenes in the UAVid layout, with labels (e.g. data/val); default: the "
+                                  "system file's [data] val")
+    p.add_argument("--monitor", metavar="SPEC", help="monitor to calibrate, e.g. lhd, msp (default: the system "
+                                                    "file's [monitor] spec)")
     p.add_argument("--miss-rate", type=float, default=0.05, help="largest P(accept an unsafe candidate) (0.05)")
     p.add_argument("--confidence", type=float, default=0.95, help="confidence of the bound (0.95)")
     p.add_argument("--out", required=True, type=Path, help="calibration card to write (JSON)")
@@ -25,13 +27,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from assurance.cli.system_options import model_spec, system_of
     from assurance.fitting.calibration import calibrate_on_data
+    from assurance.system import build as system_build
 
-    if not Path(args.data).is_dir():
-        raise CommandError(f"{args.data}: no such folder")
+    system = system_of(args)
+    data = system_build.data_root(system, "val", args.data)
+    if not Path(data).is_dir():
+        raise CommandError(f"{data}: no such folder")
+    monitor = args.monitor or (system_build.monitor_spec(system) if system.sets("monitor.spec") else None)
+    if monitor is None:
+        raise CommandError("give the monitor to calibrate with --monitor SPEC (or [monitor] spec in the system file)")
     try:
-        doc = calibrate_on_data(args.data, args.monitor, miss_rate=args.miss_rate, confidence=args.confidence,
-                                weights=args.weights, images=args.images)
+        doc = calibrate_on_data(data, monitor, miss_rate=args.miss_rate, confidence=args.confidence,
+                                weights=model_spec(args), images=args.images,
+                                core=system_build.core_config(system))
     except ValueError as exc:  # CalibrationError, WeightsError, a bad spec: one line
         raise CommandError(str(exc)) from None
     write_json(args.out, doc, indent=2)

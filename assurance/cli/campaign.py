@@ -7,12 +7,14 @@ import argparse
 from assurance.campaign.presets import load_presets, preset_config
 from assurance.campaign.run import describe, run_campaign
 from assurance.errors import CommandError
+from assurance.scenes.poses import POLICIES
 
 HELP = "run or resume an evaluation campaign (perturbations x test images x monitor configurations)"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--data", required=True, help="test scenes in the UAVid layout (with Labels)")
+    p.add_argument("--data", help="test scenes in the UAVid layout (with Labels); default: the system file's "
+                                  "[data] test")
     p.add_argument("--out", required=True, help="run folder (created; re-running resumes it)")
     p.add_argument("--preset", default="demo", choices=sorted(load_presets()),
                    help="campaign preset (default: demo); the options below override its fields")
@@ -26,6 +28,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="segmentation model: a .pt weights file with its card, or a registered uav_el.models "
                         "name (NAME or NAME:ARG); default: the shipped model")
     p.add_argument("--seed", type=int, help="campaign seed (perturbations, MC dropout)")
+    p.add_argument("--poses", choices=POLICIES, default=None,
+                   help="pose of each frame (default: the system file's [camera] poses, else nominal): nominal (the "
+                        "configured pose for all), sidecar (a frame's line of seqNN/poses.csv, else a synthetic "
+                        "scene's meta, else nominal), required (as sidecar, but a frame without its own pose is a "
+                        "recorded fault)")
     p.add_argument("--jobs", type=int, default=1, help="parallel workers (default 1)")
     p.add_argument("--backend", choices=("loky", "dask"), default="loky", help="parallel backend (default loky)")
     p.add_argument("--scheduler", help="address of a running dask.distributed scheduler (with --backend dask)")
@@ -37,26 +44,35 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError("--jobs must be >= 1")
     if args.scheduler and args.backend != "dask":
         raise CommandError("--scheduler needs --backend dask")
+    from assurance.cli.system_options import model_spec, system_of
+    from assurance.system import build as system_build
+
+    system = system_of(args)
+    data = system_build.data_root(system, "test", args.data)
     monitors = tuple(args.monitors) if args.monitors else None
+    deployed = system_build.monitor_spec(system) if system.sets("monitor.spec") else None
+    card_paths = args.calibration or ([str(system.path_of("monitor.calibration"))]
+                                      if system.sets("monitor.calibration") else [])
     cards = []
-    if args.calibration:
+    if card_paths:
         from el.monitors import build_monitor
         from el.monitors.calibration import check_card_monitor, load_calibration
 
-        cards = [load_calibration(c) for c in args.calibration]
+        cards = [load_calibration(c) for c in card_paths]
         for card in cards:
             check_card_monitor(card, build_monitor(card.spec))
-        base = monitors or tuple(preset_config(args.preset).monitors)
+        base = monitors or tuple(preset_config(args.preset, deployed=deployed).monitors)
         monitors = tuple(dict.fromkeys((*base, *(card.spec for card in cards))))
     config = preset_config(
-        args.preset,
+        args.preset, deployed=deployed, core=system_build.core_config(system),
         perturbations=tuple(args.perturbations) if args.perturbations else None,
         severities=tuple(args.severities) if args.severities else None,
         monitors=monitors,
-        images=args.images, weights=args.weights, seed=args.seed,
+        images=args.images, weights=model_spec(args), seed=args.seed,
+        poses=args.poses or system_build.poses_policy(system),
     )
-    summary = run_campaign(args.data, args.out, config, jobs=args.jobs, backend=args.backend,
-                           scheduler=args.scheduler, progress=not args.quiet, records=cards)
+    summary = run_campaign(data, args.out, config, jobs=args.jobs, backend=args.backend,
+                           scheduler=args.scheduler, progress=not args.quiet, records=cards, system=system)
     print(describe(summary))
     print(f"readouts in {args.out}; results table: uav-el table {args.out}")
     return 1 if summary["missing"] else 0

@@ -22,8 +22,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--baseline", metavar="RUN0", help="an earlier run: adds a 'what changed' section")
     p.add_argument("--baseline-requirements", metavar="JSON", help="the baseline's requirement results")
     p.add_argument("--registry", metavar="YAML", help="requirement registry (default: assurance/requirements.yaml)")
+    p.add_argument("--targets", metavar="JSON", help="requirement targets overriding the registry's parameters (a "
+                   "JSON object, the file given to pytest --uav-el-targets); the results must use the same")
     p.add_argument("--waivers", help="accepted deviations (e.g. assurance/waivers.yaml): a failed requirement "
-                   "listed there does not fail the gate; ignored with --strict")
+                   "listed there does not fail the gate; ignored with --strict (default: the system file's "
+                   "[waivers] file)")
     p.add_argument("--strict", action="store_true",
                    help="also exit 1 when a requirement is not verified or the PDF cannot be written")
     p.add_argument("--no-pdf", action="store_true", help="write the HTML and JSON only")
@@ -32,8 +35,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from assurance.campaign.readouts import DamagedRunError, RunError
+    from assurance.cli.system_options import system_of
     from assurance.evidence import generate
-    from assurance.requirements import RegistryError
+    from assurance.requirements import RegistryError, read_targets_file
 
     if args.baseline_requirements and not args.baseline:
         raise CommandError("--baseline-requirements needs --baseline")
@@ -43,9 +47,12 @@ def run(args: argparse.Namespace) -> int:
     if args.boot < 1:
         raise CommandError("--boot must be >= 1")
     try:
+        targets = read_targets_file(args.targets) if args.targets else None
         report = generate(args.run, args.out, requirements=args.requirements, baseline=args.baseline,
                           baseline_requirements=args.baseline_requirements, registry=args.registry,
-                          strict=args.strict, pdf=not args.no_pdf, n_boot=args.boot, waivers=args.waivers)
+                          targets=targets, targets_source=str(Path(args.targets).resolve()) if args.targets else None,
+                          strict=args.strict, pdf=not args.no_pdf, n_boot=args.boot, waivers=args.waivers,
+                          system=system_of(args))
     except DamagedRunError:
         raise  # exit 4: the run's readouts fail verification
     except (RegistryError, RunError, ValueError) as exc:

@@ -14,7 +14,8 @@ HELP = ("train the learned candidate monitor (logistic regression on candidate f
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--data", required=True, help="training scenes with labels (e.g. data/train)")
+    p.add_argument("--data", help="training scenes with labels (e.g. data/train); default: the system file's "
+                                  "[data] train")
     p.add_argument("--val", help="held-out scenes for C and the threshold (default: every 5th scene of --data)")
     p.add_argument("--out", required=True, type=Path, help="model file to write (e.g. el/monitors/data/learned.json)")
     p.add_argument("--weights", "--model", dest="weights", metavar="MODEL",
@@ -29,11 +30,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from assurance.cli.system_options import load_model, model_spec, system_of
     from assurance.fitting.learned_monitor import fit_learned_monitor
     from assurance.fitting.network_identity import network_record
-    from el.config import CoreConfig
-    from el.segmentation.factory import load_model
+    from assurance.system import build as system_build
 
+    system = system_of(args)
+    args.data = system_build.data_root(system, "train", args.data)
+    if args.val is None and system.get("data.val") is not None:
+        args.val = system_build.data_root(system, "val")
     for d in (args.data, args.val):
         if d is not None and not Path(d).is_dir():
             raise CommandError(f"{d}: no such folder")
@@ -42,10 +47,10 @@ def run(args: argparse.Namespace) -> int:
     if args.mcd < 0:
         raise CommandError(f"--mcd must be >= 0, got {args.mcd}")
     try:
-        segmenter = load_model(args.weights)
-        core = CoreConfig(working_width=args.working_width) if args.working_width else CoreConfig()
+        segmenter = load_model(args)
+        core = system_build.core_config(system, working_width=args.working_width)
         doc = fit_learned_monitor(args.data, segmenter, val=args.val, core=core, mcd_n=args.mcd, recall=args.recall,
-                                  images=args.images, weights=network_record(segmenter, args.weights))
+                                  images=args.images, weights=network_record(segmenter, model_spec(args)))
     except ValueError as exc:
         raise CommandError(str(exc)) from None
     write_json(args.out, doc)

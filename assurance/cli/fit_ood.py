@@ -13,8 +13,9 @@ HELP = ("fit the out-of-domain frame gate (Mahalanobis distance of pooled encode
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--data", required=True, help="training scenes (e.g. data/train)")
-    p.add_argument("--val", required=True, help="validation scenes for the threshold (e.g. data/val)")
+    p.add_argument("--data", help="training scenes (e.g. data/train); default: the system file's [data] train")
+    p.add_argument("--val", help="validation scenes for the threshold (e.g. data/val); default: the system file's "
+                                 "[data] val")
     p.add_argument("--out", required=True, type=Path, help="gate file to write (JSON)")
     p.add_argument("--weights", "--model", dest="weights", metavar="MODEL",
                    help="segmentation model: a .pt weights file with its card, or a registered uav_el.models "
@@ -27,18 +28,22 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from assurance.cli.system_options import load_model, model_spec, system_of
     from assurance.fitting.network_identity import network_record
     from assurance.fitting.ood_gate import fit_ood, ood_shift_report
+    from assurance.system import build as system_build
     from el.monitors.ood import load_ood
-    from el.segmentation.factory import load_model
 
+    system = system_of(args)
+    args.data = system_build.data_root(system, "train", args.data)
+    args.val = system_build.data_root(system, "val", args.val)
     for d in (args.data, args.val):
         if not Path(d).is_dir():
             raise CommandError(f"{d}: no such folder")
     try:
-        segmenter = load_model(args.weights)
+        segmenter = load_model(args)
         doc = fit_ood(args.data, args.val, segmenter, quantile=args.quantile, images=args.images,
-                      weights=network_record(segmenter, args.weights))
+                      weights=network_record(segmenter, model_spec(args)))
     except ValueError as exc:
         raise CommandError(str(exc)) from None
     write_json(args.out, doc)

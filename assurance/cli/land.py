@@ -14,13 +14,14 @@ default action, which is still written and drawn.
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 from pathlib import Path
 
 from assurance.errors import CommandError
 from assurance.files import atomic_write_bytes
-from assurance.scenes.uavid import read_image, write_image
-from el.camera import CAMERAS, Pose
-from el.config import MODES, CoreConfig, camera_intrinsics
+from assurance.scenes.uavid import image_size, read_image, write_image
+from el.camera import CAMERAS, MAX_ROLL_DEG, Pose, geometry_problem
+from el.config import MODES, CoreConfig, make_intrinsics
 from el.decision import Decision
 from el.pipeline import DEFAULT_TIME_BUDGET_S
 
@@ -35,18 +36,31 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--image", type=Path, metavar="IMAGE.png", help="image to draw the overlay on")
     parser.add_argument("--json", type=Path, metavar="OUT.json", help="write the decision as JSON")
     parser.add_argument("--overlay", type=Path, metavar="OUT.png", help="draw the decision into a PNG")
-    parser.add_argument("--height", type=float, default=Pose().height_m, metavar="M",
-                        help="flight height above the ground in metres (default: %(default)s)")
-    parser.add_argument("--pitch", type=float, default=Pose().pitch_deg, metavar="DEG",
-                        help="camera pitch below the horizon in degrees (default: %(default)s)")
-    parser.add_argument("--camera", choices=sorted(CAMERAS), default="phantom4",
-                        help="camera intrinsics (default: %(default)s)")
+    parser.add_argument("--height", type=float, default=None, metavar="M",
+                        help=f"flight height above the ground in metres (default: the system file's, else "
+                             f"{Pose().height_m})")
+    parser.add_argument("--pitch", type=float, default=None, metavar="DEG",
+                        help=f"camera pitch below the horizon in degrees (default: the system file's, else "
+                             f"{Pose().pitch_deg})")
+    parser.add_argument("--roll", type=float, default=0.0, metavar="DEG",
+                        help=f"camera roll in degrees, not modelled: accepted within +-{MAX_ROLL_DEG:g} as a pose "
+                             "error, refused beyond (default: %(default)s)")
+    parser.add_argument("--camera", choices=sorted(CAMERAS), default=None,
+                        help="camera preset (default: the system file's camera, else phantom4); the options below "
+                             "override its values")
+    parser.add_argument("--sensor-width", type=float, metavar="MM", help="sensor width in millimetres")
+    parser.add_argument("--sensor-height", type=float, metavar="MM",
+                        help="sensor height in millimetres (optional: when the image is taller than the sensor's "
+                             "proportions it spans the sensor's height)")
+    lens = parser.add_mutually_exclusive_group()
+    lens.add_argument("--focal", type=float, metavar="MM", help="focal length in millimetres")
+    lens.add_argument("--hfov", type=float, metavar="DEG", help="horizontal field of view in degrees")
     parser.add_argument(
-        "--mode", choices=MODES, default="exact",
-        help="valid pixels: exact disc, or the paper's stripes and squares (default: %(default)s)",
+        "--mode", choices=MODES, default=None,
+        help="valid pixels: exact disc, or the paper's stripes and squares (default: exact)",
     )
-    parser.add_argument("--working-width", type=int, default=CoreConfig().working_width, metavar="PX",
-                        help="working resolution width (default: %(default)s)")
+    parser.add_argument("--working-width", type=int, default=None, metavar="PX",
+                        help=f"working resolution width (default: {CoreConfig().working_width})")
     parser.add_argument("--monitor", default=None, metavar="SPEC",
                         help="runtime monitor: none, lhd, 'lhd+ch:tau=0.25', 'lhd+mcd:n=10,rho=0.9', "
                              "'lhd+ch+mcd:tau=0.125,n=30,rho=0.5', a registered monitor such as msp "
@@ -60,8 +74,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--weights", "--model", dest="weights", metavar="MODEL",
                         help="segmentation model: a .pt weights file with its card, or a name registered in the "
                              "uav_el.models entry points (NAME or NAME:ARG); default: the shipped model")
-    parser.add_argument("--budget", type=float, default=DEFAULT_TIME_BUDGET_S, metavar="S",
-                        help="time budget in seconds; past it, the default action (default: %(default)s)")
+    parser.add_argument("--budget", type=float, default=None, metavar="S",
+                        help="time budget in seconds; past it, the default action (default: the system file's "
+                             f"[targets] time_budget_s, else {DEFAULT_TIME_BUDGET_S})")
     parser.add_argument("--seed", type=int, default=0, help="seed of MC dropout (default: %(default)s)")
     parser.add_argument("--threads", type=int, help="CPU threads for the CNN (default: torch's choice)")
     parser.add_argument("--all", action="store_true", dest="evaluate_all",
@@ -69,13 +84,31 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def config_from_args(args: argparse.Namespace) -> CoreConfig:
-    """The CM configuration of the command-line options (ValueError names a bad value)."""
-    return CoreConfig(
-        mode=args.mode,
-        working_width=args.working_width,
-        pose=Pose(height_m=args.height, pitch_deg=args.pitch),
-        intrinsics=camera_intrinsics(args.camera),
-    )
+    """The CM configuration: the system file's camera, pose and safety radius, with the options given on the
+    command line winning (CommandError names a bad value)."""
+    from assurance.cli.system_options import system_of
+    from assurance.system import build as system_build
+
+    base = system_build.core_config(system_of(args))
+    lens = (args.camera, args.sensor_width, args.sensor_height, args.focal, args.hfov)
+    try:
+        intrinsics = base.intrinsics if all(v is None for v in lens) else make_intrinsics(
+            args.camera, sensor_width_mm=args.sensor_width, sensor_height_mm=args.sensor_height, focal_mm=args.focal,
+            hfov_deg=args.hfov)
+        pose = Pose(height_m=base.pose.height_m if args.height is None else args.height,
+                    pitch_deg=base.pose.pitch_deg if args.pitch is None else args.pitch)
+        return replace(base, mode=args.mode or base.mode, working_width=args.working_width or base.working_width,
+                       pose=pose, intrinsics=intrinsics)
+    except ValueError as exc:
+        raise CommandError(f"camera/pose options: {exc}") from None
+
+
+def check_frame_geometry(config: CoreConfig, path: Path, roll_deg: float) -> None:
+    """Refuse (one line) a camera, pose and roll the flat-ground model cannot plan with on this frame's size."""
+    width, height = image_size(path)
+    problem = geometry_problem(config.geometry(width, height), roll_deg=roll_deg)
+    if problem:
+        raise CommandError(f"{path}: {problem}")
 
 
 OVERLAY_SUFFIXES = (".png", ".jpg", ".jpeg")
@@ -112,8 +145,14 @@ def run(args: argparse.Namespace) -> int:
             raise CommandError(f"two images given ({args.image_arg} and {image_path}): give one")
         image_path = Path(args.image_arg)
 
+    from assurance.cli.system_options import system_of
+    from assurance.system import build as system_build
+
     config = config_from_args(args)
-    decision, ids = decide_from_label_file(args.labels, image_path=image_path, config=config)
+    if args.labels.is_file():  # a missing file is the reader's one-line error
+        check_frame_geometry(config, args.labels, args.roll)
+    decision, ids = decide_from_label_file(args.labels, image_path=image_path, config=config, roll_deg=args.roll,
+                                           labels=system_build.label_set(system_of(args)))
     image = read_image(image_path) if image_path is not None else None  # a bad image is an error too
 
     _write_outputs(args, decision, image=image, labels=ids)
@@ -127,39 +166,47 @@ def run_model(args: argparse.Namespace) -> int:
 
     if args.image is not None:
         raise CommandError("--image is for the ground-truth pipeline; give the image as IMAGE")
+    from assurance.cli.system_options import load_model, model_spec, system_of
+    from assurance.system import build as system_build
+
     image_path = Path(args.image_arg)
     read_image(image_path)  # bad input is a usage error here (in flight it is the default action)
-    monitor = args.monitor or PipelineConfig().monitor
-    if args.calibration is not None:  # a bad card is a usage error here (in flight it is the default action)
+    core = config_from_args(args)
+    check_frame_geometry(core, image_path, args.roll)  # so is a pose the model cannot plan with
+    system = system_of(args)
+    monitor = args.monitor or system_build.monitor_spec(system) or PipelineConfig().monitor
+    calibration = args.calibration or system.path_of("monitor.calibration")
+    ood = args.ood or system.path_of("monitor.ood")
+    budget = args.budget if args.budget is not None else system.get("targets.time_budget_s", DEFAULT_TIME_BUDGET_S)
+    if calibration is not None:  # a bad card is a usage error here (in flight it is the default action)
         from el.monitors.calibration import load_calibration
         from el.pipeline import calibrated_spec
 
-        monitor = args.monitor or load_calibration(args.calibration).monitor
-        calibrated_spec(monitor, str(args.calibration))
+        monitor = args.monitor or load_calibration(calibration).monitor
+        calibrated_spec(monitor, str(calibration))
     from el.monitors import build_monitor
     from el.pipeline import check_monitor_bindings
-    from el.segmentation.factory import load_model
 
     try:
-        segmenter = load_model(args.weights, threads=args.threads, working_width=args.working_width)
+        segmenter = load_model(args, threads=args.threads, working_width=core.working_width)
     except ValueError as exc:  # WeightsError: a model named here is a usage error (one line, exit 2); the
-        if args.weights is not None:  # shipped one missing is a flight fault: the default action, exit 3
+        if model_spec(args) is not None:  # shipped one missing is a flight fault: the default action, exit 3
             raise CommandError(str(exc)) from None
         segmenter = None
     built = build_monitor(monitor)  # a monitor that cannot be built (e.g. a missing model file): one line, exit 2
     gate = None
-    if args.ood is not None:
+    if ood is not None:
         from el.monitors.ood import load_ood
 
-        gate = load_ood(args.ood)  # a bad gate is a usage error here (in flight it is the default action)
+        gate = load_ood(ood)  # a bad gate is a usage error here (in flight it is the default action)
     # a monitor fitted, or a card calibrated, on another network or model than it runs: one line, exit 2
-    check_monitor_bindings(built, monitor, args.calibration, segmenter)
+    check_monitor_bindings(built, monitor, calibration, segmenter)
     if gate is not None and segmenter is not None:
         gate.check_network(segmenter)  # a gate fitted on another network: one line, exit 2
-    config = PipelineConfig(core=config_from_args(args), monitor=monitor, time_budget_s=args.budget,
+    config = PipelineConfig(core=core, monitor=monitor, time_budget_s=budget,
                             seed=args.seed, evaluate_all=args.evaluate_all,
-                            calibration=str(args.calibration) if args.calibration else None,
-                            ood=str(args.ood) if args.ood else None)
+                            calibration=str(calibration) if calibration else None,
+                            ood=str(ood) if ood else None)
     decision = EmergencyLanding(config, segmenter=segmenter).decide(image_path)
     _write_outputs(args, decision, image=read_image(image_path) if args.overlay else None, labels=None)
     print(summary(decision))

@@ -8,6 +8,9 @@ import sys
 from pathlib import Path
 
 from assurance.errors import CommandError
+from assurance.scenes.generate import ViewPlan
+from el.camera import CAMERAS, Pose
+from el.config import make_intrinsics
 
 HELP = "Generate synthetic oblique urban scenes (UAVid layout: Images, Labels, meta) with a progress bar."
 
@@ -34,6 +37,47 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="split: disjoint seed ranges; val/test also draw held-out styles (default train)")
     parser.add_argument("--jobs", type=int, default=1, help="worker processes (default 1)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    cam = parser.add_argument_group("camera and poses (default: phantom4 at 50 m, 45 degrees, no poses.csv)")
+    cam.add_argument("--camera", choices=sorted(CAMERAS), default=None, help="camera preset")
+    cam.add_argument("--sensor-width", type=float, metavar="MM", help="sensor width in millimetres")
+    cam.add_argument("--sensor-height", type=float, metavar="MM", help="sensor height in millimetres (optional)")
+    lens = cam.add_mutually_exclusive_group()
+    lens.add_argument("--focal", type=float, metavar="MM", help="focal length in millimetres")
+    lens.add_argument("--hfov", type=float, metavar="DEG", help="horizontal field of view in degrees")
+    cam.add_argument("--height", type=float, metavar="M", help="nominal flight height in metres (default 50)")
+    cam.add_argument("--pitch", type=float, metavar="DEG", help="nominal pitch below the horizon (default 45)")
+    cam.add_argument("--heights", metavar="LOW:HIGH", help="per-scene heights drawn from this range (seeded)")
+    cam.add_argument("--pitches", metavar="LOW:HIGH", help="per-scene pitches drawn from this range (seeded)")
+
+
+def parse_range(flag: str, text: str | None) -> tuple[float, float] | None:
+    """'20:120' -> (20.0, 120.0); None for None; CommandError naming the option otherwise."""
+    if text is None:
+        return None
+    parts = text.split(":")
+    try:
+        lo, hi = (float(p) for p in parts) if len(parts) == 2 else (float("nan"),) * 2
+    except ValueError:
+        lo = hi = float("nan")
+    if not (lo <= hi):
+        raise CommandError(f"{flag} must look like LOW:HIGH with LOW <= HIGH (e.g. 20:120), got {text!r}")
+    return lo, hi
+
+
+def view_from_args(args: argparse.Namespace, size: tuple[int, int]) -> ViewPlan:
+    """The camera and poses of the options; CommandError (one line) for a value outside what is allowed."""
+    try:
+        intrinsics = make_intrinsics(args.camera, sensor_width_mm=args.sensor_width,
+                                     sensor_height_mm=args.sensor_height, focal_mm=args.focal, hfov_deg=args.hfov)
+        pose = Pose(height_m=Pose().height_m if args.height is None else args.height,
+                    pitch_deg=Pose().pitch_deg if args.pitch is None else args.pitch)
+        view = ViewPlan(intrinsics=intrinsics, pose=pose, heights=parse_range("--heights", args.heights),
+                        pitches=parse_range("--pitches", args.pitches))
+        if not view.is_default:
+            view.check(size)
+    except ValueError as exc:
+        raise CommandError(f"camera/pose options: {exc}") from None
+    return view
 
 
 def run(args: argparse.Namespace) -> int:
@@ -41,6 +85,7 @@ def run(args: argparse.Namespace) -> int:
     from assurance.scenes.generate import scene_complete
 
     size = parse_size(args.size)
+    view = view_from_args(args, size)
     if args.scenes < 1:
         raise CommandError(f"--scenes must be at least 1, got {args.scenes}")
     if args.seed < 0 or args.seed + args.scenes > 1_000_000:
@@ -50,7 +95,8 @@ def run(args: argparse.Namespace) -> int:
     if args.out.exists() and not args.out.is_dir():
         raise CommandError(f"{args.out}: exists and is not a folder")
     done_before = sum(scene_complete(args.out, i) for i in range(args.scenes))
-    write_dataset(args.out, args.scenes, args.seed, args.split, size, progress=not args.no_progress, jobs=args.jobs)
+    write_dataset(args.out, args.scenes, args.seed, args.split, size, progress=not args.no_progress, jobs=args.jobs,
+                  view=view)
     written = args.scenes - done_before
     print(f"{args.out}: {written} scene(s) written, {done_before} already complete "
           f"({args.split}, seeds {args.seed}..{args.seed + args.scenes - 1}, {size[0]}x{size[1]})", file=sys.stdout)

@@ -3,6 +3,7 @@ finished context its templates render."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -14,7 +15,7 @@ from assurance.campaign.integrity import RunCheck, verify_run
 from assurance.evidence.gate import GATE_CLASS, Gate, requirement_results
 from assurance.evidence.identity import identity
 from assurance.evidence.matrix import check_problems, check_view, matrix, run_checks
-from assurance.evidence.render import TEMPLATE, TEMPLATES_DIR, faults_table
+from assurance.evidence.render import TEMPLATES_DIR, faults_table, rel
 from assurance.evidence.sections import (
     domain,
     limitations,
@@ -22,6 +23,7 @@ from assurance.evidence.sections import (
     results_view,
     sample_size,
     scene_types,
+    ub_label,
     unsafe_picks,
 )
 from assurance.evidence.text import STATE_CLASS, pct
@@ -47,6 +49,7 @@ class Inputs:
     checks: dict[str, rq.Evidence]
     warnings: list[str]
     problems: list[str]
+    system: Any = None  # the system file assessed (assurance.system.SystemFile)
 
     @property
     def deployed(self) -> str:
@@ -55,14 +58,17 @@ class Inputs:
 
 
 def read_inputs(run: Path, out: Path, *, requirements: str | Path | None, baseline: str | Path | None,
-                registry: str | Path | None, n_boot: int, templates: str | Path | None) -> Inputs:
+                registry: str | Path | rq.Registry | None, n_boot: int, templates: str | Path | None,
+                system: Any = None, targets: Mapping[str, Any] | None = None,
+                targets_source: str | None = None) -> Inputs:
     """Read and verify the run (and the baseline's shards), write ``results.csv``, read the requirement results
     and run the report's checks; a damaged run raises ``readouts.DamagedRunError``."""
     templates = Path(templates) if templates else TEMPLATES_DIR
-    if not (templates / TEMPLATE).is_file():
-        raise FileNotFoundError(f"{templates / TEMPLATE}: report template not found")
+    if not templates.is_dir():
+        raise FileNotFoundError(f"{templates}: report template folder not found")
     warnings: list[str] = []
-    reg = rq.load_registry(registry)
+    reg = (registry if isinstance(registry, rq.Registry) else rq.load_registry(registry)).with_targets(
+        targets, source=targets_source)
     man = readouts.read_manifest(run)
     check = verify_run(run).raise_if_damaged()
     if check.legacy:
@@ -84,11 +90,45 @@ def read_inputs(run: Path, out: Path, *, requirements: str | Path | None, baseli
                           table=table)
     checks = run_checks(reg, ctx)
     check_problems(checks, results, problems, warnings)
+    problems.extend(system_problems(system, man, req_doc, run))
     deployed = reg.parameters["deployed_monitor"]
     if deployed not in man["config"]["monitors"]:
         warnings.append(f"the deployed monitor {deployed!r} (registry) was not evaluated by this campaign")
     return Inputs(run, out, templates, reg, man, check, images, candidates, table, csv_path, req_path, results,
-                  req_doc, checks, warnings, problems)
+                  req_doc, checks, warnings, problems, system)
+
+
+def system_problems(system: Any, man: dict[str, Any], req_doc: dict[str, Any] | None, run: Path) -> list[str]:
+    """Why the report, the run and the requirement results are not about one system file (empty when they are):
+    a run records the system file it assessed; the requirement results record the run's."""
+    recorded = (man.get("system") or {}).get("sha256")
+    if system is None or not recorded:
+        return []
+    out = []
+    if recorded != system.sha256:
+        out.append(f"{run}: the campaign assessed another system file (SHA-256 {recorded[:12]}, "
+                   f"{(man.get('system') or {}).get('path') or 'the embedded default'}) than this report "
+                   f"({system.label}, {system.sha256[:12]}); give the run's system file with --system")
+    if req_doc is not None and (req_doc.get("context") or {}).get("system_sha256") != recorded:
+        out.append("the requirement results are not bound to the run's system file (system SHA-256 "
+                   f"{str((req_doc.get('context') or {}).get('system_sha256'))[:12]}, the run's {recorded[:12]})")
+    return out
+
+
+def _setting(inp: Inputs, key: str, default: str) -> str:
+    return str(inp.system.get(key, default)) if inp.system is not None else default
+
+
+def system_view(inp: Inputs) -> dict[str, Any] | None:
+    """The system file the report assesses: where, its hash, every value it sets, the model's hash."""
+    if inp.system is None:
+        return None
+    sysf = inp.system
+    weights = inp.manifest.get("weights") or {}
+    return {"label": sysf.label if sysf.path is None else str(rel(sysf.path)), "sha256": sysf.sha256,
+            "name": sysf.name, "values": [{"key": k, "value": v} for k, v in sysf.values()],
+            "model_sha256": weights.get("sha256") or "not recorded",
+            "model": weights.get("path") or weights.get("model") or "the shipped network"}
 
 
 def _plots(inp: Inputs) -> list[dict[str, str]]:
@@ -139,22 +179,28 @@ def campaign_context(inp: Inputs) -> dict[str, Any]:
         "unsafe": unsafe, "n_unsafe": n_unsafe, "n_unsafe_pictures": len(unsafe),
         "scenes_error": scenes.error,
         "plots": _plots(inp),
-        "results": results_view(inp.table, inp.deployed, float(params["unsafe_landing_bound"])),
+        "results": results_view(inp.table, inp.deployed, float(params["unsafe_landing_bound"]),
+                                float(params["confidence"])),
         "deployed": inp.deployed, "bound": pct(params["unsafe_landing_bound"]),
+        "confidence": rq.confidence_text(params["confidence"]), "ub_label": ub_label(params["confidence"]),
     }
 
 
 def commands(inp: Inputs) -> list[str]:
     """The commands that reproduce the run, the requirement results and this report."""
     man, run, out, cfg = inp.manifest, inp.run, inp.out, inp.manifest["config"]
+    src = inp.registry.targets_source
+    tfile = src if inp.registry.targets and src and Path(src).suffix == ".json" else None
     return [
         f"uav-el campaign --data {man['data']['path']} --out {run} --perturbations {' '.join(cfg['perturbations'])} "
         f"--severities {' '.join(str(s) for s in cfg['severities'])} --monitors "
         + " ".join(f"'{m}'" for m in cfg["monitors"])
         + (f" --images {cfg['images']}" if cfg.get("images") else "") + f" --seed {cfg['seed']}"
         + (f" --weights {cfg['weights']}" if cfg.get("weights") else ""),
-        f"pytest -m requirements --uav-el-run {run} --requirements-report {out / 'requirements.json'}",
-        f"uav-el evidence --run {run} --out {out}" + (f" --requirements {inp.req_path}" if inp.req_path else ""),
+        f"pytest -m requirements --uav-el-run {run} --requirements-report {out / 'requirements.json'}"
+        + (f" --uav-el-targets {tfile}" if tfile else ""),
+        f"uav-el evidence --run {run} --out {out}" + (f" --requirements {inp.req_path}" if inp.req_path else "")
+        + (f" --targets {tfile}" if tfile else ""),
     ]
 
 
@@ -178,8 +224,12 @@ def run_scope(inp: Inputs, states: dict[str, str]) -> dict[str, Any] | None:
     if release.images is not None and n >= release.images:
         return None
     undecided = [rid for rid, st in states.items() if st == rq.NOT_VERIFIED]
+    p = inp.registry.parameters
+    bound, conf = float(p["unsafe_landing_bound"]), float(p["confidence"])
     return {"images": n, "release_images": release.images, "undecided": ", ".join(undecided) or "none",
-            "command": "make release-evidence"}
+            "command": "make release-evidence", "bound": pct(bound), "confidence": rq.confidence_text(conf),
+            "bound_images": rq.images_needed(bound, conf),
+            "bound_claims": ", ".join(rq.requirements_reading("unsafe_landing_bound")) or "the bound"}
 
 
 def template_context(inp: Inputs, gate: Gate, campaign: dict[str, Any], base: dict[str, Any] | None,
@@ -188,7 +238,9 @@ def template_context(inp: Inputs, gate: Gate, campaign: dict[str, Any], base: di
     reg, results = inp.registry, inp.results
     counts = rq.summary_counts(gate.states.values())
     return {
-        "title": "Evidence report: UAV emergency landing",
+        "title": _setting(inp, "report.title", "Evidence report: UAV emergency landing"),
+        "organisation": _setting(inp, "report.organisation", ""),
+        "system": system_view(inp),
         "run_name": inp.run.name, "run": str(inp.run), "created": created,
         "gate": gate.result, "gate_class": GATE_CLASS[gate.result], "gate_text": gate.text,
         "waivers": [{"id": rid, **gate.waivers[rid]} for rid in gate.waived],
@@ -210,6 +262,7 @@ def template_context(inp: Inputs, gate: Gate, campaign: dict[str, Any], base: di
         "checks": [check_view(ev) for ev in inp.checks.values()],
         "results": campaign["results"],
         "deployed": campaign["deployed"], "bound": campaign["bound"],
+        "confidence": campaign["confidence"], "ub_label": campaign["ub_label"],
         "sample_size": sample_size(inp.table, reg, n_boot),
         "plots": campaign["plots"],
         "gallery": campaign["gallery"], "gallery_key": campaign["gallery_key"],

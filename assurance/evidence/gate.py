@@ -9,6 +9,7 @@ fails on a missing PDF); PASSED otherwise.
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -76,7 +77,8 @@ def requirement_results(registry: rq.Registry, path: Path | None, run: Path, war
     if ctx.get("run") and Path(ctx["run"]).resolve() != run.resolve():
         warnings.append(f"the requirement results were produced on run {ctx['run']}, not on {run}")
     if check is not None:
-        problems.extend(binding_problems(doc, check.digest, code_sha256(), registry.sha256, path))
+        problems.extend(binding_problems(doc, check.digest, code_sha256(), registry.sha256, path,
+                                         parameters_sha=registry.parameters_sha256))
     for rid, res in results.items():
         if not res.tests:
             if res.state != rq.NOT_VERIFIED:
@@ -93,8 +95,13 @@ def requirement_results(registry: rq.Registry, path: Path | None, run: Path, war
     return results, doc
 
 
-def binding_problems(doc: Mapping[str, Any], digest: str, code: str, registry_sha: str, path: Path) -> list[str]:
-    """Why requirement results do not belong to this run, code and registry (empty when they do)."""
+def binding_problems(doc: Mapping[str, Any], digest: str, code: str, registry_sha: str, path: Path, *,
+                     parameters_sha: str | None = None) -> list[str]:
+    """Why requirement results do not belong to this run, code, registry and targets (empty when they do).
+
+    ``parameters_sha``: the SHA-256 of the report's effective parameters (``Registry.parameters_sha256``):
+    results judged on other targets (``--uav-el-targets`` / ``set_targets``) are refused.
+    """
     ctx = doc.get("context") or {}
     out = []
     given = ctx.get("run_digest")
@@ -106,8 +113,14 @@ def binding_problems(doc: Mapping[str, Any], digest: str, code: str, registry_sh
     if ctx.get("code_sha256") != code:
         out.append(f"{path}: the requirement results were produced on other code (code hash "
                    f"{str(ctx.get('code_sha256'))[:12]}, this checkout {code[:12]})")
-    if (doc.get("registry") or {}).get("sha256") != registry_sha:
+    reg = doc.get("registry") or {}
+    if reg.get("sha256") != registry_sha:
         out.append(f"{path}: the requirement results were produced with another requirement registry")
+    elif parameters_sha is not None and reg.get("parameters_sha256") != parameters_sha:
+        given = reg.get("targets")
+        out.append(f"{path}: the requirement results were judged on other requirement targets (their overrides: "
+                   f"{json.dumps(given, sort_keys=True) if isinstance(given, dict) else 'not recorded'}); "
+                   "give the report the same targets (uav-el evidence --targets)")
     return out
 
 

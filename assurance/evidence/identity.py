@@ -56,13 +56,21 @@ def identity(run: Path, man: Mapping[str, Any], registry: rq.Registry, req_path:
          "sha256": "", "note": f"report: {now_commit or 'unknown'}"},
         {"item": "Code (source tree)", "value": f"{n_files} source files of el/ and assurance/ at report time",
          "sha256": code_sha, "note": "a '-dirty' commit means uncommitted changes: rely on this hash"},
-        {"item": "Weights", "value": str(wpath or "not recorded"), "sha256": weights.get("sha256") or "",
+        {"item": "System file", "value": _system_text(man), "sha256": (man.get("system") or {}).get("sha256") or "",
+         "note": "every value it sets: section 'The system assessed'"},
+        {"item": "Weights", "value": str(wpath or weights.get("model") or "not recorded"),
+         "sha256": weights.get("sha256") or "",
          "note": current},
         {"item": "Data", "value": f"{data.get('path', '?')} ({data.get('images', '?')} images)",
          "sha256": data.get("sha256") or "", "note": "hash of every image and label file (relative path and SHA-256)"},
         {"item": "Configuration", "value": "campaign configuration (manifest.json 'config', canonical JSON)",
          "sha256": cfg_sha, "note": ""},
         {"item": "Requirement registry", "value": str(registry.path), "sha256": registry.sha256, "note": ""},
+        {"item": "Requirement targets",
+         "value": (", ".join(f"{k} = {v}" for k, v in registry.targets.items()) + f" (from {registry.targets_source})"
+                   if registry.targets else "the registry's parameters (no override)"),
+         "sha256": registry.parameters_sha256,
+         "note": "hash of the effective parameters (canonical JSON); the requirement results must carry it"},
         {"item": "Requirement test results", "value": str(req_path) if req_path else "not given",
          "sha256": sha256_file(req_path) if req_path else "",
          "note": (f"pytest session finished {req_doc.get('context', {}).get('finished', '?')}" if req_doc else "")},
@@ -86,12 +94,24 @@ def identity(run: Path, man: Mapping[str, Any], registry: rq.Registry, req_path:
              "code_sha256": code_sha, "weights_path": wpath, "weights_sha256": weights.get("sha256"),
              "data_path": data.get("path"), "data_sha256": data.get("sha256"), "config_sha256": cfg_sha,
              "registry_path": str(registry.path), "registry_sha256": registry.sha256,
+             "targets": dict(registry.targets), "targets_source": registry.targets_source,
+             "parameters_sha256": registry.parameters_sha256,
              "requirements_results_path": str(req_path) if req_path else None,
              "requirements_results_sha256": sha256_file(req_path) if req_path else None,
              "results_csv_sha256": sha256_file(csv_path), "templates_sha256": tpl_sha,
              "manifest_sha256": sha256_file(run / "manifest.json"), "run_digest": check.digest,
-             "run_shards_verified": not check.legacy, "versions": dict(versions)}
+             "run_shards_verified": not check.legacy, "versions": dict(versions),
+             "system_sha256": (man.get("system") or {}).get("sha256"),
+             "system_path": (man.get("system") or {}).get("path")}
     return rows, ident
+
+
+def _system_text(man: Mapping[str, Any]) -> str:
+    rec = man.get("system")
+    if not rec:
+        return "not recorded (a run made before system files)"
+    where = "the embedded default (the shipped system)" if rec.get("default") else rec.get("path")
+    return f"{rec.get('name')}: {where}"
 
 
 def baseline_view(baseline: Path, man: Mapping[str, Any], ident: Mapping[str, Any], table: Any,

@@ -33,10 +33,13 @@ def faults_table(out: Path, warnings: list[str]) -> list[dict[str, str]] | None:
 
 
 def environment(templates: str | Path | None = None) -> Any:
-    """The Jinja2 environment of the report: autoescape on for every template, strict undefined."""
-    from jinja2 import Environment, FileSystemLoader, StrictUndefined
+    """The Jinja2 environment of the report: autoescape on for every template, strict undefined. A user's
+    template folder overrides the packaged templates file by file (the packaged ones fill the gaps)."""
+    from jinja2 import ChoiceLoader, Environment, FileSystemLoader, StrictUndefined
 
-    return Environment(loader=FileSystemLoader(str(templates or TEMPLATES_DIR)), autoescape=True,
+    folders = [str(templates)] if templates and Path(templates) != TEMPLATES_DIR else []
+    loader = ChoiceLoader([FileSystemLoader(f) for f in (*folders, str(TEMPLATES_DIR))])
+    return Environment(loader=loader, autoescape=True,
                        undefined=StrictUndefined, trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True)
 
 

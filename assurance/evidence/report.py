@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import json
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -77,22 +78,36 @@ def generate(
     requirements: str | Path | None = None,
     baseline: str | Path | None = None,
     baseline_requirements: str | Path | None = None,
-    registry: str | Path | None = None,
+    registry: str | Path | rq.Registry | None = None,
+    targets: Mapping[str, Any] | None = None,
+    targets_source: str | None = None,
     strict: bool = False,
     waivers: str | Path | None = None,
     pdf: bool = True,
     n_boot: int = 2000,
     templates: str | Path | None = None,
+    system: Any = None,
 ) -> EvidenceReport:
     """Write the evidence report of ``run`` into ``out`` and return what the gate says.
 
     ``requirements``: the plugin's results JSON; None looks for ``out/requirements.json`` and, without
     one, leaves every requirement "not verified". ``baseline``: an earlier run to compare with;
-    ``baseline_requirements``: that run's results JSON (for requirement state changes).
+    ``baseline_requirements``: that run's results JSON (for requirement state changes). ``system``: the system
+    file assessed (``assurance.system.SystemFile``): its waivers, report settings and identity; a run or
+    requirement results about another system file fail the gate. ``registry``: a path, or a loaded ``Registry``
+    (with its targets); ``targets``: overrides of its parameters (``Registry.with_targets``, from
+    ``targets_source``); the requirement results must have been judged on the same effective targets.
     """
     run, out = Path(run), Path(out)
+    if system is not None:
+        from assurance.system import build as system_build
+
+        waivers = system_build.waivers(system, str(waivers) if waivers else None)
+        templates = templates or system_build.report_settings(system)["templates"]
+        if targets is None:  # the system file's [targets] (and R, beta, deployed monitor) judge the requirements
+            targets, targets_source = system_build.targets(system), targets_source or f"{system.label} [targets]"
     inp = read_inputs(run, out, requirements=requirements, baseline=baseline, registry=registry, n_boot=n_boot,
-                      templates=templates)
+                      templates=templates, system=system, targets=targets, targets_source=targets_source)
     campaign = campaign_context(inp)
     gate = decide_gate(inp.results, inp.problems, waivers, strict)
     base = (baseline_view(Path(baseline), inp.manifest, campaign["ident"], inp.table, inp.results, inp.registry,

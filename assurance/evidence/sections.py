@@ -77,15 +77,22 @@ def domain(man: Mapping[str, Any], registry: rq.Registry, size: tuple[int, int] 
     return rows
 
 
+def ub_label(conf: float) -> str:
+    """The results table's header of the upper bound at ``conf`` (``UB95``, ``UB99``, ``UB97.5``)."""
+    return "UB" + rq.confidence_text(conf).rstrip("%")
+
+
 RESULT_FIGURES = (("g_cm", "G_CM", 3), ("g_rm", "G_RM", 3), ("g_star", "G*", 3), ("mcc", "MCC", 3),
                   ("f1", "F1", 3), ("precision", "Precision", 3), ("recall", "Recall", 3), ("fp_rate", "FP rate", 3),
                   ("overhead_s", "Overhead (s)", 3))
 
 
-def results_view(table: Any, deployed: str, bound: float) -> dict[str, Any]:
-    """The results table as the report shows it: figures with their intervals, the deployed monitor marked."""
+def results_view(table: Any, deployed: str, bound: float, conf: float) -> dict[str, Any]:
+    """The results table as the report shows it: figures with their intervals, the deployed monitor marked, and
+    the unsafe-landing rate's one-sided upper bound at ``conf`` (the registry's confidence parameter, not the
+    table's fixed 95%)."""
     headers = ["Scenario", "Monitor", "Img.", "Cand."] + [h for _, h, _ in RESULT_FIGURES] + [
-        "Unsafe landings", "UB95"]
+        "Unsafe landings", ub_label(conf)]
     rows = []
     last = None
     for rec in table.to_dict("records"):
@@ -93,7 +100,8 @@ def results_view(table: Any, deployed: str, bound: float) -> dict[str, Any]:
         n = int(rec["images"])
         k = int(round(to_float(rec["unsafe_landing_rate"]) * n)) if n and math.isfinite(
             to_float(rec["unsafe_landing_rate"])) else 0
-        ub = to_float(rec["unsafe_landing_ub95"])
+        ub = clopper_pearson_upper(k, n, conf) if n and math.isfinite(to_float(rec["unsafe_landing_rate"])) \
+            else math.nan
         cells = [{"v": fmt(rec[name], d), "ci": ci(rec, name, d), "over": False} for name, _, d in RESULT_FIGURES]
         cells.append({"v": f"{k}/{n}", "ci": pct(rec["unsafe_landing_rate"]), "over": False})
         cells.append({"v": pct(ub), "ci": "", "over": bool(math.isfinite(ub) and ub > bound)})
@@ -122,9 +130,9 @@ def sample_size(table: Any, registry: rq.Registry, n_boot: int) -> list[str]:
     size = f"{n_min}" if n_min == n_max else f"{n_min} to {n_max}"
     paras = [
         f"Each scenario (perturbation x monitor configuration) holds {size} test images. The unsafe-landing "
-        f"rate comes with an exact one-sided {conf:.0%} upper bound (Clopper-Pearson): with 0 unsafe landings "
-        f"in {n_min} images the rate can still be as high as {ub0:.1%}, so such a sample cannot show a rate "
-        f"below that. Showing the configured bound of {bound:.1%}{claims} needs at least {need} images per "
+        f"rate comes with an exact one-sided {rq.confidence_text(conf)} upper bound (Clopper-Pearson): with 0 "
+        f"unsafe landings in {n_min} images the rate can still be as high as {ub0:.1%}, so such a sample cannot "
+        f"show a rate below that. Showing the configured bound of {bound:.1%}{claims} needs at least {need} images per "
         "scenario with no unsafe landing; more if any occurs.",
         f"Over all scenarios of the deployed monitor ({p['deployed_monitor']}) there were {k_tot} unsafe "
         f"landing(s) in {n_tot} decisions (the scenarios share their test images, so these are not "

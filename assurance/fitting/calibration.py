@@ -121,7 +121,7 @@ def calibration_body(scores: Any, unsafe: Any, *, monitor: str, miss_rate: float
 
 
 def calibrate_on_data(data: str | Path, monitor: str, *, miss_rate: float, confidence: float,
-                      weights: str | None = None, images: int | None = None, segmenter: Any = None,
+                      weights: str | dict[str, Any] | None = None, images: int | None = None, segmenter: Any = None,
                       core: Any = None) -> dict[str, Any]:
     """Score every candidate of the clean scenes in ``data`` with ``monitor`` and calibrate it: the card document.
 
@@ -147,9 +147,9 @@ def calibrate_on_data(data: str | Path, monitor: str, *, miss_rate: float, confi
         raise CalibrationError(f"{data}: no labelled scenes to calibrate on")
     loaded = segmenter is None
     if loaded:
-        from el.segmentation.factory import load_model
+        from assurance.system.model import load_model_spec
 
-        segmenter = load_model(weights)
+        segmenter = load_model_spec(weights)
     network = network_record(segmenter, weights, loaded=loaded)  # an unidentified network is refused here
     scores, unsafe, faults = [], [], []
     for task in tasks:

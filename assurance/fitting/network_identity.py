@@ -15,7 +15,8 @@ from el.segmentation.factory import FILE, PLUGIN, SHIPPED_KIND, model_kind
 from el.segmentation.weights import DEFAULT_WEIGHTS
 
 
-def network_record(segmenter: Any, weights: str | Path | None = None, *, loaded: bool = True) -> dict[str, Any]:
+def network_record(segmenter: Any, weights: str | Path | dict[str, Any] | None = None, *,
+                   loaded: bool = True) -> dict[str, Any]:
     """``{"path", "sha256", "segmenter"}`` of the network a record is fitted on (``"model"`` too for a model
     registered by name). ValueError for a network that reports no weights hash: the record could not be
     bound to it, and the flight code refuses unbound records.
@@ -27,6 +28,8 @@ def network_record(segmenter: Any, weights: str | Path | None = None, *, loaded:
     if not sha:
         raise ValueError(f"the segmentation model ({type(segmenter).__name__}) reports no weights_sha256: a fitted "
                          f"record could not be bound to it; give the model an identity (its weights hash)")
+    if isinstance(weights, dict):  # a system file's model: its file (if any) and kind
+        return {"path": weights.get("path"), "sha256": sha, "segmenter": "weights", "model": weights.get("kind")}
     kind = model_kind(weights) if loaded else None
     path = DEFAULT_WEIGHTS if kind == SHIPPED_KIND else (Path(weights) if kind == FILE else None)
     record = {"path": shown_path(path) if path is not None else None, "sha256": sha, "segmenter": "weights"}

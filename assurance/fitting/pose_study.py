@@ -4,7 +4,7 @@ For each scene and each pose error (height and pitch each off by up to +-20%), t
 rendered with the *true* pose, the ground-truth pipeline plans on the label map with the *nominal*
 pose (50 m, 45 deg), and every candidate's landing point (where its centre pixel's ray meets the
 ground under the true pose) gets its true metric clearance to the nearest road, car or building
-footprint of the world model, hidden parts included. The requirement: clearance >= R = 2 m.
+footprint of the world model, hidden parts included. The requirement: clearance >= R (2 m by default).
 
 A violation can come from the geometry (beta too small) or from what the labels cannot show: a road
 hidden under a tree canopy is labelled "tree" in the image, so no planner that trusts the image can
@@ -28,7 +28,7 @@ from assurance.campaign.gt_pipeline import decide_from_labels
 from assurance.scenes.generate import default_geometry, generate_world, scene_seed
 from assurance.scenes.renderer import render
 from assurance.scenes.world import World, pixel_clearance_m
-from el.camera import Pose
+from el.camera import Pose, SafetyParams
 from el.config import CoreConfig
 from el.labels import FORBIDDEN_LUT
 
@@ -57,8 +57,14 @@ def pose_cases(errors: Sequence[float] = POSE_ERRORS) -> list[PoseCase]:
 def candidate_clearances(seeds: Iterable[int], *, size: tuple[int, int] = (1920, 1080),
                          modes: Sequence[str] = ("exact", "paper"),
                          cases: Sequence[PoseCase] | None = None, split: str = "val",
-                         working_width: int = 1024, radius_m: float = 2.0) -> pd.DataFrame:
-    """One row per (scene, mode, pose case, candidate): its true clearance in metres."""
+                         working_width: int = 1024, safety: SafetyParams | None = None) -> pd.DataFrame:
+    """One row per (scene, mode, pose case, candidate): its true clearance in metres.
+
+    ``safety``: the R and beta the planner uses and the clearance is judged against (default ``SafetyParams()``,
+    the flight code's; EL-R02's test passes the registry's targets ``radius_m`` and ``beta``).
+    """
+    safety = safety or SafetyParams()
+    radius_m = safety.radius_m
     cases = list(cases or pose_cases())
     nominal = Pose()
     rows = []
@@ -69,7 +75,7 @@ def candidate_clearances(seeds: Iterable[int], *, size: tuple[int, int] = (1920,
             geo = default_geometry(size, case.pose(nominal))
             labels = render(world, geo).labels
             for mode in modes:
-                cfg = CoreConfig(mode=mode, working_width=working_width)  # plans with the nominal pose
+                cfg = CoreConfig(mode=mode, working_width=working_width, safety=safety)  # the nominal pose
                 d = decide_from_labels(labels, config=cfg)
                 if not d.candidates:
                     rows.append({"seed": seed, "mode": mode, "case": case.label, "candidate": -1,

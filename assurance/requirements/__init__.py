@@ -1,6 +1,8 @@
 """Safety requirements: the registry, the verification states, and the campaign checks (docs/architecture.md 4.6).
 
 - ``registry``: ``assurance/requirements.yaml`` read and validated (``load_registry``, ``RegistryError``);
+- ``targets``: the parameters a user sets (``TARGETS``, ``validate_targets``, ``TargetError``) and the
+  requirement texts rendered from them (``render_text``);
 - ``states``: test outcomes -> verified / failed / not verified (``requirement_state``, ``evaluate``) and
   the results document the pytest plugin writes;
 - ``records``: ``Evidence``, what a campaign check returns (pass, fail or insufficient);
@@ -35,6 +37,7 @@ from assurance.requirements.checks import (
     check_pose_margin,
     check_safety_gain,
     check_unsafe_landing_bound,
+    confidence_text,
     config_sha256,
     images_needed,
     pose_margin,
@@ -67,8 +70,26 @@ from assurance.requirements.states import (
     results_document,
     summary_counts,
 )
+from assurance.requirements.targets import (
+    REQUIRED_TARGETS,
+    TARGETS,
+    TargetError,
+    check_target,
+    read_targets_file,
+    render_text,
+    targets_sha256,
+    validate_targets,
+)
 
 __all__ = [
+    "validate_targets",
+    "targets_sha256",
+    "render_text",
+    "read_targets_file",
+    "check_target",
+    "TargetError",
+    "TARGETS",
+    "REQUIRED_TARGETS",
     "ARTEFACTS",
     "CHECKS",
     "FAIL",
@@ -105,6 +126,7 @@ __all__ = [
     "check_table_recomputation",
     "check_unsafe_landing_bound",
     "checks_of",
+    "confidence_text",
     "config_sha256",
     "default_registry_path",
     "evaluate",

@@ -73,14 +73,22 @@ def decision_time(ctx: CheckContext) -> Evidence:
     return ck.check_decision_time(ctx.images, p["deployed_monitor"], p["time_budget_s"])
 
 
-@check("EL-R14", parameters=("pose_error",))
+@check("EL-R14", parameters=("pose_error", "radius_m", "beta"))
 def pose_error_margin(ctx: CheckContext) -> Evidence:
-    """The run's beta covers the declared pose-error box at the run's input size."""
+    """The run planned with the declared R and beta, and that beta covers the declared pose-error box at the
+    run's input size."""
     size = ctx.input_size
     if size is None:
         return Evidence("pose-error margin of beta", INSUFFICIENT,
                         "insufficient evidence: no evaluated image gives the input size")
-    return ck.check_pose_margin(ctx.manifest["config"]["core"], size, ctx.parameters["pose_error"])
+    p = ctx.parameters
+    images = ctx.images
+    poses: list[tuple[float, float]] = []
+    if images is not None and {"height_m", "pitch_deg", "pose_source"} <= set(images.columns):
+        framed = images[(images["pose_source"] != "nominal") & images["height_m"].notna()]
+        poses = sorted(set(zip(framed["height_m"], framed["pitch_deg"], strict=True)))
+    return ck.check_pose_margins(ctx.manifest["config"]["core"], size, poses, p["pose_error"],
+                                 {"radius_m": p["radius_m"], "beta": p["beta"]})
 
 
 @check("EL-R16", parameters=("calibration_card",), in_report=False)

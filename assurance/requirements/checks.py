@@ -212,27 +212,40 @@ def images_needed_at(rate: float, bound: float, conf: float = 0.95, limit: int =
     return hi
 
 
+def _k_of(rate: Any, n: int) -> int:
+    """The unsafe landings behind a table's rate over ``n`` images (0 when there are none or no rate)."""
+    return int(round(float(rate) * n)) if n and _finite(rate) else 0
+
+
+def confidence_text(conf: float) -> str:
+    """A confidence level as the checks and the report show it (``0.95`` -> ``95%``, ``0.975`` -> ``97.5%``)."""
+    return f"{float(conf) * 100:.10g}%"
+
+
 def check_unsafe_landing_bound(table: Any, monitor: str, bound: float, required: Sequence[str],
                                conf: float = 0.95) -> Evidence:
-    """EL-R10: the unsafe-landing rate's one-sided upper bound <= ``bound`` for ``monitor``, per scenario.
+    """EL-R10: the unsafe-landing rate's one-sided ``conf`` upper bound <= ``bound`` for ``monitor``, per scenario.
 
-    A scenario whose bound exceeds ``bound`` fails when the sample was large enough for zero unsafe
-    landings to meet it; otherwise the sample is too small to decide (insufficient).
+    The bound is computed here, at ``conf``, from each scenario's images and unsafe landings (exact
+    Clopper-Pearson, ``clopper_pearson_upper``), never read from the table's fixed 95% column. A scenario
+    whose bound exceeds ``bound`` fails when the sample was large enough for zero unsafe landings to meet
+    it; otherwise the sample is too small to decide (insufficient).
     """
     from assurance.analysis.metrics import clopper_pearson_upper
 
-    name = f"unsafe-landing rate of the deployed monitor ({monitor}), bound {bound:g}"
+    level = confidence_text(conf)
+    name = f"unsafe-landing rate of the deployed monitor ({monitor}), bound {bound:g} at {level} confidence"
     rows_df = _deployed_rows(table, monitor)
-    cols = ("perturbation", "severity", "images", "unsafe_landings", "unsafe_landing_rate", "unsafe_landing_ub95",
-            "over_bound_by", "images_needed", "verdict")
+    cols = ("perturbation", "severity", "images", "unsafe_landings", "unsafe_landing_rate", "confidence",
+            "upper_bound", "over_bound_by", "images_needed", "verdict")
     if rows_df is None or len(rows_df) == 0:
         return Evidence(name, INSUFFICIENT, f"insufficient evidence: monitor {monitor!r} was not evaluated")
     need = images_needed(bound, conf)
     rows, fails, short = [], [], []
     for r in rows_df.itertuples(index=False):
         n = int(r.images)
-        k = int(round(float(r.unsafe_landing_rate) * n)) if n and _finite(r.unsafe_landing_rate) else 0
-        ub = float(r.unsafe_landing_ub95) if _finite(r.unsafe_landing_ub95) else math.nan
+        k = _k_of(r.unsafe_landing_rate, n)
+        ub = clopper_pearson_upper(k, n, conf) if n and _finite(r.unsafe_landing_rate) else math.nan
         scen = f"{r.perturbation} (s{int(r.severity)})"
         if n == 0 or not math.isfinite(ub):
             verdict = "insufficient"
@@ -246,21 +259,23 @@ def check_unsafe_landing_bound(table: Any, monitor: str, bound: float, required:
             verdict = "fail"
             fails.append(scen)
         rows.append({"perturbation": r.perturbation, "severity": int(r.severity), "images": n,
-                     "unsafe_landings": k, "unsafe_landing_rate": _num(r.unsafe_landing_rate),
-                     "unsafe_landing_ub95": _num(ub),
+                     "unsafe_landings": k, "unsafe_landing_rate": _num(r.unsafe_landing_rate), "confidence": level,
+                     "upper_bound": _num(ub),
                      "over_bound_by": _num(ub - bound) if math.isfinite(ub) and ub > bound else 0.0,
                      "images_needed": _images_needed_text(k / n if n else 0.0, bound, conf), "verdict": verdict})
     missing = [p for p in required if p not in set(rows_df["perturbation"])]
     if fails:
-        return Evidence(name, FAIL, f"upper bound > {bound:g} under {', '.join(fails)} (images_needed: the images "
-                        "at which the observed rate would show the bound)", tuple(rows), cols)
+        return Evidence(name, FAIL, f"one-sided {level} upper bound > {bound:g} under {', '.join(fails)} "
+                        "(images_needed: the images at which the observed rate would show the bound)",
+                        tuple(rows), cols)
     if missing or short:
         what = [f"{p} not evaluated" for p in missing]
         if short:
-            what.append(f"{', '.join(short)}: too few images to show {bound:g} (needs >= {need} images with no "
-                        "unsafe landing)")
+            what.append(f"{', '.join(short)}: too few images to show {bound:g} at {level} confidence (needs >= "
+                        f"{need} images with no unsafe landing)")
         return Evidence(name, INSUFFICIENT, "insufficient evidence: " + "; ".join(what), tuple(rows), cols)
-    return Evidence(name, PASS, f"upper bound <= {bound:g} in all {len(rows)} scenario(s)", tuple(rows), cols)
+    return Evidence(name, PASS, f"one-sided {level} upper bound <= {bound:g} in all {len(rows)} scenario(s)",
+                    tuple(rows), cols)
 
 
 def check_decision_time(images: Any, monitor: str, budget_s: float) -> Evidence:
@@ -303,17 +318,48 @@ def pose_margin(core: Any, size: tuple[int, int], pose_error: Mapping[str, float
     he, pe = float(pose_error["height"]), float(pose_error["pitch"])
     need = required_beta(geo, height_error=he, pitch_error=pe)
     return {"working_size": f"{w}x{h}", "height_m": cfg.pose.height_m, "pitch_deg": cfg.pose.pitch_deg,
-            "height_error": he, "pitch_error": pe, "beta": float(cfg.safety.beta),
-            "required_beta": round(need, 4)}, need
+            "height_error": he, "pitch_error": pe, "radius_m": float(cfg.safety.radius_m),
+            "beta": float(cfg.safety.beta), "required_beta": round(need, 4)}, need
 
 
-def check_pose_margin(core: Any, size: tuple[int, int], pose_error: Mapping[str, float]) -> Evidence:
-    """EL-R14: beta >= the beta required for the pose-error box, at working resolution (``pose_margin``)."""
+def check_pose_margin(core: Any, size: tuple[int, int], pose_error: Mapping[str, float],
+                      safety: Mapping[str, float] | None = None) -> Evidence:
+    """EL-R14: beta >= the beta required for the pose-error box, at working resolution (``pose_margin``).
+
+    ``safety``: the declared targets ``{"radius_m": R, "beta": beta}`` (the registry's parameters); a
+    configuration planned with another R or beta does not judge them (insufficient, naming both).
+    """
     row, need = pose_margin(core, size, pose_error)
+    if safety is not None:
+        want_r, want_b = float(safety["radius_m"]), float(safety["beta"])
+        if not (math.isclose(row["radius_m"], want_r) and math.isclose(row["beta"], want_b)):
+            return Evidence("pose-error margin of beta", INSUFFICIENT,
+                            f"insufficient evidence: the campaign planned with R = {row['radius_m']:g} m, beta = "
+                            f"{row['beta']:g}; the targets declare R = {want_r:g} m, beta = {want_b:g}",
+                            (row,), tuple(row))
     beta, he, pe = row["beta"], row["height_error"], row["pitch_error"]
     rel = ">=" if beta >= need else "<"
     verdict = f"beta {beta:g} {rel} required {need:.3f} for +-{he:.0%} height, +-{pe:.0%} pitch"
     return Evidence("pose-error margin of beta", PASS if beta >= need else FAIL, verdict, (row,), tuple(row))
+
+
+def check_pose_margins(core: Any, size: tuple[int, int], poses: Any, pose_error: Mapping[str, float],
+                       safety: Mapping[str, float] | None = None) -> Evidence:
+    """EL-R14 over every pose a run planned at: the nominal one and each frame's own (``poses``: distinct
+    (height_m, pitch_deg) pairs from the images readouts); fails when beta falls short at any of them."""
+    base = dict(core) if isinstance(core, Mapping) else core.to_dict()
+    evidences = [check_pose_margin(base, size, pose_error, safety)]
+    for height, pitch in poses:
+        framed = {**base, "pose": {"height_m": float(height), "pitch_deg": float(pitch)}}
+        evidences.append(check_pose_margin(framed, size, pose_error, safety))
+    rows = tuple(r for ev in evidences for r in ev.rows)
+    rank = {FAIL: 0, INSUFFICIENT: 1, PASS: 2}
+    worst = min(evidences, key=lambda ev: (rank.get(ev.status, 1),
+                                           -max((r.get("required_beta", 0.0) for r in ev.rows), default=0.0)))
+    if len(evidences) == 1:
+        return worst
+    summary = f"{worst.summary} (worst of {len(evidences)} poses: the nominal one and each frame's own)"
+    return Evidence(worst.name, worst.status, summary, rows, evidences[0].columns)
 
 
 def _sha(v: Any) -> bool:

@@ -94,7 +94,18 @@ def _replan(man: Mapping[str, Any], config: Any, own_model: bool) -> list[Any] |
         return f"insufficient evidence: the run's data folder {data} is gone"
     weights = (man.get("weights") or {}).get("path")
     named = (man.get("weights") or {}).get("model")
-    if not own_model and named:  # a model registered by name: it must still load and report the same weights
+    source = getattr(config, "weights", None)
+    if not own_model and isinstance(source, Mapping):  # a system file's model: it must load as it did
+        from assurance.system.model import load_model_spec
+        from el.segmentation.contract import weights_sha256_of
+
+        try:
+            now = weights_sha256_of(load_model_spec(source))
+        except Exception as exc:
+            return f"insufficient evidence: the run's model cannot be loaded now: {exc}"
+        if now != man["weights"].get("sha256"):
+            return "insufficient evidence: the run's model reports other weights than in the run"
+    elif not own_model and named:  # a model registered by name: it must still load and report the same weights
         from el.segmentation.contract import weights_sha256_of
         from el.segmentation.factory import load_model
 

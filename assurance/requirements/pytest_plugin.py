@@ -15,6 +15,12 @@ project has it.
   ``--requirements-report PATH``, or ``reports/requirements.json`` under the rootdir when the marker
   expression selects the requirement tests (``-m requirements``).
 
+- The requirement targets (the registry's parameters a user sets, ``assurance.requirements.targets``):
+  ``--uav-el-targets FILE.json`` (a JSON object of overrides), else ``$UAV_EL_TARGETS``; a plugin or
+  conftest binds them in code with ``set_targets(config, targets, source=...)`` before collection (e.g.
+  a system file's ``[targets]``). The overrides, their source and the effective parameters' SHA-256 go
+  into the results JSON (``registry``), and the evidence gate refuses a report on other targets.
+
 State lives in ``config.stash``. ``set_context(config, **values)`` lets a conftest add facts to the
 report (e.g. the campaign run the campaign tests read).
 """
@@ -22,6 +28,7 @@ report (e.g. the campaign run the campaign tests read).
 from __future__ import annotations
 
 import json
+import os
 import re
 import sys
 import time
@@ -32,6 +39,8 @@ import pytest
 
 MARKER = "requirements"
 DEFAULT_REPORT = Path("reports") / "requirements.json"
+TARGETS_ENV = "UAV_EL_TARGETS"
+"""The environment variable naming a targets JSON file when ``--uav-el-targets`` is not given."""
 
 _REGISTRY = pytest.StashKey[Any]()
 _CLAIMS = pytest.StashKey[dict[str, tuple[str, ...]]]()
@@ -40,6 +49,7 @@ _DESELECTED = pytest.StashKey[set[str]]()
 _CONTEXT = pytest.StashKey[dict[str, Any]]()
 _ERRORS = pytest.StashKey[list[str]]()
 _WRITTEN = pytest.StashKey[Any]()
+_TARGETS = pytest.StashKey[Any]()
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
@@ -49,6 +59,9 @@ def pytest_addoption(parser: pytest.Parser) -> None:
                          f"(default with -m requirements: {DEFAULT_REPORT} under the rootdir)")
     group.addoption("--requirements-registry", metavar="PATH", default=None,
                     help="requirement registry to check marker ids against (default: assurance/requirements.yaml)")
+    group.addoption("--uav-el-targets", dest="uav_el_targets", metavar="FILE.json", default=None,
+                    help="requirement targets overriding the registry's parameters (a JSON object, e.g. "
+                         '{"confidence": 0.99, "radius_m": 2.5}; default: $' + TARGETS_ENV + ", else none)")
     group.addoption("--uav-el-run", dest="uav_el_run", metavar="RUN", default=None,
                     help="campaign run folder for the campaign requirement tests "
                          "(default: $UAV_EL_RUN, else runs/demo under the rootdir)")
@@ -61,22 +74,41 @@ def pytest_configure(config: pytest.Config) -> None:
         "e.g. 'EL-R01'); select them with -m requirements",
     )
     for key, empty in ((_REGISTRY, None), (_CLAIMS, {}), (_PHASES, {}), (_DESELECTED, set()), (_CONTEXT, {}),
-                       (_ERRORS, []), (_WRITTEN, None)):
+                       (_ERRORS, []), (_WRITTEN, None), (_TARGETS, None)):
         config.stash.setdefault(key, empty)  # a conftest may have set its context first
     config.pluginmanager.register(_Recorder(config), "uav_el_requirements_recorder")
-    if config.getoption("requirements_registry"):
-        registry(config)  # a bad registry given on the command line is a usage error at once
+    if config.getoption("requirements_registry") or _targets_file(config):
+        registry(config)  # a bad registry or targets file given on the command line is a usage error at once
+
+
+def _targets_file(config: pytest.Config) -> str | None:
+    return config.getoption("uav_el_targets", None) or os.environ.get(TARGETS_ENV) or None
+
+
+def set_targets(config: pytest.Config, targets: Any, *, source: str = "set_targets") -> None:
+    """Bind the session's requirement targets in code (e.g. from a system file's ``[targets]``), replacing
+    ``--uav-el-targets`` / ``$UAV_EL_TARGETS``. Call it before collection (``pytest_configure`` of a plugin
+    or conftest); the overrides are validated at once (UsageError naming the key)."""
+    config.stash[_TARGETS] = (dict(targets or {}), source)
+    config.stash[_REGISTRY] = None
+    registry(config)
 
 
 def registry(config: pytest.Config) -> Any:
-    """The session's validated requirement registry (loaded once; UsageError if it is invalid)."""
-    from assurance.requirements import RegistryError, load_registry
+    """The session's validated requirement registry with the session's targets applied (loaded once;
+    UsageError if the registry or a target is invalid)."""
+    from assurance.requirements import RegistryError, TargetError, load_registry, read_targets_file
 
     reg = config.stash.get(_REGISTRY, None)
     if reg is None:
         try:
-            reg = load_registry(config.getoption("requirements_registry"))
-        except RegistryError as exc:
+            bound = config.stash.get(_TARGETS, None)
+            if bound is None and _targets_file(config):
+                path = _targets_file(config)
+                bound = (read_targets_file(path), str(Path(path).resolve()))
+            targets, source = bound or ({}, None)
+            reg = load_registry(config.getoption("requirements_registry"), targets=targets, targets_source=source)
+        except (RegistryError, TargetError) as exc:
             raise pytest.UsageError(f"requirement registry: {exc}") from None
         config.stash[_REGISTRY] = reg
     return reg

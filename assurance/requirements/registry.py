@@ -1,7 +1,8 @@
 """The requirement registry: ``assurance/requirements.yaml`` read and validated (docs/architecture.md 4.6).
 
-``load_registry`` checks unique ids, required fields and known sources, and raises ``RegistryError``
-naming the file and the entry.
+``load_registry`` checks unique ids, required fields, known sources and the parameters (``targets``), renders the
+requirement texts from the parameters, and raises ``RegistryError`` naming the file and the entry;
+``load_registry(targets=...)`` / ``Registry.with_targets`` apply a user's target overrides.
 """
 
 from __future__ import annotations
@@ -9,13 +10,21 @@ from __future__ import annotations
 import hashlib
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
 import yaml
 
+from assurance.requirements.targets import (
+    REQUIRED_TARGETS,
+    TargetError,
+    check_target,
+    render_text,
+    targets_sha256,
+    validate_targets,
+)
 from el.errors import UavElError
 
 REGISTRY_FORMAT = "uav-el-requirements/1"
@@ -24,16 +33,6 @@ KNOWN_SOURCES: tuple[str, ...] = ("SORA", "SSIV21", "ICRA22", "PROJECT")
 
 _ID = re.compile(r"^EL-R\d{2,3}$")
 _FIELDS: tuple[str, ...] = ("id", "title", "text", "source", "rationale", "verification", "acceptance", "domain")
-_PARAMETERS: dict[str, type | tuple[type, ...]] = {
-    "deployed_monitor": str,
-    "required_perturbations": list,
-    "min_images_per_perturbation": int,
-    "unsafe_landing_bound": (int, float),
-    "confidence": (int, float),
-    "time_budget_s": (int, float),
-    "pose_error": dict,
-    "rerun_shards": int,
-}
 
 
 class RegistryError(UavElError, ValueError):
@@ -42,7 +41,7 @@ class RegistryError(UavElError, ValueError):
 
 @dataclass(frozen=True)
 class Requirement:
-    """One safety requirement of the registry."""
+    """One safety requirement of the registry (its texts rendered from the registry's parameters)."""
 
     id: str
     title: str
@@ -57,7 +56,11 @@ class Requirement:
 
 @dataclass(frozen=True)
 class Registry:
-    """The validated registry: requirements in file order, the parameters of their acceptance criteria."""
+    """The validated registry: requirements in file order, the parameters of their acceptance criteria.
+
+    ``parameters`` are the effective targets: the file's ``defaults`` with the user's overrides ``targets``
+    (from ``targets_source``) applied; requirement texts and the operating domain are rendered from them.
+    """
 
     path: Path
     sha256: str
@@ -65,6 +68,10 @@ class Registry:
     parameters: dict[str, Any]
     operating_domain: dict[str, str]
     requirements: dict[str, Requirement]
+    defaults: dict[str, Any] = field(default_factory=dict)
+    targets: dict[str, Any] = field(default_factory=dict)
+    targets_source: str | None = None
+    templates: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
     def __contains__(self, req_id: object) -> bool:
         return req_id in self.requirements
@@ -82,20 +89,38 @@ class Registry:
     def __getitem__(self, req_id: str) -> Requirement:
         return self.requirements[req_id]
 
+    @property
+    def parameters_sha256(self) -> str:
+        """SHA-256 of the effective parameters (canonical JSON): binds requirement results and report to the targets."""
+        return targets_sha256(self.parameters)
+
+    def with_targets(self, targets: Mapping[str, Any] | None, *, source: str | None = None) -> Registry:
+        """This registry with ``targets`` overriding its parameters (on top of any applied before) and its texts
+        rendered again. TargetError for an unknown key (naming the known ones) or a value out of range."""
+        if not targets:
+            return self
+        given = validate_targets(targets, self.defaults, where=source or "targets")
+        merged = {**self.targets, **given}
+        return _build(self.path, self.sha256, self.sources, self.defaults, self.templates, merged,
+                      source or self.targets_source)
+
 
 def default_registry_path() -> Path:
     """The shipped registry, ``assurance/requirements.yaml``."""
     return Path(str(resources.files("assurance").joinpath("requirements.yaml")))
 
 
-def _text(where: str, entry: Mapping[str, Any], name: str) -> str:
+def _text(where: str, entry: Mapping[str, Any], name: str, params: Mapping[str, Any]) -> str:
     value = entry.get(name)
     if not isinstance(value, str) or not value.strip():
         raise RegistryError(f"{where}: field '{name}' must be a non-empty string, got {value!r}")
-    return " ".join(value.split())
+    try:
+        return " ".join(render_text(value, params).split())
+    except TargetError as exc:
+        raise RegistryError(f"{where}: field '{name}': {exc}") from None
 
 
-def _requirement(where: str, entry: Any, sources: Mapping[str, str]) -> Requirement:
+def _requirement(where: str, entry: Any, sources: Mapping[str, str], params: Mapping[str, Any]) -> Requirement:
     if not isinstance(entry, dict):
         raise RegistryError(f"{where}: a requirement must be a mapping, got {type(entry).__name__}")
     missing = [f for f in _FIELDS if f not in entry]
@@ -119,35 +144,58 @@ def _requirement(where: str, entry: Any, sources: Mapping[str, str]) -> Requirem
     if not isinstance(kind, list) or not all(isinstance(k, str) for k in kind):
         raise RegistryError(f"{where}: 'verification.kind' must be a list of strings, got {kind!r}")
     return Requirement(
-        id=entry["id"], title=_text(where, entry, "title"), text=_text(where, entry, "text"),
-        source=tuple(src), rationale=_text(where, entry, "rationale"),
-        verification_method=_text(where, ver, "method"), verification_kind=tuple(kind),
-        acceptance=_text(where, entry, "acceptance"), domain=_text(where, entry, "domain"),
+        id=entry["id"], title=_text(where, entry, "title", params), text=_text(where, entry, "text", params),
+        source=tuple(src), rationale=_text(where, entry, "rationale", params),
+        verification_method=_text(where, ver, "method", params), verification_kind=tuple(kind),
+        acceptance=_text(where, entry, "acceptance", params), domain=_text(where, entry, "domain", params),
     )
 
 
 def _parameters(path: Path, params: Any) -> dict[str, Any]:
-    """The registry's ``parameters``, checked for presence, type and range."""
+    """The registry's ``parameters``, checked for presence, type and range (``targets.TARGETS``)."""
     if not isinstance(params, dict):
         raise RegistryError(f"{path}: 'parameters' must be a mapping")
-    for name, typ in _PARAMETERS.items():
-        if name not in params:
-            raise RegistryError(f"{path}: parameters: missing {name!r}")
-        if isinstance(params[name], bool) or not isinstance(params[name], typ):
-            raise RegistryError(f"{path}: parameters.{name} has the wrong type ({params[name]!r})")
-    if not 0 < params["unsafe_landing_bound"] < 1 or not 0 < params["confidence"] < 1:
-        raise RegistryError(f"{path}: parameters.unsafe_landing_bound and confidence must lie in (0, 1)")
-    if params["min_images_per_perturbation"] < 1 or params["rerun_shards"] < 0 or params["time_budget_s"] <= 0:
-        raise RegistryError(f"{path}: parameters: min_images_per_perturbation >= 1, rerun_shards >= 0, "
-                            "time_budget_s > 0")
-    return params
+    missing = [name for name in REQUIRED_TARGETS if name not in params]
+    if missing:
+        raise RegistryError(f"{path}: parameters: missing {', '.join(repr(m) for m in missing)}")
+    out = dict(params)
+    out.setdefault("calibration_card", None)
+    try:
+        for name, value in out.items():
+            out[name] = check_target(name, value, where=f"{path}: parameters")
+    except TargetError as exc:
+        raise RegistryError(str(exc)) from None
+    return out
 
 
-def load_registry(path: str | Path | None = None) -> Registry:
-    """Read and validate a requirement registry (default: the shipped one).
+def _build(path: Path, sha: str, sources: dict[str, str], defaults: dict[str, Any], templates: Mapping[str, Any],
+           targets: dict[str, Any], source: str | None) -> Registry:
+    """The registry with ``targets`` (already validated) over ``defaults``, its texts rendered from the result."""
+    params = {**defaults, **targets}
+    reqs: dict[str, Requirement] = {}
+    for i, entry in enumerate(templates["requirements"]):
+        rid = entry.get("id") if isinstance(entry, dict) else None
+        where = f"{path}: requirements[{i}]" + (f" ({rid})" if isinstance(rid, str) else "")
+        if not isinstance(rid, str) or not _ID.match(rid):
+            raise RegistryError(f"{where}: 'id' must look like 'EL-R01', got {rid!r}")
+        if rid in reqs:
+            raise RegistryError(f"{where}: duplicate id {rid!r}")
+        reqs[rid] = _requirement(where, entry, sources, params)
+    domain = {k: _text(f"{path}: operating_domain", templates["operating_domain"], k, params)
+              for k in templates["operating_domain"]}
+    return Registry(path=path, sha256=sha, sources=dict(sources), parameters=params, operating_domain=domain,
+                    requirements=reqs, defaults=dict(defaults), targets=dict(targets), targets_source=source,
+                    templates=templates)
+
+
+def load_registry(path: str | Path | None = None, *, targets: Mapping[str, Any] | None = None,
+                  targets_source: str | None = None) -> Registry:
+    """Read and validate a requirement registry (default: the shipped one), with ``targets`` overriding its
+    parameters (``Registry.with_targets``) and every text rendered from the result.
 
     Raises RegistryError for a missing or unparsable file, a wrong format tag, a requirement without
-    one of the required fields, a malformed or duplicate id, an unknown source, or a missing parameter.
+    one of the required fields, a malformed or duplicate id, an unknown source, a missing or out-of-range
+    parameter, or a text whose placeholder names no parameter; TargetError for a bad override.
     """
     path = Path(path) if path is not None else default_registry_path()
     try:
@@ -175,15 +223,6 @@ def load_registry(path: str | Path | None = None) -> Registry:
     entries = doc.get("requirements")
     if not isinstance(entries, list) or not entries:
         raise RegistryError(f"{path}: 'requirements' must be a non-empty list")
-    reqs: dict[str, Requirement] = {}
-    for i, entry in enumerate(entries):
-        rid = entry.get("id") if isinstance(entry, dict) else None
-        where = f"{path}: requirements[{i}]" + (f" ({rid})" if isinstance(rid, str) else "")
-        if not isinstance(rid, str) or not _ID.match(rid):
-            raise RegistryError(f"{where}: 'id' must look like 'EL-R01', got {rid!r}")
-        if rid in reqs:
-            raise RegistryError(f"{where}: duplicate id {rid!r}")
-        reqs[rid] = _requirement(where, entry, sources)
-    return Registry(path=path, sha256=hashlib.sha256(raw).hexdigest(), sources=dict(sources),
-                    parameters=dict(params), operating_domain={k: " ".join(v.split()) for k, v in domain.items()},
-                    requirements=reqs)
+    templates = {"requirements": entries, "operating_domain": domain}
+    reg = _build(path, hashlib.sha256(raw).hexdigest(), dict(sources), params, templates, {}, None)
+    return reg.with_targets(targets, source=targets_source)

@@ -114,7 +114,9 @@ def results_document(registry: Registry, results: Mapping[str, RequirementResult
     """The JSON document the pytest plugin writes (``--requirements-report``)."""
     return {
         "format": RESULTS_FORMAT,
-        "registry": {"path": str(registry.path), "sha256": registry.sha256},
+        "registry": {"path": str(registry.path), "sha256": registry.sha256, "targets": dict(registry.targets),
+                     "targets_source": registry.targets_source, "parameters": dict(registry.parameters),
+                     "parameters_sha256": registry.parameters_sha256},
         "context": dict(context or {}),
         "exitstatus": exitstatus,
         "collection_errors": list(collection_errors),

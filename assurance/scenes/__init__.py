@@ -1,6 +1,6 @@
 """Procedural oblique urban scenes in the UAVid layout, with a metric world model behind every pixel.
 
-Public API: ``generate_scene``, ``generate_world``, ``render``, ``write_dataset``, ``World``,
+Public API: ``generate_scene``, ``generate_world``, ``ViewPlan``, ``render``, ``write_dataset``, ``World``,
 ``pixel_clearance_m``, the styles (``STYLES``, ``HELD_OUT_STYLES``) and the split seeds.
 """
 
@@ -8,6 +8,7 @@ from assurance.scenes.generate import (
     GENERATOR_VERSION,
     SPLIT_BASE,
     Scene,
+    ViewPlan,
     default_geometry,
     frame_location,
     generate_scene,
@@ -27,6 +28,7 @@ __all__ = [
     "STYLES",
     "Rendered",
     "Scene",
+    "ViewPlan",
     "World",
     "default_geometry",
     "frame_location",

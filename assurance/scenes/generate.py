@@ -11,7 +11,7 @@ import os
 import sys
 from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -21,13 +21,14 @@ import numpy as np
 from assurance.files import atomic_write_bytes
 from assurance.scenes.builder import Builder
 from assurance.scenes.layout import build_city
+from assurance.scenes.poses import POSES_FILE, write_poses
 from assurance.scenes.rand import Rand
 from assurance.scenes.renderer import render
 from assurance.scenes.styles import ALL_STYLES, HELD_OUT_STYLES, LIGHTINGS, Style, choose_style, get_style
 from assurance.scenes.uavid import sample_paths, write_image
 from assurance.scenes.view import coverage_domain, visible_ground
 from assurance.scenes.world import Sun, World
-from el.camera import CameraGeometry, Intrinsics, Pose
+from el.camera import HEIGHT_M, PITCH_DEG, CameraGeometry, Intrinsics, Pose, check_geometry
 from el.labels import CLASS_NAMES, NUM_CLASSES, PALETTE
 
 GENERATOR_VERSION = "1.1"  # 1.1: look-alike hazards (tracks, shared streets, low sheds, stray and verge cars)
@@ -123,8 +124,7 @@ def scene_meta(world: World, geometry: CameraGeometry, labels: np.ndarray, split
         "lighting": world.lighting,
         "sun": {"azimuth_deg": round(world.sun.azimuth_deg, 3), "elevation_deg": round(world.sun.elevation_deg, 3)},
         "pose": {"height_m": geometry.pose.height_m, "pitch_deg": geometry.pose.pitch_deg},
-        "intrinsics": {"sensor_width_mm": geometry.intrinsics.sensor_width_mm,
-                       "focal_mm": geometry.intrinsics.focal_mm, "name": geometry.intrinsics.name},
+        "intrinsics": geometry.intrinsics.to_dict(),
         "image_size": [geometry.width, geometry.height],
         "class_shares": shares,
         "footprints_region": [round(x, 3) for x in region],
@@ -134,14 +134,39 @@ def scene_meta(world: World, geometry: CameraGeometry, labels: np.ndarray, split
 
 
 def generate_scene(seed: int, *, size: tuple[int, int] = DEFAULT_SIZE, pose: Pose | None = None,
-                   style: str | None = None, split: str | None = None) -> Scene:
+                   style: str | None = None, split: str | None = None, intrinsics: Intrinsics | None = None) -> Scene:
     """Generate and render one scene. The world covers poses within +-20% of ``pose``."""
     if style is not None and style not in ALL_STYLES:
         raise ValueError(f"unknown style {style!r}; known: {', '.join(ALL_STYLES)}")
-    geometry = default_geometry(size, pose)
+    geometry = default_geometry(size, pose, intrinsics)
     world = generate_world(seed, style=style, split=split, geometry=geometry)
     out = render(world, geometry)
     return Scene(out.image, out.labels, scene_meta(world, geometry, out.labels, split), world)
+
+
+def _check_rendered(root: Path, index: int, view: ViewPlan | None, seed: int) -> bool:
+    """False for a complete scene rendered as ``view`` asks (None: not checked); ValueError when it was not."""
+    if view is None:
+        return False
+    meta_path = sample_paths(root, *frame_location(index))[2]
+    meta = json.loads(meta_path.read_text(encoding="utf-8"))
+    pose = view.pose_for(seed)
+    want = {"pose": {"height_m": pose.height_m, "pitch_deg": pose.pitch_deg}, "intrinsics": view.intrinsics.to_dict()}
+    for key, value in want.items():
+        if meta.get(key) != value:
+            raise ValueError(f"{meta_path}: scene rendered with {key} {meta.get(key)}, not {value}; "
+                             "use another --out folder")
+    return False
+
+
+def _write_sidecars(root: Path, n: int, seed: int, split: str, view: ViewPlan) -> None:
+    """Each sequence's ``poses.csv``: the pose every scene of it is (or will be) rendered at."""
+    by_seq: dict[str, dict[str, Pose]] = {}
+    for i in range(n):
+        seq, frame = frame_location(i)
+        by_seq.setdefault(seq, {})[frame] = view.pose_for(scene_seed(split, i, seed))
+    for seq, poses in by_seq.items():
+        write_poses(root / seq / POSES_FILE, poses)
 
 
 # -- datasets on disk ---------------------------------------------------------------------------
@@ -156,12 +181,55 @@ def scene_complete(root: str | Path, index: int) -> bool:
     return all(p.is_file() and p.stat().st_size > 0 for p in sample_paths(root, seq, frame))
 
 
+@dataclass(frozen=True)
+class ViewPlan:
+    """The camera scenes are rendered with: intrinsics, a nominal pose, and optional per-scene ranges of
+    height and pitch from which each scene draws its pose, seeded by the scene seed (deterministic)."""
+
+    intrinsics: Intrinsics = field(default_factory=Intrinsics)
+    pose: Pose = field(default_factory=Pose)
+    heights: tuple[float, float] | None = None
+    pitches: tuple[float, float] | None = None
+
+    def __post_init__(self) -> None:
+        for name, rng, (lo, hi) in (("heights", self.heights, HEIGHT_M), ("pitches", self.pitches, PITCH_DEG)):
+            if rng is not None and not (len(rng) == 2 and lo <= rng[0] <= rng[1] <= hi):
+                raise ValueError(f"{name} must be a range LOW:HIGH with {lo:g} <= LOW <= HIGH <= {hi:g}, got {rng!r}")
+
+    @property
+    def is_default(self) -> bool:
+        """Whether scenes render as they always did (Phantom 4, 50 m, 45 degrees, one pose)."""
+        return self == ViewPlan()
+
+    def pose_for(self, seed: int) -> Pose:
+        """The pose of scene ``seed``: drawn from the ranges (to 0.01), else the nominal pose."""
+        if self.heights is None and self.pitches is None:
+            return self.pose
+        rng = np.random.default_rng([seed, 5309])
+        height = round(float(rng.uniform(*self.heights)), 2) if self.heights else self.pose.height_m
+        pitch = round(float(rng.uniform(*self.pitches)), 2) if self.pitches else self.pose.pitch_deg
+        return Pose(height_m=height, pitch_deg=pitch)
+
+    def check(self, size: tuple[int, int]) -> None:
+        """ValueError when a pose of the plan is one the generator or the planner cannot handle at ``size``."""
+        hs = self.heights or (self.pose.height_m,) * 2
+        ps = self.pitches or (self.pose.pitch_deg,) * 2
+        for h in hs:
+            for p in ps:
+                g = default_geometry(size, Pose(height_m=h, pitch_deg=p), self.intrinsics)
+                check_geometry(g)
+                coverage_domain(g)  # the whole view must see the ground (the generator models the ground only)
+
+
 def write_scene(root: str | Path, index: int, seed: int, split: str, size: tuple[int, int],
-                compression: int = 1) -> str:
+                compression: int = 1, view: ViewPlan | None = None) -> str:
     """Generate scene ``seed`` and write it as item ``index`` (image, labels, then meta); returns its key."""
     seq, frame = frame_location(index)
     img_path, lab_path, meta_path = sample_paths(root, seq, frame)
-    scene = generate_scene(seed, size=size, split=split)
+    if view is None or view.is_default:
+        scene = generate_scene(seed, size=size, split=split)
+    else:
+        scene = generate_scene(seed, size=size, split=split, pose=view.pose_for(seed), intrinsics=view.intrinsics)
     write_image(img_path, scene.image, compression=compression)
     atomic_write_bytes(lab_path, encode_labels(scene.labels))
     atomic_write_bytes(meta_path, (json.dumps(scene.meta, separators=(",", ":")) + "\n").encode())
@@ -180,13 +248,13 @@ def encode_labels(ids: np.ndarray) -> bytes:
     return buf.tobytes()
 
 
-def _write_job(args: tuple[str, int, int, str, tuple[int, int]]) -> str:
-    root, index, seed, split, size = args
+def _write_job(args: tuple[str, int, int, str, tuple[int, int], ViewPlan | None]) -> str:
+    root, index, seed, split, size, view = args
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     import cv2
 
     cv2.setNumThreads(1)
-    return write_scene(root, index, seed, split, size)
+    return write_scene(root, index, seed, split, size, view=view)
 
 
 def _iterate(items: Iterator[str], total: int, desc: str, enabled: bool) -> Iterator[str]:
@@ -201,19 +269,33 @@ def _iterate(items: Iterator[str], total: int, desc: str, enabled: bool) -> Iter
 
 
 def write_dataset(out: str | Path, n: int, seed: int = 0, split: str = "train",
-                  size: tuple[int, int] = DEFAULT_SIZE, *, progress: bool = True, jobs: int = 1) -> list[str]:
+                  size: tuple[int, int] = DEFAULT_SIZE, *, progress: bool = True, jobs: int = 1,
+                  view: ViewPlan | None = None) -> list[str]:
     """Write ``n`` scenes of ``split`` under ``out`` in the UAVid layout; complete ones are skipped.
 
+    ``view``: camera and poses (default: Phantom 4 at 50 m, 45 degrees, no sidecar). Another view also
+    writes each sequence's ``poses.csv``; a complete scene rendered with another camera or pose is an error.
     Returns the keys (``seqNN/NNNNNN``) of the scenes written or found complete.
     """
     if n < 0:
         raise ValueError(f"number of scenes must be >= 0, got {n}")
     out = Path(out)
-    todo = [(str(out), i, scene_seed(split, i, seed), split, tuple(size)) for i in range(n)
-            if not scene_complete(out, i)]
+    view = None if view is None or view.is_default else view
+    if view is not None:
+        view.check(tuple(size))
+    todo = [(str(out), i, scene_seed(split, i, seed), split, tuple(size), view) for i in range(n)
+            if not scene_complete(out, i) or _check_rendered(out, i, view, scene_seed(split, i, seed))]
     keys = ["/".join(frame_location(i)) for i in range(n)]
+    _render_all(todo, split, progress, jobs)
+    if view is not None:  # after the scenes: a sidecar names only frames that have an image
+        _write_sidecars(out, n, seed, split, view)
+    return keys
+
+
+def _render_all(todo: list[Any], split: str, progress: bool, jobs: int) -> None:
+    """Render and write the scenes of ``todo`` (``_write_job`` arguments), in worker processes when jobs > 1."""
     if not todo:
-        return keys
+        return
     if jobs <= 1:
         results: Iterator[str] = (_write_job(t) for t in todo)
         for _ in _iterate(results, total=len(todo), desc=f"synth {split}", enabled=progress):
@@ -222,4 +304,3 @@ def write_dataset(out: str | Path, n: int, seed: int = 0, split: str = "train",
         with ProcessPoolExecutor(max_workers=jobs) as pool:
             for _ in _iterate(pool.map(_write_job, todo), total=len(todo), desc=f"synth {split}", enabled=progress):
                 pass
-    return keys

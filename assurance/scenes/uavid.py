@@ -15,6 +15,8 @@ import cv2
 import numpy as np
 
 from assurance.files import atomic_write_bytes, public_mode  # noqa: F401  (re-exported)
+from assurance.scenes.poses import POSES_FILE, sequence_poses
+from el.camera import Pose
 from el.errors import DataError
 from el.imageio import read_image
 from el.labels import UAVID, LabelSet
@@ -52,12 +54,18 @@ def write_labels(path: str | Path, ids: np.ndarray, labels: LabelSet = UAVID) ->
 
 @dataclass(frozen=True)
 class Sample:
-    """One image of a UAVid-layout dataset and its label file (None when the set is unlabelled)."""
+    """One image of a UAVid-layout dataset and its label file (None when the set is unlabelled).
+
+    ``pose`` and ``roll_deg``: the frame's line of its sequence's ``poses.csv`` (``poses_path``, None when
+    the sequence has none), read when ``iter_samples`` is asked to (``assurance.scenes.poses``)."""
 
     sequence: str
     frame: str
     image_path: Path
     label_path: Path | None
+    pose: Pose | None = None
+    roll_deg: float = 0.0
+    poses_path: Path | None = None
 
     @property
     def key(self) -> str:
@@ -67,11 +75,14 @@ class Sample:
         return self.image_path.parent.parent / META_DIR / f"{self.frame}.json"
 
 
-def iter_samples(root: str | Path, *, require_labels: bool = True, check_sizes: bool = False) -> Iterator[Sample]:
+def iter_samples(root: str | Path, *, require_labels: bool = True, check_sizes: bool = False,
+                 poses: bool = False) -> Iterator[Sample]:
     """Yield the samples of ``ROOT/seqNN/{Images,Labels}`` in sorted order.
 
     Raises DataError for a missing root, a root without sequences, an image without its label
     (or a label without its image) and, with ``check_sizes``, an image and label of different sizes.
+    With ``poses``, each sequence's ``poses.csv`` (if any) is read into the samples' ``pose``: a
+    malformed sidecar, or one naming a frame without an image, is a DataError.
     """
     root = Path(root)
     if not root.is_dir():
@@ -98,8 +109,12 @@ def iter_samples(root: str | Path, *, require_labels: bool = True, check_sizes: 
             if unpaired_lab:
                 raise DataError(f"{labels[unpaired_lab[0]]}: label has no image in {img_dir}"
                                 + (f" ({len(unpaired_lab)} unpaired)" if len(unpaired_lab) > 1 else ""))
+        sidecar = sequence_poses(seq, set(images)) if poses else {}
+        poses_path = seq / POSES_FILE if poses and (seq / POSES_FILE).is_file() else None
         for frame in sorted(images):
-            sample = Sample(seq.name, frame, images[frame], labels.get(frame))
+            fp = sidecar.get(frame)
+            sample = Sample(seq.name, frame, images[frame], labels.get(frame), fp.pose if fp else None,
+                            fp.roll_deg if fp else 0.0, poses_path)
             if check_sizes and sample.label_path is not None:
                 check_same_size(sample.image_path, sample.label_path)
             yield sample

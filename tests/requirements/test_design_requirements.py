@@ -18,11 +18,25 @@ from el.segmentation.weights import WeightsError, load_weights
 
 @pytest.mark.requirements("EL-R14")
 @pytest.mark.parametrize("size", [(3840, 2160), (4096, 2160)])
-def test_shipped_beta_covers_the_declared_pose_error_box(size, requirement_registry):
-    ev = rq.check_pose_margin(CoreConfig(), size, requirement_registry.parameters["pose_error"])
+def test_declared_beta_covers_the_declared_pose_error_box(size, requirement_registry):
+    from el.camera import SafetyParams
+
+    p = requirement_registry.parameters  # the targets: R, beta and the pose-error box
+    core = CoreConfig(safety=SafetyParams(radius_m=p["radius_m"], beta=p["beta"]))
+    ev = rq.check_pose_margin(core, size, p["pose_error"], {"radius_m": p["radius_m"], "beta": p["beta"]})
     assert ev.status == rq.PASS, ev.summary
-    need = ev.rows[0]["required_beta"]
-    assert 1.5 < need < CoreConfig().safety.beta  # docs/architecture.md 2.3: about 1.56 for +-20%, so 1.7 has margin
+    assert ev.rows[0]["required_beta"] <= p["beta"]
+
+
+def test_shipped_targets_are_the_flight_codes_safety_params():
+    """The registry's default R and beta are what the flight code plans with (el.camera.SafetyParams())."""
+    from el.camera import SafetyParams
+
+    p = rq.load_registry().parameters
+    assert (p["radius_m"], p["beta"]) == (SafetyParams().radius_m, SafetyParams().beta)
+    assert CoreConfig().safety == SafetyParams()
+    need = rq.check_pose_margin(CoreConfig(), (3840, 2160), p["pose_error"]).rows[0]["required_beta"]
+    assert 1.5 < need < p["beta"]  # docs/architecture.md 2.3: about 1.56 for +-20%, so 1.7 has margin
 
 
 @pytest.mark.requirements("EL-R14")
@@ -31,6 +45,17 @@ def test_a_too_small_beta_is_caught():
 
     ev = rq.check_pose_margin(CoreConfig(safety=SafetyParams(beta=1.2)), (3840, 2160), {"height": 0.2, "pitch": 0.2})
     assert ev.status == rq.FAIL and "1.2 <" in ev.summary
+
+
+@pytest.mark.requirements("EL-R14")
+def test_a_run_planned_with_other_safety_params_does_not_judge_the_targets():
+    from el.camera import SafetyParams
+
+    core = CoreConfig(safety=SafetyParams(radius_m=2.0, beta=1.7))
+    ev = rq.check_pose_margin(core, (3840, 2160), {"height": 0.2, "pitch": 0.2}, {"radius_m": 2.5, "beta": 1.7})
+    assert ev.status == rq.INSUFFICIENT and "planned with R = 2 m" in ev.summary and "declare R = 2.5 m" in ev.summary
+    same = rq.check_pose_margin(core, (3840, 2160), {"height": 0.2, "pitch": 0.2}, {"radius_m": 2, "beta": 1.7})
+    assert same.status == rq.PASS
 
 
 @pytest.fixture(scope="module")

@@ -1,0 +1,40 @@
+"""What a command takes from the system file (``--system``), with options given on the command line winning."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from assurance.system import SystemFile, default_system
+from assurance.system import build as system_build
+
+
+def system_of(args: argparse.Namespace) -> SystemFile:
+    """The command's system file (``uav-el`` resolved it before the command ran; the default otherwise)."""
+    system = getattr(args, "system_file", None)
+    return system if system is not None else default_system()
+
+
+def is_shipped_model(system: SystemFile) -> bool:
+    """Whether the system flies the shipped network on the shipped classes (the exact default path)."""
+    from el.labels import UAVID
+
+    return (system_build.model_kind(system) == "builtin" and not system.get("model.class_map")
+            and system_build.label_set(system) == UAVID)
+
+
+def model_spec(args: argparse.Namespace) -> Any:
+    """What a campaign records and its workers load: the ``--model`` given, else the system's model (None for
+    the shipped one, else its source as data, ``assurance.system.build.model_source``)."""
+    given = getattr(args, "weights", None)
+    if given is not None:
+        return given
+    system = system_of(args)
+    return None if is_shipped_model(system) else system_build.model_source(system)
+
+
+def load_model(args: argparse.Namespace, *, threads: int | None = None, working_width: int | None = None) -> Any:
+    """The segmentation model of the command: ``--model`` if given, else the system file's."""
+    from assurance.system.model import load_model_spec
+
+    return load_model_spec(model_spec(args), threads=threads, working_width=working_width)

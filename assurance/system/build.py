@@ -1,0 +1,208 @@
+"""Turn a system file's settings into the objects the flight code and the harness take: label set, camera,
+core configuration, model, monitor, data roots, requirement targets, waivers, report settings.
+
+Each function reads one section; a command-line option given explicitly wins over the file (the caller passes
+it). Errors name the system file and the key (``SystemFileError``).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+from assurance.system.loader import SystemFile
+from el.camera import CAMERAS, Intrinsics, Pose, SafetyParams
+from el.config import CoreConfig
+from el.labels import UAVID, LabelSet
+
+DEFAULT_IMAGE_SIZE = (3840, 2160)
+MODEL_KINDS = ("builtin", "pt", "onnx", "plugin")
+
+
+def label_set(system: SystemFile) -> LabelSet:
+    """The system's label set: ``[labels] preset`` or ``file`` (with ``ignore_rgb`` when given)."""
+    if "labels" in system._cache:
+        return system._cache["labels"]
+    from el.labels import load_label_set
+
+    preset, file = system.get("labels.preset"), system.path_of("labels.file")
+    if preset is not None and file is not None:
+        raise system.error("labels", "give either preset or file, not both")
+    try:
+        if file is not None:
+            labels = load_label_set(file)
+        elif preset in (None, "uavid"):
+            labels = UAVID
+        else:
+            labels = load_label_set(preset)
+    except (ValueError, OSError) as exc:
+        key = "labels.file" if file is not None else "labels.preset"
+        raise system.error(key, str(exc)) from None
+    ignore = system.get("labels.ignore_rgb")
+    if ignore is not None:
+        labels = _with_ignore(system, labels, tuple(ignore))
+    system._cache["labels"] = labels
+    return labels
+
+
+def _with_ignore(system: SystemFile, labels: LabelSet, rgb: tuple[int, ...]) -> LabelSet:
+    if not hasattr(labels, "with_ignore"):
+        raise system.error("labels.ignore_rgb", "this version of the label set has no ignore colour")
+    try:
+        return labels.with_ignore(rgb)
+    except ValueError as exc:
+        raise system.error("labels.ignore_rgb", str(exc)) from None
+
+
+def intrinsics(system: SystemFile) -> Intrinsics:
+    """The camera's lens and sensor: ``preset``, overridden by ``sensor_width_mm`` and ``focal_mm`` or
+    ``hfov_deg``."""
+    preset = system.get("camera.preset", "phantom4")
+    if preset not in CAMERAS:
+        raise system.error("camera.preset", f"{preset!r} is not a known camera; known: {', '.join(sorted(CAMERAS))} "
+                                            "(or give sensor_width_mm and focal_mm or hfov_deg)")
+    base = CAMERAS[preset]
+    if system.sets("camera.focal_mm") and system.sets("camera.hfov_deg"):
+        raise system.error("camera", "give focal_mm or hfov_deg, not both")
+    width = float(system.get("camera.sensor_width_mm", base.sensor_width_mm))
+    focal = float(system.get("camera.focal_mm", base.focal_mm))
+    if system.get("camera.hfov_deg") is not None:
+        focal = width / (2.0 * math.tan(math.radians(float(system.get("camera.hfov_deg"))) / 2.0))
+    custom = any(system.sets(f"camera.{k}") for k in ("sensor_width_mm", "focal_mm", "hfov_deg"))
+    name = system.get("camera.name") or (f"{preset}-custom" if custom else base.name)
+    kwargs: dict[str, Any] = {"sensor_width_mm": width, "focal_mm": focal, "name": str(name)}
+    if system.get("camera.sensor_height_mm") is not None:
+        kwargs["sensor_height_mm"] = float(system.get("camera.sensor_height_mm"))
+    try:
+        return Intrinsics(**kwargs)
+    except ValueError as exc:
+        raise system.error("camera", str(exc)) from None
+
+
+def nominal_pose(system: SystemFile) -> Pose:
+    """The nominal pose (``camera.height_m``, ``camera.pitch_deg``)."""
+    try:
+        return Pose(height_m=float(system.get("camera.height_m", 50.0)),
+                    pitch_deg=float(system.get("camera.pitch_deg", 45.0)))
+    except ValueError as exc:
+        raise system.error("camera", str(exc)) from None
+
+
+def safety(system: SystemFile) -> SafetyParams:
+    """The safety radius R and its coefficient beta (``[safety]``)."""
+    try:
+        return SafetyParams(radius_m=float(system.get("safety.radius_m", 2.0)),
+                            beta=float(system.get("safety.beta", 1.7)))
+    except ValueError as exc:
+        raise system.error("safety", str(exc)) from None
+
+
+def image_size(system: SystemFile) -> tuple[int, int]:
+    """The camera's image size (``camera.image_width`` x ``camera.image_height``; 3840x2160 by default)."""
+    return (int(system.get("camera.image_width", DEFAULT_IMAGE_SIZE[0])),
+            int(system.get("camera.image_height", DEFAULT_IMAGE_SIZE[1])))
+
+
+def core_config(system: SystemFile, **overrides: Any) -> CoreConfig:
+    """The core model's configuration of this system (camera, nominal pose, safety); ``overrides`` (non-None)
+    win, e.g. a command-line ``--mode``."""
+    kwargs: dict[str, Any] = {"intrinsics": intrinsics(system), "pose": nominal_pose(system),
+                              "safety": safety(system)}
+    width = system.get("model.working_width")
+    if width is not None:
+        kwargs["working_width"] = int(width)
+    kwargs.update({k: v for k, v in overrides.items() if v is not None})
+    return CoreConfig(**kwargs)
+
+
+def poses_policy(system: SystemFile) -> str:
+    """How per-frame poses are used: ``nominal``, ``sidecar`` (a frame's own pose when it has one) or
+    ``required`` (a frame without one is a fault)."""
+    return str(system.get("camera.poses", "nominal"))
+
+
+def model_kind(system: SystemFile) -> str:
+    """``builtin``, ``pt``, ``onnx`` or ``plugin``: ``[model] kind``, else inferred from ``path``/``name``."""
+    kind = system.get("model.kind")
+    path, name = system.get("model.path"), system.get("model.name")
+    if kind is None:
+        kind = "plugin" if name else "onnx" if str(path or "").lower().endswith(".onnx") else "pt" if path else \
+            "builtin"
+    if kind in ("pt", "onnx") and not path:
+        raise system.error("model.path", f"kind {kind!r} needs the model file's path")
+    if kind == "plugin" and not name:
+        raise system.error("model.name", "kind 'plugin' needs the name registered in the uav_el.models entry points")
+    if kind == "builtin" and (path or name):
+        raise system.error("model", "kind 'builtin' (the shipped network) takes no path or name")
+    if system.get("model.onnx") is not None and kind != "onnx":
+        raise system.error("model.onnx", f"an ONNX contract given for a {kind!r} model")
+    return str(kind)
+
+
+def model_source(system: SystemFile) -> dict[str, Any]:
+    """The model as data (picklable, recorded in manifests): kind, resolved path, name, expected SHA-256,
+    ONNX contract, class map, and the system's label set it must produce."""
+    kind = model_kind(system)
+    path = system.path_of("model.path")
+    return {"kind": kind, "path": None if path is None else str(path.resolve()), "name": system.get("model.name"),
+            "sha256": system.get("model.sha256"), "onnx": system.get("model.onnx"),
+            "class_map": system.get("model.class_map"), "unreachable": system.get("model.unreachable") or [],
+            "labels": label_set(system).to_dict(),
+            "system": system.label}
+
+
+def monitor_spec(system: SystemFile) -> str | None:
+    """The deployed monitor's spec (``[monitor] spec``; the shipped one by default)."""
+    from el.pipeline import DEPLOYED_MONITOR
+
+    return str(system.get("monitor.spec", DEPLOYED_MONITOR))
+
+
+def data_root(system: SystemFile, split: str, given: str | Path | None = None) -> Path:
+    """The data set of a split: the option given, else ``[data] <split>``; a clear error when neither."""
+    if given is not None:
+        return Path(given)
+    root = system.path_of(f"data.{split}")
+    if root is None:
+        raise system.error(f"data.{split}", f"not set; give the {split} data with --data or in [data] {split}")
+    if not root.is_dir():
+        raise system.error(f"data.{split}", f"{root}: no such folder")
+    return root
+
+
+def targets(system: SystemFile) -> dict[str, Any]:
+    """The requirement parameters this system sets: ``[targets]``, R and beta of ``[safety]``, the deployed
+    monitor and its calibration card of ``[monitor]`` (only those the file itself sets; none for the embedded
+    default, whose values are the registry's own)."""
+    if system.default:
+        return {}
+    out: dict[str, Any] = dict(system.document.get("targets") or {})
+    for key in ("radius_m", "beta"):
+        if system.sets(f"safety.{key}"):
+            out[key] = system.get(f"safety.{key}")
+    if system.sets("monitor.spec"):
+        out["deployed_monitor"] = system.get("monitor.spec")
+        out["calibration_card"] = None  # the shipped card calibrates the shipped monitor, not this one
+    if system.sets("monitor.calibration"):
+        out["calibration_card"] = str(system.path_of("monitor.calibration"))
+    return out
+
+
+def waivers(system: SystemFile, given: str | None = None) -> str | None:
+    """The waiver file: the option given, else ``[waivers] file``."""
+    if given is not None:
+        return given
+    p = system.path_of("waivers.file")
+    return None if p is None else str(p)
+
+
+def report_settings(system: SystemFile) -> dict[str, Any]:
+    """Title, organisation and template folder of the evidence report (``[report]``)."""
+    templates = system.path_of("report.templates")
+    return {"title": system.get("report.title"), "organisation": system.get("report.organisation"),
+            "templates": None if templates is None else str(templates)}
+
+
+def describe_path(p: Path | None) -> str:
+    return "" if p is None else str(p)

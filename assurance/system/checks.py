@@ -1,0 +1,97 @@
+"""The checks a system file must pass when it is loaded, before any command starts work.
+
+Beyond the schema (keys, types, ranges): the label set builds, the camera and nominal pose give a valid
+geometry at the image size, the model file exists and has the SHA-256 the file states, the class map names
+classes that exist, the monitor spec parses, the files it names exist, the perturbations are known.
+Loading the model itself (an ONNX file's output shape) is checked when a command loads it, before any task.
+"""
+
+from __future__ import annotations
+
+from assurance.system import build
+from assurance.system.loader import SystemFile
+
+
+def check_system(system: SystemFile) -> None:
+    """Every load-time check; the first problem as ``SystemFileError`` naming the key."""
+    labels = build.label_set(system)
+    check_geometry(system)
+    check_model(system, labels.names)
+    check_monitor(system)
+    for key in ("monitor.calibration", "monitor.ood", "waivers.file"):
+        p = system.path_of(key)
+        if p is not None and not p.is_file():
+            raise system.error(key, f"{p}: no such file")
+    templates = system.path_of("report.templates")
+    if templates is not None and not templates.is_dir():
+        raise system.error("report.templates", f"{templates}: no such folder")
+    perturbations = system.get("targets.required_perturbations")
+    if perturbations is not None:
+        from assurance.campaign.perturbations import PERTURBATIONS
+
+        unknown = [p for p in perturbations if p not in PERTURBATIONS]
+        if unknown:
+            raise system.error("targets.required_perturbations",
+                               f"unknown {unknown[0]!r}; known: {', '.join(PERTURBATIONS)}")
+
+
+def check_geometry(system: SystemFile) -> None:
+    """The camera, nominal pose and image size must give a geometry the flat-ground model handles: every
+    reachable row sees the ground at a finite footprint."""
+    from el.camera import CameraGeometry, check_geometry
+
+    intr, pose, width_height = build.intrinsics(system), build.nominal_pose(system), build.image_size(system)
+    build.safety(system)
+    geometry = CameraGeometry(width=width_height[0], height=width_height[1], intrinsics=intr, pose=pose)
+    try:
+        check_geometry(geometry)
+    except ValueError as exc:
+        raise system.error("camera", str(exc)) from None
+
+
+def check_model(system: SystemFile, names: tuple[str, ...]) -> None:
+    """The model section: a consistent kind, an existing file with the stated SHA-256, a class map onto the
+    system's classes."""
+    from el.hashing import sha256_file
+
+    kind = build.model_kind(system)
+    path = system.path_of("model.path")
+    if path is not None:
+        if not path.is_file():
+            raise system.error("model.path", f"{path}: no such file")
+        suffix = {"pt": ".pt", "onnx": ".onnx"}.get(kind)
+        if suffix and path.suffix.lower() != suffix:
+            raise system.error("model.path", f"{path}: a {kind!r} model is a {suffix} file")
+        want = system.get("model.sha256")
+        if want is not None:
+            have = sha256_file(path)
+            if have != want:
+                raise system.error("model.sha256", f"{path} has SHA-256 {have}, the system file states {want} "
+                                                   "(the file changed, or the wrong file)")
+    elif system.get("model.sha256") is not None and kind != "plugin":
+        raise system.error("model.sha256", "given without a model file")
+    class_map = system.get("model.class_map")
+    if class_map:
+        unknown = sorted({v for v in class_map.values() if v not in names})
+        if unknown:
+            raise system.error("model.class_map", f"maps onto {unknown[0]!r}, not a class of the system's label set "
+                                                  f"({', '.join(names)})")
+    unknown = [u for u in system.get("model.unreachable") or () if u not in names]
+    if unknown:
+        raise system.error("model.unreachable", f"{unknown[0]!r} is not a class of the system's label set")
+    contract = system.get("model.onnx")
+    if contract and contract.get("scaling") == "mean_std" and not (contract.get("mean") and contract.get("std")):
+        raise system.error("model.onnx", "scaling 'mean_std' needs mean and std")
+
+
+def check_monitor(system: SystemFile) -> None:
+    """The monitor spec parses (a registered or built-in monitor)."""
+    from el.monitors import parse_monitor_spec
+
+    spec = system.get("monitor.spec")
+    if spec is None:
+        return
+    try:
+        parse_monitor_spec(spec)
+    except ValueError as exc:
+        raise system.error("monitor.spec", str(exc)) from None

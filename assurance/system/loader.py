@@ -1,0 +1,236 @@
+"""Read a system file (``uav-el.toml``): TOML by the standard library, validated against the packaged JSON Schema.
+
+Every error is one line naming the file, the key, the value and what is allowed (``SystemFileError``, a
+``ValueError``: exit 2 at the command line). Without a file, the embedded default (``default.toml`` in this
+package: the shipped system) is used, so a command given no system file behaves as it always did.
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import json
+import tomllib
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
+from functools import cache
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from el.errors import UavElError
+
+SYSTEM_FILE = "uav-el.toml"
+FORMAT = "uav-el-system/1"
+REPLACED_WHOLE = ("model", "labels")  # a user's section replaces the default's (its keys exclude each other)
+MAX_BYTES = 1_000_000  # a system file is a page of settings, not data
+
+
+class SystemFileError(UavElError, ValueError):
+    """A system file that cannot be used: one line naming the file, the key, the value and what is allowed."""
+
+
+@cache
+def schema() -> dict[str, Any]:
+    """The system file's JSON Schema (``assurance/system/schema.json``)."""
+    text = resources.files("assurance.system").joinpath("schema.json").read_text(encoding="utf-8")
+    return json.loads(text)
+
+
+@dataclass(frozen=True)
+class SystemFile:
+    """A validated system file: where it is, its SHA-256, what it sets, and the settings in effect.
+
+    ``document`` is what the file itself sets; ``settings`` is that merged over the embedded default
+    (sections ``model`` and ``labels`` are replaced whole, the others key by key). Relative paths are
+    relative to ``base``, the file's folder.
+    """
+
+    path: Path | None
+    sha256: str
+    document: dict[str, Any]
+    settings: dict[str, Any]
+    base: Path
+    default: bool = False
+    _cache: dict[str, Any] = field(default_factory=dict, compare=False, repr=False)
+
+    @property
+    def label(self) -> str:
+        """How messages name the file: its path, or "the embedded default system"."""
+        return "the embedded default system" if self.path is None else str(self.path)
+
+    @property
+    def name(self) -> str:
+        return str(self.get("system.name", "unnamed system"))
+
+    def get(self, key: str, default: Any = None) -> Any:
+        """A setting in effect by dotted key (``"camera.height_m"``), or ``default``."""
+        return _lookup(self.settings, key, default)
+
+    def sets(self, key: str) -> bool:
+        """Whether the file itself (not the default) sets ``key``."""
+        return _lookup(self.document, key, _UNSET) is not _UNSET
+
+    def path_of(self, key: str) -> Path | None:
+        """The setting ``key`` as a path, relative ones resolved against the file's folder; None when unset."""
+        value = self.get(key)
+        if value is None:
+            return None
+        p = Path(str(value)).expanduser()
+        return p if p.is_absolute() else (self.base / p)
+
+    def error(self, key: str, problem: str) -> SystemFileError:
+        """The one-line error about ``key`` of this file."""
+        return SystemFileError(f"{self.label}: {key}: {problem}")
+
+    def values(self) -> list[tuple[str, str]]:
+        """Every value the file sets, as (dotted key, JSON text), in file order: what the report shows."""
+        return [(k, json.dumps(v, sort_keys=True)) for k, v in _flatten(self.document)]
+
+    def record(self) -> dict[str, Any]:
+        """The JSON record of this system file (manifests, requirement results, the report)."""
+        return {"path": None if self.path is None else str(self.path.resolve()), "sha256": self.sha256,
+                "name": self.name, "default": self.default, "document": self.document}
+
+
+_UNSET = object()
+
+
+def _lookup(doc: Mapping[str, Any], key: str, default: Any) -> Any:
+    """``doc``'s value at a dotted key, or ``default`` when a part is missing."""
+    value: Any = doc
+    for part in key.split("."):
+        if not isinstance(value, Mapping) or part not in value:
+            return default
+        value = value[part]
+    return value
+
+
+def _flatten(doc: Mapping[str, Any], prefix: str = "") -> Iterator[tuple[str, Any]]:
+    for key, value in doc.items():
+        dotted = f"{prefix}{key}"
+        if isinstance(value, Mapping) and value:
+            yield from _flatten(value, dotted + ".")
+        else:
+            yield dotted, value
+
+
+def parse_system(text: str, *, label: str) -> dict[str, Any]:
+    """The validated document of a system file's text; ``SystemFileError`` naming ``label`` and the key."""
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SystemFileError(f"{label}: not valid TOML: {exc}") from None
+    validate(doc, label=label)
+    return doc
+
+
+def validate(doc: Mapping[str, Any], *, label: str) -> None:
+    """Check a document against the schema; the first problem (in key order) as one line."""
+    import jsonschema
+
+    validator = jsonschema.Draft202012Validator(schema())
+    errors = sorted(validator.iter_errors(doc), key=lambda e: (list(map(str, e.absolute_path)), e.validator))
+    if errors:
+        raise SystemFileError(f"{label}: {describe_error(errors[0])}")
+
+
+def describe_error(err: Any) -> str:
+    """One line for a jsonschema error: the dotted key, the value, what is allowed."""
+    key = ".".join(str(p) for p in err.absolute_path) or "(top level)"
+    value = err.instance
+    shown = json.dumps(value) if not isinstance(value, dict) else "a table"
+    kind, arg = err.validator, err.validator_value
+    if kind == "additionalProperties":
+        allowed = sorted((err.schema.get("properties") or {}).keys())
+        extra = sorted(set(value) - set(allowed)) if isinstance(value, dict) else []
+        where = f"{key}." if err.absolute_path else ""
+        if not allowed:  # a free-form table whose values have a type
+            return f"{key}: {describe_type(err.schema.get('additionalProperties'))}"
+        return f"unknown key {where}{extra[0] if extra else '?'}; allowed here: {', '.join(allowed)}"
+    if kind == "enum":
+        return f"{key} = {shown}: allowed: {', '.join(json.dumps(a) for a in arg)}"
+    if kind == "const":
+        return f"{key} = {shown}: must be {json.dumps(arg)}"
+    if kind == "type":
+        return f"{key} = {shown}: must be {_TYPES.get(str(arg), arg)}"
+    bounds = {"minimum": ">=", "maximum": "<=", "exclusiveMinimum": ">", "exclusiveMaximum": "<"}
+    if kind in bounds:
+        return f"{key} = {shown}: must be {bounds[kind]} {arg}"
+    if kind == "pattern":
+        return f"{key} = {shown}: must be 64 lowercase hex digits (a SHA-256)" if "64" in str(arg) else \
+            f"{key} = {shown}: must match {arg}"
+    if kind in ("minItems", "maxItems"):
+        return f"{key} = {shown}: needs {'at least' if kind == 'minItems' else 'at most'} {arg} item(s)"
+    if kind in ("minLength", "maxLength"):
+        return f"{key} = {shown}: needs {'at least' if kind == 'minLength' else 'at most'} {arg} character(s)"
+    if kind == "required":
+        return f"{key}: missing key(s) {', '.join(arg)}"
+    if kind == "uniqueItems":
+        return f"{key} = {shown}: items must be unique"
+    return f"{key} = {shown}: {err.message}"
+
+
+_TYPES = {"number": "a number", "integer": "an integer", "string": "a string", "object": "a table",
+          "array": "a list", "boolean": "true or false"}
+
+
+def describe_type(sub: Any) -> str:
+    kind = (sub or {}).get("type", "?") if isinstance(sub, Mapping) else "?"
+    return f"every value must be {_TYPES.get(str(kind), kind)}"
+
+
+@cache
+def _default_text() -> str:
+    return resources.files("assurance.system").joinpath("default.toml").read_text(encoding="utf-8")
+
+
+def merge(default: Mapping[str, Any], doc: Mapping[str, Any]) -> dict[str, Any]:
+    """The settings in effect: ``doc`` over ``default`` (``model`` and ``labels`` replaced whole)."""
+    out = copy.deepcopy(dict(default))
+    for section, value in doc.items():
+        if isinstance(value, Mapping) and section not in REPLACED_WHOLE and isinstance(out.get(section), Mapping):
+            out[section] = {**out[section], **copy.deepcopy(dict(value))}
+        else:
+            out[section] = copy.deepcopy(value)
+    return out
+
+
+def default_system() -> SystemFile:
+    """The embedded default: the shipped system (``assurance/system/default.toml``)."""
+    text = _default_text()
+    doc = parse_system(text, label="the embedded default system")
+    base = Path(str(resources.files("assurance.system")))
+    return SystemFile(None, hashlib.sha256(text.encode("utf-8")).hexdigest(), doc, merge({}, doc), base,
+                      default=True)
+
+
+def system_from_record(record: Mapping[str, Any]) -> SystemFile:
+    """The system file a run recorded (``SystemFile.record()`` in its manifest), validated again: what the
+    requirement checks of that run read (targets, R, the deployed monitor), whatever the file says today."""
+    if record.get("default"):
+        return default_system()
+    path = Path(str(record.get("path") or "recorded-system.toml"))
+    label = f"{path} (as recorded in the run)"
+    doc = dict(record.get("document") or {})
+    validate(doc, label=label)
+    default = parse_system(_default_text(), label="the embedded default system")
+    return SystemFile(path, str(record.get("sha256") or ""), doc, merge(default, doc), path.parent)
+
+
+def read_system(path: str | Path) -> SystemFile:
+    """Read and validate a system file against the schema (``SystemFileError`` naming file, key, value, allowed);
+    the checks beyond the schema are ``assurance.system.checks`` (``assurance.system.load_system`` runs both)."""
+    path = Path(path)
+    if not path.is_file():
+        raise SystemFileError(f"{path}: no such system file" if not path.exists() else f"{path}: not a file")
+    if path.stat().st_size > MAX_BYTES:
+        raise SystemFileError(f"{path}: {path.stat().st_size} bytes; a system file is at most {MAX_BYTES}")
+    raw = path.read_bytes()
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise SystemFileError(f"{path}: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+    doc = parse_system(text, label=str(path))
+    default = parse_system(_default_text(), label="the embedded default system")
+    return SystemFile(path, hashlib.sha256(raw).hexdigest(), doc, merge(default, doc), path.resolve().parent)

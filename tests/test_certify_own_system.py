@@ -1,0 +1,77 @@
+"""The README's walkthrough, "Certify your own system", end to end on tiny data: a network not trained here (the
+shipped one exported to ONNX stands in for it), data in another palette with per-frame poses, the user's own
+camera and targets, all declared in examples/my-drone/uav-el.toml (used unchanged); the evidence PDF names that
+network's hash and the system file. No edit to the package."""
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+from assurance import cli
+
+pytest.importorskip("onnxruntime")
+EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "my-drone"
+TO_CITY_SURVEY = {"road": "asphalt", "low_vegetation": "lawn", "building": "house", "moving_car": "driving_vehicle",
+                  "human": "pedestrian", "tree": "canopy", "static_car": "parked_vehicle", "clutter": "misc"}
+
+
+@pytest.fixture(scope="module")
+def walkthrough(tmp_path_factory):
+    root = tmp_path_factory.mktemp("walkthrough")
+    example = root / "examples" / "my-drone"
+    shutil.copytree(EXAMPLE, example)
+    main = cli.main
+    assert main(["export-onnx", "--out", str(example / "net.onnx")]) == 0
+    assert main(["synth", "--out", str(root / "data" / "src"), "--scenes", "3", "--size", "320x180",
+                 "--split", "test", "--sensor-width", "13.2", "--hfov", "73.7", "--heights", "40:70",
+                 "--pitches", "50:80", "--no-progress"]) == 0
+    assert main(["recolour", "--data", str(root / "data" / "src"), "--out", str(root / "data" / "my-drone"),
+                 "--to", str(example / "labels.yaml"), "--map", json.dumps(TO_CITY_SURVEY)]) == 0
+    system = example / "uav-el.toml"
+    run = root / "runs" / "my-drone"
+    assert main(["campaign", "--system", str(system), "--out", str(run), "--perturbations", "none", "fog",
+                 "--monitors", "lhd", "--quiet"]) == 0
+    return {"root": root, "system": system, "run": run, "onnx": example / "net.onnx"}
+
+
+def test_the_campaign_assessed_the_users_network_poses_and_palette(walkthrough):
+    from el.hashing import sha256_file
+
+    man = json.loads((walkthrough["run"] / "manifest.json").read_text())
+    assert man["weights"]["sha256"] == sha256_file(walkthrough["onnx"])
+    assert man["system"]["sha256"] == sha256_file(walkthrough["system"])
+    assert man["config"]["poses"] == "required"
+    assert man["config"]["core"]["safety"]["radius_m"] == 2.5
+    from assurance.campaign import readouts
+
+    images = readouts.load_table(walkthrough["run"], "images")
+    assert (images["fault"] == "").all(), images["fault"].tolist()
+    assert images["height_m"].nunique() == 3 and images["pose_source"].eq("frame").all()
+
+
+def test_the_evidence_pdf_names_the_network_and_the_system_file(walkthrough, tmp_path):
+    from el.hashing import sha256_file
+
+    out = tmp_path / "report"
+    code = cli.main(["evidence", "--system", str(walkthrough["system"]), "--run", str(walkthrough["run"]),
+                     "--out", str(out), "--boot", "50"])
+    assert code == 0
+    evidence = json.loads((out / "evidence.json").read_text())
+    assert evidence["identity"]["weights_sha256"] == sha256_file(walkthrough["onnx"])
+    assert evidence["identity"]["system_sha256"] == sha256_file(walkthrough["system"])
+    assert evidence["parameters"]["confidence"] == 0.99 and evidence["parameters"]["radius_m"] == 2.5
+    assert evidence["parameters"]["deployed_monitor"] == "lhd"
+    html = (out / "evidence.html").read_text()
+    assert "Example Drone Operations Ltd." in html and "my-drone" in html and "R = 2.5 m" in html
+    pdf = out / "evidence.pdf"
+    if evidence["pdf_error"] is None:
+        assert pdf.is_file() and pdf.read_bytes().startswith(b"%PDF")
+
+
+def test_evidence_on_another_system_file_is_refused(walkthrough, tmp_path, capsys):
+    code = cli.main(["evidence", "--run", str(walkthrough["run"]), "--out", str(tmp_path / "r"), "--no-pdf",
+                     "--boot", "20"])  # no --system: the embedded default, not the run's system file
+    assert code == 1
+    assert "another system file" in capsys.readouterr().out
