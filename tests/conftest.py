@@ -21,6 +21,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))  # tests/helpers.py for
 import assurance.campaign.integrity  # noqa: E402, F401
 
 DEFAULT_RUN = Path("runs") / "demo"
+_THREAD_COUNTS: list[tuple[int, int]] = []  # torch's and OpenCV's thread counts when the session started
 
 
 def campaign_run_path(config: pytest.Config) -> Path:
@@ -32,8 +33,12 @@ def campaign_run_path(config: pytest.Config) -> Path:
 
 
 def pytest_configure(config: pytest.Config) -> None:
+    import cv2
+    import torch
+
     from assurance.requirements.pytest_plugin import set_context
 
+    _THREAD_COUNTS[:] = [(torch.get_num_threads(), cv2.getNumThreads())]  # before any fixture changes them
     run = campaign_run_path(config)
     exists = (run / "manifest.json").is_file()
     set_context(config, run=str(run), run_exists=exists)
@@ -238,3 +243,19 @@ def one_torch_thread():
     torch.set_num_threads(1)
     yield
     torch.set_num_threads(before)
+
+
+@pytest.fixture(autouse=True)
+def _restore_thread_counts():
+    """Code under test sets process-wide thread counts (``Segmenter.load(threads=...)``, ``uav-el synth`` sets
+    OpenCV's to 1), also in module fixtures: put back the session's first counts after each test, so no test sees
+    another's (float sums, and OpenCV's distance transform, depend on them)."""
+    import cv2
+    import torch
+
+    yield
+    torch_threads, cv2_threads = _THREAD_COUNTS[0]
+    if torch.get_num_threads() != torch_threads:
+        torch.set_num_threads(torch_threads)
+    if cv2.getNumThreads() != cv2_threads:
+        cv2.setNumThreads(cv2_threads)
