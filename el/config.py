@@ -13,8 +13,17 @@ from typing import Any
 
 from el.camera import CAMERAS, FOV_SENSOR_WIDTH_MM, CameraGeometry, Intrinsics, Pose, SafetyParams
 
+SEED_LIMIT = 2**32
+"""Seeds lie in [0, 2^32): every generator a seed reaches (numpy, torch, MC dropout's ``seed + k``) takes them."""
 MODES = ("exact", "paper")
 REGION_METHODS = ("fast", "dbscan")
+
+
+def check_seed(value: Any, name: str = "seed") -> int:
+    """A valid seed: an integer in [0, 2^32), else ValueError naming ``name``, the value and the range."""
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < SEED_LIMIT:
+        raise ValueError(f"{name} must be an integer >= 0, got {value!r} (seeds lie in [0, 2^32), below {SEED_LIMIT})")
+    return value
 
 
 @dataclass(frozen=True, kw_only=True)

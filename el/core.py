@@ -31,6 +31,7 @@ from el import regions as reg
 from el import representatives as reps
 from el.camera import working_size
 from el.config import CoreConfig
+from el.deadline import checkpoint
 from el.decision import Candidate, Disc
 from el.labels import UAVID, LabelSet
 
@@ -173,16 +174,19 @@ def run_core(
     forbidden = cand.forbidden_from_probs(probs, labels=labels)
     vp = cand.valid_pixels(forbidden, radii, mode=config.mode, min_row=min_row)
     t1 = clock()
+    checkpoint("candidates (regions)")  # the decision's deadline between the CM's stages (el.deadline)
 
     region_fn = reg.regions_fast if config.region_method == "fast" else reg.regions_dbscan
     regions = region_fn(vp.valid, eps=config.dbscan_eps, min_samples=config.dbscan_min_samples)
     t2 = clock()
+    checkpoint("candidates (representatives)")
 
     rows, cols, _ = reps.representatives(
         regions, n_star=config.n_star, max_points=config.kmeans_max_points,
         seed=config.kmeans_seed, n_init=config.kmeans_n_init,
     )
     t3 = clock()
+    checkpoint("candidates (ranking)")
 
     out = _ranked_candidates(probs, vp, rows, cols, config, (W, H), labels)
     t4 = clock()

@@ -1,7 +1,9 @@
 """Reading a camera frame from a file as RGB uint8 (H, W, 3); OpenCV's BGR order stays inside this module.
 
 The one file reader of the flight path: every error is a ``DataError`` naming the file and the problem,
-which the decision loop turns into the default action.
+which the decision loop turns into the default action. The frame's size is read from its header and
+refused above ``max_pixels`` before anything is decoded (a 68-byte file may claim 10^10 pixels), and a
+JPEG's EXIF orientation is applied, so the array is the scene as the camera saw it.
 """
 
 from __future__ import annotations
@@ -12,21 +14,41 @@ import cv2
 import numpy as np
 
 from el.errors import DataError
+from el.imageheader import Header, pil_size, read_header
+
+MAX_PIXELS = 7680 * 4320 * 5 // 4
+"""Default pixel limit of a frame: an 8K frame (7680 x 4320, 33.2 Mpx) plus a quarter (41.5 Mpx, ~125 MB as
+RGB). Larger files are refused from their header; ``PipelineConfig.max_pixels`` and ``--max-pixels`` set it."""
+HEADER_BYTES = 1 << 16  # a JPEG's EXIF block (orientation) and frame header lie within the first 64 KiB
 
 
-def read_image(path: str | Path) -> np.ndarray:
-    """Read a colour image as RGB uint8 (H, W, 3); DataError if missing, not an image or truncated."""
+def check_max_pixels(value: object) -> int:
+    """A valid pixel limit (a positive integer), else ValueError naming it."""
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
+        raise ValueError(f"max_pixels must be a positive integer, got {value!r}")
+    return int(value)
+
+
+def read_image(path: str | Path, *, max_pixels: int = MAX_PIXELS) -> np.ndarray:
+    """Read a colour image as RGB uint8 (H, W, 3), EXIF orientation applied; DataError if missing, not an image,
+    truncated, or larger than ``max_pixels`` (checked from the header, before decoding)."""
+    return read_image_meta(path, max_pixels=max_pixels)[0]
+
+
+def read_image_meta(path: str | Path, *, max_pixels: int = MAX_PIXELS) -> tuple[np.ndarray, dict[str, int]]:
+    """``read_image`` and what the file said about itself: ``{"exif_orientation": n}`` when a JPEG's EXIF
+    orientation (n in 2..8) was applied, else ``{}``."""
     path = Path(path)
-    if not path.exists():
-        raise DataError(f"{path}: no such file")
-    if not path.is_file():
-        raise DataError(f"{path}: not a file")
+    header = _checked_header(path, max_pixels)
     data = np.fromfile(path, dtype=np.uint8)
     if data.size == 0:
         raise DataError(f"{path}: empty file")
     if path.suffix.lower() == ".png" and not _png_complete(data):
         raise DataError(f"{path}: truncated or corrupt PNG (no IEND chunk)")
-    img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+    try:
+        img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+    except cv2.error as exc:  # e.g. OpenCV's own size limit on a format without a readable header
+        raise DataError(f"{path}: not a readable image ({_first_line(str(exc))})") from None
     if img is None:
         raise DataError(f"{path}: not a readable image")
     if img.dtype != np.uint8:
@@ -37,7 +59,61 @@ def read_image(path: str | Path) -> np.ndarray:
         img = img[:, :, :3]
     elif img.shape[2] != 3:
         raise DataError(f"{path}: expected 3 colour channels, got {img.shape[2]}")
-    return np.ascontiguousarray(img[:, :, ::-1])
+    orientation = header.orientation if header is not None else 1
+    rgb = orient(img[:, :, ::-1], orientation)
+    return np.ascontiguousarray(rgb), ({"exif_orientation": orientation} if orientation != 1 else {})
+
+
+def image_size(path: str | Path, *, max_pixels: int = MAX_PIXELS) -> tuple[int, int]:
+    """(width, height) of an image as ``read_image`` returns it (orientation applied), from its header when it
+    has a readable one (PNG, JPEG), else by decoding it; DataError like ``read_image``."""
+    header = _checked_header(Path(path), max_pixels)
+    if header is not None:
+        return header.oriented_size
+    img = read_image(path, max_pixels=max_pixels)
+    return img.shape[1], img.shape[0]
+
+
+def orient(img: np.ndarray, orientation: int) -> np.ndarray:
+    """The stored pixels ``img`` (H, W, ...) turned upright by EXIF orientation 1..8 (as Pillow's exif_transpose)."""
+    if orientation in (2, 4, 5, 7):  # mirrored: flip the columns first
+        img = img[:, ::-1]
+    turns = {3: 2, 4: 2, 5: 1, 6: 3, 7: 3, 8: 1}.get(orientation, 0)  # counter-clockwise quarter turns
+    return np.rot90(img, turns) if turns else img
+
+
+def _checked_header(path: Path, max_pixels: int) -> Header | None:
+    """The file's header (None when its format has none we read); DataError when missing or above the limit."""
+    max_pixels = check_max_pixels(max_pixels)
+    if not path.exists():
+        raise DataError(f"{path}: no such file")
+    if not path.is_file():
+        raise DataError(f"{path}: not a file")
+    try:
+        with open(path, "rb") as f:
+            head = f.read(HEADER_BYTES)
+    except OSError as exc:
+        raise DataError(f"{path}: unreadable: {exc.strerror or exc}") from None
+    header = read_header(head)
+    if header is not None:
+        size = (header.width, header.height)
+    else:
+        try:
+            size = pil_size(path)
+        except OverflowError:
+            raise DataError(f"{path}: image too large (Pillow refuses it as a decompression bomb; the limit is "
+                            f"{max_pixels} pixels)") from None
+    if size is not None and size[0] * size[1] > max_pixels:
+        raise DataError(f"{path}: image of {size[0]}x{size[1]} pixels exceeds the limit of {max_pixels} pixels "
+                        f"(max_pixels; 8K is 7680x4320); refused before decoding")
+    if size is not None and min(size) < 1:
+        raise DataError(f"{path}: image header claims a {size[0]}x{size[1]} frame")
+    return header
+
+
+def _first_line(text: str) -> str:
+    lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
+    return lines[-1] if lines else "decoder error"
 
 
 def _png_complete(data: np.ndarray) -> bool:

@@ -333,6 +333,8 @@ def load_label_set(source: str | Path) -> LabelSet:
     """
     import yaml
 
+    from el import safeyaml
+
     p = Path(source)
     if p.suffix.lower() not in (".yaml", ".yml", ".json"):
         presets = label_presets()
@@ -347,14 +349,14 @@ def load_label_set(source: str | Path) -> LabelSet:
     except OSError as err:
         raise ValueError(f"{p}: cannot read label set ({err.strerror or err})") from None
     try:
-        data = json.loads(text) if p.suffix.lower() == ".json" else yaml.safe_load(text)
+        data = json.loads(text) if p.suffix.lower() == ".json" else safeyaml.safe_load(text)
     except (json.JSONDecodeError, yaml.YAMLError) as err:
         raise ValueError(f"{p}: not valid {'JSON' if p.suffix.lower() == '.json' else 'YAML'}: {err}") from None
     try:
         if isinstance(data, dict) and isinstance(data.get("hierarchy"), str):
             ref = p.parent / data["hierarchy"]
             try:
-                data = {**data, "hierarchy": yaml.safe_load(ref.read_text(encoding="utf-8"))}
+                data = {**data, "hierarchy": safeyaml.load_file(ref)}
             except (OSError, yaml.YAMLError) as err:
                 raise ValueError(f"hierarchy file {ref}: {err}") from None
         return LabelSet.from_dict(data)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import logging
 import math
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, fields, replace
@@ -22,12 +23,13 @@ from typing import Any
 import numpy as np
 
 from el.camera import Pose, check_geometry
-from el.config import CoreConfig
+from el.config import CoreConfig, check_seed
 from el.core import default_area, run_core
+from el.deadline import Deadline, active, run_with_deadline
 from el.decision import Candidate, Decision, Disc, MonitorVerdict
 from el.errors import BudgetExceeded
 from el.hashing import sha256_bytes
-from el.imageio import read_image
+from el.imageio import MAX_PIXELS, check_max_pixels, read_image_meta
 from el.labels import UAVID
 from el.monitors import CandidateContext, Monitor, build_monitor, monitor_name, parse_monitor_spec
 from el.monitors.capabilities import check_monitor_capabilities
@@ -78,6 +80,14 @@ class PipelineConfig:
     calibration : path or None
         A calibration card (``uav-el calibrate``): the monitor runs at the card's threshold. The card
         must calibrate ``monitor``; a missing or altered card is a fault (default action).
+    hard_stop : bool
+        With a budget and the real clock (``time.perf_counter``), the decision runs in a worker thread and
+        ``decide`` returns the default action ("timeout") at the deadline even while a stage that has no
+        checkpoint (a forward pass, a decode) is still running; the stopped decision ends at its next
+        checkpoint (``el.deadline``). False, or an injected clock: the cooperative checks alone.
+    max_pixels : int
+        Largest frame accepted, in pixels (:data:`el.imageio.MAX_PIXELS`, 8K plus a quarter by default): a file
+        whose header claims more is refused before decoding (default action, the reason naming the file).
     ood : path or None
         An out-of-domain gate (``uav-el fit-ood``, ``el.monitors.ood``): a frame whose distance is above
         the gate's threshold ends in the default action with reason ``out_of_domain``; a missing or
@@ -94,13 +104,15 @@ class PipelineConfig:
     nominal_size: tuple[int, int] = (3840, 2160)
     calibration: str | None = None
     ood: str | None = None
+    max_pixels: int = MAX_PIXELS
+    hard_stop: bool = True
 
     def __post_init__(self) -> None:
         parse_monitor_spec(self.monitor)  # a bad spec fails here, before any image
+        check_max_pixels(self.max_pixels)
         if self.time_budget_s is not None and not (math.isfinite(self.time_budget_s) and self.time_budget_s > 0):
             raise ValueError(f"time_budget_s must be a positive number of seconds or None, got {self.time_budget_s!r}")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
-            raise ValueError(f"seed must be a non-negative integer, got {self.seed!r}")
+        check_seed(self.seed)
 
     @property
     def monitor_name(self) -> str:
@@ -118,26 +130,9 @@ class PipelineConfig:
             "core": self.core.to_dict(),
             **({"calibration": self.calibration} if self.calibration else {}),
             **({"ood": self.ood} if self.ood else {}),
+            **({"max_pixels": self.max_pixels} if self.max_pixels != MAX_PIXELS else {}),
+            **({} if self.hard_stop else {"hard_stop": False}),
         }
-
-
-class _Budget:
-    """Elapsed time against the budget, read from the injected clock."""
-
-    def __init__(self, clock: Clock, budget_s: float | None) -> None:
-        self.clock, self.budget_s, self.start = clock, budget_s, clock()
-
-    def elapsed(self) -> float:
-        return self.clock() - self.start
-
-    def check(self, stage: str) -> None:
-        if self.budget_s is not None and self.elapsed() > self.budget_s:
-            raise BudgetExceeded(f"time budget of {self.budget_s:g} s exceeded after {stage}")
-
-    def ahead(self, next_s: float) -> None:
-        """Stop now if the next step, taking about ``next_s`` seconds, would end past the budget."""
-        if self.budget_s is not None and self.elapsed() + max(0.0, next_s) > self.budget_s:
-            raise BudgetExceeded(f"time budget of {self.budget_s:g} s would be exceeded during monitoring")
 
 
 class EmergencyLanding:
@@ -167,6 +162,7 @@ class EmergencyLanding:
     ) -> None:
         self.config = config or PipelineConfig()
         self.clock = clock
+        self._lock = threading.Lock()
         self.fault: str | None = None
         self.segmenter = segmenter
         self.monitor: Monitor | None = None
@@ -217,9 +213,32 @@ class EmergencyLanding:
         of the model, is ``assurance.campaign.gt_pipeline``.)
         """
         cfg = self.config
-        budget = _Budget(self.clock, cfg.time_budget_s)
+        budget = Deadline(self.clock, cfg.time_budget_s)
         timings: dict[str, float] = {}
         info: dict[str, Any] = {}
+        if not (cfg.hard_stop and cfg.time_budget_s is not None and self.clock is time.perf_counter):
+            with active(budget):
+                return self._decide(image, pose, budget, timings, info)
+
+        def locked() -> Decision:  # one decision at a time: a stopped one ends at its next checkpoint
+            with self._lock:
+                return self._decide(image, pose, budget, timings, info)
+
+        finished, decision = run_with_deadline(locked, budget)
+        if finished:
+            return decision
+        try:  # the hard stop: the default action at the deadline, on what the stopped decision had read
+            core_cfg = frame_core(cfg.core, pose)
+        except Exception:
+            core_cfg = cfg.core
+        seen = dict(info)  # the worker sets width, then height
+        size = (seen["width"], seen["height"]) if "height" in seen else cfg.nominal_size
+        return self._default("timeout", [], size, dict(timings), seen, budget, core_cfg)
+
+    def _decide(self, image: np.ndarray | str | Path, pose: Pose | None, budget: Deadline,
+                timings: dict[str, float], info: dict[str, Any]) -> Decision:
+        """The decision itself, with ``budget`` checked between stages and (as the active deadline) inside them."""
+        cfg = self.config
         core_cfg = cfg.core
         size = cfg.nominal_size
         stage = "read"
@@ -228,6 +247,9 @@ class EmergencyLanding:
             t = self.clock()
             rgb = self._read(image, info)
             size = (rgb.shape[1], rgb.shape[0])
+            if size[0] * size[1] > cfg.max_pixels:  # an array (a file was checked from its header)
+                raise ValueError(f"{info['path']}: image of {size[0]}x{size[1]} pixels exceeds the limit of "
+                                 f"{cfg.max_pixels} pixels (max_pixels)")
             timings["read_s"] = self.clock() - t
             stage = "pose"
             core_cfg = frame_core(cfg.core, pose)
@@ -285,8 +307,9 @@ class EmergencyLanding:
         if isinstance(image, str | Path):
             path = Path(image)
             info["path"] = str(path)
-            rgb = read_image(path)
+            rgb, meta = read_image_meta(path, max_pixels=self.config.max_pixels)
             info["sha256"] = sha256_bytes(path.read_bytes())
+            info.update(meta)  # exif_orientation, when one was applied
         else:
             rgb = image
             if not isinstance(rgb, np.ndarray):
@@ -304,7 +327,7 @@ class EmergencyLanding:
         return probs
 
     def _walk(
-        self, rgb: np.ndarray, candidates: list[Candidate], budget: _Budget, probs: np.ndarray | None = None
+        self, rgb: np.ndarray, candidates: list[Candidate], budget: Deadline, probs: np.ndarray | None = None
     ) -> tuple[list[Candidate], WalkOutcome]:
         """Monitor candidates with the one decision walk (``el.walk``); returns the candidates with their
         verdicts and the outcome. The budget is checked before and after each judgement of the deciding
@@ -341,7 +364,7 @@ class EmergencyLanding:
         size: tuple[int, int],
         timings: dict[str, float],
         info: dict[str, Any],
-        budget: _Budget,
+        budget: Deadline,
         core: CoreConfig,
     ) -> Decision:
         try:

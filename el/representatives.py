@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 
+from el.deadline import checkpoint
 from el.regions import Regions
 
 
@@ -143,6 +144,7 @@ def representatives(
     starts = np.concatenate([[0], np.cumsum(counts)])
     out_r, out_c, out_k = [], [], []
     for k in np.flatnonzero(counts):
+        checkpoint("representatives")
         n_k = int(counts[k])
         pix = idx[starts[k] : starts[k + 1]]
         k_star = min(n_k, max(1, int(math.floor(n_star * n_k / total + 0.5))))

@@ -65,3 +65,17 @@ def test_command_writes_csv_and_markdown_and_refuses_bad_options(tmp_path, capsy
     bad.write_text("a,b\n1,2\n")
     with pytest.raises(ValueError, match="not a fault-injection table"):
         fi.read_table(bad)
+
+
+def test_issue_31_cases_behave(workspace):
+    """Bounded resources and no silent loss (R1..R13; R6, which SIGKILLs a campaign, runs in the table only)."""
+    from assurance.campaign.fault_bounds import BOUNDS_CASES
+
+    cases = [c for c in BOUNDS_CASES if c.id != "R6-workers-die-with-parent"]
+    assert {c.id for c in BOUNDS_CASES} <= {c.id for c in fi.CASES} and len(BOUNDS_CASES) == 13
+    rows = fi.run_cases(workspace, cases, main=main)
+    for r in rows:
+        assert r["result"] == "pass", r
+    by = {r["case"]: r for r in rows}
+    assert "refused before decoding" in by["R1-pixel-header"]["outcome"]
+    assert "exceeds the" in by["R5-jobs-1000"]["outcome"] and by["R8-colliding-frames"]["outcome"].startswith("2 task")

@@ -16,28 +16,18 @@ import csv
 import io
 import json
 import shutil
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from collections.abc import Sequence
 from pathlib import Path
+
+from assurance.campaign.fault_bounds import BOUNDS_CASES
+from assurance.campaign.fault_case import Case, CliMain, save_tiny_weights
+from assurance.campaign.fault_case import campaign_argv as _campaign
+from assurance.campaign.fault_case import copy_run as _copy_run
+from assurance.campaign.fault_case import first_image as _image
 
 COLUMNS = ("case", "injected", "command", "expected", "observed", "outcome", "result")
 CSV_NAME, MD_NAME = "faults.csv", "faults.md"
 MCD_SPEC = "lhd+ch+mcd:tau=0.25,n=1000,rho=0.5"
-
-CliMain = Callable[[list[str]], int]  # ``assurance.cli.main``: argv -> exit code
-
-
-@dataclass(frozen=True)
-class Case:
-    """One fault: ``make(ws)`` injects it (into copies under the workspace) and returns the argv to run."""
-
-    id: str
-    injected: str
-    make: Callable[[Path], list[str]]
-    expected: int
-    expect_text: str = ""  # words the output must hold (e.g. the decision's reason)
-    pick: str = ""  # the output line holding this is the outcome (default: first stderr line)
-
 
 # ------------------------------------------------------------------------------------------------
 # Workspace
@@ -51,24 +41,6 @@ def _cli(main: CliMain, argv: Sequence[str]) -> tuple[int, str, str]:
         except SystemExit as exc:  # argparse's own refusals
             code = int(exc.code or 0)
     return code, out.getvalue(), err.getvalue()
-
-
-def save_tiny_weights(path: Path, *, nan: bool = False) -> Path:
-    """A tiny randomly-initialised CNN (seed 0) and its card; ``nan``: every parameter NaN."""
-    import torch
-
-    from assurance.fitting.network.weights_io import save_weights
-    from el.segmentation.architectures import build_model
-    from el.segmentation.model import ArchConfig
-
-    torch.manual_seed(0)
-    model = build_model(ArchConfig(widths=(8, 8, 8), decoder_channels=8))
-    if nan:
-        with torch.no_grad():
-            for p in model.parameters():
-                p.fill_(float("nan"))
-    save_weights(model, path)
-    return path
 
 
 def build_workspace(root: str | Path, *, main: CliMain) -> Path:
@@ -85,21 +57,6 @@ def build_workspace(root: str | Path, *, main: CliMain) -> Path:
     if code:
         raise RuntimeError(f"fault-table workspace: uav-el campaign exited {code}: {err.strip()}")
     return ws
-
-
-def _campaign(ws: Path, out: Path, *extra: str) -> list[str]:
-    return ["campaign", "--data", str(ws / "data"), "--out", str(out), "--weights", str(ws / "tiny.pt"),
-            "--perturbations", "none", "--monitors", "lhd", "--images", "2", "--quiet", *extra]
-
-
-def _image(ws: Path) -> Path:
-    return sorted((ws / "data").glob("*/Images/*.png"))[0]
-
-
-def _copy_run(ws: Path, name: str) -> tuple[Path, list[Path]]:
-    run = ws / name
-    shutil.copytree(ws / "run", run)
-    return run, sorted(p for p in (run / "shards").iterdir() if p.is_dir())
 
 
 def _copy_weights(ws: Path, name: str) -> Path:
@@ -243,6 +200,7 @@ CASES: tuple[Case, ...] = (
          "DEFAULT action", "decision:"),
     Case("B5-missing-run", "table on a folder that is not a run",
          lambda ws: ["table", ws / "no-run", "--boot", "20"], 2),
+    *BOUNDS_CASES,  # issue 31: bounded resources, no silent loss
 )
 
 

@@ -37,7 +37,7 @@ def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *,
 
     weights_record = _weights_record(config.weights, model)
     files = sorted({t.sample.image_path for t in tasks} | {t.sample.label_path for t in tasks if t.sample.label_path}
-                   | _pose_files(config, tasks))
+                   | _frame_files(tasks))
     h = hashlib.sha256()
     for f in files:
         h.update(f"{Path(f).relative_to(data)}:{sha256_file(f)}\n".encode())
@@ -60,15 +60,14 @@ def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *,
     }
 
 
-def _pose_files(config: CampaignConfig, tasks: Sequence[Task]) -> set[Path]:
-    """The files per-frame poses are read from (none under the nominal policy): sidecars, else scene metas."""
-    if config.poses == "nominal":
-        return set()
+def _frame_files(tasks: Sequence[Task]) -> set[Path]:
+    """The per-frame files besides image and labels that readouts rest on: a scene's meta (its pose, its world
+    model: the clearance readouts) and a sequence's poses sidecar, whatever the pose policy."""
     out: set[Path] = set()
     for t in tasks:
-        path = t.sample.poses_path or t.sample.meta_path()
-        if path.is_file():
-            out.add(path)
+        for path in (t.sample.meta_path(), t.sample.poses_path):
+            if path is not None and path.is_file():
+                out.add(path)
     return out
 
 

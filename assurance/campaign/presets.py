@@ -6,9 +6,8 @@ from collections.abc import Sequence
 from importlib import resources
 from typing import Any
 
-import yaml
-
 from assurance.campaign.run import CampaignConfig
+from el import safeyaml
 from el.monitors import DEMO_GRID, PAPER_GRID
 
 GRIDS = {"paper-grid": PAPER_GRID, "demo-grid": DEMO_GRID}
@@ -17,7 +16,7 @@ GRIDS = {"paper-grid": PAPER_GRID, "demo-grid": DEMO_GRID}
 def load_presets() -> dict[str, dict[str, Any]]:
     """The campaign presets (``assurance/presets.yaml``)."""
     text = resources.files("assurance").joinpath("presets.yaml").read_text(encoding="utf-8")
-    return yaml.safe_load(text)
+    return safeyaml.safe_load(text)
 
 
 def resolve_monitors(value: str | Sequence[str], deployed: str | None = None) -> tuple[str, ...]:

@@ -18,6 +18,7 @@ and ``assurance.campaign.integrity.verify_run`` checks a whole run and computes 
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import re
@@ -33,7 +34,11 @@ from assurance.files import atomic_write_bytes, public_mode
 from el.errors import UavElError
 from el.hashing import sha256_file
 
-FORMAT_VERSION = "uav-el-readouts/1"
+FORMAT_VERSION = "uav-el-readouts/2"
+"""2: shard names carry a digest of the task key (``a b`` and ``a_b`` no longer share one) and the data hash
+covers the scenes' ``meta/*.json``. A format-1 run still reads (``uav-el table``, ``evidence``); it cannot be
+resumed (``init_run`` says so)."""
+OLD_FORMATS = ("uav-el-readouts/1",)
 INTEGRITY = "uav-el-shard-sha256/1"
 """Recorded in the manifest (``integrity``) of runs whose shards carry hashes: such a run's shard
 without a valid SHA256SUMS is damaged, not a legacy shard."""
@@ -70,8 +75,11 @@ class DamagedRunError(RunError):
 
 
 def shard_name(perturbation: str, severity: int, key: str) -> str:
-    """Folder name of a task's shard, e.g. ``fog-s3__seq00_000012``."""
-    return _SAFE.sub("_", f"{perturbation}-s{severity}__{key.replace('/', '_')}")
+    """Folder name of a task's shard, e.g. ``fog-s3__seq00_000012-1f3a9c0b2d4e6f70``: a readable prefix, then 16 hex
+    digits of the SHA-256 of the task key, so two tasks never share a folder (``a b`` and ``a_b`` would by
+    their prefix alone)."""
+    digest = hashlib.sha256(f"{perturbation}|{severity}|{key}".encode()).hexdigest()[:16]
+    return _SAFE.sub("_", f"{perturbation}-s{severity}__{key.replace('/', '_')}")[:96] + f"-{digest}"
 
 
 def init_run(run_dir: Path, manifest: dict[str, Any]) -> None:
@@ -80,6 +88,10 @@ def init_run(run_dir: Path, manifest: dict[str, Any]) -> None:
     path = run_dir / "manifest.json"
     if path.exists():
         old = json.loads(path.read_text())
+        if old.get("format") in OLD_FORMATS:
+            raise RunError(f"{run_dir}: a run of readouts format {old['format']} (shard names that could collide, a "
+                           f"data hash without meta/*.json); it still reads with `uav-el table` and `uav-el evidence`, "
+                           f"but this toolkit writes {FORMAT_VERSION}: run the campaign into a new --out folder")
         for key in ("format", "config", "data"):
             if old.get(key) != json.loads(json.dumps(manifest.get(key), default=str)):
                 raise RunError(f"{run_dir}: holds another campaign (its manifest differs in '{key}'); "
@@ -223,6 +235,23 @@ def read_index(run_dir: str | Path) -> dict[str, dict[str, str]]:
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise DamagedRunError(run_dir, [f"{INDEX}: unreadable shard index ({exc})"]) from None
     return {str(k): dict(v) for k, v in shards.items()}
+
+
+def set_aside_index(run_dir: str | Path) -> str | None:
+    """Move an unreadable shard index to ``RUN/damaged/`` so the runner rebuilds it from the shards that verify
+    against their own SHA256SUMS; returns the line saying so (None when the index reads or is absent)."""
+    try:
+        read_index(run_dir)
+        return None
+    except DamagedRunError as exc:
+        why = exc.problems[0]
+    aside = Path(run_dir) / "damaged"
+    aside.mkdir(exist_ok=True)
+    k = 0
+    while (aside / f"{INDEX}.{k}").exists():
+        k += 1
+    (Path(run_dir) / INDEX).rename(aside / f"{INDEX}.{k}")
+    return f"{why}: set aside as damaged/{INDEX}.{k}; rebuilt from the shards' own {SUMS}"
 
 
 def record_shards(run_dir: str | Path, hashes: Mapping[str, Mapping[str, str] | None]) -> None:

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from assurance.campaign import readouts
+from assurance.campaign.faults import config_faults
 from assurance.campaign.judging import _timed, judge_candidates
 from assurance.campaign.manifest import (  # noqa: F401  (re-exported)
     check_monitor_networks,
@@ -34,12 +35,14 @@ from assurance.campaign.manifest import (  # noqa: F401  (re-exported)
 )
 from assurance.campaign.perturbations import PERTURBATIONS, perturb, severities_of
 from assurance.campaign.truth import true_hazard
+from assurance.campaign.workers import bounded_jobs, die_with_parent
 from assurance.scenes.poses import NOMINAL, check_policy, frame_pose
 from assurance.scenes.uavid import Sample, iter_samples, read_image, read_labels
 from el.camera import check_geometry
-from el.config import CoreConfig
+from el.config import CoreConfig, check_seed
 from el.core import run_core
 from el.decision import Candidate
+from el.errors import DataError
 from el.monitors import DEMO_GRID, build_monitor, parse_monitor_spec
 from el.monitors.spec import walk_of
 from el.segmentation.contract import labels_of
@@ -86,8 +89,7 @@ class CampaignConfig:
         object.__setattr__(self, "monitors", tuple(canon))
         if self.images is not None and self.images < 1:
             raise ValueError(f"images must be >= 1, got {self.images}")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
-            raise ValueError(f"seed must be an integer >= 0, got {self.seed!r}")
+        check_seed(self.seed)
         check_policy(self.poses)
 
     def scenarios(self) -> list[tuple[str, int]]:
@@ -140,11 +142,11 @@ def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Calla
         rgb, timings["read_s"] = _timed(clock, read_image, s.image_path)
         frame_cfg, pose_cols = frame_config(config, s, (rgb.shape[1], rgb.shape[0]))
         if s.label_path is None:
-            raise ValueError(f"{s.image_path}: no label map (the campaign needs ground truth)")
+            raise DataError(f"{s.image_path}: no label map (the campaign needs ground truth)")
         labels = labels_of(segmenter)
         ids = read_labels(s.label_path, labels=labels)
         if ids.shape != rgb.shape[:2]:
-            raise ValueError(f"{s.label_path}: label size differs from the image")
+            raise DataError(f"{s.label_path}: label size differs from the image")
         rng = np.random.default_rng(task_seed(config.seed, s.key, task.perturbation, task.severity))
         hd, timings["perturb_s"] = _timed(clock, perturb, rgb, task.perturbation, task.severity, rng)
         probs, timings["segmentation_s"] = _timed(clock, segmenter.predict_frame, hd)
@@ -214,7 +216,12 @@ def frame_config(config: CampaignConfig, sample: Sample, size: tuple[int, int]) 
     camera, pose and size are outside what the flat-ground model handles (``el.camera.check_geometry``)."""
     pose, roll, source = frame_pose(sample, config.poses, config.core.pose)
     cfg = config.core if source == NOMINAL else replace(config.core, pose=pose)
-    check_geometry(cfg.geometry(*size), roll_deg=roll)
+    try:
+        check_geometry(cfg.geometry(*size), roll_deg=roll)
+    except ValueError as exc:  # the frame's own pose or size: its data's fault; the nominal pose: the configuration's
+        if source == NOMINAL:
+            raise
+        raise DataError(f"{sample.image_path}: {exc}") from None
     return cfg, {"height_m": float(pose.height_m), "pitch_deg": float(pose.pitch_deg), "roll_deg": float(roll),
                  "pose_source": source}
 
@@ -257,8 +264,10 @@ def _check_models(names: Sequence[str], monitors: Sequence[Any], expected: dict[
 
 
 def execute(task: Task, config: CampaignConfig, run_dir: str, threads: int, segmenter: Any = None,
-            expected_models: dict[str, str] | None = None) -> dict[str, Any]:
-    """Worker entry point: run one task and write its shard; returns a small summary."""
+            expected_models: dict[str, str] | None = None, parent_pid: int | None = None) -> dict[str, Any]:
+    """Worker entry point: run one task and write its shard; returns a small summary. ``parent_pid``: the
+    campaign's process, in a loky worker: the worker dies with it (``workers.die_with_parent``)."""
+    die_with_parent(parent_pid)
     if segmenter is None:
         segmenter = _worker_segmenter(config.weights, threads)
     t = time.perf_counter()
@@ -293,7 +302,8 @@ def run_campaign(
     records: Sequence[Any] = (),
     system: Any = None,
 ) -> dict[str, Any]:
-    """Run (or resume) a campaign; returns a summary {tasks, done, skipped, faults, missing, repaired, seconds}.
+    """Run (or resume) a campaign; returns a summary {tasks, done, skipped, faults, config_faults, missing, repaired,
+    seconds} (``config_faults``: the faults that are not the data's, ``assurance.campaign.faults``).
 
     ``segmenter`` replaces the model loaded from ``config.weights`` (any object with
     ``predict_frame``, ``predict_patch`` and ``mc_dropout``; picklable for parallel backends).
@@ -322,6 +332,8 @@ def run_campaign(
     check_monitor_networks(config.monitors, network)
     for record in records:
         record.check_network(network)
+    if not (backend == "dask" and scheduler):  # local workers: no more than the cores (a warning says so)
+        jobs = bounded_jobs(jobs)
     threads = max(1, (os.cpu_count() or 1) // max(1, jobs))
     if system is None:
         from assurance.system import default_system
@@ -347,6 +359,7 @@ def run_campaign(
     missing = [t.shard_name for t in todo if not readouts.shard_done(run_dir, t.shard_name)]
     summary = {"tasks": len(tasks), "done": len(results), "skipped": len(tasks) - len(todo),
                "faults": [f"{r['shard']}: {r['fault']}" for r in faults], "missing": missing,
+               "config_faults": config_faults([f"{r['shard']}: {r['fault']}" for r in faults]),
                "repaired": repaired, "seconds": time.perf_counter() - t0}
     readouts.append_log(run_dir, summary)
     return summary
@@ -357,8 +370,8 @@ def _set_aside_damaged(run_dir: Path, tasks: Sequence[Task]) -> list[str]:
     again; record the verified shards the index lacks. Returns one line per damaged shard."""
     if not readouts.has_integrity(run_dir):
         return []
+    out = [line for line in [readouts.set_aside_index(run_dir)] if line]  # unreadable: rebuilt below
     index = readouts.read_index(run_dir)
-    out: list[str] = []
     found: dict[str, dict[str, str] | None] = {}
     for t in tasks:
         name = t.shard_name
@@ -407,8 +420,10 @@ def _dispatch(todo: list[Task], config: CampaignConfig, run_dir: Path, *, jobs: 
         return
     from joblib import Parallel, delayed
 
-    par = Parallel(n_jobs=jobs, backend="loky", return_as="generator_unordered")
-    gen = par(delayed(execute)(t, config, str(run_dir), threads, segmenter, expected_models) for t in todo)
+    par = Parallel(n_jobs=jobs, backend="loky", return_as="generator_unordered",  # workers die with this process
+                   initializer=die_with_parent, initargs=(os.getpid(),))
+    gen = par(delayed(execute)(t, config, str(run_dir), threads, segmenter, expected_models, os.getpid())
+              for t in todo)
     with warnings.catch_warnings():
         # loky replaces a worker whose resident memory grew by 300 MB (its leak guard); MC-dropout
         # batches grow the allocator's arenas that much once. The task is not lost (the replacement

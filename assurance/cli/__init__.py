@@ -5,8 +5,9 @@ Each sub-command lives in ``assurance/cli/<name>.py`` and exposes ``HELP``,
 options) are printed as one line naming the file and the problem, with a non-zero exit code.
 
 Exit codes (the same for every sub-command, ``EXIT_CODES``): 0 success; 1 a requirement failed (the
-evidence gate); 2 bad input or options; 3 ``land`` hit a fault in the flight path and took the default
-action; 4 a damaged run (a shard altered, truncated or missing: its readouts fail verification);
+evidence gate); 2 bad input or options (``campaign``: also tasks that faulted for a configuration reason);
+3 ``land`` hit a fault in the flight path and took the default action; 4 a damaged run (a shard altered,
+truncated or missing: its readouts fail verification);
 70 an internal error (a bug: one line, the traceback with ``UAV_EL_DEBUG=1``); 130 interrupted.
 """
 
@@ -52,7 +53,8 @@ EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_FLIGHT_FAULT, EXIT_DAMAGED_RUN, EXIT_
 EXIT_CODES: dict[int, str] = {
     EXIT_OK: "success",
     EXIT_FAILED: "a requirement failed (evidence gate; with --strict also one not verified)",
-    EXIT_BAD_INPUT: "bad input or options (one line naming the file and the problem)",
+    EXIT_BAD_INPUT: "bad input or options (one line naming the file and the problem); campaign: tasks faulted for "
+                    "a configuration reason, not their data",
     EXIT_FLIGHT_FAULT: "land: a fault in the flight path; the default action was taken",
     EXIT_DAMAGED_RUN: "damaged run: a shard altered, truncated or missing (its readouts fail verification)",
     EXIT_INTERNAL: "internal error (a bug; UAV_EL_DEBUG=1 shows the traceback)",

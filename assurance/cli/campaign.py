@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
+from assurance.campaign.faults import config_fault_line
 from assurance.campaign.presets import load_presets, preset_config
 from assurance.campaign.run import describe, run_campaign
+from assurance.campaign.workers import bounded_jobs
 from assurance.errors import CommandError
 from assurance.scenes.poses import POLICIES
 
@@ -33,7 +36,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "configured pose for all), sidecar (a frame's line of seqNN/poses.csv, else a synthetic "
                         "scene's meta, else nominal), required (as sidecar, but a frame without its own pose is a "
                         "recorded fault)")
-    p.add_argument("--jobs", type=int, default=1, help="parallel workers (default 1)")
+    p.add_argument("--jobs", type=int, default=1,
+                   help="parallel workers (default 1; more than the CPU cores are clamped to them, with a warning)")
     p.add_argument("--backend", choices=("loky", "dask"), default="loky", help="parallel backend (default loky)")
     p.add_argument("--scheduler", help="address of a running dask.distributed scheduler (with --backend dask)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -44,6 +48,8 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError("--jobs must be >= 1")
     if args.scheduler and args.backend != "dask":
         raise CommandError("--scheduler needs --backend dask")
+    if not args.scheduler:  # local workers: clamped to the cores, one warning line says so
+        args.jobs = bounded_jobs(args.jobs, warn=lambda m: print(f"uav-el campaign: warning: {m}", file=sys.stderr))
     from assurance.cli.system_options import model_spec, system_of
     from assurance.system import build as system_build
 
@@ -75,5 +81,7 @@ def run(args: argparse.Namespace) -> int:
                            scheduler=args.scheduler, progress=not args.quiet, records=cards, system=system)
     print(describe(summary))
     print(f"readouts in {args.out}; results table: uav-el table {args.out}")
+    if summary.get("config_faults"):  # every such task measured nothing: fail loud (exit 2)
+        raise CommandError(config_fault_line(summary["config_faults"]))
     return 1 if summary["missing"] else 0
 

@@ -23,6 +23,7 @@ from assurance.scenes.uavid import image_size, read_image, write_image
 from el.camera import CAMERAS, MAX_ROLL_DEG, Pose, geometry_problem
 from el.config import MODES, CoreConfig, make_intrinsics
 from el.decision import Decision
+from el.imageio import MAX_PIXELS, check_max_pixels
 from el.pipeline import DEFAULT_TIME_BUDGET_S
 
 HELP = "decide where to land for one frame (model pipeline, or the ground-truth pipeline with --labels)"
@@ -78,6 +79,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="time budget in seconds; past it, the default action (default: the system file's "
                              f"[targets] time_budget_s, else {DEFAULT_TIME_BUDGET_S})")
     parser.add_argument("--seed", type=int, default=0, help="seed of MC dropout (default: %(default)s)")
+    parser.add_argument("--max-pixels", type=int, default=MAX_PIXELS, metavar="N",
+                        help="largest frame accepted, in pixels, checked from the file's header before decoding "
+                             "(default: %(default)s, 8K plus a quarter)")
     parser.add_argument("--threads", type=int, help="CPU threads for the CNN (default: torch's choice)")
     parser.add_argument("--all", action="store_true", dest="evaluate_all",
                         help="evaluation mode: run the monitor on every candidate (the decision is unchanged)")
@@ -170,7 +174,8 @@ def run_model(args: argparse.Namespace) -> int:
     from assurance.system import build as system_build
 
     image_path = Path(args.image_arg)
-    read_image(image_path)  # bad input is a usage error here (in flight it is the default action)
+    check_max_pixels(args.max_pixels)
+    read_image(image_path, max_pixels=args.max_pixels)  # bad input is a usage error here (in flight: default action)
     core = config_from_args(args)
     check_frame_geometry(core, image_path, args.roll)  # so is a pose the model cannot plan with
     system = system_of(args)
@@ -204,7 +209,7 @@ def run_model(args: argparse.Namespace) -> int:
     if gate is not None and segmenter is not None:
         gate.check_network(segmenter)  # a gate fitted on another network: one line, exit 2
     config = PipelineConfig(core=core, monitor=monitor, time_budget_s=budget,
-                            seed=args.seed, evaluate_all=args.evaluate_all,
+                            seed=args.seed, evaluate_all=args.evaluate_all, max_pixels=args.max_pixels,
                             calibration=str(calibration) if calibration else None,
                             ood=str(ood) if ood else None)
     decision = EmergencyLanding(config, segmenter=segmenter).decide(image_path)
@@ -231,7 +236,8 @@ def _write_outputs(args: argparse.Namespace, decision: Decision, *, image, label
 def summary(decision: Decision) -> str:
     """A few human-readable lines: the decision, the best candidates, the time spent."""
     info = decision.input
-    lines = [f"{info.get('path', '<array>')} ({info.get('width')}x{info.get('height')}): "
+    exif = f", EXIF orientation {info['exif_orientation']} applied" if info.get("exif_orientation") else ""
+    lines = [f"{info.get('path', '<array>')} ({info.get('width')}x{info.get('height')}{exif}): "
              f"{len(decision.candidates)} candidate(s)"]
     if decision.selected is not None:
         c = decision.candidates[decision.selected]

@@ -21,9 +21,11 @@ def load_waivers(path: str | Path) -> dict[str, dict[str, str]]:
     """
     import yaml
 
+    from el import safeyaml
+
     path = Path(path)
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+        data = safeyaml.load_file(path) or {}
     except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
         raise ValueError(f"{path}: unreadable waivers file: {exc}") from None
     if not isinstance(data, dict) or not isinstance(data.get("waivers") or [], list):

@@ -301,6 +301,8 @@ def _render_all(todo: list[Any], split: str, progress: bool, jobs: int) -> None:
         for _ in _iterate(results, total=len(todo), desc=f"synth {split}", enabled=progress):
             pass
     else:
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
+        from assurance.campaign.workers import die_with_parent
+
+        with ProcessPoolExecutor(max_workers=jobs, initializer=die_with_parent, initargs=(os.getpid(),)) as pool:
             for _ in _iterate(pool.map(_write_job, todo), total=len(todo), desc=f"synth {split}", enabled=progress):
                 pass

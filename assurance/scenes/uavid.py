@@ -18,6 +18,7 @@ from assurance.files import atomic_write_bytes, public_mode  # noqa: F401  (re-e
 from assurance.scenes.poses import POSES_FILE, sequence_poses
 from el.camera import Pose
 from el.errors import DataError
+from el.imageio import image_size as header_image_size
 from el.imageio import read_image
 from el.labels import UAVID, LabelSet
 from el.rgb import check_rgb
@@ -121,14 +122,9 @@ def iter_samples(root: str | Path, *, require_labels: bool = True, check_sizes: 
 
 
 def image_size(path: str | Path) -> tuple[int, int]:
-    """(width, height) of a PNG from its header without decoding it; other formats are decoded."""
-    path = Path(path)
-    with open(path, "rb") as f:
-        head = f.read(24)
-    if head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR":
-        return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
-    img = read_image(path)
-    return img.shape[1], img.shape[0]
+    """(width, height) of an image as read (EXIF orientation applied), from its header without decoding it when
+    it has one (PNG, JPEG); DataError above the pixel limit (``el.imageio.image_size``)."""
+    return header_image_size(path)
 
 
 def check_same_size(image_path: str | Path, label_path: str | Path) -> None:

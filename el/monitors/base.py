@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
+from el.deadline import checkpoint
 from el.decision import Candidate, Disc, MonitorVerdict
 from el.labels import UAVID, LabelSet
 from el.monitors.patches import Patch, extract_patch, validate_patch_params
@@ -145,6 +146,16 @@ def validate_threshold(threshold: object) -> float:
     return float(threshold)
 
 
+def check_threshold_range(threshold: float, score_range: tuple[float, float], who: str) -> float:
+    """``threshold`` when it lies in [lo, hi) of ``score_range``, else ValueError naming the monitor and the range."""
+    lo, hi = score_range
+    if not lo <= threshold < hi:
+        effect = "accept every candidate" if threshold >= hi else "reject every candidate"
+        raise ValueError(f"{who}: threshold {threshold:g} lies outside the monitor's score range [{lo:g}, {hi:g}] "
+                         f"(it would {effect}); give a threshold in [{lo:g}, {hi:g})")
+    return threshold
+
+
 class Monitor(ABC):
     """A runtime monitor as the decision loop sees it: it judges one candidate on the HD frame.
 
@@ -159,6 +170,10 @@ class Monitor(ABC):
     """
 
     DEFAULT_THRESHOLD: ClassVar[float] = 0.0
+    #: The finite scores this monitor can give, [lo, hi] (``+inf`` aside). A threshold must lie in [lo, hi): at
+    #: or above hi it accepts every candidate, below lo it rejects every one; either way the monitor would run
+    #: under its name without judging. A plugin that does not declare its range is not checked.
+    SCORE_RANGE: ClassVar[tuple[float, float]] = (-math.inf, math.inf)
 
     #: SHA-256 of the fitted file this monitor's scores rest on (a learned model); None for a rule. A
     #: monitor with a model sets or overrides it: calibration cards and campaign manifests record it,
@@ -166,7 +181,9 @@ class Monitor(ABC):
     model_sha256: str | None = None
 
     def __init__(self, *, threshold: float | None = None) -> None:
-        self.threshold = validate_threshold(self.DEFAULT_THRESHOLD if threshold is None else threshold)
+        self.threshold = check_threshold_range(
+            validate_threshold(self.DEFAULT_THRESHOLD if threshold is None else threshold), self.SCORE_RANGE,
+            type(self).__name__)
 
     @property
     @abstractmethod
@@ -315,8 +332,10 @@ class PatchMonitor(Monitor):
         wrong shape or non-finite scores.
         """
         t0 = self.clock()
+        checkpoint("monitoring")  # the decision's deadline (el.deadline), before and after the patch's segmentation
         patch = self.patch(hd_image, candidate)
         features, mask = self.patch_features(patch, segmenter, seed=seed, context=context)
+        checkpoint("monitoring")
         j = self.judge(self.reduce(features, mask))
         return self._verdict(j, self.clock() - t0)
 

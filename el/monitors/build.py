@@ -80,12 +80,14 @@ def build_monitor(
         return None
     if isinstance(parsed, GenericSpec):
         return _build_registered(parsed, labels, margin=margin, max_side=max_side, clock=clock)
-    common = {"margin": margin, "max_side": max_side, "clock": clock, "threshold": parsed.threshold, "labels": labels}
+    mcd = parsed.n is not None and parsed.rho is not None  # MCD holds the threshold (its scores' range is wider)
+    common = {"margin": margin, "max_side": max_side, "clock": clock, "labels": labels,
+              "threshold": None if mcd else parsed.threshold}
     rule: LHDMonitor
     if parsed.tau is not None:
         rule = CHMonitor(tau=parsed.tau, hierarchy=hierarchy, **common)
     else:
         rule = LHDMonitor(**common)
-    if parsed.n is None or parsed.rho is None:
+    if not mcd:
         return rule
-    return MCDMonitor(rule, n=parsed.n, rho=parsed.rho)
+    return MCDMonitor(rule, n=parsed.n, rho=parsed.rho, threshold=parsed.threshold)

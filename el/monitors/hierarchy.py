@@ -19,8 +19,8 @@ from importlib import resources
 from pathlib import Path
 
 import numpy as np
-import yaml
 
+from el import safeyaml
 from el.labels import UAVID, LabelSet
 
 HIERARCHY_FILE = "hierarchy.yaml"
@@ -151,7 +151,7 @@ class ClassHierarchy:
 
     @classmethod
     def _from_text(cls, text: str, source: str, *, labels: LabelSet = UAVID) -> ClassHierarchy:
-        data = yaml.safe_load(text)
+        data = safeyaml.safe_load(text)
         if not isinstance(data, dict) or "root" not in data or not isinstance(data.get("children"), dict):
             raise ValueError(f"{source}: a hierarchy needs 'root: NAME' and 'children: {{parent: [...]}}'")
         try:

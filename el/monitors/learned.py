@@ -314,6 +314,7 @@ class LearnedMonitor(LHDMonitor):
     """
 
     PARAMS: ClassVar[dict[str, Any]] = {"model": str}
+    SCORE_RANGE: ClassVar[tuple[float, float]] = (0.0, 1.0)  # a probability
 
     def __init__(self, *, model: str | None = None, threshold: float | None = None, labels: LabelSet = UAVID,
                  **common: Any) -> None:

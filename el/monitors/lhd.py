@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Hashable
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -110,6 +110,7 @@ class LHDMonitor(PatchMonitor):
     0.1111
     """
 
+    SCORE_RANGE: ClassVar[tuple[float, float]] = (-1.0, 1.0)  # fraction_score: a safe margin >= -1, a fraction <= 1
     #: The label set of the scores; a class default too, for subclasses that do not call this ``__init__``.
     labels: LabelSet = UAVID
 

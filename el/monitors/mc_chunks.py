@@ -21,6 +21,8 @@ from typing import Any
 
 import numpy as np
 
+from el.deadline import checkpoint
+
 MC_CHUNK = 32
 """Samples per batch: above the shipped configurations' n (10, 30), so their samples are unchanged."""
 
@@ -68,6 +70,7 @@ def mc_samples(segmenter: Any, rgb_patch: np.ndarray, n: int, keep_prob: float, 
     with torch.inference_mode():
         features = model.trunk(x)
         for a in range(0, n, chunk):
+            checkpoint("MC dropout")
             t = clock()
             b = min(n, a + chunk)
             sub = MCSpec([m[a:b] for m in spec.masks])

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Hashable
 from dataclasses import replace
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -81,10 +81,14 @@ class MCDMonitor(PatchMonitor):
     is the wrapped rule's (``el.monitors.lhd.fraction_score``) on ``S``.
     """
 
-    def __init__(self, rule: LHDMonitor, *, n: int, rho: float):
+    #: fraction_score of S = mean + k std (each in [0, 1 + k / 2]): a safe margin >= -(1 + k / 2), a fraction <= 1
+    SCORE_RANGE: ClassVar[tuple[float, float]] = (-(1.0 + MCD_SIGMAS / 2.0), 1.0)
+
+    def __init__(self, rule: LHDMonitor, *, n: int, rho: float, threshold: float | None = None):
         if not isinstance(rule, LHDMonitor):
             raise ValueError(f"MCD wraps an LHD or LHD+CH monitor, got {type(rule).__name__}")
-        super().__init__(margin=rule.margin, max_side=rule.max_side, clock=rule.clock, threshold=rule.threshold)
+        super().__init__(margin=rule.margin, max_side=rule.max_side, clock=rule.clock,
+                         threshold=rule.threshold if threshold is None else threshold)
         self.rule = rule
         self.labels = rule.labels  # the label set of the samples: the wrapped rule's
         self.n = validate_n(n)
@@ -93,7 +97,7 @@ class MCDMonitor(PatchMonitor):
 
     @property
     def spec(self) -> MonitorSpec:
-        return replace(self.rule.spec, n=self.n, rho=self.rho)
+        return replace(self.rule.spec, n=self.n, rho=self.rho, threshold=self.threshold)
 
     @property
     def feature_key(self) -> Hashable:

@@ -40,6 +40,7 @@ class SoftmaxScoreMonitor(LHDMonitor):
 
     KIND: ClassVar[str] = ""
     DEFAULT_THRESHOLD: ClassVar[float] = 1.0
+    SCORE_RANGE: ClassVar[tuple[float, float]] = (0.0, 2.0)  # uncertainty in [0, 1], 1 + a fraction above it
     PARAMS: ClassVar[dict[str, Any]] = {}
 
     @property

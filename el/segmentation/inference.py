@@ -45,6 +45,7 @@ import torch
 from torch import nn
 
 from el.camera import working_size
+from el.deadline import checkpoint
 from el.errors import WeightsError
 from el.labels import UAVID, LabelSet
 from el.rgb import check_rgb
@@ -66,6 +67,12 @@ def _check_finite(probs: np.ndarray, what: str) -> np.ndarray:
         bad = int((~np.isfinite(probs)).sum())
         raise ValueError(f"{what}: segmentation output has {bad} non-finite values (NaN or inf)")
     return probs
+
+
+def _checked(model: nn.Module, x: torch.Tensor, where: str) -> torch.Tensor:
+    """``model(x)`` after a checkpoint of the decision's deadline (``el.deadline``)."""
+    checkpoint(where)
+    return model(x)
 
 
 def _is_dropout(module: nn.Module) -> bool:
@@ -266,6 +273,7 @@ class Segmenter:
         _check_rgb(rgb, "frame at working resolution")
         total = None
         for scale in self.frame_scales:
+            checkpoint("segmentation")  # the decision's deadline, between the network's passes
             probs = self._frame_at_scale(rgb, scale)
             total = probs if total is None else total + probs
         if len(self.frame_scales) > 1:
@@ -331,6 +339,7 @@ class Segmenter:
         for i, p in enumerate(patches):
             groups.setdefault(p.shape[:2], []).append(i)
         for idx in groups.values():
+            checkpoint("patch segmentation")
             probs = self._predict([patches[i] for i in idx], "patches")
             for j, i in enumerate(idx):
                 out[i] = probs[j]
@@ -424,7 +433,7 @@ class Segmenter:
                     for m in drops:
                         m.p = p
                         m.train()
-                    logits = torch.cat([self.model(x) for _ in range(n)], dim=0)
+                    logits = torch.cat([_checked(self.model, x, "MC dropout") for _ in range(n)], dim=0)
             finally:
                 for m, old_p, training in saved:
                     m.p = old_p

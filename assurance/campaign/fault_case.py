@@ -1,0 +1,65 @@
+"""One fault-injection case and the scratch workspace it is injected into (``assurance.campaign.fault_injection``).
+
+The workspace (``build_workspace`` there): ``WS/data`` (two tiny synthetic test scenes), ``WS/tiny.pt`` (a
+tiny CNN's weights and card) and ``WS/run`` (a finished 2-image campaign on them). The helpers below name
+its parts, so the modules of cases agree on them.
+"""
+
+from __future__ import annotations
+
+import shutil
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+CliMain = Callable[[list[str]], int]  # ``assurance.cli.main``: argv -> exit code
+
+
+@dataclass(frozen=True)
+class Case:
+    """One fault: ``make(ws)`` injects it (into copies under the workspace) and returns the argv to run."""
+
+    id: str
+    injected: str
+    make: Callable[[Path], list[str]]
+    expected: int
+    expect_text: str = ""  # words the output must hold (e.g. the decision's reason)
+    pick: str = ""  # the output line holding this is the outcome (default: first stderr line)
+
+
+def campaign_argv(ws: Path, out: Path, *extra: str, data: Path | None = None, weights: Path | None = None
+                  ) -> list[str]:
+    """``uav-el campaign`` on the workspace's data (or ``data``) and tiny weights (or ``weights``), into ``out``."""
+    return ["campaign", "--data", str(data or ws / "data"), "--out", str(out), "--weights",
+            str(weights or ws / "tiny.pt"),
+            "--perturbations", "none", "--monitors", "lhd", "--images", "2", "--quiet", *extra]
+
+
+def first_image(ws: Path) -> Path:
+    """The workspace's first test image."""
+    return sorted((ws / "data").glob("*/Images/*.png"))[0]
+
+
+def copy_run(ws: Path, name: str) -> tuple[Path, list[Path]]:
+    """A copy of the workspace's finished run as ``WS/name``, and its shard folders."""
+    run = ws / name
+    shutil.copytree(ws / "run", run)
+    return run, sorted(p for p in (run / "shards").iterdir() if p.is_dir())
+
+
+def save_tiny_weights(path: Path, *, nan: bool = False) -> Path:
+    """A tiny randomly-initialised CNN (seed 0) and its card; ``nan``: every parameter NaN."""
+    import torch
+
+    from assurance.fitting.network.weights_io import save_weights
+    from el.segmentation.architectures import build_model
+    from el.segmentation.model import ArchConfig
+
+    torch.manual_seed(0)
+    model = build_model(ArchConfig(widths=(8, 8, 8), decoder_channels=8))
+    if nan:
+        with torch.no_grad():
+            for p in model.parameters():
+                p.fill_(float("nan"))
+    save_weights(model, path)
+    return path
