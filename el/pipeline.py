@@ -244,6 +244,8 @@ class EmergencyLanding:
         stage = "read"
         candidates: list[Candidate] = []
         try:
+            if budget.cancelled.is_set():  # stopped while it waited for the one before it: read nothing
+                raise BudgetExceeded("decision stopped before it started")
             t = self.clock()
             rgb = self._read(image, info)
             size = (rgb.shape[1], rgb.shape[0])

@@ -305,3 +305,24 @@ def test_workers_die_with_a_sigkilled_campaign(tmp_path):
         pytest.skip("Linux only")
     ws = build_workspace(tmp_path, main=main)
     assert killed_campaign_survivors(ws, ws / "killed") == []
+
+
+def test_a_campaign_records_the_exif_orientation_it_applied(tmp_path):
+    from PIL import Image
+
+    from assurance.scenes.uavid import write_labels
+    from el.labels import ids_to_colors
+
+    ids = scene_ids()
+    seq = tmp_path / "data" / "seq00"
+    (seq / "Images").mkdir(parents=True)
+    exif = Image.Exif()
+    exif[0x0112] = 3  # stored upside down
+    Image.fromarray(ids_to_colors(ids)[::-1, ::-1]).save(seq / "Images" / "000000.jpg", quality=98,
+                                                       exif=exif.tobytes())
+    write_labels(seq / "Labels" / "000000.png", ids)
+    config = CampaignConfig(perturbations=("none",), monitors=("lhd",), core=CoreConfig(working_width=WW))
+    s = run_campaign(tmp_path / "data", tmp_path / "run", config, progress=False, segmenter=OracleSegmenter(WW))
+    assert s["faults"] == []
+    images = readouts.load_table(tmp_path / "run", "images")
+    assert images["exif_orientation"].tolist() == [3] and images["candidates"].iloc[0] > 0

@@ -37,12 +37,13 @@ from assurance.campaign.perturbations import PERTURBATIONS, perturb, severities_
 from assurance.campaign.truth import true_hazard
 from assurance.campaign.workers import bounded_jobs, die_with_parent
 from assurance.scenes.poses import NOMINAL, check_policy, frame_pose
-from assurance.scenes.uavid import Sample, iter_samples, read_image, read_labels
+from assurance.scenes.uavid import Sample, iter_samples, read_labels
 from el.camera import check_geometry
 from el.config import CoreConfig, check_seed
 from el.core import run_core
 from el.decision import Candidate
 from el.errors import DataError
+from el.imageio import read_image_meta
 from el.monitors import DEMO_GRID, build_monitor, parse_monitor_spec
 from el.monitors.spec import walk_of
 from el.segmentation.contract import labels_of
@@ -139,7 +140,7 @@ def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Calla
     timings: dict[str, float] = {}
     t0 = clock()
     try:
-        rgb, timings["read_s"] = _timed(clock, read_image, s.image_path)
+        (rgb, meta), timings["read_s"] = _timed(clock, read_image_meta, s.image_path)  # meta: EXIF orientation
         frame_cfg, pose_cols = frame_config(config, s, (rgb.shape[1], rgb.shape[0]))
         if s.label_path is None:
             raise DataError(f"{s.image_path}: no label map (the campaign needs ground truth)")
@@ -193,7 +194,7 @@ def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Calla
             "clearance_decision_m": clearance[sel] if sel is not None else float("nan"),
             "overhead_s": float(outcome.overhead_s),
             "default_x": core.default_area.x, "default_y": core.default_area.y,
-            "default_r": core.default_area.radius_px, "width": W, "height": H, **pose_cols,
+            "default_r": core.default_area.radius_px, "width": W, "height": H, **pose_cols, **meta,
             **timings,
             "total_s": clock() - t0,
         })
