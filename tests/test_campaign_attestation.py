@@ -73,3 +73,54 @@ def test_an_unsigned_run_or_another_key_is_refused(signed, tmp_path):
     assert "none of them a trusted key" in check_run_attestation(run, {other.keyid: other.public}).problems[0]
     (run / ATTESTATION).unlink()
     assert "no signed attestation" in check_run_attestation(run, {other.keyid: other.public}).problems[0]
+
+
+# ------------------------------------------------------------------------------------------------
+# At the command line: the evidence step refuses what was not signed by a trusted key
+# ------------------------------------------------------------------------------------------------
+def _evidence(run, out, *extra):
+    from assurance import cli
+
+    return cli.main(["evidence", "--run", str(run), "--out", str(out), "--no-pdf", "--boot", "50", *map(str, extra)])
+
+
+def test_a_fabricated_run_is_refused_with_one_line(tiny_campaign, tmp_path, capsys):
+    """One real shard copied under many new task names and the shard index deleted: exit 4, the file named."""
+    run = tmp_path / "run"
+    shutil.copytree(tiny_campaign["run"], run)
+    first = sorted((run / "shards").iterdir())[0]
+    for i in range(20):
+        shutil.copytree(first, run / "shards" / f"none-s3__seq00_{900000 + i}")
+    (run / "shards.json").unlink()
+    assert _evidence(run, tmp_path / "rep") == 4
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "not the campaign that was signed" in err[0] and "not in the signed statement" in err[0]
+
+
+def test_the_evidence_names_the_signer_and_refuses_other_keys(tiny_campaign, tmp_path, capsys):
+    from assurance.attest.keys import load_signing_key, public_pem
+
+    run = tmp_path / "run"
+    shutil.copytree(tiny_campaign["run"], run)
+    mine = tmp_path / "mine.pem"
+    mine.write_text(public_pem(load_signing_key().public))
+    assert _evidence(run, tmp_path / "rep", "--trusted-keys", mine) in (0, 1)
+    doc = json.loads((tmp_path / "rep" / "evidence.json").read_text())
+    assert doc["identity"]["campaign_signed_by"] == load_signing_key().keyid
+    assert load_signing_key().keyid in (tmp_path / "rep" / "evidence.html").read_text()
+    other = create_key(tmp_path / "other.pem")
+    theirs = tmp_path / "theirs.pem"
+    theirs.write_text(public_pem(other.public))
+    capsys.readouterr()
+    assert _evidence(run, tmp_path / "rep2", "--trusted-keys", theirs) == 4
+    assert "none of them a trusted key" in capsys.readouterr().err
+
+
+def test_uav_el_keys_prints_the_fingerprint_and_writes_the_public_key(tmp_path, capsys):
+    from assurance import cli
+    from assurance.attest.keys import load_signing_key, load_trusted_keys
+
+    assert cli.main(["keys", "--public", "--out", str(tmp_path / "pub.pem")]) == 0
+    out = capsys.readouterr().out
+    assert load_signing_key().keyid in out and "BEGIN PUBLIC KEY" in out
+    assert set(load_trusted_keys(tmp_path / "pub.pem")) == {load_signing_key().keyid}

@@ -66,6 +66,15 @@ def sign_run(run_dir: str | Path, key: SigningKey, summary: Mapping[str, Any] | 
     return path
 
 
+class UnattestedRunError(readouts.DamagedRunError):
+    """A run whose signed statement is missing, untrusted, or does not match its files (exit 4)."""
+
+    def __init__(self, run_dir: str | Path, problems: list[str]) -> None:
+        self.run_dir, self.problems = Path(run_dir), list(problems)
+        shown = "; ".join(problems[:3]) + (f"; ... {len(problems) - 3} more" if len(problems) > 3 else "")
+        readouts.RunError.__init__(self, f"{run_dir}: not the campaign that was signed: {shown}")
+
+
 @dataclass
 class RunAttestation:
     """What ``check_run_attestation`` found: the signer, the signed predicate, and one line per problem."""

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from assurance.campaign import readouts
+from assurance.campaign.attestation import sign_run
 from assurance.campaign.judging import _timed, judge_candidates
 from assurance.campaign.manifest import (  # noqa: F401  (re-exported)
     check_monitor_networks,
@@ -292,6 +293,7 @@ def run_campaign(
     segmenter: Any = None,
     records: Sequence[Any] = (),
     system: Any = None,
+    signing_key: Any = None,
 ) -> dict[str, Any]:
     """Run (or resume) a campaign; returns a summary {tasks, done, skipped, faults, missing, repaired, seconds}.
 
@@ -306,6 +308,10 @@ def run_campaign(
     ``RUN/damaged/`` and run again (``summary["repaired"]`` says which and why). The run's manifest
     must match the config (a different campaign in the same folder is an error). Nothing is
     written before the configuration, the data and the weights have been checked.
+
+    Every invocation ends by signing the run as it stands (``RUN/campaign.dsse.json``,
+    ``assurance.campaign.attestation``) with ``signing_key`` (an ``assurance.attest.keys.SigningKey``; None: the
+    user's key, ``load_signing_key``, created on first use; False: not signed).
     """
     run_dir = Path(run_dir)
     if run_dir.exists() and not run_dir.is_dir():
@@ -319,6 +325,7 @@ def run_campaign(
 
         model = load_model_spec(config.weights)
     network = segmenter if segmenter is not None else model
+    signing_key = _signing_key(signing_key, run_dir)  # refused (no key, or one inside the run) before anything runs
     check_monitor_networks(config.monitors, network)
     for record in records:
         record.check_network(network)
@@ -349,7 +356,18 @@ def run_campaign(
                "faults": [f"{r['shard']}: {r['fault']}" for r in faults], "missing": missing,
                "repaired": repaired, "seconds": time.perf_counter() - t0}
     readouts.append_log(run_dir, summary)
+    if signing_key:
+        summary["attestation"] = str(sign_run(run_dir, signing_key, summary))
     return summary
+
+
+def _signing_key(given: Any, run_dir: Path) -> Any:
+    """The key that signs the run: ``given``, or the user's (created on first use); False: none."""
+    if given is not None:
+        return given
+    from assurance.attest.keys import load_signing_key
+
+    return load_signing_key(outside=run_dir)
 
 
 def _set_aside_damaged(run_dir: Path, tasks: Sequence[Task]) -> list[str]:
