@@ -199,6 +199,10 @@ def tiny_run_without(tiny_campaign, tmp_path_factory):
         man = json.loads((run / "manifest.json").read_text())
         man["config"]["perturbations"] = [p for p in man["config"]["perturbations"] if p != perturbation]
         (run / "manifest.json").write_text(json.dumps(man, indent=2, sort_keys=True))
+        from assurance.attest.keys import load_signing_key
+        from assurance.campaign.attestation import sign_run
+
+        sign_run(run, load_signing_key())  # as the campaign would have signed it
         made[perturbation] = run
         return run
 
@@ -259,3 +263,19 @@ def _restore_thread_counts():
         torch.set_num_threads(torch_threads)
     if cv2.getNumThreads() != cv2_threads:
         cv2.setNumThreads(cv2_threads)
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _private_key_home(tmp_path_factory):
+    """Signing keys: the suite never reads or writes the user's key file (``assurance.attest.keys``); each
+    session has a fresh key home, put back when it ends (``uav-el verify`` signs after its in-process session)."""
+    saved = {k: os.environ.get(k) for k in ("XDG_CONFIG_HOME", "UAV_EL_SIGNING_KEY", "UAV_EL_TRUSTED_KEYS")}
+    os.environ["XDG_CONFIG_HOME"] = str(tmp_path_factory.mktemp("key_home"))
+    os.environ.pop("UAV_EL_SIGNING_KEY", None)
+    os.environ.pop("UAV_EL_TRUSTED_KEYS", None)
+    yield
+    for k, v in saved.items():
+        if v is None:
+            os.environ.pop(k, None)
+        else:
+            os.environ[k] = v

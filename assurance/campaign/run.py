@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from assurance.campaign import readouts
+from assurance.campaign.attestation import sign_run
 from assurance.campaign.faults import config_faults
 from assurance.campaign.judging import _timed, judge_candidates
 from assurance.campaign.manifest import (  # noqa: F401  (re-exported)
@@ -302,6 +303,7 @@ def run_campaign(
     segmenter: Any = None,
     records: Sequence[Any] = (),
     system: Any = None,
+    signing_key: Any = None,
 ) -> dict[str, Any]:
     """Run (or resume) a campaign; returns a summary {tasks, done, skipped, faults, config_faults, missing, repaired,
     seconds} (``config_faults``: the faults that are not the data's, ``assurance.campaign.faults``).
@@ -317,6 +319,10 @@ def run_campaign(
     ``RUN/damaged/`` and run again (``summary["repaired"]`` says which and why). The run's manifest
     must match the config (a different campaign in the same folder is an error). Nothing is
     written before the configuration, the data and the weights have been checked.
+
+    Every invocation ends by signing the run as it stands (``RUN/campaign.dsse.json``,
+    ``assurance.campaign.attestation``) with ``signing_key`` (an ``assurance.attest.keys.SigningKey``; None: the
+    user's key, ``load_signing_key``, created on first use; False: not signed).
     """
     run_dir = Path(run_dir)
     if run_dir.exists() and not run_dir.is_dir():
@@ -330,6 +336,7 @@ def run_campaign(
 
         model = load_model_spec(config.weights)
     network = segmenter if segmenter is not None else model
+    signing_key = _signing_key(signing_key, run_dir)  # refused (no key, or one inside the run) before anything runs
     check_monitor_networks(config.monitors, network)
     for record in records:
         record.check_network(network)
@@ -356,14 +363,29 @@ def run_campaign(
             readouts.record_shards(run_dir, {res["shard"]: res["hashes"]})
         if on_result:
             on_result(res)
-    faults = [r for r in results if r["fault"]]
-    missing = [t.shard_name for t in todo if not readouts.shard_done(run_dir, t.shard_name)]
-    summary = {"tasks": len(tasks), "done": len(results), "skipped": len(tasks) - len(todo),
-               "faults": [f"{r['shard']}: {r['fault']}" for r in faults], "missing": missing,
-               "config_faults": config_faults([f"{r['shard']}: {r['fault']}" for r in faults]),
-               "repaired": repaired, "seconds": time.perf_counter() - t0}
+    summary = _summary(run_dir, tasks, todo, results, repaired, time.perf_counter() - t0)
     readouts.append_log(run_dir, summary)
+    if signing_key:
+        summary["attestation"] = str(sign_run(run_dir, signing_key, summary))
     return summary
+
+
+def _summary(run_dir: Path, tasks: Sequence[Task], todo: Sequence[Task], results: Sequence[dict[str, Any]],
+             repaired: list[str], seconds: float) -> dict[str, Any]:
+    """What a campaign invocation did (``run_campaign``'s return value, a line of ``RUN/log.jsonl``)."""
+    faults = [f"{r['shard']}: {r['fault']}" for r in results if r["fault"]]
+    return {"tasks": len(tasks), "done": len(results), "skipped": len(tasks) - len(todo), "faults": faults,
+            "missing": [t.shard_name for t in todo if not readouts.shard_done(run_dir, t.shard_name)],
+            "config_faults": config_faults(faults), "repaired": repaired, "seconds": seconds}
+
+
+def _signing_key(given: Any, run_dir: Path) -> Any:
+    """The key that signs the run: ``given``, or the user's (created on first use); False: none."""
+    if given is not None:
+        return given
+    from assurance.attest.keys import load_signing_key
+
+    return load_signing_key(outside=run_dir)
 
 
 def _set_aside_damaged(run_dir: Path, tasks: Sequence[Task]) -> list[str]:

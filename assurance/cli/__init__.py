@@ -40,6 +40,7 @@ COMMANDS: dict[str, str] = {
     "sweep": "sweep",
     "evidence": "evidence",
     "fault-table": "fault_table",
+    "keys": "keys",
 }
 
 
@@ -56,7 +57,8 @@ EXIT_CODES: dict[int, str] = {
     EXIT_BAD_INPUT: "bad input or options (one line naming the file and the problem); campaign: tasks faulted for "
                     "a configuration reason, not their data",
     EXIT_FLIGHT_FAULT: "land: a fault in the flight path; the default action was taken",
-    EXIT_DAMAGED_RUN: "damaged run: a shard altered, truncated or missing (its readouts fail verification)",
+    EXIT_DAMAGED_RUN: "damaged run: a shard altered, truncated or missing (its readouts fail verification), or a "
+                      "run whose signed statement is missing, untrusted or does not match its files",
     EXIT_INTERNAL: "internal error (a bug; UAV_EL_DEBUG=1 shows the traceback)",
     130: "interrupted",
 }

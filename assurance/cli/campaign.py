@@ -41,6 +41,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--backend", choices=("loky", "dask"), default="loky", help="parallel backend (default loky)")
     p.add_argument("--scheduler", help="address of a running dask.distributed scheduler (with --backend dask)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--signing-key", metavar="PEM", help="Ed25519 key that signs the run (default: $UAV_EL_SIGNING_KEY, "
+                   "else your key file, created on first use; see uav-el keys)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -77,9 +79,17 @@ def run(args: argparse.Namespace) -> int:
         images=args.images, weights=model_spec(args), seed=args.seed,
         poses=args.poses or system_build.poses_policy(system),
     )
+    from assurance.attest import AttestationError
+    from assurance.attest.keys import load_signing_key
+    try:
+        key = load_signing_key(args.signing_key, outside=args.out)
+    except AttestationError as exc:
+        raise CommandError(str(exc)) from None
     summary = run_campaign(data, args.out, config, jobs=args.jobs, backend=args.backend,
-                           scheduler=args.scheduler, progress=not args.quiet, records=cards, system=system)
+                           scheduler=args.scheduler, progress=not args.quiet, records=cards, system=system,
+                           signing_key=key)
     print(describe(summary))
+    print(f"signed: {summary['attestation']} (key {key.keyid[:16]}, {key.source})")
     print(f"readouts in {args.out}; results table: uav-el table {args.out}")
     if summary.get("config_faults"):  # every such task measured nothing: fail loud (exit 2)
         raise CommandError(config_fault_line(summary["config_faults"]))

@@ -30,6 +30,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--strict", action="store_true",
                    help="also exit 1 when a requirement is not verified or the PDF cannot be written")
     p.add_argument("--no-pdf", action="store_true", help="write the HTML and JSON only")
+    p.add_argument("--trusted-keys", metavar="PEM|DIR",
+                   help="public keys whose signatures are accepted (a PEM file, or a folder of *.pem/*.pub); default: "
+                        "$UAV_EL_TRUSTED_KEYS, else the local signing key's own (uav-el keys)")
     p.add_argument("--boot", type=int, default=2000, help="bootstrap resamples of the results table (default 2000)")
 
 
@@ -46,13 +49,20 @@ def run(args: argparse.Namespace) -> int:
             raise CommandError(f"{flag} {value}: not a campaign run (no manifest.json)")
     if args.boot < 1:
         raise CommandError("--boot must be >= 1")
+    from assurance.attest import AttestationError
+    from assurance.attest.keys import load_trusted_keys
+
+    try:
+        trusted = load_trusted_keys(args.trusted_keys)
+    except AttestationError as exc:
+        raise CommandError(f"{exc}; an auditor gives the signer's public key with --trusted-keys") from None
     try:
         targets = read_targets_file(args.targets) if args.targets else None
         report = generate(args.run, args.out, requirements=args.requirements, baseline=args.baseline,
                           baseline_requirements=args.baseline_requirements, registry=args.registry,
                           targets=targets, targets_source=str(Path(args.targets).resolve()) if args.targets else None,
                           strict=args.strict, pdf=not args.no_pdf, n_boot=args.boot, waivers=args.waivers,
-                          system=system_of(args))
+                          system=system_of(args), trusted=trusted)
     except DamagedRunError:
         raise  # exit 4: the run's readouts fail verification
     except (RegistryError, RunError, ValueError) as exc:

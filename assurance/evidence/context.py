@@ -50,6 +50,7 @@ class Inputs:
     warnings: list[str]
     problems: list[str]
     system: Any = None  # the system file assessed (assurance.system.SystemFile)
+    attestation: Any = None  # the run's verified signed statement (assurance.campaign.attestation.RunAttestation)
 
     @property
     def deployed(self) -> str:
@@ -60,9 +61,11 @@ class Inputs:
 def read_inputs(run: Path, out: Path, *, requirements: str | Path | None, baseline: str | Path | None,
                 registry: str | Path | rq.Registry | None, n_boot: int, templates: str | Path | None,
                 system: Any = None, targets: Mapping[str, Any] | None = None,
-                targets_source: str | None = None) -> Inputs:
+                targets_source: str | None = None, trusted: Mapping[str, Any] | None = None) -> Inputs:
     """Read and verify the run (and the baseline's shards), write ``results.csv``, read the requirement results
-    and run the report's checks; a damaged run raises ``readouts.DamagedRunError``."""
+    and run the report's checks; a damaged run raises ``readouts.DamagedRunError``. With ``trusted`` keys, the
+    run's signed statement must verify against one of them and match the files
+    (``UnattestedRunError`` naming what does not)."""
     templates = Path(templates) if templates else TEMPLATES_DIR
     if not templates.is_dir():
         raise FileNotFoundError(f"{templates}: report template folder not found")
@@ -71,6 +74,13 @@ def read_inputs(run: Path, out: Path, *, requirements: str | Path | None, baseli
         targets, source=targets_source)
     man = readouts.read_manifest(run)
     check = verify_run(run).raise_if_damaged()
+    attestation = None
+    if trusted is not None:
+        from assurance.campaign.attestation import UnattestedRunError, check_run_attestation
+
+        attestation = check_run_attestation(run, trusted)
+        if not attestation.ok:
+            raise UnattestedRunError(run, attestation.problems)
     if check.legacy:
         warnings.append(f"{run}: written before shard hashes: its readouts cannot be verified")
     if baseline:
@@ -95,7 +105,7 @@ def read_inputs(run: Path, out: Path, *, requirements: str | Path | None, baseli
     if deployed not in man["config"]["monitors"]:
         warnings.append(f"the deployed monitor {deployed!r} (registry) was not evaluated by this campaign")
     return Inputs(run, out, templates, reg, man, check, images, candidates, table, csv_path, req_path, results,
-                  req_doc, checks, warnings, problems, system)
+                  req_doc, checks, warnings, problems, system, attestation)
 
 
 def system_problems(system: Any, man: dict[str, Any], req_doc: dict[str, Any] | None, run: Path) -> list[str]:
@@ -150,6 +160,17 @@ def _plots(inp: Inputs) -> list[dict[str, str]]:
     return plots
 
 
+def signature_row(attestation: Any) -> dict[str, str]:
+    """The identity row of the run's signature: the signer's key fingerprint, or why there is none."""
+    if attestation is None:
+        return {"item": "Campaign signature", "value": "not checked (report written without trusted keys)",
+                "sha256": "", "note": "uav-el evidence checks it against --trusted-keys"}
+    return {"item": "Campaign signature", "value": f"in-toto statement over the task list and every shard, "
+                                                   f"verified ({attestation.path.name})",
+            "sha256": attestation.keyid or "", "note": "the SHA-256 of the signer's Ed25519 public key "
+                                                       "(its fingerprint: uav-el keys)"}
+
+
 def campaign_context(inp: Inputs) -> dict[str, Any]:
     """The run's part of the context: identity, operating domain, pictures, plots, results and limitations."""
     from assurance.campaign.perturbations import PAPER_PERTURBATIONS
@@ -158,6 +179,8 @@ def campaign_context(inp: Inputs) -> dict[str, Any]:
     man, images, candidates, reg = inp.manifest, inp.images, inp.candidates, inp.registry
     identity_rows, ident = identity(inp.run, man, reg, inp.req_path, inp.req_doc, inp.csv_path, inp.templates,
                                     inp.check)
+    identity_rows.insert(0, signature_row(inp.attestation))
+    ident["campaign_signed_by"] = inp.attestation.keyid if inp.attestation is not None else None
     scenes = Scenes(man["data"]["path"], man["config"]["seed"])
     if scenes.error:
         inp.warnings.append(scenes.error)

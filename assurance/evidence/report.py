@@ -87,6 +87,7 @@ def generate(
     n_boot: int = 2000,
     templates: str | Path | None = None,
     system: Any = None,
+    trusted: Mapping[str, Any] | None = None,
 ) -> EvidenceReport:
     """Write the evidence report of ``run`` into ``out`` and return what the gate says.
 
@@ -97,6 +98,8 @@ def generate(
     requirement results about another system file fail the gate. ``registry``: a path, or a loaded ``Registry``
     (with its targets); ``targets``: overrides of its parameters (``Registry.with_targets``, from
     ``targets_source``); the requirement results must have been judged on the same effective targets.
+    ``trusted``: public keys by keyid (``assurance.attest.keys.load_trusted_keys``); with them the run's signed
+    statement must verify (``UnattestedRunError`` otherwise); without, the report says the signature was not checked.
     """
     run, out = Path(run), Path(out)
     if system is not None:
@@ -107,7 +110,8 @@ def generate(
         if targets is None:  # the system file's [targets] (and R, beta, deployed monitor) judge the requirements
             targets, targets_source = system_build.targets(system), targets_source or f"{system.label} [targets]"
     inp = read_inputs(run, out, requirements=requirements, baseline=baseline, registry=registry, n_boot=n_boot,
-                      templates=templates, system=system, targets=targets, targets_source=targets_source)
+                      templates=templates, system=system, targets=targets, targets_source=targets_source,
+                      trusted=trusted)
     campaign = campaign_context(inp)
     gate = decide_gate(inp.results, inp.problems, waivers, strict)
     base = (baseline_view(Path(baseline), inp.manifest, campaign["ident"], inp.table, inp.results, inp.registry,

@@ -1,0 +1,106 @@
+"""The campaign's signed statement: every task of the run, every shard file and the manifest, by SHA-256.
+
+``sign_run`` writes ``RUN/campaign.dsse.json`` (an in-toto statement in a DSSE envelope) when a campaign
+invocation ends; a resumed campaign signs again over what it then holds. ``check_run_attestation`` verifies
+it against trusted keys and recomputes every subject from the files, so a shard copied in, removed or
+edited (and re-hashed in its own SHA256SUMS) after signing, a manifest edited, or a task list that is not
+the manifest's, is named.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from assurance.attest import AttestationError
+from assurance.attest.dsse import read_envelope, write_envelope
+from assurance.attest.keys import SigningKey
+from assurance.attest.statement import make_statement, open_statement, sign_statement, subject_problems
+from assurance.campaign import readouts
+from el.hashing import sha256_file
+
+ATTESTATION = "campaign.dsse.json"
+KIND = "campaign"
+MANIFEST = "manifest.json"
+
+
+def run_subjects(run_dir: str | Path) -> dict[str, str]:
+    """What a campaign statement covers, hashed from the files now: the manifest and every shard's data files."""
+    run = Path(run_dir)
+    out = {MANIFEST: sha256_file(run / MANIFEST)} if (run / MANIFEST).is_file() else {}
+    for shard in readouts.shard_dirs(run):
+        for f in sorted(p for p in shard.iterdir() if p.is_file()):
+            if f.name != readouts.SUMS:  # the sums are a shard's own claim; the statement signs the files
+                out[f"{readouts.SHARDS}/{shard.name}/{f.name}"] = sha256_file(f)
+    return out
+
+
+def _predicate(run: Path, man: Mapping[str, Any], summary: Mapping[str, Any] | None) -> dict[str, Any]:
+    from assurance.campaign.integrity import verify_run
+
+    check = verify_run(run)
+    order = list(man.get("shard_order") or [])
+    done = {p.name for p in readouts.shard_dirs(run)}
+    return {
+        "tasks": order,
+        "missing": [n for n in order if n not in done],
+        "run_digest": check.digest,
+        "faults": len((summary or {}).get("faults") or []),
+        "model_sha256": (man.get("weights") or {}).get("sha256"),
+        "monitor_models": man.get("monitor_models") or {},
+        "data_sha256": (man.get("data") or {}).get("sha256"),
+        "system_sha256": (man.get("system") or {}).get("sha256"),
+        "code": man.get("code") or {},
+    }
+
+
+def sign_run(run_dir: str | Path, key: SigningKey, summary: Mapping[str, Any] | None = None) -> Path:
+    """Sign the run as it stands (see the module docstring); returns the attestation's path."""
+    run = Path(run_dir)
+    man = readouts.read_manifest(run)
+    stmt = make_statement(run_subjects(run), KIND, _predicate(run, man, summary))
+    path = run / ATTESTATION
+    write_envelope(path, sign_statement(stmt, key))
+    return path
+
+
+class UnattestedRunError(readouts.DamagedRunError):
+    """A run whose signed statement is missing, untrusted, or does not match its files (exit 4)."""
+
+    def __init__(self, run_dir: str | Path, problems: list[str]) -> None:
+        self.run_dir, self.problems = Path(run_dir), list(problems)
+        shown = "; ".join(problems[:3]) + (f"; ... {len(problems) - 3} more" if len(problems) > 3 else "")
+        readouts.RunError.__init__(self, f"{run_dir}: not the campaign that was signed: {shown}")
+
+
+@dataclass
+class RunAttestation:
+    """What ``check_run_attestation`` found: the signer, the signed predicate, and one line per problem."""
+
+    path: Path
+    keyid: str | None = None
+    predicate: dict[str, Any] = field(default_factory=dict)
+    problems: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return not self.problems
+
+
+def check_run_attestation(run_dir: str | Path, trusted: Mapping[str, Any]) -> RunAttestation:
+    """Verify the run's signed statement against ``trusted`` keys and the files as they are now."""
+    run = Path(run_dir)
+    out = RunAttestation(run / ATTESTATION)
+    try:
+        stmt, out.keyid = open_statement(read_envelope(out.path), trusted, KIND, where=str(out.path))
+    except AttestationError as exc:
+        out.problems.append(str(exc))
+        return out
+    out.predicate = stmt["predicate"]
+    out.problems += [f"{run}: {p}" for p in subject_problems(stmt, run_subjects(run))]
+    man = readouts.read_manifest(run)
+    if list(out.predicate.get("tasks") or []) != list(man.get("shard_order") or []):
+        out.problems.append(f"{out.path}: the signed task list is not the manifest's")
+    return out

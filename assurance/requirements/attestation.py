@@ -1,0 +1,69 @@
+"""The requirement results' signed statement: what ``uav-el verify`` produced, bound to the run it judged.
+
+``sign_results`` writes ``requirements.dsse.json`` beside ``requirements.json``: an in-toto statement whose
+subjects are the results JSON and the JUnit XML, and whose predicate pins the run's digest, the campaign's
+signed statement, the registry, the effective targets, the waivers file and the system file. Results written
+any other way carry no such statement, or one that does not match them, and are not evidence
+(``check_results_attestation`` says why, one line each).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from assurance.attest import AttestationError
+from assurance.attest.dsse import read_envelope, write_envelope
+from assurance.attest.keys import SigningKey
+from assurance.attest.statement import make_statement, open_statement, sign_statement, subject_problems
+from el.hashing import sha256_file
+
+KIND = "requirements"
+ATTESTATION = "requirements.dsse.json"
+PINNED = ("run_digest", "campaign_attestation_sha256", "registry_sha256", "parameters_sha256", "waivers_sha256",
+          "system_sha256")
+"""What the statement pins and the report compares with what it was given."""
+
+
+def attestation_path(results: str | Path) -> Path:
+    """Where the statement of a results file lies: ``requirements.dsse.json`` in the same folder."""
+    return Path(results).with_name(ATTESTATION)
+
+
+def _subjects(results: Path, junit: Path | None) -> dict[str, str]:
+    out = {results.name: sha256_file(results)}
+    if junit is not None and junit.is_file():
+        out[junit.name] = sha256_file(junit)
+    return out
+
+
+def sign_results(results: str | Path, key: SigningKey, pins: Mapping[str, Any], *,
+                 junit: str | Path | None = None) -> Path:
+    """Sign a results file (and its JUnit XML) with what it was judged on (``pins``: the keys of ``PINNED`` and
+    any others worth stating, e.g. the code identity and the counts of tests collected and run)."""
+    results = Path(results)
+    stmt = make_statement(_subjects(results, Path(junit) if junit else None), KIND, dict(pins))
+    path = attestation_path(results)
+    write_envelope(path, sign_statement(stmt, key))
+    return path
+
+
+def check_results_attestation(results: str | Path, trusted: Mapping[str, Any], expected: Mapping[str, Any], *,
+                              junit: str | Path | None = None) -> tuple[dict[str, Any], list[str]]:
+    """(the signed predicate, problems): the statement must verify against ``trusted`` keys, sign the results
+    file as it is now, and pin the same values as ``expected`` for every ``PINNED`` key given there."""
+    results = Path(results)
+    path = attestation_path(results)
+    try:
+        stmt, keyid = open_statement(read_envelope(path), trusted, KIND, where=str(path))
+    except AttestationError as exc:
+        return {}, [f"{exc}: requirement results are evidence only as `uav-el verify` wrote and signed them"]
+    problems = [f"{results.parent}: {p}" for p in subject_problems(stmt, _subjects(results, Path(junit) if junit
+                                                                                else None))]
+    pred = dict(stmt["predicate"], signed_by=keyid)
+    for name in PINNED:
+        if name in expected and pred.get(name) != expected[name]:
+            problems.append(f"{path}: signed with {name} {str(pred.get(name))[:16]}, this report has "
+                            f"{str(expected[name])[:16]}")
+    return pred, problems
