@@ -345,6 +345,8 @@ def load_label_set(source: str | Path) -> LabelSet:
             return UAVID
         p = PRESET_DIR / f"{source}.yaml"
     try:
+        if p.stat().st_size > safeyaml.MAX_YAML_BYTES:  # refused before it is read
+            raise ValueError(f"{p}: label set file over {safeyaml.MAX_YAML_BYTES} bytes")
         text = p.read_text(encoding="utf-8")
     except OSError as err:
         raise ValueError(f"{p}: cannot read label set ({err.strerror or err})") from None

@@ -183,7 +183,7 @@ class Monitor(ABC):
     def __init__(self, *, threshold: float | None = None) -> None:
         self.threshold = check_threshold_range(
             validate_threshold(self.DEFAULT_THRESHOLD if threshold is None else threshold), self.SCORE_RANGE,
-            type(self).__name__)
+            f"monitor {type(self).__name__}")
 
     @property
     @abstractmethod
