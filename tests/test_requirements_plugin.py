@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import xml.etree.ElementTree as ET
-from pathlib import Path
 
 import hypothesis  # noqa: F401  # imported once here: pytester's in-process runs would re-import it every time
 import pytest
@@ -13,10 +12,11 @@ import yaml
 
 from assurance import requirements as rq
 from assurance.campaign.perturbations import PAPER_PERTURBATIONS
+from assurance.requirements.suite import SUITE_DIR
 
 pytest_plugins = ["pytester"]
 
-CAMPAIGN_TESTS = Path(__file__).resolve().parent / "requirements" / "test_campaign_requirements.py"
+CAMPAIGN_TESTS = SUITE_DIR / "test_campaign_requirements.py"
 
 SAMPLE = """
 import pytest
@@ -333,7 +333,7 @@ def test_a_bad_targets_file_is_a_usage_error(pytester, tmp_path, content, messag
 
 
 # ------------------------------------------------------------------------------------------------
-# The campaign requirement tests on tiny runs (the real tests/requirements file, run by pytester)
+# The campaign requirement tests on tiny runs (the packaged suite, run by pytester)
 # ------------------------------------------------------------------------------------------------
 def _campaign_report(pytester, run, *args):
     out = pytester.path / "campaign.json"

@@ -37,13 +37,14 @@ COMMANDS: dict[str, str] = {
     "fit-ood": "fit_ood",
     "table": "table",
     "sweep": "sweep",
+    "verify": "verify",
     "evidence": "evidence",
     "fault-table": "fault_table",
 }
 
 
 # Commands that decide, evaluate or report: they take --system FILE (else ./uav-el.toml, else the embedded default).
-SYSTEM_COMMANDS = ("land", "campaign", "calibrate", "fit-monitor", "fit-ood", "evidence")
+SYSTEM_COMMANDS = ("land", "campaign", "calibrate", "fit-monitor", "fit-ood", "verify", "evidence")
 SYSTEM_HELP = ("the system under assessment (uav-el.toml: model, camera, poses, labels, safety, monitor, data, "
                "targets, waivers, report); default: ./uav-el.toml if present, else the embedded default (the "
                "shipped system); options given here win over the file")

@@ -17,7 +17,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--run", required=True, help="campaign run folder (uav-el campaign --out)")
     p.add_argument("--out", default="reports", help="output folder (default: reports/)")
     p.add_argument("--requirements", metavar="JSON",
-                   help="requirement results of `pytest -m requirements --uav-el-run RUN` (default: "
+                   help="requirement results of `uav-el verify RUN --out OUT` (default: "
                         "OUT/requirements.json if present; without one every requirement is 'not verified')")
     p.add_argument("--baseline", metavar="RUN0", help="an earlier run: adds a 'what changed' section")
     p.add_argument("--baseline-requirements", metavar="JSON", help="the baseline's requirement results")
