@@ -43,11 +43,12 @@ def test_a_logged_fault_is_one_line_unless_verbose():
 def test_warnings_show_by_default_and_q_hides_them(tmp_path):
     script = ("import logging, sys; from assurance import cli; "
               "args = cli.build_parser().parse_args(sys.argv[1:]); cli.configure_logging(args); "
-              "logging.getLogger('assurance.x').warning('careful'); logging.getLogger('assurance.x').info('detail')")
+              "logging.getLogger('assurance.x').warning('careful'); logging.getLogger('assurance.x').info('detail'); "
+              "logging.getLogger('weasyprint').warning('font')")  # a PDF library's font notes: only with -v
     run = [sys.executable, "-c", script]
     out = subprocess.run([*run, "table", "RUN"], capture_output=True, text=True, timeout=120)
     assert out.stderr.strip() == "WARNING assurance.x: careful"
     out = subprocess.run([*run, "table", "RUN", "-q"], capture_output=True, text=True, timeout=120)
     assert out.stderr.strip() == ""
     out = subprocess.run([*run, "-v", "table", "RUN"], capture_output=True, text=True, timeout=120)
-    assert "INFO assurance.x: detail" in out.stderr
+    assert "INFO assurance.x: detail" in out.stderr and "weasyprint: font" in out.stderr

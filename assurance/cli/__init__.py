@@ -65,6 +65,8 @@ EPILOG = "exit codes: " + "; ".join(f"{k} {v}" for k, v in EXIT_CODES.items())
 VERBOSE_HELP = ("more log lines (-v: INFO, -vv: DEBUG, with the tracebacks behind a fault reason); by default "
                 "warnings and errors show as one line each")
 QUIET_HELP = "less output: errors only, no progress bars"
+NOISY_LOGGERS = ("weasyprint", "fontTools")
+"""Libraries whose warnings show only with -v."""
 
 
 def _add_verbosity(p: argparse.ArgumentParser) -> None:
@@ -100,6 +102,9 @@ def configure_logging(args: argparse.Namespace) -> None:
     root = logging.getLogger()
     if root.handlers:
         return
+    if not args.verbose:
+        for name in NOISY_LOGGERS:  # their warnings are about fonts and CSS of the PDF, not the assessment
+            logging.getLogger(name).setLevel(logging.ERROR)
     handler = logging.StreamHandler(sys.stderr)
     handler.setFormatter(_OneLine(tracebacks=args.verbose > 0 or level == "DEBUG"))
     root.addHandler(handler)
