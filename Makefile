@@ -37,17 +37,17 @@ campaign: setup
 
 ## Requirement tests against the campaign run; their results feed the evidence gate.
 requirements: setup
-	$(PY) -m pytest -q -m requirements --uav-el-run $(RUN) --requirements-report $(REPORTS)/requirements.json
+	$(PY) -m assurance verify $(RUN) --out $(REPORTS) --tests tests
 
 ## The evidence step (also run by CI; `make demo` reports a failed gate of its demo-sized run without failing,
-## any other error still fails): requirement tests (a failure is reported by the gate; their JUnit XML
-## carries one comma-joined `requirements` property per test), then the report (HTML, PDF/A-3b with the
+## any other error still fails): `uav-el verify` runs the packaged requirement checks and this repository's
+## requirement tests (a failure is reported by the gate; their JUnit XML carries one comma-joined
+## `requirements` property per test), then the report (HTML, PDF/A-3b with the
 ## JSON, CSVs, JUnit XML and SHA256SUMS attached, traceability.csv).
 evidence: setup
-	-$(PY) -m pytest -q -m requirements --uav-el-run $(RUN) --requirements-report $(REPORTS)/requirements.json \
-		--junitxml $(REPORTS)/junit.xml
+	-$(PY) -m assurance verify $(RUN) --out $(REPORTS) --tests tests
 	$(PY) -m assurance fault-table --out $(REPORTS)/faults.csv
-	@rc=0; $(PY) -m assurance evidence --run $(RUN) --out $(REPORTS) --waivers assurance/waivers.yaml || rc=$$?; \
+	@rc=0; $(PY) -m assurance evidence --run $(RUN) --out $(REPORTS) || rc=$$?; \
 	if [ $$rc -eq 1 ] && [ "$(DEMO_GATE)" = report ]; then \
 		echo "The gate failed on this demo-sized run (page 1 of the report says why); it is reported, not enforced:"; \
 		echo "the gate that decides is the release run's (make release-evidence, CI)."; \

@@ -1,14 +1,8 @@
-"""Shared options and fixtures of the test suite.
-
-``--uav-el-run RUN`` (or the environment variable ``UAV_EL_RUN``) names the campaign run that the campaign
-requirement tests (``tests/requirements``) read; the default is the README's demo run ``runs/demo``
-under the rootdir. Without a run those tests skip, so their requirements end "not verified", never
-"failed".
-"""
+"""Shared fixtures of the test suite (the run binding, ``campaign_run`` and ``requirement_registry`` are the
+plugin's: ``assurance.requirements.pytest_plugin``)."""
 
 from __future__ import annotations
 
-import os
 import sys
 from pathlib import Path
 
@@ -20,78 +14,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))  # tests/helpers.py for
 # sessions would otherwise import pandas inside a session and drop it afterwards (two copies of its types).
 import assurance.campaign.integrity  # noqa: E402, F401
 
-DEFAULT_RUN = Path("runs") / "demo"
 _THREAD_COUNTS: list[tuple[int, int]] = []  # torch's and OpenCV's thread counts when the session started
-
-
-def campaign_run_path(config: pytest.Config) -> Path:
-    """The campaign run the requirement tests read: --uav-el-run, else $UAV_EL_RUN, else runs/demo (rootdir)."""
-    given = config.getoption("uav_el_run") or os.environ.get("UAV_EL_RUN")
-    if given:
-        return Path(given).resolve()
-    return (config.rootpath / DEFAULT_RUN).resolve()
 
 
 def pytest_configure(config: pytest.Config) -> None:
     import cv2
     import torch
 
-    from assurance.requirements.pytest_plugin import set_context
-
     _THREAD_COUNTS[:] = [(torch.get_num_threads(), cv2.getNumThreads())]  # before any fixture changes them
-    run = campaign_run_path(config)
-    exists = (run / "manifest.json").is_file()
-    set_context(config, run=str(run), run_exists=exists)
-    if exists:  # bind the requirement results to the readouts they are about (assurance.evidence checks it)
-        from assurance.campaign.integrity import verify_run
-        from assurance.campaign.readouts import RunError
-
-        try:
-            check = verify_run(run)
-        except RunError as exc:
-            set_context(config, run_digest=None, run_problems=[str(exc)])
-        else:
-            set_context(config, run_digest=check.digest if check.ok else None, run_problems=check.problems)
-        bind_system(config, run)
-
-
-def bind_system(config: pytest.Config, run: Path) -> None:
-    """The requirement results are about the run's system file: its hash is recorded, its targets judge."""
-    import json
-
-    from assurance.requirements.pytest_plugin import set_context, set_targets
-
-    record = json.loads((run / "manifest.json").read_text()).get("system") or {}
-    set_context(config, system_sha256=record.get("sha256"))
-    if record and not record.get("default"):
-        from assurance.system import build as system_build
-        from assurance.system.loader import system_from_record
-
-        system = system_from_record(record)
-        set_targets(config, system_build.targets(system), source=f"{system.label} [targets]")
-
-
-@pytest.fixture(scope="session")
-def requirement_registry(pytestconfig: pytest.Config):
-    """The session's validated requirement registry (the plugin's; --requirements-registry to change it)."""
-    from assurance.requirements.pytest_plugin import registry
-
-    return registry(pytestconfig)
-
-
-@pytest.fixture(scope="session")
-def campaign_run(pytestconfig: pytest.Config) -> Path:
-    """The campaign run folder; skips (requirement not verified) when there is none."""
-    from assurance.requirements.pytest_plugin import get_context
-
-    run = campaign_run_path(pytestconfig)
-    if not (run / "manifest.json").is_file():
-        pytest.skip(f"not verified: no campaign run at {run} (pass --uav-el-run RUN or set UAV_EL_RUN; "
-                    f"make the demo run with: uav-el campaign --data data/test --out {DEFAULT_RUN})")
-    problems = get_context(pytestconfig).get("run_problems")
-    if problems:
-        pytest.skip(f"not verified: the campaign run {run} is damaged: {'; '.join(problems[:3])}")
-    return run
 
 
 # ------------------------------------------------------------------------------------------------

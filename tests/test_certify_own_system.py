@@ -75,3 +75,19 @@ def test_evidence_on_another_system_file_is_refused(walkthrough, tmp_path, capsy
                      "--boot", "20"])  # no --system: the embedded default, not the run's system file
     assert code == 1
     assert "another system file" in capsys.readouterr().out
+
+
+def test_verify_judges_the_run_with_its_system_file_and_refuses_another(walkthrough, tmp_path, capsys):
+    from el.hashing import sha256_file
+
+    out = tmp_path / "verify"
+    cli.main(["verify", str(walkthrough["run"]), "--out", str(out), "--system", str(walkthrough["system"]),
+              "-k", "not rerun"])
+    doc = json.loads((out / "requirements.json").read_text())
+    assert doc["context"]["system_sha256"] == sha256_file(walkthrough["system"])
+    assert doc["registry"]["targets"]["radius_m"] == 2.5  # the system file's targets judged the run
+    other = tmp_path / "other.toml"
+    other.write_text('[system]\nname = "another"\n')
+    capsys.readouterr()
+    assert cli.main(["verify", str(walkthrough["run"]), "--out", str(tmp_path / "o"), "--system", str(other)]) == 2
+    assert "assessed another system file" in capsys.readouterr().err

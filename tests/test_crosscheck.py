@@ -1,9 +1,8 @@
 """The project's own statistics and geometry against independent reference implementations.
 
-Each function here was written in-house for a reason (determinism, speed, no thread pool), so it is
-checked against the library it stands in for: Clopper-Pearson against
-``scipy.stats.binomtest(...).proportion_ci(method="exact")``, the percentile bootstrap against
-``scipy.stats.bootstrap(method="percentile")`` on the same resamples, the clearance EDT against
+Clopper-Pearson and the bootstrap are the libraries' own now (``tests/test_stats_libraries.py`` checks them
+against the in-house numbers they replaced); here: Clopper-Pearson against its defining tail equations, the
+bootstrap against ``scipy.stats.bootstrap(method="BCa")`` called directly, the clearance EDT against
 ``scipy.ndimage.distance_transform_edt``, and K-means against scikit-learn's ``KMeans`` from the
 same initial centres. The formulas are in docs/architecture.md sections 3.3-3.4 and 4.5.
 """
@@ -61,16 +60,12 @@ def test_one_sided_lower_bound_is_the_two_sided_bound_at_twice_the_tail(k: int, 
 
 @pytest.mark.parametrize("seed", [0, 1, 7])
 @pytest.mark.parametrize("n", [10, 70])
-def test_bootstrap_equals_scipy_percentile_bootstrap_on_the_same_resamples(seed: int, n: int) -> None:
-    # Both draw the resampled indices as Generator.integers(0, n, (n_resamples, n)) in one batch,
-    # so with generators in the same state they resample the same images and take the same
-    # percentiles (numpy's linear interpolation). Allowed difference: 1e-12 relative, for the
-    # percentile's position (50 * (1 - conf) here, 100 * (1 - conf) / 2 in scipy) and the mean's
-    # summation order, which may differ in the last bit.
+def test_bootstrap_is_scipys_bca_on_the_same_seed(seed: int, n: int) -> None:
     values = np.random.default_rng(100 + seed).normal(0.3, 0.4, size=n)
     ours = bootstrap_ci(values, np.mean, n_boot=2000, seed=np.random.default_rng(seed))
-    ref = stats.bootstrap((values,), np.mean, n_resamples=2000, method="percentile", confidence_level=0.95,
+    ref = stats.bootstrap((values,), np.mean, n_resamples=2000, method="BCa", confidence_level=0.95,
                           vectorized=True, rng=np.random.default_rng(seed))
+    # the same resampled images; the statistic sees image indices, so the mean's summation order may differ
     assert ours[0] == pytest.approx(ref.confidence_interval.low, rel=1e-12, abs=1e-15)
     assert ours[1] == pytest.approx(ref.confidence_interval.high, rel=1e-12, abs=1e-15)
 
@@ -82,7 +77,7 @@ def test_bootstrap_of_a_non_vectorised_statistic_matches_scipy() -> None:
         return float(np.count_nonzero(sample) / sample.size)
 
     ours = bootstrap_ci(values, share, n_boot=500, seed=np.random.default_rng(5))
-    ref = stats.bootstrap((values,), share, n_resamples=500, method="percentile", vectorized=False,
+    ref = stats.bootstrap((values,), share, n_resamples=500, method="BCa", vectorized=False,
                           rng=np.random.default_rng(5))
     assert ours == pytest.approx((ref.confidence_interval.low, ref.confidence_interval.high), rel=1e-12)
 

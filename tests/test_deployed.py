@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
-from assurance.requirements import load_registry
+from assurance.requirements import card_path, load_registry
 from el.hashing import sha256_file
 from el.monitors import build_monitor, parse_monitor_spec
 from el.monitors.calibration import load_calibration
@@ -13,14 +11,12 @@ from el.pipeline import DEPLOYED_CALIBRATION, DEPLOYED_MONITOR, PipelineConfig
 from el.records import read_signed
 from el.segmentation.weights import DEFAULT_WEIGHTS
 
-ROOT = Path(__file__).resolve().parents[1]
-
 
 def test_flight_default_registry_and_card_name_the_same_configuration():
     params = load_registry().parameters
     card = load_calibration(DEPLOYED_CALIBRATION)
     assert PipelineConfig().monitor_name == DEPLOYED_MONITOR == params["deployed_monitor"] == card.spec
-    assert (ROOT / params["calibration_card"]).resolve() == DEPLOYED_CALIBRATION
+    assert card_path(params["calibration_card"]).resolve() == DEPLOYED_CALIBRATION  # package data, wherever installed
     assert parse_monitor_spec(DEPLOYED_MONITOR).walk == "score"
     assert build_monitor(DEPLOYED_MONITOR).threshold == card.body["threshold"]
 

@@ -17,10 +17,11 @@ from assurance import cli
 from assurance import requirements as rq
 from assurance.campaign import readouts
 from assurance.evidence import generate
+from assurance.requirements.suite import SUITE_DIR
 
 pytest_plugins = ["pytester"]
 
-CAMPAIGN_TESTS = Path(__file__).resolve().parent / "requirements" / "test_campaign_requirements.py"
+CAMPAIGN_TESTS = SUITE_DIR / "test_campaign_requirements.py"
 SCRIPT = "<script>alert('x')</script>"
 WEIRD_WEIGHTS = '/models/w<b>"&\'.pt'
 

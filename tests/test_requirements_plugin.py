@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import xml.etree.ElementTree as ET
-from pathlib import Path
 
 import hypothesis  # noqa: F401  # imported once here: pytester's in-process runs would re-import it every time
 import pytest
@@ -13,10 +12,11 @@ import yaml
 
 from assurance import requirements as rq
 from assurance.campaign.perturbations import PAPER_PERTURBATIONS
+from assurance.requirements.suite import SUITE_DIR
 
 pytest_plugins = ["pytester"]
 
-CAMPAIGN_TESTS = Path(__file__).resolve().parent / "requirements" / "test_campaign_requirements.py"
+CAMPAIGN_TESTS = SUITE_DIR / "test_campaign_requirements.py"
 
 SAMPLE = """
 import pytest
@@ -333,7 +333,7 @@ def test_a_bad_targets_file_is_a_usage_error(pytester, tmp_path, content, messag
 
 
 # ------------------------------------------------------------------------------------------------
-# The campaign requirement tests on tiny runs (the real tests/requirements file, run by pytester)
+# The campaign requirement tests on tiny runs (the packaged suite, run by pytester)
 # ------------------------------------------------------------------------------------------------
 def _campaign_report(pytester, run, *args):
     out = pytester.path / "campaign.json"
@@ -475,3 +475,18 @@ def test_rerun_of_a_shard_reproduces_the_readouts(tiny_campaign, tmp_path):
     # the manifest's weights are not the segmenter the run used: the re-run sees different readouts
     other = rq.check_rerun(tiny_campaign["run"], work_dir=tmp_path / "w")
     assert other.status == rq.FAIL
+
+
+@pytest.mark.parametrize("edit,message", [
+    (lambda d: d["requirements"][3].update(owner="me"), r"requirements\[3\] \(EL-R04\): unknown field\(s\) 'owner'"),
+    (lambda d: d["requirements"][0]["verification"].update(kind="test"), r"field 'verification.kind'"),
+    (lambda d: d["requirements"][0].update(title="  "), r"requirements\[0\] \(EL-R01\): field 'title'"),
+    (lambda d: d.pop("operating_domain"), r"missing field\(s\) 'operating_domain'"),
+])
+def test_the_registry_structure_is_checked_by_its_json_schema(tmp_path, edit, message):
+    doc = yaml.safe_load(rq.default_registry_path().read_text())
+    edit(doc)
+    path = tmp_path / "reg.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    with pytest.raises(rq.RegistryError, match=message):
+        rq.load_registry(path)

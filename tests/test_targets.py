@@ -224,3 +224,15 @@ def test_results_and_gate_are_bound_to_the_targets(tmp_path):
     other = rq.load_registry()
     problems = binding_problems(*args, parameters_sha=other.parameters_sha256)
     assert len(problems) == 1 and 'other requirement targets (their overrides: {"confidence": 0.99})' in problems[0]
+
+
+def test_shipped_targets_are_the_flight_codes_safety_params():
+    """The registry's default R and beta are what the flight code plans with (el.camera.SafetyParams())."""
+    from el.camera import SafetyParams
+    from el.config import CoreConfig
+
+    p = rq.load_registry().parameters
+    assert (p["radius_m"], p["beta"]) == (SafetyParams().radius_m, SafetyParams().beta)
+    assert CoreConfig().safety == SafetyParams()
+    need = rq.check_pose_margin(CoreConfig(), (3840, 2160), p["pose_error"]).rows[0]["required_beta"]
+    assert 1.5 < need < p["beta"]  # docs/architecture.md 2.3: about 1.56 for +-20%, so 1.7 has margin

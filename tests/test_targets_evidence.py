@@ -5,7 +5,6 @@ targets (``uav-el evidence --targets``)."""
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import hypothesis  # noqa: F401  # imported once here: pytester's in-process runs would re-import it every time
 import pytest
@@ -13,10 +12,11 @@ import pytest
 from assurance import cli
 from assurance import requirements as rq
 from assurance.evidence import generate
+from assurance.requirements.suite import SUITE_DIR
 
 pytest_plugins = ["pytester"]
 
-CAMPAIGN_TESTS = Path(__file__).resolve().parent / "requirements" / "test_campaign_requirements.py"
+CAMPAIGN_TESTS = SUITE_DIR / "test_campaign_requirements.py"
 TARGETS = {"deployed_monitor": "lhd", "calibration_card": None, "unsafe_landing_bound": 0.3, "confidence": 0.99}
 
 
@@ -49,7 +49,7 @@ def test_report_on_the_same_targets_shows_them_and_the_bound_at_their_confidence
     r10 = ev["checks"]["EL-R10"]
     assert r10["status"] == rq.INSUFFICIENT and "99% confidence" in r10["name"]
     assert {row["confidence"] for row in r10["rows"]} == {"99%"}
-    assert f"--uav-el-targets {tfile.resolve()}" in html and f"--targets {tfile.resolve()}" in html
+    assert "uav-el verify" in html and f"--targets {tfile.resolve()}" in html
 
 
 def test_report_on_other_targets_fails_the_gate(judged, tmp_path, monkeypatch, capsys):

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from assurance.analysis.intervals import percentile_interval, resample_indices
+from assurance.analysis.intervals import check_boot, image_bootstrap
 
 __all__ = [
     "COUNT_FIELDS",
@@ -159,7 +159,7 @@ def bootstrap_pooled_ci(
     conf: float = 0.95,
     seed: int | np.random.Generator = 0,
 ) -> tuple[float, float]:
-    """Percentile bootstrap interval of a pooled ratio metric, resampling images.
+    """Bootstrap interval (``image_bootstrap``: BCa) of a pooled ratio metric, resampling images.
 
     Each resample draws images with replacement, adds up their confusion counts and
     recomputes the pooled metric, so the interval reflects that candidates of one image are
@@ -178,8 +178,8 @@ def bootstrap_pooled_ci(
     if metric_name not in METRIC_NAMES:
         raise ValueError(f"unknown metric {metric_name!r}; valid names: {', '.join(METRIC_NAMES)}")
     m = _counts_matrix(per_image_counts)
+    check_boot(n_boot, conf)
     if m.shape[0] == 0 or not np.isfinite(metric_arrays(m.sum(axis=0))[metric_name]):
-        percentile_interval(np.empty(0), conf)
         return math.nan, math.nan
-    idx = resample_indices(m.shape[0], n_boot, seed)
-    return percentile_interval(metric_arrays(m[idx].sum(axis=1))[metric_name], conf)
+    return image_bootstrap(m.shape[0], lambda idx: metric_arrays(m[idx].sum(axis=-2))[metric_name],
+                           n_boot=n_boot, conf=conf, seed=seed)

@@ -42,7 +42,10 @@ def headline_markdown(run: str | Path, table: pd.DataFrame, deployed: str,
     man = readouts.read_manifest(run)
     card = ""
     if calibration_card:
-        card = f", calibration card `{Path(calibration_card).name}` (sha256 `{sha256_file(calibration_card)[:12]}`)"
+        from assurance.requirements.targets import card_path
+
+        path = card_path(calibration_card)
+        card = f", calibration card `{path.name}` (sha256 `{sha256_file(path)[:12]}`)"
     lines = [
         f"Deployed configuration `{deployed}`{card}; model sha256 `{str(man['weights']['sha256'])[:12]}`; "
         f"{int(rows['images'].max())} test scenes per perturbation (severity {int(rows['severity'].iloc[0])}).",

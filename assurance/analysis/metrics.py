@@ -18,9 +18,9 @@ Conventions
 - Safety gains are hazard reductions, positive = safer: ``g_cm = H(c0) - H(c~)``,
   ``g_rm = H(c~) - H(c*)``, ``g_star = g_cm + g_rm`` (c0 the default action, c~ the core
   model's top-ranked candidate, c* the pipeline's decision; H the true hazard).
-- Intervals: percentile bootstrap over images (seeded, 2000 resamples by default; one set of
-  resampled image indices is shared by every figure of a scenario, so the intervals are
-  coherent), except the unsafe-landing rate, which is a binomial proportion and gets exact
+- Intervals: BCa bootstrap over images (``intervals.image_bootstrap``: ``scipy.stats.bootstrap``, seeded,
+  2000 resamples by default; every figure of a scenario is computed on the same resampled images, so the
+  intervals are coherent), except the unsafe-landing rate, which is a binomial proportion and gets exact
   Clopper-Pearson bounds (a bootstrap of 0 events out of 70 would claim [0, 0]).
 - Everything is float64 and deterministic for a seed.
 
@@ -56,10 +56,10 @@ from assurance.analysis.confusion import (
 )
 from assurance.analysis.intervals import (
     bootstrap_ci,
+    check_boot,
     clopper_pearson_interval,
     clopper_pearson_upper,
-    percentile_interval,
-    resample_indices,
+    image_bootstrap,
 )
 
 if TYPE_CHECKING:
@@ -279,7 +279,7 @@ class ScenarioMetrics:
             isinstance(severity, bool) or not isinstance(severity, int | np.integer)
         ):
             raise ValueError(f"severity must be an integer or None, got {severity!r}")
-        resample_indices(1, n_boot, 0)  # validates n_boot
+        check_boot(n_boot)
         self.perturbation = perturbation
         self.severity = None if severity is None else int(severity)
         self.monitor = monitor
@@ -311,7 +311,7 @@ class ScenarioMetrics:
 
         Point values: pooled monitor metrics over all candidates, mean gains and overhead per
         image, unsafe-landing rate with its one-sided exact 95% upper bound (``_ub95``). Intervals:
-        bootstrap percentile over images for every figure but the unsafe-landing rate, which
+        BCa bootstrap over images for every figure but the unsafe-landing rate, which
         gets the two-sided exact Clopper-Pearson interval. NaN where undefined (no images, a
         ratio with an empty denominator).
         """
@@ -334,20 +334,20 @@ class ScenarioMetrics:
             "g_star": gains.g_star,
             "overhead_s": np.array([r.overhead_s for r in records], dtype=np.float64),
         }
-        idx = resample_indices(n, self.n_boot, self.seed)
-
         pooled = metric_arrays(counts.sum(axis=0))
-        boot = metric_arrays(counts[idx].sum(axis=1))
+
+        def ci(statistic: Any) -> tuple[float, float]:  # the same resampled images for every figure (seed)
+            return image_bootstrap(n, statistic, n_boot=self.n_boot, conf=self.CONF, seed=self.seed)
+
         for name in METRIC_NAMES:
             point = float(pooled[name])
             row[name] = point
             if math.isfinite(point):
-                row[f"{name}_lo95"], row[f"{name}_hi95"] = percentile_interval(boot[name], self.CONF)
+                row[f"{name}_lo95"], row[f"{name}_hi95"] = ci(
+                    lambda idx, name=name: metric_arrays(counts[idx].sum(axis=-2))[name])
         for name, values in per_image.items():
             row[name] = float(values.mean())
-            row[f"{name}_lo95"], row[f"{name}_hi95"] = percentile_interval(
-                values[idx].mean(axis=1), self.CONF
-            )
+            row[f"{name}_lo95"], row[f"{name}_hi95"] = ci(lambda idx, values=values: values[idx].mean(axis=-1))
 
         k = sum(bool(r.decision_unsafe) for r in records)
         row["unsafe_landing_rate"] = k / n

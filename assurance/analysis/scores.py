@@ -4,8 +4,9 @@ A campaign stores every configuration's score per candidate (``candidates.score`
 ``score > threshold``). Unsafe candidates (``true_unsafe``) are the positives: the ROC curve is the
 recall of the monitor (unsafe candidates rejected) against its false-positive rate (safe candidates
 rejected) as the threshold sweeps, and the AUROC the probability that a random unsafe candidate
-scores above a random safe one (ties count one half; Mann-Whitney). Intervals: percentile bootstrap
-over images (candidates of one image are not independent), as the rest of the results table.
+scores above a random safe one (ties count one half; Mann-Whitney), both from scikit-learn
+(``roc_auc_score``, ``roc_curve``). Intervals: the bootstrap over images (candidates of one image are not
+independent; ``intervals.image_bootstrap``, BCa), as the rest of the results table.
 
 Runs recorded before scores existed have no ``score`` column: their AUROC is NaN, printed "-".
 """
@@ -17,57 +18,83 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-from scipy.stats import rankdata
+from sklearn import metrics as skm
 
-from assurance.analysis.intervals import percentile_interval, resample_indices
+from assurance.analysis.intervals import image_bootstrap
 
-__all__ = ["auroc", "auroc_markdown", "auroc_table", "roc_curve"]
+__all__ = ["auroc", "auroc_markdown", "auroc_table", "grouped_auroc_ci", "roc_curve"]
+
+
+def _clean(scores: Any, unsafe: Any) -> tuple[np.ndarray, np.ndarray]:
+    s = np.asarray(scores, dtype=np.float64)
+    y = np.asarray(unsafe, dtype=bool)
+    ok = ~np.isnan(s)
+    return s[ok], y[ok]
 
 
 def auroc(scores: Any, unsafe: Any) -> float:
-    """Area under the ROC curve of ``scores`` for the positives ``unsafe``; NaN without both classes.
+    """Area under the ROC curve of ``scores`` for the positives ``unsafe`` (``sklearn.metrics.roc_auc_score``;
+    ties count one half); NaN without both classes.
 
     >>> auroc([0.1, 0.4, 0.35, 0.8], [False, False, True, True])
     0.75
     """
-    s = np.asarray(scores, dtype=np.float64)
-    y = np.asarray(unsafe, dtype=bool)
-    ok = ~np.isnan(s)
-    s, y = s[ok], y[ok]
-    n_pos, n_neg = int(y.sum()), int((~y).sum())
-    if n_pos == 0 or n_neg == 0:
+    s, y = _clean(scores, unsafe)
+    if y.all() or not y.any():
         return math.nan
-    ranks = rankdata(s)  # average ranks: ties count one half
-    return float((ranks[y].sum() - n_pos * (n_pos + 1) / 2) / (n_pos * n_neg))
+    return float(skm.roc_auc_score(y, _finite_order(s)))
+
+
+def _finite_order(s: np.ndarray) -> np.ndarray:
+    """``s`` with +-inf replaced by finite values beyond the others (scikit-learn refuses infinities; the order,
+    hence the curve, is the same)."""
+    if np.isfinite(s).all():
+        return s
+    finite = s[np.isfinite(s)]
+    lo, hi = (finite.min(), finite.max()) if finite.size else (0.0, 0.0)
+    return np.where(s == np.inf, hi + 1.0, np.where(s == -np.inf, lo - 1.0, s))
 
 
 def roc_curve(scores: Any, unsafe: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(fpr, tpr, thresholds)``: rejecting iff score > threshold, for every distinct score (and below all)."""
-    s = np.asarray(scores, dtype=np.float64)
-    y = np.asarray(unsafe, dtype=bool)
-    ok = ~np.isnan(s)
-    s, y = s[ok], y[ok]
+    """``(fpr, tpr, thresholds)``: rejecting iff score > threshold, for every distinct score (and below all).
+
+    From ``sklearn.metrics.roc_curve`` (which rejects iff score >= threshold): its point at a score is ours at
+    the next lower one, so ours is its curve after a first point (0, 0) at +inf, thresholds shifted by one.
+    A class with no candidate gets rate 0 throughout; infinite scores are counted directly.
+    """
+    s, y = _clean(scores, unsafe)
     finite = s[np.isfinite(s)]
     below = (finite.min() - 1.0) if finite.size else 0.0
     thresholds = np.concatenate([[np.inf], np.unique(finite)[::-1], [below]])
-    n_pos, n_neg = max(int(y.sum()), 1), max(int((~y).sum()), 1)
-    tpr = np.array([(s[y] > t).sum() / n_pos for t in thresholds])
-    fpr = np.array([(s[~y] > t).sum() / n_neg for t in thresholds])
-    return fpr, tpr, thresholds
+    if y.any() and not y.all() and np.isfinite(s).all():
+        fpr, tpr, _ = skm.roc_curve(y, s, drop_intermediate=False)
+        return np.concatenate([[0.0], fpr]), np.concatenate([[0.0], tpr]), thresholds
+    # one class only, or infinite scores (which scikit-learn refuses): count the scores above each threshold
+    def rate(values: np.ndarray) -> np.ndarray:
+        return (len(values) - np.searchsorted(np.sort(values), thresholds, side="right")) / max(len(values), 1)
+
+    return rate(s[~y]), rate(s[y]), thresholds
 
 
-def _image_auroc_ci(g: pd.DataFrame, n_boot: int, seed: int, conf: float = 0.95) -> tuple[float, float]:
-    keys = g["key"].to_numpy()
-    uniq, inv = np.unique(keys, return_inverse=True)
+def grouped_auroc_ci(groups: Any, scores: Any, unsafe: Any, *, n_boot: int = 1000, seed: int = 0,
+                     conf: float = 0.95) -> tuple[float, float]:
+    """Bootstrap interval of the AUROC resampling whole groups (images, scenes: their candidates are not
+    independent) with ``intervals.image_bootstrap``; ``(nan, nan)`` with fewer than two groups."""
+    uniq, inv = np.unique(np.asarray(groups), return_inverse=True)
     if len(uniq) < 2:
         return math.nan, math.nan
     members = [np.flatnonzero(inv == i) for i in range(len(uniq))]
-    s, y = g["score"].to_numpy(float), g["true_unsafe"].to_numpy(bool)
-    reps = np.empty(n_boot)
-    for b, idx in enumerate(resample_indices(len(uniq), n_boot, seed)):
-        rows = np.concatenate([members[i] for i in idx])
-        reps[b] = auroc(s[rows], y[rows])
-    return percentile_interval(reps, conf)
+    s, y = np.asarray(scores, dtype=np.float64), np.asarray(unsafe, dtype=bool)
+
+    def statistic(idx: np.ndarray) -> np.ndarray:  # one AUROC per sample of groups (rows of idx)
+        flat = idx.reshape(-1, idx.shape[-1])
+        out = np.empty(len(flat))
+        for b, sample in enumerate(flat):
+            rows = np.concatenate([members[i] for i in sample])
+            out[b] = auroc(s[rows], y[rows])
+        return out.reshape(idx.shape[:-1])
+
+    return image_bootstrap(len(uniq), statistic, n_boot=n_boot, conf=conf, seed=seed)
 
 
 def auroc_table(candidates: pd.DataFrame, *, n_boot: int = 1000, seed: int = 0) -> pd.DataFrame:
@@ -84,7 +111,8 @@ def auroc_table(candidates: pd.DataFrame, *, n_boot: int = 1000, seed: int = 0) 
         if has and g["score"].notna().any():
             row["auroc"] = auroc(g["score"], g["true_unsafe"])
             if math.isfinite(row["auroc"]):
-                row["auroc_lo95"], row["auroc_hi95"] = _image_auroc_ci(g, n_boot, seed)
+                row["auroc_lo95"], row["auroc_hi95"] = grouped_auroc_ci(g["key"], g["score"], g["true_unsafe"],
+                                                                        n_boot=n_boot, seed=seed)
         rows.append(row)
     return pd.DataFrame(rows, columns=cols)
 

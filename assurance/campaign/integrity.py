@@ -3,41 +3,21 @@
 A campaign run's shards carry the SHA-256 of their files (``assurance.campaign.readouts``). ``verify_run``
 checks every shard against its SHA256SUMS and the run's shard index and returns the run digest: one
 SHA-256 over the shards' hashes in task order. The requirement test session records that digest,
-with the hash of the code and of the registry it ran on, so the evidence gate can refuse results
-produced on anything else (``assurance.evidence``).
+with the hash of the code (``assurance.code_identity``, re-exported here) and of the registry it ran on,
+so the evidence gate can refuse results produced on anything else (``assurance.evidence``).
 """
 
 from __future__ import annotations
 
 import hashlib
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from assurance.campaign import readouts
+from assurance.code_identity import code_sha256, tree_sha256
 from el.hashing import sha256_file
 
-ROOT = Path(__file__).resolve().parents[2]
-CODE_ROOTS = ("el", "assurance", "tests")
-"""What the code hash covers: the flight code, the harness and the tests that verify the requirements."""
-
-__all__ = ["CODE_ROOTS", "RunCheck", "code_sha256", "tree_sha256", "verify_run"]
-
-
-def tree_sha256(roots: Sequence[Path], *, suffixes: Sequence[str] = (".py", ".yaml", ".yml", ".j2", ".css"),
-                base: Path = ROOT) -> tuple[str, int]:
-    """SHA-256 over the source files under ``roots`` (relative path and content hash, sorted); (hash, files)."""
-    files = sorted(p for r in roots if r.is_dir() for p in r.rglob("*")
-                   if p.is_file() and p.suffix in suffixes and "__pycache__" not in p.parts)
-    h = hashlib.sha256()
-    for p in files:
-        h.update(f"{p.relative_to(base).as_posix()}:{sha256_file(p)}\n".encode())
-    return h.hexdigest(), len(files)
-
-
-def code_sha256() -> str:
-    """The hash of the code a requirement result is bound to (``CODE_ROOTS`` of this checkout)."""
-    return tree_sha256([ROOT / r for r in CODE_ROOTS])[0]
+__all__ = ["RunCheck", "code_sha256", "tree_sha256", "verify_run"]
 
 
 @dataclass

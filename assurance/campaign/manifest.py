@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import hashlib
 import platform
-import subprocess
 import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -16,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from assurance.campaign import readouts
+from assurance.code_identity import code_identity
 
 if TYPE_CHECKING:
     from assurance.campaign.run import CampaignConfig, Task
@@ -54,7 +54,7 @@ def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *,
         "threads_per_worker": threads,
         "segmenter": segmenter,
         **({"system": dict(system)} if system is not None else {}),
-        "code": {"version": _version(), "git_commit": git_commit()},
+        "code": code_identity(),
         "versions": {"python": sys.version.split()[0], "numpy": np.__version__, "torch": torch.__version__,
                      "platform": platform.platform()},
     }
@@ -147,22 +147,3 @@ def _frame_protocol(weights: Path) -> dict[str, Any]:
         return card_protocol(read_card(weights)).frame_options()
     except (OSError, ValueError):  # WeightsError is a ValueError
         return dict.fromkeys(FRAME_OPTIONS)
-
-
-def _version() -> str:
-    from assurance import __version__
-
-    return __version__
-
-
-def git_commit() -> str | None:
-    """The git commit of the checkout the code runs from (with '-dirty' if it has changes), or None."""
-    root = Path(__file__).resolve().parents[2]
-    try:
-        commit = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True,
-                                timeout=10, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
-                               capture_output=True, text=True, timeout=10).stdout.strip()
-        return commit + ("-dirty" if dirty else "")
-    except Exception:
-        return None

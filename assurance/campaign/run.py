@@ -30,7 +30,6 @@ from assurance.campaign.faults import config_faults
 from assurance.campaign.judging import _timed, judge_candidates
 from assurance.campaign.manifest import (  # noqa: F401  (re-exported)
     check_monitor_networks,
-    git_commit,
     manifest,
     monitor_models,
 )

@@ -38,6 +38,7 @@ COMMANDS: dict[str, str] = {
     "fit-ood": "fit_ood",
     "table": "table",
     "sweep": "sweep",
+    "verify": "verify",
     "evidence": "evidence",
     "fault-table": "fault_table",
     "keys": "keys",
@@ -45,7 +46,7 @@ COMMANDS: dict[str, str] = {
 
 
 # Commands that decide, evaluate or report: they take --system FILE (else ./uav-el.toml, else the embedded default).
-SYSTEM_COMMANDS = ("land", "campaign", "calibrate", "fit-monitor", "fit-ood", "evidence")
+SYSTEM_COMMANDS = ("land", "campaign", "calibrate", "fit-monitor", "fit-ood", "verify", "evidence")
 SYSTEM_HELP = ("the system under assessment (uav-el.toml: model, camera, poses, labels, safety, monitor, data, "
                "targets, waivers, report); default: ./uav-el.toml if present, else the embedded default (the "
                "shipped system); options given here win over the file")
@@ -65,6 +66,55 @@ EXIT_CODES: dict[int, str] = {
 EPILOG = "exit codes: " + "; ".join(f"{k} {v}" for k, v in EXIT_CODES.items())
 
 
+VERBOSE_HELP = ("more log lines (-v: INFO, -vv: DEBUG, with the tracebacks behind a fault reason); by default "
+                "warnings and errors show as one line each")
+QUIET_HELP = "less output: errors only, no progress bars"
+NOISY_LOGGERS = ("weasyprint", "fontTools")
+"""Libraries whose warnings show only with -v."""
+
+
+def _add_verbosity(p: argparse.ArgumentParser) -> None:
+    """``-v`` / ``-q`` after the command's name too; a command's own ``--quiet`` gets ``-q``."""
+    p.add_argument("-v", "--verbose", action="count", default=argparse.SUPPRESS, help=VERBOSE_HELP)
+    if "--quiet" in p._option_string_actions:
+        p.add_argument("-q", dest="quiet", action="store_true", help="same as --quiet")
+    else:
+        p.add_argument("-q", "--quiet", action="count", default=0, help=QUIET_HELP)
+
+
+class _OneLine(logging.Formatter):
+    """Log records as one line each; the traceback of a logged exception only when asked for (-v)."""
+
+    def __init__(self, tracebacks: bool) -> None:
+        super().__init__("%(levelname)s %(name)s: %(message)s")
+        self.tracebacks = tracebacks
+
+    def format(self, record: logging.LogRecord) -> str:
+        if record.exc_info and not self.tracebacks:
+            record = logging.makeLogRecord({**record.__dict__, "exc_info": None, "exc_text": None})
+        return super().format(record)
+
+
+def configure_logging(args: argparse.Namespace) -> None:
+    """WARNING by default (one line each), INFO at -v, DEBUG at -vv, ERROR at -q; ``--log-level`` wins. An
+    application that configured logging before keeps its handlers."""
+    if args.log_quiet and not getattr(args, "quiet", False):
+        args.quiet = args.log_quiet
+    quiet = bool(getattr(args, "quiet", False))
+    level = args.log_level or ("DEBUG" if args.verbose >= 2 else "INFO" if args.verbose else
+                               "ERROR" if quiet else "WARNING")
+    root = logging.getLogger()
+    if root.handlers:
+        return
+    if not args.verbose:
+        for name in NOISY_LOGGERS:  # their warnings are about fonts and CSS of the PDF, not the assessment
+            logging.getLogger(name).setLevel(logging.ERROR)
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(_OneLine(tracebacks=args.verbose > 0 or level == "DEBUG"))
+    root.addHandler(handler)
+    root.setLevel(level)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="uav-el",
@@ -72,9 +122,8 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=EPILOG,
     )
     parser.add_argument("--version", action="version", version=f"uav-el {__version__}")
-    parser.add_argument("-v", "--verbose", action="count", default=0,
-                        help="log (-v: INFO, -vv: DEBUG), e.g. the tracebacks behind a fault reason; by default "
-                             "faults show as their one-line reason only")
+    parser.add_argument("-v", "--verbose", action="count", default=0, help=VERBOSE_HELP)
+    parser.add_argument("-q", "--quiet", dest="log_quiet", action="count", default=0, help=QUIET_HELP)
     parser.add_argument("--log-level", choices=("DEBUG", "INFO", "WARNING", "ERROR"),
                         help="logging level (overrides -v)")
     # A command that replays the command line (fault-table) gets it here: importing this module would
@@ -85,6 +134,7 @@ def build_parser() -> argparse.ArgumentParser:
         module = importlib.import_module(f"assurance.cli.{module_name}")
         p = sub.add_parser(name, help=module.HELP, description=module.HELP, epilog=EPILOG)
         module.add_arguments(p)
+        _add_verbosity(p)
         if name in SYSTEM_COMMANDS:
             p.add_argument("--system", metavar="FILE", default=None, help=SYSTEM_HELP)
         p.set_defaults(_run=module.run)
@@ -98,8 +148,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     parser = build_parser()
     args = parser.parse_args(argv)
-    level = args.log_level or ("DEBUG" if args.verbose >= 2 else "INFO" if args.verbose else "CRITICAL")
-    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
+    configure_logging(args)
     try:
         if args.command in SYSTEM_COMMANDS:
             from assurance.system import find_system

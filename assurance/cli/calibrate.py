@@ -41,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         doc = calibrate_on_data(data, monitor, miss_rate=args.miss_rate, confidence=args.confidence,
                                 weights=model_spec(args), images=args.images,
-                                core=system_build.core_config(system))
+                                core=system_build.core_config(system), progress=not args.quiet)
     except ValueError as exc:  # CalibrationError, WeightsError, a bad spec: one line
         raise CommandError(str(exc)) from None
     write_json(args.out, doc, indent=2)

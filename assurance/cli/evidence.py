@@ -17,16 +17,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--run", required=True, help="campaign run folder (uav-el campaign --out)")
     p.add_argument("--out", default="reports", help="output folder (default: reports/)")
     p.add_argument("--requirements", metavar="JSON",
-                   help="requirement results of `pytest -m requirements --uav-el-run RUN` (default: "
+                   help="requirement results of `uav-el verify RUN --out OUT` (default: "
                         "OUT/requirements.json if present; without one every requirement is 'not verified')")
     p.add_argument("--baseline", metavar="RUN0", help="an earlier run: adds a 'what changed' section")
     p.add_argument("--baseline-requirements", metavar="JSON", help="the baseline's requirement results")
     p.add_argument("--registry", metavar="YAML", help="requirement registry (default: assurance/requirements.yaml)")
     p.add_argument("--targets", metavar="JSON", help="requirement targets overriding the registry's parameters (a "
                    "JSON object, the file given to pytest --uav-el-targets); the results must use the same")
-    p.add_argument("--waivers", help="accepted deviations (e.g. assurance/waivers.yaml): a failed requirement "
-                   "listed there does not fail the gate; ignored with --strict (default: the system file's "
-                   "[waivers] file)")
+    p.add_argument("--waivers", help="accepted deviations: a failed requirement listed there does not fail the "
+                   "gate; ignored with --strict (default: the system file's [waivers] file; for the shipped system, "
+                   "the shipped assurance/waivers.yaml; a system file without [waivers]: none)")
     p.add_argument("--strict", action="store_true",
                    help="also exit 1 when a requirement is not verified or the PDF cannot be written")
     p.add_argument("--no-pdf", action="store_true", help="write the HTML and JSON only")

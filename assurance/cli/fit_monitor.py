@@ -50,7 +50,8 @@ def run(args: argparse.Namespace) -> int:
         segmenter = load_model(args)
         core = system_build.core_config(system, working_width=args.working_width)
         doc = fit_learned_monitor(args.data, segmenter, val=args.val, core=core, mcd_n=args.mcd, recall=args.recall,
-                                  images=args.images, weights=network_record(segmenter, model_spec(args)))
+                                  images=args.images, weights=network_record(segmenter, model_spec(args)),
+                                  progress=not args.quiet)
     except ValueError as exc:
         raise CommandError(str(exc)) from None
     write_json(args.out, doc)

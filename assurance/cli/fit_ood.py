@@ -43,7 +43,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         segmenter = load_model(args)
         doc = fit_ood(args.data, args.val, segmenter, quantile=args.quantile, images=args.images,
-                      weights=network_record(segmenter, model_spec(args)))
+                      weights=network_record(segmenter, model_spec(args)), progress=not args.quiet)
     except ValueError as exc:
         raise CommandError(str(exc)) from None
     write_json(args.out, doc)

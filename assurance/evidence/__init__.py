@@ -1,7 +1,7 @@
 """The evidence report (docs/architecture.md 4.7): what was assessed, against which requirements, with what result.
 
 ``generate(run, out, ...)`` reads a campaign run (manifest, readouts, results table), the requirement
-registry and the requirement results of a test session (``pytest -m requirements --uav-el-run RUN``, JSON
+registry and the requirement results of a test session (``uav-el verify RUN``, JSON
 written by ``assurance.requirements.pytest_plugin``), and writes into ``out``:
 
 - ``evidence.html``: self-contained (CSS inline, images as data URIs), rendered from the Jinja2

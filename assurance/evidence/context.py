@@ -220,8 +220,7 @@ def commands(inp: Inputs) -> list[str]:
         + " ".join(f"'{m}'" for m in cfg["monitors"])
         + (f" --images {cfg['images']}" if cfg.get("images") else "") + f" --seed {cfg['seed']}"
         + (f" --weights {cfg['weights']}" if cfg.get("weights") else ""),
-        f"pytest -m requirements --uav-el-run {run} --requirements-report {out / 'requirements.json'}"
-        + (f" --uav-el-targets {tfile}" if tfile else ""),
+        f"uav-el verify {run} --out {out}" + (f" --targets {tfile}" if tfile else ""),
         f"uav-el evidence --run {run} --out {out}" + (f" --requirements {inp.req_path}" if inp.req_path else "")
         + (f" --targets {tfile}" if tfile else ""),
     ]

@@ -67,8 +67,7 @@ def requirement_results(registry: rq.Registry, path: Path | None, run: Path, war
     """
     if path is None:
         warnings.append("no requirement test results were given: every requirement is 'not verified' "
-                        f"(run: pytest -m requirements --uav-el-run {run} "
-                        "--requirements-report <out>/requirements.json)")
+                        f"(run: uav-el verify {run} --out <out>)")
         results = {r.id: rq.RequirementResult(r.id, r.title, rq.NOT_VERIFIED, "no test results given")
                    for r in registry}
         return results, None
@@ -112,7 +111,7 @@ def binding_problems(doc: Mapping[str, Any], digest: str, code: str, registry_sh
                    f"this run {digest[:12]})")
     if ctx.get("code_sha256") != code:
         out.append(f"{path}: the requirement results were produced on other code (code hash "
-                   f"{str(ctx.get('code_sha256'))[:12]}, this checkout {code[:12]})")
+                   f"{str(ctx.get('code_sha256'))[:12]}, this code {code[:12]})")
     reg = doc.get("registry") or {}
     if reg.get("sha256") != registry_sha:
         out.append(f"{path}: the requirement results were produced with another requirement registry")

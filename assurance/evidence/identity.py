@@ -17,7 +17,6 @@ from assurance import requirements as rq
 from assurance.analysis.table import results_table
 from assurance.campaign import readouts
 from assurance.campaign.integrity import RunCheck, tree_sha256
-from assurance.evidence.render import ROOT
 from assurance.evidence.text import STATE_CLASS, fmt, to_float
 from el.hashing import sha256_file
 
@@ -32,7 +31,7 @@ def identity(run: Path, man: Mapping[str, Any], registry: rq.Registry, req_path:
               req_doc: Mapping[str, Any] | None, csv_path: Path, templates: Path,
               check: RunCheck) -> tuple[list[dict], dict]:
     """What was assessed: (the report's identity rows, the same facts for evidence.json)."""
-    from assurance.campaign.run import git_commit
+    from assurance.code_identity import code_identity
 
     weights = man.get("weights") or {}
     wpath = weights.get("path")
@@ -43,19 +42,22 @@ def identity(run: Path, man: Mapping[str, Any], registry: rq.Registry, req_path:
     elif wpath:
         current = "file no longer present"
     code = man.get("code") or {}
-    code_sha, n_files = tree_sha256([ROOT / "el", ROOT / "assurance"])
+    now = code_identity()
+    code_sha, n_files = now["sha256"], now["files"]
     tpl_sha, n_tpl = tree_sha256([templates], base=templates.parent)
     data = man.get("data") or {}
     versions = man.get("versions") or {}
     cfg_sha = rq.config_sha256(man.get("config") or {})
-    now_commit = git_commit()
+    now_commit = now["git_commit"]
     rows = [
         {"item": "Toolkit", "value": f"uav-el-assurance {code.get('version', '?')} (campaign); "
                                      f"{__version__} (this report)", "sha256": "", "note": ""},
-        {"item": "Code (git)", "value": f"campaign: {code.get('git_commit') or 'unknown'}",
-         "sha256": "", "note": f"report: {now_commit or 'unknown'}"},
-        {"item": "Code (source tree)", "value": f"{n_files} source files of el/ and assurance/ at report time",
-         "sha256": code_sha, "note": "a '-dirty' commit means uncommitted changes: rely on this hash"},
+        {"item": "Code (git)", "value": f"campaign: {code.get('git_commit') or _no_commit(code)}",
+         "sha256": "", "note": f"report: {now_commit or _no_commit(now)}"},
+        {"item": "Code (package files)", "value": f"{n_files} files of el/ and assurance/ as {now['source']} at "
+                                                  "report time", "sha256": code_sha,
+         "note": f"campaign: {code['sha256'] if code.get('sha256') else 'not recorded'}; a '-dirty' commit means "
+                 "uncommitted changes: rely on this hash"},
         {"item": "System file", "value": _system_text(man), "sha256": (man.get("system") or {}).get("sha256") or "",
          "note": "every value it sets: section 'The system assessed'"},
         {"item": "Weights", "value": str(wpath or weights.get("model") or "not recorded"),
@@ -104,6 +106,11 @@ def identity(run: Path, man: Mapping[str, Any], registry: rq.Registry, req_path:
              "system_sha256": (man.get("system") or {}).get("sha256"),
              "system_path": (man.get("system") or {}).get("path")}
     return rows, ident
+
+
+def _no_commit(code: Mapping[str, Any]) -> str:
+    return "none (installed package: identified by version and file hash)" if code.get("source") == "installed" \
+        else "unknown"
 
 
 def _system_text(man: Mapping[str, Any]) -> str:

@@ -87,25 +87,10 @@ def write_pdf(html: str, path: Path, attachments: Sequence[Path] = ()) -> str | 
 
 
 def pdf_attachment_names(path: str | Path) -> list[str]:
-    """Names of the files embedded in a PDF (its EmbeddedFiles name tree), read without a PDF library:
-    the objects are searched in the file and in its compressed object streams."""
-    import re
-    import zlib
+    """Names of the files embedded in a PDF (its EmbeddedFiles name tree), read by pypdf (the ``pdf`` extra)."""
+    from pypdf import PdfReader
 
-    data = Path(path).read_bytes()
-    chunks = [data]
-    for m in re.finditer(rb"stream\r?\n", data):
-        try:
-            chunks.append(zlib.decompressobj().decompress(data[m.end():m.end() + 4_000_000]))
-        except zlib.error:
-            continue
-    names: list[str] = []
-    for chunk in chunks:
-        for m in re.finditer(rb"/Type\s*/Filespec(.{0,400}?)>>", chunk, re.S):
-            f = re.search(rb"/UF\s*\((.*?)\)|/F\s*\((.*?)\)", m.group(1))
-            if f:
-                names.append((f.group(1) or f.group(2)).decode("latin-1"))
-    return list(dict.fromkeys(names))
+    return list(PdfReader(str(path)).attachments)
 
 
 def write_csv_rows(path: Path, rows: Sequence[Mapping[str, str]], columns: Sequence[str]) -> None:

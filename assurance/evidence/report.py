@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import json
+import logging
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -18,6 +19,7 @@ from assurance.evidence.text import jsonable
 from el.hashing import sha256_file
 
 EVIDENCE_FORMAT = "uav-el-evidence/1"
+log = logging.getLogger(__name__)
 
 
 class _Files:
@@ -114,6 +116,7 @@ def generate(
                       trusted=trusted)
     campaign = campaign_context(inp)
     gate = decide_gate(inp.results, inp.problems, waivers, strict)
+    log.info("gate %s: %s (waivers: %s)", gate.result, gate.text, waivers or "none")
     base = (baseline_view(Path(baseline), inp.manifest, campaign["ident"], inp.table, inp.results, inp.registry,
                           Path(baseline_requirements) if baseline_requirements else None, n_boot)
             if baseline else None)

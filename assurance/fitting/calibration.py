@@ -122,7 +122,7 @@ def calibration_body(scores: Any, unsafe: Any, *, monitor: str, miss_rate: float
 
 def calibrate_on_data(data: str | Path, monitor: str, *, miss_rate: float, confidence: float,
                       weights: str | dict[str, Any] | None = None, images: int | None = None, segmenter: Any = None,
-                      core: Any = None) -> dict[str, Any]:
+                      core: Any = None, progress: bool = False) -> dict[str, Any]:
     """Score every candidate of the clean scenes in ``data`` with ``monitor`` and calibrate it: the card document.
 
     The candidates, their truth and the scores come from the campaign's own task code (perturbation
@@ -151,8 +151,10 @@ def calibrate_on_data(data: str | Path, monitor: str, *, miss_rate: float, confi
 
         segmenter = load_model_spec(weights)
     network = network_record(segmenter, weights, loaded=loaded)  # an unidentified network is refused here
+    from assurance.progress import progress as bar
+
     scores, unsafe, faults = [], [], []
-    for task in tasks:
+    for task in bar(tasks, total=len(tasks), desc="calibration scenes", enabled=progress):
         rows = run_task(Task(task.perturbation, task.severity, task.sample), config, segmenter)
         faults += [r["fault"] for r in rows["images"] if r.get("fault")]
         scores += [r["score"] for r in rows["candidates"]]

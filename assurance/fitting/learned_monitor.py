@@ -60,15 +60,19 @@ def split_sha256(samples: Sequence[Sample], root: str | Path, *, labels: bool = 
 
 def collect_candidates(data: str | Path, segmenter: Any, *, core: CoreConfig | None = None, margin: float = 0.25,
                        max_side: int | None = None, mcd_n: int = 0, mcd_rho: float = 0.9, seed: int = 0,
-                       images: int | None = None, samples: Sequence[Sample] | None = None) -> CandidateSet:
-    """Features and truth of every candidate of the clean scenes of ``data`` (or of ``samples`` in it)."""
+                       images: int | None = None, samples: Sequence[Sample] | None = None,
+                       progress: bool = False, desc: str = "scenes") -> CandidateSet:
+    """Features and truth of every candidate of the clean scenes of ``data`` (or of ``samples`` in it); ``progress``
+    shows a bar (``desc``) on stderr."""
+    from assurance.progress import progress as bar
+
     core = core or CoreConfig()
     if samples is None:
         samples = list(iter_samples(data, require_labels=True))[:images]
     if not samples:
         raise ValueError(f"{data}: no labelled scenes")
     rows, truth, scene = [], [], []
-    for i, s in enumerate(samples):
+    for i, s in enumerate(bar(samples, total=len(samples), desc=desc, enabled=progress)):
         rgb, ids = read_image(s.image_path), read_labels(s.label_path)
         if ids.shape != rgb.shape[:2]:
             raise ValueError(f"{s.label_path}: label size {ids.shape} differs from the image {rgb.shape[:2]}")
@@ -153,25 +157,27 @@ def fit_learned_monitor(data: str | Path, segmenter: Any, *, val: str | Path | N
                         core: CoreConfig | None = None, margin: float = 0.25, max_side: int | None = None,
                         mcd_n: int = 0, mcd_rho: float = 0.9, cs: Sequence[float] = DEFAULT_CS,
                         recall: float = 0.95, images: int | None = None,
-                        weights: dict[str, Any] | None = None) -> dict[str, Any]:
+                        weights: dict[str, Any] | None = None, progress: bool = False) -> dict[str, Any]:
     """Train on the candidates of ``data``, select on ``val`` (else every 5th scene of ``data``): the JSON document.
 
     ``weights``: the network record (default: the one ``segmenter`` reports; ValueError if it reports none)."""
     from assurance.fitting.network_identity import network_record
 
     weights = weights if weights is not None else network_record(segmenter, loaded=False)
-    kw = {"core": core, "margin": margin, "max_side": max_side, "mcd_n": mcd_n, "mcd_rho": mcd_rho}
+    kw = {"core": core, "margin": margin, "max_side": max_side, "mcd_n": mcd_n, "mcd_rho": mcd_rho,
+          "progress": progress}
     scenes = list(iter_samples(data, require_labels=True))[:images]
     if val is None:
         held = scenes[4::5]
         if not held:
             raise ValueError(f"{data}: too few scenes to hold out every 5th (give --val)")
-        train = collect_candidates(data, segmenter, samples=[s for i, s in enumerate(scenes) if i % 5 != 4], **kw)
-        held_out = collect_candidates(data, segmenter, samples=held, **kw)
+        train = collect_candidates(data, segmenter, samples=[s for i, s in enumerate(scenes) if i % 5 != 4],
+                                   desc="training scenes", **kw)
+        held_out = collect_candidates(data, segmenter, samples=held, desc="held-out scenes", **kw)
         splits = {"train": shown_path(data), "held_out": f"every 5th scene of {shown_path(data)}"}
     else:
-        train = collect_candidates(data, segmenter, samples=scenes, **kw)
-        held_out = collect_candidates(val, segmenter, images=images, **kw)
+        train = collect_candidates(data, segmenter, samples=scenes, desc="training scenes", **kw)
+        held_out = collect_candidates(val, segmenter, images=images, desc="held-out scenes", **kw)
         splits = {"train": shown_path(data), "held_out": shown_path(val)}
     body = fit_learned_body(train, held_out, cs=cs, recall=recall, mcd_n=mcd_n, mcd_rho=mcd_rho,
                             weights=weights, splits=splits)

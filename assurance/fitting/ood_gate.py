@@ -34,10 +34,15 @@ def _samples(data: str | Path, images: int | None) -> list[Sample]:
 
 
 def embed_frames(data: str | Path, segmenter: Any, *, kind: str | None = None, images: int | None = None,
-                 perturbation: str = "none", severity: int = 3, seed: int = 0) -> np.ndarray:
-    """Embeddings (n, d) of the frames of ``data``, perturbed as a campaign would (seeded per frame)."""
+                 perturbation: str = "none", severity: int = 3, seed: int = 0, progress: bool = False,
+                 desc: str = "frames") -> np.ndarray:
+    """Embeddings (n, d) of the frames of ``data``, perturbed as a campaign would (seeded per frame); ``progress``
+    shows a bar on stderr."""
+    from assurance.progress import progress as bar
+
     rows = []
-    for i, s in enumerate(_samples(data, images)):
+    samples = _samples(data, images)
+    for i, s in enumerate(bar(samples, total=len(samples), desc=desc, enabled=progress)):
         rgb = read_image(s.image_path)
         if perturbation != "none":
             rgb = perturb(rgb, perturbation, severity, np.random.default_rng([seed, i]))
@@ -69,7 +74,7 @@ def fit_ood_body(train: np.ndarray, val: np.ndarray, *, kind: str, quantile: flo
 
 
 def fit_ood(data: str | Path, val: str | Path, segmenter: Any, *, quantile: float = DEFAULT_QUANTILE,
-            images: int | None = None, weights: dict[str, Any] | None = None) -> dict[str, Any]:
+            images: int | None = None, weights: dict[str, Any] | None = None, progress: bool = False) -> dict[str, Any]:
     """Fit the gate on the frames of ``data``, threshold on ``val``: the JSON document (``uav-el fit-ood``).
 
     ``weights``: the network record (default: the one ``segmenter`` reports; ValueError if it reports none)."""
@@ -77,8 +82,8 @@ def fit_ood(data: str | Path, val: str | Path, segmenter: Any, *, quantile: floa
 
     weights = weights if weights is not None else network_record(segmenter, loaded=False)
     kind = embedding_kind(segmenter)
-    train = embed_frames(data, segmenter, kind=kind, images=images)
-    held = embed_frames(val, segmenter, kind=kind, images=images)
+    train = embed_frames(data, segmenter, kind=kind, images=images, progress=progress, desc="training frames")
+    held = embed_frames(val, segmenter, kind=kind, images=images, progress=progress, desc="validation frames")
     body = fit_ood_body(train, held, kind=kind, quantile=quantile, weights=weights,
                         training={"path": shown_path(data), "frames": int(train.shape[0]),
                                   "sha256": split_sha256(_samples(data, images), data, labels=False)},

@@ -95,6 +95,7 @@ def pose_error_margin(ctx: CheckContext) -> Evidence:
 def calibrated_miss_rate(ctx: CheckContext) -> Evidence:
     """The calibrated monitor's miss rate on the test split is within its card's (no card: not verified)."""
     from assurance.fitting.calibration import check_calibrated_miss_rate
+    from assurance.requirements.targets import card_path
     from el.monitors.calibration import load_calibration
 
     card = ctx.parameters.get("calibration_card")
@@ -102,5 +103,6 @@ def calibrated_miss_rate(ctx: CheckContext) -> Evidence:
         return Evidence("miss rate of the calibrated monitor", INSUFFICIENT,
                         "insufficient evidence: no calibration card chosen (parameters.calibration_card)")
     manifest = ctx.manifest or {}
-    return check_calibrated_miss_rate(ctx.candidates, load_calibration(card), run_models=manifest.get("monitor_models"),
+    return check_calibrated_miss_rate(ctx.candidates, load_calibration(card_path(card)),
+                                      run_models=manifest.get("monitor_models"),
                                       run_network=(manifest.get("weights") or {}).get("sha256"))

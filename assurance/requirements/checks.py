@@ -367,23 +367,29 @@ def _sha(v: Any) -> bool:
 
 
 def check_artefacts_identified(manifest: Mapping[str, Any]) -> Evidence:
-    """EL-R12 on a run: its manifest identifies weights and data by SHA-256, and the code by version and commit."""
+    """EL-R12 on a run: its manifest identifies weights and data by SHA-256, and the code by its git commit (run
+    from the toolkit's own checkout) or by its version and the SHA-256 of its package files (an installed
+    package)."""
+    code = manifest.get("code") or {}
+    by_files = bool(code.get("version")) and _sha(code.get("sha256"))
     rows = [
         {"artefact": "weights", "identity": (manifest.get("weights") or {}).get("sha256")},
         {"artefact": "data", "identity": (manifest.get("data") or {}).get("sha256")},
         {"artefact": "configuration", "identity": config_sha256(manifest.get("config") or {})
          if manifest.get("config") else None},
-        {"artefact": "code", "identity": (manifest.get("code") or {}).get("git_commit")},
+        {"artefact": "code", "identity": code.get("git_commit") or (
+            f"{code['version']} (package files {code['sha256']})" if by_files else None)},
     ]
     bad = [r["artefact"] for r in rows[:3] if not _sha(r["identity"])]
     if not rows[3]["identity"]:
-        bad.append("code (no git commit recorded)")
+        bad.append("code (neither a git commit nor a version with the hash of its files)")
     cols = ("artefact", "identity")
     if bad:
         return Evidence("artefacts identified by the run manifest", FAIL,
                         f"the run manifest does not identify: {', '.join(bad)}", tuple(rows), cols)
+    how = "git commit" if code.get("git_commit") else "version and SHA-256 of its package files"
     return Evidence("artefacts identified by the run manifest", PASS,
-                    "weights, data and configuration identified by SHA-256, code by git commit", tuple(rows), cols)
+                    f"weights, data and configuration identified by SHA-256, code by {how}", tuple(rows), cols)
 
 
 def config_sha256(config: Mapping[str, Any]) -> str:

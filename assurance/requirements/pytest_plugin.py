@@ -1,28 +1,36 @@
-"""pytest plugin: the ``requirements`` marker that ties tests to safety requirements (docs/architecture.md section 4.6).
+"""pytest plugin: the ``requirements`` marker that ties tests to safety requirements, and the binding of a test
+session to a campaign run (docs/architecture.md section 4.6).
 
-Registered with the ``pytest11`` entry point ``uav_el_requirements``, so every pytest run of the
-project has it.
+Registered with the ``pytest11`` entry point ``uav_el_requirements``, so every pytest session in an environment
+where the toolkit is installed has it: the packaged checks (``uav-el verify``, or
+``pytest --pyargs assurance.requirements.suite``) and a user's own tests in any folder alike.
 
 - ``@pytest.mark.requirements("EL-R01", ...)`` claims requirements of the registry
-  (``assurance/requirements.yaml``, or ``--requirements-registry PATH``). An id the registry does not
+  (``assurance/requirements.yaml``, or ``--uav-el-registry PATH``). An id the registry does not
   know, or a marker without ids, stops the session at collection (``pytest.UsageError`` naming the
   test and the id). A test may carry several markers (function, class, module): all count.
-  ``pytest -m requirements`` runs exactly the tests that claim a requirement.
+  ``pytest -m requirements`` runs exactly the tests that claim a requirement. The ``campaign`` and
+  ``slow`` markers are registered here too.
 - The claimed ids are added to the test's ``user_properties`` as one property named ``requirements``
   (comma-joined, e.g. ``EL-R03,EL-R04``), so ``pytest --junitxml=...`` carries them.
+- The session is bound to a campaign run (``--uav-el-run RUN``, else ``$UAV_EL_RUN``, else ini ``uav_el_run``,
+  else ``runs/demo`` under the rootdir; ``assurance.requirements.binding``): the run's digest and system file
+  hash are recorded, the run's system file sets the targets, and the fixtures ``campaign_run`` (skips when
+  there is no run: "not verified") and ``requirement_registry`` serve any test.
 - At the end of the session each requirement of the registry gets a state (verified / failed /
-  not verified, see ``assurance.requirements.requirement_state``) and the results go to a JSON file:
-  ``--requirements-report PATH``, or ``reports/requirements.json`` under the rootdir when the marker
-  expression selects the requirement tests (``-m requirements``).
-
+  not verified, see ``assurance.requirements.requirement_state``) and the results go to a JSON file,
+  with the code identity (``assurance.code_identity``) and the registry's hash:
+  ``--uav-el-report PATH`` (or ini ``uav_el_report``), or ``reports/requirements.json`` under the
+  rootdir when the marker expression selects the requirement tests (``-m requirements``).
 - The requirement targets (the registry's parameters a user sets, ``assurance.requirements.targets``):
-  ``--uav-el-targets FILE.json`` (a JSON object of overrides), else ``$UAV_EL_TARGETS``; a plugin or
-  conftest binds them in code with ``set_targets(config, targets, source=...)`` before collection (e.g.
-  a system file's ``[targets]``). The overrides, their source and the effective parameters' SHA-256 go
-  into the results JSON (``registry``), and the evidence gate refuses a report on other targets.
+  ``--uav-el-targets FILE.json`` (a JSON object of overrides), else ``$UAV_EL_TARGETS``, else ini
+  ``uav_el_targets``; a plugin or conftest binds them in code with ``set_targets(config, targets, source=...)``
+  before collection. The overrides, their source and the effective parameters' SHA-256 go into the results
+  JSON (``registry``), and the evidence gate refuses a report on other targets.
 
-State lives in ``config.stash``. ``set_context(config, **values)`` lets a conftest add facts to the
-report (e.g. the campaign run the campaign tests read).
+Every option has the prefix ``--uav-el-``; ``--requirements-report`` and ``--requirements-registry`` remain as
+aliases. Ini options (``[tool.pytest.ini_options]``) give the defaults, relative to the ini file's folder.
+State lives in ``config.stash``. ``set_context(config, **values)`` lets a conftest add facts to the report.
 """
 
 from __future__ import annotations
@@ -41,6 +49,12 @@ MARKER = "requirements"
 DEFAULT_REPORT = Path("reports") / "requirements.json"
 TARGETS_ENV = "UAV_EL_TARGETS"
 """The environment variable naming a targets JSON file when ``--uav-el-targets`` is not given."""
+RUN_ENV = "UAV_EL_RUN"
+MARKERS = {
+    "campaign": "checks a campaign run's readouts (the evidence step, uav-el verify); excluded from a fast run",
+    "slow": "long-running tests (campaigns, training); excluded from a fast run",
+}
+"""The other markers the plugin registers (a project that uses --strict-markers needs them declared)."""
 
 _REGISTRY = pytest.StashKey[Any]()
 _CLAIMS = pytest.StashKey[dict[str, tuple[str, ...]]]()
@@ -54,17 +68,25 @@ _TARGETS = pytest.StashKey[Any]()
 
 def pytest_addoption(parser: pytest.Parser) -> None:
     group = parser.getgroup("uav-el requirements", "safety requirements (assurance/requirements.yaml)")
-    group.addoption("--requirements-report", metavar="PATH", default=None,
+    group.addoption("--uav-el-run", dest="uav_el_run", metavar="RUN", default=None,
+                    help="campaign run the requirement checks judge and the results are bound to "
+                         f"(default: ${RUN_ENV}, else ini uav_el_run, else runs/demo under the rootdir)")
+    group.addoption("--uav-el-report", "--requirements-report", dest="requirements_report", metavar="PATH",
+                    default=None,
                     help="write the per-requirement results (tests, outcomes, state) to this JSON file "
-                         f"(default with -m requirements: {DEFAULT_REPORT} under the rootdir)")
-    group.addoption("--requirements-registry", metavar="PATH", default=None,
-                    help="requirement registry to check marker ids against (default: assurance/requirements.yaml)")
+                         f"(default: ini uav_el_report; with -m requirements: {DEFAULT_REPORT} under the rootdir)")
+    group.addoption("--uav-el-registry", "--requirements-registry", dest="requirements_registry", metavar="PATH",
+                    default=None, help="requirement registry to check marker ids against (default: ini "
+                                       "uav_el_registry, else the shipped assurance/requirements.yaml)")
     group.addoption("--uav-el-targets", dest="uav_el_targets", metavar="FILE.json", default=None,
                     help="requirement targets overriding the registry's parameters (a JSON object, e.g. "
-                         '{"confidence": 0.99, "radius_m": 2.5}; default: $' + TARGETS_ENV + ", else none)")
-    group.addoption("--uav-el-run", dest="uav_el_run", metavar="RUN", default=None,
-                    help="campaign run folder for the campaign requirement tests "
-                         "(default: $UAV_EL_RUN, else runs/demo under the rootdir)")
+                         '{"confidence": 0.99, "radius_m": 2.5}; default: $' + TARGETS_ENV
+                         + ", else ini uav_el_targets, else none)")
+    for name, what in (("uav_el_run", "campaign run folder (--uav-el-run)"),
+                       ("uav_el_report", "requirement results JSON (--uav-el-report)"),
+                       ("uav_el_registry", "requirement registry YAML (--uav-el-registry)"),
+                       ("uav_el_targets", "requirement targets JSON (--uav-el-targets)")):
+        parser.addini(name, f"uav-el: default {what}, relative to the ini file's folder", default="")
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -73,16 +95,47 @@ def pytest_configure(config: pytest.Config) -> None:
         f"{MARKER}(*ids): the test verifies these safety requirements (ids of assurance/requirements.yaml, "
         "e.g. 'EL-R01'); select them with -m requirements",
     )
+    for name, text in MARKERS.items():
+        config.addinivalue_line("markers", f"{name}: {text}")
     for key, empty in ((_REGISTRY, None), (_CLAIMS, {}), (_PHASES, {}), (_DESELECTED, set()), (_CONTEXT, {}),
                        (_ERRORS, []), (_WRITTEN, None), (_TARGETS, None)):
         config.stash.setdefault(key, empty)  # a conftest may have set its context first
     config.pluginmanager.register(_Recorder(config), "uav_el_requirements_recorder")
-    if config.getoption("requirements_registry") or _targets_file(config):
+    if _setting(config, "requirements_registry", "uav_el_registry") or _targets_file(config):
         registry(config)  # a bad registry or targets file given on the command line is a usage error at once
+    if not hasattr(config, "workerinput"):
+        _bind(config)
+
+
+def _bind(config: pytest.Config) -> None:
+    """Bind the session to its campaign run (``assurance.requirements.binding``): digest, system file, targets."""
+    from assurance.requirements import binding
+
+    run = binding.run_path(config.getoption("uav_el_run", None), str(config.getini("uav_el_run") or ""),
+                           _ini_base(config))
+    facts = binding.run_facts(run)
+    targets, source = facts.pop("_targets", None), facts.pop("_targets_source", None)
+    set_context(config, **facts)
+    if targets is not None:
+        set_targets(config, targets, source=source)
+
+
+def _ini_base(config: pytest.Config) -> Path:
+    return config.inipath.parent if config.inipath else config.rootpath
+
+
+def _setting(config: pytest.Config, dest: str, ini: str, env: str | None = None) -> str | None:
+    """An option's value: the command line, else the environment variable ``env``, else the ini value
+    (made absolute against the ini file's folder), else None."""
+    given = config.getoption(dest, None) or (os.environ.get(env) if env else None)
+    if given:
+        return str(given)
+    value = str(config.getini(ini) or "")
+    return str(_ini_base(config) / value) if value else None
 
 
 def _targets_file(config: pytest.Config) -> str | None:
-    return config.getoption("uav_el_targets", None) or os.environ.get(TARGETS_ENV) or None
+    return _setting(config, "uav_el_targets", "uav_el_targets", TARGETS_ENV)
 
 
 def set_targets(config: pytest.Config, targets: Any, *, source: str = "set_targets") -> None:
@@ -107,7 +160,8 @@ def registry(config: pytest.Config) -> Any:
                 path = _targets_file(config)
                 bound = (read_targets_file(path), str(Path(path).resolve()))
             targets, source = bound or ({}, None)
-            reg = load_registry(config.getoption("requirements_registry"), targets=targets, targets_source=source)
+            reg = load_registry(_setting(config, "requirements_registry", "uav_el_registry"), targets=targets,
+                                targets_source=source)
         except (RegistryError, TargetError) as exc:
             raise pytest.UsageError(f"requirement registry: {exc}") from None
         config.stash[_REGISTRY] = reg
@@ -122,6 +176,26 @@ def set_context(config: pytest.Config, **values: Any) -> None:
 def get_context(config: pytest.Config) -> dict[str, Any]:
     """The facts recorded so far for the requirement report (a copy)."""
     return dict(config.stash.get(_CONTEXT, {}))
+
+
+@pytest.fixture(scope="session")
+def requirement_registry(pytestconfig: pytest.Config) -> Any:
+    """The session's validated requirement registry, with the session's targets applied."""
+    return registry(pytestconfig)
+
+
+@pytest.fixture(scope="session")
+def campaign_run(pytestconfig: pytest.Config) -> Path:
+    """The campaign run the session is bound to; skips (requirement not verified) when there is none or it is
+    damaged, so too little evidence never fails a requirement."""
+    ctx = get_context(pytestconfig)
+    run = Path(ctx.get("run") or "runs/demo")
+    if not ctx.get("run_exists"):
+        pytest.skip(f"not verified: no campaign run at {run} (pass --uav-el-run RUN or set {RUN_ENV}; "
+                    "make one with: uav-el campaign --data DATA --out RUN)")
+    if ctx.get("run_problems"):
+        pytest.skip(f"not verified: the campaign run {run} is damaged: {'; '.join(ctx['run_problems'][:3])}")
+    return run
 
 
 def claimed_ids(item: pytest.Item) -> tuple[str, ...]:
@@ -191,10 +265,11 @@ class _Recorder:
 
         results = session_results(config)
         context = dict(config.stash[_CONTEXT])
-        from assurance.campaign.integrity import code_sha256
+        from assurance.code_identity import code_identity
 
+        code = code_identity()
         context.setdefault("run_digest", None)  # the evidence gate refuses results bound to no run
-        context.update(code_sha256=code_sha256(), finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        context.update(code_sha256=code["sha256"], code=code, finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"),
                        rootdir=str(config.rootpath),
                        args=list(config.invocation_params.args), markexpr=config.getoption("markexpr", "") or "",
                        python=sys.version.split()[0], pytest=pytest.__version__)
@@ -282,7 +357,7 @@ def session_results(config: pytest.Config) -> dict[str, Any]:
 
 
 def _report_path(config: pytest.Config) -> Path | None:
-    given = config.getoption("requirements_report")
+    given = _setting(config, "requirements_report", "uav_el_report")
     if given:
         return Path(given)
     markexpr = config.getoption("markexpr", "") or ""

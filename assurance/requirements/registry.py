@@ -1,14 +1,15 @@
 """The requirement registry: ``assurance/requirements.yaml`` read and validated (docs/architecture.md 4.6).
 
-``load_registry`` checks unique ids, required fields, known sources and the parameters (``targets``), renders the
-requirement texts from the parameters, and raises ``RegistryError`` naming the file and the entry;
+``load_registry`` checks the registry's structure against its JSON Schema (``assurance/data/registry.schema.json``,
+with jsonschema: fields, id pattern, types), then what a schema cannot say: unique ids, known sources, the
+parameters' values (``targets``); it renders the requirement texts from the parameters, and raises
+``RegistryError`` naming the file and the entry;
 ``load_registry(targets=...)`` / ``Registry.with_targets`` apply a user's target overrides.
 """
 
 from __future__ import annotations
 
 import hashlib
-import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from importlib import resources
@@ -31,8 +32,6 @@ REGISTRY_FORMAT = "uav-el-requirements/1"
 KNOWN_SOURCES: tuple[str, ...] = ("SORA", "SSIV21", "ICRA22", "PROJECT")
 """The only sources a requirement may cite (docs/architecture.md section 4.6: never invent a citation)."""
 
-_ID = re.compile(r"^EL-R\d{2,3}$")
-_FIELDS: tuple[str, ...] = ("id", "title", "text", "source", "rationale", "verification", "acceptance", "domain")
 
 
 class RegistryError(UavElError, ValueError):
@@ -120,35 +119,60 @@ def _text(where: str, entry: Mapping[str, Any], name: str, params: Mapping[str, 
         raise RegistryError(f"{where}: field '{name}': {exc}") from None
 
 
-def _requirement(where: str, entry: Any, sources: Mapping[str, str], params: Mapping[str, Any]) -> Requirement:
-    if not isinstance(entry, dict):
-        raise RegistryError(f"{where}: a requirement must be a mapping, got {type(entry).__name__}")
-    missing = [f for f in _FIELDS if f not in entry]
-    if missing:
-        raise RegistryError(f"{where}: missing field(s) {', '.join(repr(m) for m in missing)}")
-    unknown = sorted(set(entry) - set(_FIELDS))
-    if unknown:
-        raise RegistryError(f"{where}: unknown field(s) {', '.join(repr(u) for u in unknown)}")
-    src = entry["source"]
-    if isinstance(src, str):
-        src = [src]
-    if not isinstance(src, list) or not src or not all(isinstance(s, str) for s in src):
-        raise RegistryError(f"{where}: 'source' must be a non-empty list of source keys, got {src!r}")
+def _requirement(where: str, entry: dict[str, Any], sources: Mapping[str, str],
+                 params: Mapping[str, Any]) -> Requirement:
+    """One requirement (its structure already checked by the schema): sources known, texts rendered."""
+    src = [entry["source"]] if isinstance(entry["source"], str) else list(entry["source"])
     bad = [s for s in src if s not in sources]
     if bad:
         raise RegistryError(f"{where}: unknown source(s) {bad}; cite only {', '.join(sources)}")
     ver = entry["verification"]
-    if not isinstance(ver, dict) or "method" not in ver:
-        raise RegistryError(f"{where}: 'verification' must be a mapping with a 'method'")
-    kind = ver.get("kind", [])
-    if not isinstance(kind, list) or not all(isinstance(k, str) for k in kind):
-        raise RegistryError(f"{where}: 'verification.kind' must be a list of strings, got {kind!r}")
     return Requirement(
         id=entry["id"], title=_text(where, entry, "title", params), text=_text(where, entry, "text", params),
         source=tuple(src), rationale=_text(where, entry, "rationale", params),
-        verification_method=_text(where, ver, "method", params), verification_kind=tuple(kind),
+        verification_method=_text(where, ver, "method", params), verification_kind=tuple(ver.get("kind", [])),
         acceptance=_text(where, entry, "acceptance", params), domain=_text(where, entry, "domain", params),
     )
+
+
+def _schema() -> Any:
+    import json
+
+    from jsonschema import Draft202012Validator
+
+    text = resources.files("assurance").joinpath("data", "registry.schema.json").read_text(encoding="utf-8")
+    return Draft202012Validator(json.loads(text))
+
+
+def _schema_problem(path: Path, doc: Any) -> str | None:
+    """The registry's first structural problem by its JSON Schema, as one line naming the entry; None if none."""
+    from jsonschema.exceptions import best_match
+
+    error = best_match(_schema().iter_errors(doc), key=lambda e: (len(e.absolute_path), e.validator != "required"))
+    if error is None:
+        return None
+    loc = list(error.absolute_path)
+    where = str(path)
+    if len(loc) >= 2 and loc[0] == "requirements" and isinstance(loc[1], int):
+        entry = doc["requirements"][loc[1]]
+        rid = entry.get("id") if isinstance(entry, dict) else None
+        where += f": requirements[{loc[1]}]" + (f" ({rid})" if isinstance(rid, str) else "")
+        loc = loc[2:]
+    elif loc:
+        where += f": {loc[0]}"
+        loc = loc[1:]
+    field = ".".join(str(x) for x in loc)
+    if error.validator == "required":
+        missing = [r for r in error.validator_value if r not in error.instance]
+        return f"{where}: missing field(s) {', '.join(repr(m) for m in missing)}"
+    if error.validator == "additionalProperties":
+        unknown = sorted(set(error.instance) - set(error.schema.get("properties", {})))
+        return f"{where}: unknown field(s) {', '.join(repr(u) for u in unknown)}"
+    if field == "id":
+        return f"{where}: 'id' must look like 'EL-R01', got {error.instance!r}"
+    if error.validator == "const" and not field:
+        return f"{where} must be {error.validator_value!r}, got {error.instance!r}"
+    return f"{where}: " + (f"field '{field}': " if field else "") + error.message
 
 
 def _parameters(path: Path, params: Any) -> dict[str, Any]:
@@ -174,10 +198,8 @@ def _build(path: Path, sha: str, sources: dict[str, str], defaults: dict[str, An
     params = {**defaults, **targets}
     reqs: dict[str, Requirement] = {}
     for i, entry in enumerate(templates["requirements"]):
-        rid = entry.get("id") if isinstance(entry, dict) else None
-        where = f"{path}: requirements[{i}]" + (f" ({rid})" if isinstance(rid, str) else "")
-        if not isinstance(rid, str) or not _ID.match(rid):
-            raise RegistryError(f"{where}: 'id' must look like 'EL-R01', got {rid!r}")
+        rid = entry["id"]  # the schema checked its form
+        where = f"{path}: requirements[{i}] ({rid})"
         if rid in reqs:
             raise RegistryError(f"{where}: duplicate id {rid!r}")
         reqs[rid] = _requirement(where, entry, sources, params)
@@ -208,21 +230,16 @@ def load_registry(path: str | Path | None = None, *, targets: Mapping[str, Any] 
         raise RegistryError(f"{path}: not valid YAML ({exc})") from None
     if not isinstance(doc, dict):
         raise RegistryError(f"{path}: the registry must be a YAML mapping")
-    if doc.get("format") != REGISTRY_FORMAT:
-        raise RegistryError(f"{path}: format must be {REGISTRY_FORMAT!r}, got {doc.get('format')!r}")
-    sources = doc.get("sources")
-    if not isinstance(sources, dict) or not sources:
-        raise RegistryError(f"{path}: 'sources' must be a non-empty mapping")
+    problem = _schema_problem(path, doc)
+    if problem:
+        raise RegistryError(problem)
+    sources = doc["sources"]
     invented = sorted(set(sources) - set(KNOWN_SOURCES))
     if invented:
         raise RegistryError(f"{path}: sources {invented} are not allowed; cite only {', '.join(KNOWN_SOURCES)}")
-    params = _parameters(path, doc.get("parameters"))
-    domain = doc.get("operating_domain")
-    if not isinstance(domain, dict) or not all(isinstance(v, str) for v in domain.values()):
-        raise RegistryError(f"{path}: 'operating_domain' must be a mapping of strings")
-    entries = doc.get("requirements")
-    if not isinstance(entries, list) or not entries:
-        raise RegistryError(f"{path}: 'requirements' must be a non-empty list")
+    params = _parameters(path, doc["parameters"])
+    domain = doc["operating_domain"]
+    entries = doc["requirements"]
     templates = {"requirements": entries, "operating_domain": domain}
     reg = _build(path, hashlib.sha256(raw).hexdigest(), dict(sources), params, templates, {}, None)
     return reg.with_targets(targets, source=targets_source)

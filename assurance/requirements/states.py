@@ -136,7 +136,7 @@ def load_results(path: str | Path, registry: Registry) -> tuple[dict[str, Requir
     try:
         doc = json.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
-        raise FileNotFoundError(f"{path}: requirement results not found (run: pytest -m requirements)") from None
+        raise FileNotFoundError(f"{path}: requirement results not found (run: uav-el verify RUN --out DIR)") from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ValueError(f"{path}: unreadable requirement results ({exc})") from None
     if not isinstance(doc, dict) or doc.get("format") not in (RESULTS_FORMAT, "uav-el-evidence/1"):

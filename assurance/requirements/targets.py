@@ -147,7 +147,23 @@ def read_targets_file(path: str | Path) -> dict[str, Any]:
         raise TargetError(f"{path}: the targets file is not valid JSON ({exc})") from None
     if not isinstance(doc, dict):
         raise TargetError(f"{path}: the targets file must hold a JSON object of target names to values")
+    card = doc.get("calibration_card")
+    if isinstance(card, str) and card.strip() and not Path(card).is_absolute():
+        doc["calibration_card"] = str((path.resolve().parent / card).resolve())  # relative to the file, not here
     return doc
+
+
+PACKAGE_ROOT = Path(__file__).resolve().parents[2]
+"""The folder holding the ``el`` and ``assurance`` packages: relative paths in a registry are package data."""
+
+
+def card_path(value: str | Path | None) -> Path | None:
+    """Where the calibration card a target names is: an absolute path as it is, a relative one under the package
+    root (the shipped registry names ``el/monitors/data/calibration.json``), never the working directory."""
+    if value is None or str(value).strip() == "":
+        return None
+    p = Path(value)
+    return p if p.is_absolute() else PACKAGE_ROOT / p
 
 
 def targets_sha256(parameters: Mapping[str, Any]) -> str:

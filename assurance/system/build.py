@@ -189,12 +189,23 @@ def targets(system: SystemFile) -> dict[str, Any]:
     return out
 
 
+def shipped_waivers() -> Path:
+    """The waivers of the shipped system (``assurance/waivers.yaml``, package data: found by an installed wheel)."""
+    from importlib import resources
+
+    return Path(str(resources.files("assurance").joinpath("waivers.yaml")))
+
+
 def waivers(system: SystemFile, given: str | None = None) -> str | None:
-    """The waiver file: the option given, else ``[waivers] file``."""
+    """The waiver file: the option given, else ``[waivers] file``, else, for the embedded default system (the
+    shipped one), the shipped waivers; a system file of the user's without ``[waivers]`` has none (the shipped
+    waivers document the shipped system's deviations, not another system's)."""
     if given is not None:
         return given
     p = system.path_of("waivers.file")
-    return None if p is None else str(p)
+    if p is not None:
+        return str(p)
+    return str(shipped_waivers()) if system.default else None
 
 
 def report_settings(system: SystemFile) -> dict[str, Any]:

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 from assurance.system.checks import check_system
 from assurance.system.loader import SYSTEM_FILE, SystemFile, default_system, read_system
+
+log = logging.getLogger(__name__)
 
 
 def load_system(path: str | Path) -> SystemFile:
@@ -19,6 +22,11 @@ def find_system(explicit: str | Path | None = None, cwd: str | Path | None = Non
     """The system a command assesses: ``--system FILE``, else ``uav-el.toml`` in the working directory, else the
     embedded default."""
     if explicit is not None:
-        return load_system(explicit)
-    here = Path(cwd or Path.cwd()) / SYSTEM_FILE
-    return load_system(here) if here.is_file() else default_system()
+        system = load_system(explicit)
+    else:
+        here = Path(cwd or Path.cwd()) / SYSTEM_FILE
+        system = load_system(here) if here.is_file() else default_system()
+        if here.is_file():
+            log.info("system file found in the working directory: %s", here)
+    log.info("system assessed: %s (SHA-256 %s)", system.label, system.sha256[:12] or "-")
+    return system

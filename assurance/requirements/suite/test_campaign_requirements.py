@@ -1,4 +1,5 @@
-"""Campaign requirement tests: they read a campaign run (--uav-el-run RUN, $UAV_EL_RUN, default runs/demo).
+"""Campaign requirement tests: they read the campaign run the session is bound to (--uav-el-run RUN, $UAV_EL_RUN,
+ini uav_el_run, default runs/demo; ``uav-el verify RUN`` passes it).
 
 One test per registered campaign check (``assurance.requirements.CHECKS``, docs/architecture.md 4.8),
 each claiming its check's requirement: a pass passes, a failure fails with the offending scenarios,
@@ -13,8 +14,8 @@ import pytest
 
 from assurance import requirements as rq
 
-# These read a campaign run (--uav-el-run / $UAV_EL_RUN / runs/demo): the evidence step runs them
-# (`pytest -m requirements`), the default test run (`make test`, -m "not campaign") does not.
+# These read a campaign run: the evidence step runs them (`uav-el verify`), a fast test run (-m "not campaign")
+# does not.
 pytestmark = pytest.mark.campaign
 
 

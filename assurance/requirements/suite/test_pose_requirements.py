@@ -1,6 +1,8 @@
 """EL-R02: the safety radius holds in metres under the declared height and pitch errors (synthetic scenes), with
 R, beta and the pose-error box the registry's targets (parameters radius_m, beta, pose_error)."""
 
+from __future__ import annotations
+
 import pytest
 
 from assurance.fitting.pose_study import PoseCase, candidate_clearances, summarise

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 import torch
-from helpers import scene_ids, scene_image
 
 from assurance import requirements as rq
 from assurance.fitting.network.weights_io import save_weights
@@ -28,17 +28,6 @@ def test_declared_beta_covers_the_declared_pose_error_box(size, requirement_regi
     assert ev.rows[0]["required_beta"] <= p["beta"]
 
 
-def test_shipped_targets_are_the_flight_codes_safety_params():
-    """The registry's default R and beta are what the flight code plans with (el.camera.SafetyParams())."""
-    from el.camera import SafetyParams
-
-    p = rq.load_registry().parameters
-    assert (p["radius_m"], p["beta"]) == (SafetyParams().radius_m, SafetyParams().beta)
-    assert CoreConfig().safety == SafetyParams()
-    need = rq.check_pose_margin(CoreConfig(), (3840, 2160), p["pose_error"]).rows[0]["required_beta"]
-    assert 1.5 < need < p["beta"]  # docs/architecture.md 2.3: about 1.56 for +-20%, so 1.7 has margin
-
-
 @pytest.mark.requirements("EL-R14")
 def test_a_too_small_beta_is_caught():
     from el.camera import SafetyParams
@@ -56,6 +45,17 @@ def test_a_run_planned_with_other_safety_params_does_not_judge_the_targets():
     assert ev.status == rq.INSUFFICIENT and "planned with R = 2 m" in ev.summary and "declare R = 2.5 m" in ev.summary
     same = rq.check_pose_margin(core, (3840, 2160), {"height": 0.2, "pitch": 0.2}, {"radius_m": 2, "beta": 1.7})
     assert same.status == rq.PASS
+
+
+def _scene() -> np.ndarray:
+    """A small colour-coded label image (low vegetation, a road, a building): any frame will do, the model
+    fails before it is used."""
+    from el.labels import ids_to_colors
+
+    ids = np.full((144, 256), 5, np.uint8)
+    ids[:, 80:86] = 2
+    ids[:48, 160:192] = 1
+    return ids_to_colors(ids)
 
 
 @pytest.fixture(scope="module")
@@ -98,5 +98,5 @@ def test_weights_without_their_card_are_refused(tiny_weights, tmp_path):
 def test_pipeline_with_altered_weights_takes_the_default_action(tiny_weights, tmp_path):
     bad = _altered(tiny_weights, tmp_path / "altered.pt")
     el = EmergencyLanding(PipelineConfig(core=CoreConfig(working_width=128)), weights=bad)
-    d = el.decide(scene_image(scene_ids()))
+    d = el.decide(_scene())
     assert d.action == "default" and d.reason.startswith("fault: model") and "SHA-256 mismatch" in d.reason

@@ -1,0 +1,87 @@
+"""``uav-el verify``: the packaged requirement checks against a campaign run, a thin wrapper over pytest.
+
+It runs ``assurance/requirements/suite`` (and a user's own requirement tests given with ``--tests``) with
+``-m requirements`` bound to the run, and writes ``OUT/requirements.json`` and ``OUT/junit.xml``, which
+``uav-el evidence --run RUN --out OUT`` reads. The same session is
+``pytest --pyargs assurance.requirements.suite -m requirements --uav-el-run RUN --uav-el-report ...``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+from pathlib import Path
+
+from assurance.errors import CommandError
+
+log = logging.getLogger(__name__)
+
+HELP = ("run the packaged requirement checks (and your own requirement tests) against a campaign run: writes "
+        "OUT/requirements.json and OUT/junit.xml for uav-el evidence; exit 1 when a requirement test failed")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("run", metavar="RUN", help="campaign run folder (uav-el campaign --out)")
+    p.add_argument("--out", default="reports", help="output folder (default: reports/)")
+    p.add_argument("--tests", nargs="+", default=[], metavar="PATH",
+                   help="your own tests marked @pytest.mark.requirements(...), run and bound with the packaged ones")
+    p.add_argument("--registry", metavar="YAML", help="requirement registry (default: the shipped one)")
+    p.add_argument("--targets", metavar="JSON", help="requirement targets overriding the registry's parameters")
+    p.add_argument("-k", dest="keyword", metavar="EXPR", help="only the tests matching this pytest -k expression")
+
+
+def pytest_args(args: argparse.Namespace, out: Path) -> list[str]:
+    """The pytest command line of the session (what ``uav-el verify`` runs)."""
+    from assurance.code_identity import install_root
+    from assurance.requirements.suite import SUITE_DIR
+
+    argv = [str(SUITE_DIR), *[str(Path(t).resolve()) for t in args.tests], "-m", "requirements",
+            "-p", "no:cacheprovider", "--rootdir", str(install_root()),
+            "--uav-el-run", str(Path(args.run).resolve()), "--uav-el-report", str(out / "requirements.json"),
+            "--junitxml", str(out / "junit.xml")]
+    if args.registry:
+        argv += ["--uav-el-registry", args.registry]
+    if args.targets:
+        argv += ["--uav-el-targets", args.targets]
+    if args.keyword:
+        argv += ["-k", args.keyword]
+    verbose = getattr(args, "verbose", 0) or 0
+    quiet = getattr(args, "quiet", 0) or 0
+    argv += ["-v"] * verbose if verbose else ["-q"] * (1 + quiet)
+    return argv
+
+
+def _check_system(args: argparse.Namespace, run: Path) -> None:
+    """A system file given (or found) must be the one the run assessed: the results are judged on the run's."""
+    system = getattr(args, "system_file", None)
+    if system is None or system.default:
+        return
+    recorded = (json.loads((run / "manifest.json").read_text(encoding="utf-8")).get("system") or {}).get("sha256")
+    if recorded and recorded != system.sha256:
+        raise CommandError(f"{system.label}: the run {run} assessed another system file (SHA-256 {recorded[:12]}, "
+                           f"this one {system.sha256[:12]}); give the run's system file with --system")
+
+
+def run(args: argparse.Namespace) -> int:
+    import pytest
+
+    run_dir = Path(args.run)
+    if not (run_dir / "manifest.json").is_file():
+        raise CommandError(f"{run_dir}: not a campaign run (no manifest.json)")
+    for t in args.tests:
+        if not Path(t).exists():
+            raise CommandError(f"--tests {t}: no such file or folder")
+    _check_system(args, run_dir)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    argv = pytest_args(args, out.resolve())
+    log.info("pytest %s", " ".join(argv))
+    rc = int(pytest.main(argv))
+    if rc in (pytest.ExitCode.USAGE_ERROR, pytest.ExitCode.INTERRUPTED, pytest.ExitCode.INTERNAL_ERROR):
+        raise CommandError(f"the requirement test session stopped (pytest exit code {rc}); see above")
+    if rc == pytest.ExitCode.NO_TESTS_COLLECTED:
+        raise CommandError("no requirement test was collected (a -k expression that matches nothing?)")
+    print(f"requirement results: {out / 'requirements.json'}, {out / 'junit.xml'} "
+          f"(next: uav-el evidence --run {args.run} --out {args.out})")
+    return 1 if rc == pytest.ExitCode.TESTS_FAILED else 0
