@@ -3,6 +3,7 @@ plugin's: ``assurance.requirements.pytest_plugin``)."""
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 

@@ -3,6 +3,7 @@ the three states, and the campaign checks on tiny campaign runs."""
 
 from __future__ import annotations
 
+import copy
 import json
 import xml.etree.ElementTree as ET
 
@@ -73,7 +74,7 @@ def test_shipped_registry_is_complete_and_consistent():
 
 
 @pytest.mark.parametrize("edit,message", [
-    (lambda d: d["requirements"].append(dict(d["requirements"][0])), "duplicate id 'EL-R01'"),
+    (lambda d: d["requirements"].append(copy.deepcopy(d["requirements"][0])), "duplicate id 'EL-R01'"),
     (lambda d: d["requirements"][2].pop("acceptance"),
      r"requirements\[2\] \(EL-R03\): missing field\(s\) 'acceptance'"),
     (lambda d: d["requirements"][0].update(source=["ISO26262"]), "unknown source"),

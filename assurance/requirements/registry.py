@@ -26,6 +26,7 @@ from assurance.requirements.targets import (
     targets_sha256,
     validate_targets,
 )
+from el import safeyaml
 from el.errors import UavElError
 
 REGISTRY_FORMAT = "uav-el-requirements/1"
@@ -225,7 +226,7 @@ def load_registry(path: str | Path | None = None, *, targets: Mapping[str, Any] 
     except OSError as exc:
         raise RegistryError(f"{path}: cannot read the requirement registry ({exc.strerror or exc})") from None
     try:
-        doc = yaml.safe_load(raw)
+        doc = safeyaml.safe_load(raw)
     except yaml.YAMLError as exc:
         raise RegistryError(f"{path}: not valid YAML ({exc})") from None
     if not isinstance(doc, dict):
