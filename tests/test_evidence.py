@@ -43,7 +43,19 @@ def pytest_results(pytester, run, out, *args) -> Path:
     path = out / "requirements.json"
     pytester.runpytest(str(CAMPAIGN_TESTS), "-p", "no:cacheprovider", "--uav-el-run", str(run),
                        "--requirements-report", str(path), *args)
+    sign_as_verify(run, out)
     return path
+
+
+def sign_as_verify(run, out, waivers=None) -> None:
+    """Sign a session's results as ``uav-el verify [--waivers W]`` does (the session's key; by default the shipped
+    waivers, which the evidence step applies to the shipped system)."""
+    from assurance.attest.keys import load_signing_key
+    from assurance.requirements.attestation import sign_session_results
+    from assurance.system.build import shipped_waivers
+
+    if (out / "requirements.json").is_file():
+        sign_session_results(run, out, load_signing_key(), waivers=waivers or shipped_waivers())
 
 
 @pytest.fixture(scope="module")
@@ -196,6 +208,14 @@ def test_waiver_accepts_a_listed_failure_but_not_under_strict(pytester, monitor_
                        "    owner: monitor maintainers\n    expires: 2999-01-01\n")
     args = ("--run", monitor_runs["broken"], "--out", tmp_path / "bad", "--no-pdf", "--boot", 100)
     capsys.readouterr()
+    assert evidence_cli(*args, "--waivers", waivers) == 1  # the results were signed with other waivers pinned
+    assert "signed with waivers_sha256" in capsys.readouterr().out
+    real_evidence_cli = evidence_cli
+
+    def evidence_cli(*a):  # noqa: F811  (as uav-el verify --waivers W would have signed the results)
+        sign_as_verify(monitor_runs["broken"], tmp_path / "bad", a[a.index("--waivers") + 1])
+        return real_evidence_cli(*a)
+
     assert evidence_cli(*args, "--waivers", waivers) == 0
     assert "failed but waived: EL-R04" in capsys.readouterr().out
     doc = json.loads((tmp_path / "bad" / "evidence.json").read_text())

@@ -29,6 +29,12 @@ def judged(pytester, tiny_campaign, tmp_path):
     pytester.runpytest(str(CAMPAIGN_TESTS), "-p", "no:cacheprovider", "--uav-el-run", str(tiny_campaign["run"]),
                        "--requirements-report", str(results), "--uav-el-targets", str(tfile),
                        "-k", "unsafe_landing_bound or safety_gain")
+    from assurance.attest.keys import load_signing_key
+    from assurance.requirements.attestation import sign_session_results
+    from assurance.system.build import shipped_waivers
+
+    sign_session_results(tiny_campaign["run"], tmp_path, load_signing_key(), waivers=shipped_waivers(),
+                         registry=None)  # as uav-el verify --targets would
     return tiny_campaign["run"], tfile, results
 
 

@@ -12,6 +12,7 @@ import argparse
 import json
 import logging
 from pathlib import Path
+from typing import Any
 
 from assurance.errors import CommandError
 
@@ -28,7 +29,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="your own tests marked @pytest.mark.requirements(...), run and bound with the packaged ones")
     p.add_argument("--registry", metavar="YAML", help="requirement registry (default: the shipped one)")
     p.add_argument("--targets", metavar="JSON", help="requirement targets overriding the registry's parameters")
-    p.add_argument("-k", dest="keyword", metavar="EXPR", help="only the tests matching this pytest -k expression")
+    p.add_argument("-k", dest="keyword", metavar="EXPR", help="only the tests matching this pytest -k expression "
+                   "(the requirements of the tests left out are then 'not verified')")
+    p.add_argument("--waivers", metavar="YAML", help="the waivers the evidence step will apply, pinned in the signed "
+                   "results (default: the system file's [waivers] file, else the shipped ones for the shipped system)")
+    p.add_argument("--signing-key", metavar="PEM", help="Ed25519 key that signs the results (default: "
+                   "$UAV_EL_SIGNING_KEY, else your key file; see uav-el keys)")
+    p.add_argument("--trusted-keys", metavar="PEM|DIR", help="keys whose signature of the campaign run is accepted "
+                   "(default: $UAV_EL_TRUSTED_KEYS, else your own key)")
 
 
 def pytest_args(args: argparse.Namespace, out: Path) -> list[str]:
@@ -73,6 +81,7 @@ def run(args: argparse.Namespace) -> int:
         if not Path(t).exists():
             raise CommandError(f"--tests {t}: no such file or folder")
     _check_system(args, run_dir)
+    key, campaign = _signer_and_campaign(args, run_dir)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     argv = pytest_args(args, out.resolve())
@@ -82,6 +91,41 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(f"the requirement test session stopped (pytest exit code {rc}); see above")
     if rc == pytest.ExitCode.NO_TESTS_COLLECTED:
         raise CommandError("no requirement test was collected (a -k expression that matches nothing?)")
+    signed = _sign(args, run_dir, out, key, campaign)
+    print(f"signed: {signed} (key {key.keyid[:16]}, {key.source})")
     print(f"requirement results: {out / 'requirements.json'}, {out / 'junit.xml'} "
           f"(next: uav-el evidence --run {args.run} --out {args.out})")
     return 1 if rc == pytest.ExitCode.TESTS_FAILED else 0
+
+
+def _signer_and_campaign(args: argparse.Namespace, run: Path) -> tuple[Any, Any]:
+    """The signing key, and the run's signed campaign statement verified against the trusted keys (exit 4 when
+    it does not verify: results about a run nobody trusted signing are not evidence)."""
+    from assurance.attest import AttestationError
+    from assurance.attest.keys import load_signing_key, load_trusted_keys
+    from assurance.campaign.attestation import UnattestedRunError, check_run_attestation
+
+    try:
+        key = load_signing_key(args.signing_key, outside=run)
+        trusted = load_trusted_keys(args.trusted_keys)
+    except AttestationError as exc:
+        raise CommandError(str(exc)) from None
+    campaign = check_run_attestation(run, trusted)
+    if not campaign.ok:
+        raise UnattestedRunError(run, campaign.problems)
+    return key, campaign
+
+
+def _sign(args: argparse.Namespace, run: Path, out: Path, key: Any, campaign: Any) -> Path:
+    """Sign the results with what they were judged on (the pins the evidence step compares)."""
+    from assurance.requirements.attestation import sign_session_results
+    from assurance.system import build as system_build
+    from assurance.system import default_system
+
+    if not (out / "requirements.json").is_file():
+        raise CommandError(f"{out / 'requirements.json'}: the test session wrote no results")
+    system = getattr(args, "system_file", None) or default_system()
+    return sign_session_results(run, out, key, waivers=system_build.waivers(system, args.waivers),
+                                registry=args.registry,
+                                extra={"campaign_signed_by": campaign.keyid, "keyword": args.keyword,
+                                       "tests": [str(t) for t in args.tests]})

@@ -51,6 +51,7 @@ class Inputs:
     problems: list[str]
     system: Any = None  # the system file assessed (assurance.system.SystemFile)
     attestation: Any = None  # the run's verified signed statement (assurance.campaign.attestation.RunAttestation)
+    results_signed_by: str | None = None  # the keyid that signed the requirement results, when verified
 
     @property
     def deployed(self) -> str:
@@ -171,6 +172,20 @@ def signature_row(attestation: Any) -> dict[str, str]:
                                                        "(its fingerprint: uav-el keys)"}
 
 
+def results_signature_row(inp: Inputs) -> dict[str, str]:
+    """The identity row of the requirement results' signature."""
+    if inp.attestation is None:
+        value, fp = "not checked (report written without trusted keys)", ""
+    elif inp.req_path is None:
+        value, fp = "no requirement results given", ""
+    elif inp.results_signed_by:
+        value, fp = "statement of uav-el verify over requirements.json and junit.xml, verified", inp.results_signed_by
+    else:
+        value, fp = "not verified: see the gate problems (results are evidence only as uav-el verify signed them)", ""
+    return {"item": "Requirement results signature", "value": value, "sha256": fp,
+            "note": "pinned: run digest, campaign statement, registry, targets, waivers, system file"}
+
+
 def campaign_context(inp: Inputs) -> dict[str, Any]:
     """The run's part of the context: identity, operating domain, pictures, plots, results and limitations."""
     from assurance.campaign.perturbations import PAPER_PERTURBATIONS
@@ -179,8 +194,9 @@ def campaign_context(inp: Inputs) -> dict[str, Any]:
     man, images, candidates, reg = inp.manifest, inp.images, inp.candidates, inp.registry
     identity_rows, ident = identity(inp.run, man, reg, inp.req_path, inp.req_doc, inp.csv_path, inp.templates,
                                     inp.check)
-    identity_rows.insert(0, signature_row(inp.attestation))
+    identity_rows[:0] = [signature_row(inp.attestation), results_signature_row(inp)]
     ident["campaign_signed_by"] = inp.attestation.keyid if inp.attestation is not None else None
+    ident["results_signed_by"] = inp.results_signed_by
     scenes = Scenes(man["data"]["path"], man["config"]["seed"])
     if scenes.error:
         inp.warnings.append(scenes.error)

@@ -101,7 +101,9 @@ def generate(
     (with its targets); ``targets``: overrides of its parameters (``Registry.with_targets``, from
     ``targets_source``); the requirement results must have been judged on the same effective targets.
     ``trusted``: public keys by keyid (``assurance.attest.keys.load_trusted_keys``); with them the run's signed
-    statement must verify (``UnattestedRunError`` otherwise); without, the report says the signature was not checked.
+    statement must verify (``UnattestedRunError`` otherwise) and the requirement results must carry the signed
+    statement ``uav-el verify`` wrote, pinned to this run, registry, targets, waivers and system (a gate problem
+    otherwise); without, the report says the signatures were not checked.
     """
     run, out = Path(run), Path(out)
     if system is not None:
@@ -114,6 +116,12 @@ def generate(
     inp = read_inputs(run, out, requirements=requirements, baseline=baseline, registry=registry, n_boot=n_boot,
                       templates=templates, system=system, targets=targets, targets_source=targets_source,
                       trusted=trusted)
+    if trusted is not None:
+        from assurance.evidence.signatures import results_signature_problems
+
+        signed, problems = results_signature_problems(inp, waivers, trusted)
+        inp.problems.extend(problems)
+        inp.results_signed_by = signed.get("signed_by")
     campaign = campaign_context(inp)
     gate = decide_gate(inp.results, inp.problems, waivers, strict)
     log.info("gate %s: %s (waivers: %s)", gate.result, gate.text, waivers or "none")
