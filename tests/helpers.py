@@ -119,3 +119,17 @@ def install_distribution(site: Path, module: Path, group: str, entry: str) -> No
     info.mkdir()
     (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {module.stem.replace('_', '-')}\nVersion: 0.1\n")
     (info / "entry_points.txt").write_text(f"[{group}]\n{entry}\n")
+
+
+def lenient_registry(folder: Path) -> Path:
+    """A copy of the shipped registry that declares every requirement undecidable on a run smaller than the
+    release (``size_limited``): for tests of other gate behaviour on partial test sessions."""
+    from assurance.requirements import default_registry_path
+
+    text = default_registry_path().read_text(encoding="utf-8")
+    ids = ", ".join(f"EL-R{i:02d}" for i in range(1, 17))
+    start = text.index("  size_limited: [")
+    end = text.index("]", start) + 1
+    path = Path(folder) / "lenient-registry.yaml"
+    path.write_text(text[:start] + f"  size_limited: [{ids}]" + text[end:], encoding="utf-8")
+    return path

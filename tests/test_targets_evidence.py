@@ -67,7 +67,8 @@ def test_report_on_other_targets_fails_the_gate(judged, tmp_path, monkeypatch, c
     monkeypatch.setitem(cli.COMMANDS, "evidence", "evidence")
     code = cli.main(["evidence", "--run", str(run), "--out", str(tmp_path / "cli"), "--requirements", str(results),
                      "--targets", str(tfile), "--no-pdf", "--boot", "50"])
-    assert "other requirement targets" not in capsys.readouterr().out and code == 0
+    out = capsys.readouterr().out  # bound to the same targets; only the deselected requirements block
+    assert "other requirement targets" not in out and "gate problem" not in out and code == 1
     bad = tmp_path / "bad.json"
     bad.write_text('{"confidence": 2}')
     assert cli.main(["evidence", "--run", str(run), "--out", str(tmp_path / "bad"), "--targets", str(bad),

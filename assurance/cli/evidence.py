@@ -72,16 +72,18 @@ def run(args: argparse.Namespace) -> int:
     for line in report.summary_lines():
         print(line)
     if report.exit_code:
-        blocking = [r for r in report.ids("failed") if r not in report.waived]
-        why = "requirement(s) failed" if blocking else "--strict: not everything verified"
-        if not blocking and report.pdf_error and not report.ids("not verified"):
-            why = "--strict: no PDF"
-        if report.problems:
-            why = "the requirement results are not bound to this run or contradict it" + (
-                "; requirement(s) failed" if blocking else "")
-        print(f"gate: FAILED ({why})")
+        failed = [r for r in report.ids("failed") if r not in report.waived]
+        undecided = [r for r in report.ids("not verified") if r in report.blocking]
+        reasons = (["the requirement results are not signed, not bound to this run or contradict it"]
+                   if report.problems else [])
+        reasons += (["requirement(s) failed"] if failed else []) + (
+            [f"not verified: {', '.join(undecided)}"] if undecided else [])
+        if not reasons:
+            reasons = ["--strict: no PDF" if report.pdf_error and not report.ids("not verified")
+                       else "--strict: not everything verified"]
+        print(f"gate: FAILED ({'; '.join(reasons)})")
     else:
         waived = " (failed but waived: " + ", ".join(report.waived) + ")" if report.waived else ""
-        print("gate: passed" + waived + (" (not everything verified; --strict would fail)"
+        print("gate: passed" + waived + (" (some requirements undecidable at this run size; --strict would fail)"
                                          if report.ids("not verified") else ""))
     return report.exit_code

@@ -251,17 +251,34 @@ def _parameter_text(v: Any) -> str:
     return str(v)
 
 
+def images_per_perturbation(inp: Inputs) -> int:
+    """The fewest images evaluated without a fault under any perturbation of the run (0 for none)."""
+    ok = inp.images[inp.images["fault"].fillna("") == ""] if inp.images is not None and len(inp.images) else None
+    return int(ok.groupby("perturbation")["key"].nunique().min()) if ok is not None and len(ok) else 0
+
+
+def undecidable_here(inp: Inputs) -> list[str]:
+    """The registry's ``size_limited`` requirements when the run is smaller than the release preset, else none:
+    the only ones whose 'not verified' does not fail the gate."""
+    from assurance.campaign.presets import preset_config
+
+    release = preset_config("release").images
+    if release is not None and images_per_perturbation(inp) >= release:
+        return []
+    return list(inp.registry.parameters.get("size_limited") or [])
+
+
 def run_scope(inp: Inputs, states: dict[str, str]) -> dict[str, Any] | None:
     """For a run smaller than the release preset (e.g. the demo): its size, the requirements it leaves
     undecided and the command that decides them; None for a release-sized run."""
     from assurance.campaign.presets import preset_config
 
     release = preset_config("release")
-    ok = inp.images[inp.images["fault"].fillna("") == ""] if inp.images is not None and len(inp.images) else None
-    n = int(ok.groupby("perturbation")["key"].nunique().min()) if ok is not None and len(ok) else 0
+    n = images_per_perturbation(inp)
     if release.images is not None and n >= release.images:
         return None
-    undecided = [rid for rid, st in states.items() if st == rq.NOT_VERIFIED]
+    limited = set(inp.registry.parameters.get("size_limited") or [])
+    undecided = [rid for rid, st in states.items() if st == rq.NOT_VERIFIED and rid in limited]
     p = inp.registry.parameters
     bound, conf = float(p["unsafe_landing_bound"]), float(p["confidence"])
     return {"images": n, "release_images": release.images, "undecided": ", ".join(undecided) or "none",

@@ -1,23 +1,26 @@
 """The evidence gate: are the requirement results bound to this run, what do waivers cover, what is the verdict.
 
-FAILED (exit 1) when a requirement failed and is not waived, or when there is an integrity problem
-(results not bound to this run, code and registry; a state contradicting its own tests or this
-report's check of the run; an expired waiver); WAIVED (exit 0) when every failure is waived;
-INCOMPLETE when some are not verified (exit 1 only with ``strict``, which also ignores waivers and
-fails on a missing PDF); PASSED otherwise.
+FAILED (exit 1) when a requirement failed and is not waived, when one is not verified (a deselected,
+skipped or uncollected test decides nothing) unless the registry declares it undecidable at this run
+size (``size_limited``, on a run smaller than the release preset), or when there is an integrity problem
+(results not signed or not bound to this run, code and registry; a state contradicting its own tests or
+this report's check of the run; a waiver that is expired, of an unknown or non-failed requirement, by an
+undeclared owner or too far ahead); WAIVED (exit 0) when every failure is waived; INCOMPLETE when only
+undecidable requirements are not verified (exit 1 with ``strict``, which also ignores waivers and fails
+on a missing PDF); PASSED otherwise.
 """
 
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from assurance import requirements as rq
 from assurance.campaign.integrity import RunCheck, code_sha256
-from assurance.evidence.waivers import load_waivers, waiver_expired
+from assurance.evidence.waivers import DEFAULT_MAX_WAIVER_DAYS, load_waivers, waiver_expired, waiver_problems
 
 GATE_CLASS = {"FAILED": "failed", "WAIVED": "failed", "INCOMPLETE": "not-verified", "PASSED": "verified"}
 
@@ -36,6 +39,7 @@ class EvidenceReport:
     warnings: list[str] = field(default_factory=list)
     problems: list[str] = field(default_factory=list)
     waived: list[str] = field(default_factory=list)
+    blocking: list[str] = field(default_factory=list)  # failed and not waived, or not verified and decidable
 
     def ids(self, state: str) -> list[str]:
         """The requirement ids in ``state``."""
@@ -138,28 +142,40 @@ class Gate:
     problems: list[str]
 
     def exit_code(self, strict: bool, pdf_error: str | None) -> int:
-        """1 when a failure is not waived or there is a problem; with ``strict`` also when a requirement is not
-        verified or the PDF is missing; else 0."""
+        """1 when a failure is not waived, a requirement is not verified (unless undecidable at this run size), or
+        there is a problem; with ``strict`` also when any requirement is not verified or the PDF is missing."""
         return 1 if self.blocking or self.problems or (strict and (self.not_verified or pdf_error)) else 0
 
 
 def decide_gate(results: Mapping[str, rq.RequirementResult], problems: list[str], waivers: str | Path | None,
-                strict: bool) -> Gate:
-    """The gate's verdict; an expired waiver is added to ``problems`` (the caller's list)."""
+                strict: bool, *, undecidable: Sequence[str] = (), policy: Mapping[str, Any] | None = None) -> Gate:
+    """The gate's verdict. A requirement not verified blocks unless it is in ``undecidable`` (the registry's
+    ``size_limited`` on a run smaller than the release preset), or always with ``strict``. Waivers that cannot
+    stand (``waiver_problems`` under ``policy``: the registry's ``waiver_owners`` and ``waiver_max_days``) and
+    expired waivers are added to ``problems`` (the caller's list)."""
     states = {rid: r.state for rid, r in results.items()}
     failed = [rid for rid, s in states.items() if s == rq.FAILED]
     not_verified = [rid for rid, s in states.items() if s == rq.NOT_VERIFIED]
     waiver_list = load_waivers(waivers) if waivers else {}
+    policy = policy or {}
+    problems += waiver_problems(waiver_list, states, owners=policy.get("waiver_owners"),
+                                max_days=int(policy.get("waiver_max_days") or DEFAULT_MAX_WAIVER_DAYS))
     expired = {rid for rid, w in waiver_list.items() if waiver_expired(w)}
     problems += [f"the waiver of {rid} (owner: {waiver_list[rid]['owner']}) expired ({waiver_list[rid]['expires']})"
                  for rid in sorted(expired)]
     waived = [rid for rid in failed if rid in waiver_list and rid not in expired and not strict]
-    blocking = [rid for rid in failed if rid not in waived]
+    undecided_ok = [] if strict else [rid for rid in not_verified if rid in set(undecidable)]
+    blocking = [rid for rid in failed if rid not in waived] + [rid for rid in not_verified if rid not in undecided_ok]
     result = "FAILED" if blocking or problems else ("WAIVED" if waived else "INCOMPLETE" if not_verified else "PASSED")
-    text = (f"{len(failed)} requirement(s) failed" + (f", {len(waived)} waived" if waived else "")
-            if failed else
-            f"{len(not_verified)} requirement(s) not verified" if not_verified else
-            "every requirement verified")
+    parts = []
+    if failed:
+        parts.append(f"{len(failed)} requirement(s) failed" + (f", {len(waived)} waived" if waived else ""))
+    if not_verified:
+        left = len(not_verified) - len(undecided_ok)
+        parts.append(f"{len(not_verified)} not verified" + (
+            f" ({len(undecided_ok)} undecidable at this run size)" if undecided_ok else "")
+            + (f", {left} of them blocking" if left and undecided_ok else ""))
+    text = "; ".join(parts) or "every requirement verified"
     if problems:
         text = f"{len(problems)} integrity problem(s) (below); " + text
     return Gate(result, text, states, failed, not_verified, waived, blocking, waiver_list, problems)

@@ -10,11 +10,12 @@ from pathlib import Path
 from typing import Any
 
 from assurance import requirements as rq
-from assurance.evidence.context import Inputs, campaign_context, read_inputs, template_context
+from assurance.evidence.context import Inputs, campaign_context, read_inputs, template_context, undecidable_here
 from assurance.evidence.gate import EvidenceReport, Gate, decide_gate
 from assurance.evidence.identity import baseline_view
 from assurance.evidence.matrix import TRACE_COLUMNS, traceability_rows
 from assurance.evidence.render import FAULTS_CSV, rel, render_html, write_csv_rows, write_pdf, write_text
+from assurance.evidence.signatures import check_results_signature
 from assurance.evidence.text import jsonable
 from el.hashing import sha256_file
 
@@ -117,13 +118,10 @@ def generate(
                       templates=templates, system=system, targets=targets, targets_source=targets_source,
                       trusted=trusted)
     if trusted is not None:
-        from assurance.evidence.signatures import results_signature_problems
-
-        signed, problems = results_signature_problems(inp, waivers, trusted)
-        inp.problems.extend(problems)
-        inp.results_signed_by = signed.get("signed_by")
+        check_results_signature(inp, waivers, trusted)
     campaign = campaign_context(inp)
-    gate = decide_gate(inp.results, inp.problems, waivers, strict)
+    gate = decide_gate(inp.results, inp.problems, waivers, strict, undecidable=undecidable_here(inp),
+                       policy=inp.registry.parameters)
     log.info("gate %s: %s (waivers: %s)", gate.result, gate.text, waivers or "none")
     base = (baseline_view(Path(baseline), inp.manifest, campaign["ident"], inp.table, inp.results, inp.registry,
                           Path(baseline_requirements) if baseline_requirements else None, n_boot)
@@ -152,4 +150,4 @@ def generate(
         exit_code = finish(pdf_error)
     return EvidenceReport(out=out, html=files.html, json=files.json, pdf=None if pdf_error else files.pdf,
                           pdf_error=pdf_error, states=gate.states, exit_code=exit_code, warnings=inp.warnings,
-                          problems=inp.problems, waived=gate.waived)
+                          problems=inp.problems, waived=gate.waived, blocking=gate.blocking)

@@ -20,3 +20,10 @@ def results_signature_problems(inp: Any, waivers: str | Path | None,
     junit = inp.req_path.with_name("junit.xml")
     pins = results_pins(inp.run, inp.manifest, inp.registry, inp.check.digest, waivers)
     return check_results_attestation(inp.req_path, trusted, pins, junit=junit if junit.is_file() else None)
+
+
+def check_results_signature(inp: Any, waivers: str | Path | None, trusted: Mapping[str, Any]) -> None:
+    """Add the results' signature problems to the gate's and record who signed them (``inp.results_signed_by``)."""
+    signed, problems = results_signature_problems(inp, waivers, trusted)
+    inp.problems.extend(problems)
+    inp.results_signed_by = signed.get("signed_by")

@@ -93,6 +93,10 @@ REQUIRED_TARGETS: tuple[str, ...] = tuple(k for k in TARGETS if k != "calibratio
 """The targets a registry must set (``calibration_card`` may be absent: no card chosen)."""
 
 
+GATE_POLICY = ("size_limited", "waiver_owners", "waiver_max_days")
+"""Registry parameters that say what the gate accepts: set in the registry (pinned by hash), never as targets."""
+
+
 def check_target(name: str, value: Any, *, where: str = "targets") -> Any:
     """``value`` checked and normalised for the target ``name`` (numbers as float, names stripped).
 
@@ -117,9 +121,11 @@ def validate_targets(targets: Mapping[str, Any], defaults: Mapping[str, Any], *,
     a registry parameter without a registered check must keep its default's type."""
     if not isinstance(targets, Mapping):
         raise TargetError(f"{where}: must be a mapping of target names to values, got {type(targets).__name__}")
-    known = list(dict.fromkeys([*TARGETS, *defaults]))
+    known = [k for k in dict.fromkeys([*TARGETS, *defaults]) if k not in GATE_POLICY]
     out: dict[str, Any] = {}
     for name, value in targets.items():
+        if name in GATE_POLICY:
+            raise TargetError(f"{where}.{name}: the gate's policy is the registry's, not a target a run may override")
         if name not in known:
             raise TargetError(f"{where}: unknown target {name!r}; known: {', '.join(known)}")
         default = defaults.get(name)
