@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from assurance import requirements as rq
+from assurance.evidence.auditor import auditor_context, auditor_document
 from assurance.evidence.context import Inputs, campaign_context, read_inputs, template_context
 from assurance.evidence.gate import EvidenceReport, Gate, decide_gate
 from assurance.evidence.identity import baseline_view
@@ -119,6 +120,7 @@ def generate(
             if baseline else None)
     created = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
     context = template_context(inp, gate, campaign, base, created, n_boot)
+    context.update(auditor_context(inp, gate))
     html = render_html(context, inp.templates)
     files = _Files(out, inp.csv_path)
     write_text(files.html, html)
@@ -130,9 +132,9 @@ def generate(
 
     def finish(pdf_error: str | None) -> int:
         exit_code = gate.exit_code(strict, pdf_error)
-        _finish(files, evidence_document(inp, gate, campaign["ident"], base, created=created, strict=strict,
-                                         files=files, faults=faults, n_unsafe=campaign["n_unsafe"],
-                                         pdf_error=pdf_error, exit_code=exit_code))
+        _finish(files, {**evidence_document(inp, gate, campaign["ident"], base, created=created, strict=strict,
+                                            files=files, faults=faults, n_unsafe=campaign["n_unsafe"],
+                                            pdf_error=pdf_error, exit_code=exit_code), **auditor_document(context)})
         return exit_code
 
     exit_code = finish(pdf_error)  # the JSON says the PDF will be there; rewritten if it could not be
