@@ -6,17 +6,55 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from assurance.evidence.amlas import amlas_index, entry
+from assurance.evidence.argument import ArgumentInputs, build_argument, check_structure, to_gsn2x, to_yaml
+from assurance.evidence.gsn_svg import argument_pages
 from assurance.evidence.hazards import hazard_view, load_hazards
+from assurance.evidence.render import rel, write_text
+
+ARGUMENT_FILE = "argument.gsn.yaml"
 
 
-def auditor_context(inp: Any, gate: Any, hazards: str | Path | None = None) -> dict[str, Any]:
-    """The auditor's sections of the report (``inp``: the report's ``Inputs``; ``gate``: its ``Gate``)."""
+def _sha(rows: list[dict[str, Any]], item: str) -> str:
+    return next((r.get("sha256") or "" for r in rows if r["item"] == item), "")
+
+
+def auditor_context(inp: Any, gate: Any, identity_rows: list[dict[str, Any]],
+                    hazards: str | Path | None = None) -> dict[str, Any]:
+    """The auditor's sections of the report (``inp``: the report's ``Inputs``; ``gate``: its ``Gate``); writes the
+    argument's gsn2x YAML beside the report."""
     log = load_hazards(hazards, inp.registry)
-    return {"hazards": hazard_view(log, gate.states), "hazards_file": log.path.name,
-            "hazards_sha256": log.sha256}
+    extra = [entry("A", "Hazard log", str(rel(log.path)), log.sha256)]
+    index = amlas_index(identity_rows, extra)
+    args = ArgumentInputs(
+        registry=inp.registry, hazards=log, results=inp.results,
+        waivers={rid: gate.waivers[rid] for rid in gate.waived}, checks=inp.checks,
+        hashes={"requirements": _sha(identity_rows, "Requirement test results"),
+                "results": _sha(identity_rows, "Results table"), "run": _sha(identity_rows, "Run readouts"),
+                "system": _sha(identity_rows, "System file")},
+        amlas=index, system=inp.system.name if inp.system is not None else "the embedded default system")
+    nodes = build_argument(args)
+    problems = check_structure(nodes)
+    inp.warnings.extend(f"safety argument: {p}" for p in problems)
+    write_text(inp.out / ARGUMENT_FILE, to_yaml(nodes))
+    return {"hazards": hazard_view(log, gate.states), "hazards_file": log.path.name, "hazards_sha256": log.sha256,
+            "argument_pages": argument_pages(nodes), "argument_problems": problems, "argument_file": ARGUMENT_FILE,
+            "argument_counts": _counts(nodes), "argument": to_gsn2x(nodes), "amlas": index}
+
+
+def _counts(nodes: dict[str, Any]) -> str:
+    kinds: dict[str, int] = {}
+    for n in nodes.values():
+        kinds[n.kind] = kinds.get(n.kind, 0) + 1
+    undeveloped = sum(1 for n in nodes.values() if n.undeveloped)
+    return ", ".join(f"{v} {k.lower()}{'s' if v != 1 else ''}" for k, v in kinds.items()) + \
+        f"; {undeveloped} undeveloped"
 
 
 def auditor_document(context: dict[str, Any]) -> dict[str, Any]:
     """The auditor's sections as ``evidence.json`` holds them."""
     return {"hazards": {"file": context["hazards_file"], "sha256": context["hazards_sha256"],
-                        "hazards": context["hazards"]}}
+                        "hazards": context["hazards"]},
+            "argument": {"file": context["argument_file"], "problems": context["argument_problems"],
+                         "elements": context["argument"]},
+            "amlas": [{k: v for k, v in e.items() if k != "cls"} for e in context["amlas"]]}
