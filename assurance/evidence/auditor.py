@@ -13,13 +13,36 @@ from assurance.evidence.hazards import hazard_view, load_hazards
 from assurance.evidence.render import rel, write_text
 
 ARGUMENT_FILE = "argument.gsn.yaml"
+ISSRE_FILE = "issre.csv"
+
+
+def issre_view(inp: Any, n_boot: int) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """The ISSRE 2022 figures of the run (written to ``issre.csv``): the table's records and the report's rows."""
+    from assurance.analysis.issre import issre_frame
+    from assurance.analysis.table import _scenario_order
+    from assurance.evidence.text import ci, fmt
+
+    cfg = inp.manifest["config"]
+    order = [(p, s, m) for p, s in _scenario_order(cfg) for m in cfg["monitors"]]
+    frame = issre_frame(inp.images, inp.candidates, n_boot=n_boot, order=order)
+    frame.to_csv(inp.out / ISSRE_FILE, index=False, float_format="%.6g")
+    rows, last = [], None
+    for rec in frame.to_dict("records"):
+        scen = f"{rec['perturbation']} (s{int(rec['severity'])})"
+        rows.append({"scenario": scen if scen != last else "", "monitor": rec["monitor"],
+                     "deployed": rec["monitor"] == inp.deployed, "labelling": rec["labelling"],
+                     "counts": f"{rec['tp']} / {rec['fp']} / {rec['tn']} / {rec['fn']}", "n": rec["n"],
+                     "cells": [{"v": fmt(rec[k], 3), "ci": ci(rec, k, 3)}
+                               for k in ("safety_gain", "residual_hazard", "availability_cost")]})
+        last = scen
+    return frame.to_dict("records"), rows
 
 
 def _sha(rows: list[dict[str, Any]], item: str) -> str:
     return next((r.get("sha256") or "" for r in rows if r["item"] == item), "")
 
 
-def auditor_context(inp: Any, gate: Any, identity_rows: list[dict[str, Any]],
+def auditor_context(inp: Any, gate: Any, identity_rows: list[dict[str, Any]], *, n_boot: int = 2000,
                     hazards: str | Path | None = None) -> dict[str, Any]:
     """The auditor's sections of the report (``inp``: the report's ``Inputs``; ``gate``: its ``Gate``); writes the
     argument's gsn2x YAML beside the report."""
@@ -37,7 +60,9 @@ def auditor_context(inp: Any, gate: Any, identity_rows: list[dict[str, Any]],
     problems = check_structure(nodes)
     inp.warnings.extend(f"safety argument: {p}" for p in problems)
     write_text(inp.out / ARGUMENT_FILE, to_yaml(nodes))
-    return {"hazards": hazard_view(log, gate.states), "hazards_file": log.path.name, "hazards_sha256": log.sha256,
+    issre, issre_rows = issre_view(inp, n_boot)
+    return {"issre": issre, "issre_rows": issre_rows, "issre_file": ISSRE_FILE,
+            "hazards": hazard_view(log, gate.states), "hazards_file": log.path.name, "hazards_sha256": log.sha256,
             "argument_pages": argument_pages(nodes), "argument_problems": problems, "argument_file": ARGUMENT_FILE,
             "argument_counts": _counts(nodes), "argument": to_gsn2x(nodes), "amlas": index}
 
@@ -57,4 +82,5 @@ def auditor_document(context: dict[str, Any]) -> dict[str, Any]:
                         "hazards": context["hazards"]},
             "argument": {"file": context["argument_file"], "problems": context["argument_problems"],
                          "elements": context["argument"]},
+            "issre": {"file": context["issre_file"], "rows": context["issre"]},
             "amlas": [{k: v for k, v in e.items() if k != "cls"} for e in context["amlas"]]}

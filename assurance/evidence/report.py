@@ -120,7 +120,7 @@ def generate(
             if baseline else None)
     created = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
     context = template_context(inp, gate, campaign, base, created, n_boot)
-    context.update(auditor_context(inp, gate, campaign["identity"]))
+    context.update(auditor_context(inp, gate, campaign["identity"], n_boot=n_boot))
     html = render_html(context, inp.templates)
     files = _Files(out, inp.csv_path)
     write_text(files.html, html)
