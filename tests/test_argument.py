@@ -55,6 +55,8 @@ def test_failed_waived_and_not_verified_requirements_show_as_such(parts):
     assert "alice" in nodes["J-EL-R10"].text and "2099-01-01" in nodes["J-EL-R10"].text
     assert nodes["G-EL-R16"].undeveloped and not nodes["G-EL-R16"].supported_by
     assert nodes["G-EL-R01"].cls == "verified" and nodes["G-EL-R01"].supported_by == ["Sn-EL-R01-T"]
+    assert nodes["G-H1"].cls == "failed"  # EL-R09 mitigates H1 and failed
+    assert nodes["G-H7"].cls == "verified"
 
 
 def test_the_gsn2x_yaml_round_trips(parts):

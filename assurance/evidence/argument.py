@@ -114,6 +114,16 @@ def _ml_nodes(a: ArgumentInputs) -> list[Node]:
     return out
 
 
+def _worst(a: ArgumentInputs, rids: Sequence[str]) -> str:
+    """A hazard's verdict: the worst of its mitigating requirements' (failed, waived, not verified, verified)."""
+    states = [a.results[r].state if r in a.results else rq.NOT_VERIFIED for r in rids]
+    if any(s == rq.FAILED and r not in a.waivers for s, r in zip(states, rids, strict=True)):
+        return "failed"
+    if any(s == rq.FAILED for s in states):
+        return "waived"
+    return "not-verified" if rq.NOT_VERIFIED in states else "verified"
+
+
 def build_argument(a: ArgumentInputs) -> dict[str, Node]:
     """The argument's elements by id, in drawing order: top goal and context, then the three strategies."""
     reg, log = a.registry, a.hazards
@@ -130,7 +140,7 @@ def build_argument(a: ArgumentInputs) -> dict[str, Node]:
     nodes.append(shaz)
     for h in log.hazards:
         g = Node(f"G-{h.id}", f"{h.id} ({h.severity}) is mitigated: {h.hazard}",
-                 supported_by=[f"G-{r}" for r in h.mitigations])
+                 supported_by=[f"G-{r}" for r in h.mitigations], cls=_worst(a, h.mitigations))
         shaz.supported_by.append(g.id)
         nodes.append(g)
     sreq = Node("S-REQ", f"Argument over every requirement of the registry ({reg.path.name}, "

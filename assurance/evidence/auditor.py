@@ -108,7 +108,8 @@ def _counts(nodes: dict[str, Any]) -> str:
     for n in nodes.values():
         kinds[n.kind] = kinds.get(n.kind, 0) + 1
     undeveloped = sum(1 for n in nodes.values() if n.undeveloped)
-    return ", ".join(f"{v} {k.lower()}{'s' if v != 1 else ''}" for k, v in kinds.items()) + \
+    plural = {"Strategy": "strategies"}
+    return ", ".join(f"{v} {plural.get(k, k.lower() + 's') if v != 1 else k.lower()}" for k, v in kinds.items()) + \
         f"; {undeveloped} undeveloped"
 
 

@@ -53,6 +53,16 @@ def _balance(metas: list[dict[str, Any]]) -> str:
     return ", ".join(f"{k} {v / len(metas):.1%}" for k, v in shares.most_common()) if metas and shares else ""
 
 
+def _card_balance(freqs: Any) -> str:
+    """The training class frequencies of a model card, named by the default label set when the counts agree."""
+    from el.labels import UAVID
+
+    if not freqs:
+        return ""
+    names = list(UAVID.names) if len(UAVID.names) == len(freqs) else [f"class {i}" for i in range(len(freqs))]
+    return ", ".join(f"{n} {float(f):.1%}" for n, f in sorted(zip(names, freqs, strict=True), key=lambda t: -t[1]))
+
+
 def _row(name: str, role: str, letter: str, path: Any, images: Any, sha: Any, **more: Any) -> dict[str, Any]:
     return {"name": name, "role": role, "letter": letter, "path": str(path or ""), "images": images,
             "sha256": str(sha or ""), "generator": more.get("generator", ""), "seeds": more.get("seeds", ""),
@@ -71,8 +81,7 @@ def development_sets(card: dict[str, Any] | None, monitors: dict[str, dict[str, 
                              d.get("sha256"),
                              seeds=f"the {split} seed range of uav-el synth (from {SPLIT_BASE[split]})",
                              licence=LICENCE_SYNTHETIC, record="model card",
-                             balance=(f"{len(freqs)} class frequencies in the card" if freqs and split == "train"
-                                      else "")))
+                             balance=_card_balance(freqs) if split == "train" else ""))
     learned = monitors.get("learned.json") or {}
     for key, role, letter in (("training", "learned monitor training", "N"),
                               ("held_out", "learned monitor selection", "O")):
