@@ -36,6 +36,8 @@ def test_the_written_argument_round_trips_and_is_sound(auditor_report):
     assert check_structure(nodes) == []
     doc = json.loads((auditor_report / "evidence.json").read_text("utf-8"))
     assert set(nodes) == set(doc["argument"]["elements"])
+    sums = (auditor_report / "SHA256SUMS").read_text("utf-8")
+    assert "  argument.gsn.yaml\n" in sums and "  issre.csv\n" in sums
 
 
 def test_issre_csv_matches_evidence_json(auditor_report):

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from assurance import requirements as rq
-from assurance.evidence.auditor import auditor_context, auditor_document
+from assurance.evidence.auditor import ARGUMENT_FILE, ISSRE_FILE, auditor_context, auditor_document
 from assurance.evidence.context import Inputs, campaign_context, read_inputs, template_context
 from assurance.evidence.gate import EvidenceReport, Gate, decide_gate
 from assurance.evidence.identity import baseline_view
@@ -28,14 +28,17 @@ class _Files:
         self.html, self.json, self.pdf = out / "evidence.html", out / "evidence.json", out / "evidence.pdf"
         self.trace, self.junit, self.sums = out / "traceability.csv", out / "junit.xml", out / "SHA256SUMS"
         self.faults, self.csv = out / FAULTS_CSV, csv_path
+        self.argument, self.issre = out / ARGUMENT_FILE, out / ISSRE_FILE
 
     def hashed(self) -> tuple[Path, ...]:
         """The files SHA256SUMS lists (those present)."""
-        return (self.html, self.pdf, self.json, self.csv, self.trace, self.junit, self.faults)
+        return (self.html, self.pdf, self.json, self.csv, self.trace, self.junit, self.faults, self.argument,
+                self.issre)
 
     def attachments(self, faults: bool) -> list[Path]:
         """The files the PDF embeds."""
-        return [self.json, self.csv, self.trace, self.junit, self.sums] + ([self.faults] if faults else [])
+        return [self.json, self.csv, self.trace, self.junit, self.sums, self.argument, self.issre] + (
+            [self.faults] if faults else [])
 
 
 def evidence_document(inp: Inputs, gate: Gate, ident: dict[str, Any], base: dict[str, Any] | None, *,
