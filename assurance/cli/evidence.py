@@ -33,6 +33,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--trusted-keys", metavar="PEM|DIR",
                    help="public keys whose signatures are accepted (a PEM file, or a folder of *.pem/*.pub); default: "
                         "$UAV_EL_TRUSTED_KEYS, else the local signing key's own (uav-el keys)")
+    p.add_argument("--templates", metavar="DIR",
+                   help="report templates overriding the packaged ones file by file (copy any file of "
+                        "assurance/templates/ into DIR and edit it; default: the system file's [report] templates)")
     p.add_argument("--boot", type=int, default=2000, help="bootstrap resamples of the results table (default 2000)")
 
 
@@ -49,6 +52,8 @@ def run(args: argparse.Namespace) -> int:
             raise CommandError(f"{flag} {value}: not a campaign run (no manifest.json)")
     if args.boot < 1:
         raise CommandError("--boot must be >= 1")
+    if args.templates and not Path(args.templates).is_dir():
+        raise CommandError(f"--templates {args.templates}: not a folder")
     from assurance.attest import AttestationError
     from assurance.attest.keys import load_trusted_keys
 
@@ -62,6 +67,7 @@ def run(args: argparse.Namespace) -> int:
                           baseline_requirements=args.baseline_requirements, registry=args.registry,
                           targets=targets, targets_source=str(Path(args.targets).resolve()) if args.targets else None,
                           strict=args.strict, pdf=not args.no_pdf, n_boot=args.boot, waivers=args.waivers,
+                          templates=args.templates,
                           system=system_of(args), trusted=trusted)
     except DamagedRunError:
         raise  # exit 4: the run's readouts fail verification

@@ -43,9 +43,36 @@ def environment(templates: str | Path | None = None) -> Any:
                        undefined=StrictUndefined, trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True)
 
 
+class TemplateError(ValueError):
+    """A report template that cannot be read, compiled or rendered; the message names the file and the line."""
+
+
+def _template_line(exc: BaseException) -> tuple[str, int | None]:
+    """The template file and line where a rendering error arose (Jinja2 puts template frames in the traceback)."""
+    where: tuple[str, int | None] = ("a report template", None)
+    tb = exc.__traceback__
+    while tb is not None:
+        name = tb.tb_frame.f_code.co_filename
+        if name.endswith((".j2", ".css", ".html")):
+            where = (name, tb.tb_lineno)
+        tb = tb.tb_next
+    return where
+
+
 def render_html(context: Mapping[str, Any], templates: str | Path | None = None) -> str:
-    """The report's HTML from its finished context."""
-    return environment(templates).get_template(TEMPLATE).render(**context)
+    """The report's HTML from its finished context; TemplateError naming the file and line of a broken template."""
+    from jinja2 import TemplateError as JinjaError
+    from jinja2 import TemplateSyntaxError
+
+    try:
+        return environment(templates).get_template(TEMPLATE).render(**context)
+    except TemplateSyntaxError as exc:
+        raise TemplateError(f"{exc.filename or exc.name}:{exc.lineno}: report template does not compile: "
+                            f"{exc.message}") from None
+    except (JinjaError, TypeError, ValueError, AttributeError, KeyError) as exc:
+        name, line = _template_line(exc)
+        raise TemplateError(f"{name}:{line if line is not None else '?'}: report template fails to render: "
+                            f"{type(exc).__name__}: {exc}") from None
 
 
 def rel(path: str | Path | None) -> str | None:

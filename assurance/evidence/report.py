@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from assurance import requirements as rq
+from assurance.evidence.auditor import ARGUMENT_FILE, ISSRE_FILE, auditor_context, auditor_document
 from assurance.evidence.context import Inputs, campaign_context, read_inputs, template_context, undecidable_here
 from assurance.evidence.gate import EvidenceReport, Gate, decide_gate
 from assurance.evidence.identity import baseline_view
@@ -30,14 +31,17 @@ class _Files:
         self.html, self.json, self.pdf = out / "evidence.html", out / "evidence.json", out / "evidence.pdf"
         self.trace, self.junit, self.sums = out / "traceability.csv", out / "junit.xml", out / "SHA256SUMS"
         self.faults, self.csv = out / FAULTS_CSV, csv_path
+        self.argument, self.issre = out / ARGUMENT_FILE, out / ISSRE_FILE
 
     def hashed(self) -> tuple[Path, ...]:
         """The files SHA256SUMS lists (those present)."""
-        return (self.html, self.pdf, self.json, self.csv, self.trace, self.junit, self.faults)
+        return (self.html, self.pdf, self.json, self.csv, self.trace, self.junit, self.faults, self.argument,
+                self.issre)
 
     def attachments(self, faults: bool) -> list[Path]:
         """The files the PDF embeds."""
-        return [self.json, self.csv, self.trace, self.junit, self.sums] + ([self.faults] if faults else [])
+        return [self.json, self.csv, self.trace, self.junit, self.sums, self.argument, self.issre] + (
+            [self.faults] if faults else [])
 
 
 def evidence_document(inp: Inputs, gate: Gate, ident: dict[str, Any], base: dict[str, Any] | None, *,
@@ -128,6 +132,7 @@ def generate(
             if baseline else None)
     created = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
     context = template_context(inp, gate, campaign, base, created, n_boot)
+    context.update(auditor_context(inp, gate, campaign["identity"], n_boot=n_boot))
     html = render_html(context, inp.templates)
     files = _Files(out, inp.csv_path)
     write_text(files.html, html)
@@ -139,9 +144,9 @@ def generate(
 
     def finish(pdf_error: str | None) -> int:
         exit_code = gate.exit_code(strict, pdf_error)
-        _finish(files, evidence_document(inp, gate, campaign["ident"], base, created=created, strict=strict,
-                                         files=files, faults=faults, n_unsafe=campaign["n_unsafe"],
-                                         pdf_error=pdf_error, exit_code=exit_code))
+        _finish(files, {**evidence_document(inp, gate, campaign["ident"], base, created=created, strict=strict,
+                                            files=files, faults=faults, n_unsafe=campaign["n_unsafe"],
+                                            pdf_error=pdf_error, exit_code=exit_code), **auditor_document(context)})
         return exit_code
 
     exit_code = finish(pdf_error)  # the JSON says the PDF will be there; rewritten if it could not be
