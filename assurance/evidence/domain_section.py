@@ -65,3 +65,23 @@ def odd_rows(man: Mapping[str, Any], images: Any, pose_error: Mapping[str, float
                  "evidence": ", ".join(f"{p}: {per.get(p, 0)}" for p in dict.fromkeys(frames["perturbation"]))
                  if n else "no evaluated frame"})
     return rows
+
+
+def frame_gate_view() -> dict[str, Any] | None:
+    """The frame-gate measurement shipped with the package (``assurance/data/frame_gates.{csv,png}``, written by
+    ``assurance.fitting.gate_study`` on validation scenes): per set the share each candidate gate flags."""
+    import base64
+    import csv
+    from importlib import resources
+
+    data = resources.files("assurance").joinpath("data")
+    try:
+        text = data.joinpath("frame_gates.csv").read_text(encoding="utf-8")
+        png = data.joinpath("frame_gates.png").read_bytes()
+    except OSError:
+        return None
+    rows = list(csv.DictReader(text.splitlines()))
+    gates = [k for k in (rows[0] if rows else {}) if k not in ("set", "what", "frames")]
+    shown = [{"set": r["set"] if r["set"] == r["what"] else f"{r['set']}: {r['what']}", "frames": r["frames"],
+              "rates": [f"{float(r[g]):.0%}" for g in gates]} for r in rows]
+    return {"gates": gates, "rows": shown, "uri": "data:image/png;base64," + base64.b64encode(png).decode("ascii")}
