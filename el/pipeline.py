@@ -33,6 +33,7 @@ from el.imageio import MAX_PIXELS, check_max_pixels, read_image_meta
 from el.labels import UAVID
 from el.monitors import CandidateContext, Monitor, build_monitor, monitor_name, parse_monitor_spec
 from el.monitors.capabilities import check_monitor_capabilities
+from el.odd import OperatingDomain
 from el.rgb import check_rgb
 from el.segmentation.contract import check_model, labels_of
 from el.walk import HAZARD, WalkOutcome, walk_candidates
@@ -92,6 +93,10 @@ class PipelineConfig:
         An out-of-domain gate (``uav-el fit-ood``, ``el.monitors.ood``): a frame whose distance is above
         the gate's threshold ends in the default action with reason ``out_of_domain``; a missing or
         altered gate file is a fault (default action).
+    odd : OperatingDomain or None
+        The declared operating domain (``el.odd``): a frame whose pose or size is outside it ends in the
+        default action with reason ``outside_odd: <dimension> ...`` (a decision, not a fault). None: no
+        declaration is checked.
     """
 
     core: CoreConfig = field(default_factory=CoreConfig)
@@ -104,6 +109,7 @@ class PipelineConfig:
     nominal_size: tuple[int, int] = (3840, 2160)
     calibration: str | None = None
     ood: str | None = None
+    odd: OperatingDomain | None = None
     max_pixels: int = MAX_PIXELS
     hard_stop: bool = True
 
@@ -113,6 +119,8 @@ class PipelineConfig:
         if self.time_budget_s is not None and not (math.isfinite(self.time_budget_s) and self.time_budget_s > 0):
             raise ValueError(f"time_budget_s must be a positive number of seconds or None, got {self.time_budget_s!r}")
         check_seed(self.seed)
+        if self.odd is not None and not isinstance(self.odd, OperatingDomain):
+            raise ValueError(f"odd must be an el.odd.OperatingDomain or None, got {type(self.odd).__name__}")
 
     @property
     def monitor_name(self) -> str:
@@ -130,6 +138,7 @@ class PipelineConfig:
             "core": self.core.to_dict(),
             **({"calibration": self.calibration} if self.calibration else {}),
             **({"ood": self.ood} if self.ood else {}),
+            **({"odd": self.odd.to_dict()} if self.odd is not None else {}),
             **({"max_pixels": self.max_pixels} if self.max_pixels != MAX_PIXELS else {}),
             **({} if self.hard_stop else {"hard_stop": False}),
         }
@@ -256,9 +265,12 @@ class EmergencyLanding:
             stage = "pose"
             core_cfg = frame_core(cfg.core, pose)
             info["pose"] = pose_record(core_cfg.pose, nominal=pose is None)
-            check_geometry(core_cfg.geometry(*size))  # a pose the flat-ground model cannot plan with: a fault
             if self.fault:
                 return self._default(self.fault, candidates, size, timings, info, budget, core_cfg)
+            outside = None if cfg.odd is None else cfg.odd.outside(core_cfg.pose, size)
+            if outside:  # no evidence of safety there: the default action, a decision and not a fault
+                return self._default(outside, candidates, size, timings, info, budget, core_cfg)
+            check_geometry(core_cfg.geometry(*size))  # a pose the flat-ground model cannot plan with: a fault
             budget.check(stage)
 
             stage = "segmentation"

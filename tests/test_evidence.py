@@ -139,7 +139,7 @@ def test_report_contents(report):
         assert f"<strong>{rid}</strong>" in html
     assert set(doc["requirements"]) == set(rq.load_registry().ids)
     # no requirement results given: every requirement is open, and the report says why
-    assert doc["gate"]["counts"] == {rq.VERIFIED: 0, rq.FAILED: 0, rq.NOT_VERIFIED: 16}
+    assert doc["gate"]["counts"] == {rq.VERIFIED: 0, rq.FAILED: 0, rq.NOT_VERIFIED: 17}
     assert any("no requirement test results" in w for w in doc["warnings"])
     # the results table of the JSON is the run's table
     assert len(doc["results"]) == 12 and {r["perturbation"] for r in doc["results"]} >= {"fog", "pixel_trap"}
@@ -192,7 +192,7 @@ def test_gate_turns_red_for_exactly_the_broken_requirement(pytester, monitor_run
     # the tests deselected with -k decide nothing: their requirements are not verified, and that fails the gate
     assert evidence_cli("--run", monitor_runs["good"], "--out", tmp_path / "good", "--no-pdf", "--boot", 100) == 1
     out = capsys.readouterr().out
-    assert "failed:         0" in out and "not verified:  15  EL-R01, EL-R02" in out
+    assert "failed:         0" in out and "not verified:  16  EL-R01, EL-R02" in out
     assert "gate: FAILED (not verified: EL-R01, EL-R02, EL-R03, EL-R05" in out
     assert f"report: {tmp_path / 'good' / 'evidence.html'}" in out
 

@@ -83,7 +83,7 @@ def test_case_5_negative_seed_is_refused_and_faulted_runs_read(small, tmp_path, 
     code, _, err = cli(capsys, "table", faulted, "--boot", 20)
     assert code == 0 and "faulted task(s) are left out" in err
     code, out, _ = cli(capsys, "evidence", "--run", faulted, "--out", tmp_path / "rep", "--no-pdf", "--boot", 20)
-    assert code == 1 and "not verified:  16" in out and "gate: FAILED (not verified" in out
+    assert code == 1 and "not verified:  17" in out and "gate: FAILED (not verified" in out
 
 
 def test_case_6_deleted_shard_folder_is_a_damaged_run(small, tmp_path, capsys):

@@ -62,7 +62,7 @@ def test_shipped_registry_is_complete_and_consistent():
     from el.pipeline import DEFAULT_TIME_BUDGET_S, PipelineConfig
 
     reg = rq.load_registry()
-    assert reg.ids == tuple(f"EL-R{i:02d}" for i in range(1, 17))
+    assert reg.ids == tuple(f"EL-R{i:02d}" for i in range(1, 18))
     for req in reg:
         assert req.title and req.text and req.rationale and req.acceptance and req.domain and req.verification_method
         assert set(req.source) <= set(rq.KNOWN_SOURCES)
@@ -221,7 +221,7 @@ def test_json_results_per_requirement(pytester):
     assert fail["duration"] >= 0
     skip = reqs["EL-R04"]["tests"][0]
     assert skip["outcome"] == "skipped" and skip["message"] == "insufficient evidence: no run"
-    assert doc["summary"] == {rq.VERIFIED: 1, rq.FAILED: 4, rq.NOT_VERIFIED: 11}
+    assert doc["summary"] == {rq.VERIFIED: 1, rq.FAILED: 4, rq.NOT_VERIFIED: 12}
     result.stdout.fnmatch_lines(["*safety requirements*", "*failed:  4*EL-R01*", "*requirement results written to*"])
 
 

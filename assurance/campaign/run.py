@@ -18,7 +18,7 @@ import time
 import traceback
 import warnings
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +27,7 @@ import numpy as np
 from assurance.campaign import readouts
 from assurance.campaign.attestation import sign_run
 from assurance.campaign.faults import config_faults
+from assurance.campaign.frames import frame_config, outside_odd, refuse_outside
 from assurance.campaign.judging import _timed, judge_candidates
 from assurance.campaign.manifest import (  # noqa: F401  (re-exported)
     check_monitor_networks,
@@ -36,9 +37,8 @@ from assurance.campaign.manifest import (  # noqa: F401  (re-exported)
 from assurance.campaign.perturbations import PERTURBATIONS, perturb, severities_of
 from assurance.campaign.truth import true_hazard
 from assurance.campaign.workers import bounded_jobs, die_with_parent
-from assurance.scenes.poses import NOMINAL, check_policy, frame_pose
+from assurance.scenes.poses import check_policy
 from assurance.scenes.uavid import Sample, iter_samples, read_labels
-from el.camera import check_geometry
 from el.config import CoreConfig, check_seed
 from el.core import run_core
 from el.decision import Candidate
@@ -67,6 +67,7 @@ class CampaignConfig:
     weights: str | dict[str, Any] | None = None  # None: the shipped weights; a dict: a system file's model
     core: CoreConfig = field(default_factory=CoreConfig)
     poses: str = "nominal"  # which pose plans each frame: assurance.scenes.poses.POLICIES
+    odd: dict[str, Any] | None = None  # the declared operating domain (el.odd.OperatingDomain.to_dict()); None: none
 
     def __post_init__(self) -> None:
         unknown = [p for p in self.perturbations if p not in PERTURBATIONS]
@@ -92,6 +93,7 @@ class CampaignConfig:
             raise ValueError(f"images must be >= 1, got {self.images}")
         check_seed(self.seed)
         check_policy(self.poses)
+        outside_odd(self.odd, self.core.pose, (1920, 1080))  # a malformed declaration fails here
 
     def scenarios(self) -> list[tuple[str, int]]:
         """(perturbation, severity) pairs; one not graded by severity ('none') is evaluated once, at the first."""
@@ -103,6 +105,8 @@ class CampaignConfig:
         d["core"] = self.core.to_dict()
         if self.poses == "nominal":
             del d["poses"]
+        if self.odd is None:
+            del d["odd"]
         return d
 
 
@@ -131,12 +135,11 @@ def task_seed(seed: int, key: str, perturbation: str, severity: int) -> list[int
 def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Callable[[], float] = time.perf_counter,
              world_clearance: Callable[..., Any] | None = None,
              expected_models: dict[str, str] | None = None) -> dict[str, list[dict[str, Any]]]:
-    """Evaluate one task: readout rows for its images table and candidates table (see readouts), the frame
-    planned at its pose (``frame_config``). ``expected_models`` (the manifest's ``monitor_models``): a monitor
-    whose fitted model is not the one the run recorded (changed during the run) makes the task a fault."""
+    """Evaluate one task: readout rows of its images and candidates tables, the frame planned at its pose and
+    outside the domain refused (``frames``); a monitor model other than ``expected_models``'s: a fault."""
     s = task.sample
-    base = {"key": s.key, "sequence": s.sequence, "frame": s.frame,
-            "perturbation": task.perturbation, "severity": task.severity}
+    base = {"key": s.key, "sequence": s.sequence, "frame": s.frame, "perturbation": task.perturbation,
+            "severity": task.severity}
     timings: dict[str, float] = {}
     t0 = clock()
     try:
@@ -207,24 +210,8 @@ def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Calla
                 "score": column[k].score, "threshold": thresholds[j],
                 "selected": sel == k, "examined": k < examined,
             })
+    refuse_outside(image_rows, cand_rows, outside_odd(config.odd, frame_cfg.pose, (W, H)))  # as el decides it
     return {"images": image_rows, "candidates": cand_rows}
-
-
-def frame_config(config: CampaignConfig, sample: Sample, size: tuple[int, int]) -> tuple[CoreConfig, dict[str, Any]]:
-    """The CM configuration of one frame under the campaign's pose policy, and its pose readouts.
-
-    ValueError (a fault of the task) when the policy requires a pose the frame lacks, or the frame's
-    camera, pose and size are outside what the flat-ground model handles (``el.camera.check_geometry``)."""
-    pose, roll, source = frame_pose(sample, config.poses, config.core.pose)
-    cfg = config.core if source == NOMINAL else replace(config.core, pose=pose)
-    try:
-        check_geometry(cfg.geometry(*size), roll_deg=roll)
-    except ValueError as exc:  # the frame's own pose or size: its data's fault; the nominal pose: the configuration's
-        if source == NOMINAL:
-            raise
-        raise DataError(f"{sample.image_path}: {exc}") from None
-    return cfg, {"height_m": float(pose.height_m), "pitch_deg": float(pose.pitch_deg), "roll_deg": float(roll),
-                 "pose_source": source}
 
 
 def _clearance(fn: Callable[..., Any] | None, sample: Sample, size: tuple[int, int],

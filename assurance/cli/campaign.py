@@ -77,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
         severities=tuple(args.severities) if args.severities else None,
         monitors=monitors,
         images=args.images, weights=model_spec(args), seed=args.seed,
-        poses=args.poses or system_build.poses_policy(system),
+        poses=args.poses or system_build.poses_policy(system), odd=system_build.odd(system).to_dict(),
     )
     from assurance.attest import AttestationError
     from assurance.attest.keys import load_signing_key

@@ -211,7 +211,7 @@ def run_model(args: argparse.Namespace) -> int:
     config = PipelineConfig(core=core, monitor=monitor, time_budget_s=budget,
                             seed=args.seed, evaluate_all=args.evaluate_all, max_pixels=args.max_pixels,
                             calibration=str(calibration) if calibration else None,
-                            ood=str(ood) if ood else None)
+                            ood=str(ood) if ood else None, odd=system_build.odd(system))
     decision = EmergencyLanding(config, segmenter=segmenter).decide(image_path)
     _write_outputs(args, decision, image=read_image(image_path) if args.overlay else None, labels=None)
     print(summary(decision))

@@ -189,6 +189,7 @@ def results_signature_row(inp: Inputs) -> dict[str, str]:
 def campaign_context(inp: Inputs) -> dict[str, Any]:
     """The run's part of the context: identity, operating domain, pictures, plots, results and limitations."""
     from assurance.campaign.perturbations import PAPER_PERTURBATIONS
+    from assurance.evidence.domain_section import frame_gate_view, odd_rows
     from assurance.evidence.gallery import Scenes, decision_examples, perturbation_gallery
 
     man, images, candidates, reg = inp.manifest, inp.images, inp.candidates, inp.registry
@@ -211,6 +212,7 @@ def campaign_context(inp: Inputs) -> dict[str, Any]:
         "ident": ident, "synthetic": synthetic,
         "identity": identity_rows,
         "domain": domain(man, reg, readouts.input_size(images), scene_text, len(keys)),
+        "odd": odd_rows(man, images, reg.parameters["pose_error"]), "frame_gates": frame_gate_view(),
         "gallery": perturbation_gallery(scenes, keys[0] if keys else None, gallery_perts),
         "gallery_key": keys[0] if keys else "",
         "examples": (decision_examples(scenes, images, candidates, pick_examples(images, inp.deployed))
@@ -306,7 +308,7 @@ def template_context(inp: Inputs, gate: Gate, campaign: dict[str, Any], base: di
         "warnings": inp.warnings,
         "scope": run_scope(inp, gate.states),
         "identity": campaign["identity"],
-        "domain": campaign["domain"],
+        "domain": campaign["domain"], "odd": campaign["odd"], "frame_gates": campaign["frame_gates"],
         "domain_text": [{"name": k.replace("_", " "), "value": v} for k, v in reg.operating_domain.items()],
         "parameters": [{"name": k.replace("_", " "), "value": _parameter_text(v)} for k, v in reg.parameters.items()],
         "matrix": matrix(reg, results, inp.checks, inp.run, inp.csv_path.name),

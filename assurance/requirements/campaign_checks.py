@@ -106,3 +106,11 @@ def calibrated_miss_rate(ctx: CheckContext) -> Evidence:
     return check_calibrated_miss_rate(ctx.candidates, load_calibration(card_path(card)),
                                       run_models=manifest.get("monitor_models"),
                                       run_network=(manifest.get("weights") or {}).get("sha256"))
+
+
+@check("EL-R17")
+def outside_domain(ctx: CheckContext) -> Evidence:
+    """No frame outside the run's declared operating domain ends in a landing; frames outside counted."""
+    from assurance.requirements.domain_checks import check_outside_domain
+
+    return check_outside_domain(ctx.images, (ctx.manifest or {}).get("config", {}).get("odd"))

@@ -80,7 +80,7 @@ def check_monitor_coverage(images: Any, candidates: Any) -> Evidence:
         else:
             if flagged.any():
                 problem = "default action but a candidate is flagged as selected"
-            elif accepted.any():
+            elif accepted.any() and not str(row.reason).startswith("outside_odd"):  # outside: refused whatever
                 problem = f"default action although candidate {int(np.flatnonzero(accepted)[0])} was accepted"
         if problem:
             violations.append({"perturbation": row.perturbation, "severity": int(row.severity),

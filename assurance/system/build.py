@@ -15,6 +15,7 @@ from assurance.system.loader import SystemFile
 from el.camera import CAMERAS, Intrinsics, Pose, SafetyParams
 from el.config import CoreConfig
 from el.labels import UAVID, LabelSet
+from el.odd import OperatingDomain
 
 DEFAULT_IMAGE_SIZE = (3840, 2160)
 MODEL_KINDS = ("builtin", "pt", "onnx", "plugin")
@@ -114,6 +115,35 @@ def core_config(system: SystemFile, **overrides: Any) -> CoreConfig:
         kwargs["working_width"] = int(width)
     kwargs.update({k: v for k, v in overrides.items() if v is not None})
     return CoreConfig(**kwargs)
+
+
+ODD_POSE_ERROR = 0.2  # a moved camera without its own [odd] range: its nominal pose +- this fraction
+
+
+def odd(system: SystemFile) -> OperatingDomain:
+    """The declared operating domain (``[odd]``). A file that moves the nominal pose (``camera.height_m`` or
+    ``pitch_deg``) without declaring that range gets its nominal value +-20% (the registry's pose error), and
+    one that sets the camera's image size without an aspect range gets that aspect +-5%: the embedded default's
+    ranges describe the shipped camera, not another."""
+    values = {k: system.get(f"odd.{k}") for k in ("height_m", "pitch_deg", "image_width", "image_height", "aspect")}
+    pose = nominal_pose(system)
+    for key, nominal in (("height_m", pose.height_m), ("pitch_deg", pose.pitch_deg)):
+        if system.sets(f"camera.{key}") and not system.sets(f"odd.{key}"):
+            values[key] = [round(nominal * (1 - ODD_POSE_ERROR), 6), round(nominal * (1 + ODD_POSE_ERROR), 6)]
+    if (system.sets("camera.image_width") or system.sets("camera.image_height")) and not system.sets("odd.aspect"):
+        width, height = image_size(system)
+        values["aspect"] = [round(width / height / 1.05, 6), round(width / height * 1.05, 6)]
+    perturbations = dict(system.get("odd.perturbations") or {})
+    from assurance.campaign.perturbations import PERTURBATIONS
+
+    unknown = sorted(set(perturbations) - set(PERTURBATIONS))
+    if unknown:
+        raise system.error("odd.perturbations", f"unknown perturbation(s) {', '.join(unknown)}; known: "
+                                                f"{', '.join(PERTURBATIONS)}")
+    try:
+        return OperatingDomain(**values, perturbations=perturbations)
+    except (TypeError, ValueError) as exc:
+        raise system.error("odd", str(exc)) from None
 
 
 def poses_policy(system: SystemFile) -> str:

@@ -49,6 +49,7 @@ from el.deadline import checkpoint
 from el.errors import WeightsError
 from el.labels import UAVID, LabelSet
 from el.rgb import check_rgb
+from el.segmentation.frame_tap import frame_tap
 from el.segmentation.model import MCDropout, upsample_logits
 from el.segmentation.pooling import check_pooling, downsample_probs
 from el.segmentation.protocol import EvalProtocol, card_protocol, check_frame_scales
@@ -150,6 +151,8 @@ class Segmenter:
     """
 
     labels: LabelSet = UAVID  # the class default, for instances pickled before segmenters had a label set
+    tap_frames: bool = False  # keep each frame pass's FrameTap (last_tap) for a frame gate (el.monitors.gates)
+    last_tap: Any = None
 
     def __init__(self, model: nn.Module, *, threads: int | None = None, device: str | torch.device = "cpu",
                  card: dict[str, Any] | None = None, working_width: int = 1024, frame_flip: bool = False,
@@ -267,6 +270,7 @@ class Segmenter:
         ndarray of shape (8, h, w), float32, with ``(w, h) = working_size(W, H)``.
         """
         _check_rgb(rgb, "frame")
+        self.last_tap = None  # FrameTap of this frame's first pass (el.segmentation.frame_tap)
         w, h = self.working_size(rgb.shape[1], rgb.shape[0])
         if (rgb.shape[1], rgb.shape[0]) != (w, h):
             rgb = cv2.resize(rgb, (w, h), interpolation=cv2.INTER_AREA)
@@ -348,11 +352,21 @@ class Segmenter:
     def _predict(self, images: list[np.ndarray], what: str) -> np.ndarray:
         h, w = images[0].shape[:2]
         with torch.inference_mode():
+            features = None
             if getattr(self, "engine", None) is not None:
                 batch = np.stack(images).astype(np.float32) / np.float32(255.0)
-                logits = torch.from_numpy(self.engine.logits(batch.transpose(0, 3, 1, 2)))
+                if what == "frame" and self.tap_frames and getattr(self.engine, "trunk_names", None):  # one pass
+                    raw, features = self.engine.with_trunk(batch.transpose(0, 3, 1, 2))
+                    logits = torch.from_numpy(raw)
+                else:
+                    logits = torch.from_numpy(self.engine.logits(batch.transpose(0, 3, 1, 2)))
+            elif what == "frame" and self.tap_frames and self.fast_mc:  # one pass, split: the gates read its trunk
+                features = self.model.trunk(self._to_tensor(images))
+                logits = self.model.head(features)
             else:
                 logits = self.model(self._to_tensor(images))
+            if what == "frame" and self.tap_frames and self.last_tap is None and isinstance(logits, torch.Tensor):
+                self.last_tap = frame_tap(logits, features)
             # C-contiguous: frames feed the core model's OpenCV and numpy code.
             return np.ascontiguousarray(self._probs(logits, (len(images), self.labels.num_classes, h, w), what))
 

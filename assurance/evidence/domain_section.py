@@ -1,0 +1,87 @@
+"""The report's declared operating domain (the run's ``[odd]``, ``el.odd``): per dimension the declaration and
+the evidence that covers it (campaign frames, the pose margin of beta, the perturbations and severities
+evaluated), and per perturbation the frames that ended outside the domain."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from el.odd import OUTSIDE_ODD, OperatingDomain
+
+
+def _span(values: Any, unit: str) -> str:
+    lo, hi = float(values.min()), float(values.max())
+    return f"{lo:g}{unit}" if lo == hi else f"{lo:g} to {hi:g}{unit}"
+
+
+def _within(values: Any, lo: float, hi: float) -> int:
+    return int(((values >= lo) & (values <= hi)).sum())
+
+
+def odd_rows(man: Mapping[str, Any], images: Any, pose_error: Mapping[str, float]) -> list[dict[str, str]]:
+    """One row per declared dimension (name, declared, evidence); empty when the run declares no domain."""
+    record = man["config"].get("odd")
+    if record is None:
+        return []
+    odd = OperatingDomain.from_dict(record)
+    ok = images[images["fault"].fillna("") == ""] if len(images) else images
+    frames = ok.drop_duplicates(["perturbation", "severity", "key"]) if len(ok) else ok
+    n = len(frames)
+    nominal = man["config"]["core"]["pose"]
+    rows = []
+    for name, col, (lo, hi), unit, err in (("Height", "height_m", odd.height_m, " m", "height"),
+                                           ("Pitch", "pitch_deg", odd.pitch_deg, " deg", "pitch")):
+        seen = (f"{n} evaluated frames at {_span(frames[col], unit)} ({_within(frames[col], lo, hi)} inside)"
+                if n and col in frames else "no evaluated frame")
+        margin = (f"; the safety coefficient beta absorbs {pose_error[err]:.0%} around the nominal "
+                  f"{nominal[col]:g}{unit} (the pose-error margin), i.e. {nominal[col] * (1 - pose_error[err]):g} to "
+                  f"{nominal[col] * (1 + pose_error[err]):g}{unit}")
+        rows.append({"name": name, "declared": f"{lo:g} to {hi:g}{unit}", "evidence": seen + margin})
+    sizes = (sorted({(int(w), int(h)) for w, h in zip(frames["width"], frames["height"], strict=True)})
+             if n else [])
+    shown = ", ".join(f"{w}x{h}" for w, h in sizes[:6]) + (" ..." if len(sizes) > 6 else "")
+    rows.append({"name": "Image size", "declared": f"width {odd.image_width[0]:g} to {odd.image_width[1]:g} px, "
+                 f"height {odd.image_height[0]:g} to {odd.image_height[1]:g} px",
+                 "evidence": f"frames evaluated at {shown} (the network segments at its working width)"
+                 if sizes else "no evaluated frame"})
+    rows.append({"name": "Aspect", "declared": f"{odd.aspect[0]:g} to {odd.aspect[1]:g}",
+                 "evidence": ", ".join(sorted({f"{w / h:.3f}" for w, h in sizes})) or "no evaluated frame"})
+    evaluated = {(str(p), int(s)) for p, s in zip(frames["perturbation"], frames["severity"], strict=True)} \
+        if n else set()
+    for pert, level in odd.perturbations.items():
+        sev = sorted(s for p, s in evaluated if p == pert)
+        state = "covered" if level in sev else "NOT evaluated at the declared maximum"
+        rows.append({"name": f"Perturbation {pert}", "declared": f"up to severity {level}",
+                     "evidence": f"evaluated at severit{'y' if len(sev) == 1 else 'ies'} "
+                                 f"{', '.join(map(str, sev)) or 'none'}: {state}"})
+    beyond = sorted({f"{p} {s}" for p, s in evaluated if not odd.covers(p, s)})
+    if beyond:
+        rows.append({"name": "Evaluated beyond", "declared": "outside the declared perturbations",
+                     "evidence": ", ".join(beyond) + ": evaluated by the campaign, not covered by the declaration"})
+    out = frames[frames["reason"].astype(str).str.startswith(OUTSIDE_ODD)] if n else frames
+    per = out.groupby("perturbation")["key"].nunique().to_dict() if len(out) else {}
+    rows.append({"name": "Frames outside", "declared": "default action, reason outside_odd",
+                 "evidence": ", ".join(f"{p}: {per.get(p, 0)}" for p in dict.fromkeys(frames["perturbation"]))
+                 if n else "no evaluated frame"})
+    return rows
+
+
+def frame_gate_view() -> dict[str, Any] | None:
+    """The frame-gate measurement shipped with the package (``assurance/data/frame_gates.{csv,png}``, written by
+    ``assurance.fitting.gate_study`` on validation scenes): per set the share each candidate gate flags."""
+    import base64
+    import csv
+    from importlib import resources
+
+    data = resources.files("assurance").joinpath("data")
+    try:
+        text = data.joinpath("frame_gates.csv").read_text(encoding="utf-8")
+        png = data.joinpath("frame_gates.png").read_bytes()
+    except OSError:
+        return None
+    rows = list(csv.DictReader(text.splitlines()))
+    gates = [k for k in (rows[0] if rows else {}) if k not in ("set", "what", "frames")]
+    shown = [{"set": r["set"] if r["set"] == r["what"] else f"{r['set']}: {r['what']}", "frames": r["frames"],
+              "rates": [f"{float(r[g]):.0%}" for g in gates]} for r in rows]
+    return {"gates": gates, "rows": shown, "uri": "data:image/png;base64," + base64.b64encode(png).decode("ascii")}

@@ -1,0 +1,136 @@
+"""Issue 32, the declared operating domain: a frame whose pose or size is outside it ends in the default action
+with reason outside_odd naming the dimension (a decision, not a fault); the system file declares it; campaign
+readouts record it; EL-R17 fails when a landing is made outside the domain."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from conftest import TINY_WW
+from helpers import OracleSegmenter, scene_ids, scene_image
+
+from assurance.campaign.run import CampaignConfig, plan, run_task
+from assurance.requirements.domain_checks import check_outside_domain
+from assurance.system import default_system
+from assurance.system.build import odd as system_odd
+from el.camera import Pose
+from el.config import CoreConfig
+from el.odd import OperatingDomain
+from el.pipeline import EmergencyLanding, PipelineConfig
+
+WW = 128
+DOMAIN = OperatingDomain(height_m=(40, 60), pitch_deg=(36, 54), image_width=(64, 7680), image_height=(36, 4320),
+                         aspect=(1.5, 2.0), perturbations={"fog": 3})
+
+
+def _decide(pose=None, image=None, odd=DOMAIN):
+    cfg = PipelineConfig(core=CoreConfig(working_width=WW), monitor="lhd", odd=odd)
+    return EmergencyLanding(cfg, segmenter=OracleSegmenter(WW)).decide(
+        scene_image(scene_ids()) if image is None else image, pose=pose)
+
+
+@pytest.mark.requirements("EL-R17")
+@pytest.mark.parametrize("pose,dimension", [(Pose(height_m=120.0), "height 120 m not in [40, 60] m"),
+                                            (Pose(height_m=20.0, pitch_deg=45.0), "height 20 m"),
+                                            (Pose(pitch_deg=85.0), "pitch 85 deg not in [36, 54] deg")])
+def test_a_pose_outside_the_range_is_refused_by_reason(pose, dimension):
+    inside = _decide(Pose(height_m=50.0, pitch_deg=45.0))
+    assert inside.action == "land" and not inside.reason.startswith("outside_odd")
+    d = _decide(pose)
+    assert d.action == "default" and d.reason.startswith("outside_odd: ") and dimension in d.reason
+    assert d.input["pose"]["source"] == "frame" and d.config["odd"] == DOMAIN.to_dict()
+    assert _decide(pose, odd=None).action == "land"  # no declaration: nothing refused
+
+
+@pytest.mark.requirements("EL-R17")
+def test_a_frame_size_or_aspect_outside_is_refused():
+    square = scene_image(scene_ids())[:, :144]
+    d = _decide(image=square)
+    assert d.action == "default" and d.reason.startswith("outside_odd: aspect 1 not in [1.5, 2]")
+    assert _decide(image=scene_image(scene_ids())[:34, :60]).reason.startswith("outside_odd: image_width 60 px")
+
+
+def test_the_decision_schema_takes_the_reason():
+    import jsonschema
+
+    from el.decision import decision_schema
+
+    d = _decide(Pose(height_m=120.0))
+    jsonschema.validate(json.loads(d.to_json()), decision_schema())
+
+
+def test_the_embedded_default_contains_the_release_and_test_frames():
+    domain = system_odd(default_system())
+    assert domain.outside(Pose(height_m=50.0, pitch_deg=45.0), (3840, 2160)) is None
+    for size in ((256, 144), (480, 270), (1024, 576), (320, 180), (96, 54), (192, 108)):
+        assert domain.outside(Pose(), size) is None, size
+    assert domain.perturbations == {p: 3 for p in ("brightness", "fog", "motion_blur", "pixel_trap",
+                                                   "shifted_pixels")}
+    assert domain.covers("fog", 3) and not domain.covers("fog", 4) and domain.covers("none", 1)
+
+
+def test_the_system_file_declares_the_domain(tmp_path):
+    from assurance.system import load_system
+
+    path = tmp_path / "uav-el.toml"
+    path.write_text("[odd]\nheight_m = [10.0, 30.0]\n[camera]\nheight_m = 20.0\n")
+    domain = system_odd(load_system(path))
+    assert domain.height_m == (10.0, 30.0) and domain.pitch_deg == (36.0, 54.0)  # pitch: the default's
+    path.write_text("[camera]\nheight_m = 80.0\nimage_width = 4000\nimage_height = 3000\n")
+    moved = system_odd(load_system(path))  # a moved camera without [odd]: its nominal pose +-20%, its aspect +-5%
+    assert moved.height_m == (64.0, 96.0) and moved.aspect[0] < 4 / 3 < moved.aspect[1]
+    for text, needle in (("[odd]\nheight_m = [10.0]\n", "odd.height_m"),
+                         ("[odd]\nperturbations = { rain = 3 }\n", "unknown perturbation(s) rain"),
+                         ("[odd]\nperturbations = { fog = 7 }\n", "odd.perturbations.fog"),
+                         ("[odd]\npitch_deg = [60.0, 30.0]\n", "low <= high")):
+        path.write_text(text)
+        with pytest.raises(ValueError, match=needle.replace("(", r"\(").replace(")", r"\)")):
+            system_odd(load_system(path))
+
+
+@pytest.mark.requirements("EL-R17")
+def test_the_requirement_fails_when_a_landing_is_made_out_of_domain(tiny_campaign):
+    import pandas as pd
+
+    base = dict(perturbations=("none", "fog"), monitors=("lhd",), core=CoreConfig(n_star=6, working_width=TINY_WW),
+                images=3)
+    high = OperatingDomain(height_m=(60, 120), pitch_deg=(0, 90), image_width=(1, 10_000),
+                           image_height=(1, 10_000), aspect=(0.1, 10), perturbations={"fog": 3}).to_dict()
+
+    def images(config):
+        rows = [r for t in plan(tiny_campaign["data"], config)
+                for r in run_task(t, config, OracleSegmenter(TINY_WW))["images"]]
+        return pd.DataFrame(rows)
+
+    blind = images(CampaignConfig(**base))  # a system that does not check its domain lands at 50 m
+    assert (blind["action"] == "land").any()
+    failed = check_outside_domain(blind, high)
+    assert failed.status == "fail" and "landed although outside_odd: height 50 m" in failed.message()
+    refused = images(CampaignConfig(**base, odd=high))  # the campaign decides as the flight code does
+    assert (refused["action"] == "default").all() and refused["reason"].str.startswith("outside_odd: height").all()
+    ok = check_outside_domain(refused, high)
+    assert ok.status == "pass" and {(r["perturbation"], r["outside"], r["declared"]) for r in ok.rows} == \
+        {("none", 3, "yes"), ("fog", 3, "yes")}
+    assert check_outside_domain(refused, None).status == "insufficient"
+    from assurance.evidence.domain_section import odd_rows
+
+    man = {"config": {"odd": high, "core": {"pose": {"height_m": 50.0, "pitch_deg": 45.0}}}}
+    rows = {r["name"]: r for r in odd_rows(man, refused, {"height": 0.2, "pitch": 0.2})}
+    assert rows["Height"]["declared"] == "60 to 120 m" and "6 evaluated frames at 50 m (0 inside)" in \
+        rows["Height"]["evidence"]
+    assert rows["Frames outside"]["evidence"] == "none: 3, fog: 3"
+    assert rows["Perturbation fog"]["evidence"].endswith(": covered")
+
+
+@pytest.mark.requirements("EL-R17")
+def test_uav_el_land_outside_the_domain_is_a_decision_exit_0(tmp_path, capsys):
+    from assurance.cli import main
+    from assurance.scenes.uavid import write_image
+
+    img, out = tmp_path / "frame.png", tmp_path / "d.json"
+    write_image(img, scene_image(scene_ids()))
+    assert main(["land", str(img), "--height", "120", "--monitor", "none", "--json", str(out)]) == 0
+    d = json.loads(out.read_text())
+    assert d["action"] == "default" and d["reason"] == "outside_odd: height 120 m not in [40, 60] m"
+    assert "reason: outside_odd: height 120 m" in capsys.readouterr().out
