@@ -1,6 +1,7 @@
 """The AMLAS index: every artefact of the evidence package mapped to its AMLAS stage and artefact letter (AMLAS v1,
 Hawkins et al. 2021: [A]-[E] scoping, [H]/[J] ML safety requirements, [L]-[Q] data management, [U]/[V]/[X] model
-learning, [Z]/[AA] verification, [EE] deployment), with the file and its SHA-256."""
+learning, [Z]/[AA] verification, [EE]/[FF] deployment; letters as on the AMLAS stage pages), with the file and
+its SHA-256."""
 
 from __future__ import annotations
 
@@ -17,14 +18,14 @@ ARTEFACTS = {
     "Q": (3, "Data generation log"),
     "U": (4, "Model development log"), "V": (4, "ML model"), "X": (4, "Internal test results"),
     "Z": (5, "ML verification results"), "AA": (5, "Verification log"),
-    "EE": (6, "Integration testing results"),
+    "EE": (6, "Operational scenarios"), "FF": (6, "Integration testing results"),
 }
 """AMLAS artefact letter -> (stage, name)."""
 
 IDENTITY_LETTERS = {
     "Requirement registry": ("A", "E", "H"), "System file": ("C",), "Weights": ("D", "V"), "Data": ("P",),
-    "Requirement targets": ("H",), "Requirement test results": ("Z",), "Results table": ("Z", "EE"),
-    "Run readouts": ("EE",), "Configuration": ("AA",),
+    "Requirement targets": ("H",), "Requirement test results": ("Z",), "Results table": ("Z", "FF"),
+    "Run readouts": ("FF",), "Configuration": ("AA", "EE"),
 }
 """The report's identity rows (``assurance.evidence.identity``) and the AMLAS artefacts they are."""
 

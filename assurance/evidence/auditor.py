@@ -66,7 +66,7 @@ def package_entries(inp: Any, record: dict[str, Any]) -> list[dict[str, Any]]:
         if (base / name).is_file():
             out.append(entry(letter, what, str(rel(base / name)), sha(base / name)))
     for name, letter, what in (("junit.xml", "AA", "Verification log: requirement tests (JUnit XML)"),
-                               ("faults.csv", "EE", "Integration testing results: fault-injection table")):
+                               ("faults.csv", "FF", "Integration testing results: fault-injection table")):
         if (inp.out / name).is_file():
             out.append(entry(letter, what, name, sha(inp.out / name)))
     return out
