@@ -84,8 +84,8 @@ def _requirement_nodes(a: ArgumentInputs, req: rq.Requirement) -> list[Node]:
         goal.supported_by.append(out[-1].id)
     if waived:
         w = a.waivers[req.id]
-        out.append(Node(f"J-{req.id}", f"Waiver: {w.get('reason', '')} (owner {w.get('owner', '?')}, expires "
-                                       f"{w.get('expires', '?')})", cls="waived"))
+        out.append(Node(f"J-{req.id}", f"Waiver owned by {w.get('owner', '?')}, expires {w.get('expires', '?')}: "
+                                       f"{w.get('reason', '')}", cls="waived"))  # owner first: the drawing clips
         goal.in_context_of.append(out[-1].id)
     return out
 
