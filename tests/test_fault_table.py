@@ -79,3 +79,16 @@ def test_issue_31_cases_behave(workspace):
     by = {r["case"]: r for r in rows}
     assert "refused before decoding" in by["R1-pixel-header"]["outcome"]
     assert "exceeds the" in by["R5-jobs-1000"]["outcome"] and by["R8-colliding-frames"]["outcome"].startswith("2 task")
+
+
+def test_issue_31_signing_cases_behave(workspace):
+    """Forged evidence (S1..S3, exit 4 naming what is wrong) and a waiver that cannot stand (S4, exit 1)."""
+    from assurance.campaign.fault_signing import SIGNING_CASES
+
+    assert {c.id for c in SIGNING_CASES} <= {c.id for c in fi.CASES}
+    rows = fi.run_cases(workspace, SIGNING_CASES, main=main)
+    for r in rows:
+        assert r["result"] == "pass", r
+    by = {r["case"]: r for r in rows}
+    assert "seq00_900000" in by["S1-fabricated-run"]["outcome"]
+    assert "owned by 'nobody'" in by["S4-bogus-waiver"]["outcome"] or "EL-R99" in by["S4-bogus-waiver"]["outcome"]

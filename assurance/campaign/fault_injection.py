@@ -24,6 +24,7 @@ from assurance.campaign.fault_case import Case, CliMain, save_tiny_weights
 from assurance.campaign.fault_case import campaign_argv as _campaign
 from assurance.campaign.fault_case import copy_run as _copy_run
 from assurance.campaign.fault_case import first_image as _image
+from assurance.campaign.fault_signing import SIGNING_CASES
 
 COLUMNS = ("case", "injected", "command", "expected", "observed", "outcome", "result")
 CSV_NAME, MD_NAME = "faults.csv", "faults.md"
@@ -201,6 +202,7 @@ CASES: tuple[Case, ...] = (
     Case("B5-missing-run", "table on a folder that is not a run",
          lambda ws: ["table", ws / "no-run", "--boot", "20"], 2),
     *BOUNDS_CASES,  # issue 31: bounded resources, no silent loss
+    *SIGNING_CASES,  # issue 31: forged evidence, the gate's policy
 )
 
 
