@@ -99,13 +99,9 @@ def reseal_shard(run, name: str) -> None:
     that way: for tests that need a run with odd readouts that still verifies."""
     from pathlib import Path
 
-    from assurance.campaign import readouts
-    from el.hashing import sha256_file
+    from assurance.campaign.fault_case import reseal_shard as reseal
 
-    folder = Path(run) / readouts.SHARDS / name
-    sums = {f: sha256_file(folder / f) for f in readouts.shard_files()}
-    (folder / readouts.SUMS).write_text("".join(f"{h}  {f}\n" for f, h in sums.items()), encoding="utf-8")
-    readouts.record_shards(run, {name: sums})
+    reseal(Path(run), name)
 
 
 def install_distribution(site: Path, module: Path, group: str, entry: str) -> None:

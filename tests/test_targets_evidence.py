@@ -33,8 +33,8 @@ def judged(pytester, tiny_campaign, tmp_path):
     from assurance.requirements.attestation import sign_session_results
     from assurance.system.build import shipped_waivers
 
-    sign_session_results(tiny_campaign["run"], tmp_path, load_signing_key(), waivers=shipped_waivers(),
-                         registry=None)  # as uav-el verify --targets would
+    # as uav-el verify --targets would
+    sign_session_results(tiny_campaign["run"], tmp_path, load_signing_key(), waivers=shipped_waivers())
     return tiny_campaign["run"], tfile, results
 
 

@@ -47,6 +47,18 @@ def copy_run(ws: Path, name: str) -> tuple[Path, list[Path]]:
     return run, sorted(p for p in (run / "shards").iterdir() if p.is_dir())
 
 
+def reseal_shard(run: Path, name: str) -> None:
+    """Re-hash an edited shard in its own SHA256SUMS and the run's index, as a forger (or a test that needs odd
+    readouts that still verify) would: only a signed statement over the files still tells the edit."""
+    from assurance.campaign import readouts
+    from el.hashing import sha256_file
+
+    folder = Path(run) / readouts.SHARDS / name
+    sums = {f: sha256_file(folder / f) for f in readouts.shard_files()}
+    (folder / readouts.SUMS).write_text("".join(f"{h}  {f}\n" for f, h in sums.items()), encoding="utf-8")
+    readouts.record_shards(run, {name: sums})
+
+
 def save_tiny_weights(path: Path, *, nan: bool = False) -> Path:
     """A tiny randomly-initialised CNN (seed 0) and its card; ``nan``: every parameter NaN."""
     import torch

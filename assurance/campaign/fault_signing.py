@@ -9,7 +9,7 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-from assurance.campaign.fault_case import Case, copy_run
+from assurance.campaign.fault_case import Case, copy_run, reseal_shard
 
 
 def _evidence(run: Path, out: Path, *extra: object) -> list[str]:
@@ -27,15 +27,10 @@ def _fabricated_run(ws: Path) -> list[str]:
 
 def _resealed_shard(ws: Path) -> list[str]:
     """A shard's readouts edited and re-hashed in its own SHA256SUMS and the run's index (as a forger would)."""
-    from assurance.campaign import readouts
-    from el.hashing import sha256_file
-
     run, shards = copy_run(ws, "run-resealed")
     f = shards[0] / "images.parquet"
     f.write_bytes(f.read_bytes() + b"\0")
-    sums = {name: sha256_file(shards[0] / name) for name in readouts.shard_files()}
-    (shards[0] / readouts.SUMS).write_text("".join(f"{h}  {n}\n" for n, h in sums.items()), encoding="utf-8")
-    readouts.record_shards(run, {shards[0].name: sums})
+    reseal_shard(run, shards[0].name)
     return _evidence(run, ws / "rep-resealed")
 
 

@@ -126,6 +126,5 @@ def _sign(args: argparse.Namespace, run: Path, out: Path, key: Any, campaign: An
         raise CommandError(f"{out / 'requirements.json'}: the test session wrote no results")
     system = getattr(args, "system_file", None) or default_system()
     return sign_session_results(run, out, key, waivers=system_build.waivers(system, args.waivers),
-                                registry=args.registry,
                                 extra={"campaign_signed_by": campaign.keyid, "keyword": args.keyword,
                                        "tests": [str(t) for t in args.tests]})

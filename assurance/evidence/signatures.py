@@ -18,7 +18,8 @@ def results_signature_problems(inp: Any, waivers: str | Path | None,
     if inp.req_path is None:
         return {}, []
     junit = inp.req_path.with_name("junit.xml")
-    pins = results_pins(inp.run, inp.manifest, inp.registry, inp.check.digest, waivers)
+    registry = {"sha256": inp.registry.sha256, "parameters_sha256": inp.registry.parameters_sha256}
+    pins = results_pins(inp.run, inp.manifest, registry, inp.check.digest, waivers)
     return check_results_attestation(inp.req_path, trusted, pins, junit=junit if junit.is_file() else None)
 
 

@@ -26,36 +26,34 @@ PINNED = ("run_digest", "campaign_attestation_sha256", "registry_sha256", "param
 """What the statement pins and the report compares with what it was given."""
 
 
-def results_pins(run: Path, manifest: Mapping[str, Any], registry: Any, run_digest: str,
+def results_pins(run: Path, manifest: Mapping[str, Any], registry: Mapping[str, Any], run_digest: str,
                  waivers: str | Path | None) -> dict[str, Any]:
-    """The values a results statement pins (``PINNED``), as the evidence step computes them for ``run``."""
+    """The values a results statement pins (``PINNED``) for ``run``; ``registry``: the registry's ``sha256`` and
+    ``parameters_sha256`` (as a results file records them, or from the report's loaded registry)."""
     from assurance.campaign.attestation import ATTESTATION as CAMPAIGN
 
     envelope = Path(run) / CAMPAIGN
     return {"run_digest": run_digest,
             "campaign_attestation_sha256": sha256_file(envelope) if envelope.is_file() else None,
-            "registry_sha256": registry.sha256, "parameters_sha256": registry.parameters_sha256,
+            "registry_sha256": registry.get("sha256"), "parameters_sha256": registry.get("parameters_sha256"),
             "waivers_sha256": sha256_file(waivers) if waivers and Path(waivers).is_file() else None,
             "system_sha256": (manifest.get("system") or {}).get("sha256")}
 
 
 def sign_session_results(run: str | Path, out: str | Path, key: SigningKey, *, waivers: str | Path | None,
-                         registry: str | Path | None = None, extra: Mapping[str, Any] | None = None) -> Path:
+                         extra: Mapping[str, Any] | None = None) -> Path:
     """Sign ``out/requirements.json`` (and ``out/junit.xml``) of a test session on ``run`` with the pins the
     evidence step will compare: the session's run digest, registry and targets, the run's campaign statement and
     system file, the waivers to be applied (``uav-el verify`` calls this after its session)."""
     import json
-
-    from assurance.requirements.registry import load_registry
 
     run, out = Path(run), Path(out)
     results = out / "requirements.json"
     doc = json.loads(results.read_text(encoding="utf-8"))
     ctx, reg = doc.get("context") or {}, doc.get("registry") or {}
     manifest = json.loads((run / "manifest.json").read_text(encoding="utf-8"))
-    pins = results_pins(run, manifest, load_registry(registry), ctx.get("run_digest") or "", waivers)
-    pins.update(registry_sha256=reg.get("sha256"), parameters_sha256=reg.get("parameters_sha256"),
-                code=ctx.get("code"), waivers=str(waivers) if waivers else None, **dict(extra or {}))
+    pins = results_pins(run, manifest, reg, ctx.get("run_digest") or "", waivers)
+    pins.update(code=ctx.get("code"), waivers=str(waivers) if waivers else None, **dict(extra or {}))
     return sign_results(results, key, pins, junit=out / "junit.xml")
 
 
