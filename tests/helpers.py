@@ -117,9 +117,16 @@ def install_distribution(site: Path, module: Path, group: str, entry: str) -> No
     (info / "entry_points.txt").write_text(f"[{group}]\n{entry}\n")
 
 
+def allow_weaker_registry(monkeypatch) -> None:
+    """Let the gate accept a registry weaker than the system's (``lenient_registry``), for tests of other gate
+    behaviour; the weakening check itself is tested in tests/test_registry_weakening.py."""
+    monkeypatch.setattr("assurance.evidence.context.weakening_problems", lambda registry, system=None: [])
+
+
 def lenient_registry(folder: Path) -> Path:
     """A copy of the shipped registry that declares every requirement undecidable on a run smaller than the
-    release (``size_limited``): for tests of other gate behaviour on partial test sessions."""
+    release (``size_limited``): for tests of other gate behaviour on partial test sessions (the gate refuses it as
+    weaker than the system's unless ``allow_weaker_registry``)."""
     import re
 
     from assurance.requirements import default_registry_path

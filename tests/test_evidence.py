@@ -197,12 +197,14 @@ def test_gate_turns_red_for_exactly_the_broken_requirement(pytester, monitor_run
     assert f"report: {tmp_path / 'good' / 'evidence.html'}" in out
 
 
-def test_waiver_accepts_a_listed_failure_but_not_under_strict(pytester, monitor_runs, evidence_cli, tmp_path, capsys):
+def test_waiver_accepts_a_listed_failure_but_not_under_strict(pytester, monitor_runs, evidence_cli, tmp_path, capsys,
+                                                             monkeypatch):
     """A failed requirement listed in a waivers file stays "failed" in the report but does not fail the gate;
     --strict (a certification release) ignores waivers; an unlisted failure still fails."""
-    from helpers import lenient_registry
+    from helpers import allow_weaker_registry, lenient_registry
 
     lenient = lenient_registry(tmp_path)  # the requirements deselected here do not block: the waiver is tested
+    allow_weaker_registry(monkeypatch)
     pytest_results(pytester, monitor_runs["broken"], tmp_path / "bad", "-k", "monitor_coverage",
                    "--uav-el-registry", str(lenient))
     import datetime as dt
@@ -251,6 +253,9 @@ def test_waiver_accepts_a_listed_failure_but_not_under_strict(pytester, monitor_
 
 
 def test_missing_weasyprint_keeps_the_html_and_says_what_to_install(monitor_runs, tmp_path, monkeypatch):
+    from helpers import allow_weaker_registry
+
+    allow_weaker_registry(monkeypatch)
     monkeypatch.setitem(sys.modules, "weasyprint", None)  # import weasyprint -> ImportError
     out = tmp_path / "r"
     (out).mkdir()

@@ -92,3 +92,30 @@ def test_issue_31_signing_cases_behave(workspace):
     by = {r["case"]: r for r in rows}
     assert "seq00_900000" in by["S1-fabricated-run"]["outcome"]
     assert "owned by 'nobody'" in by["S4-bogus-waiver"]["outcome"] or "EL-R99" in by["S4-bogus-waiver"]["outcome"]
+
+
+def test_issue_31_gate_cases_without_a_test_session_behave(workspace):
+    """An uncollectable test, an edited manifest, a re-hashed monitor and swapped weights (G2, G6-G8)."""
+    from assurance.campaign.fault_gate import GATE_CASES
+
+    assert {c.id for c in GATE_CASES} <= {c.id for c in fi.CASES} and len(GATE_CASES) == 9
+    fast = ("G2-uncollectable-test", "G6-edited-manifest", "G7-resigned-monitor", "G8-swapped-weights")
+    rows = fi.run_cases(workspace, [c for c in GATE_CASES if c.id in fast], main=main)
+    for r in rows:
+        assert r["result"] == "pass", r
+    by = {r["case"]: r for r in rows}
+    assert "learned-copy.json: changed since the run was made" in by["G7-resigned-monitor"]["outcome"]
+
+
+@pytest.mark.slow
+def test_issue_31_gate_cases_with_a_test_session_behave(workspace):
+    """A deselected test, a weaker registry or targets, a waiver of a pass, EL-R16 on training scenes (each runs
+    uav-el verify: slow)."""
+    from assurance.campaign.fault_gate import GATE_CASES
+
+    slow = ("G1-deselected-test", "G3-weakened-registry", "G4-weakened-targets", "G5-waiver-of-a-pass",
+            "G9-el-r16-training-split")
+    rows = fi.run_cases(workspace, [c for c in GATE_CASES if c.id in slow], main=main)
+    for r in rows:
+        assert r["result"] == "pass", r
+    assert "weaker than the system" in {r["case"]: r for r in rows}["G3-weakened-registry"]["outcome"]

@@ -67,8 +67,12 @@ def test_report_on_other_targets_fails_the_gate(judged, tmp_path, monkeypatch, c
     monkeypatch.setitem(cli.COMMANDS, "evidence", "evidence")
     code = cli.main(["evidence", "--run", str(run), "--out", str(tmp_path / "cli"), "--requirements", str(results),
                      "--targets", str(tfile), "--no-pdf", "--boot", "50"])
-    out = capsys.readouterr().out  # bound to the same targets; only the deselected requirements block
-    assert "other requirement targets" not in out and "gate problem" not in out and code == 1
+    out = capsys.readouterr().out  # bound to the same targets; weaker than the system's, and deselected ones block
+    problems = [line for line in out.splitlines() if line.startswith("gate problem")]
+    assert "other requirement targets" not in out and code == 1
+    assert problems and all("weaker than the system's requirements" in p for p in problems)
+    assert any("parameter unsafe_landing_bound = 0.3 is higher (looser) than the system's 0.05" in p
+               for p in problems)
     bad = tmp_path / "bad.json"
     bad.write_text('{"confidence": 2}')
     assert cli.main(["evidence", "--run", str(run), "--out", str(tmp_path / "bad"), "--targets", str(bad),

@@ -27,6 +27,29 @@ class Case:
     pick: str = ""  # the output line holding this is the outcome (default: first stderr line)
 
 
+_CLI: list[CliMain] = []  # the command line the cases run through (set by ``fault_injection.run_case``)
+
+
+def use_cli(main: CliMain) -> None:
+    """Run the cases' preparation steps (``prepare``) through ``main`` (``assurance.cli.main``)."""
+    _CLI[:] = [main]
+
+
+def prepare(argv: list[object]) -> int:
+    """``uav-el ARGV`` in-process, its output swallowed: a case's preparation (a campaign, a verify), not its
+    outcome. The command line must have been given (``use_cli``)."""
+    import contextlib
+    import io
+
+    if not _CLI:
+        raise RuntimeError("fault-injection case preparation: no command line given (use_cli)")
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        try:
+            return int(_CLI[0]([str(a) for a in argv]))
+        except SystemExit as exc:
+            return int(exc.code or 0)
+
+
 def campaign_argv(ws: Path, out: Path, *extra: str, data: Path | None = None, weights: Path | None = None
                   ) -> list[str]:
     """``uav-el campaign`` on the workspace's data (or ``data``) and tiny weights (or ``weights``), into ``out``."""

@@ -20,10 +20,11 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from assurance.campaign.fault_bounds import BOUNDS_CASES
-from assurance.campaign.fault_case import Case, CliMain, save_tiny_weights
+from assurance.campaign.fault_case import Case, CliMain, save_tiny_weights, use_cli
 from assurance.campaign.fault_case import campaign_argv as _campaign
 from assurance.campaign.fault_case import copy_run as _copy_run
 from assurance.campaign.fault_case import first_image as _image
+from assurance.campaign.fault_gate import GATE_CASES
 from assurance.campaign.fault_signing import SIGNING_CASES
 
 COLUMNS = ("case", "injected", "command", "expected", "observed", "outcome", "result")
@@ -203,6 +204,7 @@ CASES: tuple[Case, ...] = (
          lambda ws: ["table", ws / "no-run", "--boot", "20"], 2),
     *BOUNDS_CASES,  # issue 31: bounded resources, no silent loss
     *SIGNING_CASES,  # issue 31: forged evidence, the gate's policy
+    *GATE_CASES,  # issue 31: a gate that verifies what it says, models bound to the run
 )
 
 
@@ -221,6 +223,7 @@ def _outcome(case: Case, out: str, err: str) -> str:
 
 def run_case(case: Case, ws: Path, *, main: CliMain) -> dict[str, str]:
     """Inject ``case`` into the workspace ``ws`` and replay it through ``main``; the table row."""
+    use_cli(main)
     argv = [str(a) for a in case.make(ws)]
     code, out, err = _cli(main, argv)
     text = out + err

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from assurance.campaign import readouts
+from assurance.campaign.model_files import model_files
 from assurance.code_identity import code_identity
 
 if TYPE_CHECKING:
@@ -45,9 +46,10 @@ def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *,
         "format": readouts.FORMAT_VERSION,
         "config": config.to_dict(),
         "data": {"path": str(Path(data).resolve()), "images": len({t.sample.key for t in tasks}),
-                 "sha256": h.hexdigest()},
+                 "sha256": h.hexdigest(), "splits": scene_splits(tasks)},
         "weights": weights_record,
         "monitor_models": monitor_models(config.monitors),
+        "model_files": model_files(weights_record, config.monitors),
         "tasks": len(tasks),
         "integrity": readouts.INTEGRITY,
         "shard_order": [t.shard_name for t in tasks],
@@ -58,6 +60,23 @@ def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *,
         "versions": {"python": sys.version.split()[0], "numpy": np.__version__, "torch": torch.__version__,
                      "platform": platform.platform()},
     }
+
+
+def scene_splits(tasks: Sequence[Task]) -> dict[str, int]:
+    """Frames per split their scene's ``meta/*.json`` declares (synthetic scenes; none for data without meta):
+    EL-R16 judges a calibration card on the test split only."""
+    import json
+
+    out: dict[str, int] = {}
+    for sample in {t.sample.key: t.sample for t in tasks}.values():
+        path = sample.meta_path()
+        try:
+            split = json.loads(path.read_text(encoding="utf-8")).get("split") if path.is_file() else None
+        except (OSError, ValueError, AttributeError):
+            split = None
+        if isinstance(split, str):
+            out[split] = out.get(split, 0) + 1
+    return dict(sorted(out.items()))
 
 
 def _frame_files(tasks: Sequence[Task]) -> set[Path]:

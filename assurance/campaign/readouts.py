@@ -117,6 +117,12 @@ def init_run(run_dir: Path, manifest: dict[str, Any]) -> None:
             raise RunError(f"{run_dir}: holds a campaign run whose monitors rest on other fitted models "
                            f"(monitor_models: {was_models or 'not recorded'} then, {now_models} now); use a new "
                            "--out folder or delete this one")
+        was_files, now_files = old.get("model_files"), manifest.get("model_files") or {}
+        changed = sorted(f for f in {*(was_files or {}), *now_files} if (was_files or {}).get(f) != now_files.get(f))
+        if was_files is not None and changed:
+            raise RunError(f"{run_dir}: holds a campaign run made with other model files ({changed[0]}"
+                           + (f" and {len(changed) - 1} more" if len(changed) > 1 else "")
+                           + " differ); use a new --out folder or delete this one")
         return
     shards = run_dir / SHARDS
     if shards.is_dir() and any(shards.iterdir()):  # e.g. a half-deleted run: its shards may be another campaign's

@@ -80,8 +80,9 @@ def run(args: argparse.Namespace) -> int:
     if report.exit_code:
         failed = [r for r in report.ids("failed") if r not in report.waived]
         undecided = [r for r in report.ids("not verified") if r in report.blocking]
-        reasons = (["the requirement results are not signed, not bound to this run or contradict it"]
-                   if report.problems else [])
+        more = len(report.problems) - 1
+        reasons = [report.problems[0] + (f" (and {more} more gate problem(s) above)" if more > 0 else "")
+                   ] if report.problems else []
         reasons += (["requirement(s) failed"] if failed else []) + (
             [f"not verified: {', '.join(undecided)}"] if undecided else [])
         if not reasons:

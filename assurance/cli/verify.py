@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -71,6 +72,26 @@ def _check_system(args: argparse.Namespace, run: Path) -> None:
                            f"this one {system.sha256[:12]}); give the run's system file with --system")
 
 
+def _warn_weaker(args: argparse.Namespace) -> None:
+    """A registry or targets weaker than the system's are judged, but the evidence gate will refuse them: say so
+    now, naming each parameter."""
+    if not (args.registry or args.targets):
+        return
+    from assurance.evidence.gate import weakening_problems
+    from assurance.requirements import RegistryError, load_registry, read_targets_file
+    from assurance.system import build as system_build
+    from assurance.system import default_system
+
+    system = getattr(args, "system_file", None) or default_system()
+    try:
+        targets = read_targets_file(args.targets) if args.targets else system_build.targets(system)
+        reg = load_registry(args.registry, targets=targets, targets_source=args.targets or system.label)
+    except (RegistryError, ValueError) as exc:
+        raise CommandError(str(exc)) from None
+    for line in weakening_problems(reg, system):
+        print(f"warning: {line} (the evidence gate will fail)", file=sys.stderr)
+
+
 def run(args: argparse.Namespace) -> int:
     import pytest
 
@@ -81,13 +102,17 @@ def run(args: argparse.Namespace) -> int:
         if not Path(t).exists():
             raise CommandError(f"--tests {t}: no such file or folder")
     _check_system(args, run_dir)
+    _warn_weaker(args)
     key, campaign = _signer_and_campaign(args, run_dir)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     argv = pytest_args(args, out.resolve())
     log.info("pytest %s", " ".join(argv))
     rc = int(pytest.main(argv))
-    if rc in (pytest.ExitCode.USAGE_ERROR, pytest.ExitCode.INTERRUPTED, pytest.ExitCode.INTERNAL_ERROR):
+    if rc == pytest.ExitCode.INTERRUPTED:
+        raise CommandError("the requirement test session stopped: a test could not be collected (or the session "
+                           "was interrupted), see above; nothing is signed, and no result of it is evidence")
+    if rc in (pytest.ExitCode.USAGE_ERROR, pytest.ExitCode.INTERNAL_ERROR):
         raise CommandError(f"the requirement test session stopped (pytest exit code {rc}); see above")
     if rc == pytest.ExitCode.NO_TESTS_COLLECTED:
         raise CommandError("no requirement test was collected (a -k expression that matches nothing?)")

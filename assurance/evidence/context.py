@@ -12,7 +12,8 @@ from assurance import requirements as rq
 from assurance.analysis.table import results_table, write_csv
 from assurance.campaign import readouts
 from assurance.campaign.integrity import RunCheck, verify_run
-from assurance.evidence.gate import GATE_CLASS, Gate, requirement_results
+from assurance.campaign.model_files import changed_model_files
+from assurance.evidence.gate import GATE_CLASS, Gate, requirement_results, weakening_problems
 from assurance.evidence.identity import identity
 from assurance.evidence.matrix import check_problems, check_view, matrix, run_checks
 from assurance.evidence.render import TEMPLATES_DIR, faults_table, rel
@@ -95,13 +96,17 @@ def read_inputs(run: Path, out: Path, *, requirements: str | Path | None, baseli
     req_path = Path(requirements) if requirements else (out / "requirements.json")
     if requirements is None and not req_path.is_file():
         req_path = None
-    problems: list[str] = []
+    problems: list[str] = weakening_problems(reg, system)
     results, req_doc = requirement_results(reg, req_path, run, warnings, problems, check)
     ctx = rq.CheckContext(run, reg.parameters, n_boot=n_boot, manifest=man, images=images, candidates=candidates,
                           table=table)
     checks = run_checks(reg, ctx)
     check_problems(checks, results, problems, warnings)
     problems.extend(system_problems(system, man, req_doc, run))
+    changed, unchecked = changed_model_files(man.get("model_files"))
+    problems.extend(changed)
+    if unchecked:
+        warnings.append(f"model files of the run not found here, so not checked: {', '.join(unchecked)}")
     deployed = reg.parameters["deployed_monitor"]
     if deployed not in man["config"]["monitors"]:
         warnings.append(f"the deployed monitor {deployed!r} (registry) was not evaluated by this campaign")

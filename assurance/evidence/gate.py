@@ -98,6 +98,18 @@ def requirement_results(registry: rq.Registry, path: Path | None, run: Path, war
     return results, doc
 
 
+def weakening_problems(registry: rq.Registry, system: Any = None) -> list[str]:
+    """How ``registry`` (with its targets) is weaker than the system's: the packaged registry with the system
+    file's ``[targets]`` (the shipped system when None). Each line fails the gate and names the parameter."""
+    from assurance.requirements.weakening import registry_weakenings
+    from assurance.system import build as system_build
+    from assurance.system import default_system
+
+    system = system or default_system()
+    reference = rq.load_registry(None).with_targets(system_build.targets(system), source=f"{system.label} [targets]")
+    return [f"weaker than the system's requirements: {w}" for w in registry_weakenings(reference, registry)]
+
+
 def binding_problems(doc: Mapping[str, Any], digest: str, code: str, registry_sha: str, path: Path, *,
                      parameters_sha: str | None = None) -> list[str]:
     """Why requirement results do not belong to this run, code, registry and targets (empty when they do).

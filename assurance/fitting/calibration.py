@@ -176,7 +176,8 @@ def calibrate_on_data(data: str | Path, monitor: str, *, miss_rate: float, confi
 
 
 def check_calibrated_miss_rate(candidates: Any, card: Any, perturbation: str = "none",
-                               run_models: dict[str, str] | None = None, run_network: Any = False) -> Any:
+                               run_models: dict[str, str] | None = None, run_network: Any = False, *,
+                               min_unsafe: int = 1, run_data: dict[str, Any] | None = None) -> Any:
     """EL-R16: on a campaign's readouts (the test split), the calibrated monitor's empirical miss rate (truly
     unsafe candidates it accepts) is at most the card's miss rate.
 
@@ -185,6 +186,12 @@ def check_calibrated_miss_rate(candidates: Any, card: Any, perturbation: str = "
     the one that scored the rows fails; its threshold does not mean the same on that model's scores.
     ``run_network`` (the manifest's ``weights.sha256``): a card calibrated on another network fails, and a run
     that does not record its network is insufficient evidence (False: not checked, for callers without a run).
+
+    Judged by the bound, not the point estimate: failed when the one-sided Clopper-Pearson lower bound of the miss
+    rate at the card's confidence exceeds the card's miss rate (the test split shows the guarantee broken);
+    insufficient below ``min_unsafe`` truly unsafe candidates. ``run_data`` (the manifest's ``data``): a run on
+    the card's own calibration scenes, or on scenes whose meta declare a split other than ``test``, judges
+    nothing (insufficient).
     """
     from assurance.analysis.metrics import clopper_pearson_interval
     from assurance.requirements import records as rq
@@ -215,15 +222,34 @@ def check_calibrated_miss_rate(candidates: Any, card: Any, perturbation: str = "
     if run_models is not None and (run_models.get(used) or None) != card_model:
         return rq.Evidence(name, rq.FAIL, f"the card was calibrated on monitor model {card_model!r}, the run's "
                            f"{used!r} scored with {run_models.get(used)!r}: recalibrate or re-run the campaign")
+    wrong_split = _split_problem(card, run_data)
+    if wrong_split:
+        return rq.Evidence(name, rq.INSUFFICIENT, f"insufficient evidence: {wrong_split}")
     unsafe = sub[sub["true_unsafe"].astype(bool)]
     n, k = len(unsafe), int(unsafe["accepted"].astype(bool).sum())
-    if n == 0:
-        return rq.Evidence(name, rq.INSUFFICIENT, "insufficient evidence: no truly unsafe candidate on this split")
-    eps = float(card.body["miss_rate"])
-    lo, hi = clopper_pearson_interval(k, n, float(card.body["confidence"]))
+    if n < max(1, int(min_unsafe)):
+        return rq.Evidence(name, rq.INSUFFICIENT, f"insufficient evidence: {n} truly unsafe candidate(s) on this "
+                           f"split, fewer than the {int(min_unsafe)} that judge a miss rate (calibration_min_unsafe)")
+    eps, conf = float(card.body["miss_rate"]), float(card.body["confidence"])
+    lower = clopper_pearson_interval(k, n, 2 * conf - 1)[0]  # one-sided at the card's confidence
     row = {"perturbation": perturbation, "unsafe": n, "accepted": k, "miss_rate": k / n, "bound": eps,
-           "ci_lo": lo, "ci_hi": hi, "from": how}
+           "lower_bound": lower, "confidence": conf, "from": how}
     cols = tuple(row)
-    summary = f"{k} of {n} unsafe candidates accepted ({k / n:.3f}; 95% interval [{lo:.3f}, {hi:.3f}]) with {how}"
-    status = rq.PASS if k / n <= eps else rq.FAIL
+    summary = (f"{k} of {n} unsafe candidates accepted ({k / n:.3f}; one-sided {conf:.0%} lower bound {lower:.3f}) "
+               f"with {how}")
+    status = rq.PASS if lower <= eps else rq.FAIL
     return rq.Evidence(name, status, summary + (" <= " if status == rq.PASS else " > ") + f"{eps:g}", (row,), cols)
+
+
+def _split_problem(card: Any, run_data: dict[str, Any] | None) -> str | None:
+    """Why the run's scenes cannot test the card (its own calibration scenes, or another split than test)."""
+    if not run_data:
+        return None
+    if run_data.get("sha256") and run_data.get("sha256") == (card.body.get("split") or {}).get("sha256"):
+        return "the run evaluated the scenes the card was calibrated on; run the campaign on the test split"
+    splits = run_data.get("splits") or {}
+    other = sorted(s for s in splits if s != "test")
+    if other:
+        return (f"the run's scenes declare the split(s) {', '.join(other)} (meta/*.json), not test: the card's "
+                "guarantee is tested on scenes neither fitting nor calibration saw")
+    return None

@@ -44,10 +44,10 @@ def unsafe_landing_bound(ctx: CheckContext) -> Evidence:
                                          p["required_perturbations"], p["confidence"])
 
 
-@check("EL-R11", in_report=False)
+@check("EL-R11")
 def table_recomputation(ctx: CheckContext) -> Evidence:
     """The results table recomputes identically from the readouts (the report computes its own table)."""
-    return determinism.check_table_recomputation(ctx.run)
+    return determinism.check_table_recomputation(ctx.run, n_boot=100)
 
 
 @check("EL-R11", parameters=("rerun_shards",), in_report=False)
@@ -91,7 +91,7 @@ def pose_error_margin(ctx: CheckContext) -> Evidence:
                                  {"radius_m": p["radius_m"], "beta": p["beta"]})
 
 
-@check("EL-R16", parameters=("calibration_card",), in_report=False)
+@check("EL-R16", parameters=("calibration_card", "calibration_min_unsafe"))
 def calibrated_miss_rate(ctx: CheckContext) -> Evidence:
     """The calibrated monitor's miss rate on the test split is within its card's (no card: not verified)."""
     from assurance.fitting.calibration import check_calibrated_miss_rate
@@ -105,7 +105,9 @@ def calibrated_miss_rate(ctx: CheckContext) -> Evidence:
     manifest = ctx.manifest or {}
     return check_calibrated_miss_rate(ctx.candidates, load_calibration(card_path(card)),
                                       run_models=manifest.get("monitor_models"),
-                                      run_network=(manifest.get("weights") or {}).get("sha256"))
+                                      run_network=(manifest.get("weights") or {}).get("sha256"),
+                                      min_unsafe=int(ctx.parameters.get("calibration_min_unsafe") or 1),
+                                      run_data=manifest.get("data"))
 
 
 @check("EL-R17")

@@ -291,6 +291,10 @@ class _Recorder:
                               ("not verified", {"yellow": True})):
             ids = [rid for rid, r in results.items() if r.state == state]
             tr.write_line(f"{state:>13}: {summary[state]:2d}  {' '.join(ids)}", **markup)
+        for rid, r in results.items():  # why each requirement is not verified, one line each
+            if r.state != "verified":
+                reason = " ".join(str(r.reason).split())
+                tr.write_line(f"  {rid}: {r.state}: {reason[:400]}{'...' if len(reason) > 400 else ''}")
         tr.write_line(f"requirement results written to {path}")
 
 

@@ -84,6 +84,7 @@ TARGETS: dict[str, tuple[str, Callable[[Any], Any]]] = {
     "pose_error": ("a mapping {height: e, pitch: e} of relative errors, each in [0, 1)", _pose_error),
     "rerun_shards": ("an integer >= 0", _int_at_least(0)),
     "calibration_card": ("a path to a calibration card (uav-el calibrate), or null for none", _card),
+    "calibration_min_unsafe": ("an integer >= 1", _int_at_least(1)),
     "radius_m": ("a safety radius R in metres > 0", _in(0.0, lo_open=True)),
     "beta": ("a safety coefficient beta >= 1", _in(1.0, hi=None)),
 }
