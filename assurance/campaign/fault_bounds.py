@@ -1,4 +1,4 @@
-"""Fault-injection cases of issue 31: bounded resources and no silent loss (rows ``R1``..``R13`` of the table).
+"""Fault-injection cases of issue 31: bounded resources and no silent loss (rows ``R1``..``R15`` of the table).
 
 Each case injects one hostile input into copies under the workspace (``assurance.campaign.fault_case``) and
 returns the ``uav-el`` command that must refuse it, bound it or survive it.
@@ -183,6 +183,19 @@ def _seed(ws: Path) -> list[str]:
     return campaign_argv(ws, ws / "run-seed", "--seed", str(2**64))
 
 
+def _card_threshold(ws: Path) -> list[str]:
+    """A system deploying the shipped spec on the shipped card re-hashed at another threshold (0.9)."""
+    from el.monitors.calibration import card_document
+    from el.pipeline import DEPLOYED_CALIBRATION, DEPLOYED_MONITOR
+
+    body = dict(json.loads(DEPLOYED_CALIBRATION.read_text())["body"])
+    body.update(threshold=0.9, spec="learned:walk=score,threshold=0.9")
+    (ws / "card-0.9.json").write_text(json.dumps(card_document(body)))
+    system = ws / "system-card.toml"
+    system.write_text(f'[monitor]\nspec = "{DEPLOYED_MONITOR}"\ncalibration = "card-0.9.json"\n')
+    return ["land", first_image(ws), "--system", system]
+
+
 BOUNDS_CASES: tuple[Case, ...] = (
     Case("R1-pixel-header", "a 57-byte PNG header claiming 100000x100000 pixels", _header_bomb, 2,
          "exceeds the limit"),
@@ -213,4 +226,6 @@ BOUNDS_CASES: tuple[Case, ...] = (
          "outside the monitor's score range"),
     Case("R14-dask-workers-die-with-parent", "R6 on --backend dask (a local cluster of 2 worker processes)",
          _orphans_on("dask"), 0, "0 already done, of 2", "task(s) run"),
+    Case("R15-card-threshold", "a system deploying the shipped spec on the shipped card re-hashed at threshold 0.9",
+         _card_threshold, 2, "but its calibration card has threshold 0.9"),
 )
