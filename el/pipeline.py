@@ -404,9 +404,10 @@ def check_monitor_bindings(monitor: Monitor | None, spec: str | None, calibratio
         check_monitor_capabilities(monitor, segmenter)
     card = calibration or (DEPLOYED_CALIBRATION if is_deployed(spec) else None)
     if card:
-        from el.monitors.calibration import check_card_monitor, load_calibration
+        from el.monitors.calibration import check_card_monitor, check_card_spec, load_calibration
 
         loaded = load_calibration(card)
+        check_card_spec(loaded, spec)  # the spec's own threshold, if any, is the card's
         check_card_monitor(loaded, monitor)
         if segmenter is not None:
             loaded.check_network(segmenter)
@@ -440,15 +441,14 @@ def is_deployed(spec: str | None) -> bool:
 
 
 def calibrated_spec(monitor: str | None, calibration: str | None) -> str | None:
-    """The monitor spec to run: ``monitor``, or the card's calibrated spec (which must calibrate ``monitor``)."""
+    """The monitor spec to run: ``monitor``, or the card's calibrated spec (which must calibrate ``monitor``, and
+    equal it where ``monitor`` carries a threshold)."""
     if not calibration:
         return monitor
-    from el.monitors.calibration import CalibrationError, load_calibration
+    from el.monitors.calibration import check_card_spec, load_calibration
 
     card = load_calibration(calibration)
-    wanted = parse_monitor_spec(monitor)
-    if wanted is None or wanted.base != parse_monitor_spec(card.monitor).base:
-        raise CalibrationError(f"{calibration}: calibrates {card.monitor!r}, not {monitor_name(monitor)!r}")
+    check_card_spec(card, monitor)  # the card's monitor, at no threshold of its own or at the card's
     return card.spec
 
 

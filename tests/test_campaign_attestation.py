@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import base64
 import json
 import shutil
 
@@ -124,3 +125,44 @@ def test_uav_el_keys_prints_the_fingerprint_and_writes_the_public_key(tmp_path, 
     out = capsys.readouterr().out
     assert load_signing_key().keyid in out and "BEGIN PUBLIC KEY" in out
     assert set(load_trusted_keys(tmp_path / "pub.pem")) == {load_signing_key().keyid}
+
+
+def test_signing_hashes_each_file_once_and_covers_the_files_as_they_are(signed, monkeypatch):
+    import assurance.campaign.attestation as attestation
+    import assurance.campaign.integrity as integrity
+    from assurance.attest.dsse import read_envelope
+    from assurance.attest.statement import subjects
+    from assurance.campaign import readouts
+    from assurance.campaign.integrity import verify_run
+    from el import hashing
+
+    run, key, _ = signed
+    assert attestation.run_subjects(run, verify_run(run).sums) == attestation.run_subjects(run)
+    seen: list[str] = []
+
+    def counted(path, *args, **kwargs):
+        seen.append(str(path))
+        return hashing.sha256_file(path, *args, **kwargs)
+
+    for module in (attestation, integrity, readouts):
+        monkeypatch.setattr(module, "sha256_file", counted)
+    sign_run(run, key)
+    files = [p for p in (run / "shards").glob("*/*") if p.is_file() and p.name != readouts.SUMS]
+    assert sorted(seen) == sorted([str(run / "manifest.json"), *map(str, files)])  # each once
+    name = sorted((run / "shards").iterdir())[0].name
+    edited = run / "shards" / name / "images.parquet"
+    edited.write_bytes(edited.read_bytes() + b"\0")  # damaged (not resealed): its stale sum must not be signed
+    sign_run(run, key)
+    stmt = json.loads(base64.b64decode(read_envelope(run / ATTESTATION)["payload"]))
+    assert subjects(stmt)[f"shards/{name}/images.parquet"] == hashing.sha256_file(edited)
+
+
+def test_an_unattested_run_is_a_damaged_run_with_its_own_line():
+    from assurance.campaign.attestation import UnattestedRunError
+    from assurance.campaign.readouts import DamagedRunError
+
+    err = UnattestedRunError("RUN", ["a", "b", "c", "d"])
+    assert isinstance(err, DamagedRunError) and err.problems == ["a", "b", "c", "d"] and str(err.run_dir) == "RUN"
+    assert str(err) == "RUN: not the campaign that was signed: a; b; c; ... 1 more"
+    assert str(DamagedRunError("RUN", ["x"])) == ("RUN: damaged run, 1 shard problem(s): x (re-run the same "
+                                                  "`uav-el campaign` command to re-compute the damaged shards)")

@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from assurance.attest import AttestationError
 from assurance.attest.dsse import read_envelope, write_envelope
@@ -21,26 +21,31 @@ from assurance.attest.statement import make_statement, open_statement, sign_stat
 from assurance.campaign import readouts
 from el.hashing import sha256_file
 
+if TYPE_CHECKING:
+    from assurance.campaign.integrity import RunCheck
+
 ATTESTATION = "campaign.dsse.json"
 KIND = "campaign"
 MANIFEST = "manifest.json"
 
 
-def run_subjects(run_dir: str | Path) -> dict[str, str]:
-    """What a campaign statement covers, hashed from the files now: the manifest and every shard's data files."""
+def run_subjects(run_dir: str | Path, known: Mapping[str, Mapping[str, str]] | None = None) -> dict[str, str]:
+    """What a campaign statement covers, hashed from the files now: the manifest and every shard's data files.
+    ``known``: {shard: {file: sha256}} just hashed and verified (``RunCheck.sums``), taken instead of hashing
+    those files again."""
     run = Path(run_dir)
+    known = known or {}
     out = {MANIFEST: sha256_file(run / MANIFEST)} if (run / MANIFEST).is_file() else {}
     for shard in readouts.shard_dirs(run):
+        hashed = known.get(shard.name) or {}
         for f in sorted(p for p in shard.iterdir() if p.is_file()):
             if f.name != readouts.SUMS:  # the sums are a shard's own claim; the statement signs the files
-                out[f"{readouts.SHARDS}/{shard.name}/{f.name}"] = sha256_file(f)
+                out[f"{readouts.SHARDS}/{shard.name}/{f.name}"] = hashed.get(f.name) or sha256_file(f)
     return out
 
 
-def _predicate(run: Path, man: Mapping[str, Any], summary: Mapping[str, Any] | None) -> dict[str, Any]:
-    from assurance.campaign.integrity import verify_run
-
-    check = verify_run(run)
+def _predicate(run: Path, man: Mapping[str, Any], summary: Mapping[str, Any] | None, check: RunCheck
+               ) -> dict[str, Any]:
     order = list(man.get("shard_order") or [])
     done = {p.name for p in readouts.shard_dirs(run)}
     return {
@@ -57,10 +62,14 @@ def _predicate(run: Path, man: Mapping[str, Any], summary: Mapping[str, Any] | N
 
 
 def sign_run(run_dir: str | Path, key: SigningKey, summary: Mapping[str, Any] | None = None) -> Path:
-    """Sign the run as it stands (see the module docstring); returns the attestation's path."""
+    """Sign the run as it stands (see the module docstring); returns the attestation's path. Each shard file is
+    hashed once: the run's verification hashes the data files, and the statement takes those hashes."""
+    from assurance.campaign.integrity import verify_run
+
     run = Path(run_dir)
     man = readouts.read_manifest(run)
-    stmt = make_statement(run_subjects(run), KIND, _predicate(run, man, summary))
+    check = verify_run(run)
+    stmt = make_statement(run_subjects(run, check.sums), KIND, _predicate(run, man, summary, check))
     path = run / ATTESTATION
     write_envelope(path, sign_statement(stmt, key))
     return path
@@ -70,9 +79,7 @@ class UnattestedRunError(readouts.DamagedRunError):
     """A run whose signed statement is missing, untrusted, or does not match its files (exit 4)."""
 
     def __init__(self, run_dir: str | Path, problems: list[str]) -> None:
-        self.run_dir, self.problems = Path(run_dir), list(problems)
-        shown = "; ".join(problems[:3]) + (f"; ... {len(problems) - 3} more" if len(problems) > 3 else "")
-        readouts.RunError.__init__(self, f"{run_dir}: not the campaign that was signed: {shown}")
+        super().__init__(run_dir, problems, headline="not the campaign that was signed", shown=3)
 
 
 @dataclass

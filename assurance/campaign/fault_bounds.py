@@ -1,4 +1,4 @@
-"""Fault-injection cases of issue 31: bounded resources and no silent loss (rows ``R1``..``R13`` of the table).
+"""Fault-injection cases of issue 31: bounded resources and no silent loss (rows ``R1``..``R15`` of the table).
 
 Each case injects one hostile input into copies under the workspace (``assurance.campaign.fault_case``) and
 returns the ``uav-el`` command that must refuse it, bound it or survive it.
@@ -15,6 +15,7 @@ import subprocess
 import sys
 import time
 import zlib
+from collections.abc import Callable
 from pathlib import Path
 
 from assurance.campaign.fault_case import Case, campaign_argv, copy_run, first_image, save_tiny_weights
@@ -84,16 +85,27 @@ SLOW_MONITORS = ("--monitors", "lhd+mcd:n=1000,rho=0.5", "lhd+mcd:n=1000,rho=0.7
 """About 15 s a task on the workspace's tiny network: the workers are busy when the campaign is killed."""
 
 
-def killed_campaign_survivors(ws: Path, out: Path, *, timeout_s: float = 120.0, settle_s: float = 5.0) -> list[int]:
-    """SIGKILL a 2-worker campaign (a subprocess, :data:`SLOW_MONITORS`) once its loky workers have run for
-    ``settle_s``; the worker pids still alive 3 s later (each then killed, so nothing is left behind)."""
-    argv = [sys.executable, "-m", "assurance", *map(str, campaign_argv(ws, out, *SLOW_MONITORS, "--jobs", "2"))]
+WORKER_MARKS = {"loky": "popen_loky", "dask": "spawn_main"}
+"""How a backend's worker processes are told apart from the campaign's other children (their command line)."""
+
+
+def killed_campaign_survivors(ws: Path, out: Path, *, backend: str = "loky", timeout_s: float = 120.0,
+                              settle_s: float = 5.0) -> list[int]:
+    """SIGKILL a 2-worker campaign (a subprocess on ``backend``, :data:`SLOW_MONITORS`) once its workers have run
+    for ``settle_s``; the worker pids still alive 3 s later (each then killed, so nothing is left behind).
+    RuntimeError when two workers were not seen (nothing would have been tested)."""
+    argv = [sys.executable, "-m", "assurance",
+            *map(str, campaign_argv(ws, out, *SLOW_MONITORS, "--jobs", "2", "--backend", backend))]
     proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     workers: list[int] = []
     end = time.monotonic() + timeout_s
     while time.monotonic() < end and proc.poll() is None and len(workers) < 2:
         time.sleep(0.2)
-        workers = [p for p in _children(proc.pid) if "popen_loky" in _cmdline(p)]
+        workers = [p for p in _children(proc.pid) if WORKER_MARKS[backend] in _cmdline(p)]
+    if len(workers) < 2:
+        proc.kill()
+        proc.wait()
+        raise RuntimeError(f"the {backend} campaign showed {len(workers)} of its 2 workers in {timeout_s:.0f} s")
     time.sleep(settle_s)  # the workers have imported the toolkit and started their tasks
     proc.send_signal(signal.SIGKILL)
     proc.wait()
@@ -104,14 +116,21 @@ def killed_campaign_survivors(ws: Path, out: Path, *, timeout_s: float = 120.0, 
     return alive
 
 
-def _orphans(ws: Path) -> list[str]:
-    if not sys.platform.startswith("linux"):
-        return ["table", ws / "run", "--boot", "20"]
-    run = ws / "run-killed"
-    alive = killed_campaign_survivors(ws, run)
-    if alive:  # the row fails and names them
-        return ["table", ws / f"workers-survived-{'-'.join(map(str, alive))}"]
-    return campaign_argv(ws, run, *SLOW_MONITORS, "--jobs", "2")  # the re-run completes the killed run
+def _orphans_on(backend: str) -> Callable[[Path], list[str]]:
+    """The case: a ``backend`` campaign SIGKILLed while its 2 workers run; none may survive; then the re-run."""
+    def orphans(ws: Path) -> list[str]:
+        if not sys.platform.startswith("linux"):
+            return ["table", ws / "run", "--boot", "20"]
+        run = ws / f"run-killed-{backend}"
+        try:
+            alive = killed_campaign_survivors(ws, run, backend=backend)
+        except RuntimeError as exc:  # the row fails and says why
+            return ["table", ws / f"not-tested: {exc}"]
+        if alive:  # the row fails and names them
+            return ["table", ws / f"workers-survived-{'-'.join(map(str, alive))}"]
+        return campaign_argv(ws, run, *SLOW_MONITORS, "--jobs", "2", "--backend", backend)  # the re-run completes it
+
+    return orphans
 
 
 def _colliding_frames(ws: Path) -> list[str]:
@@ -164,6 +183,19 @@ def _seed(ws: Path) -> list[str]:
     return campaign_argv(ws, ws / "run-seed", "--seed", str(2**64))
 
 
+def _card_threshold(ws: Path) -> list[str]:
+    """A system deploying the shipped spec on the shipped card re-hashed at another threshold (0.9)."""
+    from el.monitors.calibration import card_document
+    from el.pipeline import DEPLOYED_CALIBRATION, DEPLOYED_MONITOR
+
+    body = dict(json.loads(DEPLOYED_CALIBRATION.read_text())["body"])
+    body.update(threshold=0.9, spec="learned:walk=score,threshold=0.9")
+    (ws / "card-0.9.json").write_text(json.dumps(card_document(body)))
+    system = ws / "system-card.toml"
+    system.write_text(f'[monitor]\nspec = "{DEPLOYED_MONITOR}"\ncalibration = "card-0.9.json"\n')
+    return ["land", first_image(ws), "--system", system]
+
+
 BOUNDS_CASES: tuple[Case, ...] = (
     Case("R1-pixel-header", "a 57-byte PNG header claiming 100000x100000 pixels", _header_bomb, 2,
          "exceeds the limit"),
@@ -176,7 +208,7 @@ BOUNDS_CASES: tuple[Case, ...] = (
          "aliases are not allowed"),
     Case("R5-jobs-1000", "campaign --jobs 1000", _jobs, 0, "exceeds the", "warning"),
     Case("R6-workers-die-with-parent", "a 2-worker campaign SIGKILLed while its workers run; no worker may "
-         "survive it (3 s later), then the re-run completes it", _orphans, 0, "0 already done, of 2",
+         "survive it (3 s later), then the re-run completes it", _orphans_on("loky"), 0, "0 already done, of 2",
          "task(s) run"),
     Case("R7-seed-2^64", "campaign --seed 2^64", _seed, 2, "seed must be an integer >= 0"),
     Case("R8-colliding-frames", "frames 'a b' and 'a_b' in one sequence", _colliding_frames, 0,
@@ -192,4 +224,8 @@ BOUNDS_CASES: tuple[Case, ...] = (
     Case("R13-threshold-range", "land --monitor lhd:threshold=1e300",
          lambda ws: ["land", first_image(ws), "--weights", ws / "tiny.pt", "--monitor", "lhd:threshold=1e300"], 2,
          "outside the monitor's score range"),
+    Case("R14-dask-workers-die-with-parent", "R6 on --backend dask (a local cluster of 2 worker processes)",
+         _orphans_on("dask"), 0, "0 already done, of 2", "task(s) run"),
+    Case("R15-card-threshold", "a system deploying the shipped spec on the shipped card re-hashed at threshold 0.9",
+         _card_threshold, 2, "but its calibration card has threshold 0.9"),
 )

@@ -22,13 +22,15 @@ __all__ = ["RunCheck", "code_sha256", "tree_sha256", "verify_run"]
 
 @dataclass
 class RunCheck:
-    """What ``verify_run`` found: problems (one line per damaged shard), the digest, the shard count."""
+    """What ``verify_run`` found: problems (one line per damaged shard), the digest, the shard count, and
+    ``sums``: each verified shard's data files as {file: sha256}, as just hashed (``sign_run`` reuses them)."""
 
     run: Path
     digest: str
     shards: int
     legacy: bool
     problems: list[str] = field(default_factory=list)
+    sums: dict[str, dict[str, str]] = field(default_factory=dict, repr=False)
 
     @property
     def ok(self) -> bool:
@@ -75,4 +77,5 @@ def verify_run(run_dir: str | Path) -> RunCheck:
     for name in _order(man, set(sums)):
         for f, digest in sorted(sums[name].items()):
             h.update(f"{name}/{f}:{digest}\n".encode())
-    return RunCheck(run=run, digest=h.hexdigest(), shards=len(sums), legacy=legacy, problems=problems)
+    return RunCheck(run=run, digest=h.hexdigest(), shards=len(sums), legacy=legacy, problems=problems,
+                    sums=sums)

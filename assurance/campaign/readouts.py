@@ -67,10 +67,16 @@ class RunError(UavElError, ValueError):
 class DamagedRunError(RunError):
     """A run's readouts fail verification (a shard altered, truncated or missing): ``problems`` names them."""
 
-    def __init__(self, run_dir: str | Path, problems: list[str]) -> None:
+    def __init__(self, run_dir: str | Path, problems: list[str], *, headline: str | None = None,
+                 shown: int = 5) -> None:
+        """``headline``: what the run is instead of the damaged-run line (then no re-run advice); the message
+        lists the first ``shown`` problems."""
         self.run_dir, self.problems = Path(run_dir), list(problems)
-        shown = "; ".join(problems[:5]) + (f"; ... {len(problems) - 5} more" if len(problems) > 5 else "")
-        super().__init__(f"{run_dir}: damaged run, {len(problems)} shard problem(s): {shown} "
+        first = "; ".join(problems[:shown]) + (f"; ... {len(problems) - shown} more" if len(problems) > shown else "")
+        if headline is not None:
+            super().__init__(f"{run_dir}: {headline}: {first}")
+            return
+        super().__init__(f"{run_dir}: damaged run, {len(problems)} shard problem(s): {first} "
                          "(re-run the same `uav-el campaign` command to re-compute the damaged shards)")
 
 

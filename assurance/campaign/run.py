@@ -17,7 +17,7 @@ import os
 import time
 import traceback
 import warnings
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -36,7 +36,7 @@ from assurance.campaign.manifest import (  # noqa: F401  (re-exported)
 )
 from assurance.campaign.perturbations import PERTURBATIONS, perturb, severities_of
 from assurance.campaign.truth import true_hazard
-from assurance.campaign.workers import bounded_jobs, die_with_parent
+from assurance.campaign.workers import bounded_jobs, dask_map, die_with_parent
 from assurance.scenes.poses import check_policy
 from assurance.scenes.uavid import Sample, iter_samples, read_labels
 from el.config import CoreConfig, check_seed
@@ -416,9 +416,9 @@ def _dispatch(todo: list[Task], config: CampaignConfig, run_dir: Path, *, jobs: 
     if not todo:
         return
     if backend == "dask":
-        yield from bar(_dask_map(todo, config, run_dir, jobs, scheduler, threads, segmenter, expected_models),
-                       total=len(todo),
-                       desc="campaign", enabled=progress)
+        gen = dask_map(execute, todo, jobs=jobs, scheduler=scheduler, config=config, run_dir=str(run_dir),
+                       threads=threads, segmenter=segmenter, expected_models=expected_models)
+        yield from bar(gen, total=len(todo), desc="campaign", enabled=progress)
         return
     if backend != "loky":
         raise ValueError(f"unknown backend {backend!r}; valid: loky, dask")
@@ -440,29 +440,6 @@ def _dispatch(todo: list[Task], config: CampaignConfig, run_dir: Path, *, jobs: 
         warnings.filterwarnings("ignore", message="A worker stopped while some jobs were given",
                                 category=UserWarning)
         yield from bar(gen, total=len(todo), desc="campaign", enabled=progress)
-
-
-def _dask_map(todo: list[Task], config: CampaignConfig, run_dir: Path, jobs: int, scheduler: str | None,
-              threads: int, segmenter: Any, expected_models: dict[str, str] | None = None
-              ) -> Iterable[dict[str, Any]]:
-    from dask.distributed import Client, LocalCluster, as_completed
-
-    cluster = None
-    if scheduler:
-        client = Client(scheduler)
-    else:
-        cluster = LocalCluster(n_workers=max(1, jobs), threads_per_worker=1, processes=True,
-                               dashboard_address=None)
-        client = Client(cluster)
-    try:
-        futures = client.map(execute, todo, config=config, run_dir=str(run_dir), threads=threads,
-                             segmenter=segmenter, expected_models=expected_models, pure=False)
-        for fut in as_completed(futures):
-            yield fut.result()
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
 
 
 def describe(summary: dict[str, Any]) -> str:

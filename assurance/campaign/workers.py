@@ -4,6 +4,8 @@
 so): ``--jobs 1000`` once started about 200 loky workers that wrote nothing in 300 s. ``die_with_parent``,
 called in a worker, makes the kernel kill it when its parent dies (Linux ``PR_SET_PDEATHSIG``; elsewhere
 a thread that polls the parent's pid), so a SIGKILLed campaign leaves no worker writing shards.
+``dask_map`` runs tasks on dask.distributed: a local cluster's workers are the campaign's children and get
+the same guard (dask's own watchdog, a thread that needs the GIL to exit, is then a second line).
 """
 
 from __future__ import annotations
@@ -15,7 +17,8 @@ import sys
 import threading
 import time
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Iterator
+from typing import Any
 
 PR_SET_PDEATHSIG = 1  # <linux/prctl.h>
 POLL_S = 1.0  # the pid watchdog's period where prctl is not available
@@ -78,3 +81,43 @@ def _watch(parent_pid: int) -> None:  # pragma: no cover - the fallback off Linu
     while os.getppid() == parent_pid:
         time.sleep(POLL_S)
     os._exit(1)
+
+
+DIRECT_CHILD_METHODS = ("spawn", "fork")
+"""dask's worker start methods (``distributed.worker.multiprocessing-method``) whose workers are the children of
+the process that started the cluster; with ``forkserver`` they are the fork server's, so no pid is passed."""
+
+
+def dask_parent_pid(scheduler: str | None) -> int | None:
+    """The pid dask workers must die with: this process for a local cluster whose workers are its children;
+    None for a running scheduler's workers (``--scheduler``: not ours to end) or a fork server's."""
+    if scheduler:
+        return None
+    import dask
+
+    method = dask.config.get("distributed.worker.multiprocessing-method", "spawn")
+    return os.getpid() if method in DIRECT_CHILD_METHODS else None
+
+
+def dask_map(fn: Callable[..., Any], items: Iterable[Any], *, jobs: int, scheduler: str | None,
+             **kwargs: Any) -> Iterator[Any]:
+    """``fn(item, parent_pid=..., **kwargs)`` for every item on dask.distributed (a running ``scheduler``, else a
+    local cluster of ``jobs`` one-thread worker processes), results as they complete. ``fn`` calls
+    :func:`die_with_parent` with ``parent_pid``."""
+    from dask.distributed import Client, LocalCluster, as_completed
+
+    cluster = None
+    if scheduler:
+        client = Client(scheduler)
+    else:
+        cluster = LocalCluster(n_workers=max(1, jobs), threads_per_worker=1, processes=True,
+                               dashboard_address=None)
+        client = Client(cluster)
+    try:
+        futures = client.map(fn, list(items), parent_pid=dask_parent_pid(scheduler), pure=False, **kwargs)
+        for fut in as_completed(futures):
+            yield fut.result()
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()

@@ -59,6 +59,7 @@ def run(args: argparse.Namespace) -> int:
     data = system_build.data_root(system, "test", args.data)
     monitors = tuple(args.monitors) if args.monitors else None
     deployed = system_build.monitor_spec(system) if system.sets("monitor.spec") else None
+    system_build.check_deployed_calibration(system)  # a deployed spec off its card's threshold: exit 2
     card_paths = args.calibration or ([str(system.path_of("monitor.calibration"))]
                                       if system.sets("monitor.calibration") else [])
     cards = []

@@ -183,11 +183,14 @@ def run_model(args: argparse.Namespace) -> int:
     calibration = args.calibration or system.path_of("monitor.calibration")
     ood = args.ood or system.path_of("monitor.ood")
     budget = args.budget if args.budget is not None else system.get("targets.time_budget_s", DEFAULT_TIME_BUDGET_S)
+    if args.monitor is None and args.calibration is None:  # the system's deployed pair: spec on its card's threshold
+        system_build.check_deployed_calibration(system)
     if calibration is not None:  # a bad card is a usage error here (in flight it is the default action)
         from el.monitors.calibration import load_calibration
         from el.pipeline import calibrated_spec
 
-        monitor = args.monitor or load_calibration(calibration).monitor
+        own = args.calibration is None and system.sets("monitor.spec")  # the system's pair: its spec on its card
+        monitor = args.monitor or (monitor if own else load_calibration(calibration).monitor)
         calibrated_spec(monitor, str(calibration))
     from el.monitors import build_monitor
     from el.pipeline import check_monitor_bindings

@@ -189,6 +189,32 @@ def monitor_spec(system: SystemFile) -> str | None:
     return str(system.get("monitor.spec", DEPLOYED_MONITOR))
 
 
+def deployed_card(system: SystemFile) -> Path | None:
+    """The calibration card of the deployed monitor: ``[monitor] calibration`` when the file also names the
+    monitor, the shipped card when it names neither (the shipped pair), else None (a system naming only a card
+    deploys the card's own spec; one naming only a monitor has no card, as in :func:`targets`)."""
+    from el.pipeline import DEPLOYED_CALIBRATION
+
+    if not system.sets("monitor.spec"):
+        return None if system.sets("monitor.calibration") else DEPLOYED_CALIBRATION
+    return system.path_of("monitor.calibration")
+
+
+def check_deployed_calibration(system: SystemFile) -> None:
+    """Refuse a deployed monitor whose spec carries a threshold other than its card's (or is not the card's
+    monitor): ``SystemFileError``, one line naming the file, the card, the spec and both thresholds (a card that
+    cannot be read: its ``CalibrationError``)."""
+    card = deployed_card(system)
+    if card is None:
+        return
+    from el.monitors.calibration import CalibrationError, check_card_spec, load_calibration
+
+    try:
+        check_card_spec(load_calibration(card), monitor_spec(system))
+    except CalibrationError as exc:
+        raise system.error("monitor.spec", str(exc)) from None
+
+
 def data_root(system: SystemFile, split: str, given: str | Path | None = None) -> Path:
     """The data set of a split: the option given, else ``[data] <split>``; a clear error when neither."""
     if given is not None:

@@ -6,7 +6,8 @@ is JSON ``{"format", "body", "sha256"}`` where ``sha256`` is the SHA-256 of the 
 names the monitor (``monitor``, at its default threshold), the calibrated ``threshold``, the
 calibrated ``spec`` (the monitor with that threshold), the miss rate, confidence and bound, the
 split, hashes and counts, and (``monitor_model``) the SHA-256 of the fitted file the monitor's scores
-rest on, if any: :func:`check_card_monitor` refuses to run the card's threshold on another model.
+rest on, if any: :func:`check_card_monitor` refuses to run the card's threshold on another model, and
+:func:`check_card_spec` a spec of the card's monitor that carries a threshold of its own other than the card's.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from pathlib import Path
 from typing import Any, ClassVar
 
 from el.errors import CalibrationError
-from el.monitors.spec import parse_monitor_spec
+from el.monitors.spec import monitor_name, parse_monitor_spec
 from el.records import HashedRecord, short
 
 CARD_FORMAT = "uav-el-calibration/1"
@@ -90,6 +91,24 @@ def check_card_monitor(card: CalibrationCard, monitor: Any) -> None:
     if want != have:
         raise CalibrationError(f"{card.path}: calibrated on monitor model {short(want)}, but the monitor runs "
                                f"{short(have)}: recalibrate (uav-el calibrate) for this model")
+
+
+def check_card_spec(card: CalibrationCard, spec: Any) -> None:
+    """Refuse ``spec`` unless ``card`` calibrates it: the card's monitor, with no threshold of its own (it then
+    runs at the card's) or with exactly the card's. A user's ``lhd:threshold=X`` with no card is not checked.
+
+    Raises
+    ------
+    CalibrationError
+        One line naming the card, the spec and, for a threshold, both thresholds.
+    """
+    parsed = parse_monitor_spec(spec)
+    if parsed is None or parsed.base != parse_monitor_spec(card.monitor).base:
+        raise CalibrationError(f"{card.path}: calibrates {card.monitor!r}, not {monitor_name(spec)!r}")
+    if parsed.threshold is not None and parsed.threshold != card.threshold:
+        raise CalibrationError(f"{card.path}: monitor {parsed.name!r} has threshold {parsed.threshold!r}, but its "
+                               f"calibration card has threshold {card.threshold!r}: run the card's spec "
+                               f"{card.spec!r} or recalibrate (uav-el calibrate)")
 
 
 def card_document(body: dict[str, Any]) -> dict[str, Any]:
