@@ -65,7 +65,8 @@ def test_the_gate_file_records_what_it_was_fitted_and_thresholded_on(setup):
 
     b = setup["doc"]["body"]
     assert b["kind"] == "mahalanobis" and b["quantile"] == 0.99 and b["weights"]["sha256"] == SHA
-    assert b["training"]["frames"] == 30 * 6 and b["validation"]["frames"] == 6 * 6
+    assert b["params"]["shrinkage"] == 0.1 and len(b["params"]["variance"]) == min(64, b["features"]["dims"])
+    assert b["training"]["frames"] == 30 * 11 and b["validation"]["frames"] == 6 * 6
     assert b["validation"]["scenes"] == [0, 6] and len(b["training"]["sha256"]) == 64
     gate = load_frame_gate(setup["gate"])
     setup["seg"].predict_frame(_held_out(setup)[0])
@@ -166,7 +167,7 @@ def test_cli_fit_gate_and_land_with_it(setup, tmp_path, capsys, monkeypatch):
     assert main(["fit-gate", "--data", str(setup["root"] / "train"), "--val", str(setup["val"]), "--out", str(out),
                  "--train-scenes", "0:10", "--val-scenes", "0:4", "--no-progress", "--working-width", str(WW)]) == 0
     text = capsys.readouterr().out
-    assert "60 training frames" in text and "24 validation frames" in text and out.is_file()
+    assert "110 training frames" in text and "24 validation frames" in text and out.is_file()
     image = next(setup["val"].glob("**/Images/*.png"))
     js = tmp_path / "d.json"
     assert main(["land", str(image), "--gate", str(out), "--monitor", "lhd", "--working-width", str(WW),

@@ -22,7 +22,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--weights", "--model", dest="weights", metavar="MODEL",
                    help="segmentation model: a .pt weights file with its card, or a registered uav_el.models "
                         "name (NAME or NAME:ARG); default: the shipped model")
-    p.add_argument("--quantile", type=float, default=0.99,
+    p.add_argument("--quantile", type=float, default=0.995,
                    help="threshold: this quantile of the validation frames' scores (default: %(default)s)")
     p.add_argument("--train-scenes", metavar="FIRST:END", help="training scenes to use (0-based, END excluded; "
                                                                 "default: all)")

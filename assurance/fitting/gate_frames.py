@@ -1,11 +1,12 @@
 """The frames of the frame-gate study (issue 32), each tapped once by the frame's own segmentation pass and kept
 in one cache (``taps.npz``): the gate variants are then fitted and measured on the cached features in seconds.
 
-Sets (the test split is never read): ``train`` (every training scene clean and under each in-domain perturbation
-at a severity drawn from 1-3, seeded per scene), ``val_sev3`` (every validation scene clean and under each
-perturbation at severity 3), ``val_sev45`` (the last validation scenes under each perturbation at severities 4
-and 5), the ``ood_*`` folders of the data root (the synthetic city at poses outside the declared domain, made with
-``uav-el synth --heights/--pitches``), noise, constant frames and the scikit-image sample photographs.
+Sets (the test split is never read): ``train`` (every training scene clean, under each in-domain perturbation at a
+severity drawn from 1-3, seeded per scene, and under each at severity 3), ``val_sev3`` (every validation scene
+clean and under each perturbation at severity 3), ``val_sev45`` (the last validation scenes under each
+perturbation at severities 4 and 5), the ``ood_*`` folders of the data root (the synthetic city at poses outside the
+declared domain, made with ``uav-el synth --heights/--pitches``), noise, constant frames and the scikit-image sample
+photographs.
 """
 
 from __future__ import annotations
@@ -50,12 +51,15 @@ def perturbed(rgb: np.ndarray, name: str, severity: int, seed: Any) -> np.ndarra
 
 
 def training_frames(paths: list[Path], seed: int = 1) -> Iterator[tuple[int, str, np.ndarray]]:
-    """Every training scene clean and under each in-domain perturbation at a severity in 1-3 (seeded per scene)."""
+    """Every training scene clean, under each in-domain perturbation at a severity in 1-3 (seeded per scene), and
+    under each at severity 3, the declared maximum (11 frames a scene)."""
     for i, path in enumerate(paths):
         rgb = read_image(path)
         sev = np.random.default_rng([seed, i]).integers(1, 4, len(IN_DOMAIN))
         for name, s in zip(IN_DOMAIN, sev, strict=True):
             yield i, f"{name}:{0 if name == 'none' else int(s)}", perturbed(rgb, name, int(s), [seed, i, int(s)])
+        for name in IN_DOMAIN[1:]:
+            yield i, f"{name}:3", perturbed(rgb, name, 3, [seed + 4, i, 3])
 
 
 def validation_frames(paths: list[tuple[int, Path]], severities: tuple[int, ...], seed: int = 3
