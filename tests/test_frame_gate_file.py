@@ -6,7 +6,9 @@ gate that cannot score (default action, the reason recorded; exit 2 at the CLI).
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
+import jsonschema
 import numpy as np
 import pytest
 from helpers import TINY_ARCH, scene_ids
@@ -14,6 +16,7 @@ from helpers import TINY_ARCH, scene_ids
 from assurance.campaign.perturbations import perturb
 from assurance.scenes.uavid import read_image, write_sample
 from el.config import CoreConfig
+from el.decision import decision_schema
 from el.labels import ids_to_colors
 from el.pipeline import EmergencyLanding, PipelineConfig
 
@@ -81,6 +84,7 @@ def test_every_decision_records_the_gate_and_far_frames_take_the_default_action(
         g = d.input["frame_gate"]
         assert g["kind"] == "mahalanobis" and np.isfinite(g["score"]) and g["threshold"] > 0
         assert json.loads(d.to_json())["input"]["frame_gate"]["score"] == g["score"]
+        jsonschema.validate(json.loads(d.to_json()), decision_schema())
     assert sum(d.reason.startswith("out_of_domain") for d in held) <= 1  # held-out in-domain frames pass
     rng = np.random.default_rng(0)
     clean = _held_out(setup)[0]
@@ -209,3 +213,26 @@ def test_campaign_readouts_record_the_gate_and_refuse_as_the_flight_code(setup, 
                              gate={"path": str(setup["gate"]), "sha256": "0" * 64})
     row = run_task(plan(setup["val"], changed)[0], changed, setup["seg"])["images"][0]
     assert "frame gate changed since the run recorded it" in row["fault"]
+
+
+def test_which_gate_a_command_deploys(tmp_path, monkeypatch):
+    import argparse
+
+    import el.pipeline
+    from assurance.cli.system_options import frame_gate_path
+    from assurance.system.find import load_system
+
+    shipped = tmp_path / "shipped.json"
+    monkeypatch.setattr(el.pipeline, "DEPLOYED_GATE", shipped)
+
+    def args(**kw):
+        return argparse.Namespace(**{"gate": None, "weights": None, "system_file": None, **kw})
+
+    assert frame_gate_path(args()) == shipped  # the shipped network: the shipped gate
+    assert frame_gate_path(args(weights="mine.pt")) is None  # another network: its own gate, or none
+    assert frame_gate_path(args(gate="none")) is None and frame_gate_path(args(gate="g.json")) == Path("g.json")
+    toml = tmp_path / "uav-el.toml"
+    toml.write_text('format = "uav-el-system/1"\n[monitor]\ngate = "none"\n')
+    assert frame_gate_path(args(system_file=load_system(toml))) is None
+    monkeypatch.setattr(el.pipeline, "DEPLOYED_GATE", None)
+    assert frame_gate_path(args()) is None

@@ -73,9 +73,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="out-of-domain gate (uav-el fit-ood): a frame above its threshold takes the "
                              "default action")
     parser.add_argument("--gate", type=Path, metavar="GATE.json",
-                        help="frame gate (uav-el fit-gate; default: the system file's [monitor] gate): a frame "
-                             "above its threshold takes the default action (out_of_domain); its score is in the "
-                             "decision JSON")
+                        help="frame gate (uav-el fit-gate; 'none': no gate; default: the system file's [monitor] "
+                             "gate, else the shipped gate on the shipped network): a frame above its threshold "
+                             "takes the default action (out_of_domain); its score is in the decision JSON")
     parser.add_argument("--weights", "--model", dest="weights", metavar="MODEL",
                         help="segmentation model: a .pt weights file with its card, or a name registered in the "
                              "uav_el.models entry points (NAME or NAME:ARG); default: the shipped model")
@@ -175,7 +175,7 @@ def run_model(args: argparse.Namespace) -> int:
 
     if args.image is not None:
         raise CommandError("--image is for the ground-truth pipeline; give the image as IMAGE")
-    from assurance.cli.system_options import load_model, model_spec, system_of
+    from assurance.cli.system_options import frame_gate_path, load_model, model_spec, system_of
     from assurance.system import build as system_build
 
     image_path = Path(args.image_arg)
@@ -209,7 +209,7 @@ def run_model(args: argparse.Namespace) -> int:
         from el.monitors.ood import load_ood
 
         gates.append(load_ood(ood))  # a bad gate is a usage error here (in flight it is the default action)
-    frame_gate = args.gate or system.path_of("monitor.gate")
+    frame_gate = frame_gate_path(args)
     if frame_gate is not None:
         from el.monitors.frame_gate import load_frame_gate
 

@@ -69,7 +69,8 @@ def odd_rows(man: Mapping[str, Any], images: Any, pose_error: Mapping[str, float
 
 def frame_gate_view() -> dict[str, Any] | None:
     """The frame-gate measurement shipped with the package (``assurance/data/frame_gates.{csv,png}``, written by
-    ``assurance.fitting.gate_study`` on validation scenes): per set the share each candidate gate flags."""
+    ``assurance.fitting.gate_study`` on validation scenes): per set the share each candidate gate flags ("-": not
+    measured in that fold)."""
     import base64
     import csv
     from importlib import resources
@@ -83,5 +84,5 @@ def frame_gate_view() -> dict[str, Any] | None:
     rows = list(csv.DictReader(text.splitlines()))
     gates = [k for k in (rows[0] if rows else {}) if k not in ("set", "what", "frames")]
     shown = [{"set": r["set"] if r["set"] == r["what"] else f"{r['set']}: {r['what']}", "frames": r["frames"],
-              "rates": [f"{float(r[g]):.0%}" for g in gates]} for r in rows]
+              "rates": [f"{float(r[g]):.0%}" if r[g] else "-" for g in gates]} for r in rows]
     return {"gates": gates, "rows": shown, "uri": "data:image/png;base64," + base64.b64encode(png).decode("ascii")}
