@@ -22,6 +22,8 @@ from el.pipeline import EmergencyLanding, PipelineConfig
 
 W, H, WW = 128, 72, 64
 SHA = "7e" * 32
+DOMAIN = {"height_m": [40, 60], "pitch_deg": [36, 54], "image_width": [64, 7680], "image_height": [36, 4320],
+          "aspect": [1.5, 2.0], "perturbations": {"fog": 3}}
 
 
 def _scenes(root, seeds):
@@ -206,6 +208,14 @@ def test_campaign_readouts_record_the_gate_and_refuse_as_the_flight_code(setup, 
     row = run_task(plan(tmp_path / "grey", config)[0], config, setup["seg"])["images"][0]
     assert row["action"] == "default" and row["reason"].startswith("out_of_domain: frame gate mahalanobis score")
     assert row["h_decision"] == row["h_default"] and row["frame_gate_score"] > gate.threshold
+    import pandas as pd
+
+    from assurance.evidence.domain_section import odd_rows
+
+    man = {"config": {"odd": DOMAIN, "core": {"pose": {"height_m": 50.0, "pitch_deg": 45.0}}}}
+    shown = {r["name"]: r for r in odd_rows(man, pd.DataFrame([*rows, row]), {"height": 0.2, "pitch": 0.2})}
+    assert shown["Frame gate"]["evidence"] == "frames refused: none: 1"  # the grey frame, per perturbation
+    assert f"{gate.threshold:.4g}" in shown["Frame gate"]["declared"]
     plain = CampaignConfig(perturbations=("none",), monitors=("lhd",), images=1, core=CoreConfig(working_width=WW))
     row = run_task(plan(setup["val"], plain)[0], plain, setup["seg"])["images"][0]
     assert np.isnan(row["frame_gate_score"]) and np.isnan(row["frame_gate_threshold"])  # no gate: NaN, not 0
@@ -236,3 +246,16 @@ def test_which_gate_a_command_deploys(tmp_path, monkeypatch):
     assert frame_gate_path(args(system_file=load_system(toml))) is None
     monkeypatch.setattr(el.pipeline, "DEPLOYED_GATE", None)
     assert frame_gate_path(args()) is None
+
+
+def test_the_shipped_gate_is_bound_to_the_shipped_network():
+    from el.monitors.frame_gate import load_frame_gate
+    from el.pipeline import DEPLOYED_GATE
+
+    gate = load_frame_gate(DEPLOYED_GATE)
+    card = json.loads((DEPLOYED_GATE.parents[2] / "segmentation" / "weights" / "model.json").read_text())
+    assert gate.network_sha256 == card["weights_sha256"] and gate.kind == "mahalanobis"
+    b = gate.body  # chosen on validation only: fitted on train, thresholded on validation scenes 0-34
+    assert b["training"]["path"].endswith("train") and b["validation"]["path"].endswith("val")
+    assert b["validation"]["scenes"] == [0, 35] and b["quantile"] == 0.995 and gate.dims == 448
+    assert DEPLOYED_GATE.stat().st_size < 1_000_000

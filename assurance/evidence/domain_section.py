@@ -64,6 +64,14 @@ def odd_rows(man: Mapping[str, Any], images: Any, pose_error: Mapping[str, float
     rows.append({"name": "Frames outside", "declared": "default action, reason outside_odd",
                  "evidence": ", ".join(f"{p}: {per.get(p, 0)}" for p in dict.fromkeys(frames["perturbation"]))
                  if n else "no evaluated frame"})
+    scored = frames[frames["frame_gate_score"].notna()] if n and "frame_gate_score" in frames else frames.iloc[:0]
+    if len(scored):  # the run deployed a frame gate (el.monitors.frame_gate): the frames it refused
+        gated = scored[scored["reason"].astype(str).str.startswith("out_of_domain: frame gate")]
+        per = gated.groupby("perturbation")["key"].nunique().to_dict()
+        rows.append({"name": "Frame gate", "declared": f"default action above score "
+                     f"{float(scored['frame_gate_threshold'].iloc[0]):.4g}, reason out_of_domain",
+                     "evidence": "frames refused: " + ", ".join(f"{p}: {per.get(p, 0)}"
+                                                               for p in dict.fromkeys(scored["perturbation"]))})
     return rows
 
 
