@@ -261,3 +261,18 @@ def test_the_shipped_gate_is_bound_to_the_shipped_network_and_shipped_off():
     assert b["training"]["path"].endswith("train") and b["validation"]["path"].endswith("val")
     assert b["validation"]["scenes"] == [0, 35] and b["quantile"] == 0.995 and gate.dims == 448
     assert shipped.stat().st_size < 1_000_000
+
+
+def test_sweep_replays_a_frame_gate_and_gate_check_scores_other_scenes(setup):
+    from assurance.analysis.ood_replay import gate_score, load_gate
+    from assurance.fitting.gate_check import check
+    from el.monitors.frame_gate import FrameGate
+
+    gate = load_gate(setup["gate"])
+    assert isinstance(gate, FrameGate)
+    grey = np.full((H, W, 3), 128, np.uint8)
+    assert gate_score(gate, setup["seg"], grey) > gate.threshold
+    rows = check(setup["gate"], setup["val"], setup["seg"])
+    assert set(rows) == {"none:0", "brightness:3", "fog:3", "motion_blur:3", "shifted_pixels:3", "pixel_trap:3"}
+    assert all(r["frames"] == 12 and 0 <= r["flagged"] <= 12 and r["max"] >= r["median"] for r in rows.values())
+    assert rows["none:0"]["flagged"] <= 1  # 6 of its 12 clean scenes set the threshold
