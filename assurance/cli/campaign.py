@@ -29,8 +29,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--images", type=int, help="use the first N images of --data")
     p.add_argument("--gate", metavar="GATE.json",
                    help="frame gate (uav-el fit-gate; 'none': no gate; default: the system file's [monitor] gate, "
-                        "else the shipped gate on the shipped network): every image row records its score and "
-                        "threshold; a frame above it is decided as the default action")
+                        "else el.pipeline.DEPLOYED_GATE on the shipped network, none at present): every image row "
+                        "records its score and threshold; a frame above it is decided as the default action")
     p.add_argument("--weights", "--model", dest="weights", metavar="MODEL",
                    help="segmentation model: a .pt weights file with its card, or a registered uav_el.models "
                         "name (NAME or NAME:ARG); default: the shipped model")

@@ -74,8 +74,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "default action")
     parser.add_argument("--gate", type=Path, metavar="GATE.json",
                         help="frame gate (uav-el fit-gate; 'none': no gate; default: the system file's [monitor] "
-                             "gate, else the shipped gate on the shipped network): a frame above its threshold "
-                             "takes the default action (out_of_domain); its score is in the decision JSON")
+                             "gate, else el.pipeline.DEPLOYED_GATE on the shipped network, none at present): a frame "
+                             "above its threshold takes the default action (out_of_domain); its score is in the "
+                             "decision JSON")
     parser.add_argument("--weights", "--model", dest="weights", metavar="MODEL",
                         help="segmentation model: a .pt weights file with its card, or a name registered in the "
                              "uav_el.models entry points (NAME or NAME:ARG); default: the shipped model")
