@@ -33,6 +33,10 @@ class OODError(UavElError, ValueError):
     """An out-of-domain gate file that cannot be used (missing, unreadable, altered, inconsistent)."""
 
 
+class FrameGateError(UavElError, ValueError):
+    """A frame-gate file (``uav-el fit-gate``) that cannot be used (missing, unreadable, altered, inconsistent)."""
+
+
 class LearnedModelError(UavElError, ValueError):
     """A learned-monitor model file that cannot be used (missing, unreadable, altered, inconsistent)."""
 

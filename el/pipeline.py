@@ -33,6 +33,7 @@ from el.imageio import MAX_PIXELS, check_max_pixels, read_image_meta
 from el.labels import UAVID
 from el.monitors import CandidateContext, Monitor, build_monitor, monitor_name, parse_monitor_spec
 from el.monitors.capabilities import check_monitor_capabilities
+from el.monitors.frame_gate import bind_frame_gate, judge_frame
 from el.odd import OperatingDomain
 from el.rgb import check_rgb
 from el.segmentation.contract import check_model, labels_of
@@ -45,6 +46,10 @@ DEPLOYED_MONITOR = "learned:walk=score,threshold=0.8563253044730293"
 candidate monitor (``el/monitors/data/learned.json``), candidates walked by its score (``el.walk``),
 at the threshold of its calibration card :data:`DEPLOYED_CALIBRATION` (a test checks they agree)."""
 DEPLOYED_CALIBRATION = Path(__file__).resolve().parent / "monitors" / "data" / "calibration.json"
+DEPLOYED_GATE: Path | None = None
+"""The frame gate the command line deploys when it runs the shipped network (None: none). None: the shipped
+``monitors/data/frame_gate.json`` meets the policy on 1024x576 validation frames but flags most 3840x2160 frames,
+the release size (README, "Frame gates"); it is shipped off (``--gate`` deploys it)."""
 MIN_FRAME_SIZE = 16  # px: the smallest frame side the segmenter takes (el.segmentation.inference.MIN_SIZE)
 logger = logging.getLogger(__name__)  # faults with their tracebacks; the decision keeps only the reason
 
@@ -93,6 +98,10 @@ class PipelineConfig:
         An out-of-domain gate (``uav-el fit-ood``, ``el.monitors.ood``): a frame whose distance is above
         the gate's threshold ends in the default action with reason ``out_of_domain``; a missing or
         altered gate file is a fault (default action).
+    gate : path or None
+        A frame gate (``uav-el fit-gate``, ``el.monitors.frame_gate``) scoring the frame pass's own statistics: a
+        frame above its threshold ends in the default action (``out_of_domain: frame gate ...``); its score and
+        threshold are in every decision's ``input.frame_gate`` (null: no gate). A bad gate file is a fault.
     odd : OperatingDomain or None
         The declared operating domain (``el.odd``): a frame whose pose or size is outside it ends in the
         default action with reason ``outside_odd: <dimension> ...`` (a decision, not a fault). None: no
@@ -109,6 +118,7 @@ class PipelineConfig:
     nominal_size: tuple[int, int] = (3840, 2160)
     calibration: str | None = None
     ood: str | None = None
+    gate: str | None = None
     odd: OperatingDomain | None = None
     max_pixels: int = MAX_PIXELS
     hard_stop: bool = True
@@ -138,6 +148,7 @@ class PipelineConfig:
             "core": self.core.to_dict(),
             **({"calibration": self.calibration} if self.calibration else {}),
             **({"ood": self.ood} if self.ood else {}),
+            **({"gate": self.gate} if self.gate else {}),
             **({"odd": self.odd.to_dict()} if self.odd is not None else {}),
             **({"max_pixels": self.max_pixels} if self.max_pixels != MAX_PIXELS else {}),
             **({} if self.hard_stop else {"hard_stop": False}),
@@ -177,6 +188,7 @@ class EmergencyLanding:
         self.monitor: Monitor | None = None
         self.walk = HAZARD
         self.ood: Any = None
+        self.gate: Any = None
         self.labels = UAVID
         try:
             if segmenter is None:
@@ -211,6 +223,12 @@ class EmergencyLanding:
             except Exception as exc:
                 self.fault = self.fault or f"fault: ood: {type(exc).__name__}: {exc}"
                 logger.exception("out-of-domain gate not usable; every decision will be the default action")
+        if self.config.gate:
+            try:
+                self.gate = bind_frame_gate(self.config.gate, self.segmenter)
+            except Exception as exc:
+                self.fault = self.fault or f"fault: frame_gate: {type(exc).__name__}: {exc}"
+                logger.exception("frame gate not usable; every decision will be the default action")
 
     # -- the decision ----------------------------------------------------------------------------
     def decide(self, image: np.ndarray | str | Path, pose: Pose | None = None) -> Decision:
@@ -256,6 +274,7 @@ class EmergencyLanding:
             if budget.cancelled.is_set():  # stopped while it waited for the one before it: read nothing
                 raise BudgetExceeded("decision stopped before it started")
             t = self.clock()
+            info["frame_gate"] = None if self.gate is None else self.gate.record(None)
             rgb = self._read(image, info)
             size = (rgb.shape[1], rgb.shape[0])
             if size[0] * size[1] > cfg.max_pixels:  # an array (a file was checked from its header)
@@ -278,6 +297,12 @@ class EmergencyLanding:
             probs = self._segment(rgb)
             timings["segmentation_s"] = self.clock() - t
             budget.check(stage)
+
+            if self.gate is not None:
+                stage = "frame_gate"
+                refused = judge_frame(self.gate, self.segmenter, info)
+                if refused:  # no evidence of safety for this frame: a decision, not a fault
+                    return self._default(refused, candidates, size, timings, info, budget, core_cfg)
 
             if self.ood is not None:
                 stage = "ood"

@@ -134,3 +134,20 @@ def test_uav_el_land_outside_the_domain_is_a_decision_exit_0(tmp_path, capsys):
     d = json.loads(out.read_text())
     assert d["action"] == "default" and d["reason"] == "outside_odd: height 120 m not in [40, 60] m"
     assert "reason: outside_odd: height 120 m" in capsys.readouterr().out
+
+
+@pytest.mark.requirements("EL-R17")
+def test_uav_el_land_labels_checks_the_declared_domain_too(tmp_path, capsys):
+    from assurance.cli import main
+    from assurance.scenes.uavid import write_image
+    from el.labels import ids_to_colors
+
+    labels, out = tmp_path / "labels.png", tmp_path / "d.json"
+    write_image(labels, ids_to_colors(scene_ids()))
+    assert main(["land", "--labels", str(labels), "--pitch", "70", "--json", str(out)]) == 0
+    d = json.loads(out.read_text())
+    assert d["action"] == "default" and d["reason"] == "outside_odd: pitch 70 deg not in [36, 54] deg"
+    assert d["candidates"] == [] and d["config"]["odd"]["pitch_deg"] == [36.0, 54.0]
+    assert "reason: outside_odd: pitch 70 deg" in capsys.readouterr().out
+    assert main(["land", "--labels", str(labels), "--json", str(out)]) == 0  # inside: the CM decides
+    assert not json.loads(out.read_text())["reason"].startswith("outside_odd")

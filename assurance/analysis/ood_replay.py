@@ -1,5 +1,8 @@
 """Would the out-of-domain gate pay? Its distance on every frame of a campaign, as the campaign saw it.
 
+Both gate files are replayed: the frame gate (``uav-el fit-gate``, ``el.monitors.frame_gate``: the frame pass's own
+features) and the older out-of-domain gate (``uav-el fit-ood``, ``el.monitors.ood``: a second trunk pass).
+
 Each (perturbation, severity, image) of the run is re-perturbed with the campaign's own seed
 (`assurance.campaign.run.task_seed`), so the gate scores exactly the frames the monitors judged. A frame
 above the gate's threshold ends in the default action; `assurance.analysis.sweep` replays the decisions with
@@ -20,13 +23,35 @@ from assurance.campaign import readouts
 from assurance.campaign.perturbations import perturb
 from assurance.campaign.run import task_seed
 from assurance.scenes.uavid import iter_samples, read_image
+from el.monitors.frame_gate import FRAME_GATE_FORMAT, FrameGate, load_frame_gate
 from el.monitors.ood import load_ood
+
+
+def load_gate(path: str | Path) -> Any:
+    """The gate file at ``path``: a frame gate when its format says so, else an out-of-domain gate (each loader
+    refuses, one line, what it cannot use)."""
+    import json
+
+    try:
+        fmt = json.loads(Path(path).read_text(encoding="utf-8")).get("format")
+    except (OSError, UnicodeDecodeError, ValueError, AttributeError):
+        fmt = None  # the loader says what is wrong
+    return load_frame_gate(path) if fmt == FRAME_GATE_FORMAT else load_ood(path)
+
+
+def gate_score(gate: Any, segmenter: Any, rgb: np.ndarray) -> float:
+    """The gate's score of one frame: a frame gate reads the frame pass's tap, the older gate runs its own."""
+    if isinstance(gate, FrameGate):
+        segmenter.tap_frames = True
+        segmenter.predict_frame(rgb)
+        return gate.score(segmenter.last_tap)
+    return gate.score(segmenter, rgb)
 
 
 def frame_distances(run: str | Path, data: str | Path, gate_path: str | Path, segmenter: Any,
                     progress: Callable[[int, int], None] | None = None) -> pd.DataFrame:
     """One row per (perturbation, severity, key) of ``run``: the gate's distance and whether it fires."""
-    gate = load_ood(gate_path)
+    gate = load_gate(gate_path)
     gate.check_network(segmenter)  # a gate fitted on another network than the run's is refused
     man = readouts.read_manifest(run)
     seed = int(man["config"]["seed"])
@@ -41,7 +66,7 @@ def frame_distances(run: str | Path, data: str | Path, gate_path: str | Path, se
             cache.clear()
             cache[key] = read_image(samples[key].image_path)
         rng = np.random.default_rng(task_seed(seed, key, pert, int(sev)))
-        d = gate.score(segmenter, perturb(cache[key], pert, int(sev), rng))
+        d = gate_score(gate, segmenter, perturb(cache[key], pert, int(sev), rng))
         rows.append({"perturbation": pert, "severity": int(sev), "key": key, "ood_distance": d,
                      "ood_fires": bool(d > gate.threshold)})
         if progress:

@@ -26,6 +26,7 @@ from el.core import default_area, probs_from_labels, run_core
 from el.decision import Decision, decision_schema  # noqa: F401  (re-exported)
 from el.hashing import sha256_file
 from el.labels import UAVID, LabelSet
+from el.odd import OperatingDomain
 from el.pipeline import frame_core, pose_record
 from el.walk import walk_candidates
 
@@ -55,6 +56,7 @@ def decide_from_labels(
     labels: LabelSet = UAVID,
     pose: Pose | None = None,
     roll_deg: float = 0.0,
+    odd: OperatingDomain | None = None,
 ) -> Decision:
     """The decision for a full-resolution class-id map (H, W) under a perfect segmentation.
 
@@ -63,7 +65,8 @@ def decide_from_labels(
     ids (default UAVid). ``pose`` (and ``roll_deg``): the frame's pose, as ``el.pipeline``'s; None is
     ``config.pose``. ValueError for a malformed map; a pose the flat-ground model cannot plan with
     (``el.camera.check_geometry``) gives the default action with reason ``"fault: pose: <error>"``,
-    a failure inside the CM with ``"fault: <error>"``.
+    a failure inside the CM with ``"fault: <error>"``. ``odd``: the declared operating domain; a pose or size
+    outside it is the default action with reason ``outside_odd: ...``, as the flight pipeline decides it.
     """
     config = config or CoreConfig()
     ids = labels.planning_ids(ids)  # unknown (ignored) ground is never a landing site: planned as forbidden
@@ -78,15 +81,22 @@ def decide_from_labels(
         info["pose"] = pose_record(config.pose, nominal=pose is None)
         if roll_deg:
             info["pose"]["roll_deg"] = float(roll_deg)  # not modelled: a pose error within MAX_ROLL_DEG
-        check_geometry(config.geometry(W, H), roll_deg=roll_deg)
+        outside = None if odd is None else odd.outside(config.pose, (W, H))
+        if not outside:  # outside the domain: refused before planning, as el.pipeline does
+            check_geometry(config.geometry(W, H), roll_deg=roll_deg)
     except Exception as exc:  # fail safe, as the flight pipeline: the default action, with the reason
         cfg = {"pipeline": PIPELINE, "monitor": None, "core": nominal.to_dict()}
         timings["total_s"] = float(read_s) + clock() - t0
         return Decision(action="default", reason=f"fault: pose: {type(exc).__name__}: {exc}", selected=None,
                         candidates=[], default_area=default_area(W, H, nominal), timings=timings, input=info,
                         config=cfg)
-    cfg = {"pipeline": PIPELINE, "monitor": None, "core": config.to_dict()}
+    cfg = {"pipeline": PIPELINE, "monitor": None, "core": config.to_dict(),
+           **({"odd": odd.to_dict()} if odd is not None else {})}
     area = default_area(W, H, config)
+    if outside:  # no evidence of safety there: the default action, a decision and not a fault
+        timings["total_s"] = float(read_s) + clock() - t0
+        return Decision(action="default", reason=outside, selected=None, candidates=[], default_area=area,
+                        timings=timings, input=info, config=cfg)
     try:
         probs = probs_from_labels(ids, working_size(W, H, config.working_width), labels=labels)
         t1 = clock()
@@ -114,11 +124,13 @@ def decide_from_label_file(
     labels: LabelSet = UAVID,
     pose: Pose | None = None,
     roll_deg: float = 0.0,
+    odd: OperatingDomain | None = None,
 ) -> tuple[Decision, np.ndarray]:
     """Read a colour label PNG (``labels``' palette, UAVid by default) and decide; returns (decision, class ids).
 
     The optional image is only checked for size (it is for drawing) and identified in
-    ``input["image"]``. DataError (from ``assurance.scenes.uavid``) for a missing, unreadable or inconsistent file.
+    ``input["image"]``; ``odd`` as :func:`decide_from_labels`. DataError (from ``assurance.scenes.uavid``) for a
+    missing, unreadable or inconsistent file.
     """
     labels_path = Path(labels_path)
     t0 = time.perf_counter()
@@ -132,7 +144,7 @@ def decide_from_label_file(
         info["image"] = {"path": str(image_path), "sha256": sha256_file(image_path)}
     read_s = time.perf_counter() - t0
     return decide_from_labels(ids, config=config, input_info=info, read_s=read_s, labels=labels, pose=pose,
-                              roll_deg=roll_deg), ids
+                              roll_deg=roll_deg, odd=odd), ids
 
 
 def decide_sample(sample: Sample, *, config: CoreConfig | None = None, poses: str = "nominal",

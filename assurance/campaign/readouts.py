@@ -51,7 +51,7 @@ COLUMNS: dict[str, tuple[str, ...]] = {
                "reason", "selected", "h_default", "h_top", "h_decision", "decision_unsafe", "clearance_decision_m",
                "overhead_s", "default_x", "default_y", "default_r", "width", "height", "height_m", "pitch_deg",
                "roll_deg", "pose_source", "read_s", "perturb_s",
-               "segmentation_s", "candidates_s", "monitoring_s", "total_s"),
+               "segmentation_s", "candidates_s", "monitoring_s", "total_s", "frame_gate_score", "frame_gate_threshold"),
     "candidates": ("key", "sequence", "frame", "perturbation", "severity", "monitor", "rank", "x", "y", "radius_px",
                    "hazard", "hazard_semantic", "hazard_distance", "true_hazard", "true_unsafe", "clearance_m",
                    "accepted", "reason", "seconds", "selected", "examined"),

@@ -27,7 +27,15 @@ import numpy as np
 from assurance.campaign import readouts
 from assurance.campaign.attestation import sign_run
 from assurance.campaign.faults import config_faults
-from assurance.campaign.frames import frame_config, outside_odd, refuse_outside
+from assurance.campaign.frames import (
+    clearance_of,
+    frame_config,
+    frame_gate,
+    frame_truth,
+    gate_readout,
+    outside_odd,
+    refuse_outside,
+)
 from assurance.campaign.judging import _timed, judge_candidates
 from assurance.campaign.manifest import (  # noqa: F401  (re-exported)
     check_monitor_networks,
@@ -38,11 +46,9 @@ from assurance.campaign.perturbations import PERTURBATIONS, perturb, severities_
 from assurance.campaign.truth import true_hazard
 from assurance.campaign.workers import bounded_jobs, dask_map, die_with_parent
 from assurance.scenes.poses import check_policy
-from assurance.scenes.uavid import Sample, iter_samples, read_labels
+from assurance.scenes.uavid import Sample, iter_samples
 from el.config import CoreConfig, check_seed
 from el.core import run_core
-from el.decision import Candidate
-from el.errors import DataError
 from el.imageio import read_image_meta
 from el.monitors import DEMO_GRID, build_monitor, parse_monitor_spec
 from el.monitors.spec import walk_of
@@ -68,6 +74,7 @@ class CampaignConfig:
     core: CoreConfig = field(default_factory=CoreConfig)
     poses: str = "nominal"  # which pose plans each frame: assurance.scenes.poses.POLICIES
     odd: dict[str, Any] | None = None  # the declared operating domain (el.odd.OperatingDomain.to_dict()); None: none
+    gate: dict[str, str] | None = None  # the frame gate {"path", "sha256"} (el.monitors.frame_gate); None: none
 
     def __post_init__(self) -> None:
         unknown = [p for p in self.perturbations if p not in PERTURBATIONS]
@@ -105,8 +112,9 @@ class CampaignConfig:
         d["core"] = self.core.to_dict()
         if self.poses == "nominal":
             del d["poses"]
-        if self.odd is None:
-            del d["odd"]
+        for key in ("odd", "gate"):
+            if d[key] is None:
+                del d[key]
         return d
 
 
@@ -145,15 +153,12 @@ def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Calla
     try:
         (rgb, meta), timings["read_s"] = _timed(clock, read_image_meta, s.image_path)  # meta: EXIF orientation
         frame_cfg, pose_cols = frame_config(config, s, (rgb.shape[1], rgb.shape[0]))
-        if s.label_path is None:
-            raise DataError(f"{s.image_path}: no label map (the campaign needs ground truth)")
-        labels = labels_of(segmenter)
-        ids = read_labels(s.label_path, labels=labels)
-        if ids.shape != rgb.shape[:2]:
-            raise DataError(f"{s.label_path}: label size differs from the image")
+        labels, ids = frame_truth(s, labels_of(segmenter), rgb.shape[:2])
         rng = np.random.default_rng(task_seed(config.seed, s.key, task.perturbation, task.severity))
         hd, timings["perturb_s"] = _timed(clock, perturb, rgb, task.perturbation, task.severity, rng)
+        gate = frame_gate(config.gate, segmenter)  # turns the segmenter's frame tap on
         probs, timings["segmentation_s"] = _timed(clock, segmenter.predict_frame, hd)
+        gate_cols, refused = gate_readout(gate, segmenter)
         H, W = hd.shape[:2]
         core, timings["candidates_s"] = _timed(clock, run_core, probs, (W, H), frame_cfg, labels=labels)
         monitors = [build_monitor(m, margin=config.patch_margin, max_side=config.patch_max_side, clock=clock,
@@ -175,7 +180,7 @@ def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Calla
 
     cands = core.candidates
     truth = [true_hazard(ids, c.disc, labels=labels) for c in cands]
-    clearance = _clearance(world_clearance, s, (W, H), cands)
+    clearance = clearance_of(world_clearance, s, (W, H), cands)
     h_default = true_hazard(ids, core.default_area, labels=labels)
     thresholds = [m.threshold for m in monitors]
     image_rows, cand_rows = [], []
@@ -197,7 +202,7 @@ def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Calla
             "clearance_decision_m": clearance[sel] if sel is not None else float("nan"),
             "overhead_s": float(outcome.overhead_s),
             "default_x": core.default_area.x, "default_y": core.default_area.y,
-            "default_r": core.default_area.radius_px, "width": W, "height": H, **pose_cols, **meta,
+            "default_r": core.default_area.radius_px, "width": W, "height": H, **pose_cols, **meta, **gate_cols,
             **timings,
             "total_s": clock() - t0,
         })
@@ -210,20 +215,8 @@ def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Calla
                 "score": column[k].score, "threshold": thresholds[j],
                 "selected": sel == k, "examined": k < examined,
             })
-    refuse_outside(image_rows, cand_rows, outside_odd(config.odd, frame_cfg.pose, (W, H)))  # as el decides it
+    refuse_outside(image_rows, cand_rows, outside_odd(config.odd, frame_cfg.pose, (W, H)) or refused)  # as el does
     return {"images": image_rows, "candidates": cand_rows}
-
-
-def _clearance(fn: Callable[..., Any] | None, sample: Sample, size: tuple[int, int],
-               cands: Sequence[Candidate]) -> list[float]:
-    """Metric clearance (m) of each candidate's centre from the scene's world model, NaN without one."""
-    if fn is None or not cands:
-        return [float("nan")] * len(cands)
-    try:
-        vals = fn(sample, size, np.array([c.x for c in cands]), np.array([c.y for c in cands]))
-        return [float(v) for v in vals]
-    except Exception:  # no meta or no world model: the readout says NaN
-        return [float("nan")] * len(cands)
 
 
 # ------------------------------------------------------------------------------------------------

@@ -36,6 +36,7 @@ COMMANDS: dict[str, str] = {
     "calibrate": "calibrate",
     "fit-monitor": "fit_monitor",
     "fit-ood": "fit_ood",
+    "fit-gate": "fit_gate",
     "table": "table",
     "sweep": "sweep",
     "verify": "verify",
@@ -46,7 +47,7 @@ COMMANDS: dict[str, str] = {
 
 
 # Commands that decide, evaluate or report: they take --system FILE (else ./uav-el.toml, else the embedded default).
-SYSTEM_COMMANDS = ("land", "campaign", "calibrate", "fit-monitor", "fit-ood", "verify", "evidence")
+SYSTEM_COMMANDS = ("land", "campaign", "calibrate", "fit-monitor", "fit-ood", "fit-gate", "verify", "evidence")
 SYSTEM_HELP = ("the system under assessment (uav-el.toml: model, camera, poses, labels, safety, monitor, data, "
                "targets, waivers, report); default: ./uav-el.toml if present, else the embedded default (the "
                "shipped system); options given here win over the file")

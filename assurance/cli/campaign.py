@@ -27,6 +27,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--calibration", nargs="+", metavar="CALIB.json",
                    help="calibration card(s) (uav-el calibrate): also evaluate each calibrated monitor")
     p.add_argument("--images", type=int, help="use the first N images of --data")
+    p.add_argument("--gate", metavar="GATE.json",
+                   help="frame gate (uav-el fit-gate; 'none': no gate; default: the system file's [monitor] gate, "
+                        "else el.pipeline.DEPLOYED_GATE on the shipped network, none at present): every image row "
+                        "records its score and threshold; a frame above it is decided as the default action")
     p.add_argument("--weights", "--model", dest="weights", metavar="MODEL",
                    help="segmentation model: a .pt weights file with its card, or a registered uav_el.models "
                         "name (NAME or NAME:ARG); default: the shipped model")
@@ -52,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError("--scheduler needs --backend dask")
     if not args.scheduler:  # local workers: clamped to the cores, one warning line says so
         args.jobs = bounded_jobs(args.jobs, warn=lambda m: print(f"uav-el campaign: warning: {m}", file=sys.stderr))
-    from assurance.cli.system_options import model_spec, system_of
+    from assurance.cli.system_options import frame_gate_path, model_spec, system_of
     from assurance.system import build as system_build
 
     system = system_of(args)
@@ -72,6 +76,13 @@ def run(args: argparse.Namespace) -> int:
             check_card_monitor(card, build_monitor(card.spec))
         base = monitors or tuple(preset_config(args.preset, deployed=deployed).monitors)
         monitors = tuple(dict.fromkeys((*base, *(card.spec for card in cards))))
+    gate_path = frame_gate_path(args)
+    gate = None
+    if gate_path:  # a bad gate file: one line, exit 2, before any task
+        from el.monitors.frame_gate import load_frame_gate
+
+        gate = load_frame_gate(gate_path)
+        cards.append(gate)  # checked against the campaign's network with the cards
     config = preset_config(
         args.preset, deployed=deployed, core=system_build.core_config(system),
         perturbations=tuple(args.perturbations) if args.perturbations else None,
@@ -79,6 +90,7 @@ def run(args: argparse.Namespace) -> int:
         monitors=monitors,
         images=args.images, weights=model_spec(args), seed=args.seed,
         poses=args.poses or system_build.poses_policy(system), odd=system_build.odd(system).to_dict(),
+        gate=None if gate is None else {"path": gate.path, "sha256": gate.sha256},
     )
     from assurance.attest import AttestationError
     from assurance.attest.keys import load_signing_key

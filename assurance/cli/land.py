@@ -72,6 +72,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--ood", type=Path, metavar="GATE.json",
                         help="out-of-domain gate (uav-el fit-ood): a frame above its threshold takes the "
                              "default action")
+    parser.add_argument("--gate", type=Path, metavar="GATE.json",
+                        help="frame gate (uav-el fit-gate; 'none': no gate; default: the system file's [monitor] "
+                             "gate, else el.pipeline.DEPLOYED_GATE on the shipped network, none at present): a frame "
+                             "above its threshold takes the default action (out_of_domain); its score is in the "
+                             "decision JSON")
     parser.add_argument("--weights", "--model", dest="weights", metavar="MODEL",
                         help="segmentation model: a .pt weights file with its card, or a name registered in the "
                              "uav_el.models entry points (NAME or NAME:ARG); default: the shipped model")
@@ -153,10 +158,11 @@ def run(args: argparse.Namespace) -> int:
     from assurance.system import build as system_build
 
     config = config_from_args(args)
+    system = system_of(args)
     if args.labels.is_file():  # a missing file is the reader's one-line error
         check_frame_geometry(config, args.labels, args.roll)
     decision, ids = decide_from_label_file(args.labels, image_path=image_path, config=config, roll_deg=args.roll,
-                                           labels=system_build.label_set(system_of(args)))
+                                           labels=system_build.label_set(system), odd=system_build.odd(system))
     image = read_image(image_path) if image_path is not None else None  # a bad image is an error too
 
     _write_outputs(args, decision, image=image, labels=ids)
@@ -170,7 +176,7 @@ def run_model(args: argparse.Namespace) -> int:
 
     if args.image is not None:
         raise CommandError("--image is for the ground-truth pipeline; give the image as IMAGE")
-    from assurance.cli.system_options import load_model, model_spec, system_of
+    from assurance.cli.system_options import frame_gate_path, load_model, model_spec, system_of
     from assurance.system import build as system_build
 
     image_path = Path(args.image_arg)
@@ -202,19 +208,25 @@ def run_model(args: argparse.Namespace) -> int:
             raise CommandError(str(exc)) from None
         segmenter = None
     built = build_monitor(monitor)  # a monitor that cannot be built (e.g. a missing model file): one line, exit 2
-    gate = None
+    gates = []
     if ood is not None:
         from el.monitors.ood import load_ood
 
-        gate = load_ood(ood)  # a bad gate is a usage error here (in flight it is the default action)
+        gates.append(load_ood(ood))  # a bad gate is a usage error here (in flight it is the default action)
+    frame_gate = frame_gate_path(args)
+    if frame_gate is not None:
+        from el.monitors.frame_gate import load_frame_gate
+
+        gates.append(load_frame_gate(frame_gate))
     # a monitor fitted, or a card calibrated, on another network or model than it runs: one line, exit 2
     check_monitor_bindings(built, monitor, calibration, segmenter)
-    if gate is not None and segmenter is not None:
+    for gate in gates if segmenter is not None else ():
         gate.check_network(segmenter)  # a gate fitted on another network: one line, exit 2
     config = PipelineConfig(core=core, monitor=monitor, time_budget_s=budget,
                             seed=args.seed, evaluate_all=args.evaluate_all, max_pixels=args.max_pixels,
                             calibration=str(calibration) if calibration else None,
-                            ood=str(ood) if ood else None, odd=system_build.odd(system))
+                            ood=str(ood) if ood else None, gate=str(frame_gate) if frame_gate else None,
+                            odd=system_build.odd(system))
     decision = EmergencyLanding(config, segmenter=segmenter).decide(image_path)
     _write_outputs(args, decision, image=read_image(image_path) if args.overlay else None, labels=None)
     print(summary(decision))
@@ -259,6 +271,10 @@ def summary(decision: Decision) -> str:
         lines.append(f"  #{c.rank}: x={c.x:.1f} y={c.y:.1f} r={c.radius_px:.1f} hazard {c.hazard:.3f}")
     if len(decision.candidates) > 5:
         lines.append(f"  ... {len(decision.candidates) - 5} more")
+    gate = info.get("frame_gate")
+    if gate:
+        score = "not scored" if gate.get("score") is None else f"score {gate['score']:.4g}"
+        lines.append(f"frame gate ({gate['kind']}): {score}, threshold {gate['threshold']:.4g}")
     total = decision.timings.get("total_s")
     if total is not None:
         cand_ms = 1000 * (decision.timings.get("candidates_s") or 0.0)

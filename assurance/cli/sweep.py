@@ -20,7 +20,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--walks", nargs="+", choices=("hazard", "score"),
                    help="walk orders to replay (el.walk; default: each configuration's own)")
     p.add_argument("--out", type=Path, help="folder for sweep.csv, sweep.md and sweep.png (default: the run folder)")
-    p.add_argument("--ood", metavar="GATE.json", help="also replay the out-of-domain gate (uav-el fit-ood): the "
+    p.add_argument("--ood", metavar="GATE.json", help="also replay a gate (uav-el fit-gate or fit-ood): the "
                                                        "run's frames are re-perturbed with its seeds and scored; "
                                                        "needs --data")
     p.add_argument("--data", help="the run's scenes (for --ood)")
@@ -70,11 +70,11 @@ def run_model(run_dir: Path) -> str | None:
 
 def bound_gate(path: str, run_dir: Path) -> tuple[str, Any, Any]:
     """(path, gate, the run's model) for a gate fitted on the network the run segmented with; else exit 2."""
-    from el.monitors.ood import load_ood
+    from assurance.analysis.ood_replay import load_gate
     from el.segmentation.factory import load_model
 
     try:
-        gate = load_ood(path)
+        gate = load_gate(path)
         model = load_model(run_model(run_dir))
         gate.check_network(model)
     except ValueError as exc:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 from typing import Any
 
 from assurance.system import SystemFile, default_system
@@ -38,3 +39,17 @@ def load_model(args: argparse.Namespace, *, threads: int | None = None, working_
     from assurance.system.model import load_model_spec
 
     return load_model_spec(model_spec(args), threads=threads, working_width=working_width)
+
+
+def frame_gate_path(args: argparse.Namespace) -> Path | None:
+    """The command's frame gate: ``--gate``, else the system file's ``[monitor] gate`` (``none``: no gate), else the
+    shipped gate (``el.pipeline.DEPLOYED_GATE``, None when none is deployed) when the command runs the shipped
+    network: a gate is bound to its network, so another network needs its own (``uav-el fit-gate``)."""
+    from el.pipeline import DEPLOYED_GATE
+
+    system = system_of(args)
+    given = getattr(args, "gate", None)
+    value = given if given is not None else system.get("monitor.gate")
+    if value is not None:
+        return None if str(value) == "none" else Path(given) if given is not None else system.path_of("monitor.gate")
+    return DEPLOYED_GATE if model_spec(args) is None else None

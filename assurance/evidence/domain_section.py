@@ -64,12 +64,21 @@ def odd_rows(man: Mapping[str, Any], images: Any, pose_error: Mapping[str, float
     rows.append({"name": "Frames outside", "declared": "default action, reason outside_odd",
                  "evidence": ", ".join(f"{p}: {per.get(p, 0)}" for p in dict.fromkeys(frames["perturbation"]))
                  if n else "no evaluated frame"})
+    scored = frames[frames["frame_gate_score"].notna()] if n and "frame_gate_score" in frames else frames.iloc[:0]
+    if len(scored):  # the run deployed a frame gate (el.monitors.frame_gate): the frames it refused
+        gated = scored[scored["reason"].astype(str).str.startswith("out_of_domain: frame gate")]
+        per = gated.groupby("perturbation")["key"].nunique().to_dict()
+        rows.append({"name": "Frame gate", "declared": f"default action above score "
+                     f"{float(scored['frame_gate_threshold'].iloc[0]):.4g}, reason out_of_domain",
+                     "evidence": "frames refused: " + ", ".join(f"{p}: {per.get(p, 0)}"
+                                                               for p in dict.fromkeys(scored["perturbation"]))})
     return rows
 
 
 def frame_gate_view() -> dict[str, Any] | None:
     """The frame-gate measurement shipped with the package (``assurance/data/frame_gates.{csv,png}``, written by
-    ``assurance.fitting.gate_study`` on validation scenes): per set the share each candidate gate flags."""
+    ``assurance.fitting.gate_study`` on validation scenes): per set the share each candidate gate flags ("-": not
+    measured in that fold)."""
     import base64
     import csv
     from importlib import resources
@@ -83,5 +92,5 @@ def frame_gate_view() -> dict[str, Any] | None:
     rows = list(csv.DictReader(text.splitlines()))
     gates = [k for k in (rows[0] if rows else {}) if k not in ("set", "what", "frames")]
     shown = [{"set": r["set"] if r["set"] == r["what"] else f"{r['set']}: {r['what']}", "frames": r["frames"],
-              "rates": [f"{float(r[g]):.0%}" for g in gates]} for r in rows]
+              "rates": [f"{float(r[g]):.0%}" if r[g] else "-" for g in gates]} for r in rows]
     return {"gates": gates, "rows": shown, "uri": "data:image/png;base64," + base64.b64encode(png).decode("ascii")}

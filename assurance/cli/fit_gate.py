@@ -1,0 +1,68 @@
+"""``uav-el fit-gate``: fit the frame gate (``el.monitors.frame_gate``) and write its hash-checked JSON file."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from assurance.cli.fit_monitor import write_json
+from assurance.errors import CommandError
+from el.monitors.gates import GATES
+
+HELP = ("fit the frame gate (a candidate of el.monitors.gates reading the frame pass's own features) on training "
+        "scenes with the in-domain perturbations applied; threshold at a quantile of validation scenes at severity 3")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--kind", choices=sorted(GATES), default="mahalanobis", help="gate (default: %(default)s)")
+    p.add_argument("--data", help="training scenes (e.g. data/train); default: the system file's [data] train")
+    p.add_argument("--val", help="validation scenes for the threshold (e.g. data/val); default: the system file's "
+                                 "[data] val")
+    p.add_argument("--out", required=True, type=Path, help="gate file to write (JSON)")
+    p.add_argument("--weights", "--model", dest="weights", metavar="MODEL",
+                   help="segmentation model: a .pt weights file with its card, or a registered uav_el.models "
+                        "name (NAME or NAME:ARG); default: the shipped model")
+    p.add_argument("--quantile", type=float, default=0.995,
+                   help="threshold: this quantile of the validation frames' scores (default: %(default)s)")
+    p.add_argument("--train-scenes", metavar="FIRST:END", help="training scenes to use (0-based, END excluded; "
+                                                                "default: all)")
+    p.add_argument("--val-scenes", metavar="FIRST:END",
+                   help="validation scenes for the threshold (default: all); keep the others to measure the gate")
+    p.add_argument("--working-width", type=int, default=None, metavar="PX",
+                   help="working resolution width (default: the system file's, else the shipped one)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
+def run(args: argparse.Namespace) -> int:
+    from assurance.cli.system_options import load_model, model_spec, system_of
+    from assurance.fitting.frame_gate_fit import fit_gate, parse_scenes
+    from assurance.fitting.network_identity import network_record
+    from assurance.system import build as system_build
+
+    system = system_of(args)
+    args.data = system_build.data_root(system, "train", args.data)
+    args.val = system_build.data_root(system, "val", args.val)
+    for d in (args.data, args.val):
+        if not Path(d).is_dir():
+            raise CommandError(f"{d}: no such folder")
+    for flag, text in (("--train-scenes", args.train_scenes), ("--val-scenes", args.val_scenes)):
+        try:
+            parse_scenes(text)
+        except ValueError as exc:
+            raise CommandError(f"{flag}: {exc}") from None
+    width = args.working_width or system_build.core_config(system).working_width
+    try:
+        segmenter = load_model(args, working_width=width)
+        doc = fit_gate(args.data, args.val, segmenter, kind=args.kind, quantile=args.quantile,
+                       train_scenes=args.train_scenes, val_scenes=args.val_scenes,
+                       weights=network_record(segmenter, model_spec(args)),
+                       progress=not (args.no_progress or getattr(args, "quiet", False)))
+    except ValueError as exc:
+        raise CommandError(str(exc)) from None
+    write_json(args.out, doc, indent=None)
+    b = doc["body"]
+    print(f"frame gate ({b['kind']}, {b['features']['dims']} features): threshold {b['threshold']:.4g} = "
+          f"{b['quantile']:g} quantile of {b['validation']['frames']} validation frames; fitted on "
+          f"{b['training']['frames']} training frames")
+    print(f"gate written to {args.out}")
+    return 0

@@ -1,0 +1,99 @@
+"""Fitting the deployed frame gate (``el.monitors.frame_gate``, ``uav-el fit-gate``): one candidate of
+``el.monitors.gates`` fitted on the training scenes with the in-domain perturbations applied (each scene clean,
+under each perturbation at a severity drawn from 1-3, and at severity 3), thresholded at a stated quantile of
+validation scenes under each perturbation at severity 3 (``assurance.fitting.gate_frames``: the study's frames).
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from assurance.fitting.gate_frames import IN_DOMAIN, scene_images, training_frames, validation_frames
+from assurance.fitting.learned_monitor import split_sha256
+from assurance.paths import shown_path
+from assurance.scenes.uavid import iter_samples
+from el.monitors.frame_gate import frame_gate_document
+from el.monitors.gates import GATES
+
+DEFAULT_QUANTILE = 0.995
+FEATURES = {"pooled": "per-channel mean and standard deviation over space of every trunk level of the frame pass "
+                      "(el.segmentation.frame_tap)", "energy": "mean over pixels of -logsumexp of the frame logits"}
+
+
+def parse_scenes(text: str | None) -> tuple[int, int | None]:
+    """``FIRST:END`` (0-based, END excluded; either may be empty) -> (first, count or None)."""
+    if not text:
+        return 0, None
+    try:
+        first_s, end_s = text.split(":")
+        first = int(first_s) if first_s else 0
+        end = int(end_s) if end_s else None
+    except ValueError:
+        raise ValueError(f"scenes must be FIRST:END (e.g. 0:35), got {text!r}") from None
+    if first < 0 or (end is not None and end <= first):
+        raise ValueError(f"scenes {text!r}: need 0 <= FIRST < END")
+    return first, None if end is None else end - first
+
+
+def embed(gate: Any, segmenter: Any, frames: Iterable[tuple[int, str, np.ndarray]], total: int, desc: str,
+          progress: bool) -> np.ndarray:
+    """The gate's features (n, d) of ``frames``, each read from the frame pass's own tap."""
+    from assurance.progress import progress as bar
+
+    segmenter.tap_frames = True
+    rows = []
+    for _, _, rgb in bar(frames, total=total, desc=desc, enabled=progress):
+        segmenter.predict_frame(rgb)
+        rows.append(np.asarray(gate.embed(segmenter.last_tap), np.float64))
+    x = np.asarray(rows, np.float64)
+    if x.ndim != 2 or not np.isfinite(x).all():
+        raise ValueError(f"{desc}: non-finite frame features")
+    return x
+
+
+def _split(path: str | Path, first: int, count: int | None) -> dict[str, Any]:
+    samples = list(iter_samples(path, require_labels=False))[first:None if count is None else first + count]
+    return {"path": shown_path(path), "scenes": [first, first + len(samples)],
+            "sha256": split_sha256(samples, path, labels=False)}
+
+
+def fit_gate(data: str | Path, val: str | Path, segmenter: Any, *, kind: str = "mahalanobis",
+             quantile: float = DEFAULT_QUANTILE, train_scenes: str | None = None, val_scenes: str | None = None,
+             weights: dict[str, Any], progress: bool = False) -> dict[str, Any]:
+    """The gate document: fitted on ``data``, thresholded at ``quantile`` of ``val`` (``uav-el fit-gate``)."""
+    if kind not in GATES:
+        raise ValueError(f"unknown gate kind {kind!r}; known: {', '.join(sorted(GATES))}")
+    if not 0.0 < quantile < 1.0:
+        raise ValueError(f"quantile must lie in (0, 1), got {quantile!r}")
+    gate = GATES[kind]
+    t_first, t_count = parse_scenes(train_scenes)
+    v_first, v_count = parse_scenes(val_scenes)
+    train_paths, val_paths = scene_images(Path(data), t_first, t_count), scene_images(Path(val), v_first, v_count)
+    if len(train_paths) < 2 or not val_paths:
+        raise ValueError(f"{len(train_paths)} training scene(s) in {data} and {len(val_paths)} validation scene(s) "
+                         f"in {val}: need >= 2 and >= 1")
+    n = len(IN_DOMAIN)
+    train = embed(gate, segmenter, training_frames(train_paths), (2 * n - 1) * len(train_paths), "training frames",
+                  progress)
+    held = embed(gate, segmenter, validation_frames(list(enumerate(val_paths, v_first)), (3,)),
+                 n * len(val_paths), "validation frames", progress)
+    params = gate.fit(train)
+    scores = gate.score(params, held)
+    body = {"kind": kind, "features": {"tap": "energy" if not gate.NEEDS_TRUNK else "pooled",
+                                       "what": FEATURES["pooled" if gate.NEEDS_TRUNK else "energy"],
+                                       "dims": int(train.shape[1])},
+            "params": params, "threshold": float(np.quantile(scores, quantile)), "quantile": float(quantile),
+            "training": {**_split(data, t_first, t_count), "frames": int(train.shape[0]),
+                         "perturbations": "each scene clean, under each of " + ", ".join(IN_DOMAIN[1:])
+                                          + " at a severity drawn from 1-3 (seeded per scene) and at severity 3"},
+            "validation": {**_split(val, v_first, v_count), "frames": int(held.shape[0]),
+                           "perturbations": "each scene clean and under each of " + ", ".join(IN_DOMAIN[1:])
+                                            + " at severity 3",
+                           "median": float(np.median(scores)), "max": float(scores.max())},
+            "weights": weights, "created": _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")}
+    return frame_gate_document(body)

@@ -1,0 +1,147 @@
+"""The deployed frame gate: one fitted candidate of ``el.monitors.gates``, read from its hash-checked JSON file
+(``uav-el fit-gate``), scoring the statistics the frame's own segmentation pass kept (``Segmenter.last_tap``,
+``el/segmentation/frame_tap.py``: no second trunk pass).
+
+A frame whose score is above the threshold ends in the default action with reason
+``out_of_domain: frame gate <kind> score S > threshold T`` (a decision: there is no evidence of safety there);
+a fault of the gate (no tap, wrong feature count, a non-finite score) is a fault of the decision (default action,
+the reason recorded). The file binds the gate to the network it was fitted on (``weights.sha256``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+
+from el.errors import FrameGateError
+from el.monitors.gates import GATES
+from el.records import HashedRecord
+
+FRAME_GATE_FORMAT = "uav-el-frame-gate/1"
+OUT_OF_DOMAIN = "out_of_domain"
+"""The prefix of the reason of a frame the gate refuses."""
+
+
+def _arrays(value: Any) -> Any:
+    """The fitted statistics with every list of numbers as a numpy array (converted once, at load)."""
+    if isinstance(value, dict):
+        return {k: _arrays(v) for k, v in value.items()}
+    if isinstance(value, list) and value and not isinstance(value[0], str):
+        arr = np.asarray(value, np.float64)
+        if not np.isfinite(arr).all():
+            raise ValueError("non-finite fitted statistics")
+        return arr
+    return value
+
+
+@dataclass(frozen=True)
+class FrameGate(HashedRecord):
+    """A checked frame gate (:func:`load_frame_gate`): its kind, fitted statistics and threshold."""
+
+    FORMAT: ClassVar[str] = FRAME_GATE_FORMAT
+    WHAT: ClassVar[str] = "frame gate"
+    ERROR: ClassVar[type[ValueError]] = FrameGateError
+
+    params: dict[str, Any]
+
+    @property
+    def kind(self) -> str:
+        return str(self.body["kind"])
+
+    @property
+    def threshold(self) -> float:
+        return float(self.body["threshold"])
+
+    @property
+    def dims(self) -> int:
+        return int(self.body["features"]["dims"])
+
+    @property
+    def needs_trunk(self) -> bool:
+        return bool(GATES[self.kind].NEEDS_TRUNK)
+
+    def score(self, tap: Any) -> float:
+        """The frame's score from its :class:`~el.segmentation.frame_tap.FrameTap`; ValueError when the pass kept
+        none, the features do not match the fitted ones, or the score is not finite."""
+        if tap is None:
+            raise ValueError("the segmentation pass kept no frame statistics (Segmenter.tap_frames is off)")
+        gate = GATES[self.kind]
+        x = np.asarray(gate.embed(tap), np.float64)
+        if x.shape != (self.dims,):
+            raise ValueError(f"the frame has {x.size} features, the gate {self.path} was fitted on {self.dims} "
+                             "(another network or engine?)")
+        value = float(gate.score(self.params, x[None])[0])
+        if not math.isfinite(value):
+            raise ValueError("non-finite frame-gate score")
+        return value
+
+    def reason(self, score: float) -> str | None:
+        """``out_of_domain: ...`` when ``score`` is above the threshold (or not a number), else None."""
+        if score <= self.threshold:
+            return None
+        return f"{OUT_OF_DOMAIN}: frame gate {self.kind} score {score:.4g} > threshold {self.threshold:.4g}"
+
+    def record(self, score: float | None) -> dict[str, Any]:
+        """What a decision records of the gate: kind, score (None when the frame was not scored), threshold,
+        and the file's body SHA-256."""
+        return {"kind": self.kind, "score": score, "threshold": self.threshold, "sha256": self.sha256}
+
+
+def frame_gate_document(body: dict[str, Any]) -> dict[str, Any]:
+    """The JSON document of a gate with this body (format and hash added)."""
+    return FrameGate.document(body)
+
+
+def load_frame_gate(path: str | Path) -> FrameGate:
+    """Read and check a frame-gate file: format, body hash, kind, feature count, threshold, finite statistics.
+
+    Raises
+    ------
+    FrameGateError
+        One line naming the file and the problem.
+    """
+    p = Path(path)
+    body, digest = FrameGate.read_body(p)
+    try:
+        if body.get("kind") not in GATES:
+            raise ValueError(f"kind must be one of {', '.join(sorted(GATES))}, got {body.get('kind')!r}")
+        dims = body["features"]["dims"]
+        if isinstance(dims, bool) or not isinstance(dims, int) or dims < 1:
+            raise ValueError(f"features.dims must be a positive integer, got {dims!r}")
+        if not math.isfinite(float(body["threshold"])):
+            raise ValueError("threshold must be a finite number")
+        params = _arrays(body["params"])
+        GATES[body["kind"]].score(params, np.zeros((1, dims)))  # the statistics fit the feature count
+    except (KeyError, TypeError, ValueError, IndexError) as exc:
+        raise FrameGateError(f"{p}: inconsistent frame gate ({exc})") from None
+    return FrameGate(str(p), digest, body, params)
+
+
+def bind_frame_gate(path: str | Path, segmenter: Any) -> FrameGate:
+    """Load the gate at ``path`` for ``segmenter``: refused (its error, one line) when fitted on another network
+    or when the segmenter cannot keep its frame pass's statistics; turns ``segmenter.tap_frames`` on."""
+    gate = load_frame_gate(path)
+    if segmenter is None:
+        raise FrameGateError(f"{gate.path}: no segmentation network to bind the frame gate to")
+    gate.check_network(segmenter)
+    if not hasattr(segmenter, "tap_frames"):
+        raise FrameGateError(f"{gate.path}: the segmenter {type(segmenter).__name__} keeps no frame statistics "
+                             "(Segmenter.tap_frames): a frame gate cannot read it")
+    segmenter.tap_frames = True
+    return gate
+
+
+def judge_frame(gate: FrameGate, segmenter: Any, info: dict[str, Any]) -> str | None:
+    """Score the frame the segmenter just segmented; record it in ``info["frame_gate"]`` and return the
+    ``out_of_domain`` reason when it is above the threshold. ValueError (a fault) when it cannot be scored."""
+    score = gate.score(getattr(segmenter, "last_tap", None))
+    info["frame_gate"] = gate.record(score)
+    return gate.reason(score)
+
+
+__all__ = ["FRAME_GATE_FORMAT", "OUT_OF_DOMAIN", "FrameGate", "bind_frame_gate", "frame_gate_document", "judge_frame",
+           "load_frame_gate"]
