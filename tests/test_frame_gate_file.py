@@ -11,13 +11,12 @@ from pathlib import Path
 import jsonschema
 import numpy as np
 import pytest
-from helpers import TINY_ARCH, scene_ids
+from helpers import TINY_ARCH, scene_ids, write_textured_scenes
 
 from assurance.campaign.perturbations import perturb
 from assurance.scenes.uavid import read_image, write_sample
 from el.config import CoreConfig
 from el.decision import decision_schema
-from el.labels import ids_to_colors
 from el.pipeline import EmergencyLanding, PipelineConfig
 
 W, H, WW = 128, 72, 64
@@ -27,12 +26,7 @@ DOMAIN = {"height_m": [40, 60], "pitch_deg": [36, 54], "image_width": [64, 7680]
 
 
 def _scenes(root, seeds):
-    for i, seed in enumerate(seeds):
-        ids = scene_ids(W, H, seed=seed, road_col=10 + (7 * seed) % 90)
-        rgb = ids_to_colors(ids).astype(np.int16)
-        rgb += np.random.default_rng(seed).integers(-12, 13, rgb.shape, dtype=np.int16)  # texture
-        write_sample(root, "seq00", f"{i:06d}", np.clip(rgb, 0, 255).astype(np.uint8), ids)
-    return root
+    return write_textured_scenes(root, seeds, W, H)
 
 
 @pytest.fixture(scope="module")

@@ -8,21 +8,13 @@ import json
 
 import numpy as np
 import pytest
-from helpers import TINY_ARCH, OracleSegmenter, scene_ids
-
-from assurance.scenes.uavid import write_sample
-from el.labels import ids_to_colors
+from helpers import TINY_ARCH, OracleSegmenter, write_textured_scenes
 
 W, H, WW = 128, 72, 64
 
 
 def _frames(root, seeds):
-    for i, seed in enumerate(seeds):
-        ids = scene_ids(W, H, seed=seed, road_col=10 + (7 * seed) % 90)
-        rgb = ids_to_colors(ids).astype(np.int16)
-        rgb += np.random.default_rng(seed).integers(-12, 13, rgb.shape, dtype=np.int16)  # texture
-        write_sample(root, "seq00", f"{i:06d}", np.clip(rgb, 0, 255).astype(np.uint8), ids)
-    return root
+    return write_textured_scenes(root, seeds, W, H)
 
 
 @pytest.fixture(scope="module")

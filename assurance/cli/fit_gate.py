@@ -34,17 +34,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from assurance.cli.system_options import load_model, model_spec, system_of
+    from assurance.cli.system_options import load_model, model_spec, system_of, train_val_dirs
     from assurance.fitting.frame_gate_fit import fit_gate, parse_scenes
     from assurance.fitting.network_identity import network_record
     from assurance.system import build as system_build
 
     system = system_of(args)
-    args.data = system_build.data_root(system, "train", args.data)
-    args.val = system_build.data_root(system, "val", args.val)
-    for d in (args.data, args.val):
-        if not Path(d).is_dir():
-            raise CommandError(f"{d}: no such folder")
+    train_val_dirs(args, system)
     for flag, text in (("--train-scenes", args.train_scenes), ("--val-scenes", args.val_scenes)):
         try:
             parse_scenes(text)

@@ -28,18 +28,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from assurance.cli.system_options import load_model, model_spec, system_of
+    from assurance.cli.system_options import load_model, model_spec, system_of, train_val_dirs
     from assurance.fitting.network_identity import network_record
     from assurance.fitting.ood_gate import fit_ood, ood_shift_report
-    from assurance.system import build as system_build
     from el.monitors.ood import load_ood
 
     system = system_of(args)
-    args.data = system_build.data_root(system, "train", args.data)
-    args.val = system_build.data_root(system, "val", args.val)
-    for d in (args.data, args.val):
-        if not Path(d).is_dir():
-            raise CommandError(f"{d}: no such folder")
+    train_val_dirs(args, system)
     try:
         segmenter = load_model(args)
         doc = fit_ood(args.data, args.val, segmenter, quantile=args.quantile, images=args.images,
