@@ -8,7 +8,7 @@ its parts, so the modules of cases agree on them.
 from __future__ import annotations
 
 import shutil
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -35,19 +35,26 @@ def use_cli(main: CliMain) -> None:
     _CLI[:] = [main]
 
 
-def prepare(argv: list[object]) -> int:
-    """``uav-el ARGV`` in-process, its output swallowed: a case's preparation (a campaign, a verify), not its
-    outcome. The command line must have been given (``use_cli``)."""
+def run_cli(main: CliMain, argv: Sequence[object]) -> tuple[int, str, str]:
+    """``uav-el ARGV`` in-process through ``main``: (exit code, stdout, stderr)."""
     import contextlib
     import io
 
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = main([str(a) for a in argv])
+        except SystemExit as exc:  # argparse's own refusals
+            code = int(exc.code or 0)
+    return code, out.getvalue(), err.getvalue()
+
+
+def prepare(argv: list[object]) -> int:
+    """``uav-el ARGV`` in-process, its output dropped: a case's preparation (a campaign, a verify), not its
+    outcome. The command line must have been given (``use_cli``)."""
     if not _CLI:
         raise RuntimeError("fault-injection case preparation: no command line given (use_cli)")
-    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
-        try:
-            return int(_CLI[0]([str(a) for a in argv]))
-        except SystemExit as exc:
-            return int(exc.code or 0)
+    return run_cli(_CLI[0], argv)[0]
 
 
 def campaign_argv(ws: Path, out: Path, *extra: str, data: Path | None = None, weights: Path | None = None

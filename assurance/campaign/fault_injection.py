@@ -11,7 +11,6 @@ report shows it as an appendix when ``faults.csv`` lies next to it.
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import io
 import json
@@ -20,7 +19,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from assurance.campaign.fault_bounds import BOUNDS_CASES
-from assurance.campaign.fault_case import Case, CliMain, save_tiny_weights, use_cli
+from assurance.campaign.fault_case import Case, CliMain, run_cli, save_tiny_weights, use_cli
 from assurance.campaign.fault_case import campaign_argv as _campaign
 from assurance.campaign.fault_case import copy_run as _copy_run
 from assurance.campaign.fault_case import first_image as _image
@@ -34,28 +33,17 @@ MCD_SPEC = "lhd+ch+mcd:tau=0.25,n=1000,rho=0.5"
 # ------------------------------------------------------------------------------------------------
 # Workspace
 # ------------------------------------------------------------------------------------------------
-def _cli(main: CliMain, argv: Sequence[str]) -> tuple[int, str, str]:
-    """``uav-el ARGV`` in-process through ``main``: (exit code, stdout, stderr)."""
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        try:
-            code = main([str(a) for a in argv])
-        except SystemExit as exc:  # argparse's own refusals
-            code = int(exc.code or 0)
-    return code, out.getvalue(), err.getvalue()
-
-
 def build_workspace(root: str | Path, *, main: CliMain) -> Path:
     """Two 320x180 synthetic test scenes, tiny weights and a finished 2-image campaign run under ``root``."""
     ws = Path(root)
     steps = (["synth", "--out", ws / "data", "--split", "test", "--scenes", "2", "--size", "320x180",
               "--no-progress"],)
     for argv in steps:
-        code, _, err = _cli(main, argv)
+        code, _, err = run_cli(main, argv)
         if code:
             raise RuntimeError(f"fault-table workspace: uav-el {argv[0]} exited {code}: {err.strip()}")
     save_tiny_weights(ws / "tiny.pt")
-    code, _, err = _cli(main, _campaign(ws, ws / "run"))
+    code, _, err = run_cli(main, _campaign(ws, ws / "run"))
     if code:
         raise RuntimeError(f"fault-table workspace: uav-el campaign exited {code}: {err.strip()}")
     return ws
@@ -225,7 +213,7 @@ def run_case(case: Case, ws: Path, *, main: CliMain) -> dict[str, str]:
     """Inject ``case`` into the workspace ``ws`` and replay it through ``main``; the table row."""
     use_cli(main)
     argv = [str(a) for a in case.make(ws)]
-    code, out, err = _cli(main, argv)
+    code, out, err = run_cli(main, argv)
     text = out + err
     ok = code == case.expected and case.expect_text in text and "Traceback" not in text
     command = "uav-el " + " ".join(a.replace(str(ws), "WS") if str(ws) in a else a for a in argv)

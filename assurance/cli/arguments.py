@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 
 def frame_scales(text: str) -> tuple[float, ...]:
@@ -17,3 +18,20 @@ def frame_scales(text: str) -> tuple[float, ...]:
         return check_frame_scales(values)
     except ValueError as exc:
         raise argparse.ArgumentTypeError(f"{exc} (e.g. 1.25 or 1,1.25)") from None
+
+
+def model_option(p: argparse.ArgumentParser) -> None:
+    """``--weights`` / ``--model``: the segmentation model a command runs (``system_options.load_model`` reads it)."""
+    p.add_argument("--weights", "--model", dest="weights", metavar="MODEL",
+                   help="segmentation model: a .pt weights file with its card, or a registered uav_el.models "
+                        "name (NAME or NAME:ARG); default: the shipped model")
+
+
+def fit_split_options(p: argparse.ArgumentParser) -> None:
+    """``--data``, ``--val`` and ``--out`` of a frame-gate fit (``system_options.train_val_dirs`` resolves the
+    folders), and the model (``model_option``)."""
+    p.add_argument("--data", help="training scenes (e.g. data/train); default: the system file's [data] train")
+    p.add_argument("--val", help="validation scenes for the threshold (e.g. data/val); default: the system file's "
+                                 "[data] val")
+    p.add_argument("--out", required=True, type=Path, help="gate file to write (JSON)")
+    model_option(p)

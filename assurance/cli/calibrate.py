@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from assurance.cli.arguments import model_option
 from assurance.cli.fit_monitor import write_json
 from assurance.errors import CommandError
 
@@ -20,9 +21,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--miss-rate", type=float, default=0.05, help="largest P(accept an unsafe candidate) (0.05)")
     p.add_argument("--confidence", type=float, default=0.95, help="confidence of the bound (0.95)")
     p.add_argument("--out", required=True, type=Path, help="calibration card to write (JSON)")
-    p.add_argument("--weights", "--model", dest="weights", metavar="MODEL",
-                   help="segmentation model: a .pt weights file with its card, or a registered uav_el.models "
-                        "name (NAME or NAME:ARG); default: the shipped model")
+    model_option(p)
     p.add_argument("--images", type=int, help="use the first N scenes of --data")
 
 

@@ -9,6 +9,7 @@ from assurance.campaign.faults import config_fault_line
 from assurance.campaign.presets import load_presets, preset_config
 from assurance.campaign.run import describe, run_campaign
 from assurance.campaign.workers import bounded_jobs
+from assurance.cli.arguments import model_option
 from assurance.errors import CommandError
 from assurance.scenes.poses import POLICIES
 
@@ -31,9 +32,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="frame gate (uav-el fit-gate; 'none': no gate; default: the system file's [monitor] gate, "
                         "else el.pipeline.DEPLOYED_GATE on the shipped network, none at present): every image row "
                         "records its score and threshold; a frame above it is decided as the default action")
-    p.add_argument("--weights", "--model", dest="weights", metavar="MODEL",
-                   help="segmentation model: a .pt weights file with its card, or a registered uav_el.models "
-                        "name (NAME or NAME:ARG); default: the shipped model")
+    model_option(p)
     p.add_argument("--seed", type=int, help="campaign seed (perturbations, MC dropout)")
     p.add_argument("--poses", choices=POLICIES, default=None,
                    help="pose of each frame (default: the system file's [camera] poses, else nominal): nominal (the "

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
+from assurance.cli.arguments import fit_split_options
 from assurance.cli.fit_monitor import write_json
 from assurance.errors import CommandError
 from el.monitors.gates import GATES
@@ -15,13 +15,7 @@ HELP = ("fit the frame gate (a candidate of el.monitors.gates reading the frame 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--kind", choices=sorted(GATES), default="mahalanobis", help="gate (default: %(default)s)")
-    p.add_argument("--data", help="training scenes (e.g. data/train); default: the system file's [data] train")
-    p.add_argument("--val", help="validation scenes for the threshold (e.g. data/val); default: the system file's "
-                                 "[data] val")
-    p.add_argument("--out", required=True, type=Path, help="gate file to write (JSON)")
-    p.add_argument("--weights", "--model", dest="weights", metavar="MODEL",
-                   help="segmentation model: a .pt weights file with its card, or a registered uav_el.models "
-                        "name (NAME or NAME:ARG); default: the shipped model")
+    fit_split_options(p)
     p.add_argument("--quantile", type=float, default=0.995,
                    help="threshold: this quantile of the validation frames' scores (default: %(default)s)")
     p.add_argument("--train-scenes", metavar="FIRST:END", help="training scenes to use (0-based, END excluded; "

@@ -6,6 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
+from assurance.cli.arguments import model_option
 from assurance.errors import CommandError
 from assurance.files import atomic_write_bytes
 
@@ -18,9 +19,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                                   "[data] train")
     p.add_argument("--val", help="held-out scenes for C and the threshold (default: every 5th scene of --data)")
     p.add_argument("--out", required=True, type=Path, help="model file to write (e.g. el/monitors/data/learned.json)")
-    p.add_argument("--weights", "--model", dest="weights", metavar="MODEL",
-                   help="segmentation model: a .pt weights file with its card, or a registered uav_el.models "
-                        "name (NAME or NAME:ARG); default: the shipped model")
+    model_option(p)
     p.add_argument("--recall", type=float, default=0.95,
                    help="threshold: the largest with this recall of unsafe held-out candidates (0.95)")
     p.add_argument("--mcd", type=int, default=0, metavar="N",
