@@ -1,4 +1,4 @@
-"""Argument types shared by several sub-commands (argparse ``type=`` callables)."""
+"""Argument types and options shared by several sub-commands (argparse ``type=`` callables, option sets)."""
 
 from __future__ import annotations
 
