@@ -46,10 +46,11 @@ DEPLOYED_MONITOR = "learned:walk=score,threshold=0.8563253044730293"
 candidate monitor (``el/monitors/data/learned.json``), candidates walked by its score (``el.walk``),
 at the threshold of its calibration card :data:`DEPLOYED_CALIBRATION` (a test checks they agree)."""
 DEPLOYED_CALIBRATION = Path(__file__).resolve().parent / "monitors" / "data" / "calibration.json"
-DEPLOYED_GATE: Path | None = None
-"""The frame gate the command line deploys when it runs the shipped network (None: none). None: the shipped
-``monitors/data/frame_gate.json`` meets the policy on 1024x576 validation frames but flags most 3840x2160 frames,
-the release size (README, "Frame gates"); it is shipped off (``--gate`` deploys it)."""
+DEPLOYED_GATE: Path | None = Path(__file__).resolve().parent / "monitors" / "data" / "frame_gate.json"
+"""The frame gate the command line deploys when it runs the shipped network (None: none): a Mahalanobis gate on the
+frame pass's trunk statistics, fitted and thresholded on 3840x2160 training and validation frames under the
+in-domain perturbations (README, "Frame gates"). ``PipelineConfig.gate`` is what the flight code deploys; the
+command line sets it to this unless ``--gate``/``[monitor] gate`` say otherwise."""
 MIN_FRAME_SIZE = 16  # px: the smallest frame side the segmenter takes (el.segmentation.inference.MIN_SIZE)
 logger = logging.getLogger(__name__)  # faults with their tracebacks; the decision keeps only the reason
 

@@ -151,3 +151,14 @@ def lenient_registry(folder: Path) -> Path:
     path = Path(folder) / "lenient-registry.yaml"
     path.write_text(text[:start] + f"  size_limited: [{ids}]" + text[end:], encoding="utf-8")
     return path
+
+
+def bench_system(folder: Path) -> Path:
+    """``folder/uav-el.toml``: the embedded default but for a declared domain that admits the tests' small frames
+    (64-7680 x 36-4320 px; the embedded default declares only its camera's 4K frames). A command run in
+    ``folder`` (``monkeypatch.chdir``) or given ``--system`` with it decides those frames instead of refusing them
+    as ``outside_odd``."""
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / "uav-el.toml"
+    path.write_text('format = "uav-el-system/1"\n\n[odd]\nimage_width = [64, 7680]\nimage_height = [36, 4320]\n')
+    return path

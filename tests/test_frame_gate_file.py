@@ -11,7 +11,7 @@ from pathlib import Path
 import jsonschema
 import numpy as np
 import pytest
-from helpers import TINY_ARCH, scene_ids, write_textured_scenes
+from helpers import TINY_ARCH, bench_system, scene_ids, write_textured_scenes
 
 from assurance.campaign.perturbations import perturb
 from assurance.scenes.uavid import read_image, write_sample
@@ -163,6 +163,7 @@ def test_cli_fit_gate_and_land_with_it(setup, tmp_path, capsys, monkeypatch):
     from assurance.cli import main
 
     monkeypatch.setattr(seg_module.Segmenter, "load", classmethod(lambda cls, *a, **k: setup["seg"]))
+    monkeypatch.chdir(bench_system(tmp_path / "bench").parent)  # the test frames are smaller than the default's 4K
     out = tmp_path / "g.json"
     assert main(["fit-gate", "--data", str(setup["root"] / "train"), "--val", str(setup["val"]), "--out", str(out),
                  "--train-scenes", "0:10", "--val-scenes", "0:4", "--no-progress", "--working-width", str(WW)]) == 0
@@ -242,18 +243,19 @@ def test_which_gate_a_command_deploys(tmp_path, monkeypatch):
     assert frame_gate_path(args()) is None
 
 
-def test_the_shipped_gate_is_bound_to_the_shipped_network_and_shipped_off():
+def test_the_shipped_gate_is_bound_to_the_shipped_network_and_deployed():
     import el.pipeline
     from el.monitors.frame_gate import load_frame_gate
 
     shipped = Path(el.pipeline.__file__).parent / "monitors" / "data" / "frame_gate.json"
-    assert el.pipeline.DEPLOYED_GATE is None  # fitted on 1024x576 renders, it flags most 3840x2160 frames (README)
+    assert el.pipeline.DEPLOYED_GATE == shipped.resolve()  # fitted on 3840x2160 frames, the camera's (README)
     gate = load_frame_gate(shipped)
     card = json.loads((shipped.parents[2] / "segmentation" / "weights" / "model.json").read_text())
     assert gate.network_sha256 == card["weights_sha256"] and gate.kind == "mahalanobis"
     b = gate.body  # chosen on validation only: fitted on train, thresholded on validation scenes 0-34
     assert b["training"]["path"].endswith("train") and b["validation"]["path"].endswith("val")
-    assert b["validation"]["scenes"] == [0, 35] and b["quantile"] == 0.995 and gate.dims == 448
+    assert b["validation"]["scenes"] == [0, 35] and b["quantile"] == 0.997 and gate.dims == 448
+    assert b["training"]["frames"] == 2200 and b["training"]["path"].endswith("gate4k/train")
     assert shipped.stat().st_size < 1_000_000
 
 

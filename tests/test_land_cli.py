@@ -6,6 +6,7 @@ import cv2
 import jsonschema
 import numpy as np
 import pytest
+from helpers import bench_system
 
 from assurance import cli
 from assurance.evidence.overlay import STATUS_COLOURS, draw_decision
@@ -17,9 +18,11 @@ W, H = 256, 144
 
 
 @pytest.fixture
-def main(monkeypatch):
-    """``uav-el`` with only the ``land`` command, so these tests do not depend on the others."""
+def main(monkeypatch, tmp_path):
+    """``uav-el`` with only the ``land`` command, so these tests do not depend on the others, run where a system
+    file admits their small frames (the embedded default declares only 4K frames)."""
     monkeypatch.setattr(cli, "COMMANDS", {"land": "land"})
+    monkeypatch.chdir(bench_system(tmp_path / "bench").parent)
     return cli.main
 
 

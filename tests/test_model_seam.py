@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from helpers import install_distribution, scene_ids, scene_image
+from helpers import bench_system, install_distribution, scene_ids, scene_image
 
 from assurance.scenes.uavid import write_image
 from el.config import CoreConfig
@@ -47,9 +47,10 @@ def test_a_plugin_model_is_built_by_name_and_flies(colour_installed):
     assert d.action == "default" and d.reason.startswith("fault: monitor: ValueError") and "MC dropout" in d.reason
 
 
-def test_land_takes_a_plugin_model_by_name(colour_installed, tmp_path, capsys):
+def test_land_takes_a_plugin_model_by_name(colour_installed, tmp_path, capsys, monkeypatch):
     from assurance.cli import main
 
+    monkeypatch.chdir(bench_system(tmp_path / "bench").parent)  # the test frame is smaller than the default's 4K
     image = tmp_path / "frame.png"
     write_image(image, scene_image(scene_ids()))
     out = tmp_path / "d.json"

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import OracleSegmenter, install_distribution, scene_ids
+from helpers import OracleSegmenter, bench_system, install_distribution, scene_ids
 
 from assurance.scenes.uavid import write_image, write_sample
 from el.labels import ids_to_colors
@@ -89,6 +89,7 @@ def test_land_and_campaign_run_the_plugin_monitor_by_name(toy_installed, tmp_pat
     write_image(image, ids_to_colors(ids))
     out = tmp_path / "d.json"
     monkeypatch.setattr(cli, "COMMANDS", {"land": "land"})
+    monkeypatch.chdir(bench_system(tmp_path / "bench").parent)  # the test frame is smaller than the default's 4K
     code = cli.main(["land", str(image), "--weights", str(weights), "--monitor", "toy:q=0.9", "--all",
                      "--budget", "1000", "--working-width", "1024", "--json", str(out)])
     assert code == 0, capsys.readouterr().err

@@ -8,7 +8,7 @@ import json
 
 import pytest
 from conftest import TINY_WW
-from helpers import OracleSegmenter, scene_ids, scene_image
+from helpers import OracleSegmenter, bench_system, scene_ids, scene_image
 
 from assurance.campaign.run import CampaignConfig, plan, run_task
 from assurance.requirements.domain_checks import check_outside_domain
@@ -63,8 +63,10 @@ def test_the_decision_schema_takes_the_reason():
 def test_the_embedded_default_contains_the_release_and_test_frames():
     domain = system_odd(default_system())
     assert domain.outside(Pose(height_m=50.0, pitch_deg=45.0), (3840, 2160)) is None
-    for size in ((256, 144), (480, 270), (1024, 576), (320, 180), (96, 54), (192, 108)):
-        assert domain.outside(Pose(), size) is None, size
+    assert domain.outside(Pose(), (4096, 2160)) is None  # UAVid's other frame size
+    for size in ((256, 144), (1024, 576), (1920, 1080), (7680, 4320)):  # no evidence at another size
+        assert domain.outside(Pose(), size).startswith("outside_odd: image_width"), size
+    assert domain.outside(Pose(), (3840, 2880)).startswith("outside_odd: image_height")
     assert domain.perturbations == {p: 3 for p in ("brightness", "fog", "motion_blur", "pixel_trap",
                                                    "shifted_pixels")}
     assert domain.covers("fog", 3) and not domain.covers("fog", 4) and domain.covers("none", 1)
@@ -80,6 +82,7 @@ def test_the_system_file_declares_the_domain(tmp_path):
     path.write_text("[camera]\nheight_m = 80.0\nimage_width = 4000\nimage_height = 3000\n")
     moved = system_odd(load_system(path))  # a moved camera without [odd]: its nominal pose +-20%, its aspect +-5%
     assert moved.height_m == (64.0, 96.0) and moved.aspect[0] < 4 / 3 < moved.aspect[1]
+    assert moved.image_width == (4000, 4000) and moved.image_height == (3000, 3000)  # and exactly its frame size
     for text, needle in (("[odd]\nheight_m = [10.0]\n", "odd.height_m"),
                          ("[odd]\nperturbations = { rain = 3 }\n", "unknown perturbation(s) rain"),
                          ("[odd]\nperturbations = { fog = 7 }\n", "odd.perturbations.fog"),
@@ -137,13 +140,16 @@ def test_uav_el_land_outside_the_domain_is_a_decision_exit_0(tmp_path, capsys):
 
 
 @pytest.mark.requirements("EL-R17")
-def test_uav_el_land_labels_checks_the_declared_domain_too(tmp_path, capsys):
+def test_uav_el_land_labels_checks_the_declared_domain_too(tmp_path, capsys, monkeypatch):
     from assurance.cli import main
     from assurance.scenes.uavid import write_image
     from el.labels import ids_to_colors
 
     labels, out = tmp_path / "labels.png", tmp_path / "d.json"
     write_image(labels, ids_to_colors(scene_ids()))
+    assert main(["land", "--labels", str(labels), "--json", str(out)]) == 0  # the embedded default: 4K frames only
+    assert json.loads(out.read_text())["reason"] == "outside_odd: image_width 256 px not in [3840, 4096] px"
+    monkeypatch.chdir(bench_system(tmp_path / "bench").parent)  # a system that admits the small test frame
     assert main(["land", "--labels", str(labels), "--pitch", "70", "--json", str(out)]) == 0
     d = json.loads(out.read_text())
     assert d["action"] == "default" and d["reason"] == "outside_odd: pitch 70 deg not in [36, 54] deg"

@@ -181,7 +181,8 @@ def test_land_on_semantic_drone_labels_keeps_clear_of_unlabelled_ground(land, tm
     ids[70:74, :] = sdd.ids["paved-area"]
     labels = tmp_path / "sdd.png"
     write_labels(labels, ids, sdd)
-    system = write(tmp_path, '[labels]\npreset = "semantic_drone"\n[camera]\nheight_m = 20\npitch_deg = 80\n')
+    system = write(tmp_path, '[labels]\npreset = "semantic_drone"\n[camera]\nheight_m = 20\npitch_deg = 80\n'
+                             '[odd]\nimage_width = [64, 7680]\nimage_height = [36, 4320]\n')  # a small test frame
     out = tmp_path / "d.json"
     assert land(["land", "--labels", str(labels), "--system", str(system), "--json", str(out)]) == 0
     decision = json.loads(out.read_text())

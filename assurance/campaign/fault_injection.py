@@ -1,6 +1,6 @@
 """Fault injection: issue 19's hostile-user cases and a few bad inputs, replayed through the real command line.
 
-``build_workspace`` makes a scratch workspace (two tiny synthetic scenes, a tiny CNN's weights, a 2-image
+``build_workspace`` makes a scratch workspace (two 3840x2160 synthetic scenes, a tiny CNN's weights, a 2-image
 campaign run); ``run_cases`` injects each fault into a copy of what it needs and runs ``uav-el`` in-process
 (``assurance.cli.main``, passed in by the caller: the command line imports this module through ``uav-el
 fault-table``, so importing it back would be a cycle), recording the exit code and the first line that says
@@ -34,9 +34,10 @@ MCD_SPEC = "lhd+ch+mcd:tau=0.25,n=1000,rho=0.5"
 # Workspace
 # ------------------------------------------------------------------------------------------------
 def build_workspace(root: str | Path, *, main: CliMain) -> Path:
-    """Two 320x180 synthetic test scenes, tiny weights and a finished 2-image campaign run under ``root``."""
+    """Two 3840x2160 synthetic test scenes (the embedded default's declared frame size, so that the cases exercise
+    the decisions, not the operating-domain check), tiny weights and a finished 2-image campaign run under ``root``."""
     ws = Path(root)
-    steps = (["synth", "--out", ws / "data", "--split", "test", "--scenes", "2", "--size", "320x180",
+    steps = (["synth", "--out", ws / "data", "--split", "test", "--scenes", "2", "--size", "3840x2160",
               "--no-progress"],)
     for argv in steps:
         code, _, err = run_cli(main, argv)

@@ -30,7 +30,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--images", type=int, help="use the first N images of --data")
     p.add_argument("--gate", metavar="GATE.json",
                    help="frame gate (uav-el fit-gate; 'none': no gate; default: the system file's [monitor] gate, "
-                        "else el.pipeline.DEPLOYED_GATE on the shipped network, none at present): every image row "
+                        "else el.pipeline.DEPLOYED_GATE on the shipped network): every image row "
                         "records its score and threshold; a frame above it is decided as the default action")
     model_option(p)
     p.add_argument("--seed", type=int, help="campaign seed (perturbations, MC dropout)")

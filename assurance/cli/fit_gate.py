@@ -16,8 +16,9 @@ HELP = ("fit the frame gate (a candidate of el.monitors.gates reading the frame 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--kind", choices=sorted(GATES), default="mahalanobis", help="gate (default: %(default)s)")
     fit_split_options(p)
-    p.add_argument("--quantile", type=float, default=0.995,
-                   help="threshold: this quantile of the validation frames' scores (default: %(default)s)")
+    p.add_argument("--quantile", type=float,
+                   help="threshold: this quantile of the validation frames' scores (default: 0.997, the shipped "
+                        "gate's, assurance.fitting.frame_gate_fit.DEFAULT_QUANTILE)")
     p.add_argument("--train-scenes", metavar="FIRST:END", help="training scenes to use (0-based, END excluded; "
                                                                 "default: all)")
     p.add_argument("--val-scenes", metavar="FIRST:END",
@@ -29,7 +30,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from assurance.cli.system_options import load_model, model_spec, system_of, train_val_dirs
-    from assurance.fitting.frame_gate_fit import fit_gate, parse_scenes
+    from assurance.fitting.frame_gate_fit import DEFAULT_QUANTILE, fit_gate, parse_scenes
     from assurance.fitting.network_identity import network_record
     from assurance.system import build as system_build
 
@@ -43,7 +44,8 @@ def run(args: argparse.Namespace) -> int:
     width = args.working_width or system_build.core_config(system).working_width
     try:
         segmenter = load_model(args, working_width=width)
-        doc = fit_gate(args.data, args.val, segmenter, kind=args.kind, quantile=args.quantile,
+        quantile = DEFAULT_QUANTILE if args.quantile is None else args.quantile
+        doc = fit_gate(args.data, args.val, segmenter, kind=args.kind, quantile=quantile,
                        train_scenes=args.train_scenes, val_scenes=args.val_scenes,
                        weights=network_record(segmenter, model_spec(args)),
                        progress=not (args.no_progress or getattr(args, "quiet", False)))

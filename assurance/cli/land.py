@@ -74,7 +74,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "default action")
     parser.add_argument("--gate", type=Path, metavar="GATE.json",
                         help="frame gate (uav-el fit-gate; 'none': no gate; default: the system file's [monitor] "
-                             "gate, else el.pipeline.DEPLOYED_GATE on the shipped network, none at present): a frame "
+                             "gate, else el.pipeline.DEPLOYED_GATE on the shipped network): a frame "
                              "above its threshold takes the default action (out_of_domain); its score is in the "
                              "decision JSON")
     parser.add_argument("--weights", "--model", dest="weights", metavar="MODEL",

@@ -5,8 +5,10 @@ Sets (the test split is never read): ``train`` (every training scene clean, unde
 severity drawn from 1-3, seeded per scene, and under each at severity 3), ``val_sev3`` (every validation scene
 clean and under each perturbation at severity 3), ``val_sev45`` (the last validation scenes under each
 perturbation at severities 4 and 5), the ``ood_*`` folders of the data root (the synthetic city at poses outside the
-declared domain, made with ``uav-el synth --heights/--pitches``), noise, constant frames and the scikit-image sample
-photographs.
+declared domain, made with ``uav-el synth --heights/--pitches``, or at another frame size), noise, constant frames,
+the scikit-image sample photographs, another procedural world (natural terrain: sea, coast, forest, rock; no city)
+and the city at night. The generated sets are made at the study's frame size, the deployed camera's (3840x2160):
+the gate must judge frames as the camera delivers them, area-downscaled to the network's working width.
 """
 
 from __future__ import annotations
@@ -21,16 +23,17 @@ import numpy as np
 
 from assurance.campaign.perturbations import perturb
 from assurance.scenes.uavid import iter_samples, read_image
+from assurance.system.build import DEFAULT_IMAGE_SIZE
 
 IN_DOMAIN = ("none", "brightness", "fog", "motion_blur", "shifted_pixels", "pixel_trap")
-SIZE = (1024, 576)
+SIZE = DEFAULT_IMAGE_SIZE  # the deployed camera's frame: the release and test scenes' size
 PHOTOS = ("astronaut", "chelsea", "coffee", "rocket", "hubble_deep_field", "retina", "brick", "grass", "gravel",
           "camera")  # scikit-image 0.26 package data: public domain or CC0 (each function's docstring says)
 SEV45_SCENES = 20
 
 
-def fit16x9(rgb: np.ndarray) -> np.ndarray:
-    """Centre-crop to 16:9 and resize to ``SIZE``: the gate judges content, not the frame's shape."""
+def fit16x9(rgb: np.ndarray, size: tuple[int, int] = SIZE) -> np.ndarray:
+    """Centre-crop to 16:9 and resize to ``size``: the gate judges content, not the frame's shape."""
     h, w = rgb.shape[:2]
     if w / h > 16 / 9:
         c = round(h * 16 / 9)
@@ -38,7 +41,8 @@ def fit16x9(rgb: np.ndarray) -> np.ndarray:
     else:
         c = round(w * 9 / 16)
         rgb = rgb[(h - c) // 2:(h - c) // 2 + c]
-    return cv2.resize(np.ascontiguousarray(rgb), SIZE, interpolation=cv2.INTER_AREA)
+    small = rgb.shape[1] < size[0]
+    return cv2.resize(np.ascontiguousarray(rgb), size, interpolation=cv2.INTER_CUBIC if small else cv2.INTER_AREA)
 
 
 def scene_images(data: Path, first: int = 0, count: int | None = None) -> list[Path]:
@@ -75,10 +79,10 @@ def validation_frames(paths: list[tuple[int, Path]], severities: tuple[int, ...]
                 yield i, f"{name}:{0 if name == 'none' else s}", perturbed(rgb, name, s, [seed, i, s])
 
 
-def synthetic_ood(seed: int = 0, n: int = 10) -> dict[str, list[np.ndarray]]:
+def synthetic_ood(seed: int = 0, n: int = 10, size: tuple[int, int] = SIZE) -> dict[str, list[np.ndarray]]:
     """Uniform noise, Gaussian noise around grey, and constant frames (black, white, grey, colours)."""
     rng = np.random.default_rng(seed)
-    w, h = SIZE
+    w, h = size
     noise = [rng.integers(0, 256, (h, w, 3), dtype=np.uint8) for _ in range(n // 2)]
     noise += [np.clip(rng.normal(128, 40, (h, w, 3)), 0, 255).astype(np.uint8) for _ in range(n - n // 2)]
     levels = np.linspace(0, 255, n)
@@ -87,49 +91,123 @@ def synthetic_ood(seed: int = 0, n: int = 10) -> dict[str, list[np.ndarray]]:
     return {"ood_noise": noise, "ood_constant": const}
 
 
-def photos() -> list[np.ndarray]:
+def photos(size: tuple[int, int] = SIZE) -> list[np.ndarray]:
     import skimage.data
 
     out = []
     for name in PHOTOS:
         img = getattr(skimage.data, name)()
         img = np.repeat(img[..., None], 3, axis=2) if img.ndim == 2 else img[..., :3]
-        out.append(fit16x9(img.astype(np.uint8)))
+        out.append(fit16x9(img.astype(np.uint8), size))
     return out
 
 
-def frame_sets(root: Path, *, train_n: int | None = None, val_n: int | None = None
-               ) -> Iterator[tuple[str, int, str, np.ndarray]]:
-    """(set, scene, what, frame) for every frame of the study, in a fixed order."""
-    for i, what, rgb in training_frames(scene_images(root / "train", 0, train_n)):
-        yield "train", i, what, rgb
+WORLD_PALETTE = np.array([[18, 45, 92], [40, 96, 140], [205, 190, 140], [96, 140, 60], [34, 80, 34],
+                          [120, 110, 100], [235, 235, 240]], np.float32)  # deep sea .. snow
+WORLD_LEVELS = np.array([0.0, 0.35, 0.42, 0.47, 0.6, 0.75, 0.88, 1.0], np.float32)
+
+
+def other_world(seed: int = 0, n: int = 10, size: tuple[int, int] = SIZE) -> list[np.ndarray]:
+    """Another procedural world: natural terrain (sea, shore, fields, forest, rock, snow) from fractal noise,
+    hill-shaded, with fine texture; no street, car or building. The network never saw such a world."""
+    rng = np.random.default_rng([seed, 77])
+    w, h = size
+    out = []
+    for _ in range(n):
+        height = np.zeros((h // 4, w // 4), np.float32)
+        for octave in range(6):  # fractal noise: coarse grids upsampled, halving the amplitude per octave
+            cells = 3 * 2 ** octave
+            grid = rng.random((max(2, cells * h // w), cells)).astype(np.float32)
+            height += cv2.resize(grid, (w // 4, h // 4), interpolation=cv2.INTER_CUBIC) / 2 ** octave
+        height = (height - height.min()) / max(float(np.ptp(height)), 1e-6)
+        band = np.clip(np.searchsorted(WORLD_LEVELS, height, side="right") - 1, 0, len(WORLD_PALETTE) - 1)
+        rgb = WORLD_PALETTE[band]
+        gy, gx = np.gradient(height * 40.0)
+        shade = np.clip(1.0 - 0.6 * (gx + gy), 0.5, 1.4)[..., None]  # light from the top left
+        rgb = cv2.resize(rgb * shade, (w, h), interpolation=cv2.INTER_LINEAR)
+        rgb += rng.normal(0.0, 8.0, (h, w, 1)).astype(np.float32)  # fine texture (grass, waves, leaves)
+        out.append(np.clip(rgb, 0, 255).astype(np.uint8))
+    return out
+
+
+def night(paths: list[Path]) -> list[np.ndarray]:
+    """The city at night: each frame darkened to about 8% with a blue cast, sensor noise and a few street lights."""
+    out = []
+    for i, path in enumerate(paths):
+        rng = np.random.default_rng([i, 88])
+        rgb = read_image(path).astype(np.float32) * np.array([0.06, 0.07, 0.10], np.float32)
+        h, w = rgb.shape[:2]
+        for x, y in zip(rng.integers(0, w, 40), rng.integers(0, h, 40), strict=True):
+            cv2.circle(rgb, (int(x), int(y)), int(rng.integers(6, 30)), (255, 220, 150), -1)
+        rgb += rng.normal(0.0, 6.0, rgb.shape).astype(np.float32)
+        out.append(np.clip(rgb, 0, 255).astype(np.uint8))
+    return out
+
+
+NIGHT_SCENES = 20
+
+
+def frame_sets(root: Path, *, train_n: int | None = None, val_n: int | None = None, size: tuple[int, int] = SIZE,
+               skip: frozenset[str] = frozenset()) -> Iterator[tuple[str, int, str, np.ndarray]]:
+    """(set, scene, what, frame) for every frame of the study, in a fixed order; the generated sets at ``size``;
+    the sets named in ``skip`` are not made."""
+    if "train" not in skip:
+        for i, what, rgb in training_frames(scene_images(root / "train", 0, train_n)):
+            yield "train", i, what, rgb
     val = list(enumerate(scene_images(root / "val", 0, val_n)))
-    for i, what, rgb in validation_frames(val, (3,)):
-        yield "val_sev3", i, what, rgb
-    for i, what, rgb in validation_frames(val[-SEV45_SCENES:], (4, 5), seed=4):
-        yield "val_sev45", i, what, rgb
+    if "val_sev3" not in skip:
+        for i, what, rgb in validation_frames(val, (3,)):
+            yield "val_sev3", i, what, rgb
+    if "val_sev45" not in skip:
+        for i, what, rgb in validation_frames(val[-SEV45_SCENES:], (4, 5), seed=4):
+            yield "val_sev45", i, what, rgb
     for folder in sorted(root.glob("ood_*")):
-        for i, path in enumerate(scene_images(folder)):
-            yield folder.name, i, folder.name, read_image(path)
-    for name, frames in {**synthetic_ood(), "ood_photos": photos()}.items():
-        for i, rgb in enumerate(frames):
-            yield name, i, name, rgb
+        if folder.name not in skip:
+            for i, path in enumerate(scene_images(folder)):
+                yield folder.name, i, folder.name, read_image(path)
+    generated = {"ood_noise": lambda: synthetic_ood(size=size)["ood_noise"],
+                 "ood_constant": lambda: synthetic_ood(size=size)["ood_constant"], "ood_photos": lambda: photos(size),
+                 "ood_world": lambda: other_world(size=size),
+                 "ood_night": lambda: night([p for _, p in val[:NIGHT_SCENES]])}
+    for name, make in generated.items():
+        if name not in skip:
+            for i, rgb in enumerate(make()):
+                yield name, i, name, rgb
+
+
+KEYS = ("set", "scene", "what", "pooled", "energy", "msp")
 
 
 def collect(root: Path, segmenter: Any, out: Path, **limits: Any) -> Path:
-    """Tap every frame of :func:`frame_sets` with ``segmenter``'s frame pass; write ``out`` (npz)."""
+    """Tap every frame of :func:`frame_sets` with ``segmenter``'s frame pass; write ``out`` (npz). The cache is
+    rewritten (atomically) as each set is finished, and a rerun taps only the sets it lacks."""
+    import os
+
+    import skimage.data  # noqa: F401  (the photographs' package: fail before tapping, not after an hour)
+
     from assurance.progress import progress
 
     segmenter.tap_frames = True
-    rows: dict[str, list[Any]] = {"set": [], "scene": [], "what": [], "pooled": [], "energy": [], "msp": []}
-    for name, i, what, rgb in progress(frame_sets(root, **limits), total=None, desc="frames"):
+    old = load(out) if out.is_file() else {k: np.asarray([]) for k in KEYS}
+    rows: dict[str, list[Any]] = {k: list(old[k]) for k in KEYS}
+    done = frozenset(str(s) for s in rows["set"])
+    out.parent.mkdir(parents=True, exist_ok=True)
+
+    def save() -> None:
+        tmp = out.with_name(out.stem + ".part.npz")
+        np.savez_compressed(tmp, **{k: np.asarray(v) for k, v in rows.items()})
+        os.replace(tmp, out)
+
+    current = None
+    for name, i, what, rgb in progress(frame_sets(root, skip=done, **limits), total=None, desc="frames"):
+        if current is not None and name != current:
+            save()
+        current = name
         segmenter.predict_frame(rgb)
         tap = segmenter.last_tap
-        for key, value in (("set", name), ("scene", i), ("what", what), ("pooled", tap.pooled),
-                           ("energy", tap.energy), ("msp", tap.msp)):
+        for key, value in zip(KEYS, (name, i, what, tap.pooled, tap.energy, tap.msp), strict=True):
             rows[key].append(value)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    np.savez_compressed(out, **{k: np.asarray(v) for k, v in rows.items()})
+    save()
     return out
 
 
@@ -142,7 +220,7 @@ def main(argv: list[str] | None = None) -> int:
     from el.segmentation.factory import load_model
 
     root, out = (Path(a) for a in (argv or sys.argv[1:])[:2])
-    collect(root, load_model(None, working_width=SIZE[0]), out)
+    collect(root, load_model(None), out)
     print(out)
     return 0
 

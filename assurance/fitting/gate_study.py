@@ -7,7 +7,8 @@ declared domain the system's figure is given too: the declared domain (telemetry
 frame. The test split is never read. Writes ``frame_gates.{csv,md,png,json}``.
 
 Run: ``python -m assurance.fitting.gate_study DATA_ROOT OUT`` (DATA_ROOT holds ``train``, ``val`` and the
-``ood_*`` synthetic sets made with ``uav-el synth --heights/--pitches``; OUT/taps.npz is reused when present).
+``ood_*`` synthetic sets made with ``uav-el synth --heights/--pitches`` or ``--size``; OUT/taps.npz is written as
+each set is done, and a rerun taps only the sets it lacks).
 """
 
 from __future__ import annotations
@@ -19,19 +20,20 @@ from typing import Any
 
 import numpy as np
 
-from assurance.fitting.gate_frames import SIZE, collect, load, scene_images
+from assurance.fitting.gate_frames import collect, load, scene_images
 from el.monitors.gates import GATES
 
-QUANTILE = 0.995
+QUANTILE = 0.997  # the smallest of QUANTILES meeting the policy in both folds (quantile_choice)
+QUANTILES = (0.99, 0.995, 0.997, 0.998, 0.999)
 SPLIT = 35  # validation scenes 0-34 | 35-69
 DEPLOYED = "mahalanobis"
 FOLDS = {"A->B": (lambda sc: sc < SPLIT, lambda sc: sc >= SPLIT),
          "B->A": (lambda sc: sc >= SPLIT, lambda sc: sc < SPLIT)}
 
 
-def pose_refused(root: Path, name: str, count: int) -> np.ndarray:
+def domain_refused(root: Path, name: str, count: int) -> np.ndarray:
     """Per frame of the synthetic set ``name``: whether the embedded default's declared domain refuses its pose
-    (from the scene's meta, as its telemetry would give it)."""
+    (from the scene's meta, as its telemetry would give it) or its size."""
     from assurance.system import default_system
     from assurance.system.build import odd
     from el.camera import Pose
@@ -41,7 +43,7 @@ def pose_refused(root: Path, name: str, count: int) -> np.ndarray:
     for path in scene_images(root / name)[:count]:
         meta = json.loads((path.parent.parent / "meta" / f"{path.stem}.json").read_text())
         pose = Pose(height_m=meta["pose"]["height_m"], pitch_deg=meta["pose"]["pitch_deg"])
-        out.append(domain.outside(pose, SIZE) is not None)
+        out.append(domain.outside(pose, tuple(meta["image_size"])) is not None)
     return np.array(out, bool)
 
 
@@ -64,12 +66,15 @@ def _rows(cache: dict[str, np.ndarray], scores: np.ndarray, threshold: float, he
     return rows
 
 
-def measure(cache: dict[str, np.ndarray], refused: dict[str, np.ndarray], quantile: float = QUANTILE
-            ) -> dict[str, Any]:
-    """Per gate: fit on train, per fold threshold at ``quantile`` of one validation half, rates on the other."""
+def measure(cache: dict[str, np.ndarray], refused: dict[str, np.ndarray], quantile: float = QUANTILE,
+            gates: tuple[str, ...] | None = None) -> dict[str, Any]:
+    """Per gate (all, or ``gates``): fit on train, per fold threshold at ``quantile`` of one validation half, rates
+    on the other."""
     result: dict[str, Any] = {"quantile": quantile, "split": SPLIT, "gates": {}}
     val = cache["set"] == "val_sev3"
     for name, gate in GATES.items():
+        if gates is not None and name not in gates:
+            continue
         x = cache["energy"][:, None] if not gate.NEEDS_TRUNK else cache["pooled"]
         params = gate.fit(x[cache["set"] == "train"])
         scores = gate.score(params, x)
@@ -80,6 +85,23 @@ def measure(cache: dict[str, np.ndarray], refused: dict[str, np.ndarray], quanti
                            "rows": _rows(cache, scores, threshold, held_half(cache["scene"]), refused)}
         result["gates"][name] = {"folds": folds, "training_frames": int((cache["set"] == "train").sum())}
     return result
+
+
+def quantile_choice(cache: dict[str, np.ndarray], refused: dict[str, np.ndarray]) -> str:
+    """Markdown: the deployed gate's policy verdict (system figure) per fold at each of ``QUANTILES``, with the
+    worst in-domain rate and the share of the 90-120 m frames the gate alone flags; the threshold's quantile is the
+    smallest that meets the policy in both folds."""
+    lines = ["| quantile | fold | threshold | worst in-domain (severity 3) | ood_high, gate alone | policy (system) |",
+             "|---|---|---|---|---|---|"]
+    for q in QUANTILES:
+        for fold, folded in measure(cache, refused, q, gates=(DEPLOYED,))["gates"][DEPLOYED]["folds"].items():
+            rows = folded["rows"]
+            worst = max(r["rate"] for r in rows if r["set"] == "val_sev3")
+            high = next((f"{r['rate']:.0%}" for r in rows if r["set"] == "ood_high"), "-")
+            ok, fails = verdict(rows, system=True)
+            lines.append(f"| {q:g} | {fold} | {folded['threshold']:.4g} | {worst:.1%} | {high} | "
+                         f"{'meets' if ok else 'fails: ' + ', '.join(fails)} |")
+    return "\n".join(lines) + "\n"
 
 
 def verdict(rows: list[dict[str, Any]], system: bool = False) -> tuple[bool, list[str]]:
@@ -166,13 +188,13 @@ def main(argv: list[str] | None = None) -> int:
 
     root, out = (Path(a) for a in (argv or sys.argv[1:])[:2])
     cache_path = out / "taps.npz"
-    if not cache_path.is_file():
-        collect(root, load_model(None, working_width=SIZE[0]), cache_path)
+    collect(root, load_model(None), cache_path)  # resumes: taps only the sets the cache lacks
     cache = load(cache_path)
-    refused = {name: pose_refused(root, name, int((cache["set"] == name).sum()))
+    refused = {name: domain_refused(root, name, int((cache["set"] == name).sum()))
                for name in dict.fromkeys(cache["set"]) if (root / name).is_dir() and name.startswith("ood_")}
     write(out, measure(cache, refused))
-    print((out / "frame_gates.md").read_text())
+    (out / "quantiles.md").write_text(quantile_choice(cache, refused))
+    print((out / "frame_gates.md").read_text() + "\n" + (out / "quantiles.md").read_text())
     return 0
 
 

@@ -123,16 +123,20 @@ ODD_POSE_ERROR = 0.2  # a moved camera without its own [odd] range: its nominal 
 def odd(system: SystemFile) -> OperatingDomain:
     """The declared operating domain (``[odd]``). A file that moves the nominal pose (``camera.height_m`` or
     ``pitch_deg``) without declaring that range gets its nominal value +-20% (the registry's pose error), and
-    one that sets the camera's image size without an aspect range gets that aspect +-5%: the embedded default's
-    ranges describe the shipped camera, not another."""
+    one that sets the camera's image size without declaring the image ranges gets that size exactly and that
+    aspect +-5%: the embedded default's ranges describe the shipped camera, not another."""
     values = {k: system.get(f"odd.{k}") for k in ("height_m", "pitch_deg", "image_width", "image_height", "aspect")}
     pose = nominal_pose(system)
     for key, nominal in (("height_m", pose.height_m), ("pitch_deg", pose.pitch_deg)):
         if system.sets(f"camera.{key}") and not system.sets(f"odd.{key}"):
             values[key] = [round(nominal * (1 - ODD_POSE_ERROR), 6), round(nominal * (1 + ODD_POSE_ERROR), 6)]
-    if (system.sets("camera.image_width") or system.sets("camera.image_height")) and not system.sets("odd.aspect"):
+    if system.sets("camera.image_width") or system.sets("camera.image_height"):
         width, height = image_size(system)
-        values["aspect"] = [round(width / height / 1.05, 6), round(width / height * 1.05, 6)]
+        for key, value in (("image_width", width), ("image_height", height)):
+            if not system.sets(f"odd.{key}"):
+                values[key] = [value, value]
+        if not system.sets("odd.aspect"):
+            values["aspect"] = [round(width / height / 1.05, 6), round(width / height * 1.05, 6)]
     perturbations = dict(system.get("odd.perturbations") or {})
     from assurance.campaign.perturbations import PERTURBATIONS
 
