@@ -138,7 +138,8 @@ def night(paths: list[Path]) -> list[np.ndarray]:
         rgb = read_image(path).astype(np.float32) * np.array([0.06, 0.07, 0.10], np.float32)
         h, w = rgb.shape[:2]
         for x, y in zip(rng.integers(0, w, 40), rng.integers(0, h, 40), strict=True):
-            cv2.circle(rgb, (int(x), int(y)), int(rng.integers(6, 30)), (255, 220, 150), -1)
+            radius = max(1, int(rng.integers(6, 30)) * w // 3840)  # 6-30 px on a 4K frame
+            cv2.circle(rgb, (int(x), int(y)), radius, (255, 220, 150), -1)
         rgb += rng.normal(0.0, 6.0, rgb.shape).astype(np.float32)
         out.append(np.clip(rgb, 0, 255).astype(np.uint8))
     return out
