@@ -1,6 +1,6 @@
 """One fault-injection case and the scratch workspace it is injected into (``assurance.campaign.fault_injection``).
 
-The workspace (``build_workspace`` there): ``WS/data`` (two 3840x2160 synthetic test scenes), ``WS/tiny.pt`` (a
+The workspace (``build_workspace`` there): ``WS/data`` (two 320x180 synthetic test scenes), ``WS/tiny.pt`` (a
 tiny CNN's weights and card) and ``WS/run`` (a finished 2-image campaign on them). The helpers below name
 its parts, so the modules of cases agree on them.
 """

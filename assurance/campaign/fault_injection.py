@@ -1,6 +1,6 @@
 """Fault injection: issue 19's hostile-user cases and a few bad inputs, replayed through the real command line.
 
-``build_workspace`` makes a scratch workspace (two 3840x2160 synthetic scenes, a tiny CNN's weights, a 2-image
+``build_workspace`` makes a scratch workspace (two 320x180 synthetic scenes, a tiny CNN's weights, a 2-image
 campaign run); ``run_cases`` injects each fault into a copy of what it needs and runs ``uav-el`` in-process
 (``assurance.cli.main``, passed in by the caller: the command line imports this module through ``uav-el
 fault-table``, so importing it back would be a cycle), recording the exit code and the first line that says
@@ -11,6 +11,7 @@ report shows it as an appendix when ``faults.csv`` lies next to it.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import json
@@ -34,17 +35,22 @@ MCD_SPEC = "lhd+ch+mcd:tau=0.25,n=1000,rho=0.5"
 # Workspace
 # ------------------------------------------------------------------------------------------------
 def build_workspace(root: str | Path, *, main: CliMain) -> Path:
-    """Two 3840x2160 synthetic test scenes (the embedded default's declared frame size, so that the cases exercise
-    the decisions, not the operating-domain check), tiny weights and a finished 2-image campaign run under ``root``."""
-    ws = Path(root)
-    steps = (["synth", "--out", ws / "data", "--split", "test", "--scenes", "2", "--size", "3840x2160",
+    """Two 320x180 synthetic test scenes, tiny weights, a finished 2-image campaign run and ``WS/uav-el.toml`` under
+    ``root``: the embedded default but for a declared domain that admits the small frames (the default declares only
+    4K frames), so that the cases, run in ``WS`` (``run_case``), exercise the decisions, not the frame-size check."""
+    ws = Path(root).resolve()
+    ws.mkdir(parents=True, exist_ok=True)
+    (ws / "uav-el.toml").write_text('format = "uav-el-system/1"\n\n[odd]\nimage_width = [64, 7680]\n'
+                                    'image_height = [36, 4320]\n', encoding="utf-8")
+    steps = (["synth", "--out", ws / "data", "--split", "test", "--scenes", "2", "--size", "320x180",
               "--no-progress"],)
     for argv in steps:
         code, _, err = run_cli(main, argv)
         if code:
             raise RuntimeError(f"fault-table workspace: uav-el {argv[0]} exited {code}: {err.strip()}")
     save_tiny_weights(ws / "tiny.pt")
-    code, _, err = run_cli(main, _campaign(ws, ws / "run"))
+    with contextlib.chdir(ws):
+        code, _, err = run_cli(main, _campaign(ws, ws / "run"))
     if code:
         raise RuntimeError(f"fault-table workspace: uav-el campaign exited {code}: {err.strip()}")
     return ws
@@ -213,8 +219,9 @@ def _outcome(case: Case, out: str, err: str) -> str:
 def run_case(case: Case, ws: Path, *, main: CliMain) -> dict[str, str]:
     """Inject ``case`` into the workspace ``ws`` and replay it through ``main``; the table row."""
     use_cli(main)
-    argv = [str(a) for a in case.make(ws)]
-    code, out, err = run_cli(main, argv)
+    with contextlib.chdir(ws):  # the workspace's system file (build_workspace) is the one found
+        argv = [str(a) for a in case.make(ws)]
+        code, out, err = run_cli(main, argv)
     text = out + err
     ok = code == case.expected and case.expect_text in text and "Traceback" not in text
     command = "uav-el " + " ".join(a.replace(str(ws), "WS") if str(ws) in a else a for a in argv)
