@@ -158,7 +158,6 @@ def bench_system(folder: Path) -> Path:
     (64-7680 x 36-4320 px; the embedded default declares only its camera's 4K frames). A command run in
     ``folder`` (``monkeypatch.chdir``) or given ``--system`` with it decides those frames instead of refusing them
     as ``outside_odd``."""
-    folder.mkdir(parents=True, exist_ok=True)
-    path = folder / "uav-el.toml"
-    path.write_text('format = "uav-el-system/1"\n\n[odd]\nimage_width = [64, 7680]\nimage_height = [36, 4320]\n')
-    return path
+    from assurance.campaign.fault_case import write_small_frame_system
+
+    return write_small_frame_system(folder)

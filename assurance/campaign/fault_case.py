@@ -30,6 +30,16 @@ class Case:
 _CLI: list[CliMain] = []  # the command line the cases run through (set by ``fault_injection.run_case``)
 
 
+def write_small_frame_system(folder: Path) -> Path:
+    """``folder/uav-el.toml``: the embedded default but for a declared domain that admits small frames (64-7680 x
+    36-4320 px; the default declares only its camera's 4K frames), for workspaces of tiny test scenes."""
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / "uav-el.toml"
+    path.write_text('format = "uav-el-system/1"\n\n[odd]\nimage_width = [64, 7680]\nimage_height = [36, 4320]\n',
+                    encoding="utf-8")
+    return path
+
+
 def use_cli(main: CliMain) -> None:
     """Run the cases' preparation steps (``prepare``) through ``main`` (``assurance.cli.main``)."""
     _CLI[:] = [main]

@@ -20,7 +20,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from assurance.campaign.fault_bounds import BOUNDS_CASES
-from assurance.campaign.fault_case import Case, CliMain, run_cli, save_tiny_weights, use_cli
+from assurance.campaign.fault_case import Case, CliMain, run_cli, save_tiny_weights, use_cli, write_small_frame_system
 from assurance.campaign.fault_case import campaign_argv as _campaign
 from assurance.campaign.fault_case import copy_run as _copy_run
 from assurance.campaign.fault_case import first_image as _image
@@ -39,9 +39,7 @@ def build_workspace(root: str | Path, *, main: CliMain) -> Path:
     ``root``: the embedded default but for a declared domain that admits the small frames (the default declares only
     4K frames), so that the cases, run in ``WS`` (``run_case``), exercise the decisions, not the frame-size check."""
     ws = Path(root).resolve()
-    ws.mkdir(parents=True, exist_ok=True)
-    (ws / "uav-el.toml").write_text('format = "uav-el-system/1"\n\n[odd]\nimage_width = [64, 7680]\n'
-                                    'image_height = [36, 4320]\n', encoding="utf-8")
+    write_small_frame_system(ws)
     steps = (["synth", "--out", ws / "data", "--split", "test", "--scenes", "2", "--size", "320x180",
               "--no-progress"],)
     for argv in steps:

@@ -79,16 +79,19 @@ def validation_frames(paths: list[tuple[int, Path]], severities: tuple[int, ...]
                 yield i, f"{name}:{0 if name == 'none' else s}", perturbed(rgb, name, s, [seed, i, s])
 
 
-def synthetic_ood(seed: int = 0, n: int = 10, size: tuple[int, int] = SIZE) -> dict[str, list[np.ndarray]]:
-    """Uniform noise, Gaussian noise around grey, and constant frames (black, white, grey, colours)."""
+def noise_frames(seed: int = 0, n: int = 10, size: tuple[int, int] = SIZE) -> list[np.ndarray]:
+    """Uniform noise, then Gaussian noise around grey."""
     rng = np.random.default_rng(seed)
     w, h = size
     noise = [rng.integers(0, 256, (h, w, 3), dtype=np.uint8) for _ in range(n // 2)]
-    noise += [np.clip(rng.normal(128, 40, (h, w, 3)), 0, 255).astype(np.uint8) for _ in range(n - n // 2)]
-    levels = np.linspace(0, 255, n)
-    const = [np.full((h, w, 3), (int(v), int(255 - v), int(v // 2)) if i % 2 else int(v), np.uint8)
-             for i, v in enumerate(levels)]
-    return {"ood_noise": noise, "ood_constant": const}
+    return noise + [np.clip(rng.normal(128, 40, (h, w, 3)), 0, 255).astype(np.uint8) for _ in range(n - n // 2)]
+
+
+def constant_frames(n: int = 10, size: tuple[int, int] = SIZE) -> list[np.ndarray]:
+    """Constant frames: black to white, grey levels and colours."""
+    w, h = size
+    return [np.full((h, w, 3), (int(v), int(255 - v), int(v // 2)) if i % 2 else int(v), np.uint8)
+            for i, v in enumerate(np.linspace(0, 255, n))]
 
 
 def photos(size: tuple[int, int] = SIZE) -> list[np.ndarray]:
@@ -166,9 +169,8 @@ def frame_sets(root: Path, *, train_n: int | None = None, val_n: int | None = No
         if folder.name not in skip:
             for i, path in enumerate(scene_images(folder)):
                 yield folder.name, i, folder.name, read_image(path)
-    generated = {"ood_noise": lambda: synthetic_ood(size=size)["ood_noise"],
-                 "ood_constant": lambda: synthetic_ood(size=size)["ood_constant"], "ood_photos": lambda: photos(size),
-                 "ood_world": lambda: other_world(size=size),
+    generated = {"ood_noise": lambda: noise_frames(size=size), "ood_constant": lambda: constant_frames(size=size),
+                 "ood_photos": lambda: photos(size), "ood_world": lambda: other_world(size=size),
                  "ood_night": lambda: night([p for _, p in val[:NIGHT_SCENES]])}
     for name, make in generated.items():
         if name not in skip:
@@ -182,22 +184,22 @@ KEYS = ("set", "scene", "what", "pooled", "energy", "msp")
 def collect(root: Path, segmenter: Any, out: Path, **limits: Any) -> Path:
     """Tap every frame of :func:`frame_sets` with ``segmenter``'s frame pass; write ``out`` (npz). The cache is
     rewritten (atomically) as each set is finished, and a rerun taps only the sets it lacks."""
-    import os
+    import io
 
     import skimage.data  # noqa: F401  (the photographs' package: fail before tapping, not after an hour)
 
+    from assurance.files import atomic_write_bytes
     from assurance.progress import progress
 
     segmenter.tap_frames = True
     old = load(out) if out.is_file() else {k: np.asarray([]) for k in KEYS}
     rows: dict[str, list[Any]] = {k: list(old[k]) for k in KEYS}
     done = frozenset(str(s) for s in rows["set"])
-    out.parent.mkdir(parents=True, exist_ok=True)
 
     def save() -> None:
-        tmp = out.with_name(out.stem + ".part.npz")
-        np.savez_compressed(tmp, **{k: np.asarray(v) for k, v in rows.items()})
-        os.replace(tmp, out)
+        buf = io.BytesIO()
+        np.savez_compressed(buf, **{k: np.asarray(v) for k, v in rows.items()})
+        atomic_write_bytes(out, buf.getvalue())
 
     current = None
     for name, i, what, rgb in progress(frame_sets(root, skip=done, **limits), total=None, desc="frames"):
