@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import re
 import warnings
+from collections import Counter
 from collections.abc import Mapping, Sequence
+from html import unescape as html_unescape
 from pathlib import Path
 from typing import Any
 
@@ -32,15 +35,21 @@ def faults_table(out: Path, warnings: list[str]) -> list[dict[str, str]] | None:
         return None
 
 
+COVER = "cover.html.j2"
+"""The first page (gate verdict, summary): always the packaged file, never a template folder's."""
+
+
 def environment(templates: str | Path | None = None) -> Any:
-    """The Jinja2 environment of the report: autoescape on for every template, strict undefined. A user's
-    template folder overrides the packaged templates file by file (the packaged ones fill the gaps)."""
-    from jinja2 import ChoiceLoader, Environment, FileSystemLoader, StrictUndefined
+    """The Jinja2 environment of the report: the immutable sandbox (a template reaches no Python internals and
+    changes nothing), autoescape on, strict undefined. A user's template folder overrides the packaged templates
+    file by file (the packaged ones fill the gaps)."""
+    from jinja2 import ChoiceLoader, FileSystemLoader, StrictUndefined
+    from jinja2.sandbox import ImmutableSandboxedEnvironment
 
     folders = [str(templates)] if templates and Path(templates) != TEMPLATES_DIR else []
     loader = ChoiceLoader([FileSystemLoader(f) for f in (*folders, str(TEMPLATES_DIR))])
-    return Environment(loader=loader, autoescape=True,
-                       undefined=StrictUndefined, trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True)
+    return ImmutableSandboxedEnvironment(loader=loader, autoescape=True, undefined=StrictUndefined,
+                                         trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True)
 
 
 class TemplateError(ValueError):
@@ -59,20 +68,60 @@ def _template_line(exc: BaseException) -> tuple[str, int | None]:
     return where
 
 
-def render_html(context: Mapping[str, Any], templates: str | Path | None = None) -> str:
-    """The report's HTML from its finished context; TemplateError naming the file and line of a broken template."""
+def _render(env: Any, name: str, context: Mapping[str, Any]) -> str:
+    """One template rendered; TemplateError naming the file and line of a broken or unsafe template."""
     from jinja2 import TemplateError as JinjaError
     from jinja2 import TemplateSyntaxError
+    from jinja2.exceptions import SecurityError
 
     try:
-        return environment(templates).get_template(TEMPLATE).render(**context)
+        return env.get_template(name).render(**context)
     except TemplateSyntaxError as exc:
         raise TemplateError(f"{exc.filename or exc.name}:{exc.lineno}: report template does not compile: "
                             f"{exc.message}") from None
-    except (JinjaError, TypeError, ValueError, AttributeError, KeyError) as exc:
-        name, line = _template_line(exc)
-        raise TemplateError(f"{name}:{line if line is not None else '?'}: report template fails to render: "
+    except SecurityError as exc:
+        where, line = _template_line(exc)
+        raise TemplateError(f"{where}:{line if line is not None else '?'}: report template refused: it reaches "
+                            f"outside what a template may use ({exc})") from None
+    except (JinjaError, TypeError, ValueError, AttributeError, KeyError, OverflowError) as exc:
+        where, line = _template_line(exc)
+        raise TemplateError(f"{where}:{line if line is not None else '?'}: report template fails to render: "
                             f"{type(exc).__name__}: {exc}") from None
+
+
+_BODY = re.compile(r"<body\b[^>]*>", re.IGNORECASE)
+_TAG = re.compile(r"<[^>]*>")
+_VERDICT = re.compile(r"\bgate\b\W{0,24}(passed|failed|waived|incomplete|pass|fail)\b", re.IGNORECASE)
+
+
+def verdict_phrases(html: str, verdict: str) -> Counter[str]:
+    """Phrases of ``html``'s text that state a gate verdict other than ``verdict`` ("Gate: PASSED" on a failed
+    gate), with their counts."""
+    text = " ".join(html_unescape(_TAG.sub(" ", html)).split())
+    return Counter(m.group(0) for m in _VERDICT.finditer(text)
+                   if not verdict.lower().startswith(m.group(1).lower()))
+
+
+def render_html(context: Mapping[str, Any], templates: str | Path | None = None) -> str:
+    """The report's HTML from its finished context: the body from the (possibly user-supplied) templates, and
+    the first page (gate verdict, summary) from the packaged cover, put first in the body by the toolkit.
+    TemplateError naming the file and line of a broken or unsafe template, or naming what a supplied template
+    says against the gate's verdict (beyond what the packaged templates quote from the evidence, such as the
+    fault table's expected outputs)."""
+    supplied = bool(templates) and Path(str(templates)) != TEMPLATES_DIR
+    body = _render(environment(templates), TEMPLATE, context)
+    if supplied:
+        verdict = str(context["gate"])
+        said = verdict_phrases(body, verdict) - verdict_phrases(_render(environment(None), TEMPLATE, context), verdict)
+        if said:
+            raise TemplateError(f"{templates}: the supplied report templates state a gate verdict the gate did not "
+                                f"give ({'; '.join(repr(s) for s in sorted(said))}; the gate is {verdict}): refused")
+    opening = _BODY.search(body)
+    if opening is None:
+        where = Path(str(templates)) if supplied else TEMPLATES_DIR
+        raise TemplateError(f"{where / TEMPLATE}: the report template has no <body> element to put the first page in")
+    cover = _render(environment(None), COVER, context)
+    return body[:opening.end()] + "\n" + cover + body[opening.end():]
 
 
 def rel(path: str | Path | None) -> str | None:
@@ -89,9 +138,43 @@ def rel(path: str | Path | None) -> str | None:
 PDF_VARIANT = "pdf/a-3b"
 
 
-def write_pdf(html: str, path: Path, attachments: Sequence[Path] = ()) -> str | None:
+class RefusedResourceError(TemplateError):
+    """The report asked the PDF renderer for a resource it may not read (a local file, the network)."""
+
+
+def _fetcher(served: Sequence[Path]) -> Any:
+    """WeasyPrint's URL fetcher for the report: ``data:`` URIs and the files in ``served`` (the report's own
+    generated files), nothing else (no ``file:`` outside them, no network, no other scheme). Every refused URL
+    is recorded in ``.refused``."""
+    from urllib.parse import unquote, urlsplit
+
+    from weasyprint.urls import URLFetcher
+
+    allowed = {a.resolve() for a in served}
+
+    class ReportFetcher(URLFetcher):
+        refused: list[str]
+
+        def fetch(self, url: str, headers: Any = None) -> Any:
+            scheme = url.split(":", 1)[0].lower() if ":" in url else ""
+            if scheme == "data":
+                return super().fetch(url, headers)
+            if scheme == "file":
+                parts = urlsplit(url)
+                if not parts.netloc and Path(unquote(parts.path)).resolve() in allowed:
+                    return super().fetch(url, headers)
+            self.refused.append(url)
+            raise ValueError(f"the report's PDF reads only data: URIs and its own files, not {url}")
+
+    fetcher = ReportFetcher(allowed_protocols=("data", "file"), allow_redirects=False)
+    fetcher.refused = []
+    return fetcher
+
+
+def write_pdf(html: str, path: Path, attachments: Sequence[Path] = (), served: Sequence[Path] = ()) -> str | None:
     """Write the PDF/A-3b of ``html`` (WeasyPrint) with ``attachments`` embedded; returns None, or why no
-    PDF was written."""
+    PDF was written. The renderer reads nothing but ``data:`` URIs and the ``served`` files:
+    RefusedResourceError (no PDF) naming the first URL the HTML asked for beyond them."""
     try:
         with warnings.catch_warnings():  # e.g. "HarfBuzz-Subset will be required by future versions"
             warnings.simplefilter("ignore", DeprecationWarning)
@@ -101,12 +184,22 @@ def write_pdf(html: str, path: Path, attachments: Sequence[Path] = ()) -> str | 
     from weasyprint import Attachment
 
     tmp = path.with_name(f".{path.name}.tmp")
+    fetcher = _fetcher(served)
     try:
         files = [Attachment(filename=str(a), name=a.name, description=f"{a.name} of this evidence report",
                             relationship="Data" if a.suffix in (".json", ".csv", ".xml") else "Supplement")
                  for a in attachments if a.is_file()]
-        HTML(string=html, base_url=str(path.parent)).write_pdf(str(tmp), pdf_variant=PDF_VARIANT, attachments=files)
+        HTML(string=html, base_url=str(path.parent), url_fetcher=fetcher).write_pdf(
+            str(tmp), pdf_variant=PDF_VARIANT, attachments=files)
+        if fetcher.refused:
+            tmp.unlink(missing_ok=True)
+            more = f" (and {len(fetcher.refused) - 1} more)" if len(fetcher.refused) > 1 else ""
+            raise RefusedResourceError(f"{path}: PDF not written: the report asks the renderer for "
+                                       f"{fetcher.refused[0]}{more}, which it refuses: a report reads only data: "
+                                       "URIs and its own files")
         tmp.replace(path)
+    except RefusedResourceError:
+        raise
     except Exception as exc:
         tmp.unlink(missing_ok=True)
         return f"PDF not written: WeasyPrint failed ({type(exc).__name__}: {exc})"

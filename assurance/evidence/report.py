@@ -15,7 +15,15 @@ from assurance.evidence.context import Inputs, campaign_context, read_inputs, te
 from assurance.evidence.gate import EvidenceReport, Gate, decide_gate
 from assurance.evidence.identity import baseline_view
 from assurance.evidence.matrix import TRACE_COLUMNS, traceability_rows
-from assurance.evidence.render import FAULTS_CSV, rel, render_html, write_csv_rows, write_pdf, write_text
+from assurance.evidence.render import (
+    FAULTS_CSV,
+    RefusedResourceError,
+    rel,
+    render_html,
+    write_csv_rows,
+    write_pdf,
+    write_text,
+)
 from assurance.evidence.signatures import check_results_signature
 from assurance.evidence.text import jsonable
 from el.hashing import sha256_file
@@ -42,6 +50,17 @@ class _Files:
         """The files the PDF embeds."""
         return [self.json, self.csv, self.trace, self.junit, self.sums, self.argument, self.issre] + (
             [self.faults] if faults else [])
+
+
+def _write_pdf(html: str, files: _Files, faults: bool) -> str | None:
+    """The report's PDF (None, or why none was written); one that asks for a resource beyond the report's own
+    files takes the whole report with it (RefusedResourceError)."""
+    try:
+        return write_pdf(html, files.pdf, files.attachments(faults), served=files.attachments(faults))
+    except RefusedResourceError:
+        for f in (files.html, files.json, files.sums):  # no report whose PDF could not be made as it says
+            f.unlink(missing_ok=True)
+        raise
 
 
 def evidence_document(inp: Inputs, gate: Gate, ident: dict[str, Any], base: dict[str, Any] | None, *,
@@ -151,7 +170,7 @@ def generate(
 
     exit_code = finish(pdf_error)  # the JSON says the PDF will be there; rewritten if it could not be
     if pdf:
-        pdf_error = write_pdf(html, files.pdf, files.attachments(faults))
+        pdf_error = _write_pdf(html, files, faults)
         exit_code = finish(pdf_error)
     return EvidenceReport(out=out, html=files.html, json=files.json, pdf=None if pdf_error else files.pdf,
                           pdf_error=pdf_error, states=gate.states, exit_code=exit_code, warnings=inp.warnings,
