@@ -29,10 +29,6 @@ class CalibrationError(UavElError, ValueError):
     """A calibration card that cannot be used (missing, unreadable, altered, inconsistent)."""
 
 
-class OODError(UavElError, ValueError):
-    """An out-of-domain gate file that cannot be used (missing, unreadable, altered, inconsistent)."""
-
-
 class FrameGateError(UavElError, ValueError):
     """A frame-gate file (``uav-el fit-gate``) that cannot be used (missing, unreadable, altered, inconsistent)."""
 

@@ -16,28 +16,28 @@ import math
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from el.camera import Pose, check_geometry
+from el.camera import Pose
 from el.config import CoreConfig, check_seed
-from el.core import default_area, run_core
 from el.deadline import Deadline, active, run_with_deadline
-from el.decision import Candidate, Decision, Disc, MonitorVerdict
+from el.decision import Decision, Disc, MonitorVerdict
 from el.errors import BudgetExceeded
 from el.hashing import sha256_bytes
 from el.imageio import MAX_PIXELS, check_max_pixels, read_image_meta
+from el.kernel import Frame, Parts, conclude, default, frame_core, prepare
 from el.labels import UAVID
 from el.monitors import CandidateContext, Monitor, build_monitor, monitor_name, parse_monitor_spec
 from el.monitors.capabilities import check_monitor_capabilities
-from el.monitors.frame_gate import bind_frame_gate, judge_frame
+from el.monitors.frame_gate import bind_frame_gate
 from el.odd import OperatingDomain
 from el.rgb import check_rgb
 from el.segmentation.contract import check_model, labels_of
-from el.walk import HAZARD, WalkOutcome, walk_candidates
+from el.walk import HAZARD, Judge, Step
 
 Clock = Callable[[], float]
 DEFAULT_TIME_BUDGET_S = 10.0
@@ -95,10 +95,6 @@ class PipelineConfig:
     max_pixels : int
         Largest frame accepted, in pixels (:data:`el.imageio.MAX_PIXELS`, 8K plus a quarter by default): a file
         whose header claims more is refused before decoding (default action, the reason naming the file).
-    ood : path or None
-        An out-of-domain gate (``uav-el fit-ood``, ``el.monitors.ood``): a frame whose distance is above
-        the gate's threshold ends in the default action with reason ``out_of_domain``; a missing or
-        altered gate file is a fault (default action).
     gate : path or None
         A frame gate (``uav-el fit-gate``, ``el.monitors.frame_gate``) scoring the frame pass's own statistics: a
         frame above its threshold ends in the default action (``out_of_domain: frame gate ...``); its score and
@@ -118,7 +114,6 @@ class PipelineConfig:
     patch_max_side: int | None = None
     nominal_size: tuple[int, int] = (3840, 2160)
     calibration: str | None = None
-    ood: str | None = None
     gate: str | None = None
     odd: OperatingDomain | None = None
     max_pixels: int = MAX_PIXELS
@@ -148,7 +143,6 @@ class PipelineConfig:
             "patch_max_side": self.patch_max_side,
             "core": self.core.to_dict(),
             **({"calibration": self.calibration} if self.calibration else {}),
-            **({"ood": self.ood} if self.ood else {}),
             **({"gate": self.gate} if self.gate else {}),
             **({"odd": self.odd.to_dict()} if self.odd is not None else {}),
             **({"max_pixels": self.max_pixels} if self.max_pixels != MAX_PIXELS else {}),
@@ -188,7 +182,6 @@ class EmergencyLanding:
         self.segmenter = segmenter
         self.monitor: Monitor | None = None
         self.walk = HAZARD
-        self.ood: Any = None
         self.gate: Any = None
         self.labels = UAVID
         try:
@@ -214,16 +207,6 @@ class EmergencyLanding:
             self.fault = self.fault or f"fault: monitor: {type(exc).__name__}: {exc}"
             logger.exception("runtime monitor %r not built; every decision will be the default action",
                              self.config.monitor)
-        if self.config.ood:
-            try:
-                from el.monitors.ood import load_ood
-
-                self.ood = load_ood(self.config.ood)
-                self.ood.check_network(self.segmenter)
-                check_monitor_capabilities(None, self.segmenter, ood=self.ood)
-            except Exception as exc:
-                self.fault = self.fault or f"fault: ood: {type(exc).__name__}: {exc}"
-                logger.exception("out-of-domain gate not usable; every decision will be the default action")
         if self.config.gate:
             try:
                 self.gate = bind_frame_gate(self.config.gate, self.segmenter)
@@ -231,14 +214,22 @@ class EmergencyLanding:
                 self.fault = self.fault or f"fault: frame_gate: {type(exc).__name__}: {exc}"
                 logger.exception("frame gate not usable; every decision will be the default action")
 
+
+    @property
+    def parts(self) -> Parts:
+        """The deployed parts the kernel decides with (``el.kernel.Parts``)."""
+        return Parts(segmenter=self.segmenter, labels=self.labels, core=self.config.core, odd=self.config.odd,
+                     gate=self.gate, fault=self.fault, record=self.config.to_dict(),
+                     nominal_size=self.config.nominal_size)
+
     # -- the decision ----------------------------------------------------------------------------
     def decide(self, image: np.ndarray | str | Path, pose: Pose | None = None) -> Decision:
         """Decide where to land for one frame (an RGB uint8 array or an image file); never raises.
 
-        ``pose``: the camera's height and pitch when the frame was taken (from the flight log); None is
-        the configured nominal pose (``config.core.pose``). It sets the safety radius in pixels and is
-        recorded in the decision's ``input.pose``. (The ground-truth pipeline, with a label map instead
-        of the model, is ``assurance.campaign.gt_pipeline``.)
+        ``pose``: the camera's height and pitch when the frame was taken (from the flight log); None is the
+        configured nominal pose (``config.core.pose``). It sets the safety radius in pixels and is recorded in the
+        decision's ``input.pose``. The decision is the kernel's (``el.kernel``), with this system's parts and its
+        monitor judging candidates lazily under the deadline.
         """
         cfg = self.config
         budget = Deadline(self.clock, cfg.time_budget_s)
@@ -255,92 +246,23 @@ class EmergencyLanding:
         finished, decision = run_with_deadline(locked, budget)
         if finished:
             return decision
-        try:  # the hard stop: the default action at the deadline, on what the stopped decision had read
-            core_cfg = frame_core(cfg.core, pose)
-        except Exception:
-            core_cfg = cfg.core
         seen = dict(info)  # the worker sets width, then height
-        size = (seen["width"], seen["height"]) if "height" in seen else cfg.nominal_size
-        return self._default("timeout", [], size, dict(timings), seen, budget, core_cfg)
+        frame = Frame(info=seen, timings=dict(timings), core=cfg.core,
+                      size=(seen["width"], seen["height"]) if "height" in seen else None)
+        try:  # the hard stop: the default action at the deadline, on what the stopped decision had read
+            frame.core = frame_core(cfg.core, pose)
+        except Exception:
+            pass
+        return default(frame, self.parts, "timeout", budget)
 
     def _decide(self, image: np.ndarray | str | Path, pose: Pose | None, budget: Deadline,
                 timings: dict[str, float], info: dict[str, Any]) -> Decision:
-        """The decision itself, with ``budget`` checked between stages and (as the active deadline) inside them."""
-        cfg = self.config
-        core_cfg = cfg.core
-        size = cfg.nominal_size
-        stage = "read"
-        candidates: list[Candidate] = []
-        try:
-            if budget.cancelled.is_set():  # stopped while it waited for the one before it: read nothing
-                raise BudgetExceeded("decision stopped before it started")
-            t = self.clock()
-            info["frame_gate"] = None if self.gate is None else self.gate.record(None)
-            rgb = self._read(image, info)
-            size = (rgb.shape[1], rgb.shape[0])
-            if size[0] * size[1] > cfg.max_pixels:  # an array (a file was checked from its header)
-                raise ValueError(f"{info['path']}: image of {size[0]}x{size[1]} pixels exceeds the limit of "
-                                 f"{cfg.max_pixels} pixels (max_pixels)")
-            timings["read_s"] = self.clock() - t
-            stage = "pose"
-            core_cfg = frame_core(cfg.core, pose)
-            info["pose"] = pose_record(core_cfg.pose, nominal=pose is None)
-            if self.fault:
-                return self._default(self.fault, candidates, size, timings, info, budget, core_cfg)
-            outside = None if cfg.odd is None else cfg.odd.outside(core_cfg.pose, size)
-            if outside:  # no evidence of safety there: the default action, a decision and not a fault
-                return self._default(outside, candidates, size, timings, info, budget, core_cfg)
-            check_geometry(core_cfg.geometry(*size))  # a pose the flat-ground model cannot plan with: a fault
-            budget.check(stage)
-
-            stage = "segmentation"
-            t = self.clock()
-            probs = self._segment(rgb)
-            timings["segmentation_s"] = self.clock() - t
-            budget.check(stage)
-
-            if self.gate is not None:
-                stage = "frame_gate"
-                refused = judge_frame(self.gate, self.segmenter, info)
-                if refused:  # no evidence of safety for this frame: a decision, not a fault
-                    return self._default(refused, candidates, size, timings, info, budget, core_cfg)
-
-            if self.ood is not None:
-                stage = "ood"
-                t = self.clock()
-                info["ood_score"] = self.ood.score(self.segmenter, rgb, probs)
-                info["ood_threshold"] = self.ood.threshold
-                timings["ood_s"] = self.clock() - t
-                if not info["ood_score"] <= self.ood.threshold:
-                    return self._default("out_of_domain", candidates, size, timings, info, budget, core_cfg)
-                budget.check(stage)
-
-            stage = "candidates"
-            t = self.clock()
-            candidates = run_core(probs, size, core_cfg, clock=self.clock, labels=self.labels).candidates
-            timings["candidates_s"] = self.clock() - t
-            budget.check(stage)
-
-            stage = "monitoring"
-            t = self.clock()
-            candidates, outcome = self._walk(rgb, candidates, budget, probs)
-            timings["monitoring_s"] = self.clock() - t
-            timings["overhead_s"] = outcome.overhead_s
-            budget.check(stage)
-        except BudgetExceeded:
-            return self._default("timeout", candidates, size, timings, info, budget, core_cfg)
-        except Exception as exc:
-            reason = f"fault: {stage}: {type(exc).__name__}: {exc}"
-            logger.exception("fault in stage %s of the decision (input %s); default action", stage,
-                             info.get("path", "?"))
-            return self._default(reason, candidates, size, timings, info, budget, core_cfg)
-
-        if outcome.selected is None:
-            return self._default(outcome.reason, candidates, size, timings, info, budget, core_cfg)
-        timings["total_s"] = budget.elapsed()
-        return Decision(action="land", reason=outcome.reason, selected=outcome.selected, candidates=candidates,
-                        default_area=default_area(*size, core_cfg), timings=timings, input=info,
-                        config=cfg.to_dict())
+        """The kernel's decision, with ``budget`` checked between stages and (as the active deadline) inside them."""
+        frame = prepare(lambda record: self._read(image, record), self.parts, pose=pose, budget=budget,
+                        clock=self.clock, info=info, timings=timings)
+        judge, before, after = self._judge(frame, budget)
+        return conclude(frame, self.parts, judge, walk=self.walk, budget=budget, clock=self.clock,
+                        evaluate_all=self.config.evaluate_all, before=before, after=after)[0]
 
     # -- stages ----------------------------------------------------------------------------------
     def _read(self, image: np.ndarray | str | Path, info: dict[str, Any]) -> np.ndarray:
@@ -358,28 +280,24 @@ class EmergencyLanding:
             check_rgb(rgb, "image", min_size=0)  # shape and type now; the size once the input is recorded
             info["sha256"] = sha256_bytes(np.ascontiguousarray(rgb).tobytes())
         info["width"], info["height"] = int(rgb.shape[1]), int(rgb.shape[0])
-        return check_rgb(rgb, "image", min_size=MIN_FRAME_SIZE)
+        rgb = check_rgb(rgb, "image", min_size=MIN_FRAME_SIZE)
+        if rgb.shape[0] * rgb.shape[1] > self.config.max_pixels:  # an array (a file was checked from its header)
+            raise ValueError(f"{info['path']}: image of {rgb.shape[1]}x{rgb.shape[0]} pixels exceeds the limit of "
+                             f"{self.config.max_pixels} pixels (max_pixels)")
+        return rgb
 
-    def _segment(self, rgb: np.ndarray) -> np.ndarray:
-        probs = self.segmenter.predict_frame(rgb)
-        if not isinstance(probs, np.ndarray) or not np.isfinite(probs).all():
-            raise ValueError("segmentation returned non-finite scores")
-        return probs
-
-    def _walk(
-        self, rgb: np.ndarray, candidates: list[Candidate], budget: Deadline, probs: np.ndarray | None = None
-    ) -> tuple[list[Candidate], WalkOutcome]:
-        """Monitor candidates with the one decision walk (``el.walk``); returns the candidates with their
-        verdicts and the outcome. The budget is checked before and after each judgement of the deciding
-        walk; evaluation-only judgements past the decision (``evaluate_all``) are not budgeted."""
-        if self.monitor is None:  # no runtime monitor: the CM's top candidate
-            return candidates, walk_candidates(len(candidates), None)
+    def _judge(self, frame: Frame, budget: Deadline) -> tuple[Judge | None, Step | None, Step | None]:
+        """The flight judge: this system's monitor on one candidate at a time, the budget checked before and after
+        each judgement of the deciding walk (evaluation-only judgements past the decision are not budgeted)."""
+        if self.monitor is None or frame.stop:  # no runtime monitor: the CM's top candidate
+            return None, None, None
+        monitor, rgb, probs = self.monitor, frame.rgb, frame.probs
         budgeted = self.config.time_budget_s is not None
-        has_chunks = hasattr(self.monitor, "between")  # MC dropout: the budget binds between its chunks too
+        has_chunks = hasattr(monitor, "between")  # MC dropout: the budget binds between its chunks too
 
         def before(k: int, real: bool) -> None:
             if has_chunks:
-                self.monitor.between = budget.ahead if (budgeted and real) else None
+                monitor.between = budget.ahead if (budgeted and real) else None
             if real:
                 budget.check("monitoring")
 
@@ -388,35 +306,11 @@ class EmergencyLanding:
                 raise BudgetExceeded("time budget exceeded during monitoring")
 
         def judge(k: int) -> MonitorVerdict:
-            cand = candidates[k]
+            cand = frame.candidates[k]
             context = None if probs is None else CandidateContext(cand, probs, (rgb.shape[1], rgb.shape[0]))
-            return self.monitor.check(rgb, cand, self.segmenter, seed=self.config.seed + k, context=context)
+            return monitor.check(rgb, cand, self.segmenter, seed=self.config.seed + k, context=context)
 
-        outcome = walk_candidates(len(candidates), judge, self.walk, evaluate_all=self.config.evaluate_all,
-                                  before=before, after=after)
-        judged = [c if v is None else replace(c, monitor=v) for c, v in zip(candidates, outcome.verdicts, strict=True)]
-        return judged, outcome
-
-    def _default(
-        self,
-        reason: str,
-        candidates: list[Candidate],
-        size: tuple[int, int],
-        timings: dict[str, float],
-        info: dict[str, Any],
-        budget: Deadline,
-        core: CoreConfig,
-    ) -> Decision:
-        try:
-            area = default_area(*size, core)
-        except Exception:  # the default area of the nominal frame: the decision itself must not fail
-            logger.exception("default area of a %dx%d frame failed; using the nominal %dx%d frame", *size,
-                             *self.config.nominal_size)
-            area = default_area(*self.config.nominal_size, core)
-        timings = dict(timings)
-        timings["total_s"] = budget.elapsed()
-        return Decision(action="default", reason=reason, selected=None, candidates=list(candidates),
-                        default_area=area, timings=timings, input=info, config=self.config.to_dict())
+        return judge, before, after
 
 
 def check_monitor_bindings(monitor: Monitor | None, spec: str | None, calibration: str | Path | None,
@@ -437,24 +331,6 @@ def check_monitor_bindings(monitor: Monitor | None, spec: str | None, calibratio
         check_card_monitor(loaded, monitor)
         if segmenter is not None:
             loaded.check_network(segmenter)
-
-
-def frame_core(core: CoreConfig, pose: Pose | None) -> CoreConfig:
-    """The core configuration of one frame: the nominal one, at the frame's pose when it brings one."""
-    if pose is None:
-        return core
-    if not isinstance(pose, Pose):
-        raise ValueError(f"pose must be an el.camera.Pose, got {type(pose).__name__}")
-    values = {f.name: getattr(pose, f.name) for f in fields(pose)}
-    for name, value in values.items():
-        if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
-            raise ValueError(f"pose {name} must be a number, got {value!r}")
-    return replace(core, pose=Pose(**{k: float(v) for k, v in values.items()}))  # checked again, plain floats
-
-
-def pose_record(pose: Pose, *, nominal: bool) -> dict[str, Any]:
-    """The pose a decision was planned with, as its JSON records it (``input.pose``)."""
-    return {**{f.name: getattr(pose, f.name) for f in fields(pose)}, "source": "nominal" if nominal else "frame"}
 
 
 def is_deployed(spec: str | None) -> bool:

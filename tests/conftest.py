@@ -144,7 +144,8 @@ def tiny_run_without(tiny_campaign, tmp_path_factory):
 def monitor_runs(tiny_campaign, tmp_path_factory):
     """Two small runs whose monitor rejects every candidate on grass: 'good' (the real decision loop)
     and 'broken' (a pipeline variant that ignores the monitor and lands on rank 0 regardless)."""
-    from assurance.campaign import run as campaign
+    import el.kernel as kernel
+    from assurance.campaign import task as campaign
     from assurance.campaign.run import CampaignConfig, run_campaign
 
     root = tmp_path_factory.mktemp("monitor_runs")
@@ -161,11 +162,11 @@ def monitor_runs(tiny_campaign, tmp_path_factory):
         return WalkOutcome(0 if n else None, "accepted" if n else "no_candidate", out.verdicts, out.examined,
                            out.overhead_s)
 
-    campaign.walk_candidates = lands_on_top
+    campaign.walk_candidates = kernel.walk_candidates = lands_on_top  # the task's readouts and its decisions
     try:
         run_campaign(tiny_campaign["data"], root / "broken", config, progress=False, segmenter=seg)
     finally:
-        campaign.walk_candidates = real_walk
+        campaign.walk_candidates = kernel.walk_candidates = real_walk
     return {"good": root / "good", "broken": root / "broken"}
 
 

@@ -89,7 +89,7 @@ def scene_ids(width: int = 256, height: int = 144, *, road_col: int | None = Non
     return ids
 
 
-def write_textured_scenes(root: Path, seeds, width: int = 128, height: int = 72) -> Path:
+def write_textured_scenes(root: Path, seeds, width: int = 128, height: int = 72, sequence: str = "seq00") -> Path:
     """One UAVid-layout sequence under ``root``: a ``scene_ids`` scene per seed with seeded colour noise as
     texture (frames for out-of-domain gates, which need some variance)."""
     from assurance.scenes.uavid import write_sample
@@ -98,7 +98,7 @@ def write_textured_scenes(root: Path, seeds, width: int = 128, height: int = 72)
         ids = scene_ids(width, height, seed=seed, road_col=10 + (7 * seed) % 90)
         rgb = ids_to_colors(ids).astype(np.int16)
         rgb += np.random.default_rng(seed).integers(-12, 13, rgb.shape, dtype=np.int16)  # texture
-        write_sample(root, "seq00", f"{i:06d}", np.clip(rgb, 0, 255).astype(np.uint8), ids)
+        write_sample(root, sequence, f"{i:06d}", np.clip(rgb, 0, 255).astype(np.uint8), ids)
     return root
 
 

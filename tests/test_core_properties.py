@@ -289,10 +289,12 @@ def test_a_fault_inside_the_cm_gives_the_default_action_with_its_reason(monkeypa
     def broken(*args, **kwargs):
         raise RuntimeError("injected")
 
-    monkeypatch.setattr(gt, "run_core", broken)
+    import el.kernel
+
+    monkeypatch.setattr(el.kernel, "run_core", broken)
     ids = np.full((144, 256), CLASS_IDS["low_vegetation"], dtype=np.uint8)
     decision = gt.decide_from_labels(ids, config=CoreConfig(working_width=128))
-    assert decision.action == "default" and decision.reason == "fault: RuntimeError: injected"
+    assert decision.action == "default" and decision.reason == "fault: candidates: RuntimeError: injected"
     jsonschema.validate(decision.to_dict(), decision_schema())
 
 

@@ -27,5 +27,5 @@ def test_shipped_monitor_files_rest_on_the_shipped_weights():
     body, digest = read_signed(DEFAULT_MODEL, "uav-el-learned-monitor/1", "learned monitor", ValueError)
     assert body["weights"]["sha256"] == weights
     assert load_calibration(DEPLOYED_CALIBRATION).body["monitor_model"]["sha256"] == digest  # calibrated on it
-    for f in (DEPLOYED_CALIBRATION, DEFAULT_MODEL, DEFAULT_MODEL.with_name("ood.json")):
+    for f in (DEPLOYED_CALIBRATION, DEFAULT_MODEL, DEFAULT_MODEL.with_name("frame_gate.json")):
         assert "/work/" not in f.read_text() and "\\\\" not in f.read_text()  # no machine paths recorded

@@ -26,11 +26,11 @@ def _records(caplog, name: str) -> list[logging.LogRecord]:
 def test_segmentation_fault_is_logged_with_traceback(caplog) -> None:
     system = EmergencyLanding(PipelineConfig(core=CoreConfig(working_width=WW), monitor="lhd"),
                               segmenter=_Exploding(WW))
-    with caplog.at_level(logging.ERROR, logger="el.pipeline"):
+    with caplog.at_level(logging.ERROR, logger="el.kernel"):
         d = system.decide(scene_image(scene_ids()))
     assert d.action == "default"
     assert d.reason == "fault: segmentation: RuntimeError: GPU fell off"  # the reason itself is unchanged
-    (rec,) = _records(caplog, "el.pipeline")
+    (rec,) = _records(caplog, "el.kernel")  # the one decision kernel logs every fault
     assert "segmentation" in rec.getMessage()
     assert rec.exc_info is not None and rec.exc_info[0] is RuntimeError  # the traceback is kept
 
@@ -43,16 +43,16 @@ def test_missing_weights_are_logged_once_at_construction(tmp_path, caplog) -> No
 
 
 def test_ground_truth_pipeline_fault_is_logged(caplog, monkeypatch) -> None:
-    import assurance.campaign.gt_pipeline
+    import el.kernel
 
     def broken_core(*args, **kwargs):
         raise ValueError("no candidates today")
 
-    monkeypatch.setattr(assurance.campaign.gt_pipeline, "run_core", broken_core)
-    with caplog.at_level(logging.ERROR, logger="assurance.campaign.gt_pipeline"):
+    monkeypatch.setattr(el.kernel, "run_core", broken_core)
+    with caplog.at_level(logging.ERROR, logger="el.kernel"):
         d = decide_from_labels(scene_ids(), config=CoreConfig(working_width=WW))
-    assert d.action == "default" and d.reason == "fault: ValueError: no candidates today"
-    (rec,) = _records(caplog, "assurance.campaign.gt_pipeline")
+    assert d.action == "default" and d.reason == "fault: candidates: ValueError: no candidates today"
+    (rec,) = _records(caplog, "el.kernel")  # the ground-truth pipeline is the flight kernel
     assert rec.exc_info is not None and rec.exc_info[0] is ValueError
 
 

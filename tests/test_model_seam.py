@@ -85,17 +85,6 @@ def test_a_campaign_runs_a_plugin_model_by_name_and_records_it(colour_installed,
     assert readouts.load_table(run, "images")["fault"].eq("").all()
 
 
-def test_the_softmax_embedding_follows_the_label_set_size():
-    import numpy as np
-
-    from el.monitors.ood import softmax_embedding
-
-    probs = np.full((4, 6, 8), 0.25, np.float32)
-    assert softmax_embedding(probs).shape == (2 * 4 + 2,)
-    with pytest.raises(ValueError, match=r"\(C, h, w\)"):
-        softmax_embedding(np.ones((6, 8)))
-
-
 def test_a_registered_name_wins_over_a_path_like_argument(colour_installed):
     from el.segmentation.factory import FILE, PLUGIN, model_kind
 

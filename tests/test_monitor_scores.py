@@ -76,7 +76,7 @@ def test_campaign_sharing_gives_the_same_scores_as_each_monitor_alone(cases):
     """judge_candidates shares features and reductions between configurations: same verdicts and scores."""
     import numpy as np
 
-    from assurance.campaign.run import judge_candidates
+    from assurance.campaign.judging import judge_candidates
     from el.decision import Disc
 
     class Fixed:  # serves the frozen cases by patch: case i sits at column 20 i of a one-row image

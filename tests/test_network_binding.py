@@ -11,18 +11,18 @@ from helpers import OracleSegmenter, scene_ids, scene_image
 
 from assurance.cli import main
 from el.config import CoreConfig
-from el.errors import CalibrationError, LearnedModelError, OODError
+from el.errors import CalibrationError, FrameGateError, LearnedModelError
 from el.monitors import build_monitor
 from el.monitors.calibration import card_document, load_calibration
+from el.monitors.frame_gate import load_frame_gate
 from el.monitors.learned import DEFAULT_MODEL, load_learned_model
-from el.monitors.ood import load_ood
 from el.pipeline import DEPLOYED_CALIBRATION, DEPLOYED_MONITOR, EmergencyLanding, PipelineConfig
 from el.segmentation.weights import DEFAULT_WEIGHTS, read_card
 
 WW = 128
 SHIPPED = read_card(DEFAULT_WEIGHTS)["weights_sha256"]
 OTHER = "ab" * 32
-SHIPPED_OOD = DEFAULT_MODEL.with_name("ood.json")
+SHIPPED_GATE = DEFAULT_MODEL.with_name("frame_gate.json")
 
 
 class Network(OracleSegmenter):
@@ -39,11 +39,12 @@ def _decide(segmenter, **config):
 
 
 def test_shipped_records_are_bound_to_the_shipped_network():
-    for record in (load_learned_model(), load_calibration(DEPLOYED_CALIBRATION), load_ood(SHIPPED_OOD)):
+    for record in (load_learned_model(), load_calibration(DEPLOYED_CALIBRATION), load_frame_gate(SHIPPED_GATE)):
         assert record.network_sha256 == SHIPPED
         record.check_network(Network(SHIPPED))  # the network they were fitted on passes
-    errors = (LearnedModelError, CalibrationError, OODError)
-    for record, error in zip((load_learned_model(), load_calibration(DEPLOYED_CALIBRATION), load_ood(SHIPPED_OOD)),
+    errors = (LearnedModelError, CalibrationError, FrameGateError)
+    shipped = (load_learned_model(), load_calibration(DEPLOYED_CALIBRATION), load_frame_gate(SHIPPED_GATE))
+    for record, error in zip(shipped,
                              errors, strict=True):
         for other in (OTHER, None):  # another network, or one that cannot say which it is
             with pytest.raises(error, match="fitted on network 0d3dab88c2b0"):
@@ -71,9 +72,10 @@ def test_a_calibration_card_refuses_another_network_in_flight(tmp_path):
     assert "calibration card fitted on network abababababab" in d.reason
 
 
-def test_an_out_of_domain_gate_refuses_another_network_in_flight():
-    d = _decide(Network(OTHER), monitor="lhd", ood=str(SHIPPED_OOD))
-    assert d.action == "default" and d.reason.startswith("fault: ood: OODError") and "fitted on network" in d.reason
+def test_a_frame_gate_refuses_another_network_in_flight():
+    d = _decide(Network(OTHER), monitor="lhd", gate=str(SHIPPED_GATE))
+    assert d.action == "default" and d.reason.startswith("fault: frame_gate: FrameGateError")
+    assert "fitted on network" in d.reason
 
 
 def test_the_command_line_refuses_another_network_with_exit_2(tiny_campaign, tmp_path, capsys):
@@ -81,7 +83,7 @@ def test_the_command_line_refuses_another_network_with_exit_2(tiny_campaign, tmp
     weights = str(tiny_campaign["weights"])  # a real weights file with its card: another network
     cases = [
         ["land", str(image), "--weights", weights],  # the deployed learned monitor
-        ["land", str(image), "--weights", weights, "--monitor", "lhd", "--ood", str(SHIPPED_OOD)],
+        ["land", str(image), "--weights", weights, "--monitor", "lhd", "--gate", str(SHIPPED_GATE)],
         ["campaign", "--data", str(tiny_campaign["data"]), "--out", str(tmp_path / "run"), "--weights", weights,
          "--monitors", "lhd", "--calibration", str(DEPLOYED_CALIBRATION), "--quiet"],
     ]

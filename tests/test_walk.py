@@ -7,10 +7,10 @@ from helpers import OracleSegmenter, scene_ids, scene_image
 from hypothesis import given
 from hypothesis import strategies as st
 
-from assurance.campaign.run import walk_of
 from el.config import CoreConfig
 from el.decision import MonitorVerdict
 from el.monitors import parse_monitor_spec
+from el.monitors.spec import walk_of
 from el.pipeline import EmergencyLanding, PipelineConfig
 from el.walk import ALL_REJECTED, NO_CANDIDATE, select, walk_candidates, walk_order
 

@@ -1,7 +1,6 @@
 """Would the out-of-domain gate pay? Its distance on every frame of a campaign, as the campaign saw it.
 
-Both gate files are replayed: the frame gate (``uav-el fit-gate``, ``el.monitors.frame_gate``: the frame pass's own
-features) and the older out-of-domain gate (``uav-el fit-ood``, ``el.monitors.ood``: a second trunk pass).
+The gate replayed is a frame gate (``uav-el fit-gate``, ``el.monitors.frame_gate``: the frame pass's own features).
 
 Each (perturbation, severity, image) of the run is re-perturbed with the campaign's own seed
 (`assurance.campaign.run.task_seed`), so the gate scores exactly the frames the monitors judged. A frame
@@ -23,29 +22,19 @@ from assurance.campaign import readouts
 from assurance.campaign.perturbations import perturb
 from assurance.campaign.run import task_seed
 from assurance.scenes.uavid import iter_samples, read_image
-from el.monitors.frame_gate import FRAME_GATE_FORMAT, FrameGate, load_frame_gate
-from el.monitors.ood import load_ood
+from el.monitors.frame_gate import FrameGate, load_frame_gate
 
 
-def load_gate(path: str | Path) -> Any:
-    """The gate file at ``path``: a frame gate when its format says so, else an out-of-domain gate (each loader
-    refuses, one line, what it cannot use)."""
-    import json
-
-    try:
-        fmt = json.loads(Path(path).read_text(encoding="utf-8")).get("format")
-    except (OSError, UnicodeDecodeError, ValueError, AttributeError):
-        fmt = None  # the loader says what is wrong
-    return load_frame_gate(path) if fmt == FRAME_GATE_FORMAT else load_ood(path)
+def load_gate(path: str | Path) -> FrameGate:
+    """The frame-gate file at ``path`` (its loader refuses, one line, what it cannot use)."""
+    return load_frame_gate(path)
 
 
-def gate_score(gate: Any, segmenter: Any, rgb: np.ndarray) -> float:
-    """The gate's score of one frame: a frame gate reads the frame pass's tap, the older gate runs its own."""
-    if isinstance(gate, FrameGate):
-        segmenter.tap_frames = True
-        segmenter.predict_frame(rgb)
-        return gate.score(segmenter.last_tap)
-    return gate.score(segmenter, rgb)
+def gate_score(gate: FrameGate, segmenter: Any, rgb: np.ndarray) -> float:
+    """The gate's score of one frame, from the frame pass's tap."""
+    segmenter.tap_frames = True
+    segmenter.predict_frame(rgb)
+    return gate.score(segmenter.last_tap)
 
 
 def frame_distances(run: str | Path, data: str | Path, gate_path: str | Path, segmenter: Any,

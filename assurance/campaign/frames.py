@@ -16,30 +16,34 @@ import numpy as np
 from assurance.scenes.poses import NOMINAL, frame_pose
 from assurance.scenes.uavid import Sample, read_labels
 from el.camera import Pose, check_geometry
-from el.config import CoreConfig
 from el.decision import Candidate
 from el.errors import DataError
-from el.monitors.frame_gate import FrameGate, judge_frame, load_frame_gate
+from el.monitors.frame_gate import FrameGate, load_frame_gate
 from el.odd import OperatingDomain
 
 _GATES: dict[tuple[str, str], FrameGate] = {}  # per worker: each gate file read once
 
 
-def frame_config(config: Any, sample: Sample, size: tuple[int, int]) -> tuple[CoreConfig, dict[str, Any]]:
-    """The CM configuration of one frame under the campaign's pose policy, and its pose readouts.
-
-    ValueError (a fault of the task) when the policy requires a pose the frame lacks, or the frame's
-    camera, pose and size are outside what the flat-ground model handles (``el.camera.check_geometry``)."""
+def frame_pose_of(config: Any, sample: Sample) -> tuple[Pose | None, float, dict[str, Any]]:
+    """The pose that plans a campaign frame under the campaign's pose policy (None: the nominal one), its roll, and
+    its pose readouts. DataError (the data's fault) when the policy requires a pose the frame lacks."""
     pose, roll, source = frame_pose(sample, config.poses, config.core.pose)
-    cfg = config.core if source == NOMINAL else replace(config.core, pose=pose)
+    cols = {"height_m": float(pose.height_m), "pitch_deg": float(pose.pitch_deg), "roll_deg": float(roll),
+            "pose_source": source}
+    return (None if source == NOMINAL else pose), roll, cols
+
+
+def check_frame_pose(config: Any, sample: Sample, pose: Pose | None, roll: float, size: tuple[int, int]) -> None:
+    """Refuse a frame whose camera, pose and size are outside what the flat-ground model handles
+    (``el.camera.check_geometry``): the frame's own pose is its data's fault (DataError), the nominal pose the
+    configuration's (ValueError)."""
+    cfg = config.core if pose is None else replace(config.core, pose=pose)
     try:
         check_geometry(cfg.geometry(*size), roll_deg=roll)
-    except ValueError as exc:  # the frame's own pose or size: its data's fault; the nominal pose: the configuration's
-        if source == NOMINAL:
+    except ValueError as exc:
+        if pose is None:
             raise
         raise DataError(f"{sample.image_path}: {exc}") from None
-    return cfg, {"height_m": float(pose.height_m), "pitch_deg": float(pose.pitch_deg), "roll_deg": float(roll),
-                 "pose_source": source}
 
 
 def frame_truth(sample: Sample, labels: Any, shape: tuple[int, ...]) -> tuple[Any, np.ndarray]:
@@ -56,18 +60,6 @@ def frame_truth(sample: Sample, labels: Any, shape: tuple[int, ...]) -> tuple[An
 def outside_odd(odd: dict[str, Any] | None, pose: Pose, size: tuple[int, int]) -> str | None:
     """The ``outside_odd`` reason of a frame under the campaign's declared domain (None: inside, or none declared)."""
     return None if odd is None else OperatingDomain.from_dict(odd).outside(pose, size)
-
-
-def refuse_outside(image_rows: list[dict[str, Any]], cand_rows: list[dict[str, Any]], reason: str | None) -> None:
-    """Rewrite a frame's decisions as the default action for ``reason`` (in place; None: inside, unchanged): no
-    candidate selected, the decision's true hazard the default area's. The candidates keep their verdicts."""
-    if not reason:
-        return
-    for row in image_rows:
-        row.update(action="default", reason=reason, selected=-1, h_decision=row["h_default"],
-                   decision_unsafe=bool(row["h_default"] >= 1.0), clearance_decision_m=math.nan)
-    for row in cand_rows:
-        row["selected"] = False
 
 
 def frame_gate(gate: dict[str, str] | None, segmenter: Any) -> FrameGate | None:
@@ -87,14 +79,13 @@ def frame_gate(gate: dict[str, str] | None, segmenter: Any) -> FrameGate | None:
     return _GATES[key]
 
 
-def gate_readout(gate: FrameGate | None, segmenter: Any) -> tuple[dict[str, float], str | None]:
-    """The gate's readout columns of the frame just segmented, and its ``out_of_domain`` reason (None: passed, or
-    no gate)."""
-    if gate is None:
-        return {"frame_gate_score": math.nan, "frame_gate_threshold": math.nan}, None
-    info: dict[str, Any] = {}
-    reason = judge_frame(gate, segmenter, info)
-    return {"frame_gate_score": float(info["frame_gate"]["score"]), "frame_gate_threshold": gate.threshold}, reason
+def gate_columns(gate: FrameGate | None, info: dict[str, Any]) -> dict[str, float]:
+    """The gate's readout columns of a frame, from the kernel's ``input.frame_gate`` record (NaN: no gate, or the
+    frame was not scored)."""
+    record = info.get("frame_gate") or {}
+    score = record.get("score")
+    return {"frame_gate_score": math.nan if gate is None or score is None else float(score),
+            "frame_gate_threshold": math.nan if gate is None else gate.threshold}
 
 
 def clearance_of(fn: Callable[..., Any] | None, sample: Sample, size: tuple[int, int],

@@ -1,11 +1,11 @@
 """The ground-truth pipeline: a label map -> the CM -> a landing decision, without a model or monitor.
 
 It answers "what would the EL system decide if the segmentation were perfect?": the structural
-check of EL-R01 on whole scenes, and the reference for the model pipeline. The full-resolution
-label map is pooled conservatively to the working resolution (``el.core.probs_from_labels``), the
-CM ranks the candidates, and the decision is to land on rank 0 (no runtime monitor: every
-candidate's ``monitor`` is None), or the default action when there is no candidate. A fault inside
-the CM ends in the default action with reason ``"fault: ..."`` (EL-R06).
+check of EL-R01 on whole scenes, and the reference for the model pipeline. It is the flight kernel
+(``el.kernel``) with a label-map segmenter: the full-resolution label map is pooled conservatively to the
+working resolution (``el.core.probs_from_labels``), the CM ranks the candidates, and the decision is to land on
+rank 0 (no runtime monitor: every candidate's ``monitor`` is None), or the default action when there is no
+candidate. A fault inside the CM ends in the default action with reason ``"fault: ..."`` (EL-R06).
 """
 
 from __future__ import annotations
@@ -20,15 +20,14 @@ import numpy as np
 
 from assurance.scenes.poses import NOMINAL, frame_pose
 from assurance.scenes.uavid import DataError, Sample, check_same_size, read_labels
-from el.camera import Pose, check_geometry, working_size
+from el.camera import Pose, working_size
 from el.config import CoreConfig
-from el.core import default_area, probs_from_labels, run_core
+from el.core import default_area, probs_from_labels
 from el.decision import Decision, decision_schema  # noqa: F401  (re-exported)
 from el.hashing import sha256_file
+from el.kernel import Parts, decide_frame
 from el.labels import UAVID, LabelSet
 from el.odd import OperatingDomain
-from el.pipeline import frame_core, pose_record
-from el.walk import walk_candidates
 
 PIPELINE = "ground_truth"
 logger = logging.getLogger(__name__)  # faults with their tracebacks; the decision keeps only the reason
@@ -46,6 +45,18 @@ def _check_ids(ids: np.ndarray, labels: LabelSet = UAVID) -> tuple[int, int]:
     return w, h
 
 
+class LabelMapSegmenter:
+    """A perfect segmentation: the frame's class ids pooled conservatively to the working resolution
+    (``el.core.probs_from_labels``), whatever array the kernel hands it (the ids themselves)."""
+
+    def __init__(self, ids: np.ndarray, labels: LabelSet, working_width: int) -> None:
+        self.ids, self.labels, self.working_width = ids, labels, working_width
+
+    def predict_frame(self, frame: np.ndarray) -> np.ndarray:
+        H, W = self.ids.shape
+        return probs_from_labels(self.ids, working_size(W, H, self.working_width), labels=self.labels)
+
+
 def decide_from_labels(
     ids: np.ndarray,
     *,
@@ -58,62 +69,35 @@ def decide_from_labels(
     roll_deg: float = 0.0,
     odd: OperatingDomain | None = None,
 ) -> Decision:
-    """The decision for a full-resolution class-id map (H, W) under a perfect segmentation.
+    """The decision for a full-resolution class-id map (H, W) under a perfect segmentation: the flight kernel
+    (``el.kernel``) with a label-map segmenter and no monitor.
 
     ``input_info`` goes to the decision's ``"input"`` (path, sha256; width and height are filled
     in). ``read_s`` is the time already spent reading the input. ``labels``: the label set of the
     ids (default UAVid). ``pose`` (and ``roll_deg``): the frame's pose, as ``el.pipeline``'s; None is
     ``config.pose``. ValueError for a malformed map; a pose the flat-ground model cannot plan with
     (``el.camera.check_geometry``) gives the default action with reason ``"fault: pose: <error>"``,
-    a failure inside the CM with ``"fault: <error>"``. ``odd``: the declared operating domain; a pose or size
-    outside it is the default action with reason ``outside_odd: ...``, as the flight pipeline decides it.
+    a failure inside the CM ``"fault: candidates: <error>"``. ``odd``: the declared operating domain; a pose or
+    size outside it is the default action with reason ``outside_odd: ...``, as the flight pipeline decides it.
     """
     config = config or CoreConfig()
     ids = labels.planning_ids(ids)  # unknown (ignored) ground is never a landing site: planned as forbidden
     W, H = _check_ids(ids, labels)
-    t0 = clock()
-    info = dict(input_info or {})
-    info.update(width=W, height=H)
-    timings = {"read_s": float(read_s), "segmentation_s": 0.0, "candidates_s": 0.0, "monitoring_s": 0.0}
-    nominal = config
-    try:
-        config = frame_core(config, pose)
-        info["pose"] = pose_record(config.pose, nominal=pose is None)
-        if roll_deg:
-            info["pose"]["roll_deg"] = float(roll_deg)  # not modelled: a pose error within MAX_ROLL_DEG
-        outside = None if odd is None else odd.outside(config.pose, (W, H))
-        if not outside:  # outside the domain: refused before planning, as el.pipeline does
-            check_geometry(config.geometry(W, H), roll_deg=roll_deg)
-    except Exception as exc:  # fail safe, as the flight pipeline: the default action, with the reason
-        cfg = {"pipeline": PIPELINE, "monitor": None, "core": nominal.to_dict()}
-        timings["total_s"] = float(read_s) + clock() - t0
-        return Decision(action="default", reason=f"fault: pose: {type(exc).__name__}: {exc}", selected=None,
-                        candidates=[], default_area=default_area(W, H, nominal), timings=timings, input=info,
-                        config=cfg)
-    cfg = {"pipeline": PIPELINE, "monitor": None, "core": config.to_dict(),
-           **({"odd": odd.to_dict()} if odd is not None else {})}
-    area = default_area(W, H, config)
-    if outside:  # no evidence of safety there: the default action, a decision and not a fault
-        timings["total_s"] = float(read_s) + clock() - t0
-        return Decision(action="default", reason=outside, selected=None, candidates=[], default_area=area,
-                        timings=timings, input=info, config=cfg)
-    try:
-        probs = probs_from_labels(ids, working_size(W, H, config.working_width), labels=labels)
-        t1 = clock()
-        core = run_core(probs, (W, H), config, clock=clock, labels=labels)
-        t2 = clock()
-    except Exception as exc:  # fail safe: any fault ends in the default action, with its reason
-        logger.exception("fault in the core model on %s; default action", info.get("path", "?"))
-        timings["total_s"] = float(read_s) + clock() - t0
-        return Decision(action="default", reason=f"fault: {type(exc).__name__}: {exc}", selected=None,
-                        candidates=[], default_area=area, timings=timings, input=info, config=cfg)
-    timings["segmentation_s"] = t1 - t0
-    timings["candidates_s"] = t2 - t1
-    timings.update({k: v for k, v in core.timings.items() if k != "total_s"})
-    timings["total_s"] = float(read_s) + clock() - t0
-    outcome = walk_candidates(len(core.candidates), None)  # no monitor: the top candidate, as the pipeline
-    return Decision(action=outcome.action, reason=outcome.reason, selected=outcome.selected,
-                    candidates=core.candidates, default_area=area, timings=timings, input=info, config=cfg)
+    record = {"pipeline": PIPELINE, "monitor": None, "core": config.to_dict(),
+              **({"odd": odd.to_dict()} if odd is not None else {})}
+    parts = Parts(segmenter=LabelMapSegmenter(ids, labels, config.working_width), labels=labels, core=config,
+                  odd=odd, record=record, nominal_size=(W, H))
+
+    def read(info: dict[str, Any]) -> np.ndarray:
+        info.update(input_info or {})
+        info.update(width=W, height=H)
+        del info["frame_gate"]  # no frame gate on a label map
+        return ids
+
+    decision = decide_frame(read, parts, None, pose=pose, roll_deg=roll_deg, clock=clock)
+    decision.timings["read_s"] = float(read_s)
+    decision.timings["total_s"] += float(read_s)
+    return decision
 
 
 def decide_from_label_file(

@@ -30,8 +30,8 @@ from typing import Any
 
 import pandas as pd
 
+from assurance.errors import DamagedRunError, RunError  # noqa: F401  (re-exported)
 from assurance.files import atomic_write_bytes, public_mode
-from el.errors import UavElError
 from el.hashing import sha256_file
 
 FORMAT_VERSION = "uav-el-readouts/2"
@@ -58,26 +58,6 @@ COLUMNS: dict[str, tuple[str, ...]] = {
 }
 """Columns every loaded table has (a faulted task's row holds only the task's keys and the fault)."""
 _SAFE = re.compile(r"[^A-Za-z0-9_.-]+")
-
-
-class RunError(UavElError, ValueError):
-    """A run folder is missing, not a run, or belongs to another campaign."""
-
-
-class DamagedRunError(RunError):
-    """A run's readouts fail verification (a shard altered, truncated or missing): ``problems`` names them."""
-
-    def __init__(self, run_dir: str | Path, problems: list[str], *, headline: str | None = None,
-                 shown: int = 5) -> None:
-        """``headline``: what the run is instead of the damaged-run line (then no re-run advice); the message
-        lists the first ``shown`` problems."""
-        self.run_dir, self.problems = Path(run_dir), list(problems)
-        first = "; ".join(problems[:shown]) + (f"; ... {len(problems) - shown} more" if len(problems) > shown else "")
-        if headline is not None:
-            super().__init__(f"{run_dir}: {headline}: {first}")
-            return
-        super().__init__(f"{run_dir}: damaged run, {len(problems)} shard problem(s): {first} "
-                         "(re-run the same `uav-el campaign` command to re-compute the damaged shards)")
 
 
 def shard_name(perturbation: str, severity: int, key: str) -> str:

@@ -1,10 +1,10 @@
 """Evaluation campaigns (docs/architecture.md 4.2): perturbation x image tasks, every monitor configuration per task.
 
-One task = one (perturbation, severity, image). It perturbs the HD frame (seeded per image), segments
-it and finds the CM's candidates **once**, then judges every candidate with every monitor
-configuration, sharing work between them: each HD patch is segmented once for every tau, MC-dropout
-samples are drawn once per rho (the largest n; smaller n use the prefix). Each configuration is
-charged the monitoring time it would have spent alone (see ``_attributed_costs``).
+One task = one (perturbation, severity, image) through the flight kernel (``assurance.campaign.task``): the
+frame perturbed (seeded per image), segmented and its candidates found **once**, every candidate judged with
+every monitor configuration in one pass, sharing work between them (``judging``: each HD patch segmented once for
+every tau, MC-dropout samples drawn once per rho), each configuration charged the monitoring time it would have
+spent alone, and each configuration's decision concluded by the kernel.
 
 Results go to a readouts store (``assurance.campaign.readouts``): one shard per task, written atomically, so
 an interrupted campaign resumes where it stopped, and a bad image is a recorded fault, not a crash.
@@ -12,212 +12,30 @@ an interrupted campaign resumes where it stopped, and a bad image is a recorded 
 
 from __future__ import annotations
 
-import hashlib
 import os
 import time
-import traceback
 import warnings
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
-
-import numpy as np
 
 from assurance.campaign import readouts
 from assurance.campaign.attestation import sign_run
 from assurance.campaign.faults import config_faults
-from assurance.campaign.frames import (
-    clearance_of,
-    frame_config,
-    frame_gate,
-    frame_truth,
-    gate_readout,
-    outside_odd,
-    refuse_outside,
-)
-from assurance.campaign.judging import _timed, judge_candidates
 from assurance.campaign.manifest import (  # noqa: F401  (re-exported)
     check_monitor_networks,
     manifest,
     monitor_models,
 )
-from assurance.campaign.perturbations import PERTURBATIONS, perturb, severities_of
-from assurance.campaign.truth import true_hazard
+from assurance.campaign.task import (  # noqa: F401  (re-exported)
+    CampaignConfig,
+    Task,
+    run_task,
+    task_parts,
+    task_seed,
+)
 from assurance.campaign.workers import bounded_jobs, dask_map, die_with_parent
-from assurance.scenes.poses import check_policy
-from assurance.scenes.uavid import Sample, iter_samples
-from el.config import CoreConfig, check_seed
-from el.core import run_core
-from el.imageio import read_image_meta
-from el.monitors import DEMO_GRID, build_monitor, parse_monitor_spec
-from el.monitors.spec import walk_of
-from el.segmentation.contract import labels_of
-from el.walk import walk_candidates
-
-
-# ------------------------------------------------------------------------------------------------
-# Configuration
-# ------------------------------------------------------------------------------------------------
-@dataclass(frozen=True, kw_only=True)
-class CampaignConfig:
-    """What a campaign evaluates. Recorded in the run manifest; a resumed run must match it."""
-
-    perturbations: tuple[str, ...]
-    severities: tuple[int, ...] = (3,)
-    monitors: tuple[str, ...] = DEMO_GRID
-    images: int | None = None  # the first N images of the data set (sorted); None: all
-    seed: int = 0
-    patch_margin: float = 0.25
-    patch_max_side: int | None = None
-    weights: str | dict[str, Any] | None = None  # None: the shipped weights; a dict: a system file's model
-    core: CoreConfig = field(default_factory=CoreConfig)
-    poses: str = "nominal"  # which pose plans each frame: assurance.scenes.poses.POLICIES
-    odd: dict[str, Any] | None = None  # the declared operating domain (el.odd.OperatingDomain.to_dict()); None: none
-    gate: dict[str, str] | None = None  # the frame gate {"path", "sha256"} (el.monitors.frame_gate); None: none
-
-    def __post_init__(self) -> None:
-        unknown = [p for p in self.perturbations if p not in PERTURBATIONS]
-        if unknown:
-            raise ValueError(f"unknown perturbation(s) {unknown}; valid: {', '.join(PERTURBATIONS)}")
-        if not self.perturbations:
-            raise ValueError("a campaign needs at least one perturbation")
-        bad = [s for s in self.severities if not (isinstance(s, int) and 1 <= s <= 5)]
-        if bad or not self.severities:
-            raise ValueError(f"severities must be integers in 1..5, got {list(self.severities)}")
-        if not self.monitors:
-            raise ValueError("a campaign needs at least one monitor configuration")
-        canon = []
-        for m in self.monitors:
-            spec = parse_monitor_spec(m)
-            if spec is None:
-                raise ValueError("'none' is not a monitor configuration to evaluate (the CM alone is in every row)")
-            canon.append(spec.name)
-        if len(set(canon)) != len(canon):
-            raise ValueError(f"duplicate monitor configurations in {list(self.monitors)}")
-        object.__setattr__(self, "monitors", tuple(canon))
-        if self.images is not None and self.images < 1:
-            raise ValueError(f"images must be >= 1, got {self.images}")
-        check_seed(self.seed)
-        check_policy(self.poses)
-        outside_odd(self.odd, self.core.pose, (1920, 1080))  # a malformed declaration fails here
-
-    def scenarios(self) -> list[tuple[str, int]]:
-        """(perturbation, severity) pairs; one not graded by severity ('none') is evaluated once, at the first."""
-        return [(p, s) for p in self.perturbations for s in severities_of(p, self.severities)]
-
-    def to_dict(self) -> dict[str, Any]:
-        """The manifest's ``config``; ``poses`` only when not nominal, so a nominal run records as before."""
-        d = asdict(self)
-        d["core"] = self.core.to_dict()
-        if self.poses == "nominal":
-            del d["poses"]
-        for key in ("odd", "gate"):
-            if d[key] is None:
-                del d[key]
-        return d
-
-
-# ------------------------------------------------------------------------------------------------
-# One task
-# ------------------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class Task:
-    """One (perturbation, severity, image) of a campaign."""
-
-    perturbation: str
-    severity: int
-    sample: Sample
-
-    @property
-    def shard_name(self) -> str:
-        return readouts.shard_name(self.perturbation, self.severity, self.sample.key)
-
-
-def task_seed(seed: int, key: str, perturbation: str, severity: int) -> list[int]:
-    """Seed sequence of a task's perturbation: independent of the order and place tasks run."""
-    digest = hashlib.sha256(f"{key}|{perturbation}|{severity}".encode()).digest()
-    return [seed, int.from_bytes(digest[:8], "little")]
-
-
-def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Callable[[], float] = time.perf_counter,
-             world_clearance: Callable[..., Any] | None = None,
-             expected_models: dict[str, str] | None = None) -> dict[str, list[dict[str, Any]]]:
-    """Evaluate one task: readout rows of its images and candidates tables, the frame planned at its pose and
-    outside the domain refused (``frames``); a monitor model other than ``expected_models``'s: a fault."""
-    s = task.sample
-    base = {"key": s.key, "sequence": s.sequence, "frame": s.frame, "perturbation": task.perturbation,
-            "severity": task.severity}
-    timings: dict[str, float] = {}
-    t0 = clock()
-    try:
-        (rgb, meta), timings["read_s"] = _timed(clock, read_image_meta, s.image_path)  # meta: EXIF orientation
-        frame_cfg, pose_cols = frame_config(config, s, (rgb.shape[1], rgb.shape[0]))
-        labels, ids = frame_truth(s, labels_of(segmenter), rgb.shape[:2])
-        rng = np.random.default_rng(task_seed(config.seed, s.key, task.perturbation, task.severity))
-        hd, timings["perturb_s"] = _timed(clock, perturb, rgb, task.perturbation, task.severity, rng)
-        gate = frame_gate(config.gate, segmenter)  # turns the segmenter's frame tap on
-        probs, timings["segmentation_s"] = _timed(clock, segmenter.predict_frame, hd)
-        gate_cols, refused = gate_readout(gate, segmenter)
-        H, W = hd.shape[:2]
-        core, timings["candidates_s"] = _timed(clock, run_core, probs, (W, H), frame_cfg, labels=labels)
-        monitors = [build_monitor(m, margin=config.patch_margin, max_side=config.patch_max_side, clock=clock,
-                                  labels=labels)
-                    for m in config.monitors]
-        for monitor in monitors:
-            if monitor is not None:
-                monitor.check_network(segmenter)  # a monitor fitted on another network: a fault, never a readout
-        if expected_models is not None:
-            _check_models(config.monitors, monitors, expected_models)
-        t = clock()
-        verdicts = judge_candidates(hd, core.candidates, monitors, segmenter, seed=config.seed, clock=clock,
-                                    frame_probs=probs)
-        timings["monitoring_s"] = clock() - t
-    except Exception as exc:  # a bad image is a recorded fault, never a crash of the campaign
-        fault = f"{type(exc).__name__}: {exc}"
-        row = {**base, "monitor": "", "fault": fault, "traceback": traceback.format_exc(limit=3)}
-        return {"images": [row], "candidates": []}
-
-    cands = core.candidates
-    truth = [true_hazard(ids, c.disc, labels=labels) for c in cands]
-    clearance = clearance_of(world_clearance, s, (W, H), cands)
-    h_default = true_hazard(ids, core.default_area, labels=labels)
-    thresholds = [m.threshold for m in monitors]
-    image_rows, cand_rows = [], []
-    for j, name in enumerate(config.monitors):
-        column = [verdicts[k][j] for k in range(len(cands))]
-        outcome = walk_candidates(len(cands), column.__getitem__, walk_of(name), evaluate_all=True)
-        sel, examined = outcome.selected, outcome.examined
-        h_decision = h_default if sel is None else truth[sel]
-        image_rows.append({
-            **base, "monitor": name, "fault": "",
-            "candidates": len(cands),
-            "action": outcome.action,
-            "reason": outcome.reason,
-            "selected": -1 if sel is None else sel,
-            "h_default": h_default,
-            "h_top": truth[0] if cands else float("nan"),
-            "h_decision": h_decision,
-            "decision_unsafe": bool(h_decision >= 1.0),
-            "clearance_decision_m": clearance[sel] if sel is not None else float("nan"),
-            "overhead_s": float(outcome.overhead_s),
-            "default_x": core.default_area.x, "default_y": core.default_area.y,
-            "default_r": core.default_area.radius_px, "width": W, "height": H, **pose_cols, **meta, **gate_cols,
-            **timings,
-            "total_s": clock() - t0,
-        })
-        for k, c in enumerate(cands):
-            cand_rows.append({
-                **base, "monitor": name, "rank": k, "x": c.x, "y": c.y, "radius_px": c.radius_px,
-                "hazard": c.hazard, "hazard_semantic": c.hazard_semantic, "hazard_distance": c.hazard_distance,
-                "true_hazard": truth[k], "true_unsafe": bool(truth[k] >= 1.0), "clearance_m": clearance[k],
-                "accepted": bool(column[k].accepted), "reason": column[k].reason, "seconds": float(column[k].seconds),
-                "score": column[k].score, "threshold": thresholds[j],
-                "selected": sel == k, "examined": k < examined,
-            })
-    refuse_outside(image_rows, cand_rows, outside_odd(config.odd, frame_cfg.pose, (W, H)) or refused)  # as el does
-    return {"images": image_rows, "candidates": cand_rows}
-
+from assurance.scenes.uavid import iter_samples
 
 # ------------------------------------------------------------------------------------------------
 # The runner
@@ -234,14 +52,6 @@ def _worker_segmenter(weights: str | dict[str, Any] | None, threads: int) -> Any
         _WORKER_STATE["segmenter"] = load_model_spec(weights, threads=threads)
         _WORKER_STATE["key"] = key
     return _WORKER_STATE["segmenter"]
-
-
-def _check_models(names: Sequence[str], monitors: Sequence[Any], expected: dict[str, str]) -> None:
-    for name, monitor in zip(names, monitors, strict=True):
-        have, want = getattr(monitor, "model_sha256", None), expected.get(name)
-        if have != want:
-            raise ValueError(f"monitor {name!r} runs model {have}, the run recorded {want} "
-                             "(its model file changed during the run)")
 
 
 def execute(task: Task, config: CampaignConfig, run_dir: str, threads: int, segmenter: Any = None,

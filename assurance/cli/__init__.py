@@ -21,7 +21,8 @@ import sys
 from collections.abc import Sequence
 
 from assurance import __version__
-from assurance.errors import CommandError
+from assurance.errors import CommandError, DamagedRunError
+from el.errors import DataError, LabelColourError
 
 # Sub-command name -> module under assurance.cli. Order is the order of `uav-el --help`.
 COMMANDS: dict[str, str] = {
@@ -35,7 +36,6 @@ COMMANDS: dict[str, str] = {
     "campaign": "campaign",
     "calibrate": "calibrate",
     "fit-monitor": "fit_monitor",
-    "fit-ood": "fit_ood",
     "fit-gate": "fit_gate",
     "table": "table",
     "sweep": "sweep",
@@ -45,9 +45,30 @@ COMMANDS: dict[str, str] = {
     "keys": "keys",
 }
 
+SUMMARIES: dict[str, str] = {
+    "synth": "generate synthetic oblique urban scenes in the UAVid layout",
+    "preview": "write a preview PNG of a UAVid-layout data set",
+    "recolour": "copy a data set with its label maps re-coloured into another label set's palette",
+    "land": "decide where to land for one frame (model pipeline, or ground truth with --labels)",
+    "train": "train the segmentation network and write its weights and model card",
+    "model-card": "print the segmentation model card (--verify recomputes its figures)",
+    "export-onnx": "export the segmentation network to ONNX, checked against torch",
+    "campaign": "run or resume an evaluation campaign (perturbations x images x monitors)",
+    "calibrate": "calibrate a monitor's threshold on held-out scenes with a stated guarantee",
+    "fit-monitor": "train the learned candidate monitor on a split, select it on --val",
+    "fit-gate": "fit the frame gate on training scenes, threshold it on validation scenes",
+    "table": "print and write the results table of a campaign run",
+    "sweep": "replay a campaign at every threshold of its monitors (--choose picks one)",
+    "verify": "run the requirement checks and your requirement tests against a campaign run",
+    "evidence": "write the evidence report (HTML, PDF, JSON) of a campaign run and decide the gate",
+    "fault-table": "replay the fault-injection cases through the command line and write their table",
+    "keys": "show the Ed25519 key that signs campaigns and requirement results",
+}
+"""One line per command for ``uav-el --help``: the list is built without importing any command (each command's
+module, and what it needs, is imported only when that command runs or shows its own help)."""
 
 # Commands that decide, evaluate or report: they take --system FILE (else ./uav-el.toml, else the embedded default).
-SYSTEM_COMMANDS = ("land", "campaign", "calibrate", "fit-monitor", "fit-ood", "fit-gate", "verify", "evidence")
+SYSTEM_COMMANDS = ("land", "campaign", "calibrate", "fit-monitor", "fit-gate", "verify", "evidence")
 SYSTEM_HELP = ("the system under assessment (uav-el.toml: model, camera, poses, labels, safety, monitor, data, "
                "targets, waivers, report); default: ./uav-el.toml if present, else the embedded default (the "
                "shipped system); options given here win over the file")
@@ -116,7 +137,23 @@ def configure_logging(args: argparse.Namespace) -> None:
     root.setLevel(level)
 
 
-def build_parser() -> argparse.ArgumentParser:
+def _chosen(argv: Sequence[str]) -> str | None:
+    """The sub-command named in ``argv`` (the first word that is one, past the global options), or None."""
+    takes_value = {"--log-level"}
+    skip = False
+    for word in argv:
+        if skip:
+            skip = False
+        elif word in takes_value:
+            skip = True
+        elif not word.startswith("-"):
+            return word if word in COMMANDS else None
+    return None
+
+
+def build_parser(commands: Sequence[str] | None = None) -> argparse.ArgumentParser:
+    """The ``uav-el`` parser: every command listed, with the options of ``commands`` (None: of every command; the
+    command line itself passes only the one it runs, so that nothing else is imported)."""
     parser = argparse.ArgumentParser(
         prog="uav-el",
         description="Safety-assurance toolkit for UAV emergency landing.",
@@ -131,9 +168,13 @@ def build_parser() -> argparse.ArgumentParser:
     # close an import cycle (this module imports every command).
     parser.set_defaults(cli_main=main)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    wanted = set(COMMANDS) if commands is None else set(commands)
     for name, module_name in COMMANDS.items():
+        if name not in wanted:
+            sub.add_parser(name, help=SUMMARIES.get(name, ""))
+            continue
         module = importlib.import_module(f"assurance.cli.{module_name}")
-        p = sub.add_parser(name, help=module.HELP, description=module.HELP, epilog=EPILOG)
+        p = sub.add_parser(name, help=SUMMARIES.get(name, module.HELP), description=module.HELP, epilog=EPILOG)
         module.add_arguments(p)
         _add_verbosity(p)
         if name in SYSTEM_COMMANDS:
@@ -144,12 +185,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``uav-el``; returns the exit code."""
-    from assurance.campaign.readouts import DamagedRunError
-    from el.errors import DataError, LabelColourError
-
-    parser = build_parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
+    chosen = _chosen(argv)
+    parser = build_parser([chosen] if chosen else [])
     args = parser.parse_args(argv)
     configure_logging(args)
+
     try:
         if args.command in SYSTEM_COMMANDS:
             from assurance.system import find_system

@@ -69,9 +69,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "--calibration card's monitor; model pipeline)")
     parser.add_argument("--calibration", type=Path, metavar="CALIB.json",
                         help="calibration card (uav-el calibrate): run the monitor at its calibrated threshold")
-    parser.add_argument("--ood", type=Path, metavar="GATE.json",
-                        help="out-of-domain gate (uav-el fit-ood): a frame above its threshold takes the "
-                             "default action")
     parser.add_argument("--gate", type=Path, metavar="GATE.json",
                         help="frame gate (uav-el fit-gate; 'none': no gate; default: the system file's [monitor] "
                              "gate, else el.pipeline.DEPLOYED_GATE on the shipped network): a frame "
@@ -187,7 +184,6 @@ def run_model(args: argparse.Namespace) -> int:
     system = system_of(args)
     monitor = args.monitor or system_build.monitor_spec(system) or PipelineConfig().monitor
     calibration = args.calibration or system.path_of("monitor.calibration")
-    ood = args.ood or system.path_of("monitor.ood")
     budget = args.budget if args.budget is not None else system.get("targets.time_budget_s", DEFAULT_TIME_BUDGET_S)
     if args.monitor is None and args.calibration is None:  # the system's deployed pair: spec on its card's threshold
         system_build.check_deployed_calibration(system)
@@ -209,12 +205,8 @@ def run_model(args: argparse.Namespace) -> int:
         segmenter = None
     built = build_monitor(monitor)  # a monitor that cannot be built (e.g. a missing model file): one line, exit 2
     gates = []
-    if ood is not None:
-        from el.monitors.ood import load_ood
-
-        gates.append(load_ood(ood))  # a bad gate is a usage error here (in flight it is the default action)
     frame_gate = frame_gate_path(args)
-    if frame_gate is not None:
+    if frame_gate is not None:  # a bad gate is a usage error here (in flight it is the default action)
         from el.monitors.frame_gate import load_frame_gate
 
         gates.append(load_frame_gate(frame_gate))
@@ -225,7 +217,7 @@ def run_model(args: argparse.Namespace) -> int:
     config = PipelineConfig(core=core, monitor=monitor, time_budget_s=budget,
                             seed=args.seed, evaluate_all=args.evaluate_all, max_pixels=args.max_pixels,
                             calibration=str(calibration) if calibration else None,
-                            ood=str(ood) if ood else None, gate=str(frame_gate) if frame_gate else None,
+                            gate=str(frame_gate) if frame_gate else None,
                             odd=system_build.odd(system))
     decision = EmergencyLanding(config, segmenter=segmenter).decide(image_path)
     _write_outputs(args, decision, image=read_image(image_path) if args.overlay else None, labels=None)

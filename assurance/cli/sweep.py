@@ -20,10 +20,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--walks", nargs="+", choices=("hazard", "score"),
                    help="walk orders to replay (el.walk; default: each configuration's own)")
     p.add_argument("--out", type=Path, help="folder for sweep.csv, sweep.md and sweep.png (default: the run folder)")
-    p.add_argument("--ood", metavar="GATE.json", help="also replay a gate (uav-el fit-gate or fit-ood): the "
-                                                       "run's frames are re-perturbed with its seeds and scored; "
-                                                       "needs --data")
-    p.add_argument("--data", help="the run's scenes (for --ood)")
+    p.add_argument("--gate", metavar="GATE.json", help="also replay a frame gate (uav-el fit-gate): the run's frames "
+                                                        "are re-perturbed with its seeds and scored; needs --data")
+    p.add_argument("--data", help="the run's scenes (for --gate)")
     p.add_argument("--choose", action="store_true", help="print the threshold each monitor would be deployed at, "
                                                           "and the best of them")
 
@@ -43,13 +42,13 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(f"{run_dir}: {exc}") from None
     out = args.out or run_dir
     gate = None
-    if args.ood:
+    if args.gate:
         if not args.data:
-            raise CommandError("--ood needs --data (the run's scenes)")
-        gate = bound_gate(args.ood, run_dir)  # refused before anything is written
+            raise CommandError("--gate needs --data (the run's scenes)")
+        gate = bound_gate(args.gate, run_dir)  # refused before anything is written
     md = write_sweep(out, table, choices)
     if gate is not None:
-        md += ood_section(run_dir, Path(args.data), gate, images, candidates, choices[0], out)
+        md += gate_section(run_dir, Path(args.data), gate, images, candidates, choices[0], out)
         from assurance.files import atomic_write_bytes
 
         atomic_write_bytes(out / "sweep.md", md.encode())
@@ -82,7 +81,7 @@ def bound_gate(path: str, run_dir: Path) -> tuple[str, Any, Any]:
     return path, gate, model
 
 
-def ood_section(run_dir: Path, data: Path, bound: tuple[str, Any, Any], images, candidates, best, out: Path) -> str:
+def gate_section(run_dir: Path, data: Path, bound: tuple[str, Any, Any], images, candidates, best, out: Path) -> str:
     """Markdown: what the gate would change for the best choice (its distances cached per gate in
     ood_distances-<gate sha256>.csv)."""
     import pandas as pd
@@ -103,7 +102,7 @@ def ood_section(run_dir: Path, data: Path, bound: tuple[str, Any, Any], images, 
         atomic_write_bytes(cache, dist.to_csv(index=False).encode())
     im, ca = monitor_rows(images, candidates, best.monitor)
     eff = gate_effect(replay(im, ca, best.threshold, best.walk), dist)
-    lines = ["", f"Out-of-domain gate `{gate}` on `{best.monitor}` ({best.walk} walk) at threshold "
+    lines = ["", f"Frame gate `{gate}` on `{best.monitor}` ({best.walk} walk) at threshold "
                  f"{best.threshold:.6g}:", "",
              "| perturbation | frames | gate fires | unsafe landings without gate | with gate |",
              "|---|---|---|---|---|"]

@@ -61,7 +61,7 @@ def package_entries(inp: Any, record: dict[str, Any]) -> list[dict[str, Any]]:
                 entry("X", "Internal test results: validation figures of the model card", str(rel(card)), sha(card))]
     base = Path(__file__).resolve().parents[2] / "el" / "monitors" / "data"
     for name, letter, what in (("learned.json", "V", "Learned runtime monitor"),
-                               ("ood.json", "V", "Out-of-domain gate"),
+                               ("frame_gate.json", "V", "Frame gate (out-of-domain frames)"),
                                ("calibration.json", "X", "Calibration card of the deployed monitor")):
         if (base / name).is_file():
             out.append(entry(letter, what, str(rel(base / name)), sha(base / name)))

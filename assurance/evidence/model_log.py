@@ -66,10 +66,11 @@ def monitor_rows(monitors: dict[str, dict[str, Any]]) -> list[dict[str, str]]:
     if cal:
         rows.append({"item": "Calibration card", "value": f"{cal.get('monitor')}: {cal.get('method')}; "
                                                           f"{cal.get('guarantee')}"})
-    ood = monitors.get("ood.json")
-    if ood:
-        rows.append({"item": "Out-of-domain gate", "value": f"{ood.get('embedding', '?')}; threshold at quantile "
-                                                            f"{ood.get('quantile')} of the validation distances"})
+    gate = monitors.get("frame_gate.json")
+    if gate:
+        tap = (gate.get("features") or {}).get("tap")
+        rows.append({"item": "Frame gate", "value": f"{gate.get('kind', '?')} on {tap} trunk statistics; threshold "
+                                                    f"at quantile {gate.get('quantile')} of the validation scores"})
     return rows
 
 

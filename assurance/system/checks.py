@@ -18,7 +18,7 @@ def check_system(system: SystemFile) -> None:
     check_geometry(system)
     check_model(system, labels.names)
     check_monitor(system)
-    for key in ("monitor.calibration", "monitor.ood", "monitor.gate", "waivers.file"):
+    for key in ("monitor.calibration", "monitor.gate", "waivers.file"):
         p = system.path_of(key)
         if p is not None and not p.is_file() and not (key == "monitor.gate" and system.get(key) == "none"):
             raise system.error(key, f"{p}: no such file")

@@ -36,14 +36,11 @@ def _name(model: Any) -> str:
     return type(model).__name__ + (f" ({where})" if where else "")
 
 
-def check_monitor_capabilities(monitor: Any, model: Any, *, ood: Any = None) -> None:
-    """Refuse a monitor (and an out-of-domain gate) needing what the model does not offer: one-line ValueError
-    naming the monitor and the missing capability. ``monitor``/``ood`` None: nothing to check."""
+def check_monitor_capabilities(monitor: Any, model: Any) -> None:
+    """Refuse a monitor needing what the model does not offer: one-line ValueError naming the monitor and the
+    missing capability. ``monitor`` None: nothing to check."""
     if monitor is not None:
         for capability in required_capabilities(monitor):
             if not has_capability(model, capability):
                 raise ValueError(f"monitor {monitor.name!r} needs {WHAT.get(capability, capability)}, which the "
                                  f"segmentation model {_name(model)} does not offer; choose a monitor without it")
-    if ood is not None and getattr(ood, "kind", None) == "trunk" and not has_capability(model, TRUNK_FEATURES):
-        raise ValueError(f"the out-of-domain gate {ood.path} embeds {WHAT[TRUNK_FEATURES]}, which the segmentation "
-                         f"model {_name(model)} does not offer; fit a softmax gate on it (uav-el fit-ood)")

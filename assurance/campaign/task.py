@@ -1,0 +1,264 @@
+"""A campaign's configuration and one task of it: a (perturbation, severity, image) through the flight kernel.
+
+The task reads and perturbs its frame (seeded per image), runs the kernel's stages (``el.kernel.prepare``: the pose
+and the declared domain, segmentation, the frame gate, the CM's candidates) **once**, judges every candidate with
+every monitor configuration in one pass, sharing work between them (``judging``), and concludes each
+configuration's decision with the kernel (``el.kernel.conclude``), so that what a campaign measures is what flies.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import time
+import traceback
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from assurance.campaign import readouts
+from assurance.campaign.frames import (
+    check_frame_pose,
+    clearance_of,
+    frame_gate,
+    frame_pose_of,
+    frame_truth,
+    gate_columns,
+    outside_odd,
+)
+from assurance.campaign.judging import _timed, judge_candidates
+from assurance.campaign.perturbations import PERTURBATIONS, perturb, severities_of
+from assurance.campaign.truth import true_hazard
+from assurance.scenes.poses import check_policy
+from assurance.scenes.uavid import Sample
+from el.config import CoreConfig, check_seed
+from el.core import default_area
+from el.deadline import Deadline
+from el.imageio import read_image_meta
+from el.kernel import Frame, Parts, conclude, prepare
+from el.monitors import DEMO_GRID, build_monitor, parse_monitor_spec
+from el.monitors.spec import walk_of
+from el.odd import OperatingDomain
+from el.segmentation.contract import labels_of
+from el.walk import walk_candidates
+
+
+# ------------------------------------------------------------------------------------------------
+# Configuration
+# ------------------------------------------------------------------------------------------------
+@dataclass(frozen=True, kw_only=True)
+class CampaignConfig:
+    """What a campaign evaluates. Recorded in the run manifest; a resumed run must match it."""
+
+    perturbations: tuple[str, ...]
+    severities: tuple[int, ...] = (3,)
+    monitors: tuple[str, ...] = DEMO_GRID
+    images: int | None = None  # the first N images of the data set (sorted); None: all
+    seed: int = 0
+    patch_margin: float = 0.25
+    patch_max_side: int | None = None
+    weights: str | dict[str, Any] | None = None  # None: the shipped weights; a dict: a system file's model
+    core: CoreConfig = field(default_factory=CoreConfig)
+    poses: str = "nominal"  # which pose plans each frame: assurance.scenes.poses.POLICIES
+    odd: dict[str, Any] | None = None  # the declared operating domain (el.odd.OperatingDomain.to_dict()); None: none
+    gate: dict[str, str] | None = None  # the frame gate {"path", "sha256"} (el.monitors.frame_gate); None: none
+    time_budget_s: float | None = None  # the flight's deadline (with the task's clock); None: none, so that the
+    # readouts do not depend on the machine's speed
+
+    def __post_init__(self) -> None:
+        unknown = [p for p in self.perturbations if p not in PERTURBATIONS]
+        if unknown:
+            raise ValueError(f"unknown perturbation(s) {unknown}; valid: {', '.join(PERTURBATIONS)}")
+        if not self.perturbations:
+            raise ValueError("a campaign needs at least one perturbation")
+        bad = [s for s in self.severities if not (isinstance(s, int) and 1 <= s <= 5)]
+        if bad or not self.severities:
+            raise ValueError(f"severities must be integers in 1..5, got {list(self.severities)}")
+        if not self.monitors:
+            raise ValueError("a campaign needs at least one monitor configuration")
+        canon = []
+        for m in self.monitors:
+            spec = parse_monitor_spec(m)
+            if spec is None:
+                raise ValueError("'none' is not a monitor configuration to evaluate (the CM alone is in every row)")
+            canon.append(spec.name)
+        if len(set(canon)) != len(canon):
+            raise ValueError(f"duplicate monitor configurations in {list(self.monitors)}")
+        object.__setattr__(self, "monitors", tuple(canon))
+        if self.images is not None and self.images < 1:
+            raise ValueError(f"images must be >= 1, got {self.images}")
+        check_seed(self.seed)
+        check_policy(self.poses)
+        outside_odd(self.odd, self.core.pose, (1920, 1080))  # a malformed declaration fails here
+
+    def scenarios(self) -> list[tuple[str, int]]:
+        """(perturbation, severity) pairs; one not graded by severity ('none') is evaluated once, at the first."""
+        return [(p, s) for p in self.perturbations for s in severities_of(p, self.severities)]
+
+    def to_dict(self) -> dict[str, Any]:
+        """The manifest's ``config``; ``poses`` only when not nominal, so a nominal run records as before."""
+        d = asdict(self)
+        d["core"] = self.core.to_dict()
+        if self.poses == "nominal":
+            del d["poses"]
+        for key in ("odd", "gate", "time_budget_s"):
+            if d[key] is None:
+                del d[key]
+        return d
+
+
+# ------------------------------------------------------------------------------------------------
+# One task
+# ------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Task:
+    """One (perturbation, severity, image) of a campaign."""
+
+    perturbation: str
+    severity: int
+    sample: Sample
+
+    @property
+    def shard_name(self) -> str:
+        return readouts.shard_name(self.perturbation, self.severity, self.sample.key)
+
+
+def task_seed(seed: int, key: str, perturbation: str, severity: int) -> list[int]:
+    """Seed sequence of a task's perturbation: independent of the order and place tasks run."""
+    digest = hashlib.sha256(f"{key}|{perturbation}|{severity}".encode()).digest()
+    return [seed, int.from_bytes(digest[:8], "little")]
+
+
+def task_parts(config: CampaignConfig, segmenter: Any, labels: Any) -> Parts:
+    """The flight kernel's parts for a campaign's frames: its network, label set, CM configuration, declared domain
+    and frame gate (read once per worker, refused when its file changed or it was fitted on another network)."""
+    odd = None if config.odd is None else OperatingDomain.from_dict(config.odd)
+    return Parts(segmenter=segmenter, labels=labels, core=config.core, odd=odd,
+                 gate=frame_gate(config.gate, segmenter))
+
+
+def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Callable[[], float] = time.perf_counter,
+             world_clearance: Callable[..., Any] | None = None,
+             expected_models: dict[str, str] | None = None) -> dict[str, list[dict[str, Any]]]:
+    """Evaluate one task: the flight kernel (``el.kernel``) on the perturbed frame, every configuration's verdicts
+    from one judging pass (``judging``), each configuration's decision concluded by the kernel, and the readout rows
+    of its images and candidates tables. A frame the kernel refuses (declared domain, frame gate) is decided as in
+    flight while every monitor's verdicts on its candidates stay in the readouts; a monitor model other than
+    ``expected_models``'s: a fault."""
+    s = task.sample
+    base = {"key": s.key, "sequence": s.sequence, "frame": s.frame, "perturbation": task.perturbation,
+            "severity": task.severity}
+    t0 = clock()
+    budget = Deadline(clock, config.time_budget_s)
+    try:
+        judged = _judged_frame(task, config, segmenter, clock, budget, expected_models)
+    except Exception as exc:  # a bad image is a recorded fault, never a crash of the campaign
+        fault = f"{type(exc).__name__}: {exc}"
+        row = {**base, "monitor": "", "fault": fault, "traceback": traceback.format_exc(limit=3)}
+        return {"images": [row], "candidates": []}
+    return _readout_rows(judged, config, base, clock, t0, budget, world_clearance)
+
+
+@dataclass
+class _Judged:
+    """One campaign frame through the kernel: the frame, its parts, its truth, every configuration's verdicts."""
+
+    frame: Frame
+    parts: Parts
+    sample: Sample
+    ids: np.ndarray
+    monitors: list[Any]
+    verdicts: list[list[Any]]
+    pose_cols: dict[str, Any]
+    meta: dict[str, Any]
+
+
+def _judged_frame(task: Task, config: CampaignConfig, segmenter: Any, clock: Callable[[], float], budget: Deadline,
+                  expected_models: dict[str, str] | None) -> _Judged:
+    """The task's frame read, perturbed and run through the kernel's stages, then judged by every configuration
+    at once; raises on a fault of the task."""
+    s = task.sample
+    pose, roll, pose_cols = frame_pose_of(config, s)
+    labels = labels_of(segmenter)
+    parts = task_parts(config, segmenter, labels)
+    meta: dict[str, Any] = {}
+    truth: list[np.ndarray] = []
+    timings: dict[str, float] = {"read_s": 0.0}  # the readouts' column order: read, perturb, segmentation, ...
+
+    def read(info: dict[str, Any]) -> np.ndarray:
+        rgb, found = read_image_meta(s.image_path)
+        meta.update(found)  # EXIF orientation
+        check_frame_pose(config, s, pose, roll, (rgb.shape[1], rgb.shape[0]))
+        truth.append(frame_truth(s, labels, rgb.shape[:2])[1])
+        rng = np.random.default_rng(task_seed(config.seed, s.key, task.perturbation, task.severity))
+        hd, timings["perturb_s"] = _timed(clock, perturb, rgb, task.perturbation, task.severity, rng)
+        return hd
+
+    frame = prepare(read, parts, pose=pose, roll_deg=roll, budget=budget, clock=clock, evaluate=True,
+                    raise_faults=True, timings=timings)
+    timings["read_s"] -= timings.get("perturb_s", 0.0)
+    if frame.stop == "timeout":  # decided at the deadline, as in flight: no candidate is judged
+        frame.candidates = []
+    monitors = [build_monitor(m, margin=config.patch_margin, max_side=config.patch_max_side, clock=clock,
+                              labels=labels)
+                for m in config.monitors]
+    for monitor in monitors:
+        if monitor is not None:
+            monitor.check_network(segmenter)  # a monitor fitted on another network: a fault, never a readout
+    if expected_models is not None:
+        _check_models(config.monitors, monitors, expected_models)
+    t = clock()
+    verdicts = judge_candidates(frame.rgb, frame.candidates, monitors, segmenter, seed=config.seed, clock=clock,
+                                frame_probs=frame.probs)
+    timings["monitoring_s"] = clock() - t
+    return _Judged(frame, parts, s, truth[0], monitors, verdicts, pose_cols, meta)
+
+
+def _readout_rows(j: _Judged, config: CampaignConfig, base: dict[str, Any], clock: Callable[[], float], t0: float,
+                  budget: Deadline, world_clearance: Callable[..., Any] | None) -> dict[str, list[dict[str, Any]]]:
+    """Each configuration's decision (the kernel's) and its readout rows (images and candidates tables)."""
+    frame, labels = j.frame, j.parts.labels
+    cands = frame.candidates
+    W, H = frame.size
+    truth = [true_hazard(j.ids, c.disc, labels=labels) for c in cands]
+    clearance = clearance_of(world_clearance, j.sample, (W, H), cands)
+    area = default_area(W, H, frame.core)
+    h_default = true_hazard(j.ids, area, labels=labels)
+    gate_cols = gate_columns(j.parts.gate, frame.info)
+    image_rows, cand_rows = [], []
+    for m, name in enumerate(config.monitors):
+        column = [j.verdicts[k][m] for k in range(len(cands))]
+        outcome = walk_candidates(len(cands), column.__getitem__, walk_of(name), evaluate_all=True)
+        decision, _ = conclude(frame, j.parts, column.__getitem__, walk=walk_of(name), budget=budget, clock=clock,
+                               evaluate_all=True)
+        sel = decision.selected
+        h_decision = h_default if sel is None else truth[sel]
+        image_rows.append({
+            **base, "monitor": name, "fault": "", "candidates": len(cands), "action": decision.action,
+            "reason": decision.reason, "selected": -1 if sel is None else sel, "h_default": h_default,
+            "h_top": truth[0] if cands else float("nan"), "h_decision": h_decision,
+            "decision_unsafe": bool(h_decision >= 1.0),
+            "clearance_decision_m": clearance[sel] if sel is not None else float("nan"),
+            "overhead_s": float(outcome.overhead_s),
+            "default_x": area.x, "default_y": area.y, "default_r": area.radius_px, "width": W, "height": H,
+            **j.pose_cols, **j.meta, **gate_cols, **frame.timings, "total_s": clock() - t0,
+        })
+        for k, c in enumerate(cands):
+            cand_rows.append({
+                **base, "monitor": name, "rank": k, "x": c.x, "y": c.y, "radius_px": c.radius_px,
+                "hazard": c.hazard, "hazard_semantic": c.hazard_semantic, "hazard_distance": c.hazard_distance,
+                "true_hazard": truth[k], "true_unsafe": bool(truth[k] >= 1.0), "clearance_m": clearance[k],
+                "accepted": bool(column[k].accepted), "reason": column[k].reason, "seconds": float(column[k].seconds),
+                "score": column[k].score, "threshold": j.monitors[m].threshold,
+                "selected": sel == k, "examined": k < outcome.examined,
+            })
+    return {"images": image_rows, "candidates": cand_rows}
+
+
+def _check_models(names: Sequence[str], monitors: Sequence[Any], expected: dict[str, str]) -> None:
+    for name, monitor in zip(names, monitors, strict=True):
+        have, want = getattr(monitor, "model_sha256", None), expected.get(name)
+        if have != want:
+            raise ValueError(f"monitor {name!r} runs model {have}, the run recorded {want} "
+                             "(its model file changed during the run)")

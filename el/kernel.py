@@ -1,0 +1,244 @@
+"""The one decision kernel: a frame -> its pose and the declared domain -> segmentation -> the frame gate ->
+the CM's candidates -> the judge -> the walk -> a ``Decision``.
+
+Every user of the flight function runs this code: the flight loop (``el.pipeline.EmergencyLanding``, a lazy judge
+under the deadline), an evaluation campaign (``assurance.campaign.run``: every configuration's verdicts from one
+judging pass, each walked here) and the ground-truth pipeline (a label-map segmenter and no monitor). What differs
+between them is plugged in: how the frame is read, the segmenter, and the judge.
+
+:func:`prepare` runs the stages up to the candidates and returns a :class:`Frame`; a stage that settles the decision
+before the walk (a fault, a frame outside the declared domain, one the frame gate refuses, the deadline) sets
+``Frame.stop``. With ``evaluate=True`` (campaigns) the stages after a refusal still run, so the readouts keep the
+candidates and the monitors' verdicts, while the decision stays the refusal's. :func:`conclude` walks the judged
+candidates to the decision; it never raises.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields, replace
+from typing import Any
+
+import numpy as np
+
+from el.camera import Pose, check_geometry
+from el.config import CoreConfig
+from el.core import default_area, run_core
+from el.deadline import Deadline
+from el.decision import Candidate, Decision
+from el.errors import BudgetExceeded
+from el.labels import LabelSet
+from el.monitors.frame_gate import FrameGate, judge_frame
+from el.odd import OperatingDomain
+from el.walk import HAZARD, Judge, Step, WalkOutcome, walk_candidates
+
+Clock = Callable[[], float]
+Reader = Callable[[dict[str, Any]], np.ndarray]
+"""Reads the frame (filling the decision's ``input`` record it is given) and returns the array the segmenter takes
+and the monitors judge; its width and height are the frame's."""
+logger = logging.getLogger(__name__)  # faults with their tracebacks; the decision keeps only the reason
+
+
+@dataclass(frozen=True, kw_only=True)
+class Parts:
+    """The deployed parts a decision runs with: segmenter, label set, CM configuration, declared domain, frame gate.
+
+    ``fault``: a fault found when the system was built (weights missing, a monitor refused): every decision is
+    then the default action with it as its reason, once the frame is read. ``record``: the decision's ``config``.
+    ``nominal_size``: the frame size assumed for the default area when the frame cannot be read.
+    """
+
+    segmenter: Any
+    labels: LabelSet
+    core: CoreConfig
+    odd: OperatingDomain | None = None
+    gate: FrameGate | None = None
+    fault: str | None = None
+    record: dict[str, Any] = field(default_factory=dict)
+    nominal_size: tuple[int, int] = (3840, 2160)
+
+
+@dataclass
+class Frame:
+    """What the kernel saw of one frame: its size and pose, the segmentation, the candidates, and ``stop``, the
+    reason that settles the decision before any walk (None: the candidates are walked)."""
+
+    info: dict[str, Any]
+    timings: dict[str, float]
+    core: CoreConfig
+    size: tuple[int, int] | None = None
+    rgb: np.ndarray | None = None
+    probs: np.ndarray | None = None
+    candidates: list[Candidate] = field(default_factory=list)
+    stop: str | None = None
+    stage: str = "read"
+
+    @property
+    def frame_size(self) -> tuple[int, int] | None:
+        return self.size
+
+
+def frame_core(core: CoreConfig, pose: Pose | None) -> CoreConfig:
+    """The core configuration of one frame: the nominal one, at the frame's pose when it brings one."""
+    if pose is None:
+        return core
+    if not isinstance(pose, Pose):
+        raise ValueError(f"pose must be an el.camera.Pose, got {type(pose).__name__}")
+    values = {f.name: getattr(pose, f.name) for f in fields(pose)}
+    for name, value in values.items():
+        if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
+            raise ValueError(f"pose {name} must be a number, got {value!r}")
+    return replace(core, pose=Pose(**{k: float(v) for k, v in values.items()}))  # checked again, plain floats
+
+
+def pose_record(pose: Pose, *, nominal: bool) -> dict[str, Any]:
+    """The pose a decision was planned with, as its JSON records it (``input.pose``)."""
+    return {**{f.name: getattr(pose, f.name) for f in fields(pose)}, "source": "nominal" if nominal else "frame"}
+
+
+def _fault(stage: str, exc: BaseException, info: dict[str, Any]) -> str:
+    logger.exception("fault in stage %s of the decision (input %s); default action", stage, info.get("path", "?"))
+    return f"fault: {stage}: {type(exc).__name__}: {exc}"
+
+
+def prepare(read: Reader, parts: Parts, *, pose: Pose | None = None, roll_deg: float = 0.0,
+            budget: Deadline | None = None, clock: Clock = time.perf_counter, evaluate: bool = False,
+            raise_faults: bool = False, info: dict[str, Any] | None = None,
+            timings: dict[str, float] | None = None) -> Frame:
+    """Run the stages up to the candidates; never raises (a fault is ``Frame.stop``) unless ``raise_faults`` (a
+    campaign records a fault of its task with the exception itself).
+
+    ``pose`` (and ``roll_deg``, not modelled: checked within the flat-ground model's tolerance): the frame's pose;
+    None is the nominal ``parts.core.pose``. ``budget``: checked between the stages. ``evaluate``: past a refusal
+    (declared domain, frame gate) the later stages still run, for the readouts. ``info`` and ``timings``: the
+    decision's records, filled in place (a caller that stops the decision from another thread reads them).
+    """
+    budget = budget or Deadline(clock, None)
+    frame = Frame(info={} if info is None else info, timings={} if timings is None else timings, core=parts.core)
+    info, timings = frame.info, frame.timings
+
+    def settle(reason: str) -> None:
+        frame.stop = frame.stop or reason
+
+    try:
+        if budget.cancelled.is_set():  # stopped while it waited for the one before it: read nothing
+            raise BudgetExceeded("decision stopped before it started")
+        t = clock()
+        info["frame_gate"] = None if parts.gate is None else parts.gate.record(None)
+        rgb = read(info)
+        frame.size, frame.rgb = (int(rgb.shape[1]), int(rgb.shape[0])), rgb
+        timings["read_s"] = clock() - t
+        frame.stage = "pose"
+        frame.core = frame_core(parts.core, pose)
+        info["pose"] = pose_record(frame.core.pose, nominal=pose is None)
+        if roll_deg:
+            info["pose"]["roll_deg"] = float(roll_deg)  # not modelled: a pose error within MAX_ROLL_DEG
+        if parts.fault:
+            settle(parts.fault)
+            return frame
+        outside = None if parts.odd is None else parts.odd.outside(frame.core.pose, frame.size)
+        if outside:  # no evidence of safety there: the default action, a decision and not a fault
+            settle(outside)
+            if not evaluate:
+                return frame
+        check_geometry(frame.core.geometry(*frame.size), roll_deg=roll_deg)  # unplannable pose: a fault
+        budget.check(frame.stage)
+
+        frame.stage = "segmentation"
+        t = clock()
+        probs = parts.segmenter.predict_frame(rgb)
+        if not isinstance(probs, np.ndarray) or not np.isfinite(probs).all():
+            raise ValueError("segmentation returned non-finite scores")
+        frame.probs = probs
+        timings["segmentation_s"] = clock() - t
+        budget.check(frame.stage)
+
+        if parts.gate is not None:
+            frame.stage = "frame_gate"
+            refused = judge_frame(parts.gate, parts.segmenter, info)
+            if refused:  # no evidence of safety for this frame: a decision, not a fault
+                settle(refused)
+                if not evaluate:
+                    return frame
+
+        frame.stage = "candidates"
+        t = clock()
+        frame.candidates = run_core(probs, frame.size, frame.core, clock=clock, labels=parts.labels).candidates
+        timings["candidates_s"] = clock() - t
+        budget.check(frame.stage)
+        frame.stage = "monitoring"
+    except BudgetExceeded:
+        settle("timeout")
+    except Exception as exc:
+        if raise_faults:
+            raise
+        settle(_fault(frame.stage, exc, info))
+    return frame
+
+
+def conclude(frame: Frame, parts: Parts, judge: Judge | None, *, walk: str = HAZARD, budget: Deadline | None = None,
+             clock: Clock = time.perf_counter, evaluate_all: bool = False, before: Step | None = None,
+             after: Step | None = None) -> tuple[Decision, WalkOutcome | None]:
+    """Walk the frame's candidates with ``judge`` (None: no monitor, the CM's top candidate) to its decision; a
+    frame that stopped before the walk is the default action for its reason. Returns the decision and the walk's
+    outcome (None: no walk). Never raises: a fault of the judge or the deadline is the default action. The frame
+    is left as it is (a campaign concludes it once per configuration)."""
+    budget = budget or Deadline(clock, None)
+    if frame.stop:
+        return default(frame, parts, frame.stop, budget), None
+    timings = dict(frame.timings)
+    t = clock()
+    try:
+        outcome = walk_candidates(len(frame.candidates), judge, walk, evaluate_all=evaluate_all, before=before,
+                                  after=after)
+        judged = [c if v is None else replace(c, monitor=v)
+                  for c, v in zip(frame.candidates, outcome.verdicts, strict=True)]
+        timings["monitoring_s"] = clock() - t
+        timings["overhead_s"] = outcome.overhead_s
+        budget.check("monitoring")
+    except BudgetExceeded:
+        return default(frame, parts, "timeout", budget), None
+    except Exception as exc:
+        return default(frame, parts, _fault("monitoring", exc, frame.info), budget), None
+    if outcome.selected is None:
+        return default(frame, parts, outcome.reason, budget, candidates=judged, timings=timings), outcome
+    timings["total_s"] = budget.elapsed()
+    size = frame.size or parts.nominal_size
+    return Decision(action="land", reason=outcome.reason, selected=outcome.selected, candidates=judged,
+                    default_area=default_area(*size, frame.core), timings=timings, input=frame.info,
+                    config=parts.record), outcome
+
+
+def default(frame: Frame, parts: Parts, reason: str, budget: Deadline, *, candidates: list[Candidate] | None = None,
+            timings: dict[str, float] | None = None) -> Decision:
+    """The default action for ``reason``, its area on the frame (on the nominal frame and pose when that fails or
+    the frame was never read); ``candidates`` and ``timings``: the frame's unless given."""
+    size = frame.size or parts.nominal_size
+    try:
+        area = default_area(*size, frame.core)
+    except Exception:  # the default area of the nominal frame: the decision itself must not fail
+        logger.exception("default area of a %dx%d frame failed; using the nominal %dx%d frame", *size,
+                         *parts.nominal_size)
+        area = default_area(*parts.nominal_size, parts.core)
+    timings = dict(frame.timings if timings is None else timings)
+    timings["total_s"] = budget.elapsed()
+    return Decision(action="default", reason=reason, selected=None,
+                    candidates=list(frame.candidates if candidates is None else candidates),
+                    default_area=area, timings=timings, input=frame.info, config=parts.record)
+
+
+def decide_frame(read: Reader, parts: Parts, judge: Judge | None, *, walk: str = HAZARD, pose: Pose | None = None,
+                 roll_deg: float = 0.0, budget: Deadline | None = None, clock: Clock = time.perf_counter,
+                 evaluate_all: bool = False, before: Step | None = None, after: Step | None = None,
+                 info: dict[str, Any] | None = None, timings: dict[str, float] | None = None) -> Decision:
+    """One frame through the kernel: :func:`prepare` then :func:`conclude`; never raises."""
+    budget = budget or Deadline(clock, None)
+    frame = prepare(read, parts, pose=pose, roll_deg=roll_deg, budget=budget, clock=clock, info=info,
+                    timings=timings)
+    return conclude(frame, parts, judge, walk=walk, budget=budget, clock=clock, evaluate_all=evaluate_all,
+                    before=before, after=after)[0]
+
+
+__all__ = ["Frame", "Parts", "conclude", "decide_frame", "default", "frame_core", "pose_record", "prepare"]
