@@ -19,7 +19,7 @@ import time
 
 import numpy as np
 
-from assurance.scenes.uavid import iter_samples
+from assurance.dataio.uavid import iter_samples
 from el.pipeline import DEPLOYED_MONITOR, EmergencyLanding, PipelineConfig
 from el.segmentation.factory import load_model
 

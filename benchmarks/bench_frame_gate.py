@@ -18,7 +18,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from assurance.scenes.uavid import iter_samples, read_image
+from assurance.dataio.uavid import iter_samples, read_image
 from el.pipeline import DEPLOYED_GATE, EmergencyLanding, PipelineConfig
 from el.segmentation.factory import load_model
 

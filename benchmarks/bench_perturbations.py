@@ -19,7 +19,7 @@ import tracemalloc
 import cv2
 import numpy as np
 
-from assurance.campaign.perturbations import PERTURBATIONS, perturb
+from assurance.perturbations import PERTURBATIONS, perturb
 
 
 def frame(width: int, height: int, seed: int = 0) -> np.ndarray:

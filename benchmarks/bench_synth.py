@@ -21,6 +21,7 @@ from pathlib import Path  # noqa: E402
 
 import cv2  # noqa: E402
 
+from assurance.dataio.uavid import sample_paths, write_image  # noqa: E402
 from assurance.files import atomic_write_bytes  # noqa: E402
 from assurance.scenes.generate import (  # noqa: E402
     default_geometry,
@@ -30,7 +31,6 @@ from assurance.scenes.generate import (  # noqa: E402
     scene_seed,
 )
 from assurance.scenes.renderer import render  # noqa: E402
-from assurance.scenes.uavid import sample_paths, write_image  # noqa: E402
 
 
 def one_scene(root: Path, index: int, seed: int, size: tuple[int, int]) -> dict[str, float]:

@@ -84,10 +84,10 @@ def tiny_campaign(tmp_path_factory):
     import torch
     from helpers import OracleSegmenter
 
-    from assurance.campaign.perturbations import PAPER_PERTURBATIONS
     from assurance.campaign.run import CampaignConfig, run_campaign
+    from assurance.dataio.uavid import write_sample
     from assurance.fitting.network.weights_io import save_weights
-    from assurance.scenes.uavid import write_sample
+    from assurance.perturbations import PAPER_PERTURBATIONS
     from el.config import CoreConfig
     from el.labels import ids_to_colors
     from el.segmentation.architectures import build_model

@@ -92,7 +92,7 @@ def scene_ids(width: int = 256, height: int = 144, *, road_col: int | None = Non
 def write_textured_scenes(root: Path, seeds, width: int = 128, height: int = 72, sequence: str = "seq00") -> Path:
     """One UAVid-layout sequence under ``root``: a ``scene_ids`` scene per seed with seeded colour noise as
     texture (frames for out-of-domain gates, which need some variance)."""
-    from assurance.scenes.uavid import write_sample
+    from assurance.dataio.uavid import write_sample
 
     for i, seed in enumerate(seeds):
         ids = scene_ids(width, height, seed=seed, road_col=10 + (7 * seed) % 90)
@@ -112,7 +112,7 @@ def reseal_shard(run, name: str) -> None:
     that way: for tests that need a run with odd readouts that still verifies."""
     from pathlib import Path
 
-    from assurance.campaign.fault_case import reseal_shard as reseal
+    from assurance.fault_injection.case import reseal_shard as reseal
 
     reseal(Path(run), name)
 
@@ -158,6 +158,6 @@ def bench_system(folder: Path) -> Path:
     (64-7680 x 36-4320 px; the embedded default declares only its camera's 4K frames). A command run in
     ``folder`` (``monkeypatch.chdir``) or given ``--system`` with it decides those frames instead of refusing them
     as ``outside_odd``."""
-    from assurance.campaign.fault_case import write_small_frame_system
+    from assurance.fault_injection.case import write_small_frame_system
 
     return write_small_frame_system(folder)

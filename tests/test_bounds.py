@@ -16,13 +16,13 @@ import pytest
 from helpers import FakeClock, OracleSegmenter, scene_ids, scene_image
 
 from assurance.campaign import faults, readouts
-from assurance.campaign.fault_bounds import YAML_BOMB, _png
 from assurance.campaign.integrity import verify_run
 from assurance.campaign.run import CampaignConfig, run_campaign
-from assurance.campaign.workers import bounded_jobs, usable_cores
 from assurance.cli import main
+from assurance.dataio.uavid import image_size, write_image
 from assurance.evidence.waivers import load_waivers
-from assurance.scenes.uavid import image_size, write_image
+from assurance.fault_injection.bounds import YAML_BOMB, _png
+from assurance.workers import bounded_jobs, usable_cores
 from el import deadline as dl
 from el import safeyaml
 from el.config import SEED_LIMIT, CoreConfig, check_seed
@@ -222,7 +222,7 @@ def test_fault_classification():
 
 @pytest.fixture(scope="module")
 def small_run(tmp_path_factory):
-    from assurance.scenes.uavid import write_sample
+    from assurance.dataio.uavid import write_sample
     from el.labels import ids_to_colors
 
     root = tmp_path_factory.mktemp("bounds_run")
@@ -286,7 +286,7 @@ def test_a_run_of_the_old_format_reads_but_is_not_resumed(small_run, tmp_path):
 
 
 def test_a_campaign_whose_tasks_fault_for_a_configuration_reason_exits_2(small_run, tmp_path, capsys):
-    from assurance.campaign.fault_case import save_tiny_weights
+    from assurance.fault_injection.case import save_tiny_weights
 
     w = save_tiny_weights(tmp_path / "nan.pt", nan=True)
     code = main(["campaign", "--data", str(small_run["root"] / "data"), "--out", str(tmp_path / "run"),
@@ -298,8 +298,8 @@ def test_a_campaign_whose_tasks_fault_for_a_configuration_reason_exits_2(small_r
 
 @pytest.mark.slow
 def test_workers_die_with_a_sigkilled_campaign(tmp_path):
-    from assurance.campaign.fault_bounds import killed_campaign_survivors
-    from assurance.campaign.fault_injection import build_workspace
+    from assurance.fault_injection.bounds import killed_campaign_survivors
+    from assurance.fault_injection.table import build_workspace
 
     if not hasattr(__import__("os"), "sched_getaffinity"):
         pytest.skip("Linux only")
@@ -310,7 +310,7 @@ def test_workers_die_with_a_sigkilled_campaign(tmp_path):
 def test_a_campaign_records_the_exif_orientation_it_applied(tmp_path):
     from PIL import Image
 
-    from assurance.scenes.uavid import write_labels
+    from assurance.dataio.uavid import write_labels
     from el.labels import ids_to_colors
 
     ids = scene_ids()

@@ -12,8 +12,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import stats
 
+from assurance.dataio.uavid import write_sample
 from assurance.fitting.calibration import CalibrationError, calibrate_threshold, min_unsafe_needed
-from assurance.scenes.uavid import write_sample
 from el.labels import CLASS_IDS, ids_to_colors
 
 DISTS = {
@@ -138,7 +138,7 @@ def test_pipeline_and_land_use_the_card_and_refuse_an_altered_one(card, val, tmp
 def test_campaign_with_the_card_and_the_el_r16_check(card, val, tmp_path):
     from assurance.campaign import readouts
     from assurance.campaign.run import CampaignConfig, run_campaign
-    from assurance.fitting.calibration import check_calibrated_miss_rate
+    from assurance.requirements.calibration_check import check_calibrated_miss_rate
     from el.config import CoreConfig
     from el.monitors.calibration import load_calibration
 

@@ -16,8 +16,8 @@ from assurance.campaign import readouts
 from assurance.campaign.run import CampaignConfig, plan, run_campaign
 from assurance.campaign.stages import stage_table, wall_seconds
 from assurance.cli import main
+from assurance.dataio.uavid import read_image, write_sample
 from assurance.fitting.network.weights_io import save_weights, write_card
-from assurance.scenes.uavid import read_image, write_sample
 from el.config import CoreConfig
 from el.labels import ids_to_colors
 from el.pipeline import EmergencyLanding, PipelineConfig

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from helpers import TINY_ARCH, FakeClock, write_textured_scenes
 
-from assurance.campaign.perturbations import perturb
 from assurance.campaign.run import CampaignConfig, plan, run_task, task_seed
-from assurance.scenes.uavid import read_image
+from assurance.dataio.uavid import read_image
+from assurance.perturbations import perturb
 from el.config import CoreConfig
 from el.monitors.frame_gate import frame_gate_document, load_frame_gate
 from el.odd import OperatingDomain

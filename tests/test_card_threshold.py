@@ -81,7 +81,7 @@ def test_the_command_line_refuses_a_deployed_spec_off_its_card_s_threshold(tmp_p
     card = _resealed_card(tmp_path / "card.json", 0.9)
     system = _system(tmp_path, DEPLOYED_MONITOR, card)
     image = tmp_path / "frame.png"
-    from assurance.scenes.uavid import write_image
+    from assurance.dataio.uavid import write_image
     from el.labels import ids_to_colors
 
     write_image(image, ids_to_colors(scene_ids()))

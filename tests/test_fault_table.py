@@ -6,9 +6,9 @@ import json
 
 import pytest
 
-from assurance.campaign import fault_injection as fi
 from assurance.cli import main
 from assurance.evidence import generate
+from assurance.fault_injection import table as fi
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
@@ -70,7 +70,7 @@ def test_command_writes_csv_and_markdown_and_refuses_bad_options(tmp_path, capsy
 def test_issue_31_cases_behave(workspace):
     """Bounded resources and no silent loss (R1..R15; R6 and R14, which SIGKILL a campaign, run in the table only:
     tests/test_bounds.py and tests/test_workers.py kill one as slow tests)."""
-    from assurance.campaign.fault_bounds import BOUNDS_CASES
+    from assurance.fault_injection.bounds import BOUNDS_CASES
 
     killed = {"R6-workers-die-with-parent", "R14-dask-workers-die-with-parent"}
     cases = [c for c in BOUNDS_CASES if c.id not in killed]
@@ -87,7 +87,7 @@ def test_issue_31_cases_behave(workspace):
 
 def test_issue_31_signing_cases_behave(workspace):
     """Forged evidence (S1..S3, exit 4 naming what is wrong) and a waiver that cannot stand (S4, exit 1)."""
-    from assurance.campaign.fault_signing import SIGNING_CASES
+    from assurance.fault_injection.signing import SIGNING_CASES
 
     assert {c.id for c in SIGNING_CASES} <= {c.id for c in fi.CASES}
     rows = fi.run_cases(workspace, SIGNING_CASES, main=main)
@@ -100,7 +100,7 @@ def test_issue_31_signing_cases_behave(workspace):
 
 def test_issue_31_gate_cases_without_a_test_session_behave(workspace):
     """An uncollectable test, an edited manifest, a re-hashed monitor and swapped weights (G2, G6-G8)."""
-    from assurance.campaign.fault_gate import GATE_CASES
+    from assurance.fault_injection.gate import GATE_CASES
 
     assert {c.id for c in GATE_CASES} <= {c.id for c in fi.CASES} and len(GATE_CASES) == 9
     fast = ("G2-uncollectable-test", "G6-edited-manifest", "G7-resigned-monitor", "G8-swapped-weights")
@@ -115,7 +115,7 @@ def test_issue_31_gate_cases_without_a_test_session_behave(workspace):
 def test_issue_31_gate_cases_with_a_test_session_behave(workspace):
     """A deselected test, a weaker registry or targets, a waiver of a pass, EL-R16 on training scenes (each runs
     uav-el verify: slow)."""
-    from assurance.campaign.fault_gate import GATE_CASES
+    from assurance.fault_injection.gate import GATE_CASES
 
     slow = ("G1-deselected-test", "G3-weakened-registry", "G4-weakened-targets", "G5-waiver-of-a-pass",
             "G9-el-r16-training-split")

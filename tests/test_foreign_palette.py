@@ -11,9 +11,9 @@ from helpers import TINY_ARCH, OracleSegmenter, scene_ids
 
 from assurance.campaign import readouts
 from assurance.campaign.run import CampaignConfig, run_campaign
+from assurance.dataio.uavid import iter_samples, read_labels, write_sample
 from assurance.fitting.network.weights_io import save_weights
 from assurance.scenes.recolour import class_lut, recolour_dataset
-from assurance.scenes.uavid import iter_samples, read_labels, write_sample
 from el.config import CoreConfig
 from el.errors import DataError, LabelColourError
 from el.labels import UAVID, ids_to_colors, load_label_set

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from helpers import TINY_ARCH, bench_system, scene_ids, write_textured_scenes
 
-from assurance.campaign.perturbations import perturb
-from assurance.scenes.uavid import read_image, write_sample
+from assurance.dataio.uavid import read_image, write_sample
+from assurance.perturbations import perturb
 from el.config import CoreConfig
 from el.decision import decision_schema
 from el.pipeline import EmergencyLanding, PipelineConfig

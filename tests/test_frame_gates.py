@@ -8,7 +8,7 @@ import pytest
 import torch
 from conftest import tiny_scene
 
-from assurance.campaign.perturbations import perturb
+from assurance.perturbations import perturb
 from el.labels import ids_to_colors
 from el.monitors.gates import GATES
 from el.segmentation.architectures import build_model

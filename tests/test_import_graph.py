@@ -186,3 +186,67 @@ def test_flight_code_never_imports_the_harness() -> None:
     bad = sorted(f"{m} -> {t}" for m, targets in import_graph().items() if m.split(".")[0] == "el"
                  for t in targets if t.split(".")[0] == "assurance")
     assert not bad, "el imports assurance:\n" + "\n".join(bad)
+
+
+LAYERS = (
+    ("base", ("(root)", "errors", "files", "paths", "progress", "workers", "code_identity", "perturbations",
+              "attest")),
+    ("dataio", ("dataio",)),
+    ("scenes", ("scenes",)),
+    ("system", ("system",)),
+    ("campaign", ("campaign",)),
+    ("analysis", ("analysis",)),
+    ("fitting", ("fitting",)),
+    ("requirements", ("requirements",)),
+    ("fault_injection", ("fault_injection",)),
+    ("evidence", ("evidence",)),
+    ("cli", ("cli", "__main__")),
+)
+"""The harness's layers, bottom first: a module imports only from its own layer's parts or from layers below
+(imports inside functions included). The data on disk (UAVid layout, poses) below the synthetic scenes; the system
+file below the campaign that runs it; analysis of readouts above the campaign; the fitting tools above both;
+requirements above what they judge; fault injection above what it exercises; the report above the requirements;
+the command line on top."""
+
+
+def layer_of(module: str) -> int | None:
+    """The layer index of an ``assurance`` module (None: not the harness)."""
+    parts = module.split(".")
+    if parts[0] != "assurance":
+        return None
+    part = parts[1] if len(parts) > 1 else "(root)"
+    for i, (_, members) in enumerate(LAYERS):
+        if part in members:
+            return i
+    raise AssertionError(f"{module}: its part {part!r} of assurance is in no layer of LAYERS")
+
+
+def test_every_harness_module_has_a_layer() -> None:
+    for module in import_graph():
+        layer_of(module)
+
+
+def test_the_harness_imports_only_downwards() -> None:
+    bad = []
+    for module, targets in import_graph().items():
+        mine = layer_of(module)
+        if mine is None:
+            continue
+        for target in targets:
+            theirs = layer_of(target)
+            if theirs is not None and theirs > mine:
+                bad.append(f"{module} ({LAYERS[mine][0]}) -> {target} ({LAYERS[theirs][0]})")
+    assert not bad, "imports against the layer order:\n" + "\n".join(sorted(bad))
+
+
+def test_a_layer_violation_is_reported(tmp_path: Path) -> None:
+    (tmp_path / "el").mkdir()
+    (tmp_path / "el" / "__init__.py").write_text("")
+    for part in ("dataio", "cli"):
+        (tmp_path / "assurance" / part).mkdir(parents=True)
+        (tmp_path / "assurance" / part / "__init__.py").write_text("")
+    (tmp_path / "assurance" / "__init__.py").write_text("")
+    (tmp_path / "assurance" / "dataio" / "io.py").write_text("def f():\n    from assurance.cli import x\n")
+    graph = import_graph(tmp_path)
+    assert "assurance.cli" in graph["assurance.dataio.io"]
+    assert layer_of("assurance.dataio.io") < layer_of("assurance.cli")

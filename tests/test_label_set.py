@@ -14,7 +14,7 @@ from torch import nn
 import el.labels as lab
 from assurance.campaign.gt_pipeline import decide_from_labels
 from assurance.campaign.truth import disc_pixels, true_hazard
-from assurance.scenes.uavid import read_labels, write_labels
+from assurance.dataio.uavid import read_labels, write_labels
 from el.config import CoreConfig
 from el.core import probs_from_labels, run_core
 from el.decision import Disc

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from assurance.campaign.truth import true_hazard
-from assurance.scenes.uavid import read_labels, write_image, write_labels
+from assurance.dataio.uavid import read_labels, write_image, write_labels
 from el.decision import Disc
 from el.labels import PRESET_DIR, UAVID, LabelSet, label_presets, load_label_set
 

@@ -9,8 +9,8 @@ import pytest
 from helpers import bench_system
 
 from assurance import cli
+from assurance.dataio.uavid import read_image, write_image, write_labels
 from assurance.evidence.overlay import STATUS_COLOURS, draw_decision
-from assurance.scenes.uavid import read_image, write_image, write_labels
 from el.decision import Candidate, Decision, Disc, MonitorVerdict, decision_schema
 from el.labels import CLASS_IDS
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from helpers import OracleSegmenter, nearest_class, scene_ids
 
-from assurance.scenes.uavid import write_sample
+from assurance.dataio.uavid import write_sample
 from el.config import CoreConfig
 from el.labels import CLASS_IDS, ids_to_colors
 
@@ -206,7 +206,8 @@ def test_card_run_and_monitor_must_rest_on_the_same_learned_model(model_file, sp
     campaign (resuming with another model), and by EL-R16 (the run scored with another model)."""
     from assurance.campaign import readouts
     from assurance.campaign.run import CampaignConfig, plan, run_campaign, run_task
-    from assurance.fitting.calibration import calibrate_on_data, check_calibrated_miss_rate
+    from assurance.fitting.calibration import calibrate_on_data
+    from assurance.requirements.calibration_check import check_calibrated_miss_rate
     from el.monitors.calibration import load_calibration
     from el.monitors.learned import load_learned_model, model_document
     from el.pipeline import EmergencyLanding, PipelineConfig

@@ -33,7 +33,7 @@ from assurance.analysis.metrics import (
     safety_gains,
 )
 from assurance.analysis.reference import PERTURBATION_NAMES, load_reference, monitor_spec_name
-from assurance.campaign.perturbations import PAPER_PERTURBATIONS
+from assurance.perturbations import PAPER_PERTURBATIONS
 
 DESIGN_COLUMNS = (
     "perturbation, severity, monitor, images, candidates, g_cm, mcc, f1, precision, recall, "

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 from helpers import bench_system, install_distribution, scene_ids, scene_image
 
-from assurance.scenes.uavid import write_image
+from assurance.dataio.uavid import write_image
 from el.config import CoreConfig
 from el.errors import WeightsError
 from el.pipeline import EmergencyLanding, PipelineConfig

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from helpers import OracleSegmenter, bench_system, install_distribution, scene_ids
 
-from assurance.scenes.uavid import write_image, write_sample
+from assurance.dataio.uavid import write_image, write_sample
 from el.labels import ids_to_colors
 from el.monitors import build_monitor, monitor_names, parse_monitor_spec, registry
 

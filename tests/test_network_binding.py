@@ -108,7 +108,7 @@ def test_a_record_that_names_no_network_is_refused_everywhere(tmp_path):
 def test_el_r16_fails_on_a_run_made_with_another_network():
     import pandas as pd
 
-    from assurance.fitting.calibration import check_calibrated_miss_rate
+    from assurance.requirements.calibration_check import check_calibrated_miss_rate
 
     card = load_calibration(DEPLOYED_CALIBRATION)
     rows = pd.DataFrame({"perturbation": ["none"] * 2, "monitor": [card.spec] * 2, "true_unsafe": [True, True],

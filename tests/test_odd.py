@@ -129,7 +129,7 @@ def test_the_requirement_fails_when_a_landing_is_made_out_of_domain(tiny_campaig
 @pytest.mark.requirements("EL-R17")
 def test_uav_el_land_outside_the_domain_is_a_decision_exit_0(tmp_path, capsys):
     from assurance.cli import main
-    from assurance.scenes.uavid import write_image
+    from assurance.dataio.uavid import write_image
 
     img, out = tmp_path / "frame.png", tmp_path / "d.json"
     write_image(img, scene_image(scene_ids()))
@@ -142,7 +142,7 @@ def test_uav_el_land_outside_the_domain_is_a_decision_exit_0(tmp_path, capsys):
 @pytest.mark.requirements("EL-R17")
 def test_uav_el_land_labels_checks_the_declared_domain_too(tmp_path, capsys, monkeypatch):
     from assurance.cli import main
-    from assurance.scenes.uavid import write_image
+    from assurance.dataio.uavid import write_image
     from el.labels import ids_to_colors
 
     labels, out = tmp_path / "labels.png", tmp_path / "d.json"

@@ -18,8 +18,8 @@ from onnx_helpers import ColourNet, noisy_colours  # noqa: E402
 
 from assurance.campaign import readouts  # noqa: E402
 from assurance.campaign.run import CampaignConfig, run_campaign  # noqa: E402
+from assurance.dataio.uavid import write_sample  # noqa: E402
 from assurance.fitting.network.onnx_export import export_onnx  # noqa: E402
-from assurance.scenes.uavid import write_sample  # noqa: E402
 from el.config import CoreConfig  # noqa: E402
 from el.hashing import sha256_file  # noqa: E402
 from el.monitors import build_monitor  # noqa: E402

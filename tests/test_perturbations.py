@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from assurance.campaign.perturbations import (
+from assurance.perturbations import (
     PAPER_PERTURBATIONS,
     PERTURBATIONS,
     TRAITS,

@@ -11,7 +11,7 @@ from helpers import FakeClock, OracleSegmenter, scene_ids, scene_image
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from assurance.scenes.uavid import write_image
+from assurance.dataio.uavid import write_image
 from el.config import CoreConfig
 from el.decision import decision_schema
 from el.pipeline import EmergencyLanding, PipelineConfig

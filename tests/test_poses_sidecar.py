@@ -13,10 +13,10 @@ from assurance import cli
 from assurance.campaign import readouts
 from assurance.campaign.gt_pipeline import decide_sample
 from assurance.campaign.run import CampaignConfig, plan, run_campaign
+from assurance.dataio.poses import FramePose, frame_pose, read_poses, write_poses
+from assurance.dataio.uavid import iter_samples, read_labels, write_labels
 from assurance.scenes import World
 from assurance.scenes.generate import ViewPlan, generate_scene, write_dataset
-from assurance.scenes.poses import FramePose, frame_pose, read_poses, write_poses
-from assurance.scenes.uavid import iter_samples, read_labels, write_labels
 from el.camera import CameraGeometry, Intrinsics, Pose
 from el.config import CoreConfig
 from el.errors import DataError

@@ -79,7 +79,7 @@ def _rows(n: int, accepted: int) -> pd.DataFrame:
 
 
 def test_el_r16_is_judged_by_its_bound_with_a_minimum_sample_on_the_test_split():
-    from assurance.fitting.calibration import check_calibrated_miss_rate as r16
+    from assurance.requirements.calibration_check import check_calibrated_miss_rate as r16
 
     test = {"sha256": "test", "splits": {"test": 30}}
     assert r16(_rows(200, 168), _Card(0.8), run_data=test).status == rq.PASS  # 0.84 > 0.8, lower bound 0.791 <= 0.8

@@ -12,7 +12,7 @@ import pytest
 import yaml
 
 from assurance import requirements as rq
-from assurance.campaign.perturbations import PAPER_PERTURBATIONS
+from assurance.perturbations import PAPER_PERTURBATIONS
 from assurance.requirements.suite import SUITE_DIR
 
 pytest_plugins = ["pytester"]

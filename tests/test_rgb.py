@@ -34,7 +34,7 @@ def test_minimum_size_is_per_caller() -> None:
 
 
 def test_callers_share_it() -> None:
-    from assurance.campaign.perturbations import perturb
+    from assurance.perturbations import perturb
     from el.monitors.patches import validate_rgb
     from el.segmentation.inference import _check_rgb
 
@@ -49,8 +49,8 @@ def test_callers_share_it() -> None:
 
 
 def test_the_flight_path_and_the_writers_use_it_too(tmp_path) -> None:
+    from assurance.dataio.uavid import write_image
     from assurance.fitting.network.baseline import pixel_features
-    from assurance.scenes.uavid import write_image
     from el.pipeline import EmergencyLanding
 
     bad = np.zeros((20, 20, 3), np.float32)

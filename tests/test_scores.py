@@ -13,7 +13,7 @@ from helpers import OracleSegmenter, scene_ids
 from assurance.analysis.scores import auroc, auroc_table, roc_curve
 from assurance.campaign import readouts
 from assurance.campaign.run import CampaignConfig, run_campaign
-from assurance.scenes.uavid import write_sample
+from assurance.dataio.uavid import write_sample
 from el.config import CoreConfig
 from el.labels import ids_to_colors
 

@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+from assurance.dataio.uavid import iter_samples, read_image, read_labels
 from assurance.scenes import (
     SPLIT_BASE,
     World,
@@ -22,7 +23,6 @@ from assurance.scenes import (
 from assurance.scenes.generate import write_scene
 from assurance.scenes.geom import PolygonSet, rect
 from assurance.scenes.styles import HELD_OUT_STYLES, STYLES, choose_style
-from assurance.scenes.uavid import iter_samples, read_image, read_labels
 from assurance.scenes.world import Block, Crown, Look, Sun
 from el.camera import CameraGeometry, Pose
 from el.labels import CLASS_IDS, NUM_CLASSES, PALETTE

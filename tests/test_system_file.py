@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from assurance import cli
-from assurance.scenes.uavid import write_image, write_labels
+from assurance.dataio.uavid import write_image, write_labels
 from assurance.system import SystemFileError, default_system, find_system, load_system, schema
 from assurance.system import build as system_build
 from el.camera import PHANTOM3_PRO, SafetyParams

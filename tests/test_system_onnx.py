@@ -11,7 +11,7 @@ from helpers import scene_ids  # noqa: E402
 from onnx_helpers import MEAN, STD, ColourNet, Variant, export_raw, noisy_colours  # noqa: E402
 
 from assurance import cli  # noqa: E402
-from assurance.scenes.uavid import write_sample  # noqa: E402
+from assurance.dataio.uavid import write_sample  # noqa: E402
 from el.hashing import sha256_file  # noqa: E402
 from el.labels import UAVID  # noqa: E402
 

@@ -12,13 +12,13 @@ import torch
 from helpers import TINY_ARCH
 
 import assurance.cli as cli
+from assurance.dataio.uavid import write_sample
 from assurance.fitting.network import data as D
 from assurance.fitting.network.card import verify_card
 from assurance.fitting.network.checkpoint import checkpoint_path, load_checkpoint
 from assurance.fitting.network.evaluation import compare_figures, confusion, summarise
 from assurance.fitting.network.train_config import TrainConfig, steps_for_epochs
 from assurance.fitting.network.training import prefetched, resolve_device, sample_batch, train, training_loss
-from assurance.scenes.uavid import write_sample
 from el.labels import NUM_CLASSES, PALETTE
 from el.segmentation.architectures import build_model
 from el.segmentation.inference import Segmenter

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from assurance.scenes.uavid import DataError, iter_samples, read_image, read_labels, write_image, write_sample
+from assurance.dataio.uavid import DataError, iter_samples, read_image, read_labels, write_image, write_sample
 
 
 def _rgb(h=12, w=16, seed=0):

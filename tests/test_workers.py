@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from assurance.campaign.workers import dask_map, dask_parent_pid
+from assurance.workers import dask_map, dask_parent_pid
 
 linux_only = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux only")
 
@@ -28,7 +28,7 @@ def test_a_local_dask_cluster_s_workers_get_the_parent_death_signal():
     def probe(item: int, parent_pid: int | None) -> tuple[int, int, int]:
         import ctypes
 
-        from assurance.campaign.workers import die_with_parent
+        from assurance.workers import die_with_parent
 
         die_with_parent(parent_pid)
         sig = ctypes.c_int(0)
@@ -44,9 +44,9 @@ def test_a_local_dask_cluster_s_workers_get_the_parent_death_signal():
 @linux_only
 def test_dask_workers_die_with_a_sigkilled_campaign(tmp_path):
     pytest.importorskip("dask.distributed")
-    from assurance.campaign.fault_bounds import killed_campaign_survivors
-    from assurance.campaign.fault_injection import build_workspace
     from assurance.cli import main
+    from assurance.fault_injection.bounds import killed_campaign_survivors
+    from assurance.fault_injection.table import build_workspace
 
     ws = build_workspace(tmp_path, main=main)
     assert killed_campaign_survivors(ws, ws / "killed", backend="dask") == []

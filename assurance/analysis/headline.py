@@ -9,7 +9,6 @@ perturbation, with the hashes of the model and of the calibration card it was ma
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import pandas as pd
 
@@ -42,7 +41,7 @@ def headline_markdown(run: str | Path, table: pd.DataFrame, deployed: str,
     man = readouts.read_manifest(run)
     card = ""
     if calibration_card:
-        from assurance.requirements.targets import card_path
+        from assurance.paths import card_path
 
         path = card_path(calibration_card)
         card = f", calibration card `{path.name}` (sha256 `{sha256_file(path)[:12]}`)"
@@ -86,11 +85,3 @@ def write_block(path: str | Path, block: str) -> bool:
     if new != text:
         atomic_write_bytes(p, new.encode("utf-8"))
     return new != text
-
-
-def release_parameters() -> dict[str, Any]:
-    """The registry parameters the headline is judged with (deployed monitor, calibration card)."""
-    from assurance.requirements import load_registry
-
-    p = load_registry().parameters
-    return {"deployed": p["deployed_monitor"], "calibration_card": p.get("calibration_card")}

@@ -246,7 +246,7 @@ class ScenarioMetrics:
     Parameters
     ----------
     perturbation : str
-        Perturbation name (``assurance.campaign.perturbations``).
+        Perturbation name (``assurance.perturbations``).
     severity : int or None
         Its severity (copied to the row as given).
     monitor : str

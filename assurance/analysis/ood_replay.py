@@ -19,9 +19,9 @@ import numpy as np
 import pandas as pd
 
 from assurance.campaign import readouts
-from assurance.campaign.perturbations import perturb
 from assurance.campaign.run import task_seed
-from assurance.scenes.uavid import iter_samples, read_image
+from assurance.dataio.uavid import iter_samples, read_image
+from assurance.perturbations import perturb
 from el.monitors.frame_gate import FrameGate, load_frame_gate
 
 

@@ -5,7 +5,7 @@ Landing", ICRA 2022: its complete per-configuration results (6 perturbations x 2
 configurations, 70 UAVid validation images each), shipped verbatim as
 ``assurance/data/guerin2022_results.csv``. ``load_reference()`` renames the columns to those of the
 project's results table (``assurance.analysis.metrics.RESULT_COLUMNS``), the perturbations to
-``assurance.campaign.perturbations`` names and the monitor configurations to spec names (``"lhd"``,
+``assurance.perturbations`` names and the monitor configurations to spec names (``"lhd"``,
 ``"lhd+ch:tau=0.25"``, ``"lhd+mcd:n=10,rho=0.5"``, ``"lhd+ch+mcd:tau=0.125,n=30,rho=0.9"``), so a
 campaign's table and the paper's can be joined on ``(perturbation, monitor)``.
 
@@ -30,7 +30,7 @@ import numpy as np
 import pandas as pd
 
 from assurance.analysis.metrics import RESULT_COLUMNS
-from assurance.campaign.perturbations import TRAITS
+from assurance.perturbations import TRAITS
 
 __all__ = [
     "PERTURBATION_NAMES",
@@ -54,7 +54,7 @@ PERTURBATION_NAMES: dict[str, str] = {
     "Shifted pixels": "shifted_pixels",
     "Pixel trap": "pixel_trap",
 }
-"""Published perturbation name -> ``assurance.campaign.perturbations`` name."""
+"""Published perturbation name -> ``assurance.perturbations`` name."""
 
 _COLUMNS = {  # published column -> project column
     "Monitor MCC": "mcc",
@@ -130,7 +130,7 @@ def load_reference(path: str | Path | None = None) -> pd.DataFrame:
     -------
     DataFrame, one row per (perturbation, monitor), in the published order, with columns
 
-    - ``perturbation`` (``assurance.campaign.perturbations`` name), ``severity`` (Int64: 3 for the five
+    - ``perturbation`` (``assurance.perturbations`` name), ``severity`` (Int64: 3 for the five
       perturbations, whose published settings are our severity 3; <NA> for ``none``),
       ``monitor`` (spec name), ``images`` (70), ``candidates`` (Int64 <NA>: not published);
     - the published figures under the results-table names: ``g_cm, mcc, f1, precision, recall,

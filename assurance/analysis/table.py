@@ -17,7 +17,7 @@ import pandas as pd
 
 from assurance.analysis.metrics import RESULT_COLUMNS, ImageReadout, ScenarioMetrics, rows_to_frame
 from assurance.campaign import readouts
-from assurance.campaign.perturbations import severities_of
+from assurance.perturbations import severities_of
 
 PAPER_FIGURES = ("g_cm", "mcc", "f1", "precision", "recall", "fp_rate", "g_rm", "overhead_s", "g_star")
 HEADERS = {"g_cm": "G_CM", "mcc": "MCC", "f1": "F1", "precision": "Precision", "recall": "Recall",

@@ -13,8 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from assurance.scenes.poses import NOMINAL, frame_pose
-from assurance.scenes.uavid import Sample, read_labels
+from assurance.dataio.poses import NOMINAL, frame_pose
+from assurance.dataio.uavid import Sample, read_labels
 from el.camera import Pose, check_geometry
 from el.decision import Candidate
 from el.errors import DataError

@@ -18,8 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from assurance.scenes.poses import NOMINAL, frame_pose
-from assurance.scenes.uavid import DataError, Sample, check_same_size, read_labels
+from assurance.dataio.poses import NOMINAL, frame_pose
+from assurance.dataio.uavid import DataError, Sample, check_same_size, read_labels
 from el.camera import Pose, working_size
 from el.config import CoreConfig
 from el.core import default_area, probs_from_labels
@@ -113,7 +113,7 @@ def decide_from_label_file(
     """Read a colour label PNG (``labels``' palette, UAVid by default) and decide; returns (decision, class ids).
 
     The optional image is only checked for size (it is for drawing) and identified in
-    ``input["image"]``; ``odd`` as :func:`decide_from_labels`. DataError (from ``assurance.scenes.uavid``) for a
+    ``input["image"]``; ``odd`` as :func:`decide_from_labels`. DataError (from ``assurance.dataio.uavid``) for a
     missing, unreadable or inconsistent file.
     """
     labels_path = Path(labels_path)
@@ -134,7 +134,7 @@ def decide_from_label_file(
 def decide_sample(sample: Sample, *, config: CoreConfig | None = None, poses: str = "nominal",
                   labels: LabelSet = UAVID) -> Decision:
     """The ground-truth decision for a UAVid-layout sample, planned at its pose under the policy ``poses``
-    (``assurance.scenes.poses``; read the samples with ``iter_samples(..., poses=True)``). A frame
+    (``assurance.dataio.poses``; read the samples with ``iter_samples(..., poses=True)``). A frame
     without the pose the policy requires is the default action with reason ``"fault: pose: ..."``."""
     config = config or CoreConfig()
     if sample.label_path is None:

@@ -34,8 +34,8 @@ from assurance.campaign.task import (  # noqa: F401  (re-exported)
     task_parts,
     task_seed,
 )
-from assurance.campaign.workers import bounded_jobs, dask_map, die_with_parent
-from assurance.scenes.uavid import iter_samples
+from assurance.dataio.uavid import iter_samples
+from assurance.workers import bounded_jobs, dask_map, die_with_parent
 
 # ------------------------------------------------------------------------------------------------
 # The runner
@@ -62,7 +62,7 @@ def execute(task: Task, config: CampaignConfig, run_dir: str, threads: int, segm
     if segmenter is None:
         segmenter = _worker_segmenter(config.weights, threads)
     t = time.perf_counter()
-    from assurance.analysis.clearance import sample_clearance_m
+    from assurance.campaign.clearance import sample_clearance_m
 
     rows = run_task(task, config, segmenter, world_clearance=sample_clearance_m, expected_models=expected_models)
     hashes = readouts.write_shard(Path(run_dir), task.shard_name, rows)

@@ -28,10 +28,10 @@ from assurance.campaign.frames import (
     outside_odd,
 )
 from assurance.campaign.judging import _timed, judge_candidates
-from assurance.campaign.perturbations import PERTURBATIONS, perturb, severities_of
 from assurance.campaign.truth import true_hazard
-from assurance.scenes.poses import check_policy
-from assurance.scenes.uavid import Sample
+from assurance.dataio.poses import check_policy
+from assurance.dataio.uavid import Sample
+from assurance.perturbations import PERTURBATIONS, perturb, severities_of
 from el.config import CoreConfig, check_seed
 from el.core import default_area
 from el.deadline import Deadline
@@ -60,7 +60,7 @@ class CampaignConfig:
     patch_max_side: int | None = None
     weights: str | dict[str, Any] | None = None  # None: the shipped weights; a dict: a system file's model
     core: CoreConfig = field(default_factory=CoreConfig)
-    poses: str = "nominal"  # which pose plans each frame: assurance.scenes.poses.POLICIES
+    poses: str = "nominal"  # which pose plans each frame: assurance.dataio.poses.POLICIES
     odd: dict[str, Any] | None = None  # the declared operating domain (el.odd.OperatingDomain.to_dict()); None: none
     gate: dict[str, str] | None = None  # the frame gate {"path", "sha256"} (el.monitors.frame_gate); None: none
     time_budget_s: float | None = None  # the flight's deadline (with the task's clock); None: none, so that the

@@ -8,10 +8,10 @@ import sys
 from assurance.campaign.faults import config_fault_line
 from assurance.campaign.presets import load_presets, preset_config
 from assurance.campaign.run import describe, run_campaign
-from assurance.campaign.workers import bounded_jobs
 from assurance.cli.arguments import model_option
+from assurance.dataio.poses import POLICIES
 from assurance.errors import CommandError
-from assurance.scenes.poses import POLICIES
+from assurance.workers import bounded_jobs
 
 HELP = "run or resume an evaluation campaign (perturbations x test images x monitor configurations)"
 

@@ -23,7 +23,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     import torch
 
-    from assurance.campaign import fault_injection as fi
+    from assurance.fault_injection import table as fi
 
     if args.list:
         for c in fi.CASES:

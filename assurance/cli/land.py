@@ -17,9 +17,9 @@ import argparse
 from dataclasses import replace
 from pathlib import Path
 
+from assurance.dataio.uavid import image_size, read_image, write_image
 from assurance.errors import CommandError
 from assurance.files import atomic_write_bytes
-from assurance.scenes.uavid import image_size, read_image, write_image
 from el.camera import CAMERAS, MAX_ROLL_DEG, Pose, geometry_problem
 from el.config import MODES, CoreConfig, make_intrinsics
 from el.decision import Decision

@@ -20,8 +20,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from assurance.dataio.uavid import iter_samples, read_image, read_labels, write_image
     from assurance.scenes.preview import make_preview
-    from assurance.scenes.uavid import iter_samples, read_image, read_labels, write_image
 
     if args.out.suffix.lower() != ".png":
         raise CommandError(f"--out must be a .png file, got {args.out}")

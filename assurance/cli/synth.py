@@ -92,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(f"--seed must be >= 0 and --seed + --scenes <= 1000000, got {args.seed} + {args.scenes}")
     if args.jobs < 1:
         raise CommandError(f"--jobs must be at least 1, got {args.jobs}")
-    from assurance.campaign.workers import bounded_jobs
+    from assurance.workers import bounded_jobs
 
     args.jobs = bounded_jobs(args.jobs, warn=lambda m: print(f"uav-el synth: warning: {m}", file=sys.stderr))
     if args.out.exists() and not args.out.is_dir():

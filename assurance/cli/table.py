@@ -77,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _headline(run: str, df: Any) -> str:
-    from assurance.analysis.headline import HeadlineError, headline_markdown, release_parameters
+    from assurance.analysis.headline import HeadlineError, headline_markdown
 
     try:
         return headline_markdown(run, df, **release_parameters())
@@ -115,3 +115,11 @@ def check_readme(run: str, df: Any, readme: str) -> int:
     print(f"{readme}: the headline table differs from {run}; run `uav-el table {run} --readme {readme}`\n"
           f"--- README\n{shown}--- run\n{block}", file=sys.stderr)
     return 1
+
+
+def release_parameters() -> dict[str, Any]:
+    """The registry parameters the headline is judged with (deployed monitor, calibration card)."""
+    from assurance.requirements import load_registry
+
+    p = load_registry().parameters
+    return {"deployed": p["deployed_monitor"], "calibration_card": p.get("calibration_card")}

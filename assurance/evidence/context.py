@@ -193,9 +193,9 @@ def results_signature_row(inp: Inputs) -> dict[str, str]:
 
 def campaign_context(inp: Inputs) -> dict[str, Any]:
     """The run's part of the context: identity, operating domain, pictures, plots, results and limitations."""
-    from assurance.campaign.perturbations import PAPER_PERTURBATIONS
     from assurance.evidence.domain_section import frame_gate_view, odd_rows
     from assurance.evidence.gallery import Scenes, decision_examples, perturbation_gallery
+    from assurance.perturbations import PAPER_PERTURBATIONS
 
     man, images, candidates, reg = inp.manifest, inp.images, inp.candidates, inp.registry
     identity_rows, ident = identity(inp.run, man, reg, inp.req_path, inp.req_doc, inp.csv_path, inp.templates,

@@ -19,10 +19,10 @@ from typing import Any
 import cv2
 import numpy as np
 
-from assurance.campaign.perturbations import perturb
 from assurance.campaign.readouts import image_size
 from assurance.campaign.run import task_seed
-from assurance.scenes.uavid import Sample, iter_samples, read_image
+from assurance.dataio.uavid import Sample, iter_samples, read_image
+from assurance.perturbations import perturb
 
 GALLERY_SEVERITY = 3
 

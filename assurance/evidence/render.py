@@ -23,7 +23,7 @@ FAULTS_CSV = "faults.csv"
 
 def faults_table(out: Path, warnings: list[str]) -> list[dict[str, str]] | None:
     """The fault-injection table (``uav-el fault-table``) found next to the report, for its appendix."""
-    from assurance.campaign.fault_injection import read_table
+    from assurance.fault_injection.table import read_table
 
     path = out / FAULTS_CSV
     if not path.is_file():

@@ -154,7 +154,7 @@ def sample_size(table: Any, registry: rq.Registry, n_boot: int) -> list[str]:
 def limitations(man: Mapping[str, Any], registry: rq.Registry, results: Mapping[str, rq.RequirementResult],
                  synthetic: bool, table: Any) -> list[str]:
     """What the evidence does not cover: synthetic scenes, geometry, timings, what was not evaluated or verified."""
-    from assurance.campaign.perturbations import PERTURBATIONS, SEVERITIES
+    from assurance.perturbations import PERTURBATIONS, SEVERITIES
     from el.monitors import PAPER_GRID
 
     cfg = man["config"]

@@ -17,8 +17,8 @@ from typing import Any
 import numpy as np
 
 from assurance.campaign.truth import disc_pixels
+from assurance.dataio.uavid import iter_samples, read_image, read_labels
 from assurance.fitting.separation import disc_scores, separation
-from assurance.scenes.uavid import iter_samples, read_image, read_labels
 from el.config import CoreConfig
 from el.core import run_core
 from el.labels import CLASS_NAMES, FORBIDDEN_LUT, NUM_CLASSES

@@ -13,10 +13,10 @@ from typing import Any
 
 import numpy as np
 
+from assurance.dataio.uavid import iter_samples
 from assurance.fitting.gate_frames import IN_DOMAIN, scene_images, training_frames, validation_frames
 from assurance.fitting.learned_monitor import split_sha256
 from assurance.paths import shown_path
-from assurance.scenes.uavid import iter_samples
 from el.monitors.frame_gate import frame_gate_document
 from el.monitors.gates import GATES
 

@@ -21,8 +21,8 @@ from typing import Any
 import cv2
 import numpy as np
 
-from assurance.campaign.perturbations import perturb
-from assurance.scenes.uavid import iter_samples, read_image
+from assurance.dataio.uavid import iter_samples, read_image
+from assurance.perturbations import perturb
 from assurance.system.build import DEFAULT_IMAGE_SIZE
 
 IN_DOMAIN = ("none", "brightness", "fog", "motion_blur", "shifted_pixels", "pixel_trap")

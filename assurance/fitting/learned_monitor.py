@@ -26,8 +26,8 @@ from typing import Any
 import numpy as np
 
 from assurance.campaign.truth import true_hazard
+from assurance.dataio.uavid import Sample, iter_samples, read_image, read_labels
 from assurance.paths import shown_path
-from assurance.scenes.uavid import Sample, iter_samples, read_image, read_labels
 from el.config import CoreConfig
 from el.core import run_core
 from el.hashing import sha256_file

@@ -18,6 +18,7 @@ every public name.
 
 from __future__ import annotations
 
+from assurance.paths import card_path
 from assurance.requirements import campaign_checks  # noqa: F401  (registers the checks)
 from assurance.requirements.catalogue import (
     ARTEFACTS,
@@ -74,7 +75,6 @@ from assurance.requirements.targets import (
     REQUIRED_TARGETS,
     TARGETS,
     TargetError,
-    card_path,
     check_target,
     read_targets_file,
     render_text,

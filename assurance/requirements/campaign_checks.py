@@ -94,8 +94,8 @@ def pose_error_margin(ctx: CheckContext) -> Evidence:
 @check("EL-R16", parameters=("calibration_card", "calibration_min_unsafe"))
 def calibrated_miss_rate(ctx: CheckContext) -> Evidence:
     """The calibrated monitor's miss rate on the test split is within its card's (no card: not verified)."""
-    from assurance.fitting.calibration import check_calibrated_miss_rate
-    from assurance.requirements.targets import card_path
+    from assurance.paths import card_path
+    from assurance.requirements.calibration_check import check_calibrated_miss_rate
     from el.monitors.calibration import load_calibration
 
     card = ctx.parameters.get("calibration_card")

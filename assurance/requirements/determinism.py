@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from assurance.campaign.perturbations import TRAITS
+from assurance.perturbations import TRAITS
 from assurance.requirements.records import FAIL, INSUFFICIENT, PASS, Evidence
 
 TIMING_COLUMNS: frozenset[str] = frozenset({

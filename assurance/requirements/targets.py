@@ -160,17 +160,7 @@ def read_targets_file(path: str | Path) -> dict[str, Any]:
     return doc
 
 
-PACKAGE_ROOT = Path(__file__).resolve().parents[2]
 """The folder holding the ``el`` and ``assurance`` packages: relative paths in a registry are package data."""
-
-
-def card_path(value: str | Path | None) -> Path | None:
-    """Where the calibration card a target names is: an absolute path as it is, a relative one under the package
-    root (the shipped registry names ``el/monitors/data/calibration.json``), never the working directory."""
-    if value is None or str(value).strip() == "":
-        return None
-    p = Path(value)
-    return p if p.is_absolute() else PACKAGE_ROOT / p
 
 
 def targets_sha256(parameters: Mapping[str, Any]) -> str:

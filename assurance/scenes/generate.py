@@ -18,14 +18,14 @@ from typing import Any
 import cv2
 import numpy as np
 
+from assurance.dataio.poses import POSES_FILE, write_poses
+from assurance.dataio.uavid import sample_paths, write_image
 from assurance.files import atomic_write_bytes
 from assurance.scenes.builder import Builder
 from assurance.scenes.layout import build_city
-from assurance.scenes.poses import POSES_FILE, write_poses
 from assurance.scenes.rand import Rand
 from assurance.scenes.renderer import render
 from assurance.scenes.styles import ALL_STYLES, HELD_OUT_STYLES, LIGHTINGS, Style, choose_style, get_style
-from assurance.scenes.uavid import sample_paths, write_image
 from assurance.scenes.view import coverage_domain, visible_ground
 from assurance.scenes.world import Sun, World
 from el.camera import HEIGHT_M, PITCH_DEG, CameraGeometry, Intrinsics, Pose, check_geometry
@@ -301,7 +301,7 @@ def _render_all(todo: list[Any], split: str, progress: bool, jobs: int) -> None:
         for _ in _iterate(results, total=len(todo), desc=f"synth {split}", enabled=progress):
             pass
     else:
-        from assurance.campaign.workers import die_with_parent
+        from assurance.workers import die_with_parent
 
         with ProcessPoolExecutor(max_workers=jobs, initializer=die_with_parent, initargs=(os.getpid(),)) as pool:
             for _ in _iterate(pool.map(_write_job, todo), total=len(todo), desc=f"synth {split}", enabled=progress):

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from assurance.scenes.uavid import LABEL_DIR, iter_samples, read_labels, write_labels
+from assurance.dataio.uavid import LABEL_DIR, iter_samples, read_labels, write_labels
 from el.errors import DataError
 from el.labels import MAX_CLASSES, LabelSet
 

@@ -138,7 +138,7 @@ def odd(system: SystemFile) -> OperatingDomain:
         if not system.sets("odd.aspect"):
             values["aspect"] = [round(width / height / 1.05, 6), round(width / height * 1.05, 6)]
     perturbations = dict(system.get("odd.perturbations") or {})
-    from assurance.campaign.perturbations import PERTURBATIONS
+    from assurance.perturbations import PERTURBATIONS
 
     unknown = sorted(set(perturbations) - set(PERTURBATIONS))
     if unknown:

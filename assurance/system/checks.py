@@ -27,7 +27,7 @@ def check_system(system: SystemFile) -> None:
         raise system.error("report.templates", f"{templates}: no such folder")
     perturbations = system.get("targets.required_perturbations")
     if perturbations is not None:
-        from assurance.campaign.perturbations import PERTURBATIONS
+        from assurance.perturbations import PERTURBATIONS
 
         unknown = [p for p in perturbations if p not in PERTURBATIONS]
         if unknown:

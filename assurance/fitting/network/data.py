@@ -32,8 +32,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from assurance.dataio.uavid import DataError, Sample, iter_samples, read_image, read_labels
 from assurance.files import atomic_write_bytes
-from assurance.scenes.uavid import DataError, Sample, iter_samples, read_image, read_labels
 from el.camera import NUM_STRIPES, UNREACHABLE_STRIPES, working_size
 from el.hashing import sha256_file
 from el.labels import NUM_CLASSES

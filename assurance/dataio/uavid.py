@@ -14,8 +14,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from assurance.dataio.poses import POSES_FILE, sequence_poses
 from assurance.files import atomic_write_bytes, public_mode  # noqa: F401  (re-exported)
-from assurance.scenes.poses import POSES_FILE, sequence_poses
 from el.camera import Pose
 from el.errors import DataError
 from el.imageio import image_size as header_image_size
@@ -58,7 +58,7 @@ class Sample:
     """One image of a UAVid-layout dataset and its label file (None when the set is unlabelled).
 
     ``pose`` and ``roll_deg``: the frame's line of its sequence's ``poses.csv`` (``poses_path``, None when
-    the sequence has none), read when ``iter_samples`` is asked to (``assurance.scenes.poses``)."""
+    the sequence has none), read when ``iter_samples`` is asked to (``assurance.dataio.poses``)."""
 
     sequence: str
     frame: str

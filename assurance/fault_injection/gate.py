@@ -13,7 +13,7 @@ import json
 import shutil
 from pathlib import Path
 
-from assurance.campaign.fault_case import Case, campaign_argv, copy_run, prepare
+from assurance.fault_injection.case import Case, campaign_argv, copy_run, prepare
 
 
 def _verified(ws: Path, run: Path | None = None, name: str = "ver", *extra: object) -> Path:
@@ -113,7 +113,7 @@ def _resigned_monitor(ws: Path) -> list[str]:
 
 def _changed_weights(ws: Path) -> list[str]:
     """The run's network weights replaced after the run by others, with their own matching card."""
-    from assurance.campaign.fault_case import save_tiny_weights
+    from assurance.fault_injection.case import save_tiny_weights
 
     weights, run = ws / "tiny-swapped.pt", ws / "run-swapped"
     shutil.copy(ws / "tiny.pt", weights)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from assurance.scenes.uavid import Sample
+from assurance.dataio.uavid import Sample
 from assurance.scenes.world import World, pixel_clearance_m
 from el.camera import CameraGeometry, Intrinsics, Pose
 

@@ -1,4 +1,4 @@
-"""One fault-injection case and the scratch workspace it is injected into (``assurance.campaign.fault_injection``).
+"""One fault-injection case and the scratch workspace it is injected into (``assurance.fault_injection.table``).
 
 The workspace (``build_workspace`` there): ``WS/data`` (two 320x180 synthetic test scenes), ``WS/tiny.pt`` (a
 tiny CNN's weights and card) and ``WS/run`` (a finished 2-image campaign on them). The helpers below name

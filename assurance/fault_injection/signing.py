@@ -9,7 +9,7 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-from assurance.campaign.fault_case import Case, copy_run, reseal_shard
+from assurance.fault_injection.case import Case, copy_run, reseal_shard
 
 
 def _evidence(run: Path, out: Path, *extra: object) -> list[str]:

@@ -19,13 +19,13 @@ import shutil
 from collections.abc import Sequence
 from pathlib import Path
 
-from assurance.campaign.fault_bounds import BOUNDS_CASES
-from assurance.campaign.fault_case import Case, CliMain, run_cli, save_tiny_weights, use_cli, write_small_frame_system
-from assurance.campaign.fault_case import campaign_argv as _campaign
-from assurance.campaign.fault_case import copy_run as _copy_run
-from assurance.campaign.fault_case import first_image as _image
-from assurance.campaign.fault_gate import GATE_CASES
-from assurance.campaign.fault_signing import SIGNING_CASES
+from assurance.fault_injection.bounds import BOUNDS_CASES
+from assurance.fault_injection.case import Case, CliMain, run_cli, save_tiny_weights, use_cli, write_small_frame_system
+from assurance.fault_injection.case import campaign_argv as _campaign
+from assurance.fault_injection.case import copy_run as _copy_run
+from assurance.fault_injection.case import first_image as _image
+from assurance.fault_injection.gate import GATE_CASES
+from assurance.fault_injection.signing import SIGNING_CASES
 
 COLUMNS = ("case", "injected", "command", "expected", "observed", "outcome", "result")
 CSV_NAME, MD_NAME = "faults.csv", "faults.md"
@@ -152,7 +152,7 @@ def _unreadable_image(ws: Path) -> list[str]:
 
 def _wrong_shape_labels(ws: Path) -> list[str]:
     labels = sorted((ws / "data").glob("*/Labels/*.png"))[0]
-    from assurance.scenes.uavid import read_image, write_image
+    from assurance.dataio.uavid import read_image, write_image
 
     small = ws / "labels-small.png"
     write_image(small, read_image(labels)[:90, :160])

@@ -1,6 +1,6 @@
 """Fault-injection cases of issue 31: bounded resources and no silent loss (rows ``R1``..``R15`` of the table).
 
-Each case injects one hostile input into copies under the workspace (``assurance.campaign.fault_case``) and
+Each case injects one hostile input into copies under the workspace (``assurance.fault_injection.case``) and
 returns the ``uav-el`` command that must refuse it, bound it or survive it.
 """
 
@@ -18,7 +18,7 @@ import zlib
 from collections.abc import Callable
 from pathlib import Path
 
-from assurance.campaign.fault_case import Case, campaign_argv, copy_run, first_image, save_tiny_weights
+from assurance.fault_injection.case import Case, campaign_argv, copy_run, first_image, save_tiny_weights
 
 YAML_BOMB = "".join(f"l{i}: &l{i} [" + ", ".join([f"*l{i - 1}" if i else '"lol"'] * 9) + "]\n" for i in range(9))
 

@@ -130,7 +130,7 @@ def meta_pose(meta_path: Path) -> Pose | None:
 def frame_pose(sample: object, policy: str, nominal: Pose) -> tuple[Pose, float, str]:
     """(pose, roll_deg, source) that plans a sample's frame under ``policy``; source is nominal, frame or meta.
 
-    ``sample`` is an ``assurance.scenes.uavid.Sample``: ``pose`` and ``roll_deg`` from its sequence's
+    ``sample`` is an ``assurance.dataio.uavid.Sample``: ``pose`` and ``roll_deg`` from its sequence's
     sidecar (``poses_path``). A sequence without a sidecar falls back on the pose a synthetic scene's meta
     records. Under ``required`` a frame without a pose is a DataError naming the sidecar that lacks it."""
     check_policy(policy)
