@@ -123,3 +123,18 @@ def test_issue_31_gate_cases_with_a_test_session_behave(workspace):
     for r in rows:
         assert r["result"] == "pass", r
     assert "weaker than the system" in {r["case"]: r for r in rows}["G3-weakened-registry"]["outcome"]
+
+
+def test_trust_boundary_cases_behave(workspace):
+    """An applicant's templates (T1..T4): no code runs, no local file or network URL is read, no contradicting verdict
+    is printed; each is exit 2 with one line naming the problem."""
+    from assurance.fault_injection.applicant import APPLICANT_CASES
+
+    assert {c.id for c in APPLICANT_CASES} <= {c.id for c in fi.CASES}
+    rows = fi.run_cases(workspace, APPLICANT_CASES, main=main)
+    for r in rows:
+        assert r["result"] == "pass", r
+    assert not (workspace / "T1-executed").exists()
+    by = {r["case"]: r for r in rows}
+    assert "stand-in-signing-key.pem" in by["T2-template-file-attachment"]["outcome"]
+    assert not (workspace / "rep-attach" / "evidence.pdf").exists()

@@ -19,6 +19,7 @@ import shutil
 from collections.abc import Sequence
 from pathlib import Path
 
+from assurance.fault_injection.applicant import APPLICANT_CASES
 from assurance.fault_injection.bounds import BOUNDS_CASES
 from assurance.fault_injection.case import Case, CliMain, run_cli, save_tiny_weights, use_cli, write_small_frame_system
 from assurance.fault_injection.case import campaign_argv as _campaign
@@ -198,6 +199,7 @@ CASES: tuple[Case, ...] = (
     *BOUNDS_CASES,  # issue 31: bounded resources, no silent loss
     *SIGNING_CASES,  # issue 31: forged evidence, the gate's policy
     *GATE_CASES,  # issue 31: a gate that verifies what it says, models bound to the run
+    *APPLICANT_CASES,  # the auditor's trust boundary: supplied templates never execute, read files or contradict
 )
 
 
