@@ -34,6 +34,9 @@ from el.monitors.frame_gate import FrameGate, judge_frame
 from el.odd import OperatingDomain
 from el.walk import HAZARD, Judge, Step, WalkOutcome, walk_candidates
 
+REFUSALS = ("outside_odd", "out_of_domain")
+"""How the reasons of the kernel's refusals begin: a frame outside the declared domain, or one the frame gate refuses,
+is the default action by design, whatever the monitors would have said of its candidates."""
 Clock = Callable[[], float]
 Reader = Callable[[dict[str, Any]], np.ndarray]
 """Reads the frame (filling the decision's ``input`` record it is given) and returns the array the segmenter takes
@@ -241,4 +244,4 @@ def decide_frame(read: Reader, parts: Parts, judge: Judge | None, *, walk: str =
                     before=before, after=after)[0]
 
 
-__all__ = ["Frame", "Parts", "conclude", "decide_frame", "default", "frame_core", "pose_record", "prepare"]
+__all__ = ["REFUSALS", "Frame", "Parts", "conclude", "decide_frame", "default", "frame_core", "pose_record", "prepare"]

@@ -10,10 +10,11 @@ from pathlib import Path
 
 import pytest
 
-from assurance.analysis.headline import current_block, headline_markdown, release_parameters
+from assurance.analysis.headline import current_block, headline_markdown
 from assurance.analysis.table import results_table
 from assurance.campaign.presets import preset_config
 from assurance.campaign.readouts import read_manifest
+from assurance.cli.table import release_parameters
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 

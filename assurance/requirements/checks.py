@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from assurance.requirements.records import FAIL, INSUFFICIENT, PASS, Evidence
+from el.kernel import REFUSALS
 from el.monitors.spec import walk_of
 from el.walk import walk_order
 
@@ -39,7 +40,8 @@ def _num(v: Any) -> float | None:
 def check_monitor_coverage(images: Any, candidates: Any) -> Evidence:
     """EL-R04 on campaign readouts: every 'land' decision is on an accepted candidate, every candidate
     walked before it (in the configuration's walk order, ``el.walk``) was rejected, and the two
-    readout tables agree on the decision.
+    readout tables agree on the decision. A frame the kernel refuses before the walk (outside the declared domain,
+    or above the frame gate's threshold: ``el.kernel.REFUSALS``) is the default action by design, not a breach.
 
     ``images`` / ``candidates``: the run's tables (``assurance.campaign.readouts.load_table``).
     """
@@ -80,7 +82,7 @@ def check_monitor_coverage(images: Any, candidates: Any) -> Evidence:
         else:
             if flagged.any():
                 problem = "default action but a candidate is flagged as selected"
-            elif accepted.any() and not str(row.reason).startswith("outside_odd"):  # outside: refused whatever
+            elif accepted.any() and not str(row.reason).startswith(REFUSALS):  # refused whatever the monitor said
                 problem = f"default action although candidate {int(np.flatnonzero(accepted)[0])} was accepted"
         if problem:
             violations.append({"perturbation": row.perturbation, "severity": int(row.severity),
