@@ -26,21 +26,20 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from assurance.cli.system_options import model_spec, system_of
+    from assurance.cli.system_options import assessed
     from assurance.fitting.calibration import calibrate_on_data
-    from assurance.system import build as system_build
 
-    system = system_of(args)
-    data = system_build.data_root(system, "val", args.data)
+    system = assessed(args)
+    data = system.data("val", args.data)
     if not Path(data).is_dir():
         raise CommandError(f"{data}: no such folder")
-    monitor = args.monitor or (system_build.monitor_spec(system) if system.sets("monitor.spec") else None)
+    monitor = args.monitor or (system.monitor if system.file.sets("monitor.spec") else None)
     if monitor is None:
         raise CommandError("give the monitor to calibrate with --monitor SPEC (or [monitor] spec in the system file)")
     try:
         doc = calibrate_on_data(data, monitor, miss_rate=args.miss_rate, confidence=args.confidence,
-                                weights=model_spec(args), images=args.images,
-                                core=system_build.core_config(system), progress=not args.quiet)
+                                weights=system.model, images=args.images, core=system.core,
+                                progress=not args.quiet)
     except ValueError as exc:  # CalibrationError, WeightsError, a bad spec: one line
         raise CommandError(str(exc)) from None
     write_json(args.out, doc, indent=2)

@@ -55,16 +55,14 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError("--scheduler needs --backend dask")
     if not args.scheduler:  # local workers: clamped to the cores, one warning line says so
         args.jobs = bounded_jobs(args.jobs, warn=lambda m: print(f"uav-el campaign: warning: {m}", file=sys.stderr))
-    from assurance.cli.system_options import frame_gate_path, model_spec, system_of
-    from assurance.system import build as system_build
+    from assurance.cli.system_options import assessed
 
-    system = system_of(args)
-    data = system_build.data_root(system, "test", args.data)
+    system = assessed(args)  # the system under assessment, with --model and --gate: what the campaign runs
+    data = system.data("test", args.data)
     monitors = tuple(args.monitors) if args.monitors else None
-    deployed = system_build.monitor_spec(system) if system.sets("monitor.spec") else None
-    system_build.check_deployed_calibration(system)  # a deployed spec off its card's threshold: exit 2
-    card_paths = args.calibration or ([str(system.path_of("monitor.calibration"))]
-                                      if system.sets("monitor.calibration") else [])
+    system.deployed()  # a deployed spec off its card's threshold: exit 2
+    deployed = system.monitor if system.file.sets("monitor.spec") else None
+    card_paths = args.calibration or ([str(system.calibration)] if system.calibration is not None else [])
     cards = []
     if card_paths:
         from el.monitors import build_monitor
@@ -75,20 +73,19 @@ def run(args: argparse.Namespace) -> int:
             check_card_monitor(card, build_monitor(card.spec))
         base = monitors or tuple(preset_config(args.preset, deployed=deployed).monitors)
         monitors = tuple(dict.fromkeys((*base, *(card.spec for card in cards))))
-    gate_path = frame_gate_path(args)
     gate = None
-    if gate_path:  # a bad gate file: one line, exit 2, before any task
+    if system.gate is not None:  # a bad gate file: one line, exit 2, before any task
         from el.monitors.frame_gate import load_frame_gate
 
-        gate = load_frame_gate(gate_path)
+        gate = load_frame_gate(system.gate)
         cards.append(gate)  # checked against the campaign's network with the cards
     config = preset_config(
-        args.preset, deployed=deployed, core=system_build.core_config(system),
+        args.preset, deployed=deployed, core=system.core,
         perturbations=tuple(args.perturbations) if args.perturbations else None,
         severities=tuple(args.severities) if args.severities else None,
         monitors=monitors,
-        images=args.images, weights=model_spec(args), seed=args.seed,
-        poses=args.poses or system_build.poses_policy(system), odd=system_build.odd(system).to_dict(),
+        images=args.images, weights=system.model, seed=args.seed,
+        poses=args.poses or system.poses, odd=system.odd.to_dict(),
         gate=None if gate is None else {"path": gate.path, "sha256": gate.sha256},
     )
     from assurance.attest import AttestationError
@@ -98,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
     except AttestationError as exc:
         raise CommandError(str(exc)) from None
     summary = run_campaign(data, args.out, config, jobs=args.jobs, backend=args.backend,
-                           scheduler=args.scheduler, progress=not args.quiet, records=cards, system=system,
+                           scheduler=args.scheduler, progress=not args.quiet, records=cards, system=system.file,
                            signing_key=key)
     print(describe(summary))
     print(f"signed: {summary['attestation']} (key {key.keyid[:16]}, {key.source})")

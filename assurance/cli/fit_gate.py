@@ -29,25 +29,24 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from assurance.cli.system_options import load_model, model_spec, system_of, train_val_dirs
+    from assurance.cli.system_options import assessed, train_val_dirs
     from assurance.fitting.frame_gate_fit import DEFAULT_QUANTILE, fit_gate, parse_scenes
     from assurance.fitting.network_identity import network_record
-    from assurance.system import build as system_build
 
-    system = system_of(args)
-    train_val_dirs(args, system)
+    system = assessed(args)
+    train_val_dirs(args, system.file)
     for flag, text in (("--train-scenes", args.train_scenes), ("--val-scenes", args.val_scenes)):
         try:
             parse_scenes(text)
         except ValueError as exc:
             raise CommandError(f"{flag}: {exc}") from None
-    width = args.working_width or system_build.core_config(system).working_width
+    width = args.working_width or system.core.working_width
     try:
-        segmenter = load_model(args, working_width=width)
+        segmenter = system.segmenter(working_width=width)
         quantile = DEFAULT_QUANTILE if args.quantile is None else args.quantile
         doc = fit_gate(args.data, args.val, segmenter, kind=args.kind, quantile=quantile,
                        train_scenes=args.train_scenes, val_scenes=args.val_scenes,
-                       weights=network_record(segmenter, model_spec(args)),
+                       weights=network_record(segmenter, system.model),
                        progress=not (args.no_progress or getattr(args, "quiet", False)))
     except ValueError as exc:
         raise CommandError(str(exc)) from None

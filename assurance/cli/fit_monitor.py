@@ -29,15 +29,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from assurance.cli.system_options import load_model, model_spec, system_of
+    from dataclasses import replace
+
+    from assurance.cli.system_options import assessed
     from assurance.fitting.learned_monitor import fit_learned_monitor
     from assurance.fitting.network_identity import network_record
-    from assurance.system import build as system_build
 
-    system = system_of(args)
-    args.data = system_build.data_root(system, "train", args.data)
-    if args.val is None and system.get("data.val") is not None:
-        args.val = system_build.data_root(system, "val")
+    system = assessed(args)
+    args.data = system.data("train", args.data)
+    if args.val is None and system.file.get("data.val") is not None:
+        args.val = system.data("val")
     for d in (args.data, args.val):
         if d is not None and not Path(d).is_dir():
             raise CommandError(f"{d}: no such folder")
@@ -46,10 +47,10 @@ def run(args: argparse.Namespace) -> int:
     if args.mcd < 0:
         raise CommandError(f"--mcd must be >= 0, got {args.mcd}")
     try:
-        segmenter = load_model(args)
-        core = system_build.core_config(system, working_width=args.working_width)
+        segmenter = system.segmenter()
+        core = system.core if args.working_width is None else replace(system.core, working_width=args.working_width)
         doc = fit_learned_monitor(args.data, segmenter, val=args.val, core=core, mcd_n=args.mcd, recall=args.recall,
-                                  images=args.images, weights=network_record(segmenter, model_spec(args)),
+                                  images=args.images, weights=network_record(segmenter, system.model),
                                   progress=not args.quiet)
     except ValueError as exc:
         raise CommandError(str(exc)) from None

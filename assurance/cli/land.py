@@ -173,25 +173,22 @@ def run_model(args: argparse.Namespace) -> int:
 
     if args.image is not None:
         raise CommandError("--image is for the ground-truth pipeline; give the image as IMAGE")
-    from assurance.cli.system_options import frame_gate_path, load_model, model_spec, system_of
-    from assurance.system import build as system_build
+    from assurance.cli.system_options import assessed, load_model
 
     image_path = Path(args.image_arg)
     check_max_pixels(args.max_pixels)
     read_image(image_path, max_pixels=args.max_pixels)  # bad input is a usage error here (in flight: default action)
     core = config_from_args(args)
     check_frame_geometry(core, image_path, args.roll)  # so is a pose the model cannot plan with
-    system = system_of(args)
-    monitor = args.monitor or system_build.monitor_spec(system) or PipelineConfig().monitor
-    calibration = args.calibration or system.path_of("monitor.calibration")
-    budget = args.budget if args.budget is not None else system.get("targets.time_budget_s", DEFAULT_TIME_BUDGET_S)
-    if args.monitor is None and args.calibration is None:  # the system's deployed pair: spec on its card's threshold
-        system_build.check_deployed_calibration(system)
+    system = assessed(args)  # the system under assessment, with --model and --gate
+    monitor, calibration = system.deployed() if args.monitor is None and args.calibration is None else (
+        args.monitor or system.monitor or PipelineConfig().monitor, args.calibration or system.calibration)
+    budget = args.budget if args.budget is not None else system.budget_s
     if calibration is not None:  # a bad card is a usage error here (in flight it is the default action)
         from el.monitors.calibration import load_calibration
         from el.pipeline import calibrated_spec
 
-        own = args.calibration is None and system.sets("monitor.spec")  # the system's pair: its spec on its card
+        own = args.calibration is None and system.file.sets("monitor.spec")  # the system's pair: its spec on its card
         monitor = args.monitor or (monitor if own else load_calibration(calibration).monitor)
         calibrated_spec(monitor, str(calibration))
     from el.monitors import build_monitor
@@ -200,25 +197,22 @@ def run_model(args: argparse.Namespace) -> int:
     try:
         segmenter = load_model(args, threads=args.threads, working_width=core.working_width)
     except ValueError as exc:  # WeightsError: a model named here is a usage error (one line, exit 2); the
-        if model_spec(args) is not None:  # shipped one missing is a flight fault: the default action, exit 3
+        if not system.shipped_network:  # shipped one missing is a flight fault: the default action, exit 3
             raise CommandError(str(exc)) from None
         segmenter = None
     built = build_monitor(monitor)  # a monitor that cannot be built (e.g. a missing model file): one line, exit 2
     gates = []
-    frame_gate = frame_gate_path(args)
-    if frame_gate is not None:  # a bad gate is a usage error here (in flight it is the default action)
+    if system.gate is not None:  # a bad gate is a usage error here (in flight it is the default action)
         from el.monitors.frame_gate import load_frame_gate
 
-        gates.append(load_frame_gate(frame_gate))
+        gates.append(load_frame_gate(system.gate))
     # a monitor fitted, or a card calibrated, on another network or model than it runs: one line, exit 2
     check_monitor_bindings(built, monitor, calibration, segmenter)
     for gate in gates if segmenter is not None else ():
         gate.check_network(segmenter)  # a gate fitted on another network: one line, exit 2
-    config = PipelineConfig(core=core, monitor=monitor, time_budget_s=budget,
-                            seed=args.seed, evaluate_all=args.evaluate_all, max_pixels=args.max_pixels,
-                            calibration=str(calibration) if calibration else None,
-                            gate=str(frame_gate) if frame_gate else None,
-                            odd=system_build.odd(system))
+    config = system.flight_config(core=core, monitor=monitor, time_budget_s=budget, seed=args.seed,
+                                  evaluate_all=args.evaluate_all, max_pixels=args.max_pixels,
+                                  calibration=str(calibration) if calibration else None)
     decision = EmergencyLanding(config, segmenter=segmenter).decide(image_path)
     _write_outputs(args, decision, image=read_image(image_path) if args.overlay else None, labels=None)
     print(summary(decision))
