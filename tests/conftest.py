@@ -14,6 +14,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))  # tests/helpers.py for
 # Imported once here: the run verification in pytest_configure needs them, and pytester's in-process
 # sessions would otherwise import pandas inside a session and drop it afterwards (two copies of its types).
 import assurance.campaign.integrity  # noqa: E402, F401
+from el.labels import UAVID
 
 _THREAD_COUNTS: list[tuple[int, int]] = []  # torch's and OpenCV's thread counts when the session started
 
@@ -96,7 +97,7 @@ def tiny_campaign(tmp_path_factory):
     root = tmp_path_factory.mktemp("tiny_campaign")
     for i in range(TINY_IMAGES):
         ids = tiny_scene(i)
-        write_sample(root / "data", "seq00", f"{i:06d}", ids_to_colors(ids), ids)
+        write_sample(root / "data", "seq00", f"{i:06d}", ids_to_colors(ids), ids, labels=UAVID)
     torch.manual_seed(0)
     weights = root / "tiny.pt"
     save_weights(build_model(ArchConfig(widths=(8, 8, 8), decoder_channels=8)), weights)

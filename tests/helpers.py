@@ -8,7 +8,7 @@ import numpy as np
 
 from el.camera import working_size
 from el.core import probs_from_labels
-from el.labels import NUM_CLASSES, PALETTE, ids_to_colors
+from el.labels import NUM_CLASSES, PALETTE, UAVID, ids_to_colors
 from el.segmentation.model import ArchConfig
 
 TINY_ARCH = ArchConfig(widths=(8, 8, 16), ms_channels=8, decoder_channels=8)
@@ -98,7 +98,7 @@ def write_textured_scenes(root: Path, seeds, width: int = 128, height: int = 72,
         ids = scene_ids(width, height, seed=seed, road_col=10 + (7 * seed) % 90)
         rgb = ids_to_colors(ids).astype(np.int16)
         rgb += np.random.default_rng(seed).integers(-12, 13, rgb.shape, dtype=np.int16)  # texture
-        write_sample(root, sequence, f"{i:06d}", np.clip(rgb, 0, 255).astype(np.uint8), ids)
+        write_sample(root, sequence, f"{i:06d}", np.clip(rgb, 0, 255).astype(np.uint8), ids, labels=UAVID)
     return root
 
 

@@ -30,6 +30,7 @@ from el.core import run_core
 from el.errors import BudgetExceeded, DataError
 from el.imageheader import read_header
 from el.imageio import MAX_PIXELS, read_image, read_image_meta
+from el.labels import UAVID
 from el.monitors import build_monitor
 from el.pipeline import EmergencyLanding, PipelineConfig
 
@@ -228,7 +229,7 @@ def small_run(tmp_path_factory):
     root = tmp_path_factory.mktemp("bounds_run")
     for i, frame in enumerate(("a b", "a_b", "000002")):
         ids = scene_ids(seed=i)
-        write_sample(root / "data", "seq00", frame, ids_to_colors(ids), ids)
+        write_sample(root / "data", "seq00", frame, ids_to_colors(ids), ids, labels=UAVID)
     (root / "data" / "seq00" / "meta").mkdir()
     (root / "data" / "seq00" / "meta" / "000002.json").write_text(json.dumps({"note": "meta"}))
     config = CampaignConfig(perturbations=("none",), monitors=("lhd",), core=CoreConfig(working_width=WW))
@@ -320,7 +321,7 @@ def test_a_campaign_records_the_exif_orientation_it_applied(tmp_path):
     exif[0x0112] = 3  # stored upside down
     Image.fromarray(ids_to_colors(ids)[::-1, ::-1]).save(seq / "Images" / "000000.jpg", quality=98,
                                                        exif=exif.tobytes())
-    write_labels(seq / "Labels" / "000000.png", ids)
+    write_labels(seq / "Labels" / "000000.png", ids, labels=UAVID)
     config = CampaignConfig(perturbations=("none",), monitors=("lhd",), core=CoreConfig(working_width=WW))
     s = run_campaign(tmp_path / "data", tmp_path / "run", config, progress=False, segmenter=OracleSegmenter(WW))
     assert s["faults"] == []

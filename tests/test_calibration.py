@@ -14,7 +14,7 @@ from scipy import stats
 
 from assurance.dataio.uavid import write_sample
 from assurance.fitting.calibration import CalibrationError, calibrate_threshold, min_unsafe_needed
-from el.labels import CLASS_IDS, ids_to_colors
+from el.labels import CLASS_IDS, UAVID, ids_to_colors
 
 DISTS = {
     "normal": (lambda rng, size: rng.normal(0.3, 0.2, size), lambda t: stats.norm.cdf(t, 0.3, 0.2)),
@@ -78,7 +78,7 @@ def val(tmp_path_factory):
     for i in range(4):
         ids = scene_ids(256, 144, seed=i, road_col=30 + 50 * i)
         ids[:, 150 + 10 * i: 175 + 10 * i] = CLASS_IDS["road"]  # a wide road: candidates on it
-        write_sample(root, "seq00", f"{i:06d}", ids_to_colors(ids), ids)
+        write_sample(root, "seq00", f"{i:06d}", ids_to_colors(ids), ids, labels=UAVID)
     return root
 
 

@@ -20,7 +20,7 @@ from el.camera import (
     geometry_problem,
 )
 from el.config import CoreConfig, make_intrinsics
-from el.labels import CLASS_IDS
+from el.labels import CLASS_IDS, UAVID
 
 SMALL = [(256, 144, 128), (192, 108, 96)]
 
@@ -119,14 +119,16 @@ def test_poses_outside_their_bounds_are_refused(height, pitch):
 def test_the_ground_truth_pipeline_plans_with_the_frame_pose_and_faults_on_an_invalid_one():
     ids = np.full((144, 256), CLASS_IDS["low_vegetation"], np.uint8)
     ids[:, 100:110] = CLASS_IDS["road"]
-    base = decide_from_labels(ids, config=CoreConfig(working_width=128))
-    low = decide_from_labels(ids, config=CoreConfig(working_width=128), pose=Pose(height_m=25.0, pitch_deg=45.0))
+    base = decide_from_labels(ids, config=CoreConfig(working_width=128), labels=UAVID)
+    low = decide_from_labels(ids, config=CoreConfig(working_width=128), pose=Pose(height_m=25.0, pitch_deg=45.0),
+                             labels=UAVID)
     assert low.input["pose"] == {"height_m": 25.0, "pitch_deg": 45.0, "source": "frame"}
     assert base.input["pose"]["source"] == "nominal"
     assert low.default_area.radius_px > base.default_area.radius_px  # closer: a larger disc
-    bad = decide_from_labels(ids, config=CoreConfig(working_width=128), pose=Pose(height_m=50.0, pitch_deg=8.0))
+    bad = decide_from_labels(ids, config=CoreConfig(working_width=128), pose=Pose(height_m=50.0, pitch_deg=8.0),
+                             labels=UAVID)
     assert bad.action == "default" and bad.reason.startswith("fault: pose: ValueError: pose height_m 50")
-    rolled = decide_from_labels(ids, config=CoreConfig(working_width=128), roll_deg=9.0)
+    rolled = decide_from_labels(ids, config=CoreConfig(working_width=128), roll_deg=9.0, labels=UAVID)
     assert rolled.reason.startswith("fault: pose: ValueError: roll_deg must lie in")
 
 
@@ -149,7 +151,7 @@ def test_no_candidate_disc_touches_a_forbidden_pixel_at_any_pose_and_camera(case
     intr, pose = camera
     H, W = ids.shape
     assert geometry_problem(CameraGeometry(width=W, height=H, intrinsics=intr, pose=pose)) is None
-    decision = decide_from_labels(ids, config=CoreConfig(working_width=ww, intrinsics=intr), pose=pose)
+    decision = decide_from_labels(ids, config=CoreConfig(working_width=ww, intrinsics=intr), pose=pose, labels=UAVID)
     assert not decision.reason.startswith("fault"), decision.reason
     assert decision.input["pose"]["height_m"] == pose.height_m
     assert_candidates_safe_at_full_resolution(ids, decision.candidates)

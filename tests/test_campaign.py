@@ -19,7 +19,7 @@ from assurance.cli import main
 from assurance.dataio.uavid import read_image, write_sample
 from assurance.fitting.network.weights_io import save_weights, write_card
 from el.config import CoreConfig
-from el.labels import ids_to_colors
+from el.labels import UAVID, ids_to_colors
 from el.pipeline import EmergencyLanding, PipelineConfig
 from el.segmentation.architectures import build_model
 from el.segmentation.model import ArchConfig
@@ -46,7 +46,7 @@ def data(tmp_path_factory):
     for i in range(3):
         ids = scene_ids(W, H, seed=i, road_col=60 + 90 * i)
         img = ids_to_colors(ids).astype(np.int16) + rng.integers(-20, 20, (H, W, 3))
-        write_sample(root, "seq00", f"{i:06d}", np.clip(img, 0, 255).astype(np.uint8), ids)
+        write_sample(root, "seq00", f"{i:06d}", np.clip(img, 0, 255).astype(np.uint8), ids, labels=UAVID)
     return root
 
 

@@ -23,7 +23,7 @@ from el.camera import CameraGeometry, working_size
 from el.config import CoreConfig
 from el.core import probs_from_labels, reachable_working_row, run_core
 from el.decision import Candidate, Decision, Disc, MonitorVerdict
-from el.labels import CLASS_IDS, forbidden_mask
+from el.labels import CLASS_IDS, UAVID, forbidden_mask
 
 SETTINGS = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 # (full width, full height, working width): scale 2, scale 2, and a non-integer scale
@@ -173,7 +173,7 @@ def without_timings(decision: Decision) -> dict:
 @given(label_maps())
 def test_no_candidate_disc_holds_a_forbidden_full_resolution_pixel(case):
     ids, ww = case
-    decision = decide_from_labels(ids, config=CoreConfig(working_width=ww))
+    decision = decide_from_labels(ids, config=CoreConfig(working_width=ww), labels=UAVID)
     assert not decision.reason.startswith("fault"), decision.reason
     assert_candidates_safe_at_full_resolution(ids, decision.candidates)
     if decision.candidates:
@@ -195,7 +195,8 @@ def test_every_valid_pixel_is_safe_at_full_resolution(case, mode):
 @given(label_maps(), st.sampled_from(["paper", "exact"]), st.sampled_from(["fast", "dbscan"]))
 def test_paper_mode_and_dbscan_regions_are_safe_too(case, mode, method):
     ids, ww = case
-    decision = decide_from_labels(ids, config=CoreConfig(working_width=ww, mode=mode, region_method=method))
+    decision = decide_from_labels(ids, config=CoreConfig(working_width=ww, mode=mode, region_method=method),
+                                  labels=UAVID)
     assert not decision.reason.startswith("fault"), decision.reason
     assert_candidates_safe_at_full_resolution(ids, decision.candidates)
     assert_ranked(decision.candidates)
@@ -206,7 +207,7 @@ def test_paper_mode_and_dbscan_regions_are_safe_too(case, mode, method):
 @given(label_maps())
 def test_candidates_are_ranked_by_increasing_hazard_in_unit_range(case):
     ids, ww = case
-    decision = decide_from_labels(ids, config=CoreConfig(working_width=ww))
+    decision = decide_from_labels(ids, config=CoreConfig(working_width=ww), labels=UAVID)
     assert_ranked(decision.candidates)
 
 
@@ -216,7 +217,7 @@ def test_candidates_are_ranked_by_increasing_hazard_in_unit_range(case):
 def test_hazard_terms_stay_in_unit_range_for_any_alpha_and_d_max(case, alpha, d_max_factor):
     ids, ww = case
     cfg = CoreConfig(working_width=ww, alpha=alpha, d_max_factor=d_max_factor)
-    decision = decide_from_labels(ids, config=cfg)
+    decision = decide_from_labels(ids, config=cfg, labels=UAVID)
     assert_ranked(decision.candidates, alpha)
 
 
@@ -245,8 +246,8 @@ def test_fast_regions_give_dbscans_partition_of_core_points_on_real_valid_masks(
 def test_same_input_gives_the_same_decision(case):
     ids, ww = case
     cfg = CoreConfig(working_width=ww)
-    first = decide_from_labels(ids, config=cfg, input_info={"path": "x"})
-    second = decide_from_labels(ids.copy(), config=cfg, input_info={"path": "x"})
+    first = decide_from_labels(ids, config=cfg, input_info={"path": "x"}, labels=UAVID)
+    second = decide_from_labels(ids.copy(), config=cfg, input_info={"path": "x"}, labels=UAVID)
     assert without_timings(first) == without_timings(second)
     assert json.dumps(without_timings(first)) == json.dumps(without_timings(second))
 
@@ -255,7 +256,7 @@ def test_same_input_gives_the_same_decision(case):
 @given(label_maps())
 def test_every_decision_validates_against_the_schema(case):
     ids, ww = case
-    decision = decide_from_labels(ids, config=CoreConfig(working_width=ww))
+    decision = decide_from_labels(ids, config=CoreConfig(working_width=ww), labels=UAVID)
     jsonschema.validate(json.loads(decision.to_json()), decision_schema())
 
 
@@ -266,7 +267,7 @@ def test_a_thin_diagonal_road_is_never_inside_a_disc():
     cv2.line(ids, (0, 60), (383, 215), CLASS_IDS["road"], 1)
     cv2.line(ids, (383, 50), (100, 215), CLASS_IDS["road"], 2)
     cfg = CoreConfig(working_width=192)
-    decision = decide_from_labels(ids, config=cfg)
+    decision = decide_from_labels(ids, config=cfg, labels=UAVID)
     assert decision.candidates
     assert_candidates_safe_at_full_resolution(ids, decision.candidates)
     assert assert_valid_pixels_safe_at_full_resolution(ids, cfg) > 1000
@@ -275,7 +276,7 @@ def test_a_thin_diagonal_road_is_never_inside_a_disc():
 @pytest.mark.requirements("EL-R03")
 def test_no_valid_pixel_gives_the_default_action():
     ids = np.full((144, 256), CLASS_IDS["road"], dtype=np.uint8)
-    decision = decide_from_labels(ids, config=CoreConfig(working_width=128))
+    decision = decide_from_labels(ids, config=CoreConfig(working_width=128), labels=UAVID)
     assert decision.action == "default" and decision.reason == "no_candidate"
     assert decision.selected is None and decision.candidates == []
     area = decision.default_area
@@ -293,7 +294,7 @@ def test_a_fault_inside_the_cm_gives_the_default_action_with_its_reason(monkeypa
 
     monkeypatch.setattr(el.kernel, "run_core", broken)
     ids = np.full((144, 256), CLASS_IDS["low_vegetation"], dtype=np.uint8)
-    decision = gt.decide_from_labels(ids, config=CoreConfig(working_width=128))
+    decision = gt.decide_from_labels(ids, config=CoreConfig(working_width=128), labels=UAVID)
     assert decision.action == "default" and decision.reason == "fault: candidates: RuntimeError: injected"
     jsonschema.validate(decision.to_dict(), decision_schema())
 

@@ -9,6 +9,7 @@ from helpers import OracleSegmenter, scene_ids, scene_image
 
 from assurance.campaign.gt_pipeline import decide_from_labels
 from el.config import CoreConfig
+from el.labels import UAVID
 from el.pipeline import EmergencyLanding, PipelineConfig
 
 WW = 128
@@ -50,7 +51,7 @@ def test_ground_truth_pipeline_fault_is_logged(caplog, monkeypatch) -> None:
 
     monkeypatch.setattr(el.kernel, "run_core", broken_core)
     with caplog.at_level(logging.ERROR, logger="el.kernel"):
-        d = decide_from_labels(scene_ids(), config=CoreConfig(working_width=WW))
+        d = decide_from_labels(scene_ids(), config=CoreConfig(working_width=WW), labels=UAVID)
     assert d.action == "default" and d.reason == "fault: candidates: ValueError: no candidates today"
     (rec,) = _records(caplog, "el.kernel")  # the ground-truth pipeline is the flight kernel
     assert rec.exc_info is not None and rec.exc_info[0] is ValueError

@@ -61,7 +61,7 @@ def scenes(tmp_path_factory, foreign):
         ids[200:204, 300:304] = 6  # a person
         ids[220:226, 100:110] = 3  # a parked car
         img = ids_to_colors(ids).astype(np.int16) + rng.integers(-20, 20, (H, W, 3))
-        write_sample(root / "uavid", "seq00", f"{i:06d}", np.clip(img, 0, 255).astype(np.uint8), ids)
+        write_sample(root / "uavid", "seq00", f"{i:06d}", np.clip(img, 0, 255).astype(np.uint8), ids, labels=UAVID)
     meta = root / "uavid" / "seq00" / "meta"
     meta.mkdir()
     (meta / "000000.json").write_text('{"note": "copied unchanged"}', encoding="utf-8")
@@ -121,12 +121,12 @@ def test_recolouring_keeps_images_and_meta_and_maps_every_class(scenes, foreign)
     src, dst = scenes
     for s, t in zip(iter_samples(src), iter_samples(dst), strict=True):
         assert s.image_path.read_bytes() == t.image_path.read_bytes()
-        ids = read_labels(s.label_path)
+        ids = read_labels(s.label_path, labels=UAVID)
         back = read_labels(t.label_path, foreign)
         for name, to in TO_FOREIGN.items():
             np.testing.assert_array_equal(back == foreign.ids[to], ids == UAVID.ids[name])
         with pytest.raises(LabelColourError):
-            read_labels(t.label_path)  # no longer UAVid colours
+            read_labels(t.label_path, labels=UAVID)  # no longer UAVid colours
     assert (dst / "seq00" / "meta" / "000000.json").read_text() == '{"note": "copied unchanged"}'
 
 

@@ -17,6 +17,7 @@ from assurance.dataio.uavid import read_image, write_sample
 from assurance.perturbations import perturb
 from el.config import CoreConfig
 from el.decision import decision_schema
+from el.labels import UAVID
 from el.pipeline import EmergencyLanding, PipelineConfig
 
 W, H, WW = 128, 72, 64
@@ -199,7 +200,7 @@ def test_campaign_readouts_record_the_gate_and_refuse_as_the_flight_code(setup, 
     for r in rows:  # scenes 6-7, not used for the threshold
         assert r["fault"] == "" and r["frame_gate_threshold"] == gate.threshold and np.isfinite(r["frame_gate_score"])
         assert r["reason"].startswith("out_of_domain") == (r["frame_gate_score"] > gate.threshold)
-    write_sample(tmp_path / "grey", "seq00", "000000", np.full((H, W, 3), 128, np.uint8), scene_ids(W, H))
+    write_sample(tmp_path / "grey", "seq00", "000000", np.full((H, W, 3), 128, np.uint8), scene_ids(W, H), labels=UAVID)
     row = run_task(plan(tmp_path / "grey", config)[0], config, setup["seg"])["images"][0]
     assert row["action"] == "default" and row["reason"].startswith("out_of_domain: frame gate mahalanobis score")
     assert row["h_decision"] == row["h_default"] and row["frame_gate_score"] > gate.threshold

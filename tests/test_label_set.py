@@ -170,7 +170,7 @@ def test_colours_use_the_sets_palette(tmp_path):
     write_labels(tmp_path / "l.png", big, FIELDS)
     np.testing.assert_array_equal(read_labels(tmp_path / "l.png", FIELDS), big)
     with pytest.raises(LabelColourError):
-        read_labels(tmp_path / "l.png")  # the default set does not know these colours
+        read_labels(tmp_path / "l.png", labels=UAVID)  # the default set does not know these colours
 
 
 # -- the core model with another set --------------------------------------------------------------------

@@ -63,7 +63,7 @@ def test_a_semantic_drone_label_png_with_unlabelled_pixels_reads_correctly(tmp_p
     write_labels(tmp_path / "back.png", ids, sd)
     np.testing.assert_array_equal(read_labels(tmp_path / "back.png", sd), ids)
     with pytest.raises(ValueError, match="not UAVid classes"):
-        read_labels(tmp_path / "l.png")  # UAVid does not know these colours
+        read_labels(tmp_path / "l.png", labels=UAVID)  # UAVid does not know these colours
 
 
 def test_truth_of_a_semantic_drone_disc():

@@ -12,7 +12,7 @@ from assurance import cli
 from assurance.dataio.uavid import read_image, write_image, write_labels
 from assurance.evidence.overlay import STATUS_COLOURS, draw_decision
 from el.decision import Candidate, Decision, Disc, MonitorVerdict, decision_schema
-from el.labels import CLASS_IDS
+from el.labels import CLASS_IDS, UAVID
 
 W, H = 256, 144
 
@@ -34,7 +34,7 @@ def scene(tmp_path):
     ids[40:60, 150:200] = CLASS_IDS["tree"]
     labels = tmp_path / "labels.png"
     image = tmp_path / "image.png"
-    write_labels(labels, ids)
+    write_labels(labels, ids, labels=UAVID)
     write_image(image, np.full((H, W, 3), 120, dtype=np.uint8))
     return labels, image
 
@@ -90,7 +90,7 @@ def test_positional_image_with_labels_is_the_image_to_draw_on(main, scene, tmp_p
 
 def test_all_forbidden_labels_give_the_default_action(main, tmp_path, capsys):
     labels = tmp_path / "road.png"
-    write_labels(labels, np.full((H, W), CLASS_IDS["road"], dtype=np.uint8))
+    write_labels(labels, np.full((H, W), CLASS_IDS["road"], dtype=np.uint8), labels=UAVID)
     out = tmp_path / "d.json"
     assert main(["land", "--labels", str(labels), "--json", str(out), "--working-width", "128"]) == 0
     assert "DEFAULT action" in capsys.readouterr().out

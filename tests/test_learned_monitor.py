@@ -11,7 +11,7 @@ from helpers import OracleSegmenter, nearest_class, scene_ids
 
 from assurance.dataio.uavid import write_sample
 from el.config import CoreConfig
-from el.labels import CLASS_IDS, ids_to_colors
+from el.labels import CLASS_IDS, UAVID, ids_to_colors
 
 WW = 256
 CORE = CoreConfig(working_width=WW)
@@ -30,7 +30,7 @@ def _split(root, n, offset):
     for i in range(n):
         ids = scene_ids(256, 144, seed=offset + i, road_col=20 + 40 * i)
         ids[:, 140 + 12 * i: 160 + 12 * i] = CLASS_IDS["road"]
-        write_sample(root, "seq00", f"{i:06d}", ids_to_colors(ids), ids)
+        write_sample(root, "seq00", f"{i:06d}", ids_to_colors(ids), ids, labels=UAVID)
     return root
 
 

@@ -12,7 +12,7 @@ import pytest
 from helpers import OracleSegmenter, bench_system, install_distribution, scene_ids
 
 from assurance.dataio.uavid import write_image, write_sample
-from el.labels import ids_to_colors
+from el.labels import UAVID, ids_to_colors
 from el.monitors import build_monitor, monitor_names, parse_monitor_spec, registry
 
 PLUGIN = Path(__file__).parent / "plugins" / "toy_uav_monitor.py"
@@ -102,7 +102,7 @@ def test_land_and_campaign_run_the_plugin_monitor_by_name(toy_installed, tmp_pat
     data = tmp_path / "data"
     for i in range(2):
         s = scene_ids(256, 144, seed=i, road_col=60 + 90 * i)
-        write_sample(data, "seq00", f"{i:06d}", ids_to_colors(s), s)
+        write_sample(data, "seq00", f"{i:06d}", ids_to_colors(s), s, labels=UAVID)
     config = CampaignConfig(perturbations=("none",), monitors=("lhd", "toy:q=0.9,threshold=0.1"),
                             core=CoreConfig(n_star=6, working_width=128), weights=str(weights))
     summary = run_campaign(data, tmp_path / "run", config, progress=False, segmenter=OracleSegmenter(128))

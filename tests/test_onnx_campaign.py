@@ -22,6 +22,7 @@ from assurance.dataio.uavid import write_sample  # noqa: E402
 from assurance.fitting.network.onnx_export import export_onnx  # noqa: E402
 from el.config import CoreConfig  # noqa: E402
 from el.hashing import sha256_file  # noqa: E402
+from el.labels import UAVID
 from el.monitors import build_monitor  # noqa: E402
 from el.monitors.capabilities import check_monitor_capabilities, required_capabilities  # noqa: E402
 from el.pipeline import EmergencyLanding, PipelineConfig  # noqa: E402
@@ -40,7 +41,7 @@ def data(tmp_path_factory):
     root = tmp_path_factory.mktemp("scenes")
     for i in range(2):
         ids = scene_ids(W, H, seed=i, road_col=160 + 300 * i)
-        write_sample(root, "seq00", f"{i:06d}", noisy_colours(ids, seed=i), ids)
+        write_sample(root, "seq00", f"{i:06d}", noisy_colours(ids, seed=i), ids, labels=UAVID)
     return root
 
 

@@ -20,7 +20,7 @@ from assurance.scenes.generate import ViewPlan, generate_scene, write_dataset
 from el.camera import CameraGeometry, Intrinsics, Pose
 from el.config import CoreConfig
 from el.errors import DataError
-from el.labels import CLASS_IDS
+from el.labels import CLASS_IDS, UAVID
 
 SIZE = (192, 108)
 CAMERA = Intrinsics.from_fov(70.0, name="wide70")
@@ -63,8 +63,8 @@ def test_sidecar_errors_name_file_line_column_and_value(tmp_path, text, where):
 def test_a_sidecar_naming_a_frame_without_an_image_is_refused(tmp_path):
     ids = np.full((36, 64), CLASS_IDS["low_vegetation"], np.uint8)
     for frame in ("000000", "000001"):
-        write_labels(tmp_path / "seq00" / "Images" / f"{frame}.png", ids)
-        write_labels(tmp_path / "seq00" / "Labels" / f"{frame}.png", ids)
+        write_labels(tmp_path / "seq00" / "Images" / f"{frame}.png", ids, labels=UAVID)
+        write_labels(tmp_path / "seq00" / "Labels" / f"{frame}.png", ids, labels=UAVID)
     (tmp_path / "seq00" / "poses.csv").write_text("frame,height_m,pitch_deg\n000000,40,60\n000007,40,60\n")
     with pytest.raises(DataError, match=r"poses.csv: frame '000007' has no image"):
         list(iter_samples(tmp_path, poses=True))
@@ -105,7 +105,7 @@ def test_scenes_are_rendered_at_their_sidecar_pose(posed):
         assert meta["pose"] == {"height_m": fp.pose.height_m, "pitch_deg": fp.pose.pitch_deg}
         assert meta["intrinsics"] == CAMERA.to_dict()
         # the road pixels lie on the world's roads seen with that pose, not with the nominal one
-        ids = read_labels(posed / "scenes" / "seq00" / "Labels" / f"{frame}.png")
+        ids = read_labels(posed / "scenes" / "seq00" / "Labels" / f"{frame}.png", labels=UAVID)
         world = World.from_meta(meta)
         rows, cols = np.nonzero(ids == CLASS_IDS["road"])
         share = {}
@@ -166,11 +166,11 @@ def test_without_a_sidecar_a_synthetic_scene_plans_at_its_rendered_pose(posed, t
                             poses="required")
     sample = plan(data, config)[2].sample
     assert frame_pose(sample, "required", Pose())[0] == Pose(**meta)
-    decision = decide_sample(sample, config=config.core, poses="required")
+    decision = decide_sample(sample, config=config.core, poses="required", labels=UAVID)
     assert decision.input["pose"] == {**meta, "source": "frame"}
     (data / "seq00" / "meta" / "000002.json").unlink()
     sample = plan(data, config)[2].sample
-    faulted = decide_sample(sample, config=config.core, poses="required")
+    faulted = decide_sample(sample, config=config.core, poses="required", labels=UAVID)
     assert faulted.action == "default" and faulted.reason.startswith("fault: pose: DataError")
 
 
@@ -184,7 +184,7 @@ def main(monkeypatch):
 def test_land_with_a_custom_camera(main, tmp_path, capsys):
     ids = np.full((108, 192), CLASS_IDS["low_vegetation"], np.uint8)
     ids[:, 90:96] = CLASS_IDS["road"]
-    write_labels(tmp_path / "l.png", ids)
+    write_labels(tmp_path / "l.png", ids, labels=UAVID)
     out = tmp_path / "d.json"
     assert main(["land", "--labels", str(tmp_path / "l.png"), "--json", str(out), "--working-width", "96",
                  "--sensor-width", "6.3", "--hfov", "70", "--height", "30", "--pitch", "80", "--roll", "2"]) == 0

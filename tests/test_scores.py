@@ -15,7 +15,7 @@ from assurance.campaign import readouts
 from assurance.campaign.run import CampaignConfig, run_campaign
 from assurance.dataio.uavid import write_sample
 from el.config import CoreConfig
-from el.labels import ids_to_colors
+from el.labels import UAVID, ids_to_colors
 
 MONITORS = ("lhd", "lhd+ch:tau=0.25", "lhd+mcd:n=10,rho=0.9", "msp", "entropy:threshold=0.5")
 
@@ -41,7 +41,7 @@ def run(tmp_path_factory):
     for i in range(3):
         ids = scene_ids(256, 144, seed=i, road_col=40 + 60 * i)
         img = np.clip(ids_to_colors(ids).astype(int) + rng.integers(-30, 30, (144, 256, 3)), 0, 255)
-        write_sample(root / "data", "seq00", f"{i:06d}", img.astype(np.uint8), ids)
+        write_sample(root / "data", "seq00", f"{i:06d}", img.astype(np.uint8), ids, labels=UAVID)
     config = CampaignConfig(perturbations=("none", "fog"), monitors=MONITORS,
                             core=CoreConfig(n_star=8, working_width=128))
     summary = run_campaign(root / "data", root / "run", config, progress=False, segmenter=OracleSegmenter(128))

@@ -25,7 +25,7 @@ from assurance.scenes.geom import PolygonSet, rect
 from assurance.scenes.styles import HELD_OUT_STYLES, STYLES, choose_style
 from assurance.scenes.world import Block, Crown, Look, Sun
 from el.camera import CameraGeometry, Pose
-from el.labels import CLASS_IDS, NUM_CLASSES, PALETTE
+from el.labels import CLASS_IDS, NUM_CLASSES, PALETTE, UAVID
 
 SIZE = (480, 270)
 BATCH = [(0, "downtown"), (1, "residential"), (2, "park"), (3, "campus"), (4, "industrial"), (5, "downtown")]
@@ -193,7 +193,7 @@ def test_writer_layout_reads_back_and_resumes(tmp_path):
     assert keys == ["seq00/000000", "seq00/000001"]
     samples = list(iter_samples(tmp_path, check_sizes=True))
     assert [s.key for s in samples] == keys
-    ids = read_labels(samples[1].label_path)
+    ids = read_labels(samples[1].label_path, labels=UAVID)
     assert ids.shape == (180, 320) and ids.max() < NUM_CLASSES
     meta = json.loads(samples[1].meta_path().read_text())
     assert meta["seed"] == SPLIT_BASE["val"] + 1 and meta["split"] == "val"

@@ -30,7 +30,7 @@ def scene(tmp_path):
     ids[70:74, :] = CLASS_IDS["road"]
     ids[90:120, 20:60] = CLASS_IDS["building"]
     labels, image = tmp_path / "labels.png", tmp_path / "image.png"
-    write_labels(labels, ids)
+    write_labels(labels, ids, labels=UAVID)
     write_image(image, np.full((H, W, 3), 120, dtype=np.uint8))
     return labels, image
 

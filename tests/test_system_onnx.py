@@ -23,7 +23,7 @@ def data(tmp_path_factory):
     root = tmp_path_factory.mktemp("onnx_data")
     for i in range(2):
         ids = scene_ids(256, 144, seed=i, road_col=60 + 80 * i)
-        write_sample(root, "seq00", f"{i:06d}", noisy_colours(ids, seed=i), ids)
+        write_sample(root, "seq00", f"{i:06d}", noisy_colours(ids, seed=i), ids, labels=UAVID)
     return root
 
 

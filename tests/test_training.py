@@ -19,7 +19,7 @@ from assurance.fitting.network.checkpoint import checkpoint_path, load_checkpoin
 from assurance.fitting.network.evaluation import compare_figures, confusion, summarise
 from assurance.fitting.network.train_config import TrainConfig, steps_for_epochs
 from assurance.fitting.network.training import prefetched, resolve_device, sample_batch, train, training_loss
-from el.labels import NUM_CLASSES, PALETTE
+from el.labels import NUM_CLASSES, PALETTE, UAVID
 from el.segmentation.architectures import build_model
 from el.segmentation.inference import Segmenter
 from el.segmentation.model import ArchConfig
@@ -59,7 +59,7 @@ def fake_scene(rng: np.random.Generator, width: int, height: int) -> tuple[np.nd
 def fake_dataset(root: Path, n: int, *, seed: int, width: int = 128, height: int = 72) -> Path:
     rng = np.random.default_rng(seed)
     for i in range(n):
-        write_sample(root, f"seq{i % 2 + 1:02d}", f"{i:06d}", *fake_scene(rng, width, height))
+        write_sample(root, f"seq{i % 2 + 1:02d}", f"{i:06d}", *fake_scene(rng, width, height), labels=UAVID)
     return root
 
 

@@ -26,14 +26,14 @@ from el.core import default_area, probs_from_labels
 from el.decision import Decision, decision_schema  # noqa: F401  (re-exported)
 from el.hashing import sha256_file
 from el.kernel import Parts, decide_frame
-from el.labels import UAVID, LabelSet
+from el.labels import LabelSet
 from el.odd import OperatingDomain
 
 PIPELINE = "ground_truth"
 logger = logging.getLogger(__name__)  # faults with their tracebacks; the decision keeps only the reason
 
 
-def _check_ids(ids: np.ndarray, labels: LabelSet = UAVID) -> tuple[int, int]:
+def _check_ids(ids: np.ndarray, labels: LabelSet) -> tuple[int, int]:
     ids = np.asarray(ids)
     if ids.ndim != 2 or not np.issubdtype(ids.dtype, np.integer):
         raise ValueError(f"label map must be a 2-D array of integer class ids, got {ids.dtype} {ids.shape}")
@@ -64,7 +64,7 @@ def decide_from_labels(
     input_info: dict[str, Any] | None = None,
     read_s: float = 0.0,
     clock: Callable[[], float] = time.perf_counter,
-    labels: LabelSet = UAVID,
+    labels: LabelSet,
     pose: Pose | None = None,
     roll_deg: float = 0.0,
     odd: OperatingDomain | None = None,
@@ -74,7 +74,7 @@ def decide_from_labels(
 
     ``input_info`` goes to the decision's ``"input"`` (path, sha256; width and height are filled
     in). ``read_s`` is the time already spent reading the input. ``labels``: the label set of the
-    ids (default UAVid). ``pose`` (and ``roll_deg``): the frame's pose, as ``el.pipeline``'s; None is
+    ids (the system's). ``pose`` (and ``roll_deg``): the frame's pose, as ``el.pipeline``'s; None is
     ``config.pose``. ValueError for a malformed map; a pose the flat-ground model cannot plan with
     (``el.camera.check_geometry``) gives the default action with reason ``"fault: pose: <error>"``,
     a failure inside the CM ``"fault: candidates: <error>"``. ``odd``: the declared operating domain; a pose or
@@ -105,12 +105,12 @@ def decide_from_label_file(
     *,
     image_path: str | Path | None = None,
     config: CoreConfig | None = None,
-    labels: LabelSet = UAVID,
+    labels: LabelSet,
     pose: Pose | None = None,
     roll_deg: float = 0.0,
     odd: OperatingDomain | None = None,
 ) -> tuple[Decision, np.ndarray]:
-    """Read a colour label PNG (``labels``' palette, UAVid by default) and decide; returns (decision, class ids).
+    """Read a colour label PNG (``labels``' palette) and decide; returns (decision, class ids).
 
     The optional image is only checked for size (it is for drawing) and identified in
     ``input["image"]``; ``odd`` as :func:`decide_from_labels`. DataError (from ``assurance.dataio.uavid``) for a
@@ -131,8 +131,8 @@ def decide_from_label_file(
                               roll_deg=roll_deg, odd=odd), ids
 
 
-def decide_sample(sample: Sample, *, config: CoreConfig | None = None, poses: str = "nominal",
-                  labels: LabelSet = UAVID) -> Decision:
+def decide_sample(sample: Sample, *, labels: LabelSet, config: CoreConfig | None = None,
+                  poses: str = "nominal") -> Decision:
     """The ground-truth decision for a UAVid-layout sample, planned at its pose under the policy ``poses``
     (``assurance.dataio.poses``; read the samples with ``iter_samples(..., poses=True)``). A frame
     without the pose the policy requires is the default action with reason ``"fault: pose: ..."``."""

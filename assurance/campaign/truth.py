@@ -17,7 +17,7 @@ import numpy as np
 
 from el.decision import Disc
 from el.discs import disc_bounds, disc_window_mask
-from el.labels import UAVID, LabelSet
+from el.labels import LabelSet
 
 KAPPA = 0.5
 
@@ -31,7 +31,7 @@ def disc_pixels(ids: np.ndarray, disc: Disc) -> np.ndarray:
     return ids[y0:y1, x0:x1][disc_window_mask(disc, x0, y0, x1, y1)]
 
 
-def true_hazard(ids: np.ndarray, disc: Disc, *, kappa: float = KAPPA, labels: LabelSet = UAVID) -> float:
+def true_hazard(ids: np.ndarray, disc: Disc, *, labels: LabelSet, kappa: float = KAPPA) -> float:
     """True hazard in [0, 1] of landing on ``disc`` given the full-resolution class ids (H, W) of ``labels``
     (default UAVid; the ignore id included when the set has one). A set whose safe classes all score 0
     gives a safe disc a hazard of 0."""

@@ -68,7 +68,7 @@ SUMMARIES: dict[str, str] = {
 module, and what it needs, is imported only when that command runs or shows its own help)."""
 
 # Commands that decide, evaluate or report: they take --system FILE (else ./uav-el.toml, else the embedded default).
-SYSTEM_COMMANDS = ("land", "campaign", "calibrate", "fit-monitor", "fit-gate", "verify", "evidence")
+SYSTEM_COMMANDS = ("preview", "land", "campaign", "calibrate", "fit-monitor", "fit-gate", "verify", "evidence")
 SYSTEM_HELP = ("the system under assessment (uav-el.toml: model, camera, poses, labels, safety, monitor, data, "
                "targets, waivers, report); default: ./uav-el.toml if present, else the embedded default (the "
                "shipped system); options given here win over the file")

@@ -20,8 +20,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from assurance.cli.system_options import system_of
     from assurance.dataio.uavid import iter_samples, read_image, read_labels, write_image
     from assurance.scenes.preview import make_preview
+    from assurance.system.build import label_set
+
+    labels = label_set(system_of(args))  # the system's classes: its palette and its legend
 
     if args.out.suffix.lower() != ".png":
         raise CommandError(f"--out must be a .png file, got {args.out}")
@@ -39,10 +43,10 @@ def run(args: argparse.Namespace) -> int:
         chosen = [samples[index]]
     pairs = []
     for s in chosen:
-        image, ids = read_image(s.image_path), read_labels(s.label_path)
+        image, ids = read_image(s.image_path), read_labels(s.label_path, labels)
         if image.shape[:2] != ids.shape:
             raise CommandError(f"{s.label_path}: label size differs from its image {s.image_path}")
         pairs.append((image, ids))
-    write_image(args.out, make_preview(pairs, panel_width=args.width))
+    write_image(args.out, make_preview(pairs, labels=labels, panel_width=args.width))
     print(f"{args.out}: preview of {len(pairs)} sample(s) from {args.data}")
     return 0

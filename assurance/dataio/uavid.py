@@ -20,7 +20,7 @@ from el.camera import Pose
 from el.errors import DataError
 from el.imageio import image_size as header_image_size
 from el.imageio import read_image
-from el.labels import UAVID, LabelSet
+from el.labels import LabelSet
 from el.rgb import check_rgb
 
 IMAGE_DIR = "Images"
@@ -42,14 +42,14 @@ def write_image(path: str | Path, rgb: np.ndarray, *, compression: int = 3) -> N
     atomic_write_bytes(path, buf.tobytes())
 
 
-def read_labels(path: str | Path, labels: LabelSet = UAVID) -> np.ndarray:
-    """Read a colour-coded label PNG (``labels``' palette, UAVid by default) as class ids (H, W) uint8;
+def read_labels(path: str | Path, labels: LabelSet) -> np.ndarray:
+    """Read a colour-coded label PNG (``labels``' palette: the system's label set) as class ids (H, W) uint8;
     unknown colours are an error."""
     return labels.colors_to_ids(read_image(path), source=path)
 
 
-def write_labels(path: str | Path, ids: np.ndarray, labels: LabelSet = UAVID) -> None:
-    """Write class ids (H, W) as a colour-coded label PNG (``labels``' palette, UAVid by default)."""
+def write_labels(path: str | Path, ids: np.ndarray, labels: LabelSet) -> None:
+    """Write class ids (H, W) as a colour-coded label PNG (``labels``' palette)."""
     write_image(path, labels.ids_to_colors(ids))
 
 
@@ -140,11 +140,12 @@ def sample_paths(root: str | Path, sequence: str, frame: str) -> tuple[Path, Pat
     return seq / IMAGE_DIR / f"{frame}.png", seq / LABEL_DIR / f"{frame}.png", seq / META_DIR / f"{frame}.json"
 
 
-def write_sample(root: str | Path, sequence: str, frame: str, image: np.ndarray, ids: np.ndarray) -> Sample:
-    """Write an image and its class-id map into the UAVid layout; returns the written sample."""
+def write_sample(root: str | Path, sequence: str, frame: str, image: np.ndarray, ids: np.ndarray, *,
+                 labels: LabelSet) -> Sample:
+    """Write an image and its class-id map (``labels``' palette) into the UAVid layout; returns the written sample."""
     if image.shape[:2] != ids.shape:
         raise ValueError(f"image {image.shape[:2]} and labels {ids.shape} differ in size")
     img_path, lab_path, _ = sample_paths(root, sequence, frame)
     write_image(img_path, image)
-    write_labels(lab_path, ids)
+    write_labels(lab_path, ids, labels)
     return Sample(sequence, frame, img_path, lab_path)

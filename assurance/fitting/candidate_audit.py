@@ -22,6 +22,7 @@ from assurance.fitting.separation import disc_scores, separation
 from el.config import CoreConfig
 from el.core import run_core
 from el.labels import CLASS_NAMES, FORBIDDEN_LUT, NUM_CLASSES
+from el.segmentation.contract import labels_of
 
 Progress = Callable[..., Iterable]
 
@@ -51,7 +52,7 @@ def candidate_audit(segmenter: Any, data_dir: str | Path, *, core: CoreConfig | 
     rows: list[dict[str, Any]] = []
     evidence = evidence and callable(getattr(segmenter, "predict_patch", None))  # a frame-only segmenter: none
     for s in items:
-        rgb, ids = read_image(s.image_path), read_labels(s.label_path)
+        rgb, ids = read_image(s.image_path), read_labels(s.label_path, labels_of(segmenter))
         if ids.shape != rgb.shape[:2]:
             raise ValueError(f"{s.label_path}: label size {ids.shape} differs from the image {rgb.shape[:2]}")
         result = run_core(segmenter.predict_frame(rgb), (rgb.shape[1], rgb.shape[0]), core)

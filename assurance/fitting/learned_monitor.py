@@ -34,6 +34,7 @@ from el.hashing import sha256_file
 from el.monitors.base import CandidateContext
 from el.monitors.learned import BASE_FEATURES, MCD_FEATURES, candidate_features, model_document
 from el.monitors.patches import extract_patch
+from el.segmentation.contract import labels_of
 
 DEFAULT_CS: tuple[float, ...] = (0.01, 0.1, 1.0, 10.0)
 
@@ -72,19 +73,20 @@ def collect_candidates(data: str | Path, segmenter: Any, *, core: CoreConfig | N
     if not samples:
         raise ValueError(f"{data}: no labelled scenes")
     rows, truth, scene = [], [], []
+    labels = labels_of(segmenter)  # the network's classes: the data's palette and what is forbidden
     for i, s in enumerate(bar(samples, total=len(samples), desc=desc, enabled=progress)):
-        rgb, ids = read_image(s.image_path), read_labels(s.label_path)
+        rgb, ids = read_image(s.image_path), read_labels(s.label_path, labels)
         if ids.shape != rgb.shape[:2]:
             raise ValueError(f"{s.label_path}: label size {ids.shape} differs from the image {rgb.shape[:2]}")
         probs = segmenter.predict_frame(rgb)
         size = (rgb.shape[1], rgb.shape[0])
-        for k, cand in enumerate(run_core(probs, size, core).candidates):
+        for k, cand in enumerate(run_core(probs, size, core, labels=labels).candidates):
             patch = extract_patch(rgb, cand, margin=margin, max_side=max_side)
             samples_mc = segmenter.mc_dropout(patch.rgb, mcd_n, mcd_rho, seed + k) if mcd_n > 0 else None
             rows.append(candidate_features(segmenter.predict_patch(patch.rgb), patch,
                                            CandidateContext(cand, probs, size), margin=margin,
                                            mcd_samples=samples_mc))
-            truth.append(true_hazard(ids, cand.disc) >= 1.0)
+            truth.append(true_hazard(ids, cand.disc, labels=labels) >= 1.0)
             scene.append(i)
     d = len(BASE_FEATURES) + (len(MCD_FEATURES) if mcd_n > 0 else 0)
     return CandidateSet(np.asarray(rows, np.float64).reshape(-1, d), np.asarray(truth, bool),

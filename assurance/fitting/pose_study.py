@@ -30,7 +30,7 @@ from assurance.scenes.renderer import render
 from assurance.scenes.world import World, pixel_clearance_m
 from el.camera import Pose, SafetyParams
 from el.config import CoreConfig
-from el.labels import FORBIDDEN_LUT
+from el.labels import FORBIDDEN_LUT, UAVID
 
 POSE_ERRORS = (-0.2, 0.0, 0.2)
 
@@ -76,7 +76,7 @@ def candidate_clearances(seeds: Iterable[int], *, size: tuple[int, int] = (1920,
             labels = render(world, geo).labels
             for mode in modes:
                 cfg = CoreConfig(mode=mode, working_width=working_width, safety=safety)  # the nominal pose
-                d = decide_from_labels(labels, config=cfg)
+                d = decide_from_labels(labels, config=cfg, labels=UAVID)
                 if not d.candidates:
                     rows.append({"seed": seed, "mode": mode, "case": case.label, "candidate": -1,
                                  "clearance_m": np.nan, "cause": ""})

@@ -36,11 +36,15 @@ from assurance.dataio.uavid import DataError, Sample, iter_samples, read_image, 
 from assurance.files import atomic_write_bytes
 from el.camera import NUM_STRIPES, UNREACHABLE_STRIPES, working_size
 from el.hashing import sha256_file
-from el.labels import NUM_CLASSES
+from el.labels import NUM_CLASSES, UAVID
 
 CACHE_VERSION = 1
 
 Progress = Callable[..., Iterable]
+
+
+TRAINING_LABELS = UAVID
+"""The classes the project's own network is trained to segment (its training data is in UAVid's palette)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -188,7 +192,8 @@ def _load_one(sample: Sample, hashes: tuple[str, str], params: PrepParams, cache
             path.unlink(missing_ok=True)  # a broken cache entry is rebuilt
     if sample.label_path is None:
         raise DataError(f"{sample.image_path}: no label file (training and evaluation need labels)")
-    prep = prepare_sample(sample.key, read_image(sample.image_path), read_labels(sample.label_path), params)
+    ids = read_labels(sample.label_path, TRAINING_LABELS)
+    prep = prepare_sample(sample.key, read_image(sample.image_path), ids, params)
     if path is not None:
         buf = io.BytesIO()
         np.savez(buf, image=prep.image, labels=prep.labels, regions=prep.regions,

@@ -15,7 +15,7 @@ from assurance.campaign.gt_pipeline import decide_from_labels
 from el.camera import CameraGeometry, working_size
 from el.config import CoreConfig
 from el.core import probs_from_labels
-from el.labels import CLASS_IDS, PALETTE, forbidden_mask, ids_to_colors
+from el.labels import CLASS_IDS, PALETTE, UAVID, forbidden_mask, ids_to_colors
 from el.pipeline import EmergencyLanding, PipelineConfig
 
 W, H, WW = 256, 144, 128
@@ -91,7 +91,7 @@ def test_no_candidate_disc_holds_a_forbidden_pixel(mode):
     cv2.line(ids, (0, 60), (383, 215), CLASS_IDS["road"], 1)  # thin diagonal roads: the pooling trap
     cv2.line(ids, (383, 50), (100, 215), CLASS_IDS["road"], 2)
     ids[20:60, 40:90] = CLASS_IDS["building"]
-    decision = decide_from_labels(ids, config=CoreConfig(working_width=192, mode=mode))
+    decision = decide_from_labels(ids, config=CoreConfig(working_width=192, mode=mode), labels=UAVID)
     assert decision.candidates, decision.reason
     first = CameraGeometry(width=384, height=216).first_reachable_row
     for c in decision.candidates:
@@ -104,7 +104,7 @@ def test_no_candidate_disc_holds_a_forbidden_pixel(mode):
 @pytest.mark.requirements("EL-R03")
 def test_no_valid_ground_gives_the_default_action():
     ids = np.full((H, W), CLASS_IDS["road"], np.uint8)
-    assert decide_from_labels(ids, config=CoreConfig(working_width=WW)).reason == "no_candidate"
+    assert decide_from_labels(ids, config=CoreConfig(working_width=WW), labels=UAVID).reason == "no_candidate"
     d = _pipeline().decide(ids_to_colors(ids))
     assert (d.action, d.reason, d.selected) == ("default", "no_candidate", None)
 
@@ -122,7 +122,7 @@ def test_every_candidate_rejected_gives_the_default_action():
 @pytest.mark.requirements("EL-R05")
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_candidates_are_ranked_by_increasing_hazard(seed):
-    decision = decide_from_labels(_scene(seed), config=CoreConfig(working_width=WW))
+    decision = decide_from_labels(_scene(seed), config=CoreConfig(working_width=WW), labels=UAVID)
     cands = decision.candidates
     assert len(cands) >= 2
     assert [c.rank for c in cands] == list(range(len(cands)))
