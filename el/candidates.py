@@ -36,7 +36,7 @@ import numpy as np
 
 from el.camera import NUM_STRIPES, CameraGeometry, SafetyParams
 from el.forbidden import forbidden_pixels
-from el.labels import UAVID, LabelSet
+from el.labels import LabelSet
 
 # Distance from a pixel centre to the farthest point of its square, plus a float32 guard.
 CELL_MARGIN = math.sqrt(2.0) / 2.0 + 1e-4
@@ -49,7 +49,7 @@ DIST_CAP = 1024.0
 # ----------------------------------------------------------------------------------------------
 # 1. Forbidden pixels and conservative pooling
 # ----------------------------------------------------------------------------------------------
-def forbidden_from_probs(probs: np.ndarray, *, labels: LabelSet = UAVID) -> np.ndarray:
+def forbidden_from_probs(probs: np.ndarray, *, labels: LabelSet) -> np.ndarray:
     """(H, W) bool: True where a forbidden class has the highest probability.
 
     A tie between a forbidden and a safe class counts as forbidden (the conservative side): the one
@@ -95,7 +95,7 @@ def pool_forbidden(forbidden: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     return _box_counts(forbidden, ry, rx) > 0
 
 
-def pool_label_counts(ids: np.ndarray, size: tuple[int, int], *, labels: LabelSet = UAVID) -> np.ndarray:
+def pool_label_counts(ids: np.ndarray, size: tuple[int, int], *, labels: LabelSet) -> np.ndarray:
     """Per class, how many source pixels of the class overlap each target pixel: (C, h, w) int32."""
     ids = np.asarray(ids)
     n = labels.num_classes
@@ -114,7 +114,7 @@ def pool_label_counts(ids: np.ndarray, size: tuple[int, int], *, labels: LabelSe
     return out
 
 
-def pooled_label_ids(ids: np.ndarray, size: tuple[int, int], *, labels: LabelSet = UAVID) -> np.ndarray:
+def pooled_label_ids(ids: np.ndarray, size: tuple[int, int], *, labels: LabelSet) -> np.ndarray:
     """Class ids at ``size = (w, h)`` with conservative pooling: (h, w) uint8.
 
     A target pixel that any forbidden source pixel overlaps takes the forbidden class with the

@@ -33,7 +33,7 @@ from el.camera import working_size
 from el.config import CoreConfig
 from el.deadline import checkpoint
 from el.decision import Candidate, Disc
-from el.labels import UAVID, LabelSet
+from el.labels import LabelSet
 
 PROB_TOLERANCE = 1e-3  # how far a probability may stray from [0, 1], and a pixel's sum from 1
 
@@ -62,7 +62,7 @@ class CoreResult:
 
 
 def check_probs(probs: np.ndarray, input_size: tuple[int, int], working_width: int | None = None, *,
-                labels: LabelSet = UAVID) -> None:
+                labels: LabelSet) -> None:
     """ValueError unless ``probs`` is a finite (C, h, w) probability map (C = ``labels.num_classes``)
     whose size keeps the aspect ratio of ``input_size = (W, H)`` (and, if given, has width ``working_width``)."""
     n = labels.num_classes
@@ -133,7 +133,7 @@ def run_core(
     config: CoreConfig | None = None,
     *,
     clock: Callable[[], float] = time.perf_counter,
-    labels: LabelSet = UAVID,
+    labels: LabelSet,
 ) -> CoreResult:
     """The CM post-processing: class probabilities (8, h, w) at working resolution -> candidates.
 
@@ -205,7 +205,7 @@ def run_core(
 
 
 def _ranked_candidates(probs: np.ndarray, vp: cand.ValidPixels, rows: np.ndarray, cols: np.ndarray,
-                       config: CoreConfig, input_size: tuple[int, int], labels: LabelSet = UAVID) -> list[Candidate]:
+                       config: CoreConfig, input_size: tuple[int, int], labels: LabelSet) -> list[Candidate]:
     """Rank the representatives by hazard, prune overlaps, map to full-resolution coordinates (3.5, 3.1)."""
     W, H = input_size
     _, h, w = probs.shape
@@ -248,7 +248,7 @@ def default_area(width: int, height: int, config: CoreConfig | None = None) -> D
     return Disc(x=W / 2.0, y=H - r, radius_px=r)
 
 
-def probs_from_labels(ids: np.ndarray, size: tuple[int, int], *, labels: LabelSet = UAVID) -> np.ndarray:
+def probs_from_labels(ids: np.ndarray, size: tuple[int, int], *, labels: LabelSet) -> np.ndarray:
     """One-hot class probabilities (C, h, w) float32 at ``size = (w, h)`` from full-resolution ids of ``labels``
     (C = ``labels.num_classes``, 8 for the default UAVid).
 

@@ -11,10 +11,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from el.labels import UAVID, LabelSet
+from el.labels import LabelSet
 
 
-def top_scores(scores: np.ndarray, labels: LabelSet = UAVID) -> tuple[np.ndarray, np.ndarray]:
+def top_scores(scores: np.ndarray, labels: LabelSet) -> tuple[np.ndarray, np.ndarray]:
     """(top forbidden score, top safe score) per pixel of ``scores`` of shape (C, ...), C = ``labels.num_classes``.
 
     Element-wise maxima without copying the class planes (a frame's softmax is large); the values
@@ -30,13 +30,13 @@ def top_scores(scores: np.ndarray, labels: LabelSet = UAVID) -> tuple[np.ndarray
     return top_forbidden, top_safe
 
 
-def forbidden_pixels(scores: np.ndarray, labels: LabelSet = UAVID) -> np.ndarray:
+def forbidden_pixels(scores: np.ndarray, labels: LabelSet) -> np.ndarray:
     """Bool of shape (...): True where the top-scoring class of ``scores`` (C, ...) is forbidden, ties included."""
     top_forbidden, top_safe = top_scores(scores, labels)
     return top_forbidden >= top_safe
 
 
-def argmax_slack(scores: np.ndarray, labels: LabelSet = UAVID) -> np.ndarray:
+def argmax_slack(scores: np.ndarray, labels: LabelSet) -> np.ndarray:
     """Top forbidden score minus top safe score per pixel (>= 0 exactly where :func:`forbidden_pixels`)."""
     top_forbidden, top_safe = top_scores(scores, labels)
     return top_forbidden - top_safe

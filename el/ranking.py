@@ -19,7 +19,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from el.labels import UAVID, LabelSet
+from el.labels import LabelSet
 
 
 @lru_cache(maxsize=256)
@@ -44,7 +44,7 @@ def semantic_hazard(
     radii: np.ndarray,
     scores: np.ndarray | None = None,
     *,
-    labels: LabelSet = UAVID,
+    labels: LabelSet,
 ) -> np.ndarray:
     """H_s of discs centred on pixels (rows, cols) with radii ``radii`` (px), shape (n,).
 

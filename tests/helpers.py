@@ -44,7 +44,7 @@ class OracleSegmenter:
 
     def predict_frame(self, rgb: np.ndarray) -> np.ndarray:
         ids = nearest_class(rgb)
-        probs = probs_from_labels(ids, working_size(rgb.shape[1], rgb.shape[0], self.working_width))
+        probs = probs_from_labels(ids, working_size(rgb.shape[1], rgb.shape[0], self.working_width), labels=UAVID)
         if self.nan:
             probs[:] = np.nan
         return probs

@@ -139,20 +139,20 @@ def test_jobs_are_clamped_to_the_cores_with_a_warning():
                                   "lhd+mcd:n=2,rho=0.5,threshold=-3", "lhd+mcd:n=2,rho=0.5,threshold=1"])
 def test_a_threshold_outside_the_score_range_is_refused(spec):
     with pytest.raises(ValueError, match="outside the monitor's score range"):
-        build_monitor(spec)
+        build_monitor(spec, labels=UAVID)
 
 
 def test_thresholds_inside_the_range_and_the_paper_grid_are_unchanged():
     from el.monitors import PAPER_GRID
 
     for spec in PAPER_GRID:
-        assert build_monitor(spec).name == build_monitor(spec).spec.name
-    assert build_monitor("lhd:threshold=0.99").threshold == 0.99
-    assert build_monitor("lhd:threshold=-1").threshold == -1.0
-    m = build_monitor("lhd+mcd:n=2,rho=0.5,threshold=-2")  # MC dropout's wider range: mean + 3 std
+        assert build_monitor(spec, labels=UAVID).name == build_monitor(spec, labels=UAVID).spec.name
+    assert build_monitor("lhd:threshold=0.99", labels=UAVID).threshold == 0.99
+    assert build_monitor("lhd:threshold=-1", labels=UAVID).threshold == -1.0
+    m = build_monitor("lhd+mcd:n=2,rho=0.5,threshold=-2", labels=UAVID)  # MC dropout's wider range: mean + 3 std
     assert m.threshold == -2.0 and m.name == "lhd+mcd:n=2,rho=0.5,threshold=-2.0"
-    assert build_monitor("lhd+mcd:n=10,rho=0.9").name == "lhd+mcd:n=10,rho=0.9"
-    assert build_monitor("msp").threshold == 1.0
+    assert build_monitor("lhd+mcd:n=10,rho=0.9", labels=UAVID).name == "lhd+mcd:n=10,rho=0.9"
+    assert build_monitor("msp", labels=UAVID).threshold == 1.0
 
 
 # -- the decision's deadline -----------------------------------------------------------------------
@@ -160,13 +160,13 @@ def test_checkpoints_inside_the_core_model_stop_an_expired_decision():
     ids = scene_ids()
     from el.core import probs_from_labels
 
-    probs = probs_from_labels(ids, (WW, WW * 144 // 256))
+    probs = probs_from_labels(ids, (WW, WW * 144 // 256), labels=UAVID)
     clock = FakeClock()
     deadline = dl.Deadline(clock, 1.0)
-    run_core(probs, (256, 144), CoreConfig(working_width=WW))  # no active deadline: checkpoints do nothing
+    run_core(probs, (256, 144), CoreConfig(working_width=WW), labels=UAVID)  # no active deadline: no-op checkpoints
     clock.t = 5.0
     with dl.active(deadline), pytest.raises(BudgetExceeded, match="during candidates"):
-        run_core(probs, (256, 144), CoreConfig(working_width=WW))
+        run_core(probs, (256, 144), CoreConfig(working_width=WW), labels=UAVID)
     cancelled = dl.Deadline(clock, None)
     cancelled.cancelled.set()
     with dl.active(cancelled), pytest.raises(BudgetExceeded):

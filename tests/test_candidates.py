@@ -16,7 +16,7 @@ from el import representatives as reps
 from el.camera import CameraGeometry, Pose, SafetyParams
 from el.config import CoreConfig
 from el.core import check_probs, default_area, probs_from_labels, run_core
-from el.labels import CLASS_IDS, NUM_CLASSES
+from el.labels import CLASS_IDS, NUM_CLASSES, UAVID
 
 ROAD = CLASS_IDS["road"]
 BUILDING = CLASS_IDS["building"]
@@ -41,7 +41,7 @@ def test_pooling_keeps_a_one_pixel_road(size, working, kind):
     else:
         n = min(W, H)
         ids[np.arange(n), np.arange(n) + 1] = ROAD
-    pooled = cand.pooled_label_ids(ids, working)
+    pooled = cand.pooled_label_ids(ids, working, labels=UAVID)
     assert pooled.shape == (working[1], working[0])
     # every road pixel lies under a working pixel that is road
     ry, rx = np.nonzero(ids == ROAD)
@@ -53,7 +53,7 @@ def test_pooling_keeps_a_one_pixel_road(size, working, kind):
         # the trap: nearest-neighbour sampling loses it
         nearest = cv2.resize(ids, working, interpolation=cv2.INTER_NEAREST)
         assert not (nearest == ROAD).any() or W % working[0]
-    probs = probs_from_labels(ids, working)
+    probs = probs_from_labels(ids, working, labels=UAVID)
     assert probs.dtype == np.float32 and probs.shape == (NUM_CLASSES, working[1], working[0])
     np.testing.assert_array_equal(probs.argmax(axis=0), pooled)
     np.testing.assert_array_equal(probs.sum(axis=0), 1.0)
@@ -66,7 +66,7 @@ def test_pooling_prefers_the_most_frequent_forbidden_class_and_safe_majority():
     ids[1, 0] = BUILDING  # top-left 2x2 block: 2 building, 1 road, 1 low veg -> building
     ids[2:, 2:] = TREE
     ids[3, 3] = LOWVEG  # bottom-right block: 3 tree, 1 low veg -> tree
-    pooled = cand.pooled_label_ids(ids, (2, 2))
+    pooled = cand.pooled_label_ids(ids, (2, 2), labels=UAVID)
     assert pooled[0, 0] == BUILDING
     assert pooled[1, 1] == TREE
     assert pooled[0, 1] == LOWVEG
@@ -82,7 +82,7 @@ def test_pool_forbidden_non_integer_scale_counts_overlapping_pixels():
 
 def test_pooling_rejects_bad_ids():
     with pytest.raises(ValueError, match="class ids"):
-        cand.pool_label_counts(np.full((4, 4), 9, dtype=np.uint8), (2, 2))
+        cand.pool_label_counts(np.full((4, 4), 9, dtype=np.uint8), (2, 2), labels=UAVID)
 
 
 # -- valid pixels ----------------------------------------------------------------------------------
@@ -273,8 +273,9 @@ def test_distance_hazard_values_and_range():
 def test_semantic_hazard_on_one_hot_maps():
     ids = np.full((40, 40), LOWVEG, dtype=np.uint8)
     ids[:, 20:] = TREE
-    probs = probs_from_labels(ids, (40, 40))
-    h = ranking.semantic_hazard(probs, np.array([20, 20, 20]), np.array([5, 34, 20]), np.array([3.0, 3.0, 40.0]))
+    probs = probs_from_labels(ids, (40, 40), labels=UAVID)
+    h = ranking.semantic_hazard(probs, np.array([20, 20, 20]), np.array([5, 34, 20]), np.array([3.0, 3.0, 40.0]),
+                                labels=UAVID)
     assert h[0] == 0.0 and h[1] == 1.0
     assert 0.4 < h[2] < 0.6  # half tree (s=3), half low vegetation (s=0), clipped to the image
     assert ranking.combined_hazard(np.array([1.0]), np.array([0.0]), 0.5)[0] == 0.5
@@ -307,7 +308,7 @@ def test_config_round_trips_through_a_dict():
 @pytest.mark.requirements("EL-R06")
 @pytest.mark.parametrize("problem", ["nan", "inf", "logits", "not_normalised", "shape", "aspect", "int"])
 def test_bad_probabilities_raise_instead_of_giving_candidates(problem):
-    probs = probs_from_labels(np.full((72, 128), LOWVEG, dtype=np.uint8), (128, 72))
+    probs = probs_from_labels(np.full((72, 128), LOWVEG, dtype=np.uint8), (128, 72), labels=UAVID)
     size = (256, 144)
     if problem == "nan":
         probs[2, 30, 30] = np.nan
@@ -324,9 +325,9 @@ def test_bad_probabilities_raise_instead_of_giving_candidates(problem):
     elif problem == "int":
         probs = probs.astype(np.int32)
     with pytest.raises(ValueError):
-        run_core(probs, size, CoreConfig(working_width=128))
+        run_core(probs, size, CoreConfig(working_width=128), labels=UAVID)
     with pytest.raises(ValueError):
-        check_probs(probs, size)
+        check_probs(probs, size, labels=UAVID)
 
 
 def test_default_area_is_tangent_to_the_bottom_edge_with_its_rows_radius():

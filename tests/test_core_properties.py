@@ -123,10 +123,10 @@ def assert_valid_pixels_safe_at_full_resolution(ids: np.ndarray, cfg: CoreConfig
     resolution, holds no point of a forbidden full-resolution pixel. Returns the number checked."""
     H, W = ids.shape
     w, h = working_size(W, H, cfg.working_width)
-    probs = probs_from_labels(ids, (w, h))
+    probs = probs_from_labels(ids, (w, h), labels=UAVID)
     min_row, _ = reachable_working_row((W, H), (w, h), cfg)
     radii = cand.row_radii(cfg.geometry(w, h), cfg.safety, cfg.mode)
-    vp = cand.valid_pixels(cand.forbidden_from_probs(probs), radii, mode=cfg.mode, min_row=min_row)
+    vp = cand.valid_pixels(cand.forbidden_from_probs(probs, labels=UAVID), radii, mode=cfg.mode, min_row=min_row)
     rows, cols = np.nonzero(vp.valid)
     if rows.size == 0:
         return 0
@@ -229,10 +229,10 @@ def test_fast_regions_give_dbscans_partition_of_core_points_on_real_valid_masks(
     H, W = ids.shape
     cfg = CoreConfig(working_width=ww)
     w, h = working_size(W, H, ww)
-    probs = probs_from_labels(ids, (w, h))
+    probs = probs_from_labels(ids, (w, h), labels=UAVID)
     min_row, _ = reachable_working_row((W, H), (w, h), cfg)
     radii = cand.row_radii(cfg.geometry(w, h), cfg.safety, cfg.mode)
-    vp = cand.valid_pixels(cand.forbidden_from_probs(probs), radii, min_row=min_row)
+    vp = cand.valid_pixels(cand.forbidden_from_probs(probs, labels=UAVID), radii, min_row=min_row)
     fast = reg.regions_fast(vp.valid)
     ref = reg.regions_dbscan(vp.valid)
     np.testing.assert_array_equal(fast.core, ref.core)
@@ -302,8 +302,8 @@ def test_a_fault_inside_the_cm_gives_the_default_action_with_its_reason(monkeypa
 def test_run_core_reports_stage_timings_and_full_resolution_geometry():
     ids = np.full((144, 256), CLASS_IDS["low_vegetation"], dtype=np.uint8)
     ids[60:70, 100:140] = CLASS_IDS["building"]
-    probs = probs_from_labels(ids, (128, 72))
-    result = run_core(probs, (256, 144), CoreConfig(working_width=128))
+    probs = probs_from_labels(ids, (128, 72), labels=UAVID)
+    result = run_core(probs, (256, 144), CoreConfig(working_width=128), labels=UAVID)
     assert set(result.timings) == {"valid_s", "regions_s", "representatives_s", "ranking_s", "total_s"}
     assert result.input_size == (256, 144) and result.working_size == (128, 72)
     assert result.candidates and result.stats["candidates"] == len(result.candidates)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from assurance.requirements import card_path, load_registry
 from el.hashing import sha256_file
+from el.labels import UAVID
 from el.monitors import build_monitor, parse_monitor_spec
 from el.monitors.calibration import load_calibration
 from el.monitors.learned import DEFAULT_MODEL
@@ -18,7 +19,7 @@ def test_flight_default_registry_and_card_name_the_same_configuration():
     assert PipelineConfig().monitor_name == DEPLOYED_MONITOR == params["deployed_monitor"] == card.spec
     assert card_path(params["calibration_card"]).resolve() == DEPLOYED_CALIBRATION  # package data, wherever installed
     assert parse_monitor_spec(DEPLOYED_MONITOR).walk == "score"
-    assert build_monitor(DEPLOYED_MONITOR).threshold == card.body["threshold"]
+    assert build_monitor(DEPLOYED_MONITOR, labels=UAVID).threshold == card.body["threshold"]
 
 
 def test_shipped_monitor_files_rest_on_the_shipped_weights():

@@ -76,8 +76,8 @@ def test_module_names_are_the_default_sets():
 
 
 def test_uavid_hierarchy_is_the_shipped_file():
-    assert default_hierarchy(UAVID) is default_hierarchy()
-    assert default_hierarchy().labels is UAVID
+    assert default_hierarchy(UAVID) is default_hierarchy(labels=UAVID)
+    assert default_hierarchy(labels=UAVID).labels is UAVID
 
 
 # -- a malformed set is refused, naming the problem -----------------------------------------------------
@@ -198,7 +198,7 @@ def test_run_core_with_another_set_keeps_clear_of_its_forbidden_classes():
     on_gravel = [c for c in result.candidates if c.x - c.radius_px > 176]
     assert on_gravel and all(c.hazard_semantic == 1.0 for c in on_gravel)
     with pytest.raises(ValueError, match=r"shape \(8, h, w\)"):
-        run_core(probs, (256, 144), CoreConfig(working_width=128))  # 4 classes are not UAVid's 8
+        run_core(probs, (256, 144), CoreConfig(working_width=128), labels=UAVID)  # 4 classes are not UAVid's 8
 
 
 def test_ground_truth_decision_with_another_set():
@@ -259,7 +259,7 @@ def test_ch_hierarchy_must_match_the_monitors_set():
     assert CHMonitor(tau=0.25, labels=FIELDS).hierarchy.nodes == ("grass", "gravel", "road", "water", "any", "safe",
                                                                   "unsafe")
     with pytest.raises(ValueError, match="label set 'uavid'"):
-        CHMonitor(tau=0.25, labels=FIELDS, hierarchy=default_hierarchy())
+        CHMonitor(tau=0.25, labels=FIELDS, hierarchy=default_hierarchy(labels=UAVID))
     taken = LabelSet("odd", (LabelClass(0, "safe", (1, 1, 1), False, 0.0), LabelClass(1, "b", (2, 2, 2), True, None)))
     with pytest.raises(ValueError, match="give it a 'hierarchy'"):
         CHMonitor(tau=0.25, labels=taken)

@@ -34,22 +34,22 @@ def test_entry_point_monitor_is_found_parsed_and_built(toy_installed):
     assert "toy" in monitor_names()
     spec = parse_monitor_spec("TOY: q=0.9, threshold=0.25")
     assert spec.name == "toy:q=0.9,threshold=0.25"
-    m = build_monitor(spec)
+    m = build_monitor(spec, labels=UAVID)
     assert (m.q, m.threshold, m.name) == (0.9, 0.25, "toy:q=0.9,threshold=0.25")
-    assert build_monitor("toy").name == "toy:q=1.0"
+    assert build_monitor("toy", labels=UAVID).name == "toy:q=1.0"
     mask = np.ones((2, 2), bool)
     scores = np.zeros((8, 2, 2), np.float32)
     scores[5] = 1.0
     scores[:, 0, 0] = 0.0
     scores[2, 0, 0] = 1.0  # one road pixel in four
-    v = build_monitor("toy").check_scores(scores, mask)
+    v = build_monitor("toy", labels=UAVID).check_scores(scores, mask)
     assert (v.accepted, v.score, v.threshold) == (False, 1.0, 0.5)
-    v = build_monitor("toy:q=0.5").check_scores(scores, mask)
+    v = build_monitor("toy:q=0.5", labels=UAVID).check_scores(scores, mask)
     assert v.accepted and v.score == 0.0
     for bad, needle in (("toy:q=x", "could not convert"), ("toy:z=1", "takes no parameter 'z'"),
                         ("toy:q=2", "q must lie")):
         with pytest.raises(ValueError, match=needle):
-            build_monitor(bad)
+            build_monitor(bad, labels=UAVID)
 
 
 def test_unknown_and_broken_plugins_fail_loud(tmp_path, monkeypatch):

@@ -16,7 +16,7 @@ from hypothesis.extra import numpy as hnp
 
 import el.monitors as mon
 from el.decision import Candidate, Disc, MonitorVerdict
-from el.labels import CLASS_IDS, CLASS_NAMES, FORBIDDEN_LUT, NUM_CLASSES, colors_to_ids, ids_to_colors
+from el.labels import CLASS_IDS, CLASS_NAMES, FORBIDDEN_LUT, NUM_CLASSES, UAVID, colors_to_ids, ids_to_colors
 from el.monitors import (
     DEMO_GRID,
     PAPER_GRID,
@@ -123,13 +123,13 @@ def scores_above(names: list[str], tau: float = 0.25) -> np.ndarray:
     ],
 )
 def test_hierarchy_labels_hand_made_vectors(above, label):
-    h = default_hierarchy()
+    h = default_hierarchy(labels=UAVID)
     for tau in (0.25, 0.125):
         assert h.names(h.label(scores_above(above, tau), tau))[0] == label
 
 
 def test_hierarchy_label_is_strictly_above_tau():
-    h = default_hierarchy()
+    h = default_hierarchy(labels=UAVID)
     s = np.full((NUM_CLASSES, 1), 0.0, dtype=np.float32)
     s[CLASS_IDS["tree"]] = 0.25
     s[CLASS_IDS["road"]] = 0.3
@@ -137,7 +137,7 @@ def test_hierarchy_label_is_strictly_above_tau():
 
 
 def test_hierarchy_file_matches_design_and_brute_force_lca():
-    h = default_hierarchy()
+    h = default_hierarchy(labels=UAVID)
     assert h.nodes[:NUM_CLASSES] == CLASS_NAMES
     assert set(h.rejected_names) == REJECTED_LABELS
     assert h.nodes[h.root] == "any"
@@ -160,7 +160,7 @@ def test_hierarchy_from_yaml_and_bad_trees(tmp_path):
         "root: any\nchildren:\n  any: [vehicles, rest]\n  vehicles: [static_car, moving_car]\n"
         "  rest: [clutter, building, road, tree, low_vegetation, human]\n"
     )
-    h = ClassHierarchy.from_yaml(good)
+    h = ClassHierarchy.from_yaml(good, labels=UAVID)
     assert h.names(h.label(scores_above(["static_car", "moving_car"]), 0.25))[0] == "vehicles"
     assert "rest" in h.rejected_names  # it holds building and road
     bad_trees = {
@@ -173,7 +173,7 @@ def test_hierarchy_from_yaml_and_bad_trees(tmp_path):
         path = tmp_path / "bad.yaml"
         path.write_text(text)
         with pytest.raises(ValueError, match="bad.yaml"):
-            ClassHierarchy.from_yaml(path)
+            ClassHierarchy.from_yaml(path, labels=UAVID)
             pytest.fail(f"accepted a hierarchy with a fault: {why}")
 
 
@@ -222,7 +222,7 @@ def test_lhd_sees_a_car_too_small_for_the_working_resolution():
     assert LHDMonitor().check(hd, moved, ColourSegmenter()).accepted
     # CH and MCD see it as well.
     for spec in DEMO_GRID:
-        assert not build_monitor(spec).check(hd, cand, ColourSegmenter(), seed=1).accepted, spec
+        assert not build_monitor(spec, labels=UAVID).check(hd, cand, ColourSegmenter(), seed=1).accepted, spec
 
 
 # -- CH -----------------------------------------------------------------------------------------
@@ -262,7 +262,7 @@ def test_ch_rejects_whenever_a_disc_pixel_is_unsafe_or_uncertain(patch, tau):
     monitor = CHMonitor(tau=tau)
     ok, _ = monitor.decide(scores, mask)
     assert ok == brute_force_ch(scores, mask, tau)
-    labels = default_hierarchy().names(default_hierarchy().label(scores, tau))
+    labels = default_hierarchy(labels=UAVID).names(default_hierarchy(labels=UAVID).label(scores, tau))
     if any(lab in REJECTED_LABELS for lab in labels[mask]):
         assert not ok
     if not LHDMonitor().decide(scores, mask)[0]:
@@ -302,10 +302,10 @@ def test_mcd_rejects_on_the_score_where_the_mean_looks_safe():
     samples[:, CLASS_IDS["road"], 0, 0] = (0.1, 0.5, 0.1, 0.5)  # mean 0.3, std 0.2: S = 0.9
     mask = np.ones((1, 1), bool)
     assert LHDMonitor().decide(samples.mean(axis=0), mask)[0]
-    lhd_mcd = build_monitor("lhd+mcd:n=4,rho=0.9")
+    lhd_mcd = build_monitor("lhd+mcd:n=4,rho=0.9", labels=UAVID)
     ok, reason = lhd_mcd.decide(samples, mask)
     assert not ok and "road (1 px)" in reason
-    ok, _ = build_monitor("lhd+ch+mcd:tau=0.25,n=4,rho=0.9").decide(samples, mask)
+    ok, _ = build_monitor("lhd+ch+mcd:tau=0.25,n=4,rho=0.9", labels=UAVID).decide(samples, mask)
     assert not ok  # road and low vegetation both above tau: any
 
 
@@ -320,7 +320,7 @@ def test_mcd_is_reproducible_and_n10_is_the_prefix_of_n30():
 
     hd = np.random.default_rng(1).integers(0, 256, (120, 160, 3), dtype=np.uint8)
     disc = Disc(80.0, 70.0, 15.0)
-    m10 = build_monitor("lhd+ch+mcd:tau=0.25,n=10,rho=0.5")
+    m10 = build_monitor("lhd+ch+mcd:tau=0.25,n=10,rho=0.5", labels=UAVID)
     a, b = m10.check(hd, disc, seg, seed=3), m10.check(hd, disc, seg, seed=3)
     assert (a.accepted, a.reason) == (b.accepted, b.reason)
     # A campaign draws 30 samples once; the n=10 configuration uses their prefix.
@@ -329,7 +329,7 @@ def test_mcd_is_reproducible_and_n10_is_the_prefix_of_n30():
     own = m10.features(patch.rgb, seg, seed=3)
     np.testing.assert_array_equal(own, shared[:10])
     assert m10.decide(shared, patch.disc_mask) == m10.decide(own, patch.disc_mask) == (a.accepted, a.reason)
-    assert m10.feature_key == build_monitor("lhd+mcd:n=30,rho=0.5").feature_key
+    assert m10.feature_key == build_monitor("lhd+mcd:n=30,rho=0.5", labels=UAVID).feature_key
     with pytest.raises(ValueError, match="10 MC samples needed"):
         m10.decide(shared[:5], patch.disc_mask)
 
@@ -361,7 +361,7 @@ def test_every_paper_spec_parses_round_trips_and_runs_on_a_torch_model():
     for name in PAPER_GRID:
         spec = parse_monitor_spec(name)
         assert spec.name == name and parse_monitor_spec(spec.name) == spec and str(spec) == name
-        monitor = build_monitor(name)
+        monitor = build_monitor(name, labels=UAVID)
         assert monitor.name == name and monitor.spec == spec
         verdict = monitor.check(hd, cand, seg, seed=0)
         assert verdict.name == name and isinstance(verdict.accepted, bool) and verdict.reason
@@ -375,7 +375,7 @@ def test_spec_parsing_is_lenient_on_layout_and_none_means_no_monitor():
     assert parse_monitor_spec(" LHD + CH : tau = 0.250 ").name == "lhd+ch:tau=0.25"
     assert parse_monitor_spec("lhd+mcd+ch:rho=0.9,n=10,tau=.25").name == "lhd+ch+mcd:tau=0.25,n=10,rho=0.9"
     assert parse_monitor_spec("none") is None and parse_monitor_spec("None") is None
-    assert build_monitor("none") is None and build_monitor(None) is None
+    assert build_monitor("none", labels=UAVID) is None and build_monitor(None, labels=UAVID) is None
     assert mon.monitor_name("none") == "none" and mon.monitor_name("lhd") == "lhd"
     odd = MonitorSpec(tau=0.2, n=7, rho=1.0)  # calibration values off the paper's grid
     assert parse_monitor_spec(odd.name) == odd
@@ -399,9 +399,9 @@ def test_bad_spec_values_raise_when_built():
         with pytest.raises(ValueError):
             MonitorSpec(**kwargs)
     with pytest.raises(ValueError, match="margin"):
-        build_monitor("lhd", margin=-0.1)
+        build_monitor("lhd", margin=-0.1, labels=UAVID)
     with pytest.raises(ValueError, match="max_side"):
-        build_monitor("lhd", max_side=4)
+        build_monitor("lhd", max_side=4, labels=UAVID)
 
 
 # -- fail safe ----------------------------------------------------------------------------------
@@ -413,11 +413,11 @@ def test_non_finite_scores_raise(bad):
     mask[2:, 2:] = True
     for name in ("lhd", "lhd+ch:tau=0.25"):
         with pytest.raises(ValueError, match="non-finite scores"):
-            build_monitor(name).check_scores(scores, mask)
+            build_monitor(name, labels=UAVID).check_scores(scores, mask)
     samples = np.repeat(one_hot_scores(labels_image(4, 4))[None], 10, axis=0)
     samples[9, 0, 1, 1] = bad
     with pytest.raises(ValueError, match="non-finite scores"):
-        build_monitor("lhd+ch+mcd:tau=0.25,n=10,rho=0.9").check_scores(samples, mask)
+        build_monitor("lhd+ch+mcd:tau=0.25,n=10,rho=0.9", labels=UAVID).check_scores(samples, mask)
 
     class Broken(ColourSegmenter):
         def predict_patch(self, rgb_patch):
@@ -443,7 +443,7 @@ def test_wrong_shapes_and_types_raise():
     with pytest.raises(ValueError, match="floating"):
         m.decide(scores.astype(np.int64), mask)
     with pytest.raises(ValueError, match="4-D"):
-        build_monitor("lhd+mcd:n=10,rho=0.9").decide(scores, mask)
+        build_monitor("lhd+mcd:n=10,rho=0.9", labels=UAVID).decide(scores, mask)
     hd = ids_to_colors(labels_image(40, 40))
     with pytest.raises(ValueError, match="uint8"):
         m.check(hd.astype(np.float32), Disc(20.0, 20.0, 5.0), ColourSegmenter())
@@ -466,13 +466,13 @@ def test_wrong_shapes_and_types_raise():
 def test_empty_disc_is_rejected():
     scores = one_hot_scores(labels_image(3, 3))
     for name in ("lhd", "lhd+ch:tau=0.25"):
-        ok, reason = build_monitor(name).decide(scores, np.zeros((3, 3), bool))
+        ok, reason = build_monitor(name, labels=UAVID).decide(scores, np.zeros((3, 3), bool))
         assert not ok and "empty disc" in reason
 
 
 def test_check_is_timed_with_the_injected_clock():
     ticks = iter(range(100))
-    monitor = build_monitor("lhd+ch:tau=0.25", clock=lambda: float(next(ticks)))
+    monitor = build_monitor("lhd+ch:tau=0.25", clock=lambda: float(next(ticks)), labels=UAVID)
     hd = ids_to_colors(labels_image(40, 40))
     verdict = monitor.check(hd, Disc(20.0, 20.0, 5.0), ColourSegmenter())
     assert verdict.seconds == 1.0 and verdict.accepted
@@ -554,7 +554,7 @@ def test_project_segmenter_implements_the_protocol(project_segmenter):
     assert isinstance(project_segmenter, PatchSegmenter)
     hd = np.random.default_rng(4).integers(0, 256, (80, 100, 3), dtype=np.uint8)
     for name in DEMO_GRID:
-        verdict = build_monitor(name).check(hd, Disc(50.0, 40.0, 12.0), project_segmenter, seed=2)
+        verdict = build_monitor(name, labels=UAVID).check(hd, Disc(50.0, 40.0, 12.0), project_segmenter, seed=2)
         assert verdict.name == name and isinstance(verdict.accepted, bool)
 
 
@@ -600,7 +600,7 @@ def test_mcd_check_samples_only_the_disc_box_with_the_same_verdict(project_segme
 
     hd = np.random.default_rng(0).integers(0, 255, (120, 160, 3), dtype=np.uint8)
     for spec in ("lhd+mcd:n=5,rho=0.5", "lhd+ch+mcd:tau=0.25,n=5,rho=0.75"):
-        monitor = mon.build_monitor(spec)
+        monitor = mon.build_monitor(spec, labels=UAVID)
         disc = Disc(80.5, 60.5, 20.0)
         a = monitor.check(hd, disc, Spy(), seed=3)
         b = monitor.check(hd, disc, Plain(), seed=3)

@@ -12,6 +12,7 @@ from helpers import OracleSegmenter, scene_ids, scene_image
 from assurance.cli import main
 from el.config import CoreConfig
 from el.errors import CalibrationError, FrameGateError, LearnedModelError
+from el.labels import UAVID
 from el.monitors import build_monitor
 from el.monitors.calibration import card_document, load_calibration
 from el.monitors.frame_gate import load_frame_gate
@@ -57,7 +58,7 @@ def test_the_deployed_learned_monitor_refuses_another_network_in_flight(other):
     assert d.action == "default" and d.reason.startswith("fault: monitor: LearnedModelError")
     assert "fitted on network 0d3dab88c2b0" in d.reason and "refit" in d.reason
     with pytest.raises(LearnedModelError):
-        build_monitor(DEPLOYED_MONITOR).check_network(Network(other))
+        build_monitor(DEPLOYED_MONITOR, labels=UAVID).check_network(Network(other))
 
 
 def test_a_calibration_card_refuses_another_network_in_flight(tmp_path):

@@ -103,10 +103,11 @@ def test_native_and_onnx_campaigns_decide_alike(runs):
 
 def test_mc_dropout_configuration_is_refused_before_the_run(data, onnx_file, tmp_path):
     model = load_onnx_model(onnx_file)
-    assert required_capabilities(build_monitor(MCD)) == (MC_DROPOUT,)
-    assert required_capabilities(build_monitor("lhd")) == () == required_capabilities(build_monitor("learned"))
+    assert required_capabilities(build_monitor(MCD, labels=UAVID)) == (MC_DROPOUT,)
+    assert required_capabilities(build_monitor("lhd", labels=UAVID)) == () == \
+        required_capabilities(build_monitor("learned", labels=UAVID))
     with pytest.raises(ValueError, match=r"monitor 'lhd\+mcd:n=10,rho=0.9' needs MC dropout") as err:
-        check_monitor_capabilities(build_monitor(MCD), model)
+        check_monitor_capabilities(build_monitor(MCD, labels=UAVID), model)
     assert "\n" not in str(err.value) and "colour.onnx" in str(err.value)
     with pytest.raises(ValueError, match="needs MC dropout"):
         run_campaign(data, tmp_path / "run", config(str(onnx_file), (*MONITORS, MCD)), progress=False)

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from el.labels import NUM_CLASSES
+from el.labels import NUM_CLASSES, UAVID
 from el.monitors.lhd import forbidden_pixels
 from el.segmentation.pooling import downsample_probs
 
@@ -28,7 +28,7 @@ def test_conservative_pooling_never_drops_a_forbidden_pixel(seed, h, w, fy, fx, 
     out = downsample_probs(probs, (ow, oh), "conservative")
     assert out.shape == (NUM_CLASSES, oh, ow)
     np.testing.assert_allclose(out.sum(axis=0), 1.0, atol=1e-5)
-    src, dst = forbidden_pixels(probs), forbidden_pixels(out)
+    src, dst = forbidden_pixels(probs, labels=UAVID), forbidden_pixels(out, labels=UAVID)
     for i in range(oh):  # every source pixel overlapping output pixel (i, j)
         r0, r1 = (i * h) // oh, -((-(i + 1) * h) // oh)
         for j in range(ow):
@@ -44,8 +44,8 @@ def test_area_pooling_can_drop_a_thin_hazard_that_conservative_keeps() -> None:
     probs[2, :, 2], probs[5, :, 2] = 0.6, 0.4  # a one-pixel-wide road, column 2
     area = downsample_probs(probs, (4, 4), "area")
     cons = downsample_probs(probs, (4, 4), "conservative")
-    assert not forbidden_pixels(area).any()
-    assert forbidden_pixels(cons)[:, 1:3].all()
+    assert not forbidden_pixels(area, labels=UAVID).any()
+    assert forbidden_pixels(cons, labels=UAVID)[:, 1:3].all()
 
 
 def test_same_size_is_identity_for_conservative_and_bad_input_refused() -> None:

@@ -11,6 +11,7 @@ import pytest
 from assurance import requirements as rq
 from assurance.campaign.model_files import changed_model_files, model_files
 from assurance.requirements.weakening import parameter_weakenings, registry_weakenings
+from el.labels import UAVID
 
 pytestmark = pytest.mark.requirements("EL-R12")
 
@@ -57,7 +58,7 @@ def test_a_registry_file_is_compared_with_the_system_s(tmp_path):
 def test_a_model_file_changed_after_the_run_is_named(tmp_path):
     w = tmp_path / "net.pt"
     w.write_bytes(b"weights")
-    recorded = model_files({"path": str(w)}, [])
+    recorded = model_files({"path": str(w)}, [], UAVID)
     assert str(w) in recorded and "el/monitors/data/learned.json" in recorded  # the packaged ones, by package path
     assert changed_model_files(recorded) == ([], [])
     w.write_bytes(b"other weights")

@@ -17,6 +17,8 @@ import numpy as np
 from assurance.campaign import readouts
 from assurance.campaign.model_files import model_files
 from assurance.code_identity import code_identity
+from el.labels import LabelSet
+from el.segmentation.contract import labels_of
 
 if TYPE_CHECKING:
     from assurance.campaign.run import CampaignConfig, Task
@@ -48,8 +50,8 @@ def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *,
         "data": {"path": str(Path(data).resolve()), "images": len({t.sample.key for t in tasks}),
                  "sha256": h.hexdigest(), "splits": scene_splits(tasks)},
         "weights": weights_record,
-        "monitor_models": monitor_models(config.monitors),
-        "model_files": model_files(weights_record, config.monitors),
+        "monitor_models": monitor_models(config.monitors, labels_of(model)),
+        "model_files": model_files(weights_record, config.monitors, labels_of(model)),
         "tasks": len(tasks),
         "integrity": readouts.INTEGRITY,
         "shard_order": [t.shard_name for t in tasks],
@@ -96,15 +98,16 @@ def check_monitor_networks(specs: Sequence[str], segmenter: Any) -> None:
     network lacks (``el.monitors.capabilities``: MC dropout on an ONNX file)."""
     from el.monitors import build_monitor
     from el.monitors.capabilities import check_monitor_capabilities
+    from el.segmentation.contract import labels_of
 
     for spec in specs:
-        monitor = build_monitor(spec)
+        monitor = build_monitor(spec, labels=labels_of(segmenter))
         if monitor is not None:
             monitor.check_network(segmenter)
             check_monitor_capabilities(monitor, segmenter)
 
 
-def monitor_models(specs: Sequence[str]) -> dict[str, str]:
+def monitor_models(specs: Sequence[str], labels: LabelSet) -> dict[str, str]:
     """SHA-256 of the fitted model file each configuration's scores rest on (learned monitors), by spec.
 
     Recorded in the manifest: a resumed run must score with the same models, and a calibration card
@@ -113,7 +116,7 @@ def monitor_models(specs: Sequence[str]) -> dict[str, str]:
 
     out: dict[str, str] = {}
     for spec in specs:
-        digest = getattr(build_monitor(spec), "model_sha256", None)
+        digest = getattr(build_monitor(spec, labels=labels), "model_sha256", None)
         if digest:
             out[spec] = digest
     return out

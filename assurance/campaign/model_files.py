@@ -14,6 +14,7 @@ from typing import Any
 
 from assurance.code_identity import install_root
 from el.hashing import sha256_file
+from el.labels import LabelSet
 
 PACKAGED = ("el/monitors/data", "el/segmentation/weights")
 """Folders (under the install root) of the packaged models and their cards."""
@@ -34,24 +35,24 @@ def _resolve(label: str) -> Path:
     return p if p.is_absolute() else install_root() / p
 
 
-def _monitor_files(specs: Sequence[str]) -> Iterable[Path]:
+def _monitor_files(specs: Sequence[str], labels: LabelSet) -> Iterable[Path]:
     from el.monitors import build_monitor
 
     for spec in specs:
-        model = getattr(build_monitor(spec), "model", None)
+        model = getattr(build_monitor(spec, labels=labels), "model", None)
         path = getattr(model, "path", None)
         if path:
             yield Path(path)
 
 
-def model_files(weights: Mapping[str, Any] | None, monitors: Sequence[str]) -> dict[str, str]:
+def model_files(weights: Mapping[str, Any] | None, monitors: Sequence[str], labels: LabelSet) -> dict[str, str]:
     """``{file: SHA-256}`` of the run's weights file (and its card), its monitors' model files and the packaged
     models and cards, for the manifest."""
     paths: list[Path] = []
     w = (weights or {}).get("path")
     if w:
         paths += [Path(w), Path(w).with_suffix(".json"), Path(f"{w}.json")]
-    paths += list(_monitor_files(monitors))
+    paths += list(_monitor_files(monitors, labels))
     root = install_root()
     for folder in PACKAGED:
         d = root / folder

@@ -70,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
 
         cards = [load_calibration(c) for c in card_paths]
         for card in cards:
-            check_card_monitor(card, build_monitor(card.spec))
+            check_card_monitor(card, build_monitor(card.spec, labels=system.labels))
         base = monitors or tuple(preset_config(args.preset, deployed=deployed).monitors)
         monitors = tuple(dict.fromkeys((*base, *(card.spec for card in cards))))
     gate = None

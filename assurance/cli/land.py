@@ -200,7 +200,7 @@ def run_model(args: argparse.Namespace) -> int:
         if not system.shipped_network:  # shipped one missing is a flight fault: the default action, exit 3
             raise CommandError(str(exc)) from None
         segmenter = None
-    built = build_monitor(monitor)  # a monitor that cannot be built (e.g. a missing model file): one line, exit 2
+    built = build_monitor(monitor, labels=system.labels)  # one that cannot be built (a missing model file): exit 2
     gates = []
     if system.gate is not None:  # a bad gate is a usage error here (in flight it is the default action)
         from el.monitors.frame_gate import load_frame_gate

@@ -139,7 +139,6 @@ def calibrate_on_data(data: str | Path, monitor: str, *, miss_rate: float, confi
         raise CalibrationError("'none' has no threshold to calibrate")
     from el.monitors import build_monitor
 
-    monitor_model = build_monitor(base.base.name).model_sha256  # a missing or altered model file fails here
     config = CampaignConfig(perturbations=("none",), monitors=(base.base.name,), images=images, weights=weights,
                             core=core or CoreConfig())
     tasks = plan(data, config)
@@ -151,6 +150,9 @@ def calibrate_on_data(data: str | Path, monitor: str, *, miss_rate: float, confi
 
         segmenter = load_model_spec(weights)
     network = network_record(segmenter, weights, loaded=loaded)  # an unidentified network is refused here
+    from el.segmentation.contract import labels_of
+
+    monitor_model = build_monitor(base.base.name, labels=labels_of(segmenter)).model_sha256  # missing/altered: fails
     from assurance.progress import progress as bar
 
     scores, unsafe, faults = [], [], []

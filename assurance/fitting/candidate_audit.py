@@ -55,7 +55,7 @@ def candidate_audit(segmenter: Any, data_dir: str | Path, *, core: CoreConfig | 
         rgb, ids = read_image(s.image_path), read_labels(s.label_path, labels_of(segmenter))
         if ids.shape != rgb.shape[:2]:
             raise ValueError(f"{s.label_path}: label size {ids.shape} differs from the image {rgb.shape[:2]}")
-        result = run_core(segmenter.predict_frame(rgb), (rgb.shape[1], rgb.shape[0]), core)
+        result = run_core(segmenter.predict_frame(rgb), (rgb.shape[1], rgb.shape[0]), core, labels=labels_of(segmenter))
         flags = []
         for c in result.candidates:
             cause = _unsafe_cause(disc_pixels(ids, c.disc))

@@ -27,6 +27,7 @@ from assurance.analysis.scores import grouped_auroc_ci
 from el.forbidden import top_scores
 from el.monitors.lhd import disc_pixels
 from el.monitors.patches import extract_patch
+from el.segmentation.contract import labels_of
 
 SCORES = ("max_forbidden_probability", "lhd_margin", "forbidden_fraction")
 
@@ -34,8 +35,9 @@ SCORES = ("max_forbidden_probability", "lhd_margin", "forbidden_fraction")
 def disc_scores(segmenter: Any, rgb: np.ndarray, disc: Any, *, margin: float = 0.25) -> dict[str, float]:
     """The three evidence scores of one candidate's disc on its HD patch (see the module docstring)."""
     patch = extract_patch(rgb, disc, margin=margin)
-    pixels = disc_pixels(segmenter.predict_patch(patch.rgb), patch.disc_mask)  # (8, m)
-    top_f, top_s = top_scores(pixels)
+    labels = labels_of(segmenter)  # the network's classes: which of its outputs are forbidden
+    pixels = disc_pixels(segmenter.predict_patch(patch.rgb), patch.disc_mask, labels)  # (C, m)
+    top_f, top_s = top_scores(pixels, labels)
     return {"max_forbidden_probability": float(top_f.max()), "lhd_margin": float((top_f - top_s).max()),
             "forbidden_fraction": float((top_f >= top_s).mean())}
 

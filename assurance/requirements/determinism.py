@@ -84,6 +84,16 @@ def _campaign_config(man: Mapping[str, Any]) -> Any:
     return CampaignConfig(**cfg_d)
 
 
+def _run_labels(source: Any) -> Any:
+    """The label set of a run's network: a system file's model records it; the shipped network and a weights file
+    of the project's own architecture segment into UAVid's classes."""
+    from el.labels import UAVID, LabelSet
+
+    if isinstance(source, Mapping) and source.get("labels"):
+        return LabelSet.from_dict(source["labels"])
+    return UAVID
+
+
 def _replan(man: Mapping[str, Any], config: Any, own_model: bool) -> list[Any] | str:
     """The run's tasks planned again on its data folder, or why they cannot be (data or weights gone or changed)."""
     from assurance.campaign.run import manifest as make_manifest
@@ -125,7 +135,7 @@ def _replan(man: Mapping[str, Any], config: Any, own_model: bool) -> list[Any] |
     from assurance.campaign.run import monitor_models
 
     try:
-        models = monitor_models(config.monitors)
+        models = monitor_models(config.monitors, _run_labels(source))
     except Exception as exc:  # e.g. a learned monitor's model file is gone or altered
         return f"insufficient evidence: the run's monitors cannot be built now: {exc}"
     if models != (man.get("monitor_models") or {}):

@@ -14,7 +14,7 @@ from el.monitors.registry import monitor_entry
 from el.monitors.spec import GenericSpec, MonitorSpec, parse_monitor_spec
 
 
-def _build_registered(spec: GenericSpec, labels: LabelSet = UAVID, **common: object) -> Monitor:
+def _build_registered(spec: GenericSpec, labels: LabelSet, **common: object) -> Monitor:
     """A registered monitor from its spec; checks that it is a Monitor and names itself as asked.
 
     A label set other than the default is passed as ``labels=`` (a monitor that does not take one
@@ -47,7 +47,7 @@ def build_monitor(
     max_side: int | None = None,
     clock: Clock = time.perf_counter,
     hierarchy: ClassHierarchy | None = None,
-    labels: LabelSet = UAVID,
+    labels: LabelSet,
 ) -> Monitor | None:
     """Build the monitor a spec names; ``"none"`` (or None) gives None: no runtime monitor.
 
@@ -70,9 +70,9 @@ def build_monitor(
 
     Examples
     --------
-    >>> build_monitor("lhd+mcd:n=10,rho=0.9").name
+    >>> build_monitor("lhd+mcd:n=10,rho=0.9", labels=UAVID).name
     'lhd+mcd:n=10,rho=0.9'
-    >>> build_monitor("none") is None
+    >>> build_monitor("none", labels=UAVID) is None
     True
     """
     parsed = parse_monitor_spec(spec)

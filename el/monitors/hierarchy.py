@@ -112,7 +112,7 @@ class ClassHierarchy:
     # -- construction -------------------------------------------------------------------------
     @classmethod
     def from_mapping(cls, root: str, children: Mapping[str, Sequence[str]], *,
-                     labels: LabelSet = UAVID) -> ClassHierarchy:
+                     labels: LabelSet) -> ClassHierarchy:
         """Build from a root name and ``{parent: [children]}``; every class of ``labels`` must be a leaf, once."""
         class_names = labels.names
         names = list(class_names)
@@ -144,13 +144,13 @@ class ClassHierarchy:
         return cls(nodes=tuple(names), parents=parents, labels=labels)
 
     @classmethod
-    def from_yaml(cls, path: str | Path, *, labels: LabelSet = UAVID) -> ClassHierarchy:
+    def from_yaml(cls, path: str | Path, *, labels: LabelSet) -> ClassHierarchy:
         """Load a hierarchy file: ``root: NAME`` and ``children: {parent: [children]}``."""
         text = Path(path).read_text(encoding="utf-8")
         return cls._from_text(text, str(path), labels=labels)
 
     @classmethod
-    def _from_text(cls, text: str, source: str, *, labels: LabelSet = UAVID) -> ClassHierarchy:
+    def _from_text(cls, text: str, source: str, *, labels: LabelSet) -> ClassHierarchy:
         data = safeyaml.safe_load(text)
         if not isinstance(data, dict) or "root" not in data or not isinstance(data.get("children"), dict):
             raise ValueError(f"{source}: a hierarchy needs 'root: NAME' and 'children: {{parent: [...]}}'")
@@ -198,7 +198,7 @@ class ClassHierarchy:
         return tuple(n for n, r in zip(self.nodes, self.rejected, strict=True) if r)
 
 
-def default_hierarchy(labels: LabelSet = UAVID) -> ClassHierarchy:
+def default_hierarchy(labels: LabelSet) -> ClassHierarchy:
     """A label set's tree, built once per set.
 
     UAVid (the default): the shipped ``el/monitors/hierarchy.yaml``. Another set: its own
@@ -212,7 +212,7 @@ def default_hierarchy(labels: LabelSet = UAVID) -> ClassHierarchy:
 def _hierarchy_of(labels: LabelSet) -> ClassHierarchy:
     if labels == UAVID:
         text = resources.files("el.monitors").joinpath(HIERARCHY_FILE).read_text(encoding="utf-8")
-        return ClassHierarchy._from_text(text, f"el/monitors/{HIERARCHY_FILE}")
+        return ClassHierarchy._from_text(text, f"el/monitors/{HIERARCHY_FILE}", labels=UAVID)
     if labels.hierarchy is not None:
         return ClassHierarchy.from_mapping(labels.hierarchy["root"], labels.hierarchy["children"], labels=labels)
     inner = ("any", "safe", "unsafe")

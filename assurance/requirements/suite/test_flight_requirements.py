@@ -47,12 +47,12 @@ class _LabelColours:
         return d.argmin(-1).astype(np.uint8)
 
     def predict_frame(self, rgb: np.ndarray) -> np.ndarray:
-        return probs_from_labels(self._ids(rgb), working_size(rgb.shape[1], rgb.shape[0], WW))
+        return probs_from_labels(self._ids(rgb), working_size(rgb.shape[1], rgb.shape[0], WW), labels=UAVID)
 
     def predict_patch(self, rgb: np.ndarray) -> np.ndarray:
         if self.clock is not None:
             self.clock.t += self.patch_cost_s
-        return probs_from_labels(self._ids(rgb), (rgb.shape[1], rgb.shape[0]))
+        return probs_from_labels(self._ids(rgb), (rgb.shape[1], rgb.shape[0]), labels=UAVID)
 
 
 class _Clock:
