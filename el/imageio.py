@@ -8,13 +8,15 @@ JPEG's EXIF orientation is applied, so the array is the scene as the camera saw 
 
 from __future__ import annotations
 
+import hashlib
+import threading
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 from el.errors import DataError
-from el.imageheader import Header, pil_size, read_header
+from el.imageheader import PNG_SIGNATURE, Header, pil_size, read_header
 
 MAX_PIXELS = 7680 * 4320 * 5 // 4
 """Default pixel limit of a frame: an 8K frame (7680 x 4320, 33.2 Mpx) plus a quarter (41.5 Mpx, ~125 MB as
@@ -39,18 +41,42 @@ def read_image_meta(path: str | Path, *, max_pixels: int = MAX_PIXELS) -> tuple[
     """``read_image`` and what the file said about itself: ``{"exif_orientation": n}`` when a JPEG's EXIF
     orientation (n in 2..8) was applied, else ``{}``."""
     path = Path(path)
+    header, data = _read_checked(path, max_pixels)
+    return _decode_frame(path, header, data)
+
+
+def read_image_hashed(path: str | Path, *, max_pixels: int = MAX_PIXELS) -> tuple[np.ndarray, dict[str, int], str]:
+    """``read_image_meta`` and the SHA-256 (hex) of the file's bytes, those it decoded (a decision's
+    ``input.sha256``): hashed on another thread while they decode, and with no second read of the file."""
+    path = Path(path)
+    header, data = _read_checked(path, max_pixels)
+    digest: list[str] = []
+    hasher = threading.Thread(target=lambda: digest.append(hashlib.sha256(memoryview(data)).hexdigest()), daemon=True)
+    hasher.start()
+    try:
+        rgb, meta = _decode_frame(path, header, data)
+    finally:
+        hasher.join()
+    return rgb, meta, digest[0]
+
+
+def _read_checked(path: Path, max_pixels: int) -> tuple[Header | None, np.ndarray]:
+    """The file's header and bytes, refused (DataError) above ``max_pixels``, when empty or a PNG cut short."""
     header = _checked_header(path, max_pixels)
     data = np.fromfile(path, dtype=np.uint8)
     if data.size == 0:
         raise DataError(f"{path}: empty file")
     if path.suffix.lower() == ".png" and not _png_complete(data):
         raise DataError(f"{path}: truncated or corrupt PNG (no IEND chunk)")
-    try:
-        img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
-    except cv2.error as exc:  # e.g. OpenCV's own size limit on a format without a readable header
-        raise DataError(f"{path}: not a readable image ({_first_line(str(exc))})") from None
-    if img is None:
-        raise DataError(f"{path}: not a readable image")
+    return header, data
+
+
+def _decode_frame(path: Path, header: Header | None, data: np.ndarray) -> tuple[np.ndarray, dict[str, int]]:
+    """The RGB frame (H, W, 3) uint8 of the file's bytes, EXIF orientation applied, and ``read_image_meta``'s
+    record; DataError for what is not an 8-bit colour image."""
+    if header is not None and _png_rgb8(data):  # the camera's frames: decoded straight to RGB, no copy to reorder
+        return _decode(path, data, cv2.IMREAD_COLOR_RGB | cv2.IMREAD_IGNORE_ORIENTATION), {}
+    img = _decode(path, data, cv2.IMREAD_UNCHANGED)
     if img.dtype != np.uint8:
         raise DataError(f"{path}: expected 8-bit image, got {img.dtype}")
     if img.ndim == 2:
@@ -109,6 +135,25 @@ def _checked_header(path: Path, max_pixels: int) -> Header | None:
     if size is not None and min(size) < 1:
         raise DataError(f"{path}: image header claims a {size[0]}x{size[1]} frame")
     return header
+
+
+def _decode(path: Path, data: np.ndarray, flags: int) -> np.ndarray:
+    """``cv2.imdecode``; DataError naming the file when it cannot decode it."""
+    try:
+        img = cv2.imdecode(data, flags)
+    except cv2.error as exc:  # e.g. OpenCV's own size limit on a format without a readable header
+        raise DataError(f"{path}: not a readable image ({_first_line(str(exc))})") from None
+    if img is None:
+        raise DataError(f"{path}: not a readable image")
+    return img
+
+
+def _png_rgb8(data: np.ndarray) -> bool:
+    """Whether ``data`` is a PNG of 8-bit truecolour pixels without alpha (IHDR bit depth 8, colour type 2): the
+    pixels ``IMREAD_UNCHANGED`` gives, channels reversed, are exactly those ``IMREAD_COLOR_RGB`` gives (a PNG
+    carries no EXIF orientation here: :func:`el.imageheader.read_header` reads none)."""
+    return (data.size > 26 and bytes(data[:8]) == PNG_SIGNATURE and bytes(data[12:16]) == b"IHDR"
+            and int(data[24]) == 8 and int(data[25]) == 2)
 
 
 def _first_line(text: str) -> str:

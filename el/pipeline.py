@@ -28,16 +28,17 @@ from el.deadline import Deadline, active, run_with_deadline
 from el.decision import Decision, Disc, MonitorVerdict
 from el.errors import BudgetExceeded
 from el.hashing import sha256_bytes
-from el.imageio import MAX_PIXELS, check_max_pixels, read_image_meta
+from el.imageio import MAX_PIXELS, check_max_pixels, read_image_hashed
 from el.kernel import Frame, Parts, conclude, default, frame_core, prepare
 from el.labels import UAVID
 from el.monitors import CandidateContext, Monitor, build_monitor, monitor_name, parse_monitor_spec
 from el.monitors.capabilities import check_monitor_capabilities
 from el.monitors.frame_gate import bind_frame_gate
+from el.monitors.patch_judge import batch_judge
 from el.odd import OperatingDomain
 from el.rgb import check_rgb
 from el.segmentation.contract import check_model, labels_of
-from el.walk import HAZARD, Judge, Step
+from el.walk import HAZARD, SCORE, Judge, Step
 
 Clock = Callable[[], float]
 DEFAULT_TIME_BUDGET_S = 10.0
@@ -269,8 +270,7 @@ class EmergencyLanding:
         if isinstance(image, str | Path):
             path = Path(image)
             info["path"] = str(path)
-            rgb, meta = read_image_meta(path, max_pixels=self.config.max_pixels)
-            info["sha256"] = sha256_bytes(path.read_bytes())
+            rgb, meta, info["sha256"] = read_image_hashed(path, max_pixels=self.config.max_pixels)  # read once
             info.update(meta)  # exif_orientation, when one was applied
         else:
             rgb = image
@@ -310,6 +310,9 @@ class EmergencyLanding:
             context = None if probs is None else CandidateContext(cand, probs, (rgb.shape[1], rgb.shape[0]))
             return monitor.check(rgb, cand, self.segmenter, seed=self.config.seed + k, context=context)
 
+        if self.walk == SCORE and hasattr(monitor, "check_many"):  # every candidate is judged: all in one call
+            return batch_judge(monitor, rgb, frame.candidates, self.segmenter, probs=probs,
+                               seed=self.config.seed), before, after
         return judge, before, after
 
 

@@ -4,6 +4,8 @@ the same scores; the score walk's batch judge; the PNG fast path of the frame re
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import cv2
 import numpy as np
 import pytest
@@ -12,7 +14,9 @@ from helpers import TINY_ARCH, OracleSegmenter, scene_ids, scene_image
 from el.config import CoreConfig
 from el.decision import Candidate
 from el.errors import DataError
-from el.imageio import read_image
+from el.hashing import sha256_file
+from el.imageio import read_image, read_image_hashed
+from el.labels import UAVID
 from el.monitors import CandidateContext, build_monitor
 from el.monitors.learned import LearnedMonitor, load_learned_model
 from el.monitors.lhd import LHDMonitor
@@ -95,32 +99,13 @@ def test_check_many_gives_the_verdicts_of_check(segmenters, mode, kind):
     lone = [monitor.check(FRAME, c, seg, seed=s, context=x)
             for c, s, x in zip(CANDIDATES, seeds, contexts, strict=True)]
     many = monitor.check_many(FRAME, CANDIDATES, seg, seeds=seeds, contexts=contexts)
-    assert monitor.batches_softmax() and len(many) == len(lone)
+    assert monitor.batches_softmax() == (kind == "learned") and len(many) == len(lone)  # LHD: one at a time
     for a, b in zip(lone, many, strict=True):
         assert (a.name, a.accepted, a.threshold) == (b.name, b.accepted, b.threshold) and b.seconds >= 0
         if mode == "torch":
             assert b.score == pytest.approx(a.score, abs=1e-6)
         else:
             assert (a.score, a.reason) == (b.score, b.reason)
-
-
-def test_monitors_whose_features_are_not_the_softmax_are_judged_one_at_a_time():
-    seg = OracleSegmenter(WW)
-    frame = scene_image(scene_ids(256, 144, seed=1))
-    mcd = build_monitor("lhd+mcd:n=3,rho=0.9")
-
-    class OwnFeatures(LHDMonitor):  # overrides patch_features alone: its features are not LHD's softmax
-        def patch_features(self, patch, segmenter, **kw):
-            return super().patch_features(patch, segmenter, **kw)
-
-    assert not mcd.batches_softmax() and not OwnFeatures().batches_softmax() and LHDMonitor().batches_softmax()
-    seeds = list(range(len(CANDIDATES)))
-    for monitor in (mcd, OwnFeatures()):
-        lone = [monitor.check(frame, c, seg, seed=s) for c, s in zip(CANDIDATES, seeds, strict=True)]
-        many = monitor.check_many(frame, CANDIDATES, seg, seeds=seeds)
-        assert [(v.score, v.accepted) for v in lone] == [(v.score, v.accepted) for v in many]
-    with pytest.raises(ValueError, match="5 candidates, 4 seeds"):
-        LHDMonitor().check_many(frame, CANDIDATES, seg, seeds=seeds[:4])
 
 
 class Counting(OracleSegmenter):
@@ -135,6 +120,28 @@ class Counting(OracleSegmenter):
     def predict_patches(self, patches):
         self.batches += 1
         return [self.predict_patch(p) for p in patches]
+
+
+def test_monitors_whose_features_are_not_the_softmax_are_judged_one_at_a_time():
+    seg = Counting(WW)
+    frame = scene_image(scene_ids(256, 144, seed=1))
+    mcd = build_monitor("lhd+mcd:n=3,rho=0.9", labels=UAVID)
+
+    class OwnFeatures(LearnedMonitor):  # overrides patch_features alone: its features are not the learned ones
+        def patch_features(self, patch, segmenter, **kw):
+            return super().patch_features(patch, segmenter, **kw)
+
+    assert LearnedMonitor().batches_softmax()
+    assert not any(m.batches_softmax() for m in (mcd, OwnFeatures(), LHDMonitor()))
+    seeds = list(range(len(CANDIDATES)))
+    contexts = _contexts(seg, frame=frame)
+    for monitor, ctx in ((mcd, None), (OwnFeatures(), contexts)):
+        lone = [monitor.check(frame, c, seg, seed=s, context=None if ctx is None else ctx[k])
+                for k, (c, s) in enumerate(zip(CANDIDATES, seeds, strict=True))]
+        many = monitor.check_many(frame, CANDIDATES, seg, seeds=seeds, contexts=ctx)
+        assert [(v.score, v.accepted) for v in lone] == [(v.score, v.accepted) for v in many]
+    with pytest.raises(ValueError, match="5 candidates, 4 seeds"):
+        LHDMonitor().check_many(frame, CANDIDATES, seg, seeds=seeds[:4])
 
 
 def test_batch_judge_judges_the_frame_once_and_only_that_frame():
@@ -152,7 +159,17 @@ def test_batch_judge_judges_the_frame_once_and_only_that_frame():
 
 
 class BatchedLanding(EmergencyLanding):
-    """The flight loop with the score walk's batch judge (the wiring ``EmergencyLanding._judge`` takes)."""
+    """The flight loop with the score walk's batch judge and the hashing reader (the wiring ``EmergencyLanding``
+    takes in ``_judge`` and ``_read``)."""
+
+    def _read(self, image, info):
+        if not isinstance(image, str | Path):
+            return super()._read(image, info)
+        info["path"] = str(image)
+        rgb, meta, info["sha256"] = read_image_hashed(image, max_pixels=self.config.max_pixels)
+        info.update(meta)
+        info["width"], info["height"] = int(rgb.shape[1]), int(rgb.shape[0])
+        return rgb
 
     def _judge(self, frame, budget):
         judge, before, after = super()._judge(frame, budget)
@@ -162,13 +179,16 @@ class BatchedLanding(EmergencyLanding):
                            seed=self.config.seed), before, after
 
 
-def test_batched_flight_decisions_are_the_per_candidate_ones():
+def test_batched_flight_decisions_are_the_per_candidate_ones(tmp_path):
     config = PipelineConfig(core=CoreConfig(working_width=WW), monitor=DEPLOYED_MONITOR, time_budget_s=None)
     for seed in range(3):
         frame = scene_image(scene_ids(256, 144, seed=seed, road_col=40 + 60 * seed))
+        path = tmp_path / f"{seed}.png"
+        cv2.imwrite(str(path), frame[:, :, ::-1])
         seg = Counting(WW)
-        a = EmergencyLanding(config, segmenter=Counting(WW)).decide(frame)
-        b = BatchedLanding(config, segmenter=seg).decide(frame)
+        a = EmergencyLanding(config, segmenter=Counting(WW)).decide(path)
+        b = BatchedLanding(config, segmenter=seg).decide(path)
+        assert a.input == b.input and a.input["sha256"] == sha256_file(path)
         assert a.reason == b.reason and not a.reason.startswith("fault") and a.candidates
         assert (a.action, a.selected) == (b.action, b.selected) and seg.batches == 1
         assert [(c.x, c.y, c.monitor.score, c.monitor.accepted) for c in a.candidates] == \

@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 import time
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Hashable
+from collections.abc import Callable, Hashable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
 
@@ -27,6 +27,7 @@ import numpy as np
 from el.deadline import checkpoint
 from el.decision import Candidate, Disc, MonitorVerdict
 from el.labels import UAVID, LabelSet
+from el.monitors.patch_batch import check_batched
 from el.monitors.patches import Patch, extract_patch, validate_patch_params
 
 if TYPE_CHECKING:
@@ -130,12 +131,15 @@ class CandidateContext:
     """What the decision loop knows about a candidate besides its HD patch (for monitors that use it).
 
     ``frame_probs``: the frame's softmax at the working resolution, (8, h, w); ``frame_size``: the
-    full-resolution ``(width, height)``; ``candidate``: the ranked candidate being judged.
+    full-resolution ``(width, height)``; ``candidate``: the ranked candidate being judged;
+    ``frame_checked``: ``frame_probs`` was validated already (``validate_scores``: a monitor judging every
+    candidate of a frame checks the frame once, not once per candidate).
     """
 
     candidate: Candidate
     frame_probs: np.ndarray
     frame_size: tuple[int, int]
+    frame_checked: bool = False
 
 
 def validate_threshold(threshold: object) -> float:
@@ -216,6 +220,20 @@ class Monitor(ABC):
         segmentation. Raises on bad input or a segmenter that returns the wrong shape or non-finite scores.
         """
 
+    def check_many(
+        self, hd_image: np.ndarray, candidates: Sequence[Candidate | Disc], segmenter: PatchSegmenter, *,
+        seeds: Sequence[int], contexts: Sequence[CandidateContext | None] | None = None,
+    ) -> list[MonitorVerdict]:
+        """Judge several candidates of one frame: for each k, the verdict ``check`` gives candidate k with
+        ``seed=seeds[k]`` and ``context=contexts[k]`` (None: no contexts).
+
+        A monitor may share work between the candidates (:class:`PatchMonitor` segments their HD patches in few
+        batched passes); this default judges them one at a time. A score walk judges every candidate anyway.
+        """
+        contexts = batch_arguments(candidates, seeds, contexts)
+        return [self.check(hd_image, c, segmenter, seed=int(s), context=x)
+                for c, s, x in zip(candidates, seeds, contexts, strict=True)]
+
 
 class PatchMonitor(Monitor):
     """A monitor that judges the segmented HD patch around a candidate, in steps a campaign can share:
@@ -266,6 +284,34 @@ class PatchMonitor(Monitor):
     @abstractmethod
     def judge(self, reduced: Any) -> Judgement:
         """Score, verdict at :attr:`threshold` and reason, from :meth:`reduce`'s output. Validates."""
+
+    def softmax_features(self, probs: np.ndarray, patch: Patch, segmenter: PatchSegmenter, *, seed: int = 0,
+                         context: CandidateContext | None = None) -> tuple[Any, np.ndarray]:
+        """What :meth:`patch_features` gives, from the patch's softmax ``probs`` (C, h, w) computed already.
+
+        Monitors whose features rest on the patch's softmax define it (and build ``patch_features`` on it), so
+        that :meth:`check_many` can segment every candidate's patch in few batched passes; the others do not
+        (:meth:`batches_softmax` is then False and ``check_many`` judges one candidate at a time).
+        """
+        raise NotImplementedError(f"{type(self).__name__} does not compute its features from the patch softmax")
+
+    def batches_softmax(self) -> bool:
+        """Whether :meth:`check_many` may segment the patches in batches: this class's :meth:`softmax_features`
+        is defined where its :meth:`patch_features` is, or below (a subclass that overrides ``patch_features``
+        alone computes something else, and is judged one candidate at a time)."""
+        own = _defined_in(type(self), "softmax_features")
+        return own is not PatchMonitor and issubclass(own, _defined_in(type(self), "patch_features"))
+
+    def check_many(
+        self, hd_image: np.ndarray, candidates: Sequence[Candidate | Disc], segmenter: PatchSegmenter, *,
+        seeds: Sequence[int], contexts: Sequence[CandidateContext | None] | None = None,
+    ) -> list[MonitorVerdict]:
+        """The verdicts of :meth:`check` on several candidates of one frame, their HD patches segmented in few
+        batched passes when the monitor's features rest on the softmax (:mod:`el.monitors.patch_batch`)."""
+        if not self.batches_softmax():
+            return super().check_many(hd_image, candidates, segmenter, seeds=seeds, contexts=contexts)
+        return check_batched(self, hd_image, candidates, segmenter, seeds=seeds,
+                             contexts=batch_arguments(candidates, seeds, contexts), validate=validate_scores)
 
     # -- overridable steps -------------------------------------------------------------------
     @property
@@ -357,6 +403,21 @@ class PatchMonitor(Monitor):
     def __repr__(self) -> str:
         return (f"{type(self).__name__}({self.name!r}, margin={self.margin}, max_side={self.max_side}, "
                 f"threshold={self.threshold})")
+
+
+def batch_arguments(candidates: Sequence[Any], seeds: Sequence[int],
+                    contexts: Sequence[CandidateContext | None] | None) -> list[CandidateContext | None]:
+    """The contexts of ``check_many`` (None: one None per candidate), after checking there is one seed and one
+    context per candidate."""
+    contexts = [None] * len(candidates) if contexts is None else list(contexts)
+    if not len(seeds) == len(contexts) == len(candidates):
+        raise ValueError(f"check_many: {len(candidates)} candidates, {len(seeds)} seeds and {len(contexts)} contexts")
+    return contexts
+
+
+def _defined_in(cls: type, name: str) -> type:
+    """The class of ``cls``'s MRO that defines attribute ``name``."""
+    return next(k for k in cls.__mro__ if name in k.__dict__)
 
 
 def format_counts(counts: dict[str, int]) -> str:

@@ -45,7 +45,7 @@ import numpy as np
 from el.decision import Disc
 from el.discs import disc_window_mask
 from el.errors import LearnedModelError
-from el.forbidden import argmax_slack, forbidden_pixels
+from el.forbidden import forbidden_pixels, top_scores
 from el.labels import UAVID, LabelSet
 from el.monitors.base import CandidateContext, Judgement, PatchSegmenter, validate_scores
 from el.monitors.lhd import LHDMonitor, take_disc
@@ -93,8 +93,9 @@ def disc_stats(pixel_scores: np.ndarray, labels: LabelSet = UAVID) -> list[float
         return [1.0, 1.0, 1.0, 1.0]  # nothing seen: as bad as it gets
     p = pixel_scores.astype(np.float64)
     forbidden_p = p[np.array(labels.forbidden_ids)].sum(axis=0)
+    top_forbidden, top_safe = top_scores(p, labels)  # forbidden_pixels and argmax_slack, from one pass
     return [float(forbidden_p.max()), float(forbidden_p.mean()),
-            float(np.count_nonzero(forbidden_pixels(p, labels)) / p.shape[1]), float(argmax_slack(p, labels).max())]
+            float(np.count_nonzero(top_forbidden >= top_safe) / p.shape[1]), float((top_forbidden - top_safe).max())]
 
 
 def class_max(pixel_scores: np.ndarray, labels: LabelSet = UAVID) -> list[float]:
@@ -108,18 +109,33 @@ def context_stats(frame: np.ndarray, candidate: Any, scale: float, labels: Label
     """Largest and mean forbidden probability of the frame's softmax in discs of :data:`CONTEXT_SCALES`
     radii centred on the candidate (its safe disc and what lies just beyond it)."""
     h, w = frame.shape[1:]
-    cx, cy = candidate.x * scale, candidate.y * scale
-    reach = candidate.radius_px * scale * max(CONTEXT_SCALES) + 1.0  # one window around the largest disc
-    x0, y0 = min(max(int(cx - reach), 0), w - 1), min(max(int(cy - reach), 0), h - 1)
-    x1, y1 = max(min(int(cx + reach) + 1, w), x0 + 1), max(min(int(cy + reach) + 1, h), y0 + 1)
-    window = frame[:, y0:y1, x0:x1]
-    forbidden = np.array(labels.forbidden_ids)
+    x0, y0, x1, y1 = frame_window((h, w), candidate, scale, max(CONTEXT_SCALES))  # around the largest disc
+    window = np.ascontiguousarray(frame[np.array(labels.forbidden_ids), y0:y1, x0:x1])  # copied once, for every disc
     out: list[float] = []
     for k in CONTEXT_SCALES:
         mask = frame_disc_mask((h, w), candidate, scale, radii=k, window=(x0, y0, x1, y1))
-        forbidden_p = take_disc(window, mask)[forbidden].astype(np.float64).sum(axis=0)
+        forbidden_p = take_disc(window, mask).astype(np.float64).sum(axis=0)
         out += [float(forbidden_p.max()), float(forbidden_p.mean())]
     return out
+
+
+def frame_window(shape: tuple[int, int], candidate: Any, scale: float, radii: float) -> tuple[int, int, int, int]:
+    """``(x0, y0, x1, y1)``: a window of the working grid (h, w) holding every pixel of the candidate's disc of
+    ``radii`` radii and the pixel under its centre (what :func:`frame_disc_mask` keeps for a tiny disc)."""
+    h, w = shape
+    cx, cy = candidate.x * scale, candidate.y * scale
+    reach = candidate.radius_px * scale * radii + 1.0
+    x0, y0 = min(max(int(cx - reach), 0), w - 1), min(max(int(cy - reach), 0), h - 1)
+    x1, y1 = max(min(int(cx + reach) + 1, w), x0 + 1), max(min(int(cy + reach) + 1, h), y0 + 1)
+    return x0, y0, x1, y1
+
+
+def frame_disc(frame: np.ndarray, candidate: Any, scale: float) -> np.ndarray:
+    """The frame softmax (C, h, w) on the candidate's disc, (C, m): ``take_disc(frame, frame_disc_mask(...))``,
+    the same pixels in the same order, read from a window around the disc rather than the whole frame."""
+    window = frame_window(frame.shape[1:], candidate, scale, 1.0)
+    x0, y0, x1, y1 = window
+    return take_disc(frame[:, y0:y1, x0:x1], frame_disc_mask(frame.shape[1:], candidate, scale, window=window))
 
 
 def frame_disc_mask(shape: tuple[int, int], candidate: Any, scale: float, *, radii: float = 1.0,
@@ -179,11 +195,12 @@ def candidate_features(patch_probs: np.ndarray, patch: Patch, context: Candidate
     frame = context.frame_probs
     if not isinstance(frame, np.ndarray) or frame.ndim != 3 or frame.shape[0] != patch_probs.shape[0]:
         raise ValueError(f"frame softmax must be ({labels.num_classes}, h, w), got {getattr(frame, 'shape', frame)!r}")
-    validate_scores(frame, frame.shape[1:], "frame softmax", labels=labels)
+    if not context.frame_checked:
+        validate_scores(frame, frame.shape[1:], "frame softmax", labels=labels)
     cand = context.candidate
     width, height = context.frame_size
     scale = frame.shape[2] / width
-    lr_disc = take_disc(frame, frame_disc_mask(frame.shape[1:], cand, scale))
+    lr_disc = frame_disc(frame, cand, scale)
     hd_disc = take_disc(patch_probs, patch.disc_mask)
     values = [
         *disc_stats(lr_disc, labels),
@@ -340,12 +357,21 @@ class LearnedMonitor(LHDMonitor):
         if context is None:
             raise ValueError("the learned monitor needs the candidate's context (frame softmax)")
         self.check_network(segmenter)
-        probs, mask = super().patch_features(patch, segmenter, seed=seed, trunk=trunk)
+        probs, _ = super().patch_features(patch, segmenter, seed=seed, trunk=trunk)
+        return self.softmax_features(probs, patch, segmenter, seed=seed, context=context)
+
+    def softmax_features(self, probs: np.ndarray, patch: Patch, segmenter: PatchSegmenter, *, seed: int = 0,
+                         context: CandidateContext | None = None) -> tuple[Any, np.ndarray]:
+        """The candidate's feature vector from its patch's softmax (and its MC-dropout samples, when the model
+        reads them)."""
+        if context is None:
+            raise ValueError("the learned monitor needs the candidate's context (frame softmax)")
+        self.check_network(segmenter)
         samples = None
         if self.model.mcd_n > 0:
             samples = segmenter.mc_dropout(patch.rgb, self.model.mcd_n, self.model.mcd_rho, seed)
         return candidate_features(probs, patch, context, margin=self.margin, mcd_samples=samples,
-                                  labels=self.labels), mask
+                                  labels=self.labels), patch.disc_mask
 
     def check_network(self, segmenter: Any) -> None:
         """Refuse a network the model was not fitted on: the segmenter must report the weights hash the model

@@ -49,8 +49,12 @@ from el.deadline import checkpoint
 from el.errors import WeightsError
 from el.labels import UAVID, LabelSet
 from el.rgb import check_rgb
+from el.segmentation.batching import unit_nchw
 from el.segmentation.frame_tap import frame_tap
+from el.segmentation.lazy_trunk import LazyTrunk as _LazyTrunk
+from el.segmentation.lazy_trunk import resolve as _resolve
 from el.segmentation.model import MCDropout, upsample_logits
+from el.segmentation.patch_passes import PatchPasses
 from el.segmentation.pooling import check_pooling, downsample_probs
 from el.segmentation.protocol import EvalProtocol, card_protocol, check_frame_scales
 from el.segmentation.weights import DEFAULT_WEIGHTS, card_path, load_weights
@@ -106,7 +110,7 @@ def softmax_classes(logits: torch.Tensor) -> torch.Tensor:
     return torch.softmax(logits, dim=1)
 
 
-class Segmenter:
+class Segmenter(PatchPasses):
     """Softmax segmentation of frames and patches, with MC dropout, around one network.
 
     Parameters
@@ -220,6 +224,7 @@ class Segmenter:
         state = self.__dict__.copy()
         del state["_lock"]
         state.pop("_trunk_template", None)
+        state.pop("_pool", None)
         return state
 
     def __setstate__(self, state: dict[str, Any]) -> None:
@@ -237,8 +242,7 @@ class Segmenter:
 
     # -- helpers -------------------------------------------------------------------------------
     def _to_tensor(self, images: list[np.ndarray]) -> torch.Tensor:
-        batch = np.stack(images).astype(np.float32) / np.float32(255.0)
-        return torch.from_numpy(batch).permute(0, 3, 1, 2).contiguous().to(self.device)
+        return torch.from_numpy(unit_nchw(images)).to(self.device)
 
     def _probs(self, logits: torch.Tensor, shape: tuple[int, ...], what: str) -> np.ndarray:
         if not isinstance(logits, torch.Tensor) or tuple(logits.shape) != shape:
@@ -334,32 +338,17 @@ class Segmenter:
         with torch.inference_mode():
             return self.model.trunk(self._to_tensor([rgb_patch]))
 
-    def predict_patches(self, patches: list[np.ndarray]) -> list[np.ndarray]:
-        """Softmax of several patches; patches of the same size run as one batch. Order is kept."""
-        for i, p in enumerate(patches):
-            _check_rgb(p, f"patch {i}")
-        out: list[np.ndarray | None] = [None] * len(patches)
-        groups: dict[tuple[int, int], list[int]] = {}
-        for i, p in enumerate(patches):
-            groups.setdefault(p.shape[:2], []).append(i)
-        for idx in groups.values():
-            checkpoint("patch segmentation")
-            probs = self._predict([patches[i] for i in idx], "patches")
-            for j, i in enumerate(idx):
-                out[i] = probs[j]
-        return out  # type: ignore[return-value]
-
     def _predict(self, images: list[np.ndarray], what: str) -> np.ndarray:
         h, w = images[0].shape[:2]
         with torch.inference_mode():
             features = None
             if getattr(self, "engine", None) is not None:
-                batch = np.stack(images).astype(np.float32) / np.float32(255.0)
+                batch = unit_nchw(images)
                 if what == "frame" and self.tap_frames and getattr(self.engine, "trunk_names", None):  # one pass
-                    raw, features = self.engine.with_trunk(batch.transpose(0, 3, 1, 2))
+                    raw, features = self.engine.with_trunk(batch)
                     logits = torch.from_numpy(raw)
                 else:
-                    logits = torch.from_numpy(self.engine.logits(batch.transpose(0, 3, 1, 2)))
+                    logits = torch.from_numpy(self.engine.logits(batch))
             elif what == "frame" and self.tap_frames and self.fast_mc:  # one pass, split: the gates read its trunk
                 features = self.model.trunk(self._to_tensor(images))
                 logits = self.model.head(features)
@@ -453,47 +442,3 @@ class Segmenter:
                     m.p = old_p
                     m.train(training)
         return self._probs(logits, shape, "MC dropout")
-
-
-class _LazyTrunk:
-    """A patch's trunk on first use, kept: what ``patch_trunk`` hands out when ONNX Runtime runs the full passes.
-
-    When the export carries the trunk (``engine.trunk_names``), one ONNX Runtime pass gives the patch's logits
-    (:meth:`patch_logits`, for ``predict_patch``) and its trunk (:meth:`get`, for MC dropout's torch head);
-    otherwise torch computes the trunk, and only if MC dropout asks."""
-
-    def __init__(self, segmenter: Segmenter, rgb_patch: np.ndarray) -> None:
-        self.segmenter, self.rgb_patch, self.value, self.logits = segmenter, rgb_patch, None, None
-
-    def _onnx_pass(self) -> None:
-        from el.segmentation.onnx_engine import unflatten_features
-
-        seg = self.segmenter
-        batch = (self.rgb_patch[None].astype(np.float32) / np.float32(255.0)).transpose(0, 3, 1, 2)
-        logits, trunk = seg.engine.with_trunk(batch)
-        self.logits = torch.from_numpy(logits)
-        if "_trunk_template" not in seg.__dict__:  # the trunk's output type and fields, from a tiny torch pass
-            with torch.inference_mode():
-                side = 2 * int(getattr(seg.model, "stride", 16))
-                seg._trunk_template = seg.model.trunk(torch.zeros(1, 3, side, side, device=seg.device))
-        self.value = unflatten_features(seg._trunk_template, seg.engine.trunk_names,
-                                        [torch.from_numpy(t).to(seg.device) for t in trunk], self.rgb_patch.shape[:2])
-
-    def patch_logits(self) -> torch.Tensor | None:
-        """The patch's logits from the pass that gave its trunk (None when the export has no trunk outputs)."""
-        if self.logits is None and self.segmenter.engine.trunk_names:
-            self._onnx_pass()
-        return self.logits
-
-    def get(self) -> Any:
-        if self.value is None:
-            if self.segmenter.engine.trunk_names:
-                self._onnx_pass()
-            else:
-                with torch.inference_mode():
-                    self.value = self.segmenter.model.trunk(self.segmenter._to_tensor([self.rgb_patch]))
-        return self.value
-
-
-def _resolve(features: Any) -> Any:
-    return features.get() if isinstance(features, _LazyTrunk) else features

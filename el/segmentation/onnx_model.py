@@ -35,6 +35,7 @@ import cv2
 import numpy as np
 
 from el.camera import working_size
+from el.deadline import checkpoint
 from el.errors import WeightsError
 from el.labels import UAVID, LabelSet
 from el.rgb import check_rgb
@@ -226,6 +227,7 @@ class OnnxModel:
         if len(inputs) != 1:
             raise WeightsError(f"{path}: the ONNX model has {len(inputs)} inputs, one (the image) expected")
         self._input = inputs[0].name
+        self._batch_free = not isinstance(inputs[0].shape[0], int)  # a free batch axis: patches may share a pass
         self._output = self._session.get_outputs()[0].name  # the first output; an export's trunk outputs unused
         missing = sorted(set(labels.names) ^ set(contract.class_names))
         if len(contract.class_names) != labels.num_classes or missing:
@@ -235,7 +237,8 @@ class OnnxModel:
         self._order = np.array([contract.class_names.index(n) for n in labels.names])
 
     def __getstate__(self) -> dict[str, Any]:
-        return {k: v for k, v in self.__dict__.items() if k not in ("_session", "_input", "_output", "_order")}
+        skip = ("_session", "_input", "_output", "_order", "_batch_free")
+        return {k: v for k, v in self.__dict__.items() if k not in skip}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__init__(state["path"], state["contract"], state["labels"], state["weights_sha256"],  # type: ignore[misc]
@@ -262,6 +265,30 @@ class OnnxModel:
     def predict_patch(self, rgb_patch: np.ndarray) -> np.ndarray:
         """(C, h, w) float32 probabilities of an (h, w, 3) uint8 patch at its own resolution."""
         return self._run(check_rgb(rgb_patch, "patch", min_size=MIN_SIZE), "patch")
+
+    def predict_patches(self, patches: list[np.ndarray]) -> list[np.ndarray]:
+        """:meth:`predict_patch` of each patch, in order. Patches fed to the network at one size (the contract's
+        ``net_size``: their own, their padded or the fixed size) share one pass when the file's batch axis is free;
+        the contract pads or resizes each patch as it does alone, so each keeps its own scores."""
+        for i, p in enumerate(patches):
+            check_rgb(p, f"patch {i}", min_size=MIN_SIZE)
+        if not self._batch_free:
+            return [self._run(p, "patch") for p in patches]
+        groups: dict[tuple[int, int], list[int]] = {}
+        for i, p in enumerate(patches):
+            groups.setdefault(self.contract.net_size(p.shape[1], p.shape[0]), []).append(i)
+        out: list[np.ndarray | None] = [None] * len(patches)
+        for idx in groups.values():
+            checkpoint("patch segmentation")
+            batch = np.concatenate([self.contract.to_input(patches[i]) for i in idx])
+            raw = np.asarray(self._session.run([self._output], {self._input: batch})[0])
+            if raw.ndim != 4 or raw.shape[0] != len(idx):
+                raise ValueError(f"patches: the ONNX output is {raw.shape}, expected a batch of {len(idx)}")
+            for j, i in enumerate(idx):
+                h, w = patches[i].shape[:2]
+                probs = self.contract.to_probs(raw[j:j + 1], w, h, "patch")[self._order]
+                out[i] = np.ascontiguousarray(probs, dtype=np.float32)
+        return out  # type: ignore[return-value]
 
     def probe(self) -> None:
         """One tiny inference; a one-line WeightsError for an output of the wrong rank, shape, class count
