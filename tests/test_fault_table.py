@@ -136,5 +136,6 @@ def test_trust_boundary_cases_behave(workspace):
         assert r["result"] == "pass", r
     assert not (workspace / "T1-executed").exists()
     by = {r["case"]: r for r in rows}
-    assert "stand-in-signing-key.pem" in by["T2-template-file-attachment"]["outcome"]
-    assert not (workspace / "rep-attach" / "evidence.pdf").exists()
+    if "T2-template-file-attachment" in by:  # with the PDF renderer (the pdf extra) installed
+        assert "stand-in-signing-key.pem" in by["T2-template-file-attachment"]["outcome"]
+        assert not (workspace / "rep-attach" / "evidence.pdf").exists()
