@@ -2,8 +2,8 @@
 the CM's candidates -> the judge -> the walk -> a ``Decision``.
 
 Every user of the flight function runs this code: the flight loop (``el.pipeline.EmergencyLanding``, a lazy judge
-under the deadline), an evaluation campaign (``assurance.campaign.run``: every configuration's verdicts from one
-judging pass, each walked here) and the ground-truth pipeline (a label-map segmenter and no monitor). What differs
+under the deadline), a campaign task (``assurance.campaign.task``: every configuration's verdicts from one
+judging pass, each concluded here) and the ground-truth pipeline (a label-map segmenter and no monitor). What differs
 between them is plugged in: how the frame is read, the segmenter, and the judge.
 
 :func:`prepare` runs the stages up to the candidates and returns a :class:`Frame`; a stage that settles the decision
@@ -77,10 +77,6 @@ class Frame:
     candidates: list[Candidate] = field(default_factory=list)
     stop: str | None = None
     stage: str = "read"
-
-    @property
-    def frame_size(self) -> tuple[int, int] | None:
-        return self.size
 
 
 def frame_core(core: CoreConfig, pose: Pose | None) -> CoreConfig:

@@ -259,10 +259,11 @@ class EmergencyLanding:
     def _decide(self, image: np.ndarray | str | Path, pose: Pose | None, budget: Deadline,
                 timings: dict[str, float], info: dict[str, Any]) -> Decision:
         """The kernel's decision, with ``budget`` checked between stages and (as the active deadline) inside them."""
-        frame = prepare(lambda record: self._read(image, record), self.parts, pose=pose, budget=budget,
+        parts = self.parts
+        frame = prepare(lambda record: self._read(image, record), parts, pose=pose, budget=budget,
                         clock=self.clock, info=info, timings=timings)
         judge, before, after = self._judge(frame, budget)
-        return conclude(frame, self.parts, judge, walk=self.walk, budget=budget, clock=self.clock,
+        return conclude(frame, parts, judge, walk=self.walk, budget=budget, clock=self.clock,
                         evaluate_all=self.config.evaluate_all, before=before, after=after)[0]
 
     # -- stages ----------------------------------------------------------------------------------

@@ -225,7 +225,7 @@ def test_which_gate_a_command_deploys(tmp_path, monkeypatch):
     import argparse
 
     import el.pipeline
-    from assurance.cli.system_options import frame_gate_path
+    from assurance.cli.system_options import assessed
     from assurance.system.find import load_system
 
     shipped = tmp_path / "shipped.json"
@@ -233,6 +233,9 @@ def test_which_gate_a_command_deploys(tmp_path, monkeypatch):
 
     def args(**kw):
         return argparse.Namespace(**{"gate": None, "weights": None, "system_file": None, **kw})
+
+    def frame_gate_path(namespace):
+        return assessed(namespace).gate
 
     assert frame_gate_path(args()) == shipped  # the shipped network: the shipped gate
     assert frame_gate_path(args(weights="mine.pt")) is None  # another network: its own gate, or none

@@ -1,8 +1,7 @@
-"""One campaign frame's planning: its pose under the campaign's pose policy, the declared operating domain
-(``el.odd``) and the frame gate (``el.monitors.frame_gate``): a frame outside the domain, or above the gate's
-threshold, is decided as the flight code decides it, the default action with reason ``outside_odd: ...`` or
-``out_of_domain: ...``, while every monitor's verdicts on its candidates stay in the readouts; the gate's score
-and threshold are in every image row (``frame_gate_score``, ``frame_gate_threshold``; NaN: no gate)."""
+"""What a campaign task adds around the flight kernel (``el.kernel``) for one frame: its pose under the campaign's pose
+policy (the frame's own pose is its data's fault when unplannable), its ground truth, the frame gate read once per
+worker, and the gate's readout columns (``frame_gate_score``, ``frame_gate_threshold``; NaN: no gate). The declared
+domain and the gate decide the frame inside the kernel, as in flight."""
 
 from __future__ import annotations
 

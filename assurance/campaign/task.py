@@ -229,9 +229,10 @@ def _readout_rows(j: _Judged, config: CampaignConfig, base: dict[str, Any], cloc
     image_rows, cand_rows = [], []
     for m, name in enumerate(config.monitors):
         column = [j.verdicts[k][m] for k in range(len(cands))]
-        outcome = walk_candidates(len(cands), column.__getitem__, walk_of(name), evaluate_all=True)
-        decision, _ = conclude(frame, j.parts, column.__getitem__, walk=walk_of(name), budget=budget, clock=clock,
-                               evaluate_all=True)
+        decision, outcome = conclude(frame, j.parts, column.__getitem__, walk=walk_of(name), budget=budget,
+                                     clock=clock, evaluate_all=True)
+        if outcome is None:  # a refused frame: its walk is still read out (overhead, candidates examined)
+            outcome = walk_candidates(len(cands), column.__getitem__, walk_of(name), evaluate_all=True)
         sel = decision.selected
         h_decision = h_default if sel is None else truth[sel]
         image_rows.append({

@@ -173,7 +173,7 @@ def run_model(args: argparse.Namespace) -> int:
 
     if args.image is not None:
         raise CommandError("--image is for the ground-truth pipeline; give the image as IMAGE")
-    from assurance.cli.system_options import assessed, load_model
+    from assurance.cli.system_options import assessed
 
     image_path = Path(args.image_arg)
     check_max_pixels(args.max_pixels)
@@ -195,7 +195,7 @@ def run_model(args: argparse.Namespace) -> int:
     from el.pipeline import check_monitor_bindings
 
     try:
-        segmenter = load_model(args, threads=args.threads, working_width=core.working_width)
+        segmenter = system.segmenter(threads=args.threads, working_width=core.working_width)
     except ValueError as exc:  # WeightsError: a model named here is a usage error (one line, exit 2); the
         if not system.shipped_network:  # shipped one missing is a flight fault: the default action, exit 3
             raise CommandError(str(exc)) from None

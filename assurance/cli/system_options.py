@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Any
 
 from assurance.system import SystemFile, default_system
 from assurance.system.system import System
@@ -37,20 +36,3 @@ def assessed(args: argparse.Namespace) -> System:
         system = System.build(system_of(args), model=getattr(args, "weights", None), gate=getattr(args, "gate", None))
         args.assessed_system = system
     return system
-
-
-def model_spec(args: argparse.Namespace) -> Any:
-    """What a campaign records and its workers load: the ``--model`` given, else the system's model (None for
-    the shipped one, else its source as data, ``assurance.system.build.model_source``)."""
-    return assessed(args).model
-
-
-def load_model(args: argparse.Namespace, *, threads: int | None = None, working_width: int | None = None) -> Any:
-    """The segmentation model of the command: ``--model`` if given, else the system file's."""
-    return assessed(args).segmenter(threads=threads, working_width=working_width)
-
-
-def frame_gate_path(args: argparse.Namespace) -> Path | None:
-    """The command's frame gate (``System.gate``: ``--gate``, else ``[monitor] gate``, else the shipped gate on the
-    shipped network)."""
-    return assessed(args).gate
