@@ -59,10 +59,11 @@ def _setup(weights: str | None, threads: int):
     import torch
 
     from assurance.fitting.network.training import init_untrained
+    from el.labels import UAVID
     from el.segmentation.inference import Segmenter
 
-    torch.set_num_threads(threads)
-    return Segmenter.load(weights) if weights else Segmenter(init_untrained(seed=0))
+    torch.set_num_threads(threads)  # the shipped architecture, untrained: UAVid's classes
+    return Segmenter.load(weights) if weights else Segmenter(init_untrained(seed=0), labels=UAVID)
 
 
 def _runner(seg, kind: str, h: int, w: int, n: int):

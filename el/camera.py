@@ -13,8 +13,14 @@ from typing import Any
 
 import numpy as np
 
-UNREACHABLE_STRIPES = 2  # the top 2 of 10 horizontal stripes are never landing targets
-NUM_STRIPES = 10
+NUM_STRIPES = 10  # horizontal stripes of equal height: the unit of reachability (and of radii in "paper" mode)
+UNREACHABLE_STRIPES = 2  # the paper's count at its shipped pose; the flight code derives it per pose (reach_m)
+REACH_M = 90.0
+"""Default reach (m): ground farther ahead of the nadir point is out of reach. Phantom 4 at 50 m, 45 degrees:
+the top rows of stripes 1 and 2 see the ground 100.9 m and 83.9 m ahead at 3840x2160 (100.6-101.5 m and
+83.7-84.0 m at 1024x576 down to 256x144), so 90 m, a round value between them, drops exactly the paper's
+top 2 stripes at every size."""
+REACH_BOUNDS_M = (1.0, 10_000.0)
 
 
 # Bounds of what the flat-ground pinhole model is stated for (docs/architecture.md section 2.2).
@@ -135,10 +141,12 @@ class CameraGeometry:
     height: int
     intrinsics: Intrinsics = field(default_factory=Intrinsics)
     pose: Pose = field(default_factory=Pose)
+    reach_m: float = REACH_M
 
     def __post_init__(self) -> None:
         if self.width < 8 or self.height < 8:
             raise ValueError(f"image size must be at least 8x8, got {self.width}x{self.height}")
+        check_number("reach_m", self.reach_m, *REACH_BOUNDS_M, " m")
 
     # -- basic quantities -------------------------------------------------------------------
     @property
@@ -180,15 +188,39 @@ class CameraGeometry:
         _, _, delta = self.pixel_size(rows)
         return safety.beta * safety.radius_m / delta
 
+    def ground_distance(self, rows: np.ndarray | float) -> np.ndarray:
+        """Horizontal distance (m) from the nadir point to the ground the row's centre column sees; +inf for
+        rays at or above the horizon. Rows past the nadir point look back: their distance grows again."""
+        dep = self.depression(rows)
+        s = np.sin(dep)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(s > 0, self.pose.height_m * np.abs(np.cos(dep)) / s, np.inf)
+
+    @property
+    def nadir_y(self) -> float:
+        """Image y (continuous coordinates) of the ground right below the camera, where the UAV comes down when
+        it opens its parachute without moving: H/2 for a nadir camera, beyond H when out of view (oblique)."""
+        return self.height / 2.0 + self.f_px * math.tan(math.radians(90.0 - self.pose.pitch_deg))
+
     # -- stripes and reachable rows ---------------------------------------------------------
     def stripe_edges(self) -> np.ndarray:
         """Row boundaries of the 10 horizontal stripes, shape (11,)."""
         return np.round(np.linspace(0, self.height, NUM_STRIPES + 1)).astype(int)
 
     @property
+    def unreachable_stripes(self) -> int:
+        """How many leading stripes are never landing targets, from the pose and camera (paper: "the sky or
+        unreachable areas"): those whose top row looks less than MIN_DEPRESSION_DEG below the horizon or sees
+        the ground farther than ``reach_m`` ahead. The shipped 45 degree case gives the paper's 2; a nadir one 0."""
+        tops = self.stripe_edges()[:-1] - 0.5  # the upper edge of each stripe's top row: its farthest ground
+        far = (np.degrees(self.depression(tops)) < MIN_DEPRESSION_DEG) | ~(self.ground_distance(tops) <= self.reach_m)
+        return int(np.argmin(far)) if not far.all() else NUM_STRIPES
+
+    @property
     def first_reachable_row(self) -> int:
-        """Rows above this one (the top 2 of 10 stripes) are never landing targets."""
-        return int(self.stripe_edges()[UNREACHABLE_STRIPES])
+        """Rows above this one (the ``unreachable_stripes`` leading stripes) are never landing targets;
+        ``height`` when no stripe is within reach."""
+        return int(self.stripe_edges()[self.unreachable_stripes])
 
     def reachable_rows(self) -> np.ndarray:
         """Boolean (height,) mask of rows where a landing point may lie."""
@@ -238,16 +270,19 @@ class CameraGeometry:
 
     def scaled(self, width: int, height: int) -> CameraGeometry:
         """The same camera and pose for another image size of the same aspect ratio."""
-        return CameraGeometry(width=width, height=height, intrinsics=self.intrinsics, pose=self.pose)
+        return CameraGeometry(width=width, height=height, intrinsics=self.intrinsics, pose=self.pose,
+                              reach_m=self.reach_m)
 
 
 def geometry_problem(geometry: CameraGeometry, *, roll_deg: float = 0.0) -> str | None:
     """Why the flat-ground pinhole model cannot plan on this camera, pose and image size; None when it can.
 
-    Every reachable row (below the top 2 of 10 stripes) must look at least ``MIN_DEPRESSION_DEG`` below
-    the horizon, so it sees the ground at a finite footprint. A roll (from a flight log) is not modelled:
-    up to ``MAX_ROLL_DEG`` it is a pose error, which tilts the rows' depression at the image's side edges
-    by at most ``atan(tan(hfov / 2) sin|roll|)``, taken off the margin above; beyond, it is refused.
+    Every reachable row (below the ``unreachable_stripes``) must look at least ``MIN_DEPRESSION_DEG`` below
+    the horizon, so it sees the ground at a finite footprint. The stripes are cut at that angle on the upper
+    edge of their top row, so what is left to check is that edge under a roll (from a flight log), which is
+    not modelled: up to ``MAX_ROLL_DEG`` it is a pose error, which tilts the rows' depression at the
+    image's side edges by at most ``atan(tan(hfov / 2) sin|roll|)``, taken off the margin; beyond, it is
+    refused. No reachable row at all (all ground in view beyond ``reach_m``) is fine: no candidate, the default.
     """
     if isinstance(roll_deg, bool) or not isinstance(roll_deg, int | float | np.integer | np.floating) \
             or not math.isfinite(roll_deg) or abs(roll_deg) > MAX_ROLL_DEG:
@@ -256,19 +291,35 @@ def geometry_problem(geometry: CameraGeometry, *, roll_deg: float = 0.0) -> str 
     g = geometry
     half_hfov = math.atan(g.width / 2.0 / g.f_px)
     shift = math.degrees(math.atan(math.tan(half_hfov) * math.sin(math.radians(abs(float(roll_deg))))))
+    low = _low_row(g, shift)
+    if low is None:
+        return None
+    row, top = low
+    # the pitches that plan need not be one interval (a steeper pitch brings a higher stripe within reach):
+    # the least pitch from which every steeper one plans, on a 0.1 degree grid (None: not even a nadir one)
+    need: float | None = None
+    for tenth in range(int(PITCH_DEG[1] * 10), int(math.floor(g.pose.pitch_deg * 10)), -1):
+        steeper = CameraGeometry(width=g.width, height=g.height, intrinsics=g.intrinsics, reach_m=g.reach_m,
+                                 pose=Pose(height_m=g.pose.height_m, pitch_deg=tenth / 10.0))
+        if _low_row(steeper, shift) is not None:
+            break
+        need = tenth / 10.0
+    allowed = f"{need:.1f}" if need is not None else f"{PITCH_DEG[1]:.1f} (none: narrow the field of view)"
+    roll = f", roll {float(roll_deg):g} deg" if roll_deg else ""
+    return (f"pose height_m {g.pose.height_m:g}, pitch_deg {g.pose.pitch_deg:g}{roll} with camera "
+            f"{g.intrinsics.name!r} (horizontal field of view {math.degrees(2 * half_hfov):.1f} deg) on a "
+            f"{g.width}x{g.height} image: reachable row {row} looks {top:.1f} deg below the horizon, the "
+            f"flat-ground model needs at least {MIN_DEPRESSION_DEG:g} deg; allowed: pitch_deg >= {allowed}")
+
+
+def _low_row(g: CameraGeometry, shift: float) -> tuple[int, float] | None:
+    """(first reachable row, degrees its upper edge looks below the horizon less a roll's ``shift``) when that
+    is under MIN_DEPRESSION_DEG; None when it is not (every row below looks farther down: a finite footprint)."""
     row = g.first_reachable_row
-    top = math.degrees(float(g.depression(row - 0.5))) - shift  # the upper edge of the first reachable row
-    rows = np.arange(row, g.height)
-    _, _, delta = g.pixel_size(rows)
-    if top < MIN_DEPRESSION_DEG or not np.all(np.isfinite(delta) & (delta > 0)):
-        need = g.pose.pitch_deg + MIN_DEPRESSION_DEG - top
-        roll = f", roll {float(roll_deg):g} deg" if roll_deg else ""
-        return (f"pose height_m {g.pose.height_m:g}, pitch_deg {g.pose.pitch_deg:g}{roll} with camera "
-                f"{g.intrinsics.name!r} (horizontal field of view {math.degrees(2 * half_hfov):.1f} deg) on a "
-                f"{g.width}x{g.height} image: reachable row {row} looks {top:.1f} deg below the horizon, the "
-                f"flat-ground model needs at least {MIN_DEPRESSION_DEG:g} deg; allowed: pitch_deg >= "
-                f"{min(need, 90.0):.1f}" + (" (none: narrow the field of view)" if need > PITCH_DEG[1] else ""))
-    return None
+    if row >= g.height:
+        return None
+    top = math.degrees(float(g.depression(row - 0.5))) - shift
+    return (row, top) if top < MIN_DEPRESSION_DEG else None
 
 
 def check_geometry(geometry: CameraGeometry, *, roll_deg: float = 0.0) -> None:
@@ -300,6 +351,8 @@ def required_beta(
     if not (0 <= height_error < 1 and 0 <= pitch_error < 1):
         raise ValueError("relative errors must lie in [0, 1)")
     rows = np.arange(geometry.first_reachable_row, geometry.height)
+    if rows.size == 0:  # no stripe within reach: no landing is planned, so no radius is at risk
+        return 1.0
     _, _, nominal = geometry.pixel_size(rows)
     worst = 1.0
     for hf in np.linspace(1 - height_error, 1 + height_error, steps):

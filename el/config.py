@@ -11,7 +11,16 @@ import math
 from dataclasses import dataclass, field, fields
 from typing import Any
 
-from el.camera import CAMERAS, FOV_SENSOR_WIDTH_MM, CameraGeometry, Intrinsics, Pose, SafetyParams
+from el.camera import (
+    CAMERAS,
+    FOV_SENSOR_WIDTH_MM,
+    REACH_BOUNDS_M,
+    REACH_M,
+    CameraGeometry,
+    Intrinsics,
+    Pose,
+    SafetyParams,
+)
 
 SEED_LIMIT = 2**32
 """Seeds lie in [0, 2^32): every generator a seed reaches (numpy, torch, MC dropout's ``seed + k``) takes them."""
@@ -64,6 +73,11 @@ class CoreConfig:
         Camera height (m) and pitch (degrees below the horizon).
     intrinsics : Intrinsics
         Sensor width and focal length (mm).
+    reach_m : float
+        How far ahead of the nadir point (m) the UAV can still land: a leading stripe whose top row sees the
+        ground farther is unreachable (``CameraGeometry.unreachable_stripes``). The default 90 m lies between the
+        83.9 m and 100.9 m the top rows of stripes 2 and 1 see in the paper's case (Phantom 4, 50 m, 45 degrees),
+        so that case drops exactly the paper's top 2 of 10 stripes; a nadir camera at 5-30 m drops none.
     """
 
     mode: str = "exact"
@@ -81,6 +95,7 @@ class CoreConfig:
     safety: SafetyParams = field(default_factory=SafetyParams)
     pose: Pose = field(default_factory=Pose)
     intrinsics: Intrinsics = field(default_factory=Intrinsics)
+    reach_m: float = REACH_M
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
@@ -97,13 +112,15 @@ class CoreConfig:
         _float_in("overlap_max", self.overlap_max, 0.0, 1.0)
         _float_in("alpha", self.alpha, 0.0, 1.0)
         _float_in("d_max_factor", self.d_max_factor, 1.0 + 1e-9, 10.0)
+        _float_in("reach_m", self.reach_m, *REACH_BOUNDS_M)
         for name, cls in (("safety", SafetyParams), ("pose", Pose), ("intrinsics", Intrinsics)):
             if not isinstance(getattr(self, name), cls):
                 raise ValueError(f"{name} must be a {cls.__name__}, got {type(getattr(self, name)).__name__}")
 
     def geometry(self, width: int, height: int) -> CameraGeometry:
         """The camera model of this configuration for an image of ``width x height`` pixels."""
-        return CameraGeometry(width=width, height=height, intrinsics=self.intrinsics, pose=self.pose)
+        return CameraGeometry(width=width, height=height, intrinsics=self.intrinsics, pose=self.pose,
+                              reach_m=self.reach_m)
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-ready dict (the decision's ``"config"``); nested records become dicts."""

@@ -170,7 +170,7 @@ def run_core(
     geo = config.geometry(w, h)
     min_row, full_first = reachable_working_row((W, H), (w, h), config)
 
-    radii = cand.row_radii(geo, config.safety, config.mode)
+    radii = _sized_unreachable_rows(cand.row_radii(geo, config.safety, config.mode), min_row)
     forbidden = cand.forbidden_from_probs(probs, labels=labels)
     vp = cand.valid_pixels(forbidden, radii, mode=config.mode, min_row=min_row)
     t1 = clock()
@@ -204,6 +204,17 @@ def run_core(
     )
 
 
+def _sized_unreachable_rows(radii: np.ndarray, min_row: int) -> np.ndarray:
+    """``radii`` with the unreachable rows that see no ground (at or above the horizon: R_px 0, or NaN) given the
+    first reachable row's radius: they are never valid pixels, and the valid-pixel stage wants every radius > 0."""
+    bad = ~(np.isfinite(radii) & (radii > 0))
+    bad[min_row:] = False
+    if bad.any():
+        radii = radii.copy()
+        radii[bad] = radii[min_row] if min_row < len(radii) else 1.0
+    return radii
+
+
 def _ranked_candidates(probs: np.ndarray, vp: cand.ValidPixels, rows: np.ndarray, cols: np.ndarray,
                        config: CoreConfig, input_size: tuple[int, int], labels: LabelSet) -> list[Candidate]:
     """Rank the representatives by hazard, prune overlaps, map to full-resolution coordinates (3.5, 3.1)."""
@@ -232,20 +243,29 @@ def _ranked_candidates(probs: np.ndarray, vp: cand.ValidPixels, rows: np.ndarray
 
 
 def default_area(width: int, height: int, config: CoreConfig | None = None) -> Disc:
-    """The default action's proxy landing area: the disc at the bottom centre of the image, tangent
-    to the bottom edge, with the R_px of its centre row (full-resolution geometry)."""
+    """The default action's proxy landing area: where opening the parachute without moving comes down.
+
+    The nadir point in view (``CameraGeometry.nadir_y``; the image centre for a nadir camera): the disc
+    there, moved up just enough to lie inside the image (basis "nadir"). Out of view (an oblique camera):
+    the nearest ground in view, the bottom-centre disc tangent to the bottom edge ("nearest_ground", the
+    paper's proxy). Either way the radius is the R_px of the centre's row (full-resolution geometry).
+    """
     config = config or CoreConfig()
     W, H = _check_size((width, height))
     geo = config.geometry(W, H)
-    r = float(geo.radius_px(np.array([H - 1.0]), config.safety)[0])
-    for _ in range(50):  # r = R_px(row of the centre), the centre at y = H - r: a fixed point
-        row = min(max(H - r - 0.5, 0.0), H - 1.0)
+    nadir = geo.nadir_y
+    centre = nadir if nadir < H else math.inf  # the centre's y, before it is moved inside the image
+    first = H - 1.0 if math.isinf(centre) else min(max(centre - 0.5, 0.0), H - 1.0)
+    r = float(geo.radius_px(np.array([first]), config.safety)[0])
+    for _ in range(50):  # r = R_px(row of the centre), the centre at y = min(nadir, H - r): a fixed point
+        row = min(max(min(centre, H - r) - 0.5, 0.0), H - 1.0)
         new = float(geo.radius_px(np.array([row]), config.safety)[0])
         if abs(new - r) < 1e-9:
             break
         r = new
     r = min(r, W / 2.0, H / 2.0)
-    return Disc(x=W / 2.0, y=H - r, radius_px=r)
+    basis = "nearest_ground" if math.isinf(centre) else "nadir"
+    return Disc(x=W / 2.0, y=min(centre, H - r), radius_px=r, basis=basis)
 
 
 def probs_from_labels(ids: np.ndarray, size: tuple[int, int], *, labels: LabelSet) -> np.ndarray:

@@ -14,6 +14,12 @@ from typing import Any, Literal
 
 Action = Literal["land", "default"]
 
+DEFAULT_AREA_BASES = {
+    "nadir": "the ground below the UAV: its nadir point is in view, where the parachute brings it down",
+    "nearest_ground": "the nearest ground in view (bottom centre): the nadir point is out of view (oblique camera)",
+}
+"""Why the default area sits where it does (``Disc.basis`` of a decision's ``default_area``), in one line each."""
+
 
 @dataclass(frozen=True)
 class MonitorVerdict:
@@ -33,11 +39,18 @@ class MonitorVerdict:
 
 @dataclass(frozen=True)
 class Disc:
-    """A landing disc in full-resolution pixels."""
+    """A landing disc in full-resolution pixels. ``basis``: for a default area, which ground it stands for
+    (a key of DEFAULT_AREA_BASES); None for a candidate's disc and for areas recorded before it."""
 
     x: float
     y: float
     radius_px: float
+    basis: str | None = None
+
+    @property
+    def basis_text(self) -> str:
+        """The one-line statement of ``basis`` (empty when there is none)."""
+        return DEFAULT_AREA_BASES.get(self.basis or "", "")
 
 
 @dataclass(frozen=True)

@@ -11,13 +11,19 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 MAX_CLASSES = 256  # class ids travel as uint8
-CLASS_KEYS = ("id", "name", "rgb", "forbidden", "hazard_score")
+CLASS_KEYS = ("id", "name", "rgb", "forbidden", "hazard_score", "category")
+CATEGORIES = ("road", "vehicle", "building", "person", "animal", "water", "obstacle", "bare_ground", "vegetation",
+              "tree", "marker", "unknown")
+"""Hazard categories a class may declare (``category``): what the ground is, whatever the label set calls it. The
+certification basis (``assurance.requirements.basis``) says which must be forbidden; road, vehicle and building
+are the paper's hazards (avoid roads at all costs; do not land on cars or buildings), water the ground a parachute
+cannot be recovered from; person and animal are listed so that a set's choice about them is visible."""
 IGNORE_KEYS = ("rgb", "id", "counts_as", "name")
 IGNORE_COUNTS_AS = ("forbidden", "excluded")
 """How the ground truth treats an ignored pixel: ``forbidden`` (default: unknown ground cannot be shown
@@ -35,6 +41,8 @@ class LabelClass:
     rgb: tuple[int, int, int]
     forbidden: bool
     hazard_score: float | None  # s_l for safe classes, None for forbidden ones
+    category: str | None = field(default=None, compare=False)  # hazard category (CATEGORIES); None: not declared
+    # (not part of equality: a set read back without its categories still flies the same classes)
 
 
 @dataclass(frozen=True)
@@ -120,7 +128,8 @@ def class_from_dict(i: int, c: Any) -> LabelClass:
     rgb = c["rgb"]
     if isinstance(rgb, str) or not isinstance(rgb, Sequence):
         raise ValueError(f"{where}: rgb must be a list of 3 integers in 0..255, got {rgb!r}")
-    return LabelClass(c["id"], c["name"], tuple(rgb), c["forbidden"], c.get("hazard_score"))  # type: ignore[arg-type]
+    return LabelClass(c["id"], c["name"], tuple(rgb), c["forbidden"], c.get("hazard_score"),  # type: ignore[arg-type]
+                      c.get("category"))
 
 
 def ignore_from_dict(d: Any) -> IgnoreLabel:
@@ -192,8 +201,11 @@ def classes_from_palette(d: Mapping[str, Any]) -> list[LabelClass]:
     missing = [n for n in names if n not in forbidden and n not in scores]
     if missing:
         raise ValueError(f"hazard_scores: safe classes {missing} need a score (a number >= 0)")
+    categories = d.get("categories") or {}
+    if not isinstance(categories, Mapping) or any(k not in names for k in categories):
+        raise ValueError(f"categories: must be a mapping of class name -> category, got {categories!r}")
     return [LabelClass(i, n, tuple(int(v) for v in palette[n]), n in forbidden,  # type: ignore[arg-type]
-                       None if n in forbidden else scores[n]) for i, n in enumerate(names)]
+                       None if n in forbidden else scores[n], categories.get(n)) for i, n in enumerate(names)]
 
 
 def validate_classes(set_name: str, classes: tuple[LabelClass, ...]) -> None:
@@ -204,6 +216,9 @@ def validate_classes(set_name: str, classes: tuple[LabelClass, ...]) -> None:
         raise ValueError(f"label set {set_name!r} has {len(classes)} classes, at most {MAX_CLASSES} are supported")
     for c in classes:
         _validate_class(set_name, c)
+        if c.category is not None and c.category not in CATEGORIES:
+            raise ValueError(f"label set {set_name!r}: class {c.name!r}: category {c.category!r} is not one of "
+                             f"{', '.join(CATEGORIES)}")
     ids = [int(c.id) for c in classes]
     n = len(classes)
     if sorted(ids) != list(range(n)):

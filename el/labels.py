@@ -49,7 +49,7 @@ from el.label_tables import (  # noqa: F401  (LabelClass, IgnoreLabel, MAX_CLASS
 )
 
 UavidClass = LabelClass  # the name of the record when the UAVid classes were the only ones
-_SET_KEYS = ("name", "classes", "palette", "forbidden", "hazard_scores", "ignore", "hierarchy")
+_SET_KEYS = ("name", "classes", "palette", "forbidden", "hazard_scores", "categories", "ignore", "hierarchy")
 PRESET_DIR = Path(__file__).parent / "data" / "labels"
 """The packaged label sets (``NAME.yaml``), loaded by name with :func:`load_label_set`."""
 
@@ -93,7 +93,7 @@ class LabelSet:
     Examples
     --------
     >>> s = LabelSet("toy", (LabelClass(0, "grass", (0, 160, 0), False, 0.0),
-    ...                      LabelClass(1, "road", (128, 64, 128), True, None)))
+    ...                      LabelClass(1, "road", (128, 64, 128), True, None, "road")))
     >>> s.forbidden_ids, s.safe_ids, s.num_classes
     ((1,), (0,), 2)
     >>> LabelSet.from_dict(s.to_dict()) == s
@@ -269,7 +269,8 @@ class LabelSet:
             "name": self.name,
             "classes": [
                 {"id": c.id, "name": c.name, "rgb": [int(v) for v in c.rgb], "forbidden": bool(c.forbidden),
-                 **({} if c.forbidden else {"hazard_score": float(c.hazard_score)})}  # type: ignore[arg-type]
+                 **({} if c.forbidden else {"hazard_score": float(c.hazard_score)}),  # type: ignore[arg-type]
+                 **({} if c.category is None else {"category": c.category})}
                 for c in self.classes
             ],
         }
@@ -303,7 +304,7 @@ class LabelSet:
         if "palette" in d:
             classes = classes_from_palette(d)
         else:
-            extra = sorted(k for k in ("forbidden", "hazard_scores") if k in d)
+            extra = sorted(k for k in ("forbidden", "hazard_scores", "categories") if k in d)
             if extra:
                 raise ValueError(f"{', '.join(extra)}: belong to the palette form; with 'classes' each class says it")
             raw = d["classes"]
@@ -333,7 +334,7 @@ def load_label_set(source: str | Path) -> LabelSet:
     """
     import yaml
 
-    from el import safeyaml
+    from el import safeyaml, userfiles
 
     p = Path(source)
     if p.suffix.lower() not in (".yaml", ".yml", ".json"):
@@ -344,14 +345,11 @@ def load_label_set(source: str | Path) -> LabelSet:
         if str(source) == "uavid":
             return UAVID
         p = PRESET_DIR / f"{source}.yaml"
+    # a regular file of at most 1 MiB (a FIFO or /dev/zero refused before any read), nested at most 32 deep
+    text = userfiles.read_text(p, what="label set file", max_bytes=safeyaml.MAX_YAML_BYTES)
     try:
-        if p.stat().st_size > safeyaml.MAX_YAML_BYTES:  # refused before it is read
-            raise ValueError(f"{p}: label set file over {safeyaml.MAX_YAML_BYTES} bytes")
-        text = p.read_text(encoding="utf-8")
-    except OSError as err:
-        raise ValueError(f"{p}: cannot read label set ({err.strerror or err})") from None
-    try:
-        data = json.loads(text) if p.suffix.lower() == ".json" else safeyaml.safe_load(text)
+        data = userfiles.parse_bounded(json.loads, text, where=str(p)) if p.suffix.lower() == ".json" \
+            else safeyaml.safe_load(text)
     except (json.JSONDecodeError, yaml.YAMLError) as err:
         raise ValueError(f"{p}: not valid {'JSON' if p.suffix.lower() == '.json' else 'YAML'}: {err}") from None
     try:
@@ -368,14 +366,14 @@ def load_label_set(source: str | Path) -> LabelSet:
 
 # -- the default set: UAVid ------------------------------------------------------------------------
 CLASSES: tuple[LabelClass, ...] = (
-    LabelClass(0, "clutter", (0, 0, 0), False, 2.0),
-    LabelClass(1, "building", (128, 0, 0), True, None),
-    LabelClass(2, "road", (128, 64, 128), True, None),
-    LabelClass(3, "static_car", (192, 0, 192), True, None),
-    LabelClass(4, "tree", (0, 128, 0), False, 3.0),
-    LabelClass(5, "low_vegetation", (128, 128, 0), False, 0.0),
-    LabelClass(6, "human", (64, 64, 0), False, 1.0),
-    LabelClass(7, "moving_car", (64, 0, 128), True, None),
+    LabelClass(0, "clutter", (0, 0, 0), False, 2.0, "unknown"),
+    LabelClass(1, "building", (128, 0, 0), True, None, "building"),
+    LabelClass(2, "road", (128, 64, 128), True, None, "road"),
+    LabelClass(3, "static_car", (192, 0, 192), True, None, "vehicle"),
+    LabelClass(4, "tree", (0, 128, 0), False, 3.0, "tree"),
+    LabelClass(5, "low_vegetation", (128, 128, 0), False, 0.0, "vegetation"),
+    LabelClass(6, "human", (64, 64, 0), False, 1.0, "person"),
+    LabelClass(7, "moving_car", (64, 0, 128), True, None, "vehicle"),
 )
 
 UAVID = LabelSet("uavid", CLASSES)

@@ -2,7 +2,9 @@
 
 ``yaml.safe_load`` builds no objects but still expands aliases: a 600-byte file of nested ``*refs`` (an
 "alias bomb") becomes a structure whose text is gigabytes once printed. Here aliases are refused outright
-(none of the project's files needs one) and a file is refused above :data:`MAX_YAML_BYTES`.
+(none of the project's files needs one), a document is refused above :data:`MAX_YAML_BYTES` or nested deeper than
+``el.userfiles.MAX_DEPTH`` (PyYAML composes recursively: ``[[[[...`` thousands deep exhausts the stack), and a file
+is read through ``el.userfiles`` (a regular file only, its size capped before and while it is read).
 """
 
 from __future__ import annotations
@@ -12,11 +14,14 @@ from typing import Any
 
 import yaml
 
-MAX_YAML_BYTES = 1 << 20  # 1 MiB: the largest shipped YAML file is a few tens of kB
+from el import userfiles
+
+MAX_YAML_BYTES = userfiles.MAX_SETTINGS_BYTES  # 1 MiB: the largest shipped YAML file is a few tens of kB
 
 
-class YamlLimitError(yaml.YAMLError):
-    """A YAML document outside the limits (an alias, or too large); a YAMLError, so callers' handlers catch it."""
+class YamlLimitError(yaml.YAMLError, ValueError):
+    """A YAML document or file outside the limits (an alias, too large, too deep, not a regular file); a YAMLError
+    and a ValueError, so callers' handlers of either catch it."""
 
 
 class BoundedSafeLoader(yaml.SafeLoader):
@@ -31,21 +36,31 @@ class BoundedSafeLoader(yaml.SafeLoader):
 
 
 def safe_load(text: str | bytes, *, max_bytes: int = MAX_YAML_BYTES) -> Any:
-    """Parse one YAML document like ``yaml.safe_load``, refusing aliases and documents over ``max_bytes``."""
+    """Parse one YAML document like ``yaml.safe_load``, refusing aliases, documents over ``max_bytes`` and
+    documents nested deeper than ``el.userfiles.MAX_DEPTH``."""
     size = len(text.encode("utf-8")) if isinstance(text, str) else len(text)
     if size > max_bytes:
         raise YamlLimitError(f"YAML document of {size} bytes exceeds the limit of {max_bytes} bytes")
-    loader = BoundedSafeLoader(text)
+
+    def parse(source: str | bytes) -> Any:
+        loader = BoundedSafeLoader(source)
+        try:
+            return loader.get_single_data()
+        finally:
+            loader.dispose()
+
     try:
-        return loader.get_single_data()
-    finally:
-        loader.dispose()
+        return userfiles.parse_bounded(parse, text, where="YAML document")  # type: ignore[arg-type]
+    except userfiles.UserFileError as exc:
+        raise YamlLimitError(str(exc)) from None
 
 
-def load_file(path: str | Path, *, max_bytes: int = MAX_YAML_BYTES) -> Any:
-    """``safe_load`` of a file, its size checked before it is read (OSError when it cannot be read)."""
-    path = Path(path)
-    size = path.stat().st_size
-    if size > max_bytes:
-        raise YamlLimitError(f"{path}: YAML file of {size} bytes exceeds the limit of {max_bytes} bytes")
-    return safe_load(path.read_text(encoding="utf-8"), max_bytes=max_bytes)
+def load_file(path: str | Path, *, max_bytes: int = MAX_YAML_BYTES, what: str = "YAML file") -> Any:
+    """``safe_load`` of a file read through ``el.userfiles.read_text`` (a regular file, at most ``max_bytes``):
+    ``YamlLimitError`` naming the file when it cannot be read or is outside the limits, ``YAMLError`` when it does
+    not parse."""
+    try:
+        text = userfiles.read_text(path, what=what, max_bytes=max_bytes)
+    except userfiles.UserFileError as exc:
+        raise YamlLimitError(str(exc)) from None
+    return safe_load(text, max_bytes=max_bytes)

@@ -56,12 +56,13 @@ def test_data_record_model_log_and_amlas_index(auditor_report):
     schema = json.loads((ROOT / "assurance" / "data" / "evidence.schema.json").read_text("utf-8"))
     jsonschema.validate(doc, schema)
     roles = [d["role"] for d in doc["data_record"]["datasets"]]
-    assert roles[0] == "verification (this campaign)" and "learned monitor training" in roles
+    assert roles[0] == "verification (this campaign)" and "monitor calibration (threshold)" in roles
+    assert "learned monitor training" not in roles  # the run used lhd and lhd+ch: the learned monitor is not its
     assert {c["result"] for c in doc["data_record"]["disjoint"]} <= {"pass", "fail", "not checked"}
     items = {r["item"]: r["value"] for r in doc["model_log"]["network"]}
     assert "tiny.pt" in items["Network"] and "Test split used for" in items
     letters = {(a["stage"], a["letter"]) for a in doc["amlas"]}
-    assert {(1, "A"), (2, "H"), (3, "N"), (3, "P"), (4, "V"), (5, "Z"), (6, "EE")} <= letters
+    assert {(1, "A"), (2, "H"), (3, "P"), (4, "V"), (5, "Z"), (6, "EE")} <= letters  # no development set: none used
     html = (auditor_report / "evidence.html").read_text("utf-8")
     for anchor in ('id="data-record"', 'id="model-log"', 'id="amlas"'):
         assert anchor in html
@@ -92,11 +93,15 @@ def test_model_log_of_the_shipped_network_from_its_card():
     from assurance.evidence.render import ROOT
 
     weights = ROOT / "el" / "segmentation" / "weights" / "model.pt"
-    log = model_log({"weights": {"path": str(weights)}, "data": {"sha256": "f" * 64}})
+    deployed = {"monitors": ["learned:walk=score,threshold=0.8"]}  # the run used the shipped learned monitor
+    log = model_log({"weights": {"path": str(weights)}, "data": {"sha256": "f" * 64}, "config": deployed})
     items = {r["item"]: r["value"] for r in log["network"]}
     assert items["Test split used for"].startswith("none")
     assert "data/train" in items["Data"] and "step" in items["Selection rule"]
     assert len(log["history"]) >= 1 and {r["item"] for r in log["monitors"]} >= {"Learned monitor"}
+    unused = model_log({"weights": {"path": str(weights)}, "data": {"sha256": "f" * 64},
+                        "config": {"monitors": ["lhd"]}})
+    assert "Learned monitor" not in {r["item"] for r in unused["monitors"]}  # only the monitors the run used
     card = json.loads((weights.with_suffix(".json")).read_text("utf-8"))
     used = card["training"]["data"]["train"]["sha256"]
     log = model_log({"weights": {"path": str(weights)}, "data": {"sha256": used}})

@@ -29,7 +29,7 @@ from el.segmentation.patch_pool import PatchPool
 from el.walk import SCORE
 
 WW = 64
-NET = load_learned_model().network_sha256  # the network the shipped learned model was fitted on
+NET = load_learned_model(labels=UAVID).network_sha256  # the network the shipped learned model was fitted on
 RNG = np.random.default_rng(7)
 FRAME = RNG.integers(0, 255, (144, 256, 3), dtype=np.uint8)
 # radii 10..20 px: patches of 27..51 px a side, several sharing a padded size; the first is cut by the border
@@ -48,11 +48,11 @@ def segmenters(tmp_path_factory):
     from el.segmentation.onnx_engine import OnnxEngine
 
     torch.manual_seed(0)
-    native = Segmenter(build_model(TINY_ARCH), working_width=WW, card={"weights_sha256": NET})
+    native = Segmenter(build_model(TINY_ARCH), working_width=WW, card={"weights_sha256": NET}, labels=UAVID)
     path = tmp_path_factory.mktemp("tiny") / "tiny.onnx"
     export_onnx(native, path, frame=FRAME)
     engine = OnnxEngine(path, sha256_file(path), threads=2)
-    return native, Segmenter(native.model, working_width=WW, card={"weights_sha256": NET}, engine=engine)
+    return native, Segmenter(native.model, working_width=WW, card={"weights_sha256": NET}, engine=engine, labels=UAVID)
 
 
 def _contexts(seg, candidates=CANDIDATES, frame=FRAME):
@@ -93,7 +93,7 @@ def test_check_many_gives_the_verdicts_of_check(segmenters, mode, kind):
     native, onnx = segmenters
     seg = native if mode == "torch" else onnx
     seg.patch_workers = 2 if mode == "onnx pool" else 1
-    monitor = LearnedMonitor() if kind == "learned" else LHDMonitor()
+    monitor = LearnedMonitor(labels=UAVID) if kind == "learned" else LHDMonitor(labels=UAVID)
     contexts = _contexts(seg)
     seeds = [3 + k for k in range(len(CANDIDATES))]
     lone = [monitor.check(FRAME, c, seg, seed=s, context=x)
@@ -131,22 +131,22 @@ def test_monitors_whose_features_are_not_the_softmax_are_judged_one_at_a_time():
         def patch_features(self, patch, segmenter, **kw):
             return super().patch_features(patch, segmenter, **kw)
 
-    assert LearnedMonitor().batches_softmax()
-    assert not any(m.batches_softmax() for m in (mcd, OwnFeatures(), LHDMonitor()))
+    assert LearnedMonitor(labels=UAVID).batches_softmax()
+    assert not any(m.batches_softmax() for m in (mcd, OwnFeatures(labels=UAVID), LHDMonitor(labels=UAVID)))
     seeds = list(range(len(CANDIDATES)))
     contexts = _contexts(seg, frame=frame)
-    for monitor, ctx in ((mcd, None), (OwnFeatures(), contexts)):
+    for monitor, ctx in ((mcd, None), (OwnFeatures(labels=UAVID), contexts)):
         lone = [monitor.check(frame, c, seg, seed=s, context=None if ctx is None else ctx[k])
                 for k, (c, s) in enumerate(zip(CANDIDATES, seeds, strict=True))]
         many = monitor.check_many(frame, CANDIDATES, seg, seeds=seeds, contexts=ctx)
         assert [(v.score, v.accepted) for v in lone] == [(v.score, v.accepted) for v in many]
     with pytest.raises(ValueError, match="5 candidates, 4 seeds"):
-        LHDMonitor().check_many(frame, CANDIDATES, seg, seeds=seeds[:4])
+        LHDMonitor(labels=UAVID).check_many(frame, CANDIDATES, seg, seeds=seeds[:4])
 
 
 def test_batch_judge_judges_the_frame_once_and_only_that_frame():
     seg = Counting(WW)
-    monitor = LearnedMonitor()
+    monitor = LearnedMonitor(labels=UAVID)
     contexts = _contexts(seg)
     judge = batch_judge(monitor, FRAME, CANDIDATES, seg, probs=contexts[0].frame_probs, seed=3)
     verdicts = [judge(k) for k in reversed(range(len(CANDIDATES)))][::-1]

@@ -9,6 +9,7 @@ import torch
 from helpers import TINY_ARCH, FakeClock, OracleSegmenter, scene_ids, scene_image
 
 from el.config import CoreConfig
+from el.labels import UAVID
 from el.monitors.mc_chunks import MC_CHUNK, mc_samples
 from el.pipeline import EmergencyLanding, PipelineConfig
 from el.segmentation import Segmenter
@@ -22,7 +23,7 @@ pytestmark = pytest.mark.usefixtures("one_torch_thread")
 def seg():
     """The tiny CNN on patches (and MC dropout); frames segmented perfectly, so there are candidates."""
     torch.manual_seed(0)
-    s = Segmenter(build_model(TINY_ARCH), working_width=WW)
+    s = Segmenter(build_model(TINY_ARCH), working_width=WW, labels=UAVID)
     s.predict_frame = OracleSegmenter(WW).predict_frame
     return s
 

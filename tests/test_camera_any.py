@@ -3,6 +3,7 @@ and worked example 3's property: no candidate disc of the ground-truth pipeline 
 pixel at any pose in 20-120 m, 30-90 degrees, with random intrinsics."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -23,6 +24,7 @@ from el.config import CoreConfig, make_intrinsics
 from el.labels import CLASS_IDS, UAVID
 
 SMALL = [(256, 144, 128), (192, 108, 96)]
+LONG_REACH_M = 10_000.0
 
 
 def test_a_camera_sheet_gives_the_intrinsics():
@@ -90,13 +92,21 @@ def test_the_default_geometry_and_the_stated_envelope_are_valid():
                 check_geometry(g, roll_deg=MAX_ROLL_DEG)
 
 
-def test_a_pose_that_sees_the_horizon_in_reachable_rows_is_refused_naming_what_is_allowed():
+def test_a_pose_that_sees_the_horizon_drops_those_stripes_and_a_roll_below_the_margin_is_refused():
+    # issue 41: rows that see the horizon, or ground beyond reach_m, are unreachable stripes, not a refusal
     g = CameraGeometry(width=3840, height=2160, pose=Pose(pitch_deg=12.0))
-    with pytest.raises(ValueError, match=r"pitch_deg 12 .* reachable row 432 .* allowed: pitch_deg >= 17\.2"):
-        check_geometry(g)
-    wide = CameraGeometry(width=1024, height=1024, intrinsics=Intrinsics.from_fov(118.0), pose=Pose(pitch_deg=20.0))
+    assert geometry_problem(g) is None and g.first_reachable_row == 1944  # the bottom stripe alone, ~84 m ahead
+    # with a long reach, row 432 (3.1 deg down) is reachable; a roll tilts it below the 3 degree margin
+    far = CameraGeometry(width=3840, height=2160, pose=Pose(pitch_deg=17.3), reach_m=10_000.0)
+    assert far.first_reachable_row == 432 and geometry_problem(far) is None
+    with pytest.raises(ValueError, match=r"pitch_deg 17.3, roll 5 deg .* row 432 .* allowed: pitch_deg >= 29\.7"):
+        check_geometry(far, roll_deg=5.0)
+    for pitch in (29.7, 45.0, 90.0):
+        assert geometry_problem(replace(far, pose=Pose(pitch_deg=pitch)), roll_deg=5.0) is None
+    wide = CameraGeometry(width=1024, height=1024, intrinsics=Intrinsics.from_fov(118.0), pose=Pose(pitch_deg=40.0),
+                          reach_m=10_000.0)
     with pytest.raises(ValueError, match="field of view 118.0 deg"):
-        check_geometry(wide)
+        check_geometry(wide, roll_deg=5.0)
 
 
 def test_roll_is_accepted_within_its_bound_and_refused_beyond():
@@ -106,7 +116,7 @@ def test_roll_is_accepted_within_its_bound_and_refused_beyond():
         with pytest.raises(ValueError, match=r"roll_deg must lie in \[-5, 5\] degrees"):
             check_geometry(g, roll_deg=roll)
     # a roll eats into the margin: a pose just valid without roll is refused with it
-    edge = CameraGeometry(width=3840, height=2160, pose=Pose(pitch_deg=17.3))
+    edge = CameraGeometry(width=3840, height=2160, pose=Pose(pitch_deg=17.3), reach_m=10_000.0)
     assert geometry_problem(edge) is None and "roll 5 deg" in geometry_problem(edge, roll_deg=5.0)
 
 
@@ -125,9 +135,12 @@ def test_the_ground_truth_pipeline_plans_with_the_frame_pose_and_faults_on_an_in
     assert low.input["pose"] == {"height_m": 25.0, "pitch_deg": 45.0, "source": "frame"}
     assert base.input["pose"]["source"] == "nominal"
     assert low.default_area.radius_px > base.default_area.radius_px  # closer: a larger disc
-    bad = decide_from_labels(ids, config=CoreConfig(working_width=128), pose=Pose(height_m=50.0, pitch_deg=8.0),
-                             labels=UAVID)
+    bad = decide_from_labels(ids, config=CoreConfig(working_width=128, reach_m=10_000.0), roll_deg=5.0,
+                             pose=Pose(height_m=50.0, pitch_deg=8.0), labels=UAVID)
     assert bad.action == "default" and bad.reason.startswith("fault: pose: ValueError: pose height_m 50")
+    beyond = decide_from_labels(ids, config=CoreConfig(working_width=128), pose=Pose(height_m=50.0, pitch_deg=8.0),
+                                labels=UAVID)  # all ground in view beyond reach: no candidate
+    assert (beyond.action, beyond.reason, beyond.candidates) == ("default", "no_candidate", [])
     rolled = decide_from_labels(ids, config=CoreConfig(working_width=128), roll_deg=9.0, labels=UAVID)
     assert rolled.reason.startswith("fault: pose: ValueError: roll_deg must lie in")
 
@@ -150,13 +163,15 @@ def test_no_candidate_disc_touches_a_forbidden_pixel_at_any_pose_and_camera(case
     ids, ww = case
     intr, pose = camera
     H, W = ids.shape
-    assert geometry_problem(CameraGeometry(width=W, height=H, intrinsics=intr, pose=pose)) is None
-    decision = decide_from_labels(ids, config=CoreConfig(working_width=ww, intrinsics=intr), pose=pose, labels=UAVID)
+    # a long reach: every stripe that sees the ground 3 degrees down plans, the most discs to check
+    geo = CameraGeometry(width=W, height=H, intrinsics=intr, pose=pose, reach_m=LONG_REACH_M)
+    assert geometry_problem(geo) is None
+    decision = decide_from_labels(ids, config=CoreConfig(working_width=ww, intrinsics=intr, reach_m=LONG_REACH_M),
+                                  pose=pose, labels=UAVID)
     assert not decision.reason.startswith("fault"), decision.reason
     assert decision.input["pose"]["height_m"] == pose.height_m
-    assert_candidates_safe_at_full_resolution(ids, decision.candidates)
+    assert_candidates_safe_at_full_resolution(ids, decision.candidates, geo)
     # the discs are the frame's: R_px of their row at this pose (to the working grid's rounding)
-    geo = CameraGeometry(width=W, height=H, intrinsics=intr, pose=pose)
     for c in decision.candidates:
         assert c.radius_px == pytest.approx(float(geo.radius_px(c.y - 0.5)), rel=0.05)
     SEEN["examples"] += 1

@@ -255,8 +255,8 @@ class _BlindSegmenter:
 def test_candidate_audit_says_what_makes_the_unsafe_candidates_unsafe(data):
     from assurance.fitting.candidate_audit import _unsafe_cause, candidate_audit
 
-    assert _unsafe_cause(np.array([5, 5, 0, 4], np.uint8)) is None
-    assert _unsafe_cause(np.array([5, 2, 2, 1], np.uint8)) == ("road", 0.75)
+    assert _unsafe_cause(np.array([5, 5, 0, 4], np.uint8), UAVID) is None
+    assert _unsafe_cause(np.array([5, 2, 2, 1], np.uint8), UAVID) == ("road", 0.75)
     audit = candidate_audit(_BlindSegmenter(), data, core=CoreConfig(n_star=6, working_width=256))
     assert audit["unsafe"] > 0
     assert sum(audit["unsafe_by_class"].values()) == audit["unsafe"]

@@ -15,6 +15,7 @@ from assurance.campaign.run import CampaignConfig, plan, run_task, task_seed
 from assurance.dataio.uavid import read_image
 from assurance.perturbations import perturb
 from el.config import CoreConfig
+from el.labels import UAVID
 from el.monitors.frame_gate import frame_gate_document, load_frame_gate
 from el.odd import OperatingDomain
 from el.pipeline import EmergencyLanding, PipelineConfig
@@ -84,7 +85,7 @@ def world(tmp_path_factory, one_torch_thread):
     write_textured_scenes(root / "data", range(100, 108))
     write_textured_scenes(root / "data", range(200, 204), 96, 54, sequence="seq01")  # outside the frame size
     torch.manual_seed(0)
-    seg = Segmenter(build_model(TINY_ARCH), working_width=WW, card={"weights_sha256": SHA})
+    seg = Segmenter(build_model(TINY_ARCH), working_width=WW, card={"weights_sha256": SHA}, labels=UAVID)
     doc = fit_gate(train, val, seg, kind="mahalanobis", quantile=0.99, val_scenes="0:6",
                    weights={"path": None, "sha256": SHA, "segmenter": "weights"})
     gate = load_frame_gate(_write(root / "fitted.json", doc))

@@ -66,15 +66,28 @@ def test_the_evidence_pdf_names_the_network_and_the_system_file(walkthrough, tmp
     html = (out / "evidence.html").read_text()
     assert "Example Drone Operations Ltd." in html and "my-drone" in html and "R = 2.5 m" in html
     assert "Declared operating domain" in html and "40 to 70 m" in html and "Perturbation fog" in html
-    assert "Out-of-domain frame gates, measured on validation scenes" in html and "ood_photos" in html
+    # nothing of the shipped system: its gate study, weights, monitor files, release command, forbidden classes
+    for shipped in ("Out-of-domain frame gates, measured on validation scenes", "0d3dab88", "learned.json",
+                    "frame_gate.json", "make release-evidence", "road, car", "45 degrees"):
+        assert shipped not in html, shipped
+    assert "house" in html and "guarded by telemetry only" in html  # its forbidden classes; it has no frame gate
     pdf = out / "evidence.pdf"
     if evidence["pdf_error"] is None:
         assert pdf.is_file() and pdf.read_bytes().startswith(b"%PDF")
 
 
-def test_evidence_on_another_system_file_is_refused(walkthrough, tmp_path, capsys):
+def test_evidence_uses_the_runs_system_file_and_refuses_another(walkthrough, tmp_path, capsys):
+    from el.hashing import sha256_file
+
+    out = tmp_path / "own"
+    cli.main(["evidence", "--run", str(walkthrough["run"]), "--out", str(out), "--no-pdf", "--boot", "20"])
+    assert "(the run's own)" in capsys.readouterr().err  # no --system: the run's system file, found and unchanged
+    doc = json.loads((out / "evidence.json").read_text())
+    assert doc["identity"]["system_sha256"] == sha256_file(walkthrough["system"])
+    other = tmp_path / "other.toml"
+    other.write_text('[system]\nname = "another"\n')
     code = cli.main(["evidence", "--run", str(walkthrough["run"]), "--out", str(tmp_path / "r"), "--no-pdf",
-                     "--boot", "20"])  # no --system: the embedded default, not the run's system file
+                     "--boot", "20", "--system", str(other)])
     assert code == 1
     assert "another system file" in capsys.readouterr().out
 

@@ -94,7 +94,7 @@ def test_capabilities_pass_through_only_where_the_network_has_them(frame):
 
 def test_the_built_in_network_through_the_map(frame):
     torch.manual_seed(0)
-    seg = Segmenter(build_model(TINY_ARCH).eval(), working_width=64)
+    seg = Segmenter(build_model(TINY_ARCH).eval(), working_width=64, labels=UAVID)
     mapped = MappedModel(seg, TO_REVERSED, REVERSED)
     assert all(has_capability(mapped, c) for c in (MC_DROPOUT, PATCH_TRUNK, TRUNK_FEATURES))
     assert accepts_keyword(mapped.mc_dropout, "window") and mapped.working_size(128, 72) == seg.working_size(128, 72)

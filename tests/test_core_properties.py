@@ -97,11 +97,12 @@ def label_maps(draw, *, sizes=SIZES, max_objects=10):
 
 
 # -- helpers -----------------------------------------------------------------------------------------
-def assert_candidates_safe_at_full_resolution(ids: np.ndarray, candidates: list[Candidate]) -> None:
+def assert_candidates_safe_at_full_resolution(ids: np.ndarray, candidates: list[Candidate],
+                                              geometry: CameraGeometry | None = None) -> None:
     """EL-R01 at full resolution: no point of a forbidden pixel inside a disc, disc inside the image,
-    centre in a reachable row."""
+    centre in a reachable row (of ``geometry``, the camera and pose planned with; default: the nominal ones)."""
     H, W = ids.shape
-    first = CameraGeometry(width=W, height=H).first_reachable_row
+    first = (geometry or CameraGeometry(width=W, height=H)).first_reachable_row
     forbidden = forbidden_mask(ids)
     for c in candidates:
         assert c.radius_px > 0

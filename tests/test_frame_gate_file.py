@@ -41,7 +41,7 @@ def setup(tmp_path_factory, one_torch_thread):
     root = tmp_path_factory.mktemp("gate")
     train, val = _scenes(root / "train", range(30)), _scenes(root / "val", range(100, 112))
     torch.manual_seed(0)
-    seg = Segmenter(build_model(TINY_ARCH), working_width=WW, card={"weights_sha256": SHA})
+    seg = Segmenter(build_model(TINY_ARCH), working_width=WW, card={"weights_sha256": SHA}, labels=UAVID)
     doc = fit_gate(train, val, seg, kind="mahalanobis", quantile=0.99, val_scenes="0:6",
                    weights={"path": None, "sha256": SHA, "segmenter": "weights"})
     gate = root / "gate.json"
@@ -98,6 +98,7 @@ def _refused(system, frames):
         assert d.action == "default" and g["score"] > g["threshold"], (name, g)
         assert d.reason == (f"out_of_domain: frame gate mahalanobis score {g['score']:.4g} > threshold "
                             f"{g['threshold']:.4g}")
+        jsonschema.validate(json.loads(d.to_json()), decision_schema())  # a refusal is a valid decision record
 
 
 def test_a_gate_fitted_on_clean_frames_refuses_thick_fog(setup, tmp_path):

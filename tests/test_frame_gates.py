@@ -9,7 +9,7 @@ import torch
 from conftest import tiny_scene
 
 from assurance.perturbations import perturb
-from el.labels import ids_to_colors
+from el.labels import UAVID, ids_to_colors
 from el.monitors.gates import GATES
 from el.segmentation.architectures import build_model
 from el.segmentation.inference import Segmenter
@@ -21,7 +21,7 @@ IN_DOMAIN = ("none", "brightness", "fog", "motion_blur", "shifted_pixels", "pixe
 @pytest.fixture(scope="module")
 def tiny():
     torch.manual_seed(0)
-    seg = Segmenter(build_model(ArchConfig(widths=(8, 8, 8), decoder_channels=8)), working_width=128)
+    seg = Segmenter(build_model(ArchConfig(widths=(8, 8, 8), decoder_channels=8)), working_width=128, labels=UAVID)
     seg.tap_frames = True  # off by default: a system without a frame gate pays nothing
     return seg
 

@@ -28,6 +28,7 @@ def test_the_tap_cache_is_saved_per_set_and_a_rerun_taps_only_what_it_lacks(tmp_
 
     import torch
 
+    from el.labels import UAVID
     from el.segmentation.architectures import build_model
     from el.segmentation.inference import Segmenter
 
@@ -35,7 +36,7 @@ def test_the_tap_cache_is_saved_per_set_and_a_rerun_taps_only_what_it_lacks(tmp_
     write_textured_scenes(root / "train", range(2), *SIZE)
     write_textured_scenes(root / "val", range(100, 103), *SIZE)
     torch.manual_seed(0)
-    seg = Segmenter(build_model(TINY_ARCH), working_width=64)
+    seg = Segmenter(build_model(TINY_ARCH), working_width=64, labels=UAVID)
     # the photographs come from scikit-image (the "gates" extra), which the test environment need not have
     skimage = types.ModuleType("skimage")
     skimage.data = types.ModuleType("skimage.data")

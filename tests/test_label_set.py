@@ -261,8 +261,7 @@ def test_ch_hierarchy_must_match_the_monitors_set():
     with pytest.raises(ValueError, match="label set 'uavid'"):
         CHMonitor(tau=0.25, labels=FIELDS, hierarchy=default_hierarchy(labels=UAVID))
     taken = LabelSet("odd", (LabelClass(0, "safe", (1, 1, 1), False, 0.0), LabelClass(1, "b", (2, 2, 2), True, None)))
-    with pytest.raises(ValueError, match="give it a 'hierarchy'"):
-        CHMonitor(tau=0.25, labels=taken)
+    assert CHMonitor(tau=0.25, labels=taken).hierarchy.nodes == ("safe", "b", "any", "safe_node", "unsafe")
 
 
 def test_validation_takes_the_class_count_from_the_set_or_the_array():
@@ -270,12 +269,12 @@ def test_validation_takes_the_class_count_from_the_set_or_the_array():
     assert validate_scores(scores, (3, 3), labels=FIELDS) is scores
     assert validate_scores(scores, (3, 3), labels=None) is scores
     with pytest.raises(ValueError, match=r"\(8, 3, 3\)"):
-        validate_scores(scores, (3, 3))
+        validate_scores(scores, (3, 3), labels=UAVID)
     samples = np.repeat(scores[None], 2, axis=0)
     assert validate_samples(samples, (3, 3), 2, labels=FIELDS) is samples
     assert validate_samples(samples, (3, 3), 2, labels=None) is samples
     with pytest.raises(ValueError, match=r"\(n, 8, 3, 3\)"):
-        validate_samples(samples, (3, 3), 2)
+        validate_samples(samples, (3, 3), 2, labels=UAVID)
 
 
 # -- the segmenter ----------------------------------------------------------------------------------------
@@ -299,7 +298,7 @@ def test_segmenter_shapes_follow_its_label_set():
     assert seg.mc_dropout(rgb[:20, :20], 3, 0.9, 0).shape == (3, 4, 20, 20)
     assert pickle.loads(pickle.dumps(seg)).labels == FIELDS
     with pytest.raises(ValueError, match=r"expected logits of shape \(1, 8, 20, 20\)"):
-        Segmenter(FourClassNet(), working_width=32).predict_patch(rgb[:20, :20])
+        Segmenter(FourClassNet(), working_width=32, labels=UAVID).predict_patch(rgb[:20, :20])
     with pytest.raises(ValueError, match="LabelSet"):
         Segmenter(FourClassNet(), labels=FIELDS.to_dict())  # type: ignore[arg-type]
 

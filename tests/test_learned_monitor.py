@@ -60,7 +60,7 @@ def test_fit_records_a_plain_json_model_with_what_it_rests_on(model_file):
     assert len(b["training"]["sha256"]) == 64 and b["training"]["unsafe"] > 0 and b["held_out"]["unsafe"] > 0
     assert b["selection"]["held_out_recall"] >= 0.95 and b["C"] in (0.01, 0.1, 1.0, 10.0)
     assert b["sklearn_version"] and "weights" in b and b["mcd"]["n"] == 0
-    m = load_learned_model(model_file)
+    m = load_learned_model(model_file, labels=UAVID)
     assert m.threshold == b["threshold"] and 0.0 < m.threshold < 1.0
 
 
@@ -82,12 +82,12 @@ def test_tampered_missing_or_foreign_model_files_are_refused(model_file, tmp_pat
     bad = tmp_path / "tampered.json"
     bad.write_text(json.dumps(doc))
     with pytest.raises(LearnedModelError, match="altered"):
-        load_learned_model(bad)
+        load_learned_model(bad, labels=UAVID)
     with pytest.raises(LearnedModelError, match="cannot read.*fit-monitor"):
-        load_learned_model(tmp_path / "missing.json")
+        load_learned_model(tmp_path / "missing.json", labels=UAVID)
     (tmp_path / "x.json").write_text('{"format": "pickle"}')
     with pytest.raises(LearnedModelError, match="not a learned monitor model"):
-        load_learned_model(tmp_path / "x.json")
+        load_learned_model(tmp_path / "x.json", labels=UAVID)
 
 
 def test_features_are_what_the_frame_and_patch_show():
@@ -104,7 +104,7 @@ def test_features_are_what_the_frame_and_patch_show():
     patch = extract_patch(rgb, cand, margin=1.5)
     f = dict(zip(BASE_FEATURES, candidate_features(seg.predict_patch(patch.rgb), patch,
                                                    CandidateContext(cand, seg.predict_frame(rgb), (64, 64)),
-                                                   margin=1.5), strict=True))
+                                                   margin=1.5, labels=UAVID), strict=True))
     assert f["hd_forbidden_fraction"] == 0 and f["lr_forbidden_fraction"] == 0 and f["hd_max_margin"] < 0
     assert f["edge_distance_radii"] == pytest.approx(np.hypot(40.5 - 24, 0.5) / 8 - 1)
     assert f["row"] == 0.5 and f["radius"] == 8 / 64 and f["hazard"] == 0.1
@@ -117,7 +117,7 @@ def test_features_are_what_the_frame_and_patch_show():
     patch = extract_patch(rgb, cand, margin=1.5)
     g = dict(zip(BASE_FEATURES, candidate_features(seg.predict_patch(patch.rgb), patch,
                                                    CandidateContext(cand, seg.predict_frame(rgb), (64, 64)),
-                                                   margin=1.5), strict=True))
+                                                   margin=1.5, labels=UAVID), strict=True))
     assert g["hd_max_p_static_car"] == 1 and g["lr_max_p_static_car"] == pytest.approx(1)
     assert g["ctx1.5_max_forbidden_p"] == pytest.approx(1) and g["hd_max_p_road"] == 0
 
@@ -126,13 +126,13 @@ def test_a_model_on_a_subset_of_the_features_still_loads_and_unknown_ones_are_re
     from el.monitors.learned import BASE_FEATURES, CORE_FEATURES, LearnedModelError, load_learned_model, model_document
 
     body = json.loads(model_file.read_text())["body"]
-    full = load_learned_model(model_file)
+    full = load_learned_model(model_file, labels=UAVID)
     x = np.linspace(0.0, 1.0, len(BASE_FEATURES))
     keep = [BASE_FEATURES.index(n) for n in CORE_FEATURES]  # a model fitted before the context features
     old = dict(body, features=list(CORE_FEATURES), **{k: [body[k][i] for i in keep] for k in ("mean", "scale", "coef")})
     path = tmp_path / "old.json"
     path.write_text(json.dumps(model_document(old)))
-    m = load_learned_model(path)
+    m = load_learned_model(path, labels=UAVID)
     z = ((x[keep] - full.mean[keep]) / full.scale[keep]) @ full.coef[keep] + full.intercept
     assert m.predict(x) == pytest.approx(1 / (1 + np.exp(-z)))
     with pytest.raises(ValueError, match="expected candidate feature vectors"):
@@ -141,7 +141,7 @@ def test_a_model_on_a_subset_of_the_features_still_loads_and_unknown_ones_are_re
                           (list(CORE_FEATURES[:1]) * 12, "listed twice"), ([], "empty")):
         path.write_text(json.dumps(model_document(dict(old, features=names))))
         with pytest.raises(LearnedModelError, match=needle):
-            load_learned_model(path)
+            load_learned_model(path, labels=UAVID)
 
 
 def test_pipeline_uses_it_by_name_and_a_bad_file_is_the_default_action(model_file, splits, tmp_path):
@@ -218,7 +218,7 @@ def test_card_run_and_monitor_must_rest_on_the_same_learned_model(model_file, sp
     card_path.write_text(json.dumps(calibrate_on_data(val, spec, miss_rate=0.3, confidence=0.7,
                                                       segmenter=RoadBlindFrame(WW), core=CORE)))
     card = load_calibration(card_path)
-    assert card.body["monitor_model"]["sha256"] == load_learned_model(model_file).sha256
+    assert card.body["monitor_model"]["sha256"] == load_learned_model(model_file, labels=UAVID).sha256
     run = tmp_path / "run"
     config = CampaignConfig(perturbations=("none",), monitors=(spec,), core=CORE)
     assert run_campaign(val, run, config, progress=False, segmenter=RoadBlindFrame(WW))["faults"] == []
@@ -234,7 +234,7 @@ def test_card_run_and_monitor_must_rest_on_the_same_learned_model(model_file, sp
     body = json.loads(model_file.read_text())["body"]
     other = tmp_path / "learned.json"
     other.write_text(json.dumps(model_document(dict(body, intercept=body["intercept"] + 0.5))))
-    foreign = check_calibrated_miss_rate(cands, card, run_models={spec: load_learned_model(other).sha256})
+    foreign = check_calibrated_miss_rate(cands, card, run_models={spec: load_learned_model(other, labels=UAVID).sha256})
     assert foreign.status == "fail" and "calibrated on monitor model" in foreign.summary
     image = next(val.glob("**/Images/*.png"))
     original = model_file.read_text()
@@ -275,7 +275,7 @@ def test_context_windows_give_what_the_whole_frame_gives():
             mask = frame_disc_mask(frame.shape[1:], Disc(cand.x, cand.y, cand.radius_px * k), scale)
             p = take_disc(frame, mask)[_FORBIDDEN].astype(np.float64).sum(axis=0)
             want += [float(p.max()), float(p.mean())]
-        assert context_stats(frame, cand, scale) == want
+        assert context_stats(frame, cand, scale, labels=UAVID) == want
 
 
 def test_a_run_recorded_before_monitor_models_is_not_resumed_with_a_learned_monitor(model_file, splits, tmp_path):

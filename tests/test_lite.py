@@ -12,7 +12,7 @@ import torch
 
 from assurance.fitting.network.losses import segmentation_loss
 from assurance.fitting.network.weights_io import save_weights
-from el.labels import NUM_CLASSES
+from el.labels import NUM_CLASSES, UAVID
 from el.segmentation.architectures import arch_from_dict, build_model
 from el.segmentation.inference import Segmenter
 from el.segmentation.lite import (
@@ -103,7 +103,7 @@ def test_shape_contract_for_both_architectures(arch, size) -> None:
 
 
 def test_mc_dropout_changes_decisions(pretrained) -> None:
-    seg = Segmenter(pretrained)
+    seg = Segmenter(pretrained, labels=UAVID)
     rng = np.random.default_rng(0)
     patch = rng.integers(0, 255, (64, 64, 3), dtype=np.uint8)
     samples = seg.mc_dropout(patch, 6, 0.5, seed=1)

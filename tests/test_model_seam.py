@@ -44,7 +44,8 @@ def test_a_plugin_model_is_built_by_name_and_flies(colour_installed):
     # decision is the default action, with the reason naming what is missing
     d = EmergencyLanding(PipelineConfig(core=CoreConfig(working_width=WW), monitor="lhd+mcd:n=10,rho=0.9"),
                          segmenter=model).decide(scene_image(scene_ids()))
-    assert d.action == "default" and d.reason.startswith("fault: monitor: ValueError") and "MC dropout" in d.reason
+    assert d.action == "default" and d.reason.startswith("fault: monitor: MonitorSupportError")
+    assert "MC dropout" in d.reason and "ColourModel" in d.reason
 
 
 def test_land_takes_a_plugin_model_by_name(colour_installed, tmp_path, capsys, monkeypatch):

@@ -182,13 +182,13 @@ def test_hierarchy_from_yaml_and_bad_trees(tmp_path):
 def test_lhd_accepts_all_safe_disc_and_rejects_one_forbidden_pixel():
     ids = np.array([[0, 4, 5, 6]] * 4, dtype=np.uint8)  # every safe class
     mask = np.ones(ids.shape, bool)
-    ok, reason = LHDMonitor().decide(one_hot_scores(ids), mask)
+    ok, reason = LHDMonitor(labels=UAVID).decide(one_hot_scores(ids), mask)
     assert ok and "no forbidden pixel" in reason
     ids[2, 1] = CLASS_IDS["road"]
-    ok, reason = LHDMonitor().decide(one_hot_scores(ids), mask)
+    ok, reason = LHDMonitor(labels=UAVID).decide(one_hot_scores(ids), mask)
     assert not ok and reason == "forbidden class in disc: road (1 px)"
     mask[2, 1] = False  # the road pixel is outside the disc: only the disc counts
-    ok, _ = LHDMonitor().decide(one_hot_scores(ids), mask)
+    ok, _ = LHDMonitor(labels=UAVID).decide(one_hot_scores(ids), mask)
     assert ok
 
 
@@ -197,10 +197,10 @@ def test_lhd_reason_counts_every_forbidden_class_and_ties_count_as_forbidden():
     ids[0, :3] = CLASS_IDS["road"]
     ids[5, 5] = CLASS_IDS["moving_car"]
     scores = one_hot_scores(ids)
-    ok, reason = LHDMonitor().decide(scores, np.ones(ids.shape, bool))
+    ok, reason = LHDMonitor(labels=UAVID).decide(scores, np.ones(ids.shape, bool))
     assert not ok and reason == "forbidden classes in disc: road (3 px), moving_car (1 px)"
     tie = np.full((NUM_CLASSES, 1, 1), 0.125, np.float32)  # uniform: clutter ties with building
-    ok, reason = LHDMonitor().decide(tie, np.ones((1, 1), bool))
+    ok, reason = LHDMonitor(labels=UAVID).decide(tie, np.ones((1, 1), bool))
     assert not ok and "building (1 px)" in reason
 
 
@@ -214,12 +214,12 @@ def test_lhd_sees_a_car_too_small_for_the_working_resolution():
     assert not (working == CLASS_IDS["static_car"]).any()
     cand = Candidate(rank=0, x=1510.0, y=1512.0, radius_px=40.0, hazard=0.0, hazard_semantic=0.0,
                      hazard_distance=0.0)
-    verdict = LHDMonitor().check(hd, cand, ColourSegmenter())
+    verdict = LHDMonitor(labels=UAVID).check(hd, cand, ColourSegmenter())
     assert isinstance(verdict, MonitorVerdict)
     assert verdict.name == "lhd" and not verdict.accepted
     assert verdict.reason == "forbidden class in disc: static_car (9 px)"
     moved = Disc(1610.0, 1512.0, 40.0)  # the same disc 100 px to the right: clear
-    assert LHDMonitor().check(hd, moved, ColourSegmenter()).accepted
+    assert LHDMonitor(labels=UAVID).check(hd, moved, ColourSegmenter()).accepted
     # CH and MCD see it as well.
     for spec in DEMO_GRID:
         assert not build_monitor(spec, labels=UAVID).check(hd, cand, ColourSegmenter(), seed=1).accepted, spec
@@ -259,13 +259,13 @@ def softmax_patches(draw, *, h: int = 3, w: int = 3):
 @given(patch=softmax_patches(), tau=st.sampled_from([0.25, 0.125]))
 def test_ch_rejects_whenever_a_disc_pixel_is_unsafe_or_uncertain(patch, tau):
     scores, mask = patch
-    monitor = CHMonitor(tau=tau)
+    monitor = CHMonitor(tau=tau, labels=UAVID)
     ok, _ = monitor.decide(scores, mask)
     assert ok == brute_force_ch(scores, mask, tau)
     labels = default_hierarchy(labels=UAVID).names(default_hierarchy(labels=UAVID).label(scores, tau))
     if any(lab in REJECTED_LABELS for lab in labels[mask]):
         assert not ok
-    if not LHDMonitor().decide(scores, mask)[0]:
+    if not LHDMonitor(labels=UAVID).decide(scores, mask)[0]:
         assert not ok  # CH is on top of LHD
 
 
@@ -275,14 +275,14 @@ def test_ch_reason_names_uncertain_pixels():
     scores[:, 1, 1] = scores_above(["road", "tree"])[:, 0]  # road ~ tree: labelled any
     scores[:, 2, 2] = scores_above(["tree", "human"])[:, 0]  # safe: fine
     mask = np.ones((4, 4), bool)
-    ok, reason = CHMonitor(tau=0.25).decide(scores, mask)
+    ok, reason = CHMonitor(tau=0.25, labels=UAVID).decide(scores, mask)
     assert not ok and "any (1 px)" in reason
     mask[1, 1] = False
-    ok, reason = CHMonitor(tau=0.25).decide(scores, mask)
+    ok, reason = CHMonitor(tau=0.25, labels=UAVID).decide(scores, mask)
     assert ok and "15 px" in reason
     flat = np.full((NUM_CLASSES, 4, 4), 1 / NUM_CLASSES, np.float32)  # nothing above tau: any
     flat[CLASS_IDS["tree"]] += 1e-3
-    ok, reason = CHMonitor(tau=0.25).decide(flat, mask)
+    ok, reason = CHMonitor(tau=0.25, labels=UAVID).decide(flat, mask)
     assert not ok and "any (15 px)" in reason
 
 
@@ -301,7 +301,7 @@ def test_mcd_rejects_on_the_score_where_the_mean_looks_safe():
     samples[:, CLASS_IDS["low_vegetation"]] = 0.6
     samples[:, CLASS_IDS["road"], 0, 0] = (0.1, 0.5, 0.1, 0.5)  # mean 0.3, std 0.2: S = 0.9
     mask = np.ones((1, 1), bool)
-    assert LHDMonitor().decide(samples.mean(axis=0), mask)[0]
+    assert LHDMonitor(labels=UAVID).decide(samples.mean(axis=0), mask)[0]
     lhd_mcd = build_monitor("lhd+mcd:n=4,rho=0.9", labels=UAVID)
     ok, reason = lhd_mcd.decide(samples, mask)
     assert not ok and "road (1 px)" in reason
@@ -427,13 +427,13 @@ def test_non_finite_scores_raise(bad):
 
     hd = ids_to_colors(labels_image(40, 40))
     with pytest.raises(ValueError, match="non-finite scores"):
-        LHDMonitor().check(hd, Disc(20.0, 20.0, 5.0), Broken())
+        LHDMonitor(labels=UAVID).check(hd, Disc(20.0, 20.0, 5.0), Broken())
 
 
 def test_wrong_shapes_and_types_raise():
     scores = one_hot_scores(labels_image(4, 4))
     mask = np.ones((4, 4), bool)
-    m = LHDMonitor()
+    m = LHDMonitor(labels=UAVID)
     with pytest.raises(ValueError, match="shape"):
         m.decide(scores[:, :3], mask)
     with pytest.raises(ValueError, match="shape"):
@@ -547,7 +547,7 @@ def project_segmenter():
     inference = pytest.importorskip("el.segmentation.inference")
     model = pytest.importorskip("el.segmentation.model")
     architectures = pytest.importorskip("el.segmentation.architectures")
-    return inference.Segmenter(architectures.build_model(model.ArchConfig(widths=(8, 8, 8))))
+    return inference.Segmenter(architectures.build_model(model.ArchConfig(widths=(8, 8, 8))), labels=UAVID)
 
 
 def test_project_segmenter_implements_the_protocol(project_segmenter):

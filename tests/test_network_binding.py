@@ -40,11 +40,12 @@ def _decide(segmenter, **config):
 
 
 def test_shipped_records_are_bound_to_the_shipped_network():
-    for record in (load_learned_model(), load_calibration(DEPLOYED_CALIBRATION), load_frame_gate(SHIPPED_GATE)):
+    for record in (load_learned_model(labels=UAVID), load_calibration(DEPLOYED_CALIBRATION),
+                   load_frame_gate(SHIPPED_GATE)):
         assert record.network_sha256 == SHIPPED
         record.check_network(Network(SHIPPED))  # the network they were fitted on passes
     errors = (LearnedModelError, CalibrationError, FrameGateError)
-    shipped = (load_learned_model(), load_calibration(DEPLOYED_CALIBRATION), load_frame_gate(SHIPPED_GATE))
+    shipped = (load_learned_model(labels=UAVID), load_calibration(DEPLOYED_CALIBRATION), load_frame_gate(SHIPPED_GATE))
     for record, error in zip(shipped,
                              errors, strict=True):
         for other in (OTHER, None):  # another network, or one that cannot say which it is
@@ -103,7 +104,7 @@ def test_a_record_that_names_no_network_is_refused_everywhere(tmp_path):
     unbound.write_text(json.dumps(model_document(body)))
     for network in (Network(None), Network(OTHER), Network(SHIPPED)):  # two unidentified networks are not one
         with pytest.raises(LearnedModelError, match="the record names no network"):
-            load_learned_model(unbound).check_network(network)
+            load_learned_model(unbound, labels=UAVID).check_network(network)
 
 
 def test_el_r16_fails_on_a_run_made_with_another_network():

@@ -47,7 +47,7 @@ def data(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def native():
-    return Segmenter(ColourNet(), working_width=1024)
+    return Segmenter(ColourNet(), working_width=1024, labels=UAVID)
 
 
 @pytest.fixture(scope="module")
@@ -118,7 +118,7 @@ def test_the_pipeline_refuses_mc_dropout_on_an_onnx_model(onnx_file):
     frame = noisy_colours(scene_ids(W, H, seed=1))
     refused = EmergencyLanding(PipelineConfig(monitor=MCD), weights=onnx_file)
     decision = refused.decide(frame)
-    assert decision.action == "default" and decision.reason.startswith("fault: monitor: ValueError")
+    assert decision.action == "default" and decision.reason.startswith("fault: monitor: MonitorSupportError")
     assert "needs MC dropout" in decision.reason
     flies = EmergencyLanding(PipelineConfig(monitor="lhd"), weights=onnx_file)
     assert flies.fault is None and flies.decide(frame).reason in ("accepted", "all_rejected", "no_candidate")

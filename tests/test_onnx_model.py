@@ -28,7 +28,7 @@ FRAME = noisy_colours(scene_ids(128, 72, seed=3))
 
 @pytest.fixture(scope="module")
 def native():
-    return Segmenter(ColourNet(), working_width=64, card={"weights_sha256": "ab" * 32})
+    return Segmenter(ColourNet(), working_width=64, card={"weights_sha256": "ab" * 32}, labels=UAVID)
 
 
 @pytest.fixture(scope="module")
@@ -83,7 +83,7 @@ def test_every_contract_variant_gives_the_native_answer(name, native, tmp_path):
     path = tmp_path / f"{name}.onnx"
     export_raw(Variant(ColourNet(), **module_kw), path, nhwc=module_kw.get("nhwc", False))
     contract = OnnxContract.from_dict({"class_names": NAMES, **contract_kw})
-    model = load_onnx_model(path, contract=contract, working_width=64)
+    model = load_onnx_model(path, contract=contract, labels=UAVID, working_width=64)
     np.testing.assert_allclose(model.predict_frame(FRAME), native.predict_frame(FRAME), atol=2e-5)
     np.testing.assert_allclose(model.predict_patch(FRAME[:40, :50]), native.predict_patch(FRAME[:40, :50]), atol=2e-5)
     assert OnnxContract.from_dict(json.loads(json.dumps(contract.to_dict()))) == contract
@@ -116,7 +116,7 @@ def test_unusable_networks_are_refused_at_load(kw, contract, match, tmp_path):
     path = tmp_path / "bad.onnx"
     export_raw(Variant(ColourNet(), **kw), path)
     with pytest.raises(WeightsError, match=match) as err:
-        load_onnx_model(path, contract={"class_names": NAMES, **contract})
+        load_onnx_model(path, contract={"class_names": NAMES, **contract}, labels=UAVID)
     assert "\n" not in str(err.value) and str(path) in str(err.value)
 
 

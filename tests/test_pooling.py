@@ -25,7 +25,7 @@ def test_conservative_pooling_never_drops_a_forbidden_pixel(seed, h, w, fy, fx, 
     rng = np.random.default_rng(seed)
     probs = _softmax(rng, h, w, spread)
     oh, ow = max(1, int(h * fy)), max(1, int(w * fx))
-    out = downsample_probs(probs, (ow, oh), "conservative")
+    out = downsample_probs(probs, (ow, oh), "conservative", labels=UAVID)
     assert out.shape == (NUM_CLASSES, oh, ow)
     np.testing.assert_allclose(out.sum(axis=0), 1.0, atol=1e-5)
     src, dst = forbidden_pixels(probs, labels=UAVID), forbidden_pixels(out, labels=UAVID)
@@ -42,16 +42,16 @@ def test_area_pooling_can_drop_a_thin_hazard_that_conservative_keeps() -> None:
     probs[5] = 0.9   # low vegetation
     probs[2] = 0.1
     probs[2, :, 2], probs[5, :, 2] = 0.6, 0.4  # a one-pixel-wide road, column 2
-    area = downsample_probs(probs, (4, 4), "area")
-    cons = downsample_probs(probs, (4, 4), "conservative")
+    area = downsample_probs(probs, (4, 4), "area", labels=UAVID)
+    cons = downsample_probs(probs, (4, 4), "conservative", labels=UAVID)
     assert not forbidden_pixels(area, labels=UAVID).any()
     assert forbidden_pixels(cons, labels=UAVID)[:, 1:3].all()
 
 
 def test_same_size_is_identity_for_conservative_and_bad_input_refused() -> None:
     probs = _softmax(np.random.default_rng(1), 6, 7, 1.0)
-    np.testing.assert_allclose(downsample_probs(probs, (7, 6), "conservative"), probs, atol=1e-6)
+    np.testing.assert_allclose(downsample_probs(probs, (7, 6), "conservative", labels=UAVID), probs, atol=1e-6)
     with pytest.raises(ValueError, match="frame_pooling"):
-        downsample_probs(probs, (3, 3), "max")
+        downsample_probs(probs, (3, 3), "max", labels=UAVID)
     with pytest.raises(ValueError, match="up to"):
-        downsample_probs(probs, (9, 9), "conservative")
+        downsample_probs(probs, (9, 9), "conservative", labels=UAVID)

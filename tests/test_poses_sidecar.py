@@ -19,6 +19,7 @@ from assurance.scenes import World
 from assurance.scenes.generate import ViewPlan, generate_scene, write_dataset
 from el.camera import CameraGeometry, Intrinsics, Pose
 from el.config import CoreConfig
+from el.core import probs_from_labels, run_core
 from el.errors import DataError
 from el.labels import CLASS_IDS, UAVID
 
@@ -200,10 +201,20 @@ def test_land_with_a_custom_camera(main, tmp_path, capsys):
                       (["--sensor-width", "6.3"], "needs focal_mm or hfov_deg"),
                       (["--focal", "0.1", "--sensor-width", "6"], "focal_mm must lie in [0.5, 2000] mm"),
                       (["--roll", "8"], "roll_deg must lie in [-5, 5] degrees"),
-                      (["--hfov", "110", "--pitch", "20"], "allowed: pitch_deg >= ")):
+                      # a reachable row within 3 degrees of the horizon once a 5 degree roll tilts the edges
+                      (["--hfov", "110", "--height", "5", "--pitch", "10", "--roll", "5"], "allowed: pitch_deg >= ")):
         assert main(["land", "--labels", str(tmp_path / "l.png"), *bad]) == 2
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and says in err, err
+    # a wide lens at a low pitch is not refused: its far rows (beyond the reach) are unreachable, the near ones plan
+    assert main(["land", "--labels", str(tmp_path / "l.png"), "--json", str(out), "--working-width", "96",
+                 "--hfov", "110", "--pitch", "20"]) == 0
+    d = json.loads(out.read_text())
+    assert d["config"]["core"]["pose"] == {"height_m": 50.0, "pitch_deg": 20.0} and not d["reason"].startswith("fault")
+    config = CoreConfig(working_width=96, intrinsics=Intrinsics.from_fov(110.0), pose=Pose(pitch_deg=20.0))
+    result = run_core(probs_from_labels(ids, (96, 54), labels=UAVID), (192, 108), config, labels=UAVID)
+    assert 0 < result.first_reachable_row < 108 and result.candidates
+    assert all(c.y >= result.first_reachable_row for c in result.candidates)
 
 
 def test_synth_options_and_their_errors(main, tmp_path, capsys):
@@ -214,7 +225,8 @@ def test_synth_options_and_their_errors(main, tmp_path, capsys):
     capsys.readouterr()
     for bad, says in ((["--heights", "40:20"], "--heights must look like LOW:HIGH"),
                       (["--pitches", "1:90"], "pitches must be a range LOW:HIGH with 5 <= LOW"),
-                      (["--pitch", "10"], "allowed: pitch_deg >= "),
+                      (["--pitch", "10"], "sees the horizon (top edge -12.9 deg below it); the generator models "
+                                          "the ground only: raise the pitch"),
                       (["--hfov", "300"], "hfov_deg must lie in")):
         assert main(["synth", "--out", str(tmp_path / "x"), "--scenes", "1", "--size", "96x54", *bad]) == 2
         err = capsys.readouterr().err.strip()

@@ -45,7 +45,7 @@ def model() -> nn.Module:
 
 @pytest.fixture(scope="module")
 def seg(model: nn.Module) -> Segmenter:
-    return Segmenter(model, working_width=64)
+    return Segmenter(model, working_width=64, labels=UAVID)
 
 
 def _rgb(h: int, w: int, seed: int = 0) -> np.ndarray:
@@ -120,7 +120,7 @@ def test_predict_frame_at_working_size_equals_patch(seg: Segmenter) -> None:
 
 
 def test_frame_flip_averages_the_frame_and_its_mirror(model: nn.Module, seg: Segmenter) -> None:
-    flip = Segmenter(model, working_width=64, frame_flip=True)
+    flip = Segmenter(model, working_width=64, frame_flip=True, labels=UAVID)
     rgb = _rgb(36, 64, seed=5)
     mirror = np.ascontiguousarray(rgb[:, ::-1])
     expected = 0.5 * (seg.predict_frame(rgb) + seg.predict_frame(mirror)[:, :, ::-1])
@@ -132,12 +132,12 @@ def test_frame_flip_averages_the_frame_and_its_mirror(model: nn.Module, seg: Seg
     np.testing.assert_allclose(flip.predict_frame(mirror)[:, :, ::-1], got, atol=1e-6)
     np.testing.assert_array_equal(flip.predict_patch(rgb), seg.predict_patch(rgb))  # patches: unaffected
     with pytest.raises(ValueError, match="frame_flip"):
-        Segmenter(model, frame_flip="yes")
+        Segmenter(model, frame_flip="yes", labels=UAVID)
 
 
 def test_frame_scales_feed_the_working_frame_resized_and_average(model: nn.Module, seg: Segmenter) -> None:
     rgb = _rgb(36, 64, seed=6)
-    up = Segmenter(model, working_width=64, frame_scales=(1.5,))
+    up = Segmenter(model, working_width=64, frame_scales=(1.5,), labels=UAVID)
     big = seg.predict_patch(cv2.resize(rgb, (96, 54), interpolation=cv2.INTER_LINEAR))  # the network at x1.5
     expected = np.stack([cv2.resize(c, (64, 36), interpolation=cv2.INTER_AREA) for c in big])
     got = up.predict_frame(rgb)
@@ -145,11 +145,11 @@ def test_frame_scales_feed_the_working_frame_resized_and_average(model: nn.Modul
     np.testing.assert_allclose(got, expected, atol=1e-6)
     np.testing.assert_allclose(got.sum(0), 1.0, atol=1e-5)  # still a softmax at the working resolution
     assert np.abs(got - seg.predict_frame(rgb)).max() > 1e-4
-    both = Segmenter(model, working_width=64, frame_scales=[1, 1.5])
+    both = Segmenter(model, working_width=64, frame_scales=[1, 1.5], labels=UAVID)
     assert both.frame_scales == (1.0, 1.5)
     np.testing.assert_allclose(both.predict_frame(rgb), 0.5 * (seg.predict_frame(rgb) + got), atol=1e-6)
     # with the mirror image too: each size's pair is averaged
-    flip_up = Segmenter(model, working_width=64, frame_scales=(1.5,), frame_flip=True)
+    flip_up = Segmenter(model, working_width=64, frame_scales=(1.5,), frame_flip=True, labels=UAVID)
     mirror = np.ascontiguousarray(rgb[:, ::-1])
     np.testing.assert_allclose(flip_up.predict_frame(rgb), 0.5 * (got + up.predict_frame(mirror)[:, :, ::-1]),
                                atol=1e-6)
@@ -157,7 +157,7 @@ def test_frame_scales_feed_the_working_frame_resized_and_average(model: nn.Modul
     for bad in ((), (1.0, 1.0), (3.0,), (0.75,), (float("nan"),), "1.25", 1.25, (1, 1.1, 1.2, 1.3, 1.4), ("1.25",),
                 (True,), None):
         with pytest.raises(ValueError, match="frame_scales"):
-            Segmenter(model, frame_scales=bad)
+            Segmenter(model, frame_scales=bad, labels=UAVID)
 
 
 def test_conservative_frame_pooling_keeps_what_a_source_pixel_shows(model: nn.Module, seg: Segmenter) -> None:
@@ -165,15 +165,15 @@ def test_conservative_frame_pooling_keeps_what_a_source_pixel_shows(model: nn.Mo
     from el.segmentation.pooling import downsample_probs
 
     rgb = _rgb(36, 64, seed=7)
-    cons = Segmenter(model, working_width=64, frame_scales=(1.5,), frame_pooling="conservative")
+    cons = Segmenter(model, working_width=64, frame_scales=(1.5,), frame_pooling="conservative", labels=UAVID)
     big = seg.predict_patch(cv2.resize(rgb, (96, 54), interpolation=cv2.INTER_LINEAR))
     got = cons.predict_frame(rgb)
-    np.testing.assert_allclose(got, downsample_probs(big, (64, 36), "conservative"), atol=1e-6)
-    area = Segmenter(model, working_width=64, frame_scales=(1.5,)).predict_frame(rgb)
+    np.testing.assert_allclose(got, downsample_probs(big, (64, 36), "conservative", labels=UAVID), atol=1e-6)
+    area = Segmenter(model, working_width=64, frame_scales=(1.5,), labels=UAVID).predict_frame(rgb)
     assert forbidden_pixels(got, labels=UAVID).sum() >= forbidden_pixels(area, labels=UAVID).sum()
     assert (forbidden_pixels(got, labels=UAVID) | ~forbidden_pixels(area, labels=UAVID)).all()  # stay forbidden
     with pytest.raises(ValueError, match="frame_pooling"):
-        Segmenter(model, frame_pooling="max")
+        Segmenter(model, frame_pooling="max", labels=UAVID)
 
 
 def test_load_follows_the_cards_way_of_segmenting_frames(tmp_path, model: nn.Module) -> None:
@@ -235,19 +235,19 @@ class _WrongShape(nn.Module):
 
 def test_non_finite_output_raises() -> None:
     with pytest.raises(ValueError, match="non-finite"):
-        Segmenter(_NaNModel()).predict_patch(_rgb(20, 20))
+        Segmenter(_NaNModel(), labels=UAVID).predict_patch(_rgb(20, 20))
 
 
 def test_wrong_output_shape_raises() -> None:
     with pytest.raises(ValueError, match="expected logits of shape"):
-        Segmenter(_WrongShape()).predict_patch(_rgb(20, 20))
+        Segmenter(_WrongShape(), labels=UAVID).predict_patch(_rgb(20, 20))
 
 
 def test_segmenter_rejects_bad_arguments(model: nn.Module) -> None:
     with pytest.raises(ValueError, match="torch.nn.Module"):
-        Segmenter(object())  # type: ignore[arg-type]
+        Segmenter(object(), labels=UAVID)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="threads"):
-        Segmenter(model, threads=0)
+        Segmenter(model, threads=0, labels=UAVID)
 
 
 # -- Monte-Carlo dropout -------------------------------------------------------------------------------
@@ -287,7 +287,7 @@ def test_a_shared_trunk_gives_the_same_scores(seg: Segmenter) -> None:
     np.testing.assert_array_equal(seg.predict_patch(rgb, features=trunk), seg.predict_patch(rgb))
     for keep in (0.5, 1.0):
         np.testing.assert_array_equal(seg.mc_dropout(rgb, 5, keep, 3, features=trunk), seg.mc_dropout(rgb, 5, keep, 3))
-    assert Segmenter(_PlainNet()).patch_trunk(rgb) is None  # no trunk/head split: nothing to share
+    assert Segmenter(_PlainNet(), labels=UAVID).patch_trunk(rgb) is None  # no trunk/head split: nothing to share
 
 
 @pytest.mark.parametrize("window", [(0, 37, 0, 41), (5, 30, 9, 26), (36, 37, 0, 1), (1, 37, 40, 41)])
@@ -298,7 +298,7 @@ def test_mc_dropout_window_is_the_slice_of_the_full_samples(seg: Segmenter, wind
     got = seg.mc_dropout(rgb, 4, 0.5, 9, window=window, features=seg.patch_trunk(rgb))
     assert got.shape == (4, NUM_CLASSES, y1 - y0, x1 - x0)
     np.testing.assert_allclose(got, full[:, :, y0:y1, x0:x1], atol=1e-6)
-    plain = Segmenter(_PlainNet())  # the fallback path slices
+    plain = Segmenter(_PlainNet(), labels=UAVID)  # the fallback path slices
     np.testing.assert_array_equal(plain.mc_dropout(rgb, 2, 0.5, 1, window=window),
                                   plain.mc_dropout(rgb, 2, 0.5, 1)[:, :, y0:y1, x0:x1])
     with pytest.raises(ValueError, match="window"):
@@ -355,7 +355,7 @@ class _PlainNet(nn.Module):
 def test_plugged_in_module_mc_fallback() -> None:
     torch.manual_seed(0)
     net = _PlainNet()
-    seg = Segmenter(net)
+    seg = Segmenter(net, labels=UAVID)
     assert not seg.fast_mc
     rgb = _rgb(24, 24)
     a = seg.mc_dropout(rgb, 4, 0.5, seed=2)
@@ -369,7 +369,7 @@ def test_plugged_in_module_mc_fallback() -> None:
 def test_mc_fallback_without_dropout_layers_raises() -> None:
     net = nn.Conv2d(3, NUM_CLASSES, 1)
     with pytest.raises(ValueError, match="no dropout layers"):
-        Segmenter(net).mc_dropout(_rgb(20, 20), 3, 0.5, 0)
+        Segmenter(net, labels=UAVID).mc_dropout(_rgb(20, 20), 3, 0.5, 0)
 
 
 # -- weights and model cards ---------------------------------------------------------------------------
@@ -381,7 +381,7 @@ def test_weights_round_trip(tmp_path, model: nn.Module) -> None:
     seg = Segmenter.load(path)
     assert seg.weights_sha256 == card["weights_sha256"]
     rgb = _rgb(30, 30)
-    np.testing.assert_array_equal(Segmenter(model).predict_patch(rgb), seg.predict_patch(rgb))
+    np.testing.assert_array_equal(Segmenter(model, labels=UAVID).predict_patch(rgb), seg.predict_patch(rgb))
 
 
 def test_tampered_weights_raise(tmp_path, model: nn.Module) -> None:

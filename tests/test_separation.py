@@ -10,6 +10,7 @@ from sklearn.metrics import roc_auc_score
 
 from assurance.fitting.separation import SCORES, auroc, disc_scores, separation
 from el.decision import Disc
+from el.labels import UAVID
 from el.monitors.lhd import lhd_rule
 from el.monitors.patches import extract_patch
 
@@ -72,6 +73,6 @@ def test_lhd_margin_is_non_negative_exactly_when_lhd_rejects(paint) -> None:
     scores = disc_scores(_Painted(), rgb, disc)
     patch = extract_patch(rgb, disc, margin=0.25)
     probs = _Painted().predict_patch(patch.rgb)[:, patch.disc_mask]
-    accepted, _ = lhd_rule(probs)
+    accepted, _ = lhd_rule(probs, labels=UAVID)
     assert (scores["lhd_margin"] >= 0) == (not accepted) == paint
     assert scores["max_forbidden_probability"] == pytest.approx(0.86 if paint else 0.02)

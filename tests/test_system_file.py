@@ -3,6 +3,7 @@ its settings reach the commands; without one, the embedded default is today's sh
 
 import json
 import textwrap
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -11,7 +12,7 @@ from assurance import cli
 from assurance.dataio.uavid import write_image, write_labels
 from assurance.system import SystemFileError, default_system, find_system, load_system, schema
 from assurance.system import build as system_build
-from el.camera import PHANTOM3_PRO, SafetyParams
+from el.camera import PHANTOM3_PRO, SafetyParams, geometry_problem
 from el.config import CoreConfig
 from el.labels import CLASS_IDS, UAVID
 
@@ -110,10 +111,21 @@ def test_bad_system_files_name_the_key_the_value_and_what_is_allowed(tmp_path, t
 
 
 def test_a_pose_outside_the_geometry_is_refused(tmp_path):
-    # a wide lens looking almost level: rows below the top 20% see the sky
+    # a wide lens looking almost level at 50 m: the far rows (the sky, ground beyond the reach) are simply
+    # unreachable, the near ones plan
     path = write(tmp_path, "[camera]\nsensor_width_mm = 13.2\nhfov_deg = 120\npitch_deg = 6\n")
-    with pytest.raises(SystemFileError, match="camera"):
+    geometry = system_build.core_config(load_system(path)).geometry(3840, 2160)
+    assert geometry.unreachable_stripes == 8 and geometry_problem(geometry) is None
+    # the same camera at 200 m sees no ground within the 90 m reach: a system that could never land is refused
+    path = write(tmp_path, "[camera]\nsensor_width_mm = 13.2\nhfov_deg = 120\nheight_m = 200\npitch_deg = 6\n")
+    with pytest.raises(SystemFileError, match=r"uav-el.toml: camera: .* has no stripe within the 90 m reach "
+                                              r"\(the nearest ground in view lies 166 m ahead\).*raise pitch_deg"):
         load_system(path)
+    # a reachable row looking less than 3 degrees down (a reach far beyond the horizon's ground, and a roll):
+    # refused with the pitch that plans
+    wide = replace(geometry, reach_m=10_000.0)
+    assert geometry_problem(wide) is None  # the stripes are cut 3 degrees below the horizon
+    assert "allowed: pitch_deg >= " in geometry_problem(wide, roll_deg=5.0)
 
 
 def test_a_model_whose_hash_differs_from_the_file_is_refused(tmp_path):
@@ -201,6 +213,16 @@ def test_el_r14_is_judged_at_every_pose_a_run_planned_at():
     many = check_pose_margins(core, (3840, 2160), [(30.0, 60.0), (80.0, 35.0)], {"height": 0.2, "pitch": 0.2}, safety)
     assert one.status == PASS and len(one.rows) == 1
     assert len(many.rows) == 3 and "worst of 3 poses" in many.summary
-    # a frame flown far flatter than the nominal pose needs a larger beta: the requirement fails on it
-    worst = check_pose_margins(core, (3840, 2160), [(50.0, 15.0)], {"height": 0.2, "pitch": 0.2}, safety)
-    assert worst.status == FAIL and "required 5.8" in worst.summary
+    # a frame flown far lower and flatter than the nominal pose needs a larger beta over the rows it plans on
+    # (at 5 m every stripe is within reach): the requirement fails on it
+    worst = check_pose_margins(core, (3840, 2160), [(5.0, 20.0)], {"height": 0.2, "pitch": 0.2}, safety)
+    assert worst.status == FAIL and "required 2.103" in worst.summary
+    # the core's reach_m decides which rows are judged: at 50 m and 15 degrees the far rows needing a larger
+    # beta are out of the default 90 m reach (never planned on), within a 10 km one
+    flat = [(50.0, 15.0)]
+    assert check_pose_margins(core, (3840, 2160), flat, {"height": 0.2, "pitch": 0.2}, safety).status == PASS
+    far = check_pose_margins({**core, "reach_m": 10_000.0}, (3840, 2160), flat, {"height": 0.2, "pitch": 0.2}, safety)
+    assert far.status == FAIL and "required 1.930" in far.summary
+    # a frame seeing no ground within reach plans nothing: no radius at risk, nothing to fail
+    high = check_pose_margins(core, (3840, 2160), [(200.0, 20.0)], {"height": 0.2, "pitch": 0.2}, safety)
+    assert high.status == PASS and high.rows[-1]["required_beta"] == 1.0

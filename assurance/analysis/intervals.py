@@ -1,5 +1,6 @@
-"""Uncertainty of the harness's figures: exact Clopper-Pearson bounds (``scipy.stats.binomtest``) and one bootstrap
-over images (``scipy.stats.bootstrap``, BCa).
+"""Uncertainty of the harness's figures: exact Clopper-Pearson bounds (``scipy.stats.binomtest``), the decision of
+a rate bound from them at any sample size (``decide_rate_bound``), and one bootstrap over images
+(``scipy.stats.bootstrap``, BCa).
 
 Seeded and float64 throughout (docs/architecture.md section 4.4); ``assurance.analysis.metrics`` builds the
 results table's intervals from these, ``assurance.analysis.scores`` the separation AUROC's.
@@ -17,6 +18,7 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -66,6 +68,72 @@ def clopper_pearson_interval(k: int, n: int, conf: float = 0.95) -> tuple[float,
         return math.nan, math.nan
     ci = stats.binomtest(int(k), int(n)).proportion_ci(confidence_level=conf, method="exact")
     return float(ci.low), float(ci.high)
+
+
+def clopper_pearson_lower(k: int, n: int, conf: float = 0.95) -> float:
+    """One-sided exact (Clopper-Pearson) lower confidence bound of a binomial proportion.
+
+    The smallest rate still compatible, at level ``conf``, with ``k`` events in ``n`` trials
+    (``scipy.stats.binomtest(k, n, alternative="greater")``): above a target, the sample already shows the
+    target missed, however small it is. 0 when ``k == 0``, NaN when ``n == 0``.
+
+    >>> round(clopper_pearson_lower(7, 12), 4)
+    0.3152
+    """
+    _check_binomial(k, n, conf)
+    if n == 0:
+        return math.nan
+    if k == 0:
+        return 0.0
+    ci = stats.binomtest(int(k), int(n), alternative="greater").proportion_ci(confidence_level=conf, method="exact")
+    return float(ci.low)
+
+
+BOUND_MET, BOUND_MISSED, BOUND_UNDECIDED = "met", "missed", "undecided"
+"""The verdicts of ``decide_rate_bound``."""
+
+
+@dataclass(frozen=True)
+class BoundDecision:
+    """What ``k`` events in ``n`` trials say of "the rate is at most ``target``" at one-sided ``conf``."""
+
+    k: int
+    n: int
+    target: float
+    conf: float
+    lower: float
+    upper: float
+    verdict: str
+
+    def text(self) -> str:
+        """The numbers behind the verdict, e.g. ``7 of 12 (0.583; one-sided 95% lower bound 0.315, upper 0.819)``."""
+        if not self.n:
+            return "0 of 0 (no data)"
+        level = f"{self.conf * 100:.10g}%"
+        return (f"{self.k} of {self.n} ({self.k / self.n:.3f}; one-sided {level} lower bound {self.lower:.3f}, "
+                f"upper {self.upper:.3f})")
+
+
+def decide_rate_bound(k: int, n: int, target: float, conf: float = 0.95, *, min_n: int = 1) -> BoundDecision:
+    """Decide "the rate is at most ``target``" with ``conf`` from ``k`` of ``n``, at any sample size.
+
+    ``missed`` when the one-sided lower bound exceeds ``target`` (the data already show it broken, whatever
+    ``n``); ``met`` when the one-sided upper bound is at most ``target`` and ``n >= min_n`` (the smallest sample a
+    requirement accepts as verification); ``undecided`` in between, and without data.
+
+    >>> decide_rate_bound(7, 12, 0.05).verdict, decide_rate_bound(0, 12, 0.05).verdict
+    ('missed', 'undecided')
+    """
+    if not 0 <= target <= 1:
+        raise ValueError(f"target must lie in [0, 1], got {target!r}")
+    lower, upper = clopper_pearson_lower(k, n, conf), clopper_pearson_upper(k, n, conf)
+    if n and lower > target:
+        verdict = BOUND_MISSED
+    elif n and n >= min_n and upper <= target:
+        verdict = BOUND_MET
+    else:
+        verdict = BOUND_UNDECIDED
+    return BoundDecision(int(k), int(n), float(target), float(conf), lower, upper, verdict)
 
 
 def _rng(seed: int | np.random.Generator) -> np.random.Generator:

@@ -58,8 +58,9 @@ def results_table(run_dir: str | Path, *, n_boot: int = 2000, seed: int = 0) -> 
     rows = []
     order = _scenario_order(cfg)
     for pert, sev in order:
-        n_fault = int(((faults["perturbation"] == pert) & (faults["severity"] == sev)).sum()) if len(faults) else 0
-        for mon in cfg["monitors"]:
+        here = faults[(faults["perturbation"] == pert) & (faults["severity"] == sev)] if len(faults) else faults
+        for mon in cfg["monitors"]:  # a task's fault (monitor "") counts for every configuration, one's for it alone
+            n_fault = int(here["monitor"].fillna("").isin(["", mon]).sum()) if len(here) else 0
             recs = per_scen.get((pert, sev, mon), [])
             if not recs and not n_fault:
                 continue

@@ -2,9 +2,11 @@
 
 The signing key is the first of: an explicit path, ``UAV_EL_SIGNING_KEY`` (a path, or the PEM text itself,
 as a CI secret provides it), the user's key file ``$XDG_CONFIG_HOME/uav-el/signing-key.pem`` (created,
-mode 0600, on first use). Its identity is its fingerprint: the SHA-256 of the raw 32-byte public key, which
-is also the ``keyid`` of every signature it makes. Trusted keys are PEM public keys (one file holding one or
-more, or a folder of ``*.pem`` / ``*.pub``); without any, the local signing key's own public key is trusted.
+mode 0600, on first use). A key file that its group or others may read (mode 0644, say) is refused, as ssh
+refuses one, with the fix in the message (``chmod 600 PATH``). Its identity is its fingerprint: the SHA-256 of
+the raw 32-byte public key, which is also the ``keyid`` of every signature it makes. Trusted keys are PEM public
+keys (one file holding one or more, or a folder of ``*.pem`` / ``*.pub``); without any, the local signing key's
+own public key is trusted.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from cryptography.hazmat.primitives import serialization
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey, Ed25519PublicKey
 
 from assurance.attest.dsse import AttestationError
+from el import userfiles
 
 log = logging.getLogger(__name__)
 
@@ -74,11 +77,26 @@ def _private_from_pem(data: bytes, where: str) -> Ed25519PrivateKey:
 
 
 def _read_small(path: Path, what: str) -> bytes:
-    if not path.is_file():
+    """A key file's bytes through ``el.userfiles`` (a regular file of at most ``MAX_KEY_FILE_BYTES``: a FIFO or a
+    device refused before any read); AttestationError naming the file."""
+    if not path.exists() and not path.is_symlink():
         raise AttestationError(f"{path}: {what} not found")
-    if path.stat().st_size > MAX_KEY_FILE_BYTES:
-        raise AttestationError(f"{path}: {path.stat().st_size} bytes, too large for a key file")
-    return path.read_bytes()
+    try:
+        return userfiles.read_bytes(path, what=what, max_bytes=MAX_KEY_FILE_BYTES)
+    except userfiles.UserFileError as exc:
+        raise AttestationError(str(exc)) from None
+
+
+def check_private_mode(path: Path) -> None:
+    """Refuse a private key file its group or others may read or write (any of the mode bits 077), as ssh does:
+    a key others can read is no longer the signer's alone. The message names the fix (``chmod 600 PATH``)."""
+    try:
+        mode = path.stat().st_mode & 0o777
+    except OSError:
+        return  # not there: the read that follows names it
+    if mode & 0o077:
+        raise AttestationError(f"{path}: the signing key is accessible by others (mode {mode:04o}); a private key "
+                               f"must be readable by its owner only: run chmod 600 {path}")
 
 
 def create_key(path: Path) -> SigningKey:
@@ -113,6 +131,7 @@ def load_signing_key(path: str | Path | None = None, *, create: bool = True,
         log.warning("created a signing key %s (fingerprint %s); give its public key to whoever verifies "
                     "your evidence: uav-el keys --public", p, made.keyid[:16])
         return made
+    check_private_mode(p)
     return SigningKey(_private_from_pem(_read_small(p, "signing key"), str(p)), str(p))
 
 

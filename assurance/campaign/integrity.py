@@ -2,9 +2,10 @@
 
 A campaign run's shards carry the SHA-256 of their files (``assurance.campaign.readouts``). ``verify_run``
 checks every shard against its SHA256SUMS and the run's shard index and returns the run digest: one
-SHA-256 over the shards' hashes in task order. The requirement test session records that digest,
-with the hash of the code (``assurance.code_identity``, re-exported here) and of the registry it ran on,
-so the evidence gate can refuse results produced on anything else (``assurance.evidence``).
+SHA-256 over the shards' hashes in task order, and names the tasks the manifest plans that left no shard
+(``RunCheck.missing``: the evidence gate refuses a report that would not name them). The requirement test
+session records that digest, with the hash of the code (``assurance.code_identity``, re-exported here) and of the
+registry it ran on, so the evidence gate can refuse results produced on anything else (``assurance.evidence``).
 """
 
 from __future__ import annotations
@@ -22,8 +23,10 @@ __all__ = ["RunCheck", "code_sha256", "tree_sha256", "verify_run"]
 
 @dataclass
 class RunCheck:
-    """What ``verify_run`` found: problems (one line per damaged shard), the digest, the shard count, and
-    ``sums``: each verified shard's data files as {file: sha256}, as just hashed (``sign_run`` reuses them)."""
+    """What ``verify_run`` found: problems (one line per damaged shard), the digest, the shard count,
+    ``sums``: each verified shard's data files as {file: sha256}, as just hashed (``sign_run`` reuses them), and
+    ``missing``: the tasks of the manifest's task list (``shard_order``) with no shard folder and no entry in the
+    shard index (a shard the index lists but that is gone is a problem instead)."""
 
     run: Path
     digest: str
@@ -31,10 +34,24 @@ class RunCheck:
     legacy: bool
     problems: list[str] = field(default_factory=list)
     sums: dict[str, dict[str, str]] = field(default_factory=dict, repr=False)
+    missing: list[str] = field(default_factory=list)
 
     @property
     def ok(self) -> bool:
         return not self.problems
+
+    def missing_problems(self, shown: int = 5) -> list[str]:
+        """One line naming the tasks the manifest plans that have no readouts (empty when none): evidence about
+        fewer tasks than the manifest names is an unfinished campaign, or a manifest naming tasks outside the
+        data; either way the report must not pass over them (a gate problem)."""
+        if not self.missing:
+            return []
+        names = ", ".join(self.missing[:shown]) + (f", ... {len(self.missing) - shown} more"
+                                                    if len(self.missing) > shown else "")
+        planned = self.shards + len(self.missing)
+        return [f"{self.run}: the manifest names {len(self.missing)} of its {planned} task(s) with no readouts "
+                f"({names}): an unfinished campaign (re-run the same uav-el campaign command) or a manifest naming "
+                "tasks outside the data"]
 
     def raise_if_damaged(self) -> RunCheck:
         if self.problems:
@@ -73,9 +90,11 @@ def verify_run(run_dir: str | Path) -> RunCheck:
                 problems.append(f"shard {name}: {why}")
             else:
                 sums[name] = readouts.read_sums(run / readouts.SHARDS / name) or {}
+        present |= set(index)
+    missing = [str(n) for n in dict.fromkeys(man.get("shard_order") or []) if n not in present]
     h = hashlib.sha256()
     for name in _order(man, set(sums)):
         for f, digest in sorted(sums[name].items()):
             h.update(f"{name}/{f}:{digest}\n".encode())
     return RunCheck(run=run, digest=h.hexdigest(), shards=len(sums), legacy=legacy, problems=problems,
-                    sums=sums)
+                    sums=sums, missing=missing)

@@ -141,7 +141,9 @@ def _weights_record(spec: str | dict[str, Any] | None, model: Any) -> dict[str, 
         return {"path": None, "model": spec, "sha256": weights_sha256_of(model), **dict.fromkeys(FRAME_OPTIONS)}
     if is_onnx_file(spec):
         contract = getattr(model, "contract", None)
-        return {"path": str(spec), "sha256": sha256_file(spec) if Path(spec).is_file() else None, "format": "onnx",
+        from el.segmentation.onnx_engine import file_identity  # its external data included
+
+        return {"path": str(spec), "sha256": file_identity(spec) if Path(spec).is_file() else None, "format": "onnx",
                 "engine": "onnx", "contract": contract.to_dict() if contract is not None else None,
                 **dict.fromkeys(FRAME_OPTIONS)}
     weights = Path(spec) if model_kind(spec) == FILE else DEFAULT_WEIGHTS

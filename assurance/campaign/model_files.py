@@ -45,13 +45,26 @@ def _monitor_files(specs: Sequence[str], labels: LabelSet) -> Iterable[Path]:
             yield Path(path)
 
 
+def _external_data(path: Path) -> list[Path]:
+    """An ONNX file's external data files (each is recorded and re-checked like the file itself)."""
+    if path.suffix.lower() != ".onnx" or not path.is_file():
+        return []
+    from el.errors import WeightsError
+    from el.segmentation.onnx_engine import external_files
+
+    try:
+        return external_files(path)
+    except WeightsError:  # unreadable external data: the model did not load, nothing ran on it
+        return []
+
+
 def model_files(weights: Mapping[str, Any] | None, monitors: Sequence[str], labels: LabelSet) -> dict[str, str]:
     """``{file: SHA-256}`` of the run's weights file (and its card), its monitors' model files and the packaged
     models and cards, for the manifest."""
     paths: list[Path] = []
     w = (weights or {}).get("path")
     if w:
-        paths += [Path(w), Path(w).with_suffix(".json"), Path(f"{w}.json")]
+        paths += [Path(w), Path(w).with_suffix(".json"), Path(f"{w}.json"), *_external_data(Path(w))]
     paths += list(_monitor_files(monitors, labels))
     root = install_root()
     for folder in PACKAGED:

@@ -45,6 +45,7 @@ without a valid SHA256SUMS is damaged, not a legacy shard."""
 SHARDS = "shards"
 SUMS = "SHA256SUMS"
 INDEX = "shards.json"
+MAX_RUN_JSON_BYTES = 64 << 20  # a manifest or shard index of ~250 000 tasks; read bounded (el.userfiles)
 TABLES = ("images", "candidates")
 COLUMNS: dict[str, tuple[str, ...]] = {
     "images": ("key", "sequence", "frame", "perturbation", "severity", "monitor", "fault", "candidates", "action",
@@ -125,9 +126,11 @@ def shard_files() -> tuple[str, ...]:
 
 def read_sums(shard_dir: Path) -> dict[str, str] | None:
     """A shard's SHA256SUMS as {file: sha256}; None when it is missing or malformed."""
-    try:
-        lines = (shard_dir / SUMS).read_text(encoding="utf-8").splitlines()
-    except (OSError, UnicodeDecodeError):
+    from el import userfiles
+
+    try:  # a regular file of a few lines (a FIFO or a device in a run is refused, never read)
+        lines = userfiles.read_text(shard_dir / SUMS, what="shard's SHA256SUMS", max_bytes=1 << 16).splitlines()
+    except userfiles.UserFileError:
         return None
     out: dict[str, str] = {}
     for line in lines:
@@ -219,8 +222,10 @@ def read_index(run_dir: str | Path) -> dict[str, dict[str, str]]:
     path = Path(run_dir) / INDEX
     if not path.is_file():
         return {}
+    from el import userfiles
+
     try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
+        doc = json.loads(userfiles.read_text(path, what="shard index", max_bytes=MAX_RUN_JSON_BYTES))
         shards = doc["shards"]
         if not isinstance(shards, dict):
             raise TypeError
@@ -259,10 +264,12 @@ def record_shards(run_dir: str | Path, hashes: Mapping[str, Mapping[str, str] | 
 
 
 def read_manifest(run_dir: str | Path) -> dict[str, Any]:
+    from el import userfiles
+
     path = Path(run_dir) / "manifest.json"
     if not path.is_file():
         raise RunError(f"{run_dir}: not a campaign run (no manifest.json)")
-    return json.loads(path.read_text())
+    return json.loads(userfiles.read_text(path, what="run manifest", max_bytes=MAX_RUN_JSON_BYTES))
 
 
 def core_hazard(images: pd.DataFrame) -> pd.Series:

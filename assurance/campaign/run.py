@@ -43,13 +43,13 @@ from assurance.workers import bounded_jobs, dask_map, die_with_parent
 _WORKER_STATE: dict[str, Any] = {}
 
 
-def _worker_segmenter(weights: str | dict[str, Any] | None, threads: int) -> Any:
-    """One segmenter per worker process (loaded once, cached)."""
-    key = f"{weights}|{threads}"
+def _worker_segmenter(weights: str | dict[str, Any] | None, threads: int, working_width: int | None = None) -> Any:
+    """One segmenter per worker process (loaded once, cached), at the campaign's working width."""
+    key = f"{weights}|{threads}|{working_width}"
     if _WORKER_STATE.get("key") != key:
         from assurance.system.model import load_model_spec
 
-        _WORKER_STATE["segmenter"] = load_model_spec(weights, threads=threads)
+        _WORKER_STATE["segmenter"] = load_model_spec(weights, threads=threads, working_width=working_width)
         _WORKER_STATE["key"] = key
     return _WORKER_STATE["segmenter"]
 
@@ -60,7 +60,7 @@ def execute(task: Task, config: CampaignConfig, run_dir: str, threads: int, segm
     campaign's process, in a loky worker: the worker dies with it (``workers.die_with_parent``)."""
     die_with_parent(parent_pid)
     if segmenter is None:
-        segmenter = _worker_segmenter(config.weights, threads)
+        segmenter = _worker_segmenter(config.weights, threads, config.core.working_width)
     t = time.perf_counter()
     from assurance.campaign.clearance import sample_clearance_m
 
@@ -123,7 +123,7 @@ def run_campaign(
     if segmenter is None:  # bad weights or an unknown model name are refused before the run folder exists
         from assurance.system.model import load_model_spec
 
-        model = load_model_spec(config.weights)
+        model = load_model_spec(config.weights, working_width=config.core.working_width)
     network = segmenter if segmenter is not None else model
     signing_key = _signing_key(signing_key, run_dir)  # refused (no key, or one inside the run) before anything runs
     check_monitor_networks(config.monitors, network)

@@ -4,6 +4,10 @@ The task reads and perturbs its frame (seeded per image), runs the kernel's stag
 and the declared domain, segmentation, the frame gate, the CM's candidates) **once**, judges every candidate with
 every monitor configuration in one pass, sharing work between them (``judging``), and concludes each
 configuration's decision with the kernel (``el.kernel.conclude``), so that what a campaign measures is what flies.
+
+A fault of the frame (reading, pose, segmentation, the gate, the candidates) is the task's: one row records it. A
+fault of one configuration (building its monitor, a model fitted on another network, judging a candidate) is that
+configuration's: its row records it and every other configuration's readouts of the task are kept.
 """
 
 from __future__ import annotations
@@ -172,6 +176,8 @@ class _Judged:
     verdicts: list[list[Any]]
     pose_cols: dict[str, Any]
     meta: dict[str, Any]
+    faults: dict[int, str] = field(default_factory=dict)  # configuration index -> its fault on this task
+    tracebacks: dict[int, str] = field(default_factory=dict)
 
 
 def _judged_frame(task: Task, config: CampaignConfig, segmenter: Any, clock: Callable[[], float], budget: Deadline,
@@ -200,19 +206,36 @@ def _judged_frame(task: Task, config: CampaignConfig, segmenter: Any, clock: Cal
     timings["read_s"] -= timings.get("perturb_s", 0.0)
     if frame.stop == "timeout":  # decided at the deadline, as in flight: no candidate is judged
         frame.candidates = []
-    monitors = [build_monitor(m, margin=config.patch_margin, max_side=config.patch_max_side, clock=clock,
-                              labels=labels)
-                for m in config.monitors]
-    for monitor in monitors:
-        if monitor is not None:
-            monitor.check_network(segmenter)  # a monitor fitted on another network: a fault, never a readout
-    if expected_models is not None:
-        _check_models(config.monitors, monitors, expected_models)
+    monitors, faults, tracebacks = _configurations(config, segmenter, labels, clock, expected_models)
     t = clock()
     verdicts = judge_candidates(frame.rgb, frame.candidates, monitors, segmenter, seed=config.seed, clock=clock,
-                                frame_probs=frame.probs)
+                                frame_probs=frame.probs, faults=faults)
     timings["monitoring_s"] = clock() - t
-    return _Judged(frame, parts, s, truth[0], monitors, verdicts, pose_cols, meta)
+    return _Judged(frame, parts, s, truth[0], monitors, verdicts, pose_cols, meta, faults, tracebacks)
+
+
+def _configurations(config: CampaignConfig, segmenter: Any, labels: Any, clock: Callable[[], float],
+                    expected_models: dict[str, str] | None) -> tuple[list[Any], dict[int, str], dict[int, str]]:
+    """Each configuration's monitor, built and checked on its own: a monitor that cannot be built, was fitted on
+    another network or runs another model file than the run recorded is that configuration's fault (index ->
+    ``"Error: message"``, and its traceback), never the task's."""
+    monitors: list[Any] = []
+    faults: dict[int, str] = {}
+    tracebacks: dict[int, str] = {}
+    for i, name in enumerate(config.monitors):
+        try:
+            monitor = build_monitor(name, margin=config.patch_margin, max_side=config.patch_max_side, clock=clock,
+                                    labels=labels, network_classes=getattr(segmenter, "network_classes", None))
+            if monitor is not None:
+                monitor.check_network(segmenter)  # a monitor fitted on another network: a fault, never a readout
+            if expected_models is not None:
+                _check_models([name], [monitor], expected_models)
+        except Exception as exc:  # this configuration's fault; the others are judged
+            monitor = None
+            faults[i] = f"{type(exc).__name__}: {exc}"
+            tracebacks[i] = traceback.format_exc(limit=3)
+        monitors.append(monitor)
+    return monitors, faults, tracebacks
 
 
 def _readout_rows(j: _Judged, config: CampaignConfig, base: dict[str, Any], clock: Callable[[], float], t0: float,
@@ -228,6 +251,10 @@ def _readout_rows(j: _Judged, config: CampaignConfig, base: dict[str, Any], cloc
     gate_cols = gate_columns(j.parts.gate, frame.info)
     image_rows, cand_rows = [], []
     for m, name in enumerate(config.monitors):
+        if m in j.faults:  # this configuration faulted on this task: its row says so, the others are kept
+            image_rows.append({**base, "monitor": name, "fault": j.faults[m],
+                               "traceback": j.tracebacks.get(m, "")})
+            continue
         column = [j.verdicts[k][m] for k in range(len(cands))]
         decision, outcome = conclude(frame, j.parts, column.__getitem__, walk=walk_of(name), budget=budget,
                                      clock=clock, evaluate_all=True)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import Any
 
 from assurance.campaign.faults import config_fault_line
 from assurance.campaign.presets import load_presets, preset_config
@@ -27,7 +28,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--monitors", nargs="+", metavar="SPEC", help="monitor configurations, e.g. lhd 'lhd+ch:tau=0.25'")
     p.add_argument("--calibration", nargs="+", metavar="CALIB.json",
                    help="calibration card(s) (uav-el calibrate): also evaluate each calibrated monitor")
-    p.add_argument("--images", type=int, help="use the first N images of --data")
+    p.add_argument("--images", type=int, help="use the first N scenes of --data (default: every scene, except the "
+                                              "release preset's 70; the command says when scenes are left out)")
     p.add_argument("--gate", metavar="GATE.json",
                    help="frame gate (uav-el fit-gate; 'none': no gate; default: the system file's [monitor] gate, "
                         "else el.pipeline.DEPLOYED_GATE on the shipped network): every image row "
@@ -59,20 +61,8 @@ def run(args: argparse.Namespace) -> int:
 
     system = assessed(args)  # the system under assessment, with --model and --gate: what the campaign runs
     data = system.data("test", args.data)
-    monitors = tuple(args.monitors) if args.monitors else None
-    system.deployed()  # a deployed spec off its card's threshold: exit 2
-    deployed = system.monitor if system.file.sets("monitor.spec") else None
-    card_paths = args.calibration or ([str(system.calibration)] if system.calibration is not None else [])
-    cards = []
-    if card_paths:
-        from el.monitors import build_monitor
-        from el.monitors.calibration import check_card_monitor, load_calibration
-
-        cards = [load_calibration(c) for c in card_paths]
-        for card in cards:
-            check_card_monitor(card, build_monitor(card.spec, labels=system.labels))
-        base = monitors or tuple(preset_config(args.preset, deployed=deployed).monitors)
-        monitors = tuple(dict.fromkeys((*base, *(card.spec for card in cards))))
+    deployed, cards = _deployed(args, system)
+    monitors = _monitors(args, system, deployed, cards)
     gate = None
     if system.gate is not None:  # a bad gate file: one line, exit 2, before any task
         from el.monitors.frame_gate import load_frame_gate
@@ -88,6 +78,7 @@ def run(args: argparse.Namespace) -> int:
         poses=args.poses or system.poses, odd=system.odd.to_dict(),
         gate=None if gate is None else {"path": gate.path, "sha256": gate.sha256},
     )
+    _say_scenes(data, config.images, args)
     from assurance.attest import AttestationError
     from assurance.attest.keys import load_signing_key
     try:
@@ -104,3 +95,53 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(config_fault_line(summary["config_faults"]))
     return 1 if summary["missing"] else 0
 
+
+def _deployed(args: argparse.Namespace, system: Any) -> tuple[str | None, list[Any]]:
+    """The system's deployed configuration as it flies (its spec at its card's threshold, or a card's own spec)
+    and the calibration cards the campaign evaluates (``--calibration``, else the system file's), each checked
+    against its monitor. Exit 2 for a deployed spec off its card's threshold."""
+    from el.monitors import build_monitor
+    from el.monitors.calibration import check_card_monitor, load_calibration
+
+    spec, card = system.deployed()  # a deployed spec off its card's threshold: exit 2
+    deployed = load_calibration(card).spec if card is not None else spec
+    card_paths = args.calibration or ([str(system.calibration)] if system.calibration is not None else [])
+    cards = [load_calibration(c) for c in card_paths]
+    for c in cards:
+        check_card_monitor(c, build_monitor(c.spec, labels=system.labels))
+    return (deployed or None), cards
+
+
+def _monitors(args: argparse.Namespace, system: Any, deployed: str | None, cards: list[Any]) -> tuple[str, ...]:
+    """The configurations the campaign evaluates, each checked once against the system's network before any task
+    (``assurance.campaign.presets.campaign_monitors``): one the preset brought in that the network cannot run is
+    left out with a printed line; the deployed one, or one asked for (``--monitors``, a card), refuses the
+    campaign (exit 2, one line naming it and the system file)."""
+    from assurance.campaign.presets import MonitorSupportError, campaign_monitors
+
+    model = system.segmenter(working_width=system.core.working_width)  # a model that cannot load: exit 2
+    try:
+        choice = campaign_monitors(args.preset, deployed=deployed, given=args.monitors,
+                                   extra=[c.spec for c in cards], model=model, where=system.label)
+    except MonitorSupportError as exc:
+        raise CommandError(str(exc)) from None
+    for name, why in choice.left_out:
+        print(f"uav-el campaign: left out {name!r}: the network of {system.label} cannot run it ({why})")
+    if not choice.monitors:
+        raise CommandError(f"no monitor configuration of preset {args.preset!r} can run on the network of "
+                           f"{system.label}: give --monitors")
+    return choice.monitors
+
+
+def _say_scenes(data: Any, images: int | None, args: argparse.Namespace) -> None:
+    """One line when the campaign evaluates fewer scenes than the data holds: how many, of how many, and why
+    (``--images``, or the preset's stated size)."""
+    from assurance.dataio.uavid import iter_samples
+
+    if images is None:
+        return
+    total = sum(1 for _ in iter_samples(data, require_labels=True))
+    if total > images:
+        why = "--images" if args.images is not None else f"the {args.preset} preset's size"
+        print(f"uav-el campaign: evaluating the first {images} of the {total} scenes of {data} ({why}); "
+              "the others are not evaluated")

@@ -36,12 +36,63 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--templates", metavar="DIR",
                    help="report templates overriding the packaged ones file by file (copy any file of "
                         "assurance/templates/ into DIR and edit it; default: the system file's [report] templates)")
+    p.add_argument("--accept-deviation", metavar="TARGET", action="append", default=[],
+                   help="accept a target the system sets looser than the certification basis (the packaged "
+                        "registry's), by name (repeat for several); the report's first page records it. An "
+                        "unaccepted deviation fails the gate")
     p.add_argument("--boot", type=int, default=2000, help="bootstrap resamples of the results table (default 2000)")
+
+
+def run_system(args: argparse.Namespace, run: Path) -> object:
+    """The system file the report is about: the one given (or found in the working directory), else the run's own
+    (recorded in its manifest, found where it was and unchanged), else the embedded default."""
+    from assurance.cli.system_options import system_of
+    from assurance.system.find import load_system
+
+    system = system_of(args)
+    if not system.default:
+        return system
+    import json
+
+    try:
+        recorded = json.loads((run / "manifest.json").read_text(encoding="utf-8")).get("system") or {}
+    except (OSError, ValueError):
+        return system
+    path = recorded.get("path")
+    if recorded.get("default", True) or not path:
+        return system
+    if not Path(path).is_file():
+        raise CommandError(f"{run}: the run assessed the system file {path}, not found here; give it with --system")
+    found = load_system(path)
+    if found.sha256 != recorded.get("sha256"):
+        raise CommandError(f"{path}: changed since the run {run} assessed it (SHA-256 {found.sha256[:12]}, the "
+                           f"run's {str(recorded.get('sha256'))[:12]}); give the run's system file with --system")
+    print(f"system file: {path} (the run's own)", file=sys.stderr)
+    return found
+
+
+def refuse_out_inside_run(out: Path, *runs: Path) -> None:
+    """Refuse an output folder that is, or lies inside, a campaign run folder (``runs`` given, or any folder above
+    ``out`` holding a run's ``manifest.json`` with its ``shards/`` or shard index): the report writes
+    ``results.csv``, ``SHA256SUMS`` and its pages there, which would change the run's files (``--out
+    RUN/shards/report`` adds a shard folder the run's index and signature do not know: the run is damaged).
+    CommandError (exit 2) naming both folders."""
+    from assurance.campaign import readouts
+
+    target = out.resolve()
+    for run_dir in runs:
+        if target.is_relative_to(run_dir.resolve()):
+            raise CommandError(f"--out {out}: lies inside the campaign run {run_dir}; the report would change the "
+                               "run's files: write it outside the run")
+    for folder in (target, *target.parents):
+        if (folder / "manifest.json").is_file() and ((folder / readouts.SHARDS).is_dir()
+                                                     or (folder / readouts.INDEX).is_file()):
+            raise CommandError(f"--out {out}: lies inside the campaign run {folder}; the report would change the "
+                               "run's files: write it outside the run")
 
 
 def run(args: argparse.Namespace) -> int:
     from assurance.campaign.readouts import DamagedRunError, RunError
-    from assurance.cli.system_options import system_of
     from assurance.evidence import generate
     from assurance.requirements import RegistryError, read_targets_file
 
@@ -52,6 +103,11 @@ def run(args: argparse.Namespace) -> int:
             raise CommandError(f"{flag} {value}: not a campaign run (no manifest.json)")
     if args.boot < 1:
         raise CommandError("--boot must be >= 1")
+    refuse_out_inside_run(Path(args.out), *(Path(r) for r in (args.run, args.baseline) if r))
+    if args.waivers:  # read (bounded) before any work: a FIFO or a bad file is refused at once
+        from assurance.evidence.waivers import load_waivers
+
+        load_waivers(args.waivers)
     if args.templates and not Path(args.templates).is_dir():
         raise CommandError(f"--templates {args.templates}: not a folder")
     from assurance.attest import AttestationError
@@ -67,8 +123,8 @@ def run(args: argparse.Namespace) -> int:
                           baseline_requirements=args.baseline_requirements, registry=args.registry,
                           targets=targets, targets_source=str(Path(args.targets).resolve()) if args.targets else None,
                           strict=args.strict, pdf=not args.no_pdf, n_boot=args.boot, waivers=args.waivers,
-                          templates=args.templates,
-                          system=system_of(args), trusted=trusted)
+                          templates=args.templates, system=run_system(args, Path(args.run)), trusted=trusted,
+                          accepted_deviations=tuple(args.accept_deviation))
     except DamagedRunError:
         raise  # exit 4: the run's readouts fail verification
     except (RegistryError, RunError, ValueError) as exc:

@@ -11,10 +11,15 @@ from el.monitors.gates import GATES
 
 HELP = ("fit the frame gate (a candidate of el.monitors.gates reading the frame pass's own features) on training "
         "scenes with the in-domain perturbations applied; threshold at a quantile of validation scenes at severity 3")
+FEATURE_CHOICES = ("auto", "trunk", "output")  # assurance.fitting.frame_gate_fit.CHOICES (not imported at start-up)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--kind", choices=sorted(GATES), default="mahalanobis", help="gate (default: %(default)s)")
+    p.add_argument("--features", choices=FEATURE_CHOICES, default="auto",
+                   help="what a mahalanobis or knn gate reads: the trunk's pooled statistics (trunk), the pooled "
+                        "statistics of the network's output, which every network has (output), or auto: the trunk's "
+                        "where the network gives them, else the output's (default: %(default)s)")
     fit_split_options(p)
     p.add_argument("--quantile", type=float,
                    help="threshold: this quantile of the validation frames' scores (default: 0.997, the shipped "
@@ -46,14 +51,19 @@ def run(args: argparse.Namespace) -> int:
         quantile = DEFAULT_QUANTILE if args.quantile is None else args.quantile
         doc = fit_gate(args.data, args.val, segmenter, kind=args.kind, quantile=quantile,
                        train_scenes=args.train_scenes, val_scenes=args.val_scenes,
-                       weights=network_record(segmenter, system.model),
+                       weights=network_record(segmenter, system.model), features=args.features,
                        progress=not (args.no_progress or getattr(args, "quiet", False)))
     except ValueError as exc:
         raise CommandError(str(exc)) from None
     write_json(args.out, doc, indent=None)
     b = doc["body"]
-    print(f"frame gate ({b['kind']}, {b['features']['dims']} features): threshold {b['threshold']:.4g} = "
-          f"{b['quantile']:g} quantile of {b['validation']['frames']} validation frames; fitted on "
-          f"{b['training']['frames']} training frames")
+    print(f"frame gate ({b['kind']} on the {_shown(b['features']['tap'])}, {b['features']['dims']} features): "
+          f"threshold {b['threshold']:.4g} = {b['quantile']:g} quantile of {b['validation']['frames']} validation "
+          f"frames; fitted on {b['training']['frames']} training frames")
     print(f"gate written to {args.out}")
     return 0
+
+
+def _shown(tap: str) -> str:
+    """How the output names the statistics a gate reads."""
+    return {"pooled": "trunk's statistics", "output": "output's statistics"}.get(tap, tap)

@@ -1,4 +1,8 @@
-"""``uav-el fit-monitor``: train the learned candidate monitor and write its hash-checked JSON model."""
+"""``uav-el fit-monitor``: train the learned candidate monitor and write its hash-checked JSON model.
+
+The system's network and label set decide everything: the label maps are read in the system's palette (the
+classes a class-mapped network is seen in), the candidates' truth and per-class features use its forbidden
+classes, and ``--mcd`` is refused, before any scene is read, for a network that offers no MC dropout."""
 
 from __future__ import annotations
 
@@ -46,9 +50,10 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(f"--recall must lie in (0, 1), got {args.recall}")
     if args.mcd < 0:
         raise CommandError(f"--mcd must be >= 0, got {args.mcd}")
+    core = system.core if args.working_width is None else replace(system.core, working_width=args.working_width)
     try:
-        segmenter = system.segmenter()
-        core = system.core if args.working_width is None else replace(system.core, working_width=args.working_width)
+        segmenter = system.segmenter(working_width=core.working_width)
+        _check_mcd(args.mcd, segmenter, system.label)
         doc = fit_learned_monitor(args.data, segmenter, val=args.val, core=core, mcd_n=args.mcd, recall=args.recall,
                                   images=args.images, weights=network_record(segmenter, system.model),
                                   progress=not args.quiet)
@@ -62,6 +67,15 @@ def run(args: argparse.Namespace) -> int:
           f"{b['training']['candidates']} candidates ({b['training']['unsafe']} unsafe)")
     print(f"model written to {args.out} (sha256 {doc['sha256'][:12]}...)")
     return 0
+
+
+def _check_mcd(n: int, segmenter: object, where: str) -> None:
+    """Refuse ``--mcd N`` (N > 0) on a network without MC dropout: one line naming the system file."""
+    from el.segmentation.contract import MC_DROPOUT, has_capability
+
+    if n > 0 and not has_capability(segmenter, MC_DROPOUT):
+        raise CommandError(f"--mcd {n}: the network of {where} offers no MC dropout samples (an ONNX file has none); "
+                           "fit the monitor without MC-dropout features (--mcd 0)")
 
 
 def write_json(path: Path, doc: dict, *, indent: int = 1) -> None:

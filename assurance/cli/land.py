@@ -33,7 +33,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("image_arg", nargs="?", metavar="IMAGE",
                         help="input image (the model pipeline; with --labels, the image to draw on)")
     parser.add_argument("--labels", type=Path, metavar="LABELS.png",
-                        help="UAVid colour label map: run the ground-truth pipeline on it")
+                        help="colour label map in the system's label palette ([labels]; UAVid's by default): run the "
+                             "ground-truth pipeline on it")
     parser.add_argument("--image", type=Path, metavar="IMAGE.png", help="image to draw the overlay on")
     parser.add_argument("--json", type=Path, metavar="OUT.json", help="write the decision as JSON")
     parser.add_argument("--overlay", type=Path, metavar="OUT.png", help="draw the decision into a PNG")
@@ -95,7 +96,11 @@ def config_from_args(args: argparse.Namespace) -> CoreConfig:
     from assurance.cli.system_options import system_of
     from assurance.system import build as system_build
 
-    base = system_build.core_config(system_of(args))
+    system = system_of(args)
+    if system_build.poses_policy(system) == "required" and (args.height is None or args.pitch is None):
+        raise CommandError(f"{system.label}: camera.poses is 'required' (every frame flies its own pose): give this "
+                           "frame's --height and --pitch")
+    base = system_build.core_config(system)
     lens = (args.camera, args.sensor_width, args.sensor_height, args.focal, args.hfov)
     try:
         intrinsics = base.intrinsics if all(v is None for v in lens) else make_intrinsics(
@@ -225,9 +230,12 @@ def _write_outputs(args: argparse.Namespace, decision: Decision, *, image, label
             atomic_write_bytes(args.json, (decision.to_json() + "\n").encode("utf-8"))
             print(f"decision written to {args.json}")
         if args.overlay is not None:
+            from assurance.cli.system_options import system_of
             from assurance.evidence.overlay import draw_decision
+            from assurance.system import build as system_build
 
-            write_image(args.overlay, draw_decision(decision, image=image, labels=labels))
+            palette = system_build.label_set(system_of(args))  # the label map's own palette
+            write_image(args.overlay, draw_decision(decision, image=image, labels=labels, label_set=palette))
             print(f"overlay written to {args.overlay}")
     except OSError as exc:
         where = exc.filename or args.json or args.overlay

@@ -118,8 +118,10 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError("no requirement test was collected (a -k expression that matches nothing?)")
     signed = _sign(args, run_dir, out, key, campaign)
     print(f"signed: {signed} (key {key.keyid[:16]}, {key.source})")
+    system = getattr(args, "system_file", None)
+    given = f" --system {system.label}" if system is not None and not system.default else ""
     print(f"requirement results: {out / 'requirements.json'}, {out / 'junit.xml'} "
-          f"(next: uav-el evidence --run {args.run} --out {args.out})")
+          f"(next: uav-el evidence --run {args.run} --out {args.out}{given})")
     return 1 if rc == pytest.ExitCode.TESTS_FAILED else 0
 
 

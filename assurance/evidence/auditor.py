@@ -11,7 +11,7 @@ from assurance.evidence.argument import ArgumentInputs, build_argument, check_st
 from assurance.evidence.gsn_svg import argument_pages
 from assurance.evidence.hazards import hazard_view, load_hazards
 from assurance.evidence.model_log import model_log
-from assurance.evidence.records import data_record
+from assurance.evidence.records import data_record, monitor_files
 from assurance.evidence.render import rel, write_text
 
 ARGUMENT_FILE = "argument.gsn.yaml"
@@ -59,12 +59,12 @@ def package_entries(inp: Any, record: dict[str, Any]) -> list[dict[str, Any]]:
         card = card_path(wpath)
         out += [entry("U", "Model development log: model card and training record", str(rel(card)), sha(card)),
                 entry("X", "Internal test results: validation figures of the model card", str(rel(card)), sha(card))]
-    base = Path(__file__).resolve().parents[2] / "el" / "monitors" / "data"
+    used = monitor_files(inp.manifest, inp.registry.parameters.get("calibration_card"))
     for name, letter, what in (("learned.json", "V", "Learned runtime monitor"),
                                ("frame_gate.json", "V", "Frame gate (out-of-domain frames)"),
                                ("calibration.json", "X", "Calibration card of the deployed monitor")):
-        if (base / name).is_file():
-            out.append(entry(letter, what, str(rel(base / name)), sha(base / name)))
+        if name in used:
+            out.append(entry(letter, what, str(rel(used[name])), sha(used[name])))
     for name, letter, what in (("junit.xml", "AA", "Verification log: requirement tests (JUnit XML)"),
                                ("faults.csv", "FF", "Integration testing results: fault-injection table")):
         if (inp.out / name).is_file():
@@ -81,7 +81,8 @@ def auditor_context(inp: Any, gate: Any, identity_rows: list[dict[str, Any]], *,
     """The auditor's sections of the report (``inp``: the report's ``Inputs``; ``gate``: its ``Gate``); writes the
     argument's gsn2x YAML beside the report."""
     log = load_hazards(hazards, inp.registry)
-    record, mlog = data_record(inp.manifest, inp.system), model_log(inp.manifest)
+    card = inp.registry.parameters.get("calibration_card")
+    record, mlog = data_record(inp.manifest, inp.system, card), model_log(inp.manifest, card)
     index = amlas_index(identity_rows, [entry("A", "Hazard log", str(rel(log.path)), log.sha256),
                                         *package_entries(inp, record)])
     args = ArgumentInputs(

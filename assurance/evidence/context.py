@@ -74,6 +74,10 @@ def read_inputs(run: Path, out: Path, *, requirements: str | Path | None, baseli
     warnings: list[str] = []
     reg = (registry if isinstance(registry, rq.Registry) else rq.load_registry(registry)).with_targets(
         targets, source=targets_source)
+    if system is not None:  # the texts about the system assessed: its camera, pose and forbidden classes
+        from assurance.requirements.system_facts import facts_of_file
+
+        reg = reg.for_system(facts_of_file(system))
     man = readouts.read_manifest(run)
     check = verify_run(run).raise_if_damaged()
     attestation = None
@@ -103,6 +107,7 @@ def read_inputs(run: Path, out: Path, *, requirements: str | Path | None, baseli
     checks = run_checks(reg, ctx)
     check_problems(checks, results, problems, warnings)
     problems.extend(system_problems(system, man, req_doc, run))
+    problems.extend(check.missing_problems())  # tasks the manifest names with no readouts
     changed, unchecked = changed_model_files(man.get("model_files"))
     problems.extend(changed)
     if unchecked:
@@ -145,6 +150,24 @@ def system_view(inp: Inputs) -> dict[str, Any] | None:
             "name": sysf.name, "values": [{"key": k, "value": v} for k, v in sysf.values()],
             "model_sha256": weights.get("sha256") or "not recorded",
             "model": weights.get("path") or weights.get("model") or "the shipped network"}
+
+
+def _ships_gate(man: Mapping[str, Any]) -> bool:
+    """Whether the run deployed the shipped frame gate (whose validation study the package carries)."""
+    from el.hashing import sha256_file
+    from el.pipeline import DEPLOYED_GATE
+
+    gate = (man.get("config") or {}).get("gate") or {}
+    return bool(gate) and DEPLOYED_GATE.is_file() and gate.get("sha256") == sha256_file(DEPLOYED_GATE)
+
+
+def _gate_text(man: Mapping[str, Any]) -> str:
+    """What guards the declared operating domain in the run: the frame gate it ran, or telemetry alone."""
+    gate = (man.get("config") or {}).get("gate")
+    if not gate:
+        return ("none: the operating domain is guarded by telemetry only (the declared pose and image size); "
+                "a frame unlike the training data is not detected")
+    return f"{gate.get('path')} (SHA-256 {str(gate.get('sha256'))[:16]})"
 
 
 def _plots(inp: Inputs) -> list[dict[str, str]]:
@@ -195,7 +218,6 @@ def campaign_context(inp: Inputs) -> dict[str, Any]:
     """The run's part of the context: identity, operating domain, pictures, plots, results and limitations."""
     from assurance.evidence.domain_section import frame_gate_view, odd_rows
     from assurance.evidence.gallery import Scenes, decision_examples, perturbation_gallery
-    from assurance.perturbations import PAPER_PERTURBATIONS
 
     man, images, candidates, reg = inp.manifest, inp.images, inp.candidates, inp.registry
     identity_rows, ident = identity(inp.run, man, reg, inp.req_path, inp.req_doc, inp.csv_path, inp.templates,
@@ -209,7 +231,7 @@ def campaign_context(inp: Inputs) -> dict[str, Any]:
     ok = images[images["fault"].fillna("") == ""] if len(images) else images
     keys = sorted(set(ok["key"])) if len(ok) else []
     scene_text, synthetic = scene_types(scenes, keys)
-    gallery_perts = list(dict.fromkeys(list(PAPER_PERTURBATIONS) + list(man["config"]["perturbations"])))
+    gallery_perts = list(man["config"]["perturbations"])  # only what the run perturbed
     picks, groups, n_unsafe = unsafe_picks(images) if len(ok) else ([], {}, 0)
     unsafe = decision_examples(scenes, images, candidates, picks, width=360, also=groups, compact=True)
     params = reg.parameters
@@ -217,7 +239,8 @@ def campaign_context(inp: Inputs) -> dict[str, Any]:
         "ident": ident, "synthetic": synthetic,
         "identity": identity_rows,
         "domain": domain(man, reg, readouts.input_size(images), scene_text, len(keys)),
-        "odd": odd_rows(man, images, reg.parameters["pose_error"]), "frame_gates": frame_gate_view(),
+        "odd": odd_rows(man, images, reg.parameters["pose_error"]),
+        "frame_gates": frame_gate_view() if _ships_gate(man) else None,
         "gallery": perturbation_gallery(scenes, keys[0] if keys else None, gallery_perts),
         "gallery_key": keys[0] if keys else "",
         "examples": (decision_examples(scenes, images, candidates, pick_examples(images, inp.deployed))
@@ -232,20 +255,44 @@ def campaign_context(inp: Inputs) -> dict[str, Any]:
     }
 
 
-def commands(inp: Inputs) -> list[str]:
-    """The commands that reproduce the run, the requirement results and this report."""
+VALUE_FLAGS = ("-m", "-p", "--rootdir", "--junitxml", "--uav-el-run", "--uav-el-report", "--uav-el-registry",
+               "--uav-el-targets", "--uav-el-waivers", "--uav-el-system")
+
+
+def extra_tests(req_doc: Mapping[str, Any] | None) -> list[str]:
+    """The requirement tests ``uav-el verify --tests`` added to the packaged suite (from the results' pytest
+    arguments)."""
+    args = list(((req_doc or {}).get("context") or {}).get("args") or [])
+    out, skip = [], False
+    for a in args:
+        if skip:
+            skip = False
+        elif a in VALUE_FLAGS:
+            skip = True
+        elif not str(a).startswith("-") and not str(a).replace("\\", "/").endswith("requirements/suite"):
+            out.append(str(a))
+    return out
+
+
+def commands(inp: Inputs, accepted: tuple[str, ...] = ()) -> list[str]:
+    """The commands that reproduce the run, the requirement results and this report (with the system file, the
+    added requirement tests and the accepted deviations they were made with)."""
     man, run, out, cfg = inp.manifest, inp.run, inp.out, inp.manifest["config"]
     src = inp.registry.targets_source
     tfile = src if inp.registry.targets and src and Path(src).suffix == ".json" else None
+    system = f" --system {inp.system.label}" if inp.system is not None and not inp.system.default else ""
+    tests = extra_tests(inp.req_doc)
     return [
-        f"uav-el campaign --data {man['data']['path']} --out {run} --perturbations {' '.join(cfg['perturbations'])} "
-        f"--severities {' '.join(str(s) for s in cfg['severities'])} --monitors "
+        f"uav-el campaign{system} --data {man['data']['path']} --out {run} --perturbations "
+        f"{' '.join(cfg['perturbations'])} --severities {' '.join(str(s) for s in cfg['severities'])} --monitors "
         + " ".join(f"'{m}'" for m in cfg["monitors"])
         + (f" --images {cfg['images']}" if cfg.get("images") else "") + f" --seed {cfg['seed']}"
-        + (f" --weights {cfg['weights']}" if cfg.get("weights") else ""),
-        f"uav-el verify {run} --out {out}" + (f" --targets {tfile}" if tfile else ""),
-        f"uav-el evidence --run {run} --out {out}" + (f" --requirements {inp.req_path}" if inp.req_path else "")
+        + (f" --weights {cfg['weights']}" if cfg.get("weights") and not system else ""),
+        f"uav-el verify {run} --out {out}{system}" + (f" --tests {' '.join(tests)}" if tests else "")
         + (f" --targets {tfile}" if tfile else ""),
+        f"uav-el evidence --run {run} --out {out}{system}"
+        + (f" --requirements {inp.req_path}" if inp.req_path else "")
+        + (f" --targets {tfile}" if tfile else "") + "".join(f" --accept-deviation {a}" for a in accepted),
     ]
 
 
@@ -272,7 +319,8 @@ def undecidable_here(inp: Inputs) -> list[str]:
     release = preset_config("release").images
     if release is not None and images_per_perturbation(inp) >= release:
         return []
-    return list(inp.registry.parameters.get("size_limited") or [])
+    failed = {ev.requirement for ev in inp.checks.values() if ev.status == "fail"}  # shown missed at any size
+    return [rid for rid in inp.registry.parameters.get("size_limited") or [] if rid not in failed]
 
 
 def run_scope(inp: Inputs, states: dict[str, str]) -> dict[str, Any] | None:
@@ -289,9 +337,33 @@ def run_scope(inp: Inputs, states: dict[str, str]) -> dict[str, Any] | None:
     p = inp.registry.parameters
     bound, conf = float(p["unsafe_landing_bound"]), float(p["confidence"])
     return {"images": n, "release_images": release.images, "undecided": ", ".join(undecided) or "none",
-            "command": "make release-evidence", "bound": pct(bound), "confidence": rq.confidence_text(conf),
+            **_decide_command(inp), "bound": pct(bound), "confidence": rq.confidence_text(conf),
             "bound_images": rq.images_needed(bound, conf),
             "bound_claims": ", ".join(rq.requirements_reading("unsafe_landing_bound")) or "the bound"}
+
+
+def _decide_command(inp: Inputs) -> dict[str, str]:
+    """The command that decides every requirement: the release target for the shipped system, else a campaign of
+    the system's own file on every frame of its data."""
+    if inp.system is None or inp.system.default:
+        return {"command": "make release-evidence", "about": "about 25 minutes on 2 cores"}
+    need = rq.images_needed(float(inp.registry.parameters["unsafe_landing_bound"]),
+                            float(inp.registry.parameters["confidence"]))
+    return {"command": f"uav-el campaign --system {inp.system.label} --out {inp.run} (at least {need} frames per "
+                       "perturbation in its [data] test)", "about": ""}
+
+
+def _design_time_scope(inp: Inputs) -> list[str]:
+    """What the design-time requirements were checked on, for a system other than the shipped one."""
+    if inp.system is None or inp.system.default:
+        return []
+    ids = [r.id for r in inp.registry if "test" in r.verification_kind and "campaign" not in r.verification_kind]
+    if not ids:
+        return []
+    return [f"{', '.join(ids)} are properties of the flight code, verified by the packaged design tests on the "
+            "toolkit's own small synthetic scenes (oblique Phantom-class camera, its own torch network), not on "
+            f"this system's network, camera or label set ({inp.registry.facts.get('label_set', '')}); their "
+            "'verified' says the code holds them, not that this system was measured against them."]
 
 
 def template_context(inp: Inputs, gate: Gate, campaign: dict[str, Any], base: dict[str, Any] | None,
@@ -315,6 +387,7 @@ def template_context(inp: Inputs, gate: Gate, campaign: dict[str, Any], base: di
         "identity": campaign["identity"],
         "domain": campaign["domain"], "odd": campaign["odd"], "frame_gates": campaign["frame_gates"],
         "domain_text": [{"name": k.replace("_", " "), "value": v} for k, v in reg.operating_domain.items()],
+        "facts": dict(reg.facts), "frame_gate": _gate_text(inp.manifest),
         "parameters": [{"name": k.replace("_", " "), "value": _parameter_text(v)} for k, v in reg.parameters.items()],
         "matrix": matrix(reg, results, inp.checks, inp.run, inp.csv_path.name),
         "requirements": [{"id": r.id, "title": r.title, "text": r.text, "rationale": r.rationale,
@@ -331,7 +404,8 @@ def template_context(inp: Inputs, gate: Gate, campaign: dict[str, Any], base: di
         "examples": campaign["examples"], "unsafe": campaign["unsafe"], "n_unsafe": campaign["n_unsafe"],
         "n_unsafe_pictures": campaign["n_unsafe_pictures"],
         "scenes_error": campaign["scenes_error"],
-        "limitations": limitations(inp.manifest, reg, results, campaign["synthetic"], inp.table),
+        "limitations": limitations(inp.manifest, reg, results, campaign["synthetic"], inp.table)
+        + _design_time_scope(inp),
         "baseline": base,
         "commands": commands(inp),
         "faults": faults_table(inp.out, inp.warnings),

@@ -139,6 +139,16 @@ def binding_problems(doc: Mapping[str, Any], digest: str, code: str, registry_sh
     return out
 
 
+def failure_detail(res: rq.RequirementResult, limit: int = 400) -> str:
+    """The first line of a failed requirement's first failing test message (for a bound: which scenario, k of n,
+    the bound, the target and the confidence), so the gate's verdict says why without opening the report."""
+    first = next((t for t in res.tests if t.outcome in rq.FAILING and t.message), None)
+    if first is None:
+        return ""
+    line = first.message.strip().splitlines()[0].removeprefix("Failed: ").strip()
+    return line if len(line) <= limit else line[: limit - 3] + "..."
+
+
 @dataclass
 class Gate:
     """The gate's verdict on a set of requirement results."""
@@ -162,9 +172,11 @@ class Gate:
 def decide_gate(results: Mapping[str, rq.RequirementResult], problems: list[str], waivers: str | Path | None,
                 strict: bool, *, undecidable: Sequence[str] = (), policy: Mapping[str, Any] | None = None) -> Gate:
     """The gate's verdict. A requirement not verified blocks unless it is in ``undecidable`` (the registry's
-    ``size_limited`` on a run smaller than the release preset), or always with ``strict``. Waivers that cannot
-    stand (``waiver_problems`` under ``policy``: the registry's ``waiver_owners`` and ``waiver_max_days``) and
-    expired waivers are added to ``problems`` (the caller's list)."""
+    ``size_limited`` on a run smaller than the release preset), or always with ``strict``. A bound the data
+    already show missed is "failed" at any run size (``decide_rate_bound``), so it blocks like any failure and the
+    text names it with its numbers (``failure_detail``). Waivers that cannot stand (``waiver_problems`` under
+    ``policy``: the registry's ``waiver_owners`` and ``waiver_max_days``) and expired waivers are added to
+    ``problems`` (the caller's list)."""
     states = {rid: r.state for rid, r in results.items()}
     failed = [rid for rid, s in states.items() if s == rq.FAILED]
     not_verified = [rid for rid, s in states.items() if s == rq.NOT_VERIFIED]
@@ -181,7 +193,9 @@ def decide_gate(results: Mapping[str, rq.RequirementResult], problems: list[str]
     result = "FAILED" if blocking or problems else ("WAIVED" if waived else "INCOMPLETE" if not_verified else "PASSED")
     parts = []
     if failed:
-        parts.append(f"{len(failed)} requirement(s) failed" + (f", {len(waived)} waived" if waived else ""))
+        parts.append(f"{len(failed)} requirement(s) failed ({', '.join(failed)})"
+                     + (f", {len(waived)} waived" if waived else ""))
+        parts += [f"{rid}: {why}" for rid in failed if rid not in waived and (why := failure_detail(results[rid]))]
     if not_verified:
         left = len(not_verified) - len(undecided_ok)
         parts.append(f"{len(not_verified)} not verified" + (

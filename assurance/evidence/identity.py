@@ -27,6 +27,17 @@ HIGHER_IS_BETTER = {"g_cm": True, "g_rm": True, "g_star": True, "mcc": True, "f1
 
 
 
+def _file_identity(path: str) -> str | None:
+    """A weights file's identity now: an ONNX file's external data included (None: it cannot be read)."""
+    from el.errors import WeightsError
+    from el.segmentation.onnx_engine import file_identity
+
+    try:
+        return file_identity(path)
+    except WeightsError:
+        return None
+
+
 def identity(run: Path, man: Mapping[str, Any], registry: rq.Registry, req_path: Path | None,
               req_doc: Mapping[str, Any] | None, csv_path: Path, templates: Path,
               check: RunCheck) -> tuple[list[dict], dict]:
@@ -37,7 +48,7 @@ def identity(run: Path, man: Mapping[str, Any], registry: rq.Registry, req_path:
     wpath = weights.get("path")
     current = ""
     if wpath and Path(wpath).is_file():
-        current = "matches the file now" if sha256_file(wpath) == weights.get("sha256") else \
+        current = "matches the file now" if _file_identity(wpath) == weights.get("sha256") else \
             "differs from the file now (it changed since the run)"
     elif wpath:
         current = "file no longer present"

@@ -74,9 +74,9 @@ def monitor_rows(monitors: dict[str, dict[str, Any]]) -> list[dict[str, str]]:
     return rows
 
 
-def model_log(manifest: dict[str, Any]) -> dict[str, Any]:
+def model_log(manifest: dict[str, Any], calibration_card: Any = None) -> dict[str, Any]:
     """The model development log of the run's network and the shipped monitors (empty parts when a card is missing)."""
-    card, monitors = model_cards(manifest)
+    card, monitors = model_cards(manifest, calibration_card)
     test_sha = str((manifest.get("data") or {}).get("sha256") or "")
     history = [{"step": h.get("step"), "loss": f"{h.get('loss', float('nan')):.3f}",
                 "val_working": _pct(h.get("val_miou_working")), "val_hd": _pct(h.get("val_miou_hd")),

@@ -7,12 +7,14 @@ stripes shaded, and the decision with its reason as text. Returns RGB uint8 (H, 
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 import cv2
 import numpy as np
 
-from el.camera import CameraGeometry
+from el.camera import CameraGeometry, Pose
+from el.config import CoreConfig
 from el.decision import Decision
 from el.labels import ids_to_colors
 
@@ -35,12 +37,28 @@ def candidate_status(candidate: dict[str, Any], any_monitored: bool) -> str:
     return "accepted" if verdict.get("accepted") else "rejected"
 
 
+def _first_reachable_row(d: dict[str, Any], W: int, H: int) -> int:
+    """The first reachable row of the camera, pose and reach the decision records (they set the unreachable
+    stripes, el.camera.CameraGeometry.unreachable_stripes); the nominal ones where it records none."""
+    if W < 8 or H < 8:
+        return 0
+    try:
+        core = CoreConfig.from_dict(dict((d.get("config") or {}).get("core") or {}))
+        pose = (d.get("input") or {}).get("pose")
+        if pose:
+            core = replace(core, pose=Pose(height_m=pose["height_m"], pitch_deg=pose["pitch_deg"]))
+        return core.geometry(W, H).first_reachable_row
+    except (TypeError, ValueError, KeyError, AttributeError):
+        return CameraGeometry(width=W, height=H).first_reachable_row
+
+
 def draw_decision(
     decision: Decision | dict[str, Any],
     *,
     image: np.ndarray | None = None,
     labels: np.ndarray | None = None,
     labels_alpha: float = 0.0,
+    label_set: Any = None,
 ) -> np.ndarray:
     """Draw ``decision`` (a Decision or its dict) and return an RGB uint8 (H, W, 3) picture.
 
@@ -48,12 +66,13 @@ def draw_decision(
     (H, W)), else grey. With both, ``labels_alpha`` > 0 blends the label colours over the image.
     """
     d = decision.to_dict() if isinstance(decision, Decision) else decision
-    canvas = _background(d, image, labels, labels_alpha)
+    paint = ids_to_colors if label_set is None else label_set.ids_to_colors  # the ids' own palette
+    canvas = _background(d, image, labels, labels_alpha, paint)
     H, W = canvas.shape[:2]
     s = max(W, H) / 1024.0
     thick = max(2, int(round(2 * s)))
 
-    first = CameraGeometry(width=W, height=H).first_reachable_row if W >= 8 and H >= 8 else 0
+    first = _first_reachable_row(d, W, H)
     if first > 0:
         top = canvas[:first].astype(np.float32)
         canvas[:first] = (0.45 * top + 0.55 * np.array([30, 30, 60], np.float32)).astype(np.uint8)
@@ -87,7 +106,7 @@ def draw_decision(
 
 
 def _background(
-    d: dict[str, Any], image: np.ndarray | None, labels: np.ndarray | None, alpha: float
+    d: dict[str, Any], image: np.ndarray | None, labels: np.ndarray | None, alpha: float, paint: Any = ids_to_colors
 ) -> np.ndarray:
     if image is not None:
         image = np.asarray(image)
@@ -95,13 +114,13 @@ def _background(
             raise ValueError(f"image must be RGB uint8 (H, W, 3), got {image.dtype} {image.shape}")
         canvas = image.copy()
         if labels is not None and alpha > 0:
-            colours = ids_to_colors(labels).astype(np.float32)
+            colours = paint(labels).astype(np.float32)
             if colours.shape != canvas.shape:
                 raise ValueError(f"labels {colours.shape[:2]} and image {canvas.shape[:2]} differ in size")
             canvas = ((1 - alpha) * canvas + alpha * colours).astype(np.uint8)
         return canvas
     if labels is not None:
-        return np.ascontiguousarray(ids_to_colors(labels))
+        return np.ascontiguousarray(paint(labels))
     info = d.get("input") or {}
     W, H = int(info.get("width", 1024)), int(info.get("height", 576))
     return np.full((H, W, 3), 96, dtype=np.uint8)

@@ -107,6 +107,26 @@ def development_sets(card: dict[str, Any] | None, monitors: dict[str, dict[str, 
     return rows
 
 
+def declared_sets(system: Any) -> list[dict[str, Any]]:
+    """The network's development data a system file declares (``[model.provenance]``: training and validation
+    folders, who trained it), as data-record rows: the disjointness checks read their images where they are here."""
+    if system is None or getattr(system, "default", True):
+        return []
+    who = system.get("model.provenance.trained_by") or "not declared"
+    rows = []
+    for key, role, letter in (("training_data", "network training", "N"), ("validation_data", "network validation",
+                                                                          "O")):
+        path = system.path_of(f"model.provenance.{key}")
+        if path is None:
+            continue
+        inside = path.resolve().is_relative_to(Path(system.base).resolve())  # never read the auditor's other files
+        images = len(list(path.glob("seq*/Images/*.png"))) if inside and path.is_dir() else None
+        rows.append(_row(f"{role}: {path}" + ("" if inside else " (outside the system file's folder: not read)"),
+                         role, letter, path.resolve() if inside else "", images, "",
+                         licence=f"declared in {system.label} (trained by {who})", record=system.label))
+    return rows
+
+
 def disjointness(test_metas: list[dict[str, Any]], test_sha: str, test_folder: Path,
                  dev: list[dict[str, Any]]) -> list[dict[str, str]]:
     """Checks that the test data shares nothing with the development data: seed ranges, data-set hashes, and, where
@@ -146,7 +166,7 @@ def disjointness(test_metas: list[dict[str, Any]], test_sha: str, test_folder: P
     return checks
 
 
-def data_record(manifest: dict[str, Any], system: Any = None) -> dict[str, Any]:
+def data_record(manifest: dict[str, Any], system: Any = None, calibration_card: Any = None) -> dict[str, Any]:
     """The data-management record of a run: its test data, the development data of the shipped models, the
     disjointness checks."""
     data = manifest.get("data") or {}
@@ -162,16 +182,41 @@ def data_record(manifest: dict[str, Any], system: Any = None) -> dict[str, Any]:
                 balance=_balance(metas), licence=LICENCE_SYNTHETIC if metas else (
                     "the applicant's data: as declared in the system file" if user else "not recorded"),
                 record="manifest.json")
-    card, monitors = model_cards(manifest)
-    dev = development_sets(card, monitors)
+    card, monitors = model_cards(manifest, calibration_card)
+    dev = development_sets(card, monitors) + declared_sets(system)
     return {"datasets": [test, *dev], "disjoint": disjointness(metas, str(data.get("sha256") or ""), folder, dev)}
 
 
-def model_cards(manifest: dict[str, Any]) -> tuple[dict[str, Any] | None, dict[str, dict[str, Any]]]:
-    """The network's model card (beside the run's weights) and the shipped monitors' cards."""
+def model_cards(manifest: dict[str, Any], calibration_card: Any = None) -> tuple[dict[str, Any] | None,
+                                                                              dict[str, dict[str, Any]]]:
+    """The network's model card (beside the run's weights) and the cards of the monitors the run used: the learned
+    monitor's record (the packaged one for a plain ``learned`` spec, else its ``model=`` file), the calibration card
+    the requirements judge (``calibration_card``), the frame gate the run deployed. Nothing of the shipped system
+    that the run did not use."""
     from el.segmentation.weights import card_path
 
     wpath = (manifest.get("weights") or {}).get("path")
     card = _json(card_path(wpath)) if wpath else None
+    found = monitor_files(manifest, calibration_card)
+    return card, {name: doc for name, path in found.items() if (doc := _json(path)) is not None}
+
+
+def monitor_files(manifest: dict[str, Any], calibration_card: Any = None) -> dict[str, Path]:
+    """The monitor files the run used, by role (``learned.json``, ``calibration.json``, ``frame_gate.json``)."""
+    from assurance.paths import card_path as calibration_path
+    from el.monitors.spec import parse_monitor_spec
+
+    cfg = manifest.get("config") or {}
     base = ROOT / "el" / "monitors" / "data"
-    return card, {name: doc for name in MONITOR_CARDS if (doc := _json(base / name)) is not None}
+    found: dict[str, Path | None] = {}
+    for spec in cfg.get("monitors") or ():
+        parsed = parse_monitor_spec(spec)
+        for part in getattr(parsed, "parts", None) or ([parsed] if parsed is not None else []):
+            if getattr(part, "kind", None) == "learned":
+                model = dict(getattr(part, "params", {}) or {}).get("model")
+                found["learned.json"] = Path(model).with_suffix(".json") if model else base / "learned.json"
+    cal = calibration_path(calibration_card) if calibration_card else None
+    found["calibration.json"] = cal
+    gate = (cfg.get("gate") or {}).get("path")
+    found["frame_gate.json"] = Path(gate) if gate else None
+    return {name: path for name, path in found.items() if path is not None and path.is_file()}

@@ -11,7 +11,14 @@ from typing import Any
 
 from assurance import requirements as rq
 from assurance.evidence.auditor import ARGUMENT_FILE, ISSRE_FILE, auditor_context, auditor_document
-from assurance.evidence.context import Inputs, campaign_context, read_inputs, template_context, undecidable_here
+from assurance.evidence.context import (
+    Inputs,
+    campaign_context,
+    commands,
+    read_inputs,
+    template_context,
+    undecidable_here,
+)
 from assurance.evidence.gate import EvidenceReport, Gate, decide_gate
 from assurance.evidence.identity import baseline_view
 from assurance.evidence.matrix import TRACE_COLUMNS, traceability_rows
@@ -65,7 +72,7 @@ def _write_pdf(html: str, files: _Files, faults: bool) -> str | None:
 
 def evidence_document(inp: Inputs, gate: Gate, ident: dict[str, Any], base: dict[str, Any] | None, *,
                       created: str, strict: bool, files: _Files, faults: bool, n_unsafe: int,
-                      pdf_error: str | None, exit_code: int) -> dict[str, Any]:
+                      pdf_error: str | None, exit_code: int, basis: list[Any] | None = None) -> dict[str, Any]:
     """``evidence.json``: identity, gate, requirement states, the report's checks and the results table."""
     reg, results = inp.registry, inp.results
     return {
@@ -87,6 +94,7 @@ def evidence_document(inp: Inputs, gate: Gate, ident: dict[str, Any], base: dict
                   "traceability": rel(files.trace), "junit": rel(files.junit) if files.junit.is_file() else None,
                   "faults": rel(files.faults) if faults else None},
         "pdf_error": pdf_error,
+        "basis": {"deviations": [d.to_dict() for d in basis or []]},
     }
 
 
@@ -95,6 +103,38 @@ def _finish(files: _Files, document: dict[str, Any]) -> None:
     write_text(files.json, json.dumps(jsonable(document), indent=2, allow_nan=False) + "\n")
     sums = [(p, sha256_file(p)) for p in files.hashed() if p.is_file()]
     write_text(files.sums, "".join(f"{h}  {p.name}\n" for p, h in sums))
+
+
+def _system_settings(system: Any, waivers: Any, templates: Any, targets: Any, targets_source: Any,
+                     accepted: tuple[str, ...]) -> tuple[Any, Any, Any, Any, list[Any]]:
+    """The system file's waivers, templates and targets where none were given, and its deviations from the
+    certification basis (``assurance.requirements.basis``) with the auditor's acceptances."""
+    from assurance.requirements.basis import deviations
+
+    if system is None:
+        return waivers, templates, targets, targets_source, deviations({}, accepted) if accepted else []
+    from assurance.system import build as system_build
+
+    waivers = system_build.waivers(system, str(waivers) if waivers else None)
+    templates = templates or system_build.report_settings(system)["templates"]
+    if targets is None:  # the system file's [targets] (and R, beta, deployed monitor) judge the requirements
+        targets, targets_source = system_build.targets(system), targets_source or f"{system.label} [targets]"
+    return waivers, templates, targets, targets_source, deviations(system_build.targets(system), accepted,
+                                                                   system_build.label_set(system))
+
+
+def _label_classes(system: Any) -> list[dict[str, str]]:
+    """The label set's classes as the first page lists them: name, forbidden or safe, hazard category."""
+    from el.labels import UAVID
+
+    if system is None:
+        labels = UAVID
+    else:
+        from assurance.system import build as system_build
+
+        labels = system_build.label_set(system)
+    return [{"name": c.name, "state": "forbidden" if c.forbidden else "safe",
+             "category": c.category or "no category declared"} for c in labels.classes]
 
 
 def generate(
@@ -114,6 +154,7 @@ def generate(
     templates: str | Path | None = None,
     system: Any = None,
     trusted: Mapping[str, Any] | None = None,
+    accepted_deviations: tuple[str, ...] = (),
 ) -> EvidenceReport:
     """Write the evidence report of ``run`` into ``out`` and return what the gate says.
 
@@ -127,19 +168,16 @@ def generate(
     ``trusted``: public keys by keyid (``assurance.attest.keys.load_trusted_keys``); with them the run's signed
     statement must verify (``UnattestedRunError`` otherwise) and the requirement results must carry the signed
     statement ``uav-el verify`` wrote, pinned to this run, registry, targets, waivers and system (a gate problem
-    otherwise); without, the report says the signatures were not checked.
+    otherwise); without, the report says the signatures were not checked. ``accepted_deviations``: the targets
+    the auditor accepts looser than the basis (``assurance.requirements.basis``); any other deviation fails the gate.
     """
     run, out = Path(run), Path(out)
-    if system is not None:
-        from assurance.system import build as system_build
-
-        waivers = system_build.waivers(system, str(waivers) if waivers else None)
-        templates = templates or system_build.report_settings(system)["templates"]
-        if targets is None:  # the system file's [targets] (and R, beta, deployed monitor) judge the requirements
-            targets, targets_source = system_build.targets(system), targets_source or f"{system.label} [targets]"
+    waivers, templates, targets, targets_source, basis = _system_settings(
+        system, waivers, templates, targets, targets_source, accepted_deviations)
     inp = read_inputs(run, out, requirements=requirements, baseline=baseline, registry=registry, n_boot=n_boot,
                       templates=templates, system=system, targets=targets, targets_source=targets_source,
                       trusted=trusted)
+    inp.problems.extend(f"deviation from the certification basis: {d.text()}" for d in basis if not d.accepted)
     if trusted is not None:
         check_results_signature(inp, waivers, trusted)
     campaign = campaign_context(inp)
@@ -151,6 +189,9 @@ def generate(
             if baseline else None)
     created = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
     context = template_context(inp, gate, campaign, base, created, n_boot)
+    context["deviations"] = [{**d.to_dict(), "text": d.text()} for d in basis]
+    context["commands"] = commands(inp, tuple(accepted_deviations))
+    context["label_classes"] = _label_classes(system)
     context.update(auditor_context(inp, gate, campaign["identity"], n_boot=n_boot))
     html = render_html(context, inp.templates)
     files = _Files(out, inp.csv_path)
@@ -165,7 +206,8 @@ def generate(
         exit_code = gate.exit_code(strict, pdf_error)
         _finish(files, {**evidence_document(inp, gate, campaign["ident"], base, created=created, strict=strict,
                                             files=files, faults=faults, n_unsafe=campaign["n_unsafe"],
-                                            pdf_error=pdf_error, exit_code=exit_code), **auditor_document(context)})
+                                            pdf_error=pdf_error, exit_code=exit_code, basis=basis),
+                          **auditor_document(context)})
         return exit_code
 
     exit_code = finish(pdf_error)  # the JSON says the PDF will be there; rewritten if it could not be

@@ -169,7 +169,8 @@ def limitations(man: Mapping[str, Any], registry: rq.Registry, results: Mapping[
                    "whether the images represent the intended operations.")
     out.append("Geometry assumes flat ground, a pinhole camera without lens distortion and a known nominal pose; "
                "slopes, roofs as landing surfaces, and pose errors beyond the declared box are outside the domain. "
-               "The default action's landing area is a proxy (a disc at the bottom centre of the image).")
+               "The default action's landing area is a proxy: a disc on the ground below the UAV (its nadir point "
+               "when the frame shows it, else the nearest ground the frame shows, at the bottom centre).")
     out.append("Timings (overhead, decision time) were measured on the campaign's machine "
                f"({(man.get('versions') or {}).get('platform', 'unknown')}) and are not those of the flight computer.")
     missing_p = [p for p in PERTURBATIONS if p not in cfg["perturbations"]]

@@ -1,4 +1,11 @@
-"""Waivers: accepted deviations from failed requirements (``assurance/waivers.yaml``), and when they expire."""
+"""Waivers: accepted deviations from failed requirements (``assurance/waivers.yaml``), and when they expire.
+
+A waiver expires by a date or by a toolkit version, and either is bounded, so that no waiver stands for ever: a
+date at most the registry's ``waiver_max_days`` ahead of the report, a version at most the toolkit's next minor
+release (:func:`max_expiry_version`: 0.2.0 for toolkit 0.1.x, 1.4.0 for 1.3.x). A new minor release is where the
+requirements, targets and evidence are reviewed again, so a waiver must be renewed there (a version expiry of
+"999.0.0" is refused as the date 2999-12-31 is).
+"""
 
 from __future__ import annotations
 
@@ -24,10 +31,11 @@ def load_waivers(path: str | Path) -> dict[str, dict[str, str]]:
     from el import safeyaml
 
     path = Path(path)
-    try:
-        data = safeyaml.load_file(path) or {}
+    try:  # a regular file of at most 1 MiB (a FIFO or a device refused before any read), no aliases
+        data = safeyaml.load_file(path, what="waivers file") or {}
     except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
-        raise ValueError(f"{path}: unreadable waivers file: {exc}") from None
+        text = str(exc)  # a refusal of the file itself names it already
+        raise ValueError(text if text.startswith(f"{path}: ") else f"{path}: unreadable waivers file: {text}") from None
     if not isinstance(data, dict) or not isinstance(data.get("waivers") or [], list):
         raise ValueError(f"{path}: a waivers file is a mapping with a list 'waivers'")
     out: dict[str, dict[str, str]] = {}
@@ -76,12 +84,23 @@ DEFAULT_MAX_WAIVER_DAYS = 366
 """A waiver dated further ahead than this (from the day of the report) is refused unless the policy says more."""
 
 
+def max_expiry_version(version: str = __version__) -> tuple[int, int, int]:
+    """The furthest version a waiver may expire at under toolkit ``version`` X.Y.Z: the next minor release,
+    X.(Y+1).0. Versions compare as tuples of integers (``_version_tuple``), so "0.2" and "0.2.0" are equal."""
+    parts = [int(p) if p.isdigit() else 0 for p in (version.split(".") + ["0", "0"])[:2]]
+    return parts[0], parts[1] + 1, 0
+
+
+def _version_text(value: tuple[int, ...]) -> str:
+    return ".".join(str(v) for v in value)
+
+
 def waiver_problems(waivers: Mapping[str, Mapping[str, str]], states: Mapping[str, str], *,
                     owners: list[str] | None = None, max_days: int = DEFAULT_MAX_WAIVER_DAYS,
-                    today: _dt.date | None = None) -> list[str]:
+                    today: _dt.date | None = None, version: str = __version__) -> list[str]:
     """Why waivers cannot stand, one line each: a waiver of an id the registry lacks or of a requirement that
     is verified, an owner not in the declared ``owners`` (when declared), an expiry date more than ``max_days``
-    ahead. A version expiry is bounded by the release process, not by days, and is not checked here."""
+    ahead, an expiry version beyond the next minor release of toolkit ``version`` (:func:`max_expiry_version`)."""
     today = today or _dt.datetime.now(_dt.UTC).date()
     out = []
     for rid, w in sorted(waivers.items()):
@@ -95,4 +114,8 @@ def waiver_problems(waivers: Mapping[str, Mapping[str, str]], states: Mapping[st
         kind, value = _expiry(str(w.get("expires")), Path("waivers"), 0)
         if kind == "date" and (value - today).days > max_days:
             out.append(f"the waiver of {rid} expires {value}, more than {max_days} days ahead (the declared maximum)")
+        elif kind == "version" and value > (furthest := max_expiry_version(version)):
+            out.append(f"the waiver of {rid} expires at version {_version_text(value)}, beyond the next minor "
+                       f"release {_version_text(furthest)} of this toolkit ({version}): a version expiry reaches at "
+                       "most the next minor release")
     return out

@@ -1,5 +1,6 @@
 """Fault-injection cases of the auditor's trust boundary (rows ``T1``..``T4``): what an applicant supplies (here, the
-report templates) never executes, never reads the auditor's files and cannot contradict the gate.
+report templates) never executes, never reads the auditor's files and cannot contradict the gate. Rows ``T5``..``T17``
+(``assurance.fault_injection.trust``: the applicant's other files, read bounded and checked before work) follow.
 
 Each case writes a template folder an applicant could name (``--templates`` or ``[report] templates``) and returns
 the ``uav-el evidence`` command on the workspace's run that must refuse it (exit 2, one line naming the problem).
@@ -9,7 +10,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from assurance.fault_injection.basis_cases import BASIS_CASES
 from assurance.fault_injection.case import Case
+from assurance.fault_injection.trust import TRUST_CASES
 
 
 def _templates(ws: Path, name: str, body: str) -> Path:
@@ -71,4 +74,5 @@ _ALL: tuple[Case, ...] = (
     Case("T4-template-network-fetch", "a report template whose stylesheet is fetched from http://127.0.0.1:9",
          _network_fetch, 2, "which it refuses"),
 )
-APPLICANT_CASES: tuple[Case, ...] = tuple(c for c in _ALL if c.id not in PDF_CASES or pdf_renderer())
+APPLICANT_CASES: tuple[Case, ...] = (*(c for c in _ALL if c.id not in PDF_CASES or pdf_renderer()), *TRUST_CASES,
+                                     *BASIS_CASES)

@@ -21,7 +21,7 @@ from assurance.dataio.uavid import iter_samples, read_image, read_labels
 from assurance.fitting.separation import disc_scores, separation
 from el.config import CoreConfig
 from el.core import run_core
-from el.labels import CLASS_NAMES, FORBIDDEN_LUT, NUM_CLASSES
+from el.labels import LabelSet
 from el.segmentation.contract import labels_of
 
 Progress = Callable[..., Iterable]
@@ -39,9 +39,11 @@ def candidate_audit(segmenter: Any, data_dir: str | Path, *, core: CoreConfig | 
     most of each disc's forbidden pixels, and the median share of the disc that is forbidden).
     With ``evidence``, also how well the LHD monitor's evidence (the HD patch of each candidate's
     disc) separates unsafe from safe candidates (:mod:`assurance.fitting.separation`), under ``separation``.
-    Deterministic for given weights, data and core configuration.
+    Deterministic for given weights, data and core configuration. Labels are read in the palette of the
+    segmenter's label set (the system's, for a network behind a class map), and its forbidden classes decide.
     """
     core = core or CoreConfig()
+    labels = labels_of(segmenter)
     samples = list(iter_samples(data_dir, require_labels=True))
     if not samples:
         raise ValueError(f"{data_dir}: no labelled scenes")
@@ -52,13 +54,13 @@ def candidate_audit(segmenter: Any, data_dir: str | Path, *, core: CoreConfig | 
     rows: list[dict[str, Any]] = []
     evidence = evidence and callable(getattr(segmenter, "predict_patch", None))  # a frame-only segmenter: none
     for s in items:
-        rgb, ids = read_image(s.image_path), read_labels(s.label_path, labels_of(segmenter))
+        rgb, ids = read_image(s.image_path), read_labels(s.label_path, labels)
         if ids.shape != rgb.shape[:2]:
             raise ValueError(f"{s.label_path}: label size {ids.shape} differs from the image {rgb.shape[:2]}")
-        result = run_core(segmenter.predict_frame(rgb), (rgb.shape[1], rgb.shape[0]), core, labels=labels_of(segmenter))
+        result = run_core(segmenter.predict_frame(rgb), (rgb.shape[1], rgb.shape[0]), core, labels=labels)
         flags = []
         for c in result.candidates:
-            cause = _unsafe_cause(disc_pixels(ids, c.disc))
+            cause = _unsafe_cause(disc_pixels(ids, c.disc), labels)
             flags.append(cause is not None)
             if evidence:
                 rows.append({"scene": s.key, "unsafe": cause is not None, **disc_scores(segmenter, rgb, c.disc)})
@@ -74,18 +76,20 @@ def candidate_audit(segmenter: Any, data_dir: str | Path, *, core: CoreConfig | 
         "unsafe_share": unsafe / total if total else None,
         "top_unsafe_share": top_unsafe / (len(samples) - empty) if len(samples) > empty else None,
         "images_without_candidate": empty,
-        "unsafe_by_class": {name: by_class[name] for name in CLASS_NAMES if by_class[name]},
+        "unsafe_by_class": {name: by_class[name] for name in (*labels.names, "unlabelled", "outside the image")
+                            if by_class[name]},
         "median_forbidden_share": float(np.median(shares)) if shares else None,
         "core": core.to_dict(),
         **({"separation": separation(rows)} if evidence else {}),
     }
 
 
-def _unsafe_cause(pixels: np.ndarray) -> tuple[str, float] | None:
-    """(forbidden class with most pixels in the disc, forbidden share of the disc), or None if safe."""
+def _unsafe_cause(pixels: np.ndarray, labels: LabelSet) -> tuple[str, float] | None:
+    """(forbidden class of ``labels`` with most pixels in the disc, forbidden share of the disc), or None if safe."""
     if pixels.size == 0:
         return "outside the image", 1.0
-    counts = np.bincount(pixels, minlength=NUM_CLASSES) * FORBIDDEN_LUT
-    if not counts.any():
+    forbidden = labels.forbidden_mask(pixels)  # an ignored (unlabelled) pixel counts as forbidden, as in the truth
+    if not forbidden.any():
         return None
-    return CLASS_NAMES[int(counts.argmax())], float(counts.sum() / pixels.size)
+    top = int(np.bincount(pixels[forbidden]).argmax())
+    return labels.names[top] if top < labels.num_classes else "unlabelled", float(forbidden.mean())

@@ -2,6 +2,11 @@
 ``el.monitors.gates`` fitted on the training scenes with the in-domain perturbations applied (each scene clean,
 under each perturbation at a severity drawn from 1-3, and at severity 3), thresholded at a stated quantile of
 validation scenes under each perturbation at severity 3 (``assurance.fitting.gate_frames``: the study's frames).
+
+Any network that keeps its frame pass's statistics can be fitted (``el.monitors.frame_gate.keeps_taps``: the shipped
+``Segmenter``, an ONNX file, either behind a class map). A Mahalanobis or kNN gate reads the trunk's pooled
+statistics where the network gives them (``features="pooled"``), else the pooled statistics of its output, which
+every network has (``"output"``); ``features`` chooses.
 """
 
 from __future__ import annotations
@@ -17,12 +22,14 @@ from assurance.dataio.uavid import iter_samples
 from assurance.fitting.gate_frames import IN_DOMAIN, scene_images, training_frames, validation_frames
 from assurance.fitting.learned_monitor import split_sha256
 from assurance.paths import shown_path
-from el.monitors.frame_gate import frame_gate_document
-from el.monitors.gates import GATES
+from el.monitors.frame_gate import frame_gate_document, start_taps
+from el.monitors.gates import GATES, WHAT
 
 DEFAULT_QUANTILE = 0.997  # the shipped gate's: the smallest meeting the policy in both validation folds (README)
-FEATURES = {"pooled": "per-channel mean and standard deviation over space of every trunk level of the frame pass "
-                      "(el.segmentation.frame_tap)", "energy": "mean over pixels of -logsumexp of the frame logits"}
+FEATURES = WHAT  # what each tap feature is, recorded in the file
+CHOICES = ("auto", "trunk", "output")
+"""``uav-el fit-gate --features``: ``auto`` (the trunk's statistics where the network gives them, else its
+output's), ``trunk`` or ``output``."""
 
 
 def parse_scenes(text: str | None) -> tuple[int, int | None]:
@@ -40,16 +47,44 @@ def parse_scenes(text: str | None) -> tuple[int, int | None]:
     return first, None if end is None else end - first
 
 
+def tap_of(segmenter: Any, rgb: np.ndarray) -> Any:
+    """The frame pass's statistics of ``rgb`` (``FrameTap``); ValueError when the network kept none."""
+    segmenter.predict_frame(rgb)
+    tap = getattr(segmenter, "last_tap", None)
+    if tap is None:
+        raise ValueError(f"the segmentation model {type(segmenter).__name__} segmented a frame but kept no frame "
+                         "statistics (last_tap): a frame gate cannot be fitted on it")
+    return tap
+
+
+def gate_features(kind: str, choice: str, tap: Any) -> str:
+    """The tap features a gate of ``kind`` reads for ``choice`` (:data:`CHOICES`), given a frame's ``tap``."""
+    if choice not in CHOICES:
+        raise ValueError(f"features must be one of {', '.join(CHOICES)}, got {choice!r}")
+    readable = GATES[kind].FEATURES
+    if readable == ("energy",):
+        return "energy"  # the energy gate reads the logits whatever is asked
+    if choice == "trunk":
+        if tap.pooled is None:
+            raise ValueError("--features trunk: the network's frame pass gives no trunk features (an ONNX file "
+                             "without trunk outputs, or a network without a trunk); use --features output")
+        return "pooled"
+    if choice == "output":
+        return "output"
+    return "pooled" if tap.pooled is not None else "output"
+
+
 def embed(gate: Any, segmenter: Any, frames: Iterable[tuple[int, str, np.ndarray]], total: int, desc: str,
-          progress: bool) -> np.ndarray:
-    """The gate's features (n, d) of ``frames``, each read from the frame pass's own tap."""
+          progress: bool, features: str | None = None) -> np.ndarray:
+    """The gate's features (n, d) of ``frames``, each read from the frame pass's own tap (``features``: which;
+    None: the gate's default)."""
     from assurance.progress import progress as bar
 
-    segmenter.tap_frames = True
+    start_taps(segmenter, "frame gate")
+    which = features or gate.FEATURES[0]
     rows = []
     for _, _, rgb in bar(frames, total=total, desc=desc, enabled=progress):
-        segmenter.predict_frame(rgb)
-        rows.append(np.asarray(gate.embed(segmenter.last_tap), np.float64))
+        rows.append(np.asarray(gate.embed(tap_of(segmenter, rgb), which), np.float64))
     x = np.asarray(rows, np.float64)
     if x.ndim != 2 or not np.isfinite(x).all():
         raise ValueError(f"{desc}: non-finite frame features")
@@ -64,8 +99,10 @@ def _split(path: str | Path, first: int, count: int | None) -> dict[str, Any]:
 
 def fit_gate(data: str | Path, val: str | Path, segmenter: Any, *, kind: str = "mahalanobis",
              quantile: float = DEFAULT_QUANTILE, train_scenes: str | None = None, val_scenes: str | None = None,
-             weights: dict[str, Any], progress: bool = False) -> dict[str, Any]:
-    """The gate document: fitted on ``data``, thresholded at ``quantile`` of ``val`` (``uav-el fit-gate``)."""
+             weights: dict[str, Any], progress: bool = False, features: str = "auto") -> dict[str, Any]:
+    """The gate document: fitted on ``data``, thresholded at ``quantile`` of ``val`` (``uav-el fit-gate``);
+    ``features``: :data:`CHOICES` (what the Mahalanobis and kNN gates read). ValueError (one line) for a network
+    that keeps no frame statistics."""
     if kind not in GATES:
         raise ValueError(f"unknown gate kind {kind!r}; known: {', '.join(sorted(GATES))}")
     if not 0.0 < quantile < 1.0:
@@ -78,15 +115,15 @@ def fit_gate(data: str | Path, val: str | Path, segmenter: Any, *, kind: str = "
         raise ValueError(f"{len(train_paths)} training scene(s) in {data} and {len(val_paths)} validation scene(s) "
                          f"in {val}: need >= 2 and >= 1")
     n = len(IN_DOMAIN)
+    start_taps(segmenter, "frame gate")
+    tap = gate_features(kind, features, tap_of(segmenter, next(training_frames(train_paths[:1]))[2]))
     train = embed(gate, segmenter, training_frames(train_paths), (2 * n - 1) * len(train_paths), "training frames",
-                  progress)
+                  progress, tap)
     held = embed(gate, segmenter, validation_frames(list(enumerate(val_paths, v_first)), (3,)),
-                 n * len(val_paths), "validation frames", progress)
+                 n * len(val_paths), "validation frames", progress, tap)
     params = gate.fit(train)
     scores = gate.score(params, held)
-    body = {"kind": kind, "features": {"tap": "energy" if not gate.NEEDS_TRUNK else "pooled",
-                                       "what": FEATURES["pooled" if gate.NEEDS_TRUNK else "energy"],
-                                       "dims": int(train.shape[1])},
+    body = {"kind": kind, "features": {"tap": tap, "what": FEATURES[tap], "dims": int(train.shape[1])},
             "params": params, "threshold": float(np.quantile(scores, quantile)), "quantile": float(quantile),
             "training": {**_split(data, t_first, t_count), "frames": int(train.shape[0]),
                          "perturbations": "each scene clean, under each of " + ", ".join(IN_DOMAIN[1:])

@@ -15,14 +15,14 @@ from typing import Any
 import numpy as np
 
 from assurance.fitting.gate_frames import scene_images, validation_frames
-from el.monitors.frame_gate import load_frame_gate
+from el.monitors.frame_gate import load_frame_gate, start_taps
 
 
 def check(gate_path: str | Path, data: str | Path, segmenter: Any) -> dict[str, dict[str, float]]:
     """Per perturbation (``name:severity``): frames, flagged, median and max score."""
     gate = load_frame_gate(gate_path)
     gate.check_network(segmenter)
-    segmenter.tap_frames = True
+    start_taps(segmenter, gate.path)
     scores: dict[str, list[float]] = {}
     for _, what, rgb in validation_frames(list(enumerate(scene_images(Path(data)))), (3,)):
         segmenter.predict_frame(rgb)

@@ -75,7 +75,7 @@ def measure(cache: dict[str, np.ndarray], refused: dict[str, np.ndarray], quanti
     for name, gate in GATES.items():
         if gates is not None and name not in gates:
             continue
-        x = cache["energy"][:, None] if not gate.NEEDS_TRUNK else cache["pooled"]
+        x = cache["energy"][:, None] if gate.FEATURES == ("energy",) else cache["pooled"]  # the trunk's statistics
         params = gate.fit(x[cache["set"] == "train"])
         scores = gate.score(params, x)
         folds = {}

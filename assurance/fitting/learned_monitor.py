@@ -3,7 +3,10 @@
 Candidates are the core model's on the clean scenes of a split, with the campaign's truth: a candidate
 is truly unsafe when its disc holds a forbidden ground-truth pixel (``assurance.campaign.truth.true_hazard``
 = 1, as ``true_unsafe`` in readouts and the candidate audit). The features are the ones the flight
-code computes (``el.monitors.learned.candidate_features``), so training and flight cannot drift.
+code computes (``el.monitors.learned.candidate_features``), so training and flight cannot drift. Everything is
+in the label set the segmentation model outputs (``labels_of``: the system's, for a network behind a class
+map): the label maps are read in its palette, its forbidden classes make a candidate unsafe and name the
+per-class features, and the file records it (``labels``), as the flight code builds the monitor in it.
 
 Selection on held-out data (``--val``, or else every 5th scene of the training split): the L2
 strength ``C`` of a class-balanced logistic regression on standardised features with the best AUROC,
@@ -31,8 +34,9 @@ from assurance.paths import shown_path
 from el.config import CoreConfig
 from el.core import run_core
 from el.hashing import sha256_file
+from el.labels import UAVID, LabelSet
 from el.monitors.base import CandidateContext
-from el.monitors.learned import BASE_FEATURES, MCD_FEATURES, candidate_features, model_document
+from el.monitors.learned import MCD_FEATURES, base_features, candidate_features, model_document
 from el.monitors.patches import extract_patch
 from el.segmentation.contract import labels_of
 
@@ -85,10 +89,10 @@ def collect_candidates(data: str | Path, segmenter: Any, *, core: CoreConfig | N
             samples_mc = segmenter.mc_dropout(patch.rgb, mcd_n, mcd_rho, seed + k) if mcd_n > 0 else None
             rows.append(candidate_features(segmenter.predict_patch(patch.rgb), patch,
                                            CandidateContext(cand, probs, size), margin=margin,
-                                           mcd_samples=samples_mc))
+                                           mcd_samples=samples_mc, labels=labels))
             truth.append(true_hazard(ids, cand.disc, labels=labels) >= 1.0)
             scene.append(i)
-    d = len(BASE_FEATURES) + (len(MCD_FEATURES) if mcd_n > 0 else 0)
+    d = len(base_features(labels)) + (len(MCD_FEATURES) if mcd_n > 0 else 0)
     return CandidateSet(np.asarray(rows, np.float64).reshape(-1, d), np.asarray(truth, bool),
                         np.asarray(scene, np.int64), split_sha256(samples, data), len(samples))
 
@@ -119,8 +123,10 @@ def _auroc(y: np.ndarray, p: np.ndarray) -> float | None:
 
 def fit_learned_body(train: CandidateSet, val: CandidateSet, *, cs: Sequence[float] = DEFAULT_CS,
                      recall: float = 0.95, mcd_n: int = 0, mcd_rho: float = 0.9,
-                     weights: dict[str, Any] | None = None, splits: dict[str, Any] | None = None) -> dict[str, Any]:
-    """The model body: ``C`` by held-out AUROC, the recall threshold on the held-out part, what it rests on."""
+                     weights: dict[str, Any] | None = None, splits: dict[str, Any] | None = None,
+                     labels: LabelSet = UAVID) -> dict[str, Any]:
+    """The model body: ``C`` by held-out AUROC, the recall threshold on the held-out part, what it rests on;
+    ``labels``: the label set the candidates' features were computed in (their per-class names)."""
     import sklearn
 
     for name, part in (("training", train), ("held-out", val)):
@@ -136,7 +142,7 @@ def fit_learned_body(train: CandidateSet, val: CandidateSet, *, cs: Sequence[flo
     p_val = clf.predict_proba(scaler.transform(val.x))[:, 1]
     threshold = recall_threshold(p_val, val.y, recall)
     rejected = p_val > threshold
-    names = list(BASE_FEATURES) + (list(MCD_FEATURES) if mcd_n > 0 else [])
+    names = list(base_features(labels)) + (list(MCD_FEATURES) if mcd_n > 0 else [])
     return {
         "features": names, "model": "logistic regression (L2, class-balanced) on standardised features",
         "mean": [float(v) for v in scaler.mean_], "scale": [float(v) for v in scaler.scale_],
@@ -181,7 +187,9 @@ def fit_learned_monitor(data: str | Path, segmenter: Any, *, val: str | Path | N
         train = collect_candidates(data, segmenter, samples=scenes, desc="training scenes", **kw)
         held_out = collect_candidates(val, segmenter, images=images, desc="held-out scenes", **kw)
         splits = {"train": shown_path(data), "held_out": shown_path(val)}
+    labels = labels_of(segmenter)
     body = fit_learned_body(train, held_out, cs=cs, recall=recall, mcd_n=mcd_n, mcd_rho=mcd_rho,
-                            weights=weights, splits=splits)
+                            weights=weights, splits=splits, labels=labels)
+    body["labels"] = labels.name  # the label set whose classes the features read (the flight code builds it so)
     body["patch"] = {"margin": margin, "max_side": max_side}
     return model_document(body)

@@ -19,12 +19,12 @@ def check_calibrated_miss_rate(candidates: Any, card: Any, perturbation: str = "
     that does not record its network is insufficient evidence (False: not checked, for callers without a run).
 
     Judged by the bound, not the point estimate: failed when the one-sided Clopper-Pearson lower bound of the miss
-    rate at the card's confidence exceeds the card's miss rate (the test split shows the guarantee broken);
-    insufficient below ``min_unsafe`` truly unsafe candidates. ``run_data`` (the manifest's ``data``): a run on
-    the card's own calibration scenes, or on scenes whose meta declare a split other than ``test``, judges
-    nothing (insufficient).
+    rate at the card's confidence exceeds the card's miss rate (the test split shows the guarantee broken), at any
+    number of candidates; otherwise insufficient below ``min_unsafe`` truly unsafe candidates. ``run_data`` (the
+    manifest's ``data``): a run on the card's own calibration scenes, or on scenes whose meta declare a split
+    other than ``test``, judges nothing (insufficient).
     """
-    from assurance.analysis.metrics import clopper_pearson_interval
+    from assurance.analysis.intervals import BOUND_MISSED, decide_rate_bound
     from assurance.requirements import records as rq
 
     name = f"miss rate of the calibrated monitor ({card.spec}) <= {card.body['miss_rate']:g}"
@@ -58,18 +58,21 @@ def check_calibrated_miss_rate(candidates: Any, card: Any, perturbation: str = "
         return rq.Evidence(name, rq.INSUFFICIENT, f"insufficient evidence: {wrong_split}")
     unsafe = sub[sub["true_unsafe"].astype(bool)]
     n, k = len(unsafe), int(unsafe["accepted"].astype(bool).sum())
-    if n < max(1, int(min_unsafe)):
+    eps, conf = float(card.body["miss_rate"]), float(card.body["confidence"])
+    d = decide_rate_bound(k, n, eps, conf) if n else None
+    if d is None or (n < max(1, int(min_unsafe)) and d.verdict != BOUND_MISSED):
         return rq.Evidence(name, rq.INSUFFICIENT, f"insufficient evidence: {n} truly unsafe candidate(s) on this "
                            f"split, fewer than the {int(min_unsafe)} that judge a miss rate (calibration_min_unsafe)")
-    eps, conf = float(card.body["miss_rate"]), float(card.body["confidence"])
-    lower = clopper_pearson_interval(k, n, 2 * conf - 1)[0]  # one-sided at the card's confidence
     row = {"perturbation": perturbation, "unsafe": n, "accepted": k, "miss_rate": k / n, "bound": eps,
-           "lower_bound": lower, "confidence": conf, "from": how}
+           "lower_bound": d.lower, "confidence": conf, "from": how}
     cols = tuple(row)
-    summary = (f"{k} of {n} unsafe candidates accepted ({k / n:.3f}; one-sided {conf:.0%} lower bound {lower:.3f}) "
+    summary = (f"{k} of {n} unsafe candidates accepted ({k / n:.3f}; one-sided {conf:.0%} lower bound {d.lower:.3f}) "
                f"with {how}")
-    status = rq.PASS if lower <= eps else rq.FAIL
-    return rq.Evidence(name, status, summary + (" <= " if status == rq.PASS else " > ") + f"{eps:g}", (row,), cols)
+    if d.verdict == BOUND_MISSED:  # the test split already shows the guarantee broken, whatever its size
+        short = (f" (fewer than the {int(min_unsafe)} candidates that verify it, enough to show it missed)"
+                 if n < int(min_unsafe) else "")
+        return rq.Evidence(name, rq.FAIL, f"{summary} > {eps:g}{short}", (row,), cols)
+    return rq.Evidence(name, rq.PASS, f"{summary} <= {eps:g}", (row,), cols)
 
 
 def _split_problem(card: Any, run_data: dict[str, Any] | None) -> str | None:

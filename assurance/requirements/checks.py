@@ -224,52 +224,69 @@ def confidence_text(conf: float) -> str:
     return f"{float(conf) * 100:.10g}%"
 
 
+def _bound_verdict(k: int, n: int, bound: float, conf: float) -> tuple[str, Any]:
+    """One scenario of EL-R10: ("pass" | "fail" | "insufficient", the ``decide_rate_bound`` decision).
+
+    Failed at any size when the lower bound exceeds ``bound``; in between, failed when the sample was large enough
+    for zero unsafe landings to show ``bound`` (the acceptance criterion could be met and was not), else undecided.
+    """
+    from assurance.analysis.intervals import BOUND_MET, BOUND_MISSED, clopper_pearson_upper, decide_rate_bound
+
+    d = decide_rate_bound(k, n, bound, conf)
+    if d.verdict == BOUND_MET:
+        return PASS, d
+    if d.verdict == BOUND_MISSED or (n and clopper_pearson_upper(0, n, conf) <= bound):
+        return FAIL, d
+    return INSUFFICIENT, d
+
+
 def check_unsafe_landing_bound(table: Any, monitor: str, bound: float, required: Sequence[str],
                                conf: float = 0.95) -> Evidence:
     """EL-R10: the unsafe-landing rate's one-sided ``conf`` upper bound <= ``bound`` for ``monitor``, per scenario.
 
-    The bound is computed here, at ``conf``, from each scenario's images and unsafe landings (exact
-    Clopper-Pearson, ``clopper_pearson_upper``), never read from the table's fixed 95% column. A scenario
-    whose bound exceeds ``bound`` fails when the sample was large enough for zero unsafe landings to meet
-    it; otherwise the sample is too small to decide (insufficient).
+    The bounds are computed here, at ``conf``, from each scenario's images and unsafe landings (exact
+    Clopper-Pearson, ``decide_rate_bound``), never read from the table's fixed 95% column. A scenario fails at any
+    sample size when its one-sided lower bound exceeds ``bound`` (the data already show the bound missed), and
+    when its upper bound exceeds ``bound`` on a sample large enough for zero unsafe landings to meet it; only a
+    smaller sample whose bounds straddle ``bound`` is too small to decide (insufficient).
     """
-    from assurance.analysis.metrics import clopper_pearson_upper
-
     level = confidence_text(conf)
     name = f"unsafe-landing rate of the deployed monitor ({monitor}), bound {bound:g} at {level} confidence"
     rows_df = _deployed_rows(table, monitor)
     cols = ("perturbation", "severity", "images", "unsafe_landings", "unsafe_landing_rate", "confidence",
-            "upper_bound", "over_bound_by", "images_needed", "verdict")
+            "lower_bound", "upper_bound", "over_bound_by", "images_needed", "verdict")
     if rows_df is None or len(rows_df) == 0:
         return Evidence(name, INSUFFICIENT, f"insufficient evidence: monitor {monitor!r} was not evaluated")
     need = images_needed(bound, conf)
-    rows, fails, short = [], [], []
+    rows, shown_above, over, short = [], [], [], []
     for r in rows_df.itertuples(index=False):
         n = int(r.images)
         k = _k_of(r.unsafe_landing_rate, n)
-        ub = clopper_pearson_upper(k, n, conf) if n and _finite(r.unsafe_landing_rate) else math.nan
         scen = f"{r.perturbation} (s{int(r.severity)})"
-        if n == 0 or not math.isfinite(ub):
-            verdict = "insufficient"
-            short.append(scen)
-        elif ub <= bound:
-            verdict = "pass"
-        elif clopper_pearson_upper(0, n, conf) > bound:
-            verdict = "insufficient"
-            short.append(scen)
+        if n == 0 or not _finite(r.unsafe_landing_rate):
+            verdict, lb, ub = INSUFFICIENT, math.nan, math.nan
         else:
-            verdict = "fail"
-            fails.append(scen)
+            verdict, d = _bound_verdict(k, n, bound, conf)
+            lb, ub = d.lower, d.upper
+        if verdict == INSUFFICIENT:
+            short.append(scen)
+        elif verdict == FAIL and lb > bound:
+            shown_above.append(f"{scen}: {k} of {n}, lower bound {lb:.3f}")
+        elif verdict == FAIL:
+            over.append(f"{scen}: {k} of {n}, upper bound {ub:.3f}")
         rows.append({"perturbation": r.perturbation, "severity": int(r.severity), "images": n,
                      "unsafe_landings": k, "unsafe_landing_rate": _num(r.unsafe_landing_rate), "confidence": level,
-                     "upper_bound": _num(ub),
+                     "lower_bound": _num(lb), "upper_bound": _num(ub),
                      "over_bound_by": _num(ub - bound) if math.isfinite(ub) and ub > bound else 0.0,
                      "images_needed": _images_needed_text(k / n if n else 0.0, bound, conf), "verdict": verdict})
     missing = [p for p in required if p not in set(rows_df["perturbation"])]
-    if fails:
-        return Evidence(name, FAIL, f"one-sided {level} upper bound > {bound:g} under {', '.join(fails)} "
-                        "(images_needed: the images at which the observed rate would show the bound)",
-                        tuple(rows), cols)
+    if shown_above or over:
+        what = ([f"one-sided {level} lower bound > {bound:g} (the bound is missed at any sample size) under "
+                 + "; ".join(shown_above)] if shown_above else [])
+        what += ([f"one-sided {level} upper bound > {bound:g} under " + "; ".join(over)
+                  + f" (>= {need} images: enough to show the bound)"] if over else [])
+        return Evidence(name, FAIL, "; ".join(what) + " (images_needed: the images at which the observed rate "
+                        "would show the bound)", tuple(rows), cols)
     if missing or short:
         what = [f"{p} not evaluated" for p in missing]
         if short:
@@ -311,12 +328,12 @@ def pose_margin(core: Any, size: tuple[int, int], pose_error: Mapping[str, float
 
     ``core``: a CoreConfig or its dict (``CoreConfig.to_dict``); ``size``: the input image (W, H).
     """
-    from el.camera import CameraGeometry, required_beta, working_size
+    from el.camera import required_beta, working_size
     from el.config import CoreConfig
 
     cfg = core if isinstance(core, CoreConfig) else CoreConfig.from_dict(dict(core))
     w, h = working_size(int(size[0]), int(size[1]), cfg.working_width)
-    geo = CameraGeometry(width=w, height=h, intrinsics=cfg.intrinsics, pose=cfg.pose)
+    geo = cfg.geometry(w, h)  # with the core's reach_m: beta is judged over the rows it plans on
     he, pe = float(pose_error["height"]), float(pose_error["pitch"])
     need = required_beta(geo, height_error=he, pitch_error=pe)
     return {"working_size": f"{w}x{h}", "height_m": cfg.pose.height_m, "pitch_deg": cfg.pose.pitch_deg,

@@ -126,11 +126,15 @@ def _replan(man: Mapping[str, Any], config: Any, own_model: bool) -> list[Any] |
         if now != man["weights"].get("sha256"):
             return f"insufficient evidence: the model {named!r} reports other weights than in the run"
     elif not own_model:
-        from el.segmentation.weights import sha256_file
+        from el.segmentation.onnx_engine import file_identity
 
         if not weights or not Path(weights).is_file():
             return f"insufficient evidence: the run's weights {weights} are gone"
-        if sha256_file(weights) != man["weights"].get("sha256"):
+        try:
+            now_sha = file_identity(weights)  # an ONNX file's external data included
+        except Exception as exc:
+            return f"insufficient evidence: the run's weights {weights} cannot be read now: {exc}"
+        if now_sha != man["weights"].get("sha256"):
             return f"insufficient evidence: the weights file {weights} changed since the run"
     from assurance.campaign.run import monitor_models
 

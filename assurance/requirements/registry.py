@@ -26,7 +26,7 @@ from assurance.requirements.targets import (
     targets_sha256,
     validate_targets,
 )
-from el import safeyaml
+from el import safeyaml, userfiles
 from el.errors import UavElError
 
 REGISTRY_FORMAT = "uav-el-requirements/1"
@@ -72,6 +72,7 @@ class Registry:
     targets: dict[str, Any] = field(default_factory=dict)
     targets_source: str | None = None
     templates: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
+    facts: Mapping[str, str] = field(default_factory=dict, repr=False, compare=False)
 
     def __contains__(self, req_id: object) -> bool:
         return req_id in self.requirements
@@ -102,7 +103,15 @@ class Registry:
         given = validate_targets(targets, self.defaults, where=source or "targets")
         merged = {**self.targets, **given}
         return _build(self.path, self.sha256, self.sources, self.defaults, self.templates, merged,
-                      source or self.targets_source)
+                      source or self.targets_source, self.facts)
+
+    def for_system(self, facts: Mapping[str, str] | None) -> Registry:
+        """This registry with its texts rendered for the system ``facts`` describe
+        (``assurance.requirements.system_facts.facts_of``): its camera, pose, scenes and forbidden classes."""
+        if not facts:
+            return self
+        return _build(self.path, self.sha256, self.sources, self.defaults, self.templates, self.targets,
+                      self.targets_source, facts)
 
 
 def default_registry_path() -> Path:
@@ -194,21 +203,26 @@ def _parameters(path: Path, params: Any) -> dict[str, Any]:
 
 
 def _build(path: Path, sha: str, sources: dict[str, str], defaults: dict[str, Any], templates: Mapping[str, Any],
-           targets: dict[str, Any], source: str | None) -> Registry:
-    """The registry with ``targets`` (already validated) over ``defaults``, its texts rendered from the result."""
+           targets: dict[str, Any], source: str | None, facts: Mapping[str, str] | None = None) -> Registry:
+    """The registry with ``targets`` (already validated) over ``defaults``, its texts rendered from the result
+    and the system's ``facts`` (the shipped system's when None)."""
+    from assurance.requirements.system_facts import check_facts, shipped_facts
+
     params = {**defaults, **targets}
+    facts = check_facts(dict(facts) if facts else shipped_facts())
+    text_params = {**params, **{k: _text(f"{path}: system facts", facts, k, params) for k in facts}}
     reqs: dict[str, Requirement] = {}
     for i, entry in enumerate(templates["requirements"]):
         rid = entry["id"]  # the schema checked its form
         where = f"{path}: requirements[{i}] ({rid})"
         if rid in reqs:
             raise RegistryError(f"{where}: duplicate id {rid!r}")
-        reqs[rid] = _requirement(where, entry, sources, params)
-    domain = {k: _text(f"{path}: operating_domain", templates["operating_domain"], k, params)
+        reqs[rid] = _requirement(where, entry, sources, text_params)
+    domain = {k: _text(f"{path}: operating_domain", templates["operating_domain"], k, text_params)
               for k in templates["operating_domain"]}
     return Registry(path=path, sha256=sha, sources=dict(sources), parameters=params, operating_domain=domain,
                     requirements=reqs, defaults=dict(defaults), targets=dict(targets), targets_source=source,
-                    templates=templates)
+                    templates=templates, facts=facts)
 
 
 def load_registry(path: str | Path | None = None, *, targets: Mapping[str, Any] | None = None,
@@ -221,10 +235,10 @@ def load_registry(path: str | Path | None = None, *, targets: Mapping[str, Any] 
     parameter, or a text whose placeholder names no parameter; TargetError for a bad override.
     """
     path = Path(path) if path is not None else default_registry_path()
-    try:
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise RegistryError(f"{path}: cannot read the requirement registry ({exc.strerror or exc})") from None
+    try:  # a regular file of at most 1 MiB: a FIFO or a device is refused before any read
+        raw = userfiles.read_bytes(path, what="requirement registry", max_bytes=userfiles.MAX_SETTINGS_BYTES)
+    except userfiles.UserFileError as exc:
+        raise RegistryError(str(exc)) from None
     try:
         doc = safeyaml.safe_load(raw)
     except yaml.YAMLError as exc:

@@ -6,6 +6,9 @@ A requirement ends a test session in one of three states (``requirement_state``)
 - **failed**: a claiming test failed (or errored, or is marked as an expected failure);
 - **not verified**: no test claims it, or a claiming test was skipped (no campaign run, too little
   data to decide), deselected or not run.
+
+A rate bound is decided at any sample size (``assurance.analysis.intervals.decide_rate_bound``): its check fails
+when the one-sided lower bound already exceeds the target, so "too little data" means the bounds straddle it.
 """
 
 from __future__ import annotations

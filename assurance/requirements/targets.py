@@ -94,7 +94,7 @@ REQUIRED_TARGETS: tuple[str, ...] = tuple(k for k in TARGETS if k != "calibratio
 """The targets a registry must set (``calibration_card`` may be absent: no card chosen)."""
 
 
-GATE_POLICY = ("size_limited", "waiver_owners", "waiver_max_days")
+GATE_POLICY = ("size_limited", "waiver_owners", "waiver_max_days", "forbidden_categories")
 """Registry parameters that say what the gate accepts: set in the registry (pinned by hash), never as targets."""
 
 
@@ -145,12 +145,15 @@ def _same_kind(value: Any, default: Any) -> bool:
 
 def read_targets_file(path: str | Path) -> dict[str, Any]:
     """A JSON object of target overrides (``--uav-el-targets FILE.json``); TargetError naming the file otherwise."""
+    from el import userfiles
+
     path = Path(path)
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise TargetError(f"{path}: cannot read the targets file ({exc.strerror or exc})") from None
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+    try:  # a regular file of at most 1 MiB (a FIFO or a device refused before any read), nested at most 32 deep
+        text = userfiles.read_text(path, what="targets file", max_bytes=userfiles.MAX_SETTINGS_BYTES)
+        doc = userfiles.parse_bounded(json.loads, text, where=str(path))
+    except userfiles.UserFileError as exc:
+        raise TargetError(str(exc)) from None
+    except json.JSONDecodeError as exc:
         raise TargetError(f"{path}: the targets file is not valid JSON ({exc})") from None
     if not isinstance(doc, dict):
         raise TargetError(f"{path}: the targets file must hold a JSON object of target names to values")

@@ -30,6 +30,7 @@ STRONGER: dict[str, str] = {
     "size_limited": SUBSET,
     "waiver_owners": SUBSET,
     "waiver_max_days": LOWER,
+    "forbidden_categories": SUPERSET,
     "deployed_monitor": EQUAL,
     "calibration_card": EQUAL,
 }

@@ -160,6 +160,8 @@ def model_kind(system: SystemFile) -> str:
     """``builtin``, ``pt``, ``onnx`` or ``plugin``: ``[model] kind``, else inferred from ``path``/``name``."""
     kind = system.get("model.kind")
     path, name = system.get("model.path"), system.get("model.name")
+    if kind is None and path and name:
+        raise system.error("model", "give path (a .pt or .onnx file) or name (a plugin), not both")
     if kind is None:
         kind = "plugin" if name else "onnx" if str(path or "").lower().endswith(".onnx") else "pt" if path else \
             "builtin"
@@ -169,21 +171,58 @@ def model_kind(system: SystemFile) -> str:
         raise system.error("model.name", "kind 'plugin' needs the name registered in the uav_el.models entry points")
     if kind == "builtin" and (path or name):
         raise system.error("model", "kind 'builtin' (the shipped network) takes no path or name")
-    if system.get("model.onnx") is not None and kind != "onnx":
-        raise system.error("model.onnx", f"an ONNX contract given for a {kind!r} model")
+    _check_model_keys(system, str(kind))
     return str(kind)
 
 
+def _check_model_keys(system: SystemFile, kind: str) -> None:
+    """A ``[model]`` key that means nothing for the model's kind is refused, never ignored; the output channels'
+    names (``classes``, ``onnx.class_names``) agree and an ONNX contract is well formed."""
+    if kind == "plugin" and system.get("model.path") is not None:
+        raise system.error("model.path", "kind 'plugin' takes no path: its name (NAME or NAME:ARG) says what it loads")
+    if kind in ("pt", "onnx") and system.get("model.name") is not None:
+        raise system.error("model.name", f"a {kind!r} model is its file (path); name is for kind 'plugin'")
+    if system.get("model.onnx") is not None and kind != "onnx":
+        raise system.error("model.onnx", f"an ONNX contract given for a {kind!r} model")
+    if system.get("model.unreachable") and not system.get("model.class_map"):
+        raise system.error("model.unreachable", "only with a class_map (the system classes no network class maps "
+                                                "onto)")
+    classes = system.get("model.classes")
+    if kind == "builtin" and classes is not None and list(classes) != list(UAVID.names):
+        raise system.error("model.classes", f"the shipped network's output channels are {', '.join(UAVID.names)}, "
+                                            "in this order")
+    contract = system.get("model.onnx")
+    if contract is None:
+        return
+    names = contract.get("class_names")
+    if names is None and classes is None:
+        raise system.error("model.onnx.class_names", "missing: the output channels' class names, in channel order "
+                                                     "(here or as [model] classes)")
+    if names is not None and classes is not None and list(names) != list(classes):
+        raise system.error("model.classes", f"{list(classes)} differs from [model.onnx] class_names {list(names)}")
+    from el.segmentation.onnx_model import OnnxContract
+
+    try:
+        OnnxContract.from_dict({**contract, "class_names": names or classes})
+    except (TypeError, ValueError) as exc:
+        raise system.error("model.onnx", str(exc)) from None
+
+
 def model_source(system: SystemFile) -> dict[str, Any]:
-    """The model as data (picklable, recorded in manifests): kind, resolved path, name, expected SHA-256,
-    ONNX contract, class map, and the system's label set it must produce."""
+    """The model as data (picklable, recorded in manifests): kind, resolved path, name, expected identity
+    (SHA-256), ONNX contract, class map, the system's label set it must produce, and, when the file sets them,
+    the output channels' names (``classes``) and the working width."""
     kind = model_kind(system)
     path = system.path_of("model.path")
-    return {"kind": kind, "path": None if path is None else str(path.resolve()), "name": system.get("model.name"),
-            "sha256": system.get("model.sha256"), "onnx": system.get("model.onnx"),
-            "class_map": system.get("model.class_map"), "unreachable": system.get("model.unreachable") or [],
-            "labels": label_set(system).to_dict(),
-            "system": system.label}
+    source = {"kind": kind, "path": None if path is None else str(path.resolve()), "name": system.get("model.name"),
+              "sha256": system.get("model.sha256"), "onnx": system.get("model.onnx"),
+              "class_map": system.get("model.class_map"), "unreachable": system.get("model.unreachable") or [],
+              "labels": label_set(system).to_dict(),
+              "system": system.label}
+    for key in ("classes", "working_width"):  # only when set: a source without them records as before
+        if system.get(f"model.{key}") is not None:
+            source[key] = system.get(f"model.{key}")
+    return source
 
 
 def monitor_spec(system: SystemFile) -> str | None:

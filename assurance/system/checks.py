@@ -2,11 +2,15 @@
 
 Beyond the schema (keys, types, ranges): the label set builds, the camera and nominal pose give a valid
 geometry at the image size, the model file exists and has the SHA-256 the file states, the class map names
-classes that exist, the monitor spec parses, the files it names exist, the perturbations are known.
+classes that exist, the monitor spec parses, the files it names exist, the perturbations are known, and the
+frame gate's and calibration card's thresholds lie where the scores they were fitted on lie
+(``assurance.system.sense``). Every number is finite (``loader.validate``: NaN passes a schema's bounds).
 Loading the model itself (an ONNX file's output shape) is checked when a command loads it, before any task.
 """
 
 from __future__ import annotations
+
+from pathlib import Path
 
 from assurance.system import build
 from assurance.system.loader import SystemFile
@@ -33,11 +37,15 @@ def check_system(system: SystemFile) -> None:
         if unknown:
             raise system.error("targets.required_perturbations",
                                f"unknown {unknown[0]!r}; known: {', '.join(PERTURBATIONS)}")
+    from assurance.system.sense import check_fitted
+
+    check_fitted(system, labels)  # the gate's and the card's thresholds where their fits' scores lie
 
 
 def check_geometry(system: SystemFile) -> None:
     """The camera, nominal pose and image size must give a geometry the flat-ground model handles: every
-    reachable row sees the ground at a finite footprint."""
+    reachable row sees the ground at a finite footprint, and some stripe is within reach (``reach_m``): a
+    nominal pose with none could never land (every decision the default action)."""
     from el.camera import CameraGeometry, check_geometry
 
     intr, pose, width_height = build.intrinsics(system), build.nominal_pose(system), build.image_size(system)
@@ -47,6 +55,13 @@ def check_geometry(system: SystemFile) -> None:
         check_geometry(geometry)
     except ValueError as exc:
         raise system.error("camera", str(exc)) from None
+    if geometry.first_reachable_row >= geometry.height:
+        nearest = float(geometry.ground_distance(geometry.height - 0.5))
+        raise system.error("camera", f"pose height_m {pose.height_m:g}, pitch_deg {pose.pitch_deg:g} with camera "
+                                     f"{intr.name!r} on a {width_height[0]}x{width_height[1]} image has no stripe "
+                                     f"within the {geometry.reach_m:g} m reach (the nearest ground in view lies "
+                                     f"{nearest:.0f} m ahead), so it could never land; raise pitch_deg, lower "
+                                     "height_m or widen the field of view")
 
 
 def check_model(system: SystemFile, names: tuple[str, ...]) -> None:
@@ -64,7 +79,7 @@ def check_model(system: SystemFile, names: tuple[str, ...]) -> None:
             raise system.error("model.path", f"{path}: a {kind!r} model is a {suffix} file")
         want = system.get("model.sha256")
         if want is not None:
-            have = sha256_file(path)
+            have = _identity(system, kind, path) if kind == "onnx" else sha256_file(path)
             if have != want:
                 raise system.error("model.sha256", f"{path} has SHA-256 {have}, the system file states {want} "
                                                    "(the file changed, or the wrong file)")
@@ -82,6 +97,17 @@ def check_model(system: SystemFile, names: tuple[str, ...]) -> None:
     contract = system.get("model.onnx")
     if contract and contract.get("scaling") == "mean_std" and not (contract.get("mean") and contract.get("std")):
         raise system.error("model.onnx", "scaling 'mean_std' needs mean and std")
+
+
+def _identity(system: SystemFile, kind: str, path: Path) -> str:
+    """An ONNX file's identity: its SHA-256, its external data files' included (``el.segmentation.onnx_engine``)."""
+    from el.errors import WeightsError
+    from el.segmentation.onnx_engine import read_onnx
+
+    try:
+        return read_onnx(path).sha256
+    except WeightsError as exc:
+        raise system.error("model.path", str(exc)) from None
 
 
 def check_monitor(system: SystemFile) -> None:

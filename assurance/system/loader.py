@@ -18,12 +18,14 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from el import userfiles
 from el.errors import UavElError
 
 SYSTEM_FILE = "uav-el.toml"
 FORMAT = "uav-el-system/1"
 REPLACED_WHOLE = ("model", "labels")  # a user's section replaces the default's (its keys exclude each other)
 MAX_BYTES = 1_000_000  # a system file is a page of settings, not data
+MAX_DEPTH = 8  # tables, arrays and dotted keys nest at most this deep (the schema's deepest value nests 4)
 
 
 class SystemFileError(UavElError, ValueError):
@@ -116,18 +118,37 @@ def _flatten(doc: Mapping[str, Any], prefix: str = "") -> Iterator[tuple[str, An
 
 
 def parse_system(text: str, *, label: str) -> dict[str, Any]:
-    """The validated document of a system file's text; ``SystemFileError`` naming ``label`` and the key."""
+    """The validated document of a system file's text; ``SystemFileError`` naming ``label`` and the key.
+
+    Its nesting is measured before ``tomllib`` reads it (``el.userfiles.toml_nesting``: ``tomllib`` recurses on
+    brackets, 60 000 deep is a RecursionError, and takes quadratic time on a long dotted key)."""
+    depth = userfiles.toml_nesting(text, limit=MAX_DEPTH)
+    if depth > MAX_DEPTH:
+        raise SystemFileError(f"{label}: nested more than {MAX_DEPTH} levels deep (brackets, braces or dotted key "
+                              "parts); a system file is a page of settings")
     try:
-        doc = tomllib.loads(text)
+        doc = userfiles.parse_bounded(tomllib.loads, text, where=label, max_depth=MAX_DEPTH)
     except tomllib.TOMLDecodeError as exc:
         raise SystemFileError(f"{label}: not valid TOML: {exc}") from None
+    except userfiles.UserFileError as exc:
+        raise SystemFileError(str(exc)) from None
     validate(doc, label=label)
     return doc
 
 
 def validate(doc: Mapping[str, Any], *, label: str) -> None:
-    """Check a document against the schema; the first problem (in key order) as one line."""
+    """Check a document against the schema; the first problem (in key order) as one line. A number that is NaN or
+    infinite is refused wherever it stands (NaN passes every ``minimum``/``maximum`` of a schema: it compares
+    false), so no setting reaches a command as NaN."""
     import jsonschema
+
+    try:  # a document recorded in a run's manifest reaches here without parse_system's bound
+        userfiles.check_depth(dict(doc), where=label, max_depth=MAX_DEPTH)
+    except userfiles.UserFileError as exc:
+        raise SystemFileError(str(exc)) from None
+    bad = userfiles.non_finite(dict(doc))
+    if bad is not None:
+        raise SystemFileError(f"{label}: {bad[0]} = {bad[1]}: must be a finite number")
 
     validator = jsonschema.Draft202012Validator(schema())
     errors = sorted(validator.iter_errors(doc), key=lambda e: (list(map(str, e.absolute_path)), e.validator))
@@ -222,11 +243,12 @@ def read_system(path: str | Path) -> SystemFile:
     """Read and validate a system file against the schema (``SystemFileError`` naming file, key, value, allowed);
     the checks beyond the schema are ``assurance.system.checks`` (``assurance.system.load_system`` runs both)."""
     path = Path(path)
-    if not path.is_file():
-        raise SystemFileError(f"{path}: no such system file" if not path.exists() else f"{path}: not a file")
-    if path.stat().st_size > MAX_BYTES:
-        raise SystemFileError(f"{path}: {path.stat().st_size} bytes; a system file is at most {MAX_BYTES}")
-    raw = path.read_bytes()
+    if not path.exists() and not path.is_symlink():
+        raise SystemFileError(f"{path}: no such system file")
+    try:  # a regular file of at most MAX_BYTES, refused before any read that could block
+        raw = userfiles.read_bytes(path, what="system file", max_bytes=MAX_BYTES)
+    except userfiles.UserFileError as exc:
+        raise SystemFileError(str(exc)) from None
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:

@@ -2,7 +2,8 @@
 
 What the decision loop calls::
 
-    monitor = build_monitor("lhd+ch:tau=0.25", margin=0.25, max_side=None)   # None for "none"
+    monitor = build_monitor("lhd+ch:tau=0.25", labels=segmenter.labels,    # None for "none"
+                            network_classes=None, model=segmenter)         # refused here if it cannot run
     verdict = monitor.check(hd_image, candidate, segmenter, seed=seed)       # MonitorVerdict
 
 What a campaign calls to segment a patch once and judge it with many configurations::

@@ -26,7 +26,7 @@ import numpy as np
 
 from el.deadline import checkpoint
 from el.decision import Candidate, Disc, MonitorVerdict
-from el.labels import UAVID, LabelSet
+from el.labels import LabelSet
 from el.monitors.patch_batch import check_batched
 from el.monitors.patches import Patch, extract_patch, validate_patch_params
 
@@ -76,11 +76,11 @@ def _num_classes(labels: LabelSet | None, array: np.ndarray, axis: int) -> int:
 
 
 def validate_scores(scores: object, shape: tuple[int, int], what: str = "scores", *,
-                    labels: LabelSet | None = UAVID) -> np.ndarray:
+                    labels: LabelSet | None) -> np.ndarray:
     """Check per-class scores: ndarray of shape (C, h, w), real, finite.
 
-    C is ``labels.num_classes`` (the monitor's label set; 8 for the default UAVid), or, with
-    ``labels=None``, whatever the array holds.
+    C is ``labels.num_classes`` (the monitor's label set; 8 for UAVid), or, with ``labels=None``,
+    whatever the array holds.
     """
     if not isinstance(scores, np.ndarray):
         raise ValueError(f"{what} must be a numpy array, got {type(scores).__name__}")
@@ -95,7 +95,7 @@ def validate_scores(scores: object, shape: tuple[int, int], what: str = "scores"
 
 
 def validate_samples(samples: object, shape: tuple[int, int], n: int, *,
-                     labels: LabelSet | None = UAVID) -> np.ndarray:
+                     labels: LabelSet | None) -> np.ndarray:
     """Check MC-dropout samples: ndarray of shape (n', C, h, w) with n' >= n, real, finite.
 
     C as in :func:`validate_scores`: ``labels.num_classes``, or the array's own with ``labels=None``.

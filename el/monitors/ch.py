@@ -1,17 +1,20 @@
 """CH (classification hierarchy, on top of LHD): reject a disc holding an uncertain or unsafe pixel.
 
 Each pixel is labelled with the closest common ancestor of its classes scoring above tau
-(``hierarchy.yaml``); the disc is rejected if a pixel's label has a forbidden class under it
-(``any``, ``unsafe`` or a forbidden class) or if LHD rejects it. Score: the fraction of such pixels
-(``el.monitors.lhd.fraction_score``); threshold 0 is the paper's rule.
+(``hierarchy.yaml`` for UAVid; for another label set, the tree it declares or one derived from its
+forbidden/safe split: ``el.monitors.hierarchy.default_hierarchy``); the disc is rejected if a pixel's
+label has a forbidden class under it (``any``, ``unsafe`` or a forbidden class) or if LHD rejects it.
+Score: the fraction of such pixels (``el.monitors.lhd.fraction_score``); threshold 0 is the paper's rule.
 """
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from el.forbidden import forbidden_pixels
-from el.labels import UAVID, LabelSet
+from el.labels import LabelSet
 from el.monitors.base import format_counts
 from el.monitors.hierarchy import ClassHierarchy, default_hierarchy
 from el.monitors.lhd import EMPTY_DISC, LHDMonitor, forbidden_counts, lhd_reason
@@ -59,13 +62,14 @@ class CHMonitor(LHDMonitor):
     hierarchy : ClassHierarchy, optional
         Defaults to the label set's (``default_hierarchy(labels)``: the shipped ``hierarchy.yaml`` for UAVid);
         one given must be over ``labels``.
-    labels : LabelSet, default ``el.labels.UAVID``
-        The label set of the segmenter's scores.
+    labels : LabelSet
+        The label set of the segmenter's scores (any number of classes).
     margin, max_side, clock
         See ``Monitor``.
     """
 
-    def __init__(self, *, tau: float, hierarchy: ClassHierarchy | None = None, labels: LabelSet = UAVID, **kwargs):
+    def __init__(self, *, tau: float, labels: LabelSet, hierarchy: ClassHierarchy | None = None,
+                 **kwargs: Any) -> None:
         super().__init__(labels=labels, **kwargs)
         self.tau = validate_tau(tau)
         self.hierarchy = hierarchy if hierarchy is not None else default_hierarchy(labels)

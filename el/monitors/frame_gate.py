@@ -1,6 +1,9 @@
 """The deployed frame gate: one fitted candidate of ``el.monitors.gates``, read from its hash-checked JSON file
-(``uav-el fit-gate``), scoring the statistics the frame's own segmentation pass kept (``Segmenter.last_tap``,
-``el/segmentation/frame_tap.py``: no second trunk pass).
+(``uav-el fit-gate``), scoring the statistics the frame's own segmentation pass kept (the model's ``last_tap``,
+``el/segmentation/frame_tap.py``: no second pass). Any network that keeps them can carry a gate: the shipped
+``Segmenter`` (torch or ONNX Runtime), an ONNX file (``OnnxModel``) and either behind a class map (``MappedModel``
+passes its network's tap through). The file's ``features.tap`` says which statistics it reads: ``pooled`` (the
+trunk's), ``output`` (the logits', every network's) or ``energy``.
 
 A frame whose score is above the threshold ends in the default action with reason
 ``out_of_domain: frame gate <kind> score S > threshold T`` (a decision: there is no evidence of safety there);
@@ -61,16 +64,21 @@ class FrameGate(HashedRecord):
         return int(self.body["features"]["dims"])
 
     @property
+    def features(self) -> str:
+        """Which statistics of the frame's tap the gate reads (``pooled``: the trunk's; ``output``; ``energy``)."""
+        return str(self.body["features"].get("tap") or GATES[self.kind].FEATURES[0])
+
+    @property
     def needs_trunk(self) -> bool:
-        return bool(GATES[self.kind].NEEDS_TRUNK)
+        return self.features == "pooled"
 
     def score(self, tap: Any) -> float:
         """The frame's score from its :class:`~el.segmentation.frame_tap.FrameTap`; ValueError when the pass kept
         none, the features do not match the fitted ones, or the score is not finite."""
         if tap is None:
-            raise ValueError("the segmentation pass kept no frame statistics (Segmenter.tap_frames is off)")
+            raise ValueError("the segmentation pass kept no frame statistics (the model's tap_frames is off)")
         gate = GATES[self.kind]
-        x = np.asarray(gate.embed(tap), np.float64)
+        x = np.asarray(gate.embed(tap, self.features), np.float64)
         if x.shape != (self.dims,):
             raise ValueError(f"the frame has {x.size} features, the gate {self.path} was fitted on {self.dims} "
                              "(another network or engine?)")
@@ -110,15 +118,34 @@ def load_frame_gate(path: str | Path) -> FrameGate:
         if body.get("kind") not in GATES:
             raise ValueError(f"kind must be one of {', '.join(sorted(GATES))}, got {body.get('kind')!r}")
         dims = body["features"]["dims"]
+        tap = body["features"].get("tap") or GATES[body["kind"]].FEATURES[0]
+        if tap not in GATES[body["kind"]].FEATURES:
+            raise ValueError(f"features.tap {tap!r}: a {body['kind']} gate reads "
+                             f"{' or '.join(GATES[body['kind']].FEATURES)}")
         if isinstance(dims, bool) or not isinstance(dims, int) or dims < 1:
             raise ValueError(f"features.dims must be a positive integer, got {dims!r}")
         if not math.isfinite(float(body["threshold"])):
             raise ValueError("threshold must be a finite number")
         params = _arrays(body["params"])
         GATES[body["kind"]].score(params, np.zeros((1, dims)))  # the statistics fit the feature count
-    except (KeyError, TypeError, ValueError, IndexError) as exc:
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
         raise FrameGateError(f"{p}: inconsistent frame gate ({exc})") from None
     return FrameGate(str(p), digest, body, params)
+
+
+def keeps_taps(model: Any) -> bool:
+    """Whether a segmentation model can keep its frame pass's statistics for a frame gate (``tap_frames`` and
+    ``last_tap``: the shipped ``Segmenter``, an ``OnnxModel``, a ``MappedModel`` over either)."""
+    return hasattr(model, "tap_frames")
+
+
+def start_taps(model: Any, where: str) -> None:
+    """Turn ``model.tap_frames`` on; ``FrameGateError`` naming ``where`` for a model that keeps no statistics."""
+    if not keeps_taps(model):
+        inner = getattr(model, "network", model)
+        raise FrameGateError(f"{where}: the segmentation model {type(inner).__name__} keeps no frame statistics "
+                             "(tap_frames, last_tap): a frame gate cannot read it")
+    model.tap_frames = True
 
 
 def bind_frame_gate(path: str | Path, segmenter: Any) -> FrameGate:
@@ -128,10 +155,7 @@ def bind_frame_gate(path: str | Path, segmenter: Any) -> FrameGate:
     if segmenter is None:
         raise FrameGateError(f"{gate.path}: no segmentation network to bind the frame gate to")
     gate.check_network(segmenter)
-    if not hasattr(segmenter, "tap_frames"):
-        raise FrameGateError(f"{gate.path}: the segmenter {type(segmenter).__name__} keeps no frame statistics "
-                             "(Segmenter.tap_frames): a frame gate cannot read it")
-    segmenter.tap_frames = True
+    start_taps(segmenter, gate.path)
     return gate
 
 
@@ -144,4 +168,4 @@ def judge_frame(gate: FrameGate, segmenter: Any, info: dict[str, Any]) -> str | 
 
 
 __all__ = ["FRAME_GATE_FORMAT", "OUT_OF_DOMAIN", "FrameGate", "bind_frame_gate", "frame_gate_document", "judge_frame",
-           "load_frame_gate"]
+           "keeps_taps", "load_frame_gate", "start_taps"]

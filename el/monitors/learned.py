@@ -19,7 +19,7 @@ the HD patch, probability quantiles and entropies added nothing there.) Optional
 (:data:`MCD_FEATURES`, when the model file asks for ``mcd.n`` > 0 samples): the mean and largest
 standard deviation of the forbidden probability over MC-dropout samples in the disc.
 
-"Forbidden" is the label set's word (``labels``, default :data:`el.labels.UAVID`); the per-class
+"Forbidden" is the label set's word (``labels``, given by the caller); the per-class
 features are named after its forbidden classes (:func:`base_features`), so a model is fitted and
 flown with one label set.
 
@@ -58,7 +58,7 @@ DEFAULT_MODEL = Path(__file__).resolve().parent / "data" / "learned.json"
 
 _DISC_STATS = ("max_forbidden_p", "mean_forbidden_p", "forbidden_fraction", "max_margin")
 CONTEXT_SCALES: tuple[float, ...] = (1.5, 2.0, 3.0)  # context discs, in radii of the safe disc
-_FORBIDDEN = np.array(UAVID.forbidden_ids)  # the default set's
+_FORBIDDEN = np.array(UAVID.forbidden_ids)  # UAVid's, the shipped model's set (tests)
 CORE_FEATURES: tuple[str, ...] = (
     *(f"lr_{s}" for s in _DISC_STATS),
     *(f"hd_{s}" for s in _DISC_STATS),
@@ -66,8 +66,8 @@ CORE_FEATURES: tuple[str, ...] = (
 )
 
 
-def context_features(labels: LabelSet = UAVID) -> tuple[str, ...]:
-    """The context feature names (:data:`CONTEXT_FEATURES` for the default set): per forbidden class of ``labels``."""
+def context_features(labels: LabelSet) -> tuple[str, ...]:
+    """The context feature names (:data:`CONTEXT_FEATURES` for UAVid): per forbidden class of ``labels``."""
     names = tuple(labels.names[i] for i in labels.forbidden_ids)
     return (
         *(f"ctx{k:g}_{s}" for k in CONTEXT_SCALES for s in ("max_forbidden_p", "mean_forbidden_p")),
@@ -76,18 +76,18 @@ def context_features(labels: LabelSet = UAVID) -> tuple[str, ...]:
     )
 
 
-def base_features(labels: LabelSet = UAVID) -> tuple[str, ...]:
+def base_features(labels: LabelSet) -> tuple[str, ...]:
     """The names of :func:`candidate_features`' vector without MC dropout (:data:`BASE_FEATURES` for UAVid)."""
     return CORE_FEATURES + context_features(labels)
 
 
-CONTEXT_FEATURES: tuple[str, ...] = context_features(UAVID)
+CONTEXT_FEATURES: tuple[str, ...] = context_features(UAVID)  # the shipped model's (UAVid) names
 BASE_FEATURES: tuple[str, ...] = CORE_FEATURES + CONTEXT_FEATURES
 MCD_FEATURES: tuple[str, ...] = ("mcd_mean_std", "mcd_max_std")
 
 
 # -- features ------------------------------------------------------------------------------------
-def disc_stats(pixel_scores: np.ndarray, labels: LabelSet = UAVID) -> list[float]:
+def disc_stats(pixel_scores: np.ndarray, labels: LabelSet) -> list[float]:
     """The four disc statistics (:data:`_DISC_STATS`) of the softmax of the disc's pixels (C, m)."""
     if pixel_scores.shape[1] == 0:
         return [1.0, 1.0, 1.0, 1.0]  # nothing seen: as bad as it gets
@@ -98,14 +98,14 @@ def disc_stats(pixel_scores: np.ndarray, labels: LabelSet = UAVID) -> list[float
             float(np.count_nonzero(top_forbidden >= top_safe) / p.shape[1]), float((top_forbidden - top_safe).max())]
 
 
-def class_max(pixel_scores: np.ndarray, labels: LabelSet = UAVID) -> list[float]:
+def class_max(pixel_scores: np.ndarray, labels: LabelSet) -> list[float]:
     """The largest probability of each forbidden class over the disc's pixels (C, m)."""
     if pixel_scores.shape[1] == 0:
         return [1.0] * len(labels.forbidden_ids)
     return [float(v) for v in pixel_scores[np.array(labels.forbidden_ids)].max(axis=1)]
 
 
-def context_stats(frame: np.ndarray, candidate: Any, scale: float, labels: LabelSet = UAVID) -> list[float]:
+def context_stats(frame: np.ndarray, candidate: Any, scale: float, labels: LabelSet) -> list[float]:
     """Largest and mean forbidden probability of the frame's softmax in discs of :data:`CONTEXT_SCALES`
     radii centred on the candidate (its safe disc and what lies just beyond it)."""
     h, w = frame.shape[1:]
@@ -157,7 +157,7 @@ def frame_disc_mask(shape: tuple[int, int], candidate: Any, scale: float, *, rad
 
 
 def edge_distance(patch_probs: np.ndarray, patch: Patch, candidate: Any, margin: float,
-                  labels: LabelSet = UAVID) -> float:
+                  labels: LabelSet) -> float:
     """Distance from the disc's edge to the nearest predicted-forbidden pixel of the HD patch, in radii.
 
     < 0 when one lies inside the disc (-1 at the centre); the patch's reach ``(1 + margin) sqrt(2) - 1``
@@ -173,7 +173,7 @@ def edge_distance(patch_probs: np.ndarray, patch: Patch, candidate: Any, margin:
     return min(max(d, -1.0), cap)
 
 
-def mcd_spread(samples: np.ndarray, disc_mask: np.ndarray, labels: LabelSet = UAVID) -> list[float]:
+def mcd_spread(samples: np.ndarray, disc_mask: np.ndarray, labels: LabelSet) -> list[float]:
     """Mean and largest standard deviation, over MC-dropout samples (n, C, h, w), of the disc's
     forbidden probability (:data:`MCD_FEATURES`)."""
     p = take_disc(samples, disc_mask).astype(np.float64)  # (n, 8, m)
@@ -184,7 +184,7 @@ def mcd_spread(samples: np.ndarray, disc_mask: np.ndarray, labels: LabelSet = UA
 
 
 def candidate_features(patch_probs: np.ndarray, patch: Patch, context: CandidateContext, *, margin: float,
-                       mcd_samples: np.ndarray | None = None, labels: LabelSet = UAVID) -> np.ndarray:
+                       mcd_samples: np.ndarray | None = None, labels: LabelSet) -> np.ndarray:
     """The feature vector of one candidate: :func:`base_features` (:data:`BASE_FEATURES` for UAVid), then
     :data:`MCD_FEATURES` with samples.
 
@@ -233,7 +233,7 @@ class LearnedModel(HashedRecord):
     coef: np.ndarray
     intercept: float
     columns: np.ndarray  # where each of the model's features lies in the vector :func:`candidate_features` gives
-    labels: LabelSet = UAVID  # the label set whose features the model reads
+    labels: LabelSet  # the label set whose features the model reads
 
     @property
     def features(self) -> tuple[str, ...]:
@@ -265,7 +265,7 @@ class LearnedModel(HashedRecord):
         return 1.0 / (1.0 + np.exp(-np.clip(z, -500.0, 500.0)))
 
 
-def feature_columns(names: tuple[str, ...], mcd_n: int, labels: LabelSet = UAVID) -> np.ndarray:
+def feature_columns(names: tuple[str, ...], mcd_n: int, labels: LabelSet) -> np.ndarray:
     """Positions of a model's feature names in the computed vector; any subset of this version's
     features, in any order (a model fitted before the context features were added keeps working)."""
     known = base_features(labels) + (MCD_FEATURES if mcd_n > 0 else ())
@@ -292,9 +292,9 @@ def _vector(body: dict[str, Any], key: str, d: int) -> np.ndarray:
     return v
 
 
-def load_learned_model(path: str | Path | None = None, *, labels: LabelSet = UAVID) -> LearnedModel:
-    """Read and check a model file (default: the shipped ``el/monitors/data/learned.json``), whose
-    features are those of ``labels`` (default UAVid).
+def load_learned_model(path: str | Path | None = None, *, labels: LabelSet) -> LearnedModel:
+    """Read and check a model file (default: the shipped ``el/monitors/data/learned.json``, fitted on
+    UAVid), whose features are those of ``labels``.
 
     Raises
     ------
@@ -333,7 +333,7 @@ class LearnedMonitor(LHDMonitor):
     PARAMS: ClassVar[dict[str, Any]] = {"model": str}
     SCORE_RANGE: ClassVar[tuple[float, float]] = (0.0, 1.0)  # a probability
 
-    def __init__(self, *, model: str | None = None, threshold: float | None = None, labels: LabelSet = UAVID,
+    def __init__(self, *, labels: LabelSet, model: str | None = None, threshold: float | None = None,
                  **common: Any) -> None:
         self.model_path = model
         self.model = load_learned_model(model, labels=labels)

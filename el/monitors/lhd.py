@@ -9,7 +9,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from el.forbidden import argmax_slack, forbidden_pixels
-from el.labels import UAVID, LabelSet
+from el.labels import LabelSet
 from el.monitors.base import (
     CandidateContext,
     Judgement,
@@ -23,13 +23,13 @@ from el.monitors.patches import Patch
 from el.monitors.spec import MonitorSpec
 
 
-def forbidden_counts(pixel_scores: np.ndarray, labels: LabelSet = UAVID) -> dict[str, int]:
+def forbidden_counts(pixel_scores: np.ndarray, labels: LabelSet) -> dict[str, int]:
     """Forbidden-pixel count per forbidden class among pixels, each named by its top forbidden class.
 
     Parameters
     ----------
     pixel_scores : ndarray of shape (C, m), float
-        Scores of the ``m`` pixels to judge (the disc), over the classes of ``labels`` (default UAVid).
+        Scores of the ``m`` pixels to judge (the disc), over the classes of ``labels``.
     """
     hit = forbidden_pixels(pixel_scores, labels)
     if not hit.any():
@@ -40,7 +40,7 @@ def forbidden_counts(pixel_scores: np.ndarray, labels: LabelSet = UAVID) -> dict
     return {labels.names[i]: int(c) for i, c in zip(ids, counts, strict=True)}
 
 
-def disc_pixels(scores: np.ndarray, disc_mask: np.ndarray, labels: LabelSet = UAVID) -> np.ndarray:
+def disc_pixels(scores: np.ndarray, disc_mask: np.ndarray, labels: LabelSet) -> np.ndarray:
     """Validate scores (C, h, w) against a mask (h, w) and return the disc's scores (C, m); C from ``labels``."""
     validate_mask(disc_mask)
     validate_scores(scores, disc_mask.shape, labels=labels)
@@ -95,26 +95,26 @@ class LHDMonitor(PatchMonitor):
 
     Score: :func:`fraction_score` (fraction of forbidden pixels, or the best safe margin when
     there is none); threshold 0 is the paper's rule. Parameters: see ``Monitor`` (``margin``,
-    ``max_side``, ``clock``, ``threshold``), and ``labels`` (keyword, default ``el.labels.UAVID``):
-    the label set of the segmenter's scores, which says which classes are forbidden. An empty
-    disc is rejected.
+    ``max_side``, ``clock``, ``threshold``), and ``labels`` (keyword, required): the label set of the
+    segmenter's scores, which says which classes are forbidden. An empty disc is rejected.
 
     Examples
     --------
     >>> import numpy as np
+    >>> from el.labels import UAVID
     >>> scores = np.zeros((8, 3, 3), np.float32); scores[5] = 1.0   # low vegetation everywhere
     >>> scores[2, 1, 1] = 2.0                                       # one road pixel
-    >>> LHDMonitor().decide(scores, np.ones((3, 3), bool))
+    >>> LHDMonitor(labels=UAVID).decide(scores, np.ones((3, 3), bool))
     (False, 'forbidden class in disc: road (1 px)')
-    >>> round(LHDMonitor().score(scores, np.ones((3, 3), bool)), 4)     # 1 pixel of 9
+    >>> round(LHDMonitor(labels=UAVID).score(scores, np.ones((3, 3), bool)), 4)     # 1 pixel of 9
     0.1111
     """
 
     SCORE_RANGE: ClassVar[tuple[float, float]] = (-1.0, 1.0)  # fraction_score: a safe margin >= -1, a fraction <= 1
-    #: The label set of the scores; a class default too, for subclasses that do not call this ``__init__``.
-    labels: LabelSet = UAVID
+    #: The label set of the scores (set by ``__init__``: a subclass calls it).
+    labels: LabelSet
 
-    def __init__(self, *, labels: LabelSet = UAVID, **kwargs: Any) -> None:
+    def __init__(self, *, labels: LabelSet, **kwargs: Any) -> None:
         if not isinstance(labels, LabelSet):
             raise ValueError(f"labels must be a LabelSet, got {type(labels).__name__}")
         self.labels = labels
@@ -172,8 +172,8 @@ class LHDMonitor(PatchMonitor):
         return Judgement(score, accepted, reason)
 
 
-def lhd_rule(pixel_scores: np.ndarray, labels: LabelSet = UAVID) -> tuple[bool, str]:
-    """LHD on the disc's pixel scores (C, m) of ``labels`` (default UAVid): ``(accepted, reason)``."""
+def lhd_rule(pixel_scores: np.ndarray, labels: LabelSet) -> tuple[bool, str]:
+    """LHD on the disc's pixel scores (C, m) of ``labels``: ``(accepted, reason)``."""
     m = pixel_scores.shape[1]
     if m == 0:
         return False, EMPTY_DISC

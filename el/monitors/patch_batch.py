@@ -72,7 +72,7 @@ def _valid_frame(frame: object, labels: Any, validate: Validate) -> bool:
     if not isinstance(frame, np.ndarray) or frame.ndim != 3:
         return False
     try:
-        validate(frame, frame.shape[1:], "frame softmax", **({} if labels is None else {"labels": labels}))
+        validate(frame, frame.shape[1:], "frame softmax", labels=labels)
     except ValueError:
         return False
     return True

@@ -9,10 +9,12 @@ probabilities, reordered: sums of one term are exact.
 
 Capabilities pass through where the class map keeps their meaning: ``mc_dropout`` (each sample is
 mapped), ``patch_trunk`` (the trunk is class-free; ``predict_patch`` and ``mc_dropout`` take its
-``features=`` and map their output) and the trunk features of the out-of-domain gate (``model.trunk``
-and ``working_size``: class-free). Not passed: ``fast_mc`` (the chunked MC path reads the network's
-head directly and would bypass the map), so MC dropout goes through the mapped ``mc_dropout`` in one
-draw: in flight, a large MCD ``n`` is not cut into budget-checked chunks.
+``features=`` and map their output), the trunk features of the out-of-domain gate (``model.trunk``
+and ``working_size``: class-free) and the frame pass's statistics a frame gate reads (``tap_frames``,
+``last_tap``: the network's own, in its own classes, like the gate fitted on it). Not passed: ``fast_mc``
+(the chunked MC path reads the network's head directly and would bypass the map), so MC dropout goes
+through the mapped ``mc_dropout`` in one draw: in flight, a large MCD ``n`` is not cut into budget-checked
+chunks. ``network_classes``: the network's own class count (softmax scores are normalised by it).
 ``weights_sha256`` is the network's: records fitted on it stay bound to it. Beware that a record whose
 features are per class (a learned monitor's per-class features, a softmax-embedding out-of-domain gate)
 was fitted in the network's classes; the learned monitor refuses class names it does not know, a
@@ -131,6 +133,31 @@ class MappedModel:
     def weights_sha256(self) -> str | None:
         """The network's identity (the class map does not change which network runs)."""
         return getattr(self.network, "weights_sha256", None)
+
+    @property
+    def network_classes(self) -> int:
+        """How many classes the network itself outputs (before the map): what its softmax scores are normalised by."""
+        return int(self.network_labels.num_classes)
+
+    @property
+    def tap_frames(self) -> bool:
+        """Whether the network keeps its frame pass's statistics for a frame gate (AttributeError for a network
+        that cannot: ``hasattr`` then says no, as for any model without them)."""
+        if not hasattr(self.network, "tap_frames"):
+            raise AttributeError(f"{type(self.network).__name__} keeps no frame statistics (tap_frames)")
+        return bool(self.network.tap_frames)
+
+    @tap_frames.setter
+    def tap_frames(self, value: bool) -> None:
+        if not hasattr(self.network, "tap_frames"):
+            raise AttributeError(f"{type(self.network).__name__} keeps no frame statistics (tap_frames)")
+        self.network.tap_frames = value
+
+    @property
+    def last_tap(self) -> Any:
+        """The network's statistics of the frame it last segmented (``el.segmentation.frame_tap.FrameTap``; None
+        when it kept none): the map does not touch them."""
+        return getattr(self.network, "last_tap", None)
 
     def predict_frame(self, rgb: np.ndarray) -> np.ndarray:
         """The network's frame probabilities summed onto the system's classes: (C_sys, h, w) float32."""

@@ -11,6 +11,7 @@ builds one from a spec.
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -46,8 +47,32 @@ class SegmentationModel(Protocol):
     def predict_patch(self, rgb_patch: np.ndarray) -> np.ndarray: ...
 
 
-def labels_of(model: Any) -> LabelSet:
-    """The label set a model segments into (UAVid for a model that does not say)."""
+@dataclass(frozen=True)
+class OutputClasses:
+    """A network's own output classes known only by name, in channel order: no colours, no forbidden/safe split,
+    so never a system's label set; a class map (``el.segmentation.class_map.MappedModel``) maps them onto one.
+    A user's network states them (an ONNX contract's ``class_names``, a system file's ``[model] classes``)."""
+
+    name: str
+    names: tuple[str, ...]
+    ids: dict[str, int] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        names = tuple(self.names) if isinstance(self.names, (list, tuple)) else ()
+        if not names or not all(isinstance(n, str) and n.strip() for n in names) or len(set(names)) != len(names):
+            raise ValueError(f"output classes of {self.name}: distinct non-empty names expected, got {self.names!r}")
+        object.__setattr__(self, "names", names)
+        object.__setattr__(self, "ids", {n: i for i, n in enumerate(names)})
+
+    @property
+    def num_classes(self) -> int:
+        """How many output channels."""
+        return len(self.names)
+
+
+def labels_of(model: Any) -> LabelSet | OutputClasses:
+    """The classes a model segments into: its label set, or its output classes by name (:class:`OutputClasses`)
+    when only a class map gives them a meaning; UAVid for a model that does not say."""
     labels = getattr(model, "labels", None)
     return UAVID if labels is None else labels
 

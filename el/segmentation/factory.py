@@ -4,8 +4,9 @@ A model spec is what a user writes in a command or a system file:
 
 - None, ``""`` or ``"shipped"``: the shipped weights (``el/segmentation/weights/model.pt``);
 - a path to a ``.pt`` weights file with its model card beside it (``uav-el train`` writes both);
-- a path to an ``.onnx`` file: a network from elsewhere under ONNX Runtime, its input contract read from
-  the file's metadata (:func:`el.segmentation.onnx_model.load_onnx_model`; ``uav-el export-onnx`` writes one);
+- a path to an ``.onnx`` file: a network from elsewhere under ONNX Runtime, its input contract and label set
+  read from the file's metadata (:func:`el.segmentation.onnx_model.load_onnx_model`; ``uav-el export-onnx``
+  writes both; a file without them is declared in a system file, ``assurance.system``);
 - ``NAME`` or ``NAME:ARG``: a factory registered in the ``uav_el.models`` entry-point group (a package's
   ``pyproject.toml``: ``[project.entry-points."uav_el.models"] mynet = "mypkg.models:build"``), called as
   ``factory(ARG or None, threads=..., device=...)``; it returns any object implementing
@@ -25,7 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from el.errors import WeightsError
-from el.segmentation.contract import check_model
+from el.segmentation.contract import OutputClasses, check_model
 from el.segmentation.inference import Segmenter
 
 ENTRY_POINT_GROUP = "uav_el.models"
@@ -81,7 +82,12 @@ def load_model(spec: str | Path | None = None, *, threads: int | None = None, de
         from el.segmentation.onnx_model import load_onnx_model
 
         width = {} if working_width is None else {"working_width": working_width}
-        return load_onnx_model(spec, threads=threads, **width)  # type: ignore[arg-type]
+        model = load_onnx_model(spec, threads=threads, **width)  # type: ignore[arg-type]
+        if isinstance(model.labels, OutputClasses):  # no label set says what its classes mean: no guessing
+            raise WeightsError(f"{spec}: the network's classes {list(model.labels.names)} come with no label set "
+                               "(the file's metadata has none): declare it in a system file ([labels], [model.onnx] "
+                               "class_names and [model] class_map)")
+        return model
     if kind == FILE:
         return _segmenter(spec, threads, device, working_width)
     name, _, arg = str(spec).partition(":")

@@ -1,10 +1,12 @@
 """What a frame's own forward pass computed, kept for the frame gates (``el.monitors.gates``): the gates read it
-instead of running the network's trunk a second time.
+instead of running the network a second time.
 
 ``pooled``: per-channel mean and standard deviation over space of every trunk level (None when the network has
-no trunk, or runs in ONNX Runtime from an export without trunk outputs: logits only); ``energy``: the mean
-over pixels of ``-logsumexp`` of the frame logits on a 1-in-4 pixel grid (higher = less like the training
-frames); ``msp``: the mean top softmax.
+no trunk, or runs in ONNX Runtime from a file without trunk outputs); ``output``: per-class mean and standard
+deviation over space of the frame's logits (every network has them: an ONNX file's output, or the log of its
+probabilities when it gives probabilities), so a gate can be fitted on any network; ``energy``: the mean over
+pixels of ``-logsumexp`` of the frame logits (higher = less like the training frames); ``msp``: the mean top
+softmax. Energy, MSP and the output statistics are read on a 1-in-4 pixel grid.
 """
 
 from __future__ import annotations
@@ -13,9 +15,10 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import torch
 
-GRID = 4  # energy and MSP on every 4th pixel in each direction: 16 times less work, the same mean to ~1e-3
+GRID = 4  # energy, MSP and output statistics on every 4th pixel in each direction: 16 times less work
+TAP_FEATURES = ("pooled", "output")
+"""The pooled feature vectors a tap may hold: the trunk's (``pooled``) and the output's (``output``)."""
 
 
 @dataclass(frozen=True)
@@ -25,6 +28,7 @@ class FrameTap:
     energy: float
     msp: float
     pooled: np.ndarray | None = None
+    output: np.ndarray | None = None
 
 
 def trunk_levels(features: Any) -> list[Any]:
@@ -37,10 +41,29 @@ def trunk_levels(features: Any) -> list[Any]:
     return list(features) if isinstance(features, list | tuple) else [features]
 
 
-def frame_tap(logits: torch.Tensor, features: Any = None) -> FrameTap:
-    """The tap of the first frame of a batch from its logits (B, C, H, W) and, when known, its trunk features:
-    every level's per-channel mean and standard deviation over space, concatenated."""
-    z = logits[0, :, ::GRID, ::GRID].float().cpu().numpy()  # a 1-in-4 grid: the logits are upsampled anyway
+def _numpy(a: Any) -> np.ndarray:
+    """A torch tensor or array-like as a numpy array (torch is not imported for an ONNX network's arrays)."""
+    if hasattr(a, "detach"):
+        return a.detach().float().cpu().numpy()  # type: ignore[no-any-return]
+    return np.asarray(a)
+
+
+def _mean_std(a: np.ndarray) -> list[np.ndarray]:
+    """Per-channel mean and standard deviation over space of a (C, h, w) map."""
+    flat = a.reshape(a.shape[0], -1).astype(np.float32, copy=False)
+    return [flat.mean(axis=1), flat.std(axis=1)]
+
+
+def frame_tap(logits: Any, features: Any = None, *, probabilities: bool = False) -> FrameTap:
+    """The tap of the first frame of a batch from its logits (B, C, H, W; a torch tensor or a numpy array) and, when
+    known, its trunk features (every level's per-channel mean and standard deviation over space, concatenated).
+
+    ``probabilities``: ``logits`` are class probabilities (an ONNX file declaring ``output = probabilities``); their
+    logarithm stands in for the logits (equal up to a per-pixel constant: the output statistics keep their meaning,
+    the energy is then 0 for every frame)."""
+    z = _numpy(logits[0, :, ::GRID, ::GRID]).astype(np.float32, copy=False)  # the logits are upsampled anyway
+    if probabilities:
+        z = np.log(np.maximum(z, np.float32(1e-12)))
     top = z.max(axis=0)
     lse = top + np.log(np.exp(z - top).sum(axis=0))  # numpy: torch's logsumexp is far slower on these shapes
     msp = np.exp(top - lse)
@@ -48,8 +71,7 @@ def frame_tap(logits: torch.Tensor, features: Any = None) -> FrameTap:
     if features is not None:
         parts = []
         for level in trunk_levels(features):  # numpy: several times faster than torch on these small maps
-            a = level.detach().cpu().numpy() if isinstance(level, torch.Tensor) else np.asarray(level)
-            flat = a[0].reshape(a.shape[1], -1).astype(np.float32, copy=False)
-            parts += [flat.mean(axis=1), flat.std(axis=1)]
+            parts += _mean_std(_numpy(level)[0])
         pooled = np.concatenate(parts).astype(np.float64)
-    return FrameTap(energy=float(-lse.mean()), msp=float(msp.mean()), pooled=pooled)
+    output = np.concatenate(_mean_std(z)).astype(np.float64)
+    return FrameTap(energy=float(-lse.mean()), msp=float(msp.mean()), pooled=pooled, output=output)

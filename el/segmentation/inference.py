@@ -18,11 +18,11 @@ ValueError, which the decision loop turns into the default action.
 
 Plugging in another network::
 
-    seg = Segmenter(my_module)          # any torch.nn.Module with the contract below
+    seg = Segmenter(my_module, labels=my_labels)   # any torch.nn.Module with the contract below
 
 The contract: ``my_module(x)`` maps float RGB images ``x`` of shape (B, 3, H, W), values in
 [0, 1], to logits (B, C, H, W) for any H, W >= 16, C the number of classes of the segmenter's
-label set ``labels`` (8 for the default UAVid); normalisation and padding are the module's
+label set ``labels`` (8 for UAVid); normalisation and padding are the module's
 business. If the module has ``supports_mc_spec = True`` and ``trunk(x)``,
 ``head(features, mc, crop=False)`` (logits of at least the input size; the top-left H x W are kept)
 and ``mc_spec(n, keep_prob, seed)`` methods (as :class:`el.segmentation.model.MSDLite`), MC dropout
@@ -137,9 +137,9 @@ class Segmenter(PatchPasses):
         How such a softmax comes back to the working resolution: ``"area"`` (footprint mean) or
         ``"conservative"`` (a forbidden class any source pixel shows is kept, :mod:`el.segmentation.pooling`).
     labels : LabelSet
-        The classes the network's outputs are (``el.labels.UAVID`` by default; :meth:`load` takes
-        them from the card's ``labels`` entry). The core model and the monitors read them from
-        the attribute :attr:`labels`.
+        The classes the network's outputs are (required; :meth:`load` takes them from the card's
+        ``labels`` entry, UAVid for a card without one). The core model and the monitors read them
+        from the attribute :attr:`labels`.
     engine : el.segmentation.onnx_engine.OnnxEngine, optional
         ONNX Runtime for the full passes (frames, patches) of this network; None: torch. :meth:`load`
         chooses (``UAV_EL_ENGINE``, docs/architecture.md section 3.2.1); MC dropout's head stays on torch.
@@ -149,19 +149,20 @@ class Segmenter(PatchPasses):
     >>> import numpy as np
     >>> from el.segmentation.architectures import build_model
     >>> from el.segmentation.model import ArchConfig
-    >>> seg = Segmenter(build_model(ArchConfig(widths=(8, 8, 8))), working_width=64)
+    >>> from el.labels import UAVID
+    >>> seg = Segmenter(build_model(ArchConfig(widths=(8, 8, 8))), working_width=64, labels=UAVID)
     >>> seg.predict_frame(np.zeros((72, 128, 3), np.uint8)).shape
     (8, 36, 64)
     """
 
-    labels: LabelSet = UAVID  # the class default, for instances pickled before segmenters had a label set
+    labels: LabelSet
     tap_frames: bool = False  # keep each frame pass's FrameTap (last_tap) for a frame gate (el.monitors.gates)
     last_tap: Any = None
 
     def __init__(self, model: nn.Module, *, threads: int | None = None, device: str | torch.device = "cpu",
                  card: dict[str, Any] | None = None, working_width: int = 1024, frame_flip: bool = False,
                  frame_scales: Sequence[float] = (1.0,), frame_pooling: str = "area",
-                 labels: LabelSet = UAVID, engine: Any = None) -> None:
+                 labels: LabelSet, engine: Any = None) -> None:
         if not isinstance(model, nn.Module):
             raise ValueError(f"model must be a torch.nn.Module, got {type(model).__name__}")
         if threads is not None:
@@ -228,12 +229,18 @@ class Segmenter(PatchPasses):
         return state
 
     def __setstate__(self, state: dict[str, Any]) -> None:
+        state.setdefault("labels", UAVID)  # pickled before segmenters had a label set: the shipped network's
         self.__dict__.update(state)
         self._lock = threading.Lock()
 
     @property
     def weights_sha256(self) -> str | None:
         return self.card.get("weights_sha256")
+
+    @property
+    def has_dropout(self) -> bool:
+        """Whether MC dropout can run: the network has the fast MC head or dropout layers (the fallback)."""
+        return self.fast_mc or any(_is_dropout(m) for m in self.model.modules())
 
     @property
     def engine_name(self) -> str:

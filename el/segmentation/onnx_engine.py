@@ -5,6 +5,10 @@ Two users. :mod:`el.segmentation.onnx_model` runs a network from elsewhere (a us
 the ONNX export committed beside its weights (docs/architecture.md section 3.2), with torch as the
 fallback. ``onnxruntime`` is an optional extra, imported only here and only when used.
 
+Every ONNX file is read once and checked here (:func:`read_onnx`): its external data files, if any, must lie
+in the model file's folder, are hashed into its identity (:func:`external_identity`) and are copied into the
+model before ONNX Runtime sees it, so no file is read after the check and the working directory plays no part.
+
 The engine of a weights file ``NAME.pt`` is ``NAME.onnx`` with its record ``NAME.onnx.json``
 (``{"format", "weights_sha256", "onnx_sha256", "opset"}``, written by ``uav-el export-onnx --beside``): it is used
 only when the record names the weights' SHA-256 (the card's) and the ONNX file has the SHA-256 the record
@@ -17,6 +21,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +35,8 @@ ENGINES = ("auto", "torch", "onnx")
 RECORD_FORMAT = "uav-el-onnx-engine/1"
 logger = logging.getLogger(__name__)
 MISSING = "ONNX models need onnxruntime: pip install 'uav-el-assurance[onnx]'"
+EXTERNAL_FORMAT = "uav-el-onnx-external/1"
+EXTERNAL_KEY = b"location"
 
 
 def onnxruntime() -> Any:
@@ -51,7 +58,34 @@ def have_onnxruntime() -> bool:
 
 
 def read_checked(path: str | Path, sha256: str | None = None) -> tuple[bytes, str]:
-    """The bytes of an ONNX file and their SHA-256; ``WeightsError`` naming the file (and both hashes)."""
+    """The model bytes ONNX Runtime is given (external data read, confined and inlined) and the file's identity
+    (:func:`read_onnx`); ``WeightsError`` naming the file (and both identities)."""
+    found = read_onnx(path)
+    if sha256 is not None and found.sha256 != sha256:
+        raise WeightsError(f"{path}: SHA-256 mismatch: file has {found.sha256}, expected {sha256}")
+    return found.data, found.sha256
+
+
+@dataclass(frozen=True)
+class OnnxFile:
+    """An ONNX file read once: ``data``, the bytes a session is built from (no external reference left);
+    ``sha256``, its identity (:func:`read_onnx`); ``external``, each external data file (path relative to the
+    model's folder) -> its SHA-256 (empty for a self-contained file)."""
+
+    data: bytes
+    sha256: str
+    external: dict[str, str]
+
+
+def read_onnx(path: str | Path) -> OnnxFile:
+    """Read an ONNX file and the external data it names, checked; every problem a one-line ``WeightsError``.
+
+    External data (tensors whose bytes lie in other files, ``location`` in the tensor's ``external_data``) are
+    resolved relative to the model file's folder and must stay inside it: an absolute location, a ``..`` or a
+    symbolic link leading out of the folder is refused, naming the model file and the location. Each external
+    file is read once and its bytes are copied into the tensors, so the session never reads a file itself.
+    The identity is the file's plain SHA-256 when it has no external data (so existing pins hold), else
+    :func:`external_identity` over the file and its external files."""
     p = Path(path)
     if not p.is_file():
         raise WeightsError(f"{p}: ONNX file not found")
@@ -60,9 +94,125 @@ def read_checked(path: str | Path, sha256: str | None = None) -> tuple[bytes, st
     except OSError as exc:
         raise WeightsError(f"{p}: cannot read the ONNX file: {exc}") from None
     digest = sha256_bytes(data)
-    if sha256 is not None and digest != sha256:
-        raise WeightsError(f"{p}: SHA-256 mismatch: file has {digest}, expected {sha256}")
-    return data, digest
+    if EXTERNAL_KEY not in data:  # no tensor can name an external file without a "location" entry
+        return OnnxFile(data, digest, {})
+    proto, tensors = _external_tensors(data, p)
+    if not tensors:
+        return OnnxFile(data, digest, {})
+    blobs: dict[str, bytes] = {}
+    for tensor in tensors:
+        _inline(tensor, p, blobs)
+    try:
+        inlined = proto.SerializeToString()
+    except Exception as exc:  # protobuf refuses a message over 2 GiB
+        raise WeightsError(f"{p}: the model with its external data inlined cannot be serialised "
+                           f"({type(exc).__name__}: {exc}); ONNX models over 2 GiB are not supported") from None
+    external = {rel: sha256_bytes(blob) for rel, blob in blobs.items()}
+    return OnnxFile(inlined, external_identity(digest, external), external)
+
+
+def external_identity(onnx_sha256: str, external: dict[str, str]) -> str:
+    """The identity of an ONNX file with external data: the SHA-256 of the canonical listing
+    ``uav-el-onnx-external/1``, ``onnx <file SHA-256>``, then ``data <SHA-256> <path>`` for each external file
+    (path relative to the model's folder, ``/``-separated, sorted), one line each, newline-terminated."""
+    lines = [EXTERNAL_FORMAT, f"onnx {onnx_sha256}"] + [f"data {external[r]} {r}" for r in sorted(external)]
+    return sha256_bytes(("\n".join(lines) + "\n").encode("utf-8"))
+
+
+def file_identity(path: str | Path) -> str:
+    """The identity a weights file is pinned and recorded by: :func:`read_onnx`'s for an ``.onnx`` file (its
+    external data included), the plain SHA-256 otherwise; ``WeightsError`` for an ONNX file that cannot be read."""
+    if str(path).lower().endswith(".onnx"):
+        return read_onnx(path).sha256
+    from el.hashing import sha256_file
+
+    return sha256_file(path)
+
+
+def external_files(path: str | Path) -> list[Path]:
+    """The external data files of an ONNX file (checked as :func:`read_onnx` does), for a run's model files."""
+    folder = Path(path).parent
+    return [folder / rel for rel in sorted(read_onnx(path).external)]
+
+
+def _onnx_module() -> Any:
+    try:
+        import onnx
+    except ImportError:
+        raise WeightsError("an ONNX file with external data needs the onnx package: "
+                           "pip install 'uav-el-assurance[onnx]'") from None
+    return onnx
+
+
+def _external_tensors(data: bytes, where: Path) -> tuple[Any, list[Any]]:
+    """The parsed model and every tensor in it (initialisers, node attributes, subgraphs, functions, sparse
+    tensors' parts: found by walking the whole message) stored as external data."""
+    onnx = _onnx_module()
+    from google.protobuf.message import Message
+
+    proto = onnx.ModelProto()
+    try:
+        proto.ParseFromString(data)
+    except Exception as exc:  # a file that is not a serialised ModelProto
+        raise WeightsError(f"{where}: not an ONNX model ({type(exc).__name__}: {exc})") from None
+    found, stack = [], [proto]
+    while stack:
+        message = stack.pop()
+        if isinstance(message, onnx.TensorProto):
+            if message.data_location == onnx.TensorProto.EXTERNAL or len(message.external_data):
+                found.append(message)
+            continue
+        for field, value in message.ListFields():
+            if field.type == field.TYPE_MESSAGE:
+                stack.extend([value] if isinstance(value, Message) else value)
+    return proto, found
+
+
+def _confined(model: Path, location: str) -> tuple[Path, str]:
+    """The external file a location names and its path relative to the model's folder; ``WeightsError`` naming
+    the model file and the location unless it is a file inside that folder."""
+    from pathlib import PurePosixPath, PureWindowsPath
+
+    def refuse(why: str) -> WeightsError:
+        return WeightsError(f"{model}: external data location {location!r} refused: {why}")
+
+    win = PureWindowsPath(location)
+    if not location or PurePosixPath(location).is_absolute() or win.is_absolute() or win.drive or win.root:
+        raise refuse("an absolute path (external data must lie in the model file's folder)")
+    if ".." in win.parts or "\0" in location:
+        raise refuse("it leads out of the model file's folder ('..')")
+    folder = model.parent.resolve()
+    target = (folder / location).resolve()
+    if not target.is_relative_to(folder):
+        raise refuse(f"it resolves to {target}, outside the model file's folder {folder} (a symbolic link)")
+    if not target.is_file():
+        raise refuse("no such file in the model file's folder")
+    return target, target.relative_to(folder).as_posix()
+
+
+def _inline(tensor: Any, model: Path, blobs: dict[str, bytes]) -> None:
+    """Copy a tensor's external bytes (offset, length) into it from its confined file (read once into ``blobs``)."""
+    info = {e.key: e.value for e in tensor.external_data}
+    location = info.get("location", "")
+    target, rel = _confined(model, location)
+    if rel not in blobs:
+        try:
+            blobs[rel] = target.read_bytes()
+        except OSError as exc:
+            raise WeightsError(f"{model}: external data location {location!r}: cannot read it: {exc}") from None
+    blob = blobs[rel]
+    try:
+        offset = int(info.get("offset", 0))
+        length = int(info["length"]) if "length" in info else len(blob) - offset
+    except ValueError:
+        raise WeightsError(f"{model}: tensor {tensor.name!r}: external data offset/length are not integers "
+                           f"({info.get('offset')!r}, {info.get('length')!r})") from None
+    if offset < 0 or length < 0 or offset + length > len(blob):
+        raise WeightsError(f"{model}: tensor {tensor.name!r}: external data {offset}+{length} bytes lie beyond "
+                           f"the end of {location!r} ({len(blob)} bytes)")
+    tensor.raw_data = blob[offset: offset + length]
+    del tensor.external_data[:]
+    tensor.data_location = type(tensor).DEFAULT
 
 
 def open_session(data: bytes, where: str | Path, threads: int | None = None) -> Any:

@@ -9,25 +9,32 @@ section 3.2):
   resolution (``cv2.INTER_AREA``, as the shipped :class:`~el.segmentation.inference.Segmenter`); HD patches
   go in at their own resolution, under the same rule.
 - ``channel_order`` ``rgb`` | ``bgr``; ``scaling`` ``unit`` (values in [0, 1]) or ``mean_std``
-  (``(v - mean) / std`` per channel, on values in [0, ``value_range``], 255 or 1);
+  (``(v - mean) / std`` per channel, on values in [0, ``value_range``], 255 or 1; a mapping giving ``mean``
+  and ``std`` without ``scaling`` means ``mean_std``);
   ``layout`` ``nchw`` | ``nhwc`` for the input, ``output_layout`` for the output (default: the input's);
   float32 input, one input, batch of one.
 - ``output`` ``logits`` (softmax applied here) | ``probabilities``; its channels are ``class_names``, in
-  order: the names must be exactly the system label set's, in any order (outputs are permuted onto the
-  label set's ids). The output must have the input's spatial size.
+  order. Given the system's label set, the names must be exactly its classes, in any order (outputs are
+  permuted onto the label set's ids); given none, they are the network's own classes
+  (:class:`~el.segmentation.contract.OutputClasses`), for a class map onto the system's. The output must
+  have the input's spatial size.
 
 A file exported by ``uav-el export-onnx`` carries its contract, its label set, its opset and the source
 weights' SHA-256 in the ONNX ``metadata_props`` (:data:`META_CONTRACT`, ...), so it loads with no further
-configuration. The model's identity (``weights_sha256``, what cards and fitted monitors bind to, what the
-manifest records) is the SHA-256 of the ``.onnx`` file. It offers no MC dropout and no trunk: monitors that
-need them are refused before any decision (``el.monitors.capabilities``).
+configuration; a file exported elsewhere needs none of them when its contract is given. The model's identity
+(``weights_sha256``, what a system file pins, what cards and fitted monitors bind to, what the manifest
+records) is the SHA-256 of the ``.onnx`` file, or, for a file with external data, the SHA-256 of a listing of
+it and its external files (:func:`el.segmentation.onnx_engine.read_onnx`). Frames are brought to the model's
+``working_width``. It offers no MC dropout and no trunk: monitors that need them are refused before any
+decision (``el.monitors.capabilities``).
 """
 
 from __future__ import annotations
 
 import json
 import math
-from dataclasses import asdict, dataclass
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -37,8 +44,10 @@ import numpy as np
 from el.camera import working_size
 from el.deadline import checkpoint
 from el.errors import WeightsError
-from el.labels import UAVID, LabelSet
+from el.labels import LabelSet
 from el.rgb import check_rgb
+from el.segmentation.contract import OutputClasses
+from el.segmentation.frame_tap import frame_tap
 from el.segmentation.onnx_engine import metadata, open_session, read_checked
 
 MIN_SIZE = 16
@@ -130,6 +139,8 @@ class OnnxContract:
             raise ValueError(f"ONNX contract: unknown keys {unknown} (known: {sorted(known)})")
         if "class_names" not in data:
             raise ValueError("ONNX contract: class_names is missing (the output channels' class names, in order)")
+        if "scaling" not in data and ("mean" in data or "std" in data):  # mean and std say how to scale
+            data = {**data, "scaling": "mean_std"}
         return cls(**data)
 
     def to_dict(self) -> dict[str, Any]:
@@ -213,10 +224,16 @@ def contract_from_metadata(meta: dict[str, str], where: str | Path) -> OnnxContr
 class OnnxModel:
     """A :class:`el.segmentation.contract.SegmentationModel` running an ONNX file (:func:`load_onnx_model`).
 
-    ``labels``: the system's label set; ``weights_sha256``: the file's SHA-256; ``contract``; ``path``.
-    Picklable (worker processes): the session is opened again from the file, checked against its hash."""
+    ``labels``: the system's label set, or the network's own :class:`OutputClasses`; ``weights_sha256``: the
+    file's identity; ``contract``; ``path``. Picklable (worker processes): the session is opened again from
+    the file, checked against its identity. ``tap_frames``: keep each frame pass's statistics in ``last_tap``
+    for a frame gate (``el.segmentation.frame_tap``): the output's always, the trunk's when the file declares
+    trunk outputs (``trunk.*``, as ``uav-el export-onnx`` writes them)."""
 
-    def __init__(self, path: str | Path, contract: OnnxContract, labels: LabelSet, sha256: str, *,
+    tap_frames: bool = False
+    last_tap: Any = None
+
+    def __init__(self, path: str | Path, contract: OnnxContract, labels: LabelSet | OutputClasses, sha256: str, *,
                  threads: int | None = None, working_width: int = 1024, session: Any = None) -> None:
         self.path, self.contract, self.labels = str(path), contract, labels
         self.weights_sha256, self.threads, self.working_width = sha256, threads, int(working_width)
@@ -228,21 +245,25 @@ class OnnxModel:
             raise WeightsError(f"{path}: the ONNX model has {len(inputs)} inputs, one (the image) expected")
         self._input = inputs[0].name
         self._batch_free = not isinstance(inputs[0].shape[0], int)  # a free batch axis: patches may share a pass
-        self._output = self._session.get_outputs()[0].name  # the first output; an export's trunk outputs unused
+        outputs = [o.name for o in self._session.get_outputs()]
+        self._output = outputs[0]  # the first output; an export's trunk outputs only for a frame gate's tap
+        self._trunk = [n for n in outputs[1:] if n.startswith("trunk.")]
         missing = sorted(set(labels.names) ^ set(contract.class_names))
         if len(contract.class_names) != labels.num_classes or missing:
             raise WeightsError(f"{path}: the contract's classes {list(contract.class_names)} are not the label "
-                               f"set {labels.name!r}'s {list(labels.names)} (differ: {missing})")
+                               f"set {labels.name!r}'s {list(labels.names)} (differ: {missing}); name the "
+                               "network's classes and map them with a class map")
         # output channel of each label id: outputs are permuted onto the label set's order
         self._order = np.array([contract.class_names.index(n) for n in labels.names])
 
     def __getstate__(self) -> dict[str, Any]:
-        skip = ("_session", "_input", "_output", "_order", "_batch_free")
+        skip = ("_session", "_input", "_output", "_order", "_batch_free", "_trunk", "last_tap")
         return {k: v for k, v in self.__dict__.items() if k not in skip}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__init__(state["path"], state["contract"], state["labels"], state["weights_sha256"],  # type: ignore[misc]
                       threads=state["threads"], working_width=state["working_width"])
+        self.tap_frames = bool(state.get("tap_frames", False))
 
     def working_size(self, width: int, height: int) -> tuple[int, int]:
         """(width, height) of the working resolution for a frame of the given size."""
@@ -250,13 +271,22 @@ class OnnxModel:
 
     def _run(self, rgb: np.ndarray, what: str) -> np.ndarray:
         h, w = rgb.shape[:2]
-        out = self._session.run([self._output], {self._input: self.contract.to_input(rgb)})[0]
+        tap = what == "frame" and self.tap_frames
+        names = [self._output, *(self._trunk if tap else [])]
+        outs = self._session.run(names, {self._input: self.contract.to_input(rgb)})
+        out = outs[0]
         probs = self.contract.to_probs(out, w, h, what)[self._order]
+        if tap:  # the frame gate's statistics, from this very pass (channels in the label set's order)
+            raw = np.asarray(out)
+            raw = raw.transpose(0, 3, 1, 2) if self.contract.output_layout == "nhwc" else raw
+            self.last_tap = frame_tap(raw[:, self._order], outs[1:] or None,
+                                      probabilities=self.contract.output == "probabilities")
         return np.ascontiguousarray(probs, dtype=np.float32)
 
     def predict_frame(self, rgb: np.ndarray) -> np.ndarray:
         """(C, h, w) float32 probabilities at the working resolution of an (H, W, 3) uint8 frame."""
         check_rgb(rgb, "frame", min_size=MIN_SIZE)
+        self.last_tap = None
         w, h = self.working_size(rgb.shape[1], rgb.shape[0])
         if (rgb.shape[1], rgb.shape[0]) != (w, h):
             rgb = cv2.resize(rgb, (w, h), interpolation=cv2.INTER_AREA)
@@ -306,14 +336,18 @@ class OnnxModel:
 
 def load_onnx_model(path: str | Path, *, contract: OnnxContract | dict[str, Any] | None = None,
                     labels: LabelSet | None = None, sha256: str | None = None, threads: int | None = None,
-                    working_width: int = 1024) -> OnnxModel:
+                    working_width: int = 1024, class_names: Sequence[str] | None = None) -> OnnxModel:
     """An ONNX file as a segmentation model, checked; every problem a one-line ``WeightsError``.
 
-    ``contract`` None: the file's metadata (:data:`META_CONTRACT`); ``labels`` None: the file's
-    (:data:`META_LABELS`), else UAVid; ``sha256``: the file must have it; ``threads``: ONNX Runtime's
-    intra-op threads. The file is read once, hashed, and the session built from those bytes; one probe
-    inference (:meth:`OnnxModel.probe`) refuses an output of the wrong class count, rank or shape, or
-    not finite.
+    ``contract`` None: the file's metadata (:data:`META_CONTRACT`); ``labels``: the system's label set, which
+    the contract's classes must be; None: the network's own classes, the file's label set
+    (:data:`META_LABELS`) when it carries one of the contract's classes, else :class:`OutputClasses` of the
+    contract's ``class_names`` (to be mapped by a class map); ``sha256``: the file's identity must be it;
+    ``threads``: ONNX Runtime's intra-op threads; ``working_width``: the frames' working resolution;
+    ``class_names``: the output channels' names, replacing the contract's (a system file's ``[model] classes``
+    over the file's metadata). The file
+    (and its external data) is read once, checked, and the session built from those bytes; one probe inference
+    (:meth:`OnnxModel.probe`) refuses an output of the wrong class count, rank or shape, or not finite.
     """
     data, digest = read_checked(path, sha256)
     session = open_session(data, path, threads)
@@ -325,14 +359,26 @@ def load_onnx_model(path: str | Path, *, contract: OnnxContract | dict[str, Any]
             contract = OnnxContract.from_dict(contract)
         except (TypeError, ValueError) as exc:
             raise WeightsError(f"{path}: {exc}") from None
-    if labels is None:
-        labels = UAVID
-        if META_LABELS in session_meta:
-            try:
-                labels = LabelSet.from_dict(json.loads(session_meta[META_LABELS]))
-            except (TypeError, ValueError) as exc:
-                raise WeightsError(f"{path}: metadata {META_LABELS!r}: {exc}") from None
-    model = OnnxModel(path, contract, labels, digest, threads=threads, working_width=working_width,
+    if class_names is not None:
+        try:
+            contract = replace(contract, class_names=tuple(class_names))
+        except (TypeError, ValueError) as exc:
+            raise WeightsError(f"{path}: {exc}") from None
+    classes: LabelSet | OutputClasses = labels if labels is not None else _own_classes(session_meta, contract, path)
+    model = OnnxModel(path, contract, classes, digest, threads=threads, working_width=working_width,
                       session=session)
     model.probe()
     return model
+
+
+def _own_classes(meta: dict[str, str], contract: OnnxContract, path: str | Path) -> LabelSet | OutputClasses:
+    """The network's own classes: the file's label set when it carries one naming the contract's classes, else
+    the contract's class names."""
+    if META_LABELS in meta:
+        try:
+            carried = LabelSet.from_dict(json.loads(meta[META_LABELS]))
+        except (TypeError, ValueError) as exc:
+            raise WeightsError(f"{path}: metadata {META_LABELS!r}: {exc}") from None
+        if set(carried.names) == set(contract.class_names):
+            return carried
+    return OutputClasses(Path(path).name, contract.class_names)

@@ -17,7 +17,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from el.labels import UAVID, LabelSet
+from el.labels import LabelSet
 
 POOLINGS = ("area", "conservative")
 
@@ -29,13 +29,13 @@ def check_pooling(name: object) -> str:
 
 
 def downsample_probs(probs: np.ndarray, size: tuple[int, int], pooling: str = "area", *,
-                     labels: LabelSet = UAVID) -> np.ndarray:
+                     labels: LabelSet | None = None) -> np.ndarray:
     """Softmax (C, H, W) -> (C, h, w) for ``size = (w, h)`` no larger than the input, by ``pooling``.
 
     ``area``: mean over each output pixel's footprint (OpenCV ``INTER_AREA``). ``conservative``: see
     the module docstring; footprints are the source rows ``floor(i H / h) .. ceil((i + 1) H / h) - 1``
     (and likewise columns), every source pixel that overlaps the output pixel. ``labels``: which
-    classes are forbidden (default UAVid; C must be its class count for ``conservative``).
+    classes are forbidden, needed by ``conservative`` (C must be its class count); ``area`` reads no class.
     """
     check_pooling(pooling)
     c, h_in, w_in = probs.shape
@@ -46,6 +46,8 @@ def downsample_probs(probs: np.ndarray, size: tuple[int, int], pooling: str = "a
         import cv2
 
         return np.stack([cv2.resize(ch, (w, h), interpolation=cv2.INTER_AREA) for ch in probs])
+    if labels is None:
+        raise ValueError("conservative pooling needs the label set (which classes are forbidden)")
     if c != labels.num_classes:
         raise ValueError(f"conservative pooling needs the {labels.num_classes} classes, got {c}")
     forbidden, safe = list(labels.forbidden_ids), list(labels.safe_ids)

@@ -107,7 +107,7 @@ def _evaluate_on(model: Any, card: dict[str, Any], manifest: D.Manifest, protoco
                  ) -> tuple[list[D.Prepared], dict[str, Any]]:
     """The prepared validation samples and the network's figures on them, by the recorded protocol."""
     val_set = D.load_dataset(manifest, D.protocol_prep(protocol), cache_dir=None, threads=workers, progress=progress)
-    segmenter = Segmenter.for_protocol(model, protocol, threads=threads, card=card)
+    segmenter = Segmenter.for_protocol(model, protocol, threads=threads, card=card, labels=D.TRAINING_LABELS)
     return val_set, evaluate(segmenter, val_set, progress=progress, total=len(val_set))
 
 

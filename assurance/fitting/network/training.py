@@ -365,7 +365,8 @@ def _select(fit: _Fit, run: _RunState, entry: dict[str, Any], val_set: list[D.Pr
     tick = time.perf_counter()
     config, model = fit.config, fit.model
     model.eval()
-    figures = evaluate(Segmenter.for_protocol(model, config.eval_protocol, device=fit.device), val_set)
+    figures = evaluate(Segmenter.for_protocol(model, config.eval_protocol, device=fit.device,
+                                              labels=D.TRAINING_LABELS), val_set)
     model.train()
     score = selection_score(figures)
     entry.update({"val_miou_working": figures["working_resolution"]["miou"],
@@ -388,7 +389,8 @@ def _final_card(model: torch.nn.Module, run: _RunState, config: TrainConfig, wei
     if device.type != "cpu":
         say(f"re-evaluating the selected weights (step {run.best_step}) on the CPU")
         selected, _ = load_weights(weights_path)
-        cpu_figures = evaluate(Segmenter.for_protocol(selected, config.eval_protocol), val_set)
+        cpu_figures = evaluate(Segmenter.for_protocol(selected, config.eval_protocol, labels=D.TRAINING_LABELS),
+                               val_set)
         card["evaluation"].update(cpu_figures)
         card["evaluation"]["selection_device"] = _device_name(device)
     return card

@@ -7,12 +7,15 @@ from typing import Any
 
 import numpy as np
 
+from el.monitors.gates.features import tap_vector
+
 NAME = "energy"
-NEEDS_TRUNK = False
+FEATURES = ("energy",)
 
 
-def embed(tap: Any) -> np.ndarray:
-    return np.array([tap.energy], np.float64)
+def embed(tap: Any, features: str = "energy") -> np.ndarray:
+    """The frame's energy, (1,)."""
+    return tap_vector(tap, features)
 
 
 def fit(train: np.ndarray) -> dict[str, Any]:

@@ -7,15 +7,16 @@ from typing import Any
 
 import numpy as np
 
+from el.monitors.gates.features import tap_vector
+
 NAME = "knn"
-NEEDS_TRUNK = True
+FEATURES = ("pooled", "output")  # the trunk's statistics, else the output's
 K = 5
 
 
-def embed(tap: Any) -> np.ndarray:
-    if tap.pooled is None:
-        raise ValueError("the knn gate needs the trunk's features; this engine gives the logits only")
-    return np.asarray(tap.pooled, np.float64)
+def embed(tap: Any, features: str = "pooled") -> np.ndarray:
+    """The frame's pooled statistics: its trunk's (``pooled``) or its output's (``output``), (d,)."""
+    return tap_vector(tap, features)
 
 
 def _normalised(params: dict[str, Any], x: np.ndarray) -> np.ndarray:

@@ -12,16 +12,17 @@ from typing import Any
 
 import numpy as np
 
+from el.monitors.gates.features import tap_vector
+
 NAME = "mahalanobis"
-NEEDS_TRUNK = True
+FEATURES = ("pooled", "output")  # the trunk's statistics, else the output's
 SHRINKAGE = 0.1
 COMPONENTS = 64
 
 
-def embed(tap: Any) -> np.ndarray:
-    if tap.pooled is None:
-        raise ValueError("the mahalanobis gate needs the trunk's features; this engine gives the logits only")
-    return np.asarray(tap.pooled, np.float64)
+def embed(tap: Any, features: str = "pooled") -> np.ndarray:
+    """The frame's pooled statistics: its trunk's (``pooled``) or its output's (``output``), (d,)."""
+    return tap_vector(tap, features)
 
 
 def ledoit_wolf(z: np.ndarray, s: np.ndarray) -> float:

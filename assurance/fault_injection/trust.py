@@ -1,0 +1,177 @@
+"""Fault-injection cases of the auditor's trust boundary beyond the templates (rows ``T5``..``T17``, issue 39): every
+file an applicant supplies is read bounded, and what it says is checked before any work starts.
+
+A FIFO or ``/dev/zero`` given as a label set, waivers or targets; a 200 MB poses sidecar; a system file nested
+60 000 deep or holding a NaN target; a signing key others can read; a report written inside a run; a waiver
+expiring at version 999; a manifest naming tasks the run has no readouts of (re-signed, as the applicant can);
+a frame gate or calibration card re-hashed at threshold 1e300. Each case returns the ``uav-el`` command that must
+refuse it, with one line naming the file and the problem.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+from assurance.fault_injection.case import Case, campaign_argv, copy_run, first_image
+
+SMALL_FRAMES = '[odd]\nimage_width = [64, 7680]\nimage_height = [36, 4320]\n'  # the workspace's 320x180 scenes
+
+
+def _system(ws: Path, name: str, body: str) -> Path:
+    """``WS/NAME.toml``: the embedded default with the workspace's small frames, and ``body``."""
+    path = ws / f"{name}.toml"
+    path.write_text(f'format = "uav-el-system/1"\n{SMALL_FRAMES}{body}', encoding="utf-8")
+    return path
+
+
+def _fifo(ws: Path, name: str) -> Path:
+    path = ws / name
+    if not path.exists():
+        os.mkfifo(path)
+    return path
+
+
+def _evidence(ws: Path, name: str, *extra: object, run: Path | None = None) -> list[str]:
+    return ["evidence", "--run", str(run or ws / "run"), "--out", str(ws / f"rep-{name}"), "--no-pdf", "--boot", "20",
+            *map(str, extra)]
+
+
+def _land(ws: Path, system: Path) -> list[str]:
+    return ["land", str(first_image(ws)), "--weights", str(ws / "tiny.pt"), "--monitor", "lhd", "--system",
+            str(system)]
+
+
+def _fifo_labels(ws: Path) -> list[str]:
+    """A system file whose label set is a FIFO: read plainly, the command waits for a writer for ever."""
+    return _land(ws, _system(ws, "sys-fifo-labels", f'[labels]\nfile = "{_fifo(ws, "labels-fifo.yaml")}"\n'))
+
+
+def _zero_labels(ws: Path) -> list[str]:
+    """A label set linked to /dev/zero: read plainly, it grew to 6.5 GB before a MemoryError."""
+    link = ws / "labels-zero.yaml"
+    if not link.is_symlink():
+        link.symlink_to("/dev/zero")
+    return _land(ws, _system(ws, "sys-zero-labels", f'[labels]\nfile = "{link}"\n'))
+
+
+def _huge_poses(ws: Path) -> list[str]:
+    """A copy of the data with a 200 MB poses sidecar (sparse), flown under the sidecar pose policy."""
+    import shutil
+
+    data = ws / "data-poses"
+    if not data.exists():
+        shutil.copytree(ws / "data", data)
+    seq = sorted(p for p in data.iterdir() if p.is_dir())[0]
+    with open(seq / "poses.csv", "wb") as f:
+        f.truncate(200 << 20)  # it took 3.5 GB to read
+    system = _system(ws, "sys-poses", '[camera]\nposes = "sidecar"\n')
+    return [*campaign_argv(ws, ws / "run-poses", data=data), "--system", str(system)]
+
+
+def _deep_toml(ws: Path) -> list[str]:
+    """A system file whose value nests 60 000 brackets deep (it was exit 70, a RecursionError)."""
+    path = _system(ws, "sys-deep", "[system]\nname = " + "[" * 60_000 + "]" * 60_000 + "\n")
+    return _land(ws, path)
+
+
+def _nan_target(ws: Path) -> list[str]:
+    """A system file whose unsafe-landing bound is NaN (refused only after the campaign ran and signed)."""
+    system = _system(ws, "sys-nan", "[targets]\nunsafe_landing_bound = nan\n")
+    return [*campaign_argv(ws, ws / "run-nan"), "--system", str(system)]
+
+
+def _readable_key(ws: Path) -> list[str]:
+    """A signing key of mode 0644 (ssh refuses such a key)."""
+    from assurance.attest.keys import create_key
+
+    key = ws / "readable-key.pem"
+    if not key.exists():
+        create_key(key)
+    key.chmod(0o644)
+    return [*campaign_argv(ws, ws / "run-key"), "--signing-key", str(key)]
+
+
+def _out_inside_run(ws: Path) -> list[str]:
+    """The report written into a copy of the run's shards folder (it added a shard the run does not know)."""
+    run, _ = copy_run(ws, "run-out-inside")
+    return ["evidence", "--run", str(run), "--out", str(run / "shards" / "report"), "--no-pdf", "--boot", "20"]
+
+
+def _version_waiver(ws: Path) -> list[str]:
+    """A well-formed waiver by a declared owner expiring at version 999.0.0 (the same one dated 2999 is refused)."""
+    path = ws / "waiver-999.yaml"
+    path.write_text("waivers:\n  - id: EL-R10\n    reason: later\n    tracked_by: none\n"
+                    "    owner: segmentation maintainers\n    expires: 999.0.0\n", encoding="utf-8")
+    return _evidence(ws, "version-waiver", "--waivers", path)
+
+
+def _missing_tasks(ws: Path) -> list[str]:
+    """A copy of the run whose manifest names a task outside the data, re-signed with the applicant's key."""
+    from assurance.attest.keys import load_signing_key
+    from assurance.campaign.attestation import sign_run
+
+    run, _ = copy_run(ws, "run-missing-tasks")
+    man = json.loads((run / "manifest.json").read_text(encoding="utf-8"))
+    man["shard_order"] = [*man["shard_order"], "none-s3__seq00_999999-0000000000000000"]
+    (run / "manifest.json").write_text(json.dumps(man, indent=2, sort_keys=True), encoding="utf-8")
+    sign_run(run, load_signing_key())
+    return _evidence(ws, "missing-tasks", run=run)
+
+
+def _resealed(src: Path, dst: Path, **body: object) -> Path:
+    from el.records import body_sha256
+
+    doc = json.loads(src.read_text(encoding="utf-8"))
+    doc["body"].update(body)
+    doc["sha256"] = body_sha256(doc["body"])
+    dst.write_text(json.dumps(doc), encoding="utf-8")
+    return dst
+
+
+def _gate_1e300(ws: Path) -> list[str]:
+    """The shipped frame gate re-hashed at threshold 1e300 (it passes every frame), named by a system file."""
+    from el.pipeline import DEPLOYED_GATE
+
+    gate = _resealed(Path(DEPLOYED_GATE), ws / "gate-1e300.json", threshold=1e300)
+    return _land(ws, _system(ws, "sys-gate", f'[monitor]\ngate = "{gate.name}"\n'))
+
+
+def _card_1e300(ws: Path) -> list[str]:
+    """The shipped calibration card re-hashed at threshold 1e300 (it accepts every candidate)."""
+    from el.pipeline import DEPLOYED_CALIBRATION
+
+    card = _resealed(Path(DEPLOYED_CALIBRATION), ws / "card-1e300.json", threshold=1e300,
+                     spec="learned:walk=score,threshold=1e+300")
+    return ["land", str(first_image(ws)), "--system", str(_system(ws, "sys-card", f'[monitor]\ncalibration = '
+                                                                              f'"{card.name}"\n'))]
+
+
+TRUST_CASES: tuple[Case, ...] = (
+    Case("T5-fifo-labels", "a system file whose [labels] file is a FIFO", _fifo_labels, 2, "a FIFO"),
+    Case("T6-dev-zero-labels", "a system file whose [labels] file is a link to /dev/zero", _zero_labels, 2,
+         "a character device"),
+    Case("T7-fifo-waivers", "evidence --waivers FIFO", lambda ws: _evidence(ws, "fifo-waivers", "--waivers",
+                                                                            _fifo(ws, "waivers-fifo.yaml")), 2,
+         "a FIFO"),
+    Case("T8-fifo-targets", "evidence --targets FIFO", lambda ws: _evidence(ws, "fifo-targets", "--targets",
+                                                                            _fifo(ws, "targets-fifo.json")), 2,
+         "a FIFO"),
+    Case("T9-huge-poses", "a 200 MB poses.csv flown under the sidecar pose policy", _huge_poses, 2,
+         "exceeds the limit"),
+    Case("T10-deep-toml", "a system file nested 60 000 brackets deep", _deep_toml, 2, "nested more than"),
+    Case("T11-nan-target", "a system file with [targets] unsafe_landing_bound = nan, given to campaign", _nan_target,
+         2, "must be a finite number"),
+    Case("T12-readable-key", "campaign --signing-key KEY where KEY has mode 0644", _readable_key, 2, "chmod 600"),
+    Case("T13-out-inside-run", "evidence --out RUN/shards/report", _out_inside_run, 2,
+         "lies inside the campaign run"),
+    Case("T14-waiver-version-999", "a waiver of EL-R10 by a declared owner expiring at version 999.0.0",
+         _version_waiver, 1, "beyond the next minor release", "expires at version"),
+    Case("T15-manifest-missing-tasks", "a manifest naming a task outside the data, the run re-signed",
+         _missing_tasks, 1, "with no readouts", "with no readouts"),
+    Case("T16-gate-threshold-1e300", "the shipped frame gate re-hashed at threshold 1e300, in a system file",
+         _gate_1e300, 2, "lies above the highest score"),
+    Case("T17-card-threshold-1e300", "the shipped calibration card re-hashed at threshold 1e300, in a system file",
+         _card_1e300, 2, "outside the score range"),
+)

@@ -1,0 +1,77 @@
+"""The certification basis: a system's targets looser than the packaged registry's, or a label set that declares a
+class of a forbidden hazard category safe, are deviations the auditor must accept by name; the report's texts are
+about the system assessed (its camera, pose, forbidden classes), never the shipped one unless it is assessed."""
+
+import pytest
+
+from assurance.requirements.basis import deviations, label_deviations
+from assurance.requirements.registry import load_registry
+from assurance.requirements.system_facts import facts_of, shipped_facts
+from el.labels import UAVID, LabelSet, load_label_set
+
+
+def _road_safe() -> LabelSet:
+    d = UAVID.to_dict()
+    road = next(c for c in d["classes"] if c["name"] == "road")
+    road.update(forbidden=False, hazard_score=0.0)
+    return LabelSet.from_dict(d)
+
+
+def test_the_packaged_label_sets_declare_every_category_and_keep_the_basis():
+    must = load_registry().parameters["forbidden_categories"]
+    assert set(must) == {"road", "vehicle", "building", "water"}
+    for labels in (UAVID, load_label_set("uavid"), load_label_set("semantic_drone")):
+        assert all(c.category for c in labels.classes), labels.name
+        assert label_deviations(labels, must) == []
+    assert load_label_set("uavid") == UAVID  # categories are data about the classes, not a different set
+
+
+def test_looser_targets_and_a_road_declared_safe_are_deviations():
+    found = deviations({"unsafe_landing_bound": 0.999, "confidence": 0.5, "min_images_per_perturbation": 1,
+                        "radius_m": 3.0}, labels=_road_safe())
+    names = [d.name for d in found]
+    assert names == ["min_images_per_perturbation", "unsafe_landing_bound", "confidence", "class:road"]
+    text = {d.name: d.text() for d in found}
+    assert "0.999" in text["unsafe_landing_bound"] and "0.05" in text["unsafe_landing_bound"]
+    assert "not accepted" in text["class:road"] and "--accept-deviation class:road" in text["class:road"]
+    assert deviations({"unsafe_landing_bound": 0.01, "confidence": 0.99}, labels=UAVID) == []  # stricter: none
+
+
+def test_a_deviation_is_accepted_only_by_its_name():
+    found = deviations({"unsafe_landing_bound": 0.1}, ["unsafe_landing_bound"], labels=UAVID)
+    assert [(d.name, d.accepted) for d in found] == [("unsafe_landing_bound", True)]
+    with pytest.raises(ValueError, match="does not deviate from the basis on it"):
+        deviations({}, ["confidence"], labels=UAVID)
+
+
+def test_a_safe_class_without_a_category_cannot_be_checked():
+    d = UAVID.to_dict()
+    d["classes"][5].pop("category", None)
+    found = label_deviations(LabelSet.from_dict(d), ["road"])
+    assert [x.name for x in found] == ["class:low_vegetation"] and "without one" in found[0].system
+
+
+def test_an_unknown_category_is_refused():
+    d = UAVID.to_dict()
+    d["classes"][0]["category"] = "lava"
+    with pytest.raises(ValueError, match="category 'lava' is not one of"):
+        LabelSet.from_dict(d)
+
+
+def test_the_registry_texts_are_about_the_system_assessed(tmp_path):
+    from assurance.system.find import load_system
+    from assurance.system.system import System
+
+    shipped = load_registry()
+    assert "phantom4" in shipped.operating_domain["camera"] and "oblique view" in shipped.operating_domain["camera"]
+    assert "road" in shipped["EL-R01"].text and shipped.facts == shipped_facts()
+    path = tmp_path / "uav-el.toml"
+    path.write_text('[system]\nname = "nadir"\n[camera]\nname = "nadir-cam"\nsensor_width_mm = 23.5\nfocal_mm = 16.0\n'
+                    'height_m = 20.0\npitch_deg = 90.0\n[labels]\npreset = "semantic_drone"\n')
+    facts = facts_of(System.build(load_system(path)))
+    reg = shipped.for_system(facts)
+    assert "nadir-cam" in reg.operating_domain["camera"] and "nadir view" in reg.operating_domain["camera"]
+    assert "height 20 m, pitch 90 degrees" in reg.operating_domain["pose"]
+    assert "ground below the UAV" in reg.operating_domain["ground"]
+    assert "paved-area" in reg["EL-R01"].text and "road, car" not in reg["EL-R10"].text
+    assert reg.parameters == shipped.parameters  # the texts change, the targets do not
