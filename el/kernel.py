@@ -161,6 +161,7 @@ def prepare(read: Reader, parts: Parts, *, pose: Pose | None = None, roll_deg: f
                 settle(refused)
                 if not evaluate:
                     return frame
+            budget.check(frame.stage)  # no stage starts past the deadline
 
         frame.stage = "candidates"
         t = clock()

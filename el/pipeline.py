@@ -92,7 +92,9 @@ class PipelineConfig:
         With a budget and the real clock (``time.perf_counter``), the decision runs in a worker thread and
         ``decide`` returns the default action ("timeout") at the deadline even while a stage that has no
         checkpoint (a forward pass, a decode) is still running; the stopped decision ends at its next
-        checkpoint (``el.deadline``). False, or an injected clock: the cooperative checks alone.
+        checkpoint (``el.deadline``), an ONNX Runtime run in flight at once (cancelled: ``RunOptions.terminate``).
+        False: the cooperative checks, and with the real clock ONNX Runtime runs cancelled at the deadline (a timer);
+        an injected clock: the cooperative checks alone.
     max_pixels : int
         Largest frame accepted, in pixels (:data:`el.imageio.MAX_PIXELS`, 8K plus a quarter by default): a file
         whose header claims more is refused before decoding (default action, the reason naming the file).

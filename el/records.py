@@ -15,6 +15,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 
+from el.userfiles import MAX_RECORD_BYTES, UserFileError, parse_bounded, read_text
+
 
 def body_sha256(body: dict[str, Any]) -> str:
     """SHA-256 of a document body's canonical JSON."""
@@ -30,12 +32,16 @@ def signed_document(fmt: str, body: dict[str, Any]) -> dict[str, Any]:
 def read_signed(path: Path, fmt: str, what: str, error: type[ValueError], *, a: str = "a",
                 hint: str = "") -> tuple[dict[str, Any], str]:
     """The checked body of the document at ``path`` and its SHA-256 (format ``fmt``; ``what`` names it
-    in messages, ``a`` is its article, ``hint`` follows an unreadable file's message). Raises ``error``."""
+    in messages, ``a`` is its article, ``hint`` follows an unreadable file's message). Raises ``error``.
+
+    A record may be an applicant's (``--gate``, ``[monitor] calibration``), so it is read through the bounded
+    reader (``el.userfiles``): a FIFO, a device or a file over ``MAX_RECORD_BYTES`` is refused before it is read,
+    and JSON nested too deeply to parse is refused, never a ``RecursionError``."""
     try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise error(f"{path}: cannot read the {what}: {exc.strerror or exc}{hint}") from None
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        doc = parse_bounded(json.loads, read_text(path, what=what, max_bytes=MAX_RECORD_BYTES), where=str(path))
+    except UserFileError as exc:
+        raise error(f"{exc}{hint}") from None
+    except json.JSONDecodeError as exc:
         raise error(f"{path}: not {a} {what} (bad JSON: {exc})") from None
     if not isinstance(doc, dict) or doc.get("format") != fmt or not isinstance(doc.get("body"), dict):
         raise error(f"{path}: not {a} {what} (format {fmt!r} expected)")

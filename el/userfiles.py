@@ -1,5 +1,5 @@
 """One bounded reader for every file a user hands the toolkit: system file, label set, hierarchy, poses, waivers,
-targets, registry, keys.
+targets, registry, keys, report templates, fitted records (frame gates, calibration cards, learned monitors).
 
 Whoever wrote such a file may be hostile (an applicant's evidence package is read by an auditor). A plain
 ``Path.read_text`` of it trusts three things this module does not:
@@ -38,6 +38,10 @@ MAX_KEY_BYTES = 1 << 20
 MAX_POSES_BYTES = 2 << 20
 """A ``poses.csv`` sidecar: ~20 bytes a frame, so about 100 000 frames of one sequence (an hour at 30 fps is
 108 000; each frame is an image of the sequence). Parsed, 2 MiB is ~3 s and ~60 MB here (8 MiB: 14 s, 230 MB)."""
+MAX_RECORD_BYTES = 64 << 20
+"""A fitted record (``el.records``: frame gate, calibration card, learned monitor). The largest kind is a knn frame
+gate, which keeps its training frames' features (frames x dims numbers, ~20 bytes each: the shipped Mahalanobis
+gate is 0.65 MB); 64 MiB is ~3 million numbers."""
 MAX_DEPTH = 32
 """Nesting of a parsed settings document (the deepest shipped one, a class hierarchy, nests 6 levels)."""
 
@@ -89,6 +93,22 @@ def _check_regular(p: Path, info: os.stat_result, what: str) -> None:
     if not stat.S_ISREG(info.st_mode):
         kind = _KINDS.get(stat.S_IFMT(info.st_mode), "not a regular file")
         raise UserFileError(f"{p}: {kind}, not a regular file (a {what} must be a regular file)")
+
+
+def not_regular(path: str | Path, *, what: str) -> str | None:
+    """Why ``path`` cannot be read as a ``what`` (one line naming it), judged by ``stat`` alone, so without opening
+    or reading it; None for a regular file. For a check that a file named in settings is there, before it is read:
+    "no such file" for nothing at all, else what it is instead (a FIFO is not reported as missing)."""
+    p = Path(path)
+    try:
+        _check_regular(p, os.stat(p), what)
+    except FileNotFoundError:
+        return f"{p}: no such file"
+    except OSError as exc:
+        return f"{p}: cannot read {what}: {exc.strerror or exc}"
+    except UserFileError as exc:
+        return str(exc)
+    return None
 
 
 def _read_at_most(fd: int, limit: int) -> bytes:

@@ -5,7 +5,9 @@ A FIFO, a device or a folder is refused before a read that could block; a file o
 before it is read; a TOML or JSON nested thousands deep is refused without a RecursionError; NaN in a system file
 is refused when it is loaded; a signing key others can read is refused with the fix; a report is never written
 inside a run; a waiver cannot expire at version 999; the report names tasks the manifest plans but the run lacks;
-a re-hashed gate or card whose threshold lies outside its fit's scores is refused when the system is built.
+a re-hashed gate or card whose threshold lies outside its fit's scores is refused when the system is built, a
+``--gate`` as one a system file names; a report template, a gate or card, or a ``uav-el.toml`` here that is a FIFO
+is refused naming it, never read, skipped or reported missing.
 """
 
 from __future__ import annotations
@@ -277,3 +279,72 @@ def test_a_resealed_gate_or_card_threshold_outside_its_fit_is_refused_at_load(tm
     from assurance.system.sense import gate_problem
 
     assert gate_problem(fine) is None
+
+
+def test_a_resealed_gate_given_on_the_command_line_is_refused_when_the_system_is_built(tiny_campaign, tmp_path,
+                                                                                      capsys):
+    from assurance.system import SystemFileError, default_system
+    from assurance.system.system import System
+    from el.pipeline import DEPLOYED_GATE
+
+    gate = _resealed(Path(DEPLOYED_GATE), tmp_path / "gate-1e300.json", threshold=1e300)
+    with pytest.raises(SystemFileError, match=f"--gate {gate}: threshold 1e\\+300 lies above the highest score"):
+        System.build(default_system(), gate=gate)  # it was checked only when a system file named it
+    image = next(tiny_campaign["data"].glob("**/Images/*.png"))
+    assert main(["land", str(image), "--monitor", "lhd", "--gate", str(gate)]) == 2
+    one_line(capsys, f"--gate {gate}: threshold 1e+300 lies above the highest score")
+    pipe = tmp_path / "gate-fifo.json"
+    os.mkfifo(pipe)
+    with within(10):
+        assert main(["land", str(image), "--monitor", "lhd", "--gate", str(pipe)]) == 2
+    one_line(capsys, f"--gate {pipe}: a FIFO (named pipe), not a regular file")
+
+
+# -- templates and what a system file names --------------------------------------------------------
+def test_a_template_that_is_a_fifo_or_dev_zero_is_refused_naming_it(tmp_path, fifo):
+    from assurance.evidence.render import TemplateError, _render, environment
+
+    folder = tmp_path / "tpl"
+    folder.mkdir()
+    fifo.rename(folder / "auditor_issre.html.j2")
+    (folder / "evidence.css").symlink_to("/dev/zero")
+    env = environment(folder)
+    with within(10):
+        for name, kind in (("auditor_issre.html.j2", r"a FIFO \(named pipe\)"), ("evidence.css", "a character device")):
+            with pytest.raises(userfiles.UserFileError, match=f"{name}: {kind}, not a regular file"):
+                env.get_template(name)  # Jinja's own loader passed over it for the packaged one
+        with pytest.raises(TemplateError, match=r"auditor_issre.html.j2: a FIFO \(named pipe\)"):
+            _render(env, "auditor_issre.html.j2", {})  # one line naming it, not a rendering failure
+    assert env.get_template("macros.html.j2").filename.endswith("assurance/templates/macros.html.j2")  # a gap
+
+
+def test_evidence_with_a_fifo_template_is_exit_2_naming_it(tiny_campaign, tmp_path, fifo, capsys):
+    folder = tmp_path / "tpl"
+    folder.mkdir()
+    fifo.rename(folder / "auditor_issre.html.j2")
+    with within(60):
+        assert main(["evidence", "--run", str(tiny_campaign["run"]), "--out", str(tmp_path / "r"), "--no-pdf",
+                     "--boot", "20", "--templates", str(folder)]) == 2
+    one_line(capsys, "auditor_issre.html.j2: a FIFO (named pipe), not a regular file")
+
+
+def test_a_uav_el_toml_here_that_is_not_a_regular_file_is_refused_not_passed_over(tmp_path, monkeypatch, capsys):
+    from assurance.system import SystemFileError
+    from assurance.system.find import find_system
+
+    os.mkfifo(tmp_path / "uav-el.toml")
+    with within(10):
+        with pytest.raises(SystemFileError, match=r"uav-el.toml: a FIFO \(named pipe\), not a regular file"):
+            find_system(cwd=tmp_path)  # it was passed over for the embedded default
+        monkeypatch.chdir(tmp_path)
+        assert main(["land", str(tmp_path / "x.png")]) == 2
+    one_line(capsys, f"{tmp_path / 'uav-el.toml'}: a FIFO")
+
+
+@pytest.mark.parametrize("key", ["gate", "calibration"])
+def test_a_gate_or_card_a_system_file_names_that_is_a_fifo_is_named_as_one(tmp_path, fifo, capsys, key):
+    path = system_file(tmp_path, f'[monitor]\n{key} = "{fifo.name}"\n', "sys.toml")
+    with within(10):
+        assert main(["land", "--system", str(path), str(tmp_path / "x.png")]) == 2
+    err = one_line(capsys, str(path), f"monitor.{key}", f"{fifo}: a FIFO (named pipe), not a regular file")
+    assert "no such file" not in err

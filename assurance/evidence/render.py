@@ -42,14 +42,56 @@ COVER = "cover.html.j2"
 def environment(templates: str | Path | None = None) -> Any:
     """The Jinja2 environment of the report: the immutable sandbox (a template reaches no Python internals and
     changes nothing), autoescape on, strict undefined. A user's template folder overrides the packaged templates
-    file by file (the packaged ones fill the gaps)."""
-    from jinja2 import ChoiceLoader, FileSystemLoader, StrictUndefined
+    file by file (the packaged ones fill the gaps); every template is read through the bounded reader
+    (:func:`bounded_loader`)."""
+    from jinja2 import StrictUndefined
     from jinja2.sandbox import ImmutableSandboxedEnvironment
 
-    folders = [str(templates)] if templates and Path(templates) != TEMPLATES_DIR else []
-    loader = ChoiceLoader([FileSystemLoader(f) for f in (*folders, str(TEMPLATES_DIR))])
-    return ImmutableSandboxedEnvironment(loader=loader, autoescape=True, undefined=StrictUndefined,
-                                         trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True)
+    folders = [Path(templates)] if templates and Path(templates) != TEMPLATES_DIR else []
+    return ImmutableSandboxedEnvironment(loader=bounded_loader([*folders, TEMPLATES_DIR]), autoescape=True,
+                                         undefined=StrictUndefined, trim_blocks=True, lstrip_blocks=True,
+                                         keep_trailing_newline=True)
+
+
+MAX_TEMPLATE_BYTES = 1 << 20
+"""A report template (or its stylesheet): a page of markup, not data (the packaged report is 14 KB)."""
+
+
+def bounded_loader(folders: Sequence[Path]) -> Any:
+    """A Jinja2 loader of the templates in ``folders`` (the first folder holding a name wins) that reads each
+    through ``el.userfiles``: a template folder is the applicant's, so a name there that is a FIFO, a device (or a
+    link to one), a folder or a file over :data:`MAX_TEMPLATE_BYTES` is refused (``UserFileError`` naming it)
+    before a read that could block or never end, instead of being skipped for the packaged one (Jinja's own
+    ``FileSystemLoader`` passes over what ``isfile`` denies, and reads what it takes with a plain ``open``)."""
+    import os
+
+    from jinja2 import BaseLoader, TemplateNotFound
+    from jinja2.loaders import split_template_path
+
+    from el.userfiles import read_text
+
+    class BoundedLoader(BaseLoader):
+        def get_source(self, environment: Any, template: str) -> tuple[str, str, Any]:
+            pieces = split_template_path(template)  # refuses ".." (no way out of the folders)
+            for folder in folders:
+                path = folder.joinpath(*pieces)
+                if os.path.lexists(path):  # whatever is there (a FIFO too) is judged by the reader, not skipped
+                    break
+            else:
+                raise TemplateNotFound(template)
+            text = read_text(path, what="report template", max_bytes=MAX_TEMPLATE_BYTES)
+            mtime = _mtime_ns(path)
+            return text, os.path.normpath(path), lambda: _mtime_ns(path) == mtime
+
+    return BoundedLoader()
+
+
+def _mtime_ns(path: Path) -> int | None:
+    """The modification time of ``path`` (None when it is gone): whether a loaded template is up to date."""
+    try:
+        return path.stat().st_mtime_ns
+    except OSError:
+        return None
 
 
 class TemplateError(ValueError):
@@ -74,8 +116,12 @@ def _render(env: Any, name: str, context: Mapping[str, Any]) -> str:
     from jinja2 import TemplateSyntaxError
     from jinja2.exceptions import SecurityError
 
+    from el.userfiles import UserFileError
+
     try:
         return env.get_template(name).render(**context)
+    except UserFileError as exc:  # a supplied template that is no regular file, or too big: never read
+        raise TemplateError(str(exc)) from None
     except TemplateSyntaxError as exc:
         raise TemplateError(f"{exc.filename or exc.name}:{exc.lineno}: report template does not compile: "
                             f"{exc.message}") from None

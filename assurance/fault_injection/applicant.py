@@ -1,6 +1,7 @@
 """Fault-injection cases of the auditor's trust boundary (rows ``T1``..``T4``): what an applicant supplies (here, the
 report templates) never executes, never reads the auditor's files and cannot contradict the gate. Rows ``T5``..``T17``
-(``assurance.fault_injection.trust``: the applicant's other files, read bounded and checked before work) follow.
+and ``T21`` (``assurance.fault_injection.trust``: the applicant's files, templates too, read bounded and checked
+before work) follow.
 
 Each case writes a template folder an applicant could name (``--templates`` or ``[report] templates``) and returns
 the ``uav-el evidence`` command on the workspace's run that must refuse it (exit 2, one line naming the problem).

@@ -1,11 +1,12 @@
-"""Fault-injection cases of the auditor's trust boundary beyond the templates (rows ``T5``..``T17``, issue 39): every
-file an applicant supplies is read bounded, and what it says is checked before any work starts.
+"""Fault-injection cases of the auditor's trust boundary beyond the templates' contents (rows ``T5``..``T17`` and
+``T21``, issue 39): every file an applicant supplies is read bounded, and what it says is checked before any work
+starts.
 
 A FIFO or ``/dev/zero`` given as a label set, waivers or targets; a 200 MB poses sidecar; a system file nested
 60 000 deep or holding a NaN target; a signing key others can read; a report written inside a run; a waiver
 expiring at version 999; a manifest naming tasks the run has no readouts of (re-signed, as the applicant can);
-a frame gate or calibration card re-hashed at threshold 1e300. Each case returns the ``uav-el`` command that must
-refuse it, with one line naming the file and the problem.
+a frame gate or calibration card re-hashed at threshold 1e300; a report template that is a FIFO. Each case returns
+the ``uav-el`` command that must refuse it, with one line naming the file and the problem.
 """
 
 from __future__ import annotations
@@ -148,6 +149,15 @@ def _card_1e300(ws: Path) -> list[str]:
                                                                               f'"{card.name}"\n'))]
 
 
+def _fifo_template(ws: Path) -> list[str]:
+    """A template folder whose ``auditor_issre.html.j2`` is a FIFO: Jinja's own loader skipped it for the packaged
+    one (or, swapped in after its check, waited on it for ever); the bounded reader refuses it by name."""
+    folder = ws / "templates-fifo"
+    folder.mkdir(exist_ok=True)
+    _fifo(folder, "auditor_issre.html.j2")
+    return _evidence(ws, "fifo-template", "--templates", folder)
+
+
 TRUST_CASES: tuple[Case, ...] = (
     Case("T5-fifo-labels", "a system file whose [labels] file is a FIFO", _fifo_labels, 2, "a FIFO"),
     Case("T6-dev-zero-labels", "a system file whose [labels] file is a link to /dev/zero", _zero_labels, 2,
@@ -174,4 +184,6 @@ TRUST_CASES: tuple[Case, ...] = (
          _gate_1e300, 2, "lies above the highest score"),
     Case("T17-card-threshold-1e300", "the shipped calibration card re-hashed at threshold 1e300, in a system file",
          _card_1e300, 2, "outside the score range"),
+    Case("T21-fifo-template", "evidence --templates DIR where DIR/auditor_issre.html.j2 is a FIFO", _fifo_template, 2,
+         "a FIFO"),
 )

@@ -34,7 +34,7 @@ from assurance.paths import shown_path
 from el.config import CoreConfig
 from el.core import run_core
 from el.hashing import sha256_file
-from el.labels import UAVID, LabelSet
+from el.labels import LabelSet
 from el.monitors.base import CandidateContext
 from el.monitors.learned import MCD_FEATURES, base_features, candidate_features, model_document
 from el.monitors.patches import extract_patch
@@ -124,7 +124,7 @@ def _auroc(y: np.ndarray, p: np.ndarray) -> float | None:
 def fit_learned_body(train: CandidateSet, val: CandidateSet, *, cs: Sequence[float] = DEFAULT_CS,
                      recall: float = 0.95, mcd_n: int = 0, mcd_rho: float = 0.9,
                      weights: dict[str, Any] | None = None, splits: dict[str, Any] | None = None,
-                     labels: LabelSet = UAVID) -> dict[str, Any]:
+                     labels: LabelSet) -> dict[str, Any]:
     """The model body: ``C`` by held-out AUROC, the recall threshold on the held-out part, what it rests on;
     ``labels``: the label set the candidates' features were computed in (their per-class names)."""
     import sklearn

@@ -2,10 +2,11 @@
 
 Beyond the schema (keys, types, ranges): the label set builds, the camera and nominal pose give a valid
 geometry at the image size, the model file exists and has the SHA-256 the file states, the class map names
-classes that exist, the monitor spec parses, the files it names exist, the perturbations are known, and the
-frame gate's and calibration card's thresholds lie where the scores they were fitted on lie
-(``assurance.system.sense``). Every number is finite (``loader.validate``: NaN passes a schema's bounds).
-Loading the model itself (an ONNX file's output shape) is checked when a command loads it, before any task.
+classes that exist, the monitor spec parses, the files it names are regular files (a FIFO or a device is named as
+what it is, never read), the perturbations are known, and the frame gate's and calibration card's thresholds lie
+where the scores they were fitted on lie (``assurance.system.sense``). Every number is finite (``loader.validate``:
+NaN passes a schema's bounds). Loading the model itself (an ONNX file's output shape) is checked when a command
+loads it, before any task.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from pathlib import Path
 
 from assurance.system import build
 from assurance.system.loader import SystemFile
+from el.userfiles import not_regular
 
 
 def check_system(system: SystemFile) -> None:
@@ -22,13 +24,16 @@ def check_system(system: SystemFile) -> None:
     check_geometry(system)
     check_model(system, labels.names)
     check_monitor(system)
-    for key in ("monitor.calibration", "monitor.gate", "waivers.file"):
+    for key, what in (("monitor.calibration", "calibration card"), ("monitor.gate", "frame gate"),
+                      ("waivers.file", "waivers file")):
         p = system.path_of(key)
-        if p is not None and not p.is_file() and not (key == "monitor.gate" and system.get(key) == "none"):
-            raise system.error(key, f"{p}: no such file")
+        why = None if p is None or (key == "monitor.gate" and system.get(key) == "none") else not_regular(p, what=what)
+        if why:  # nothing there, or what is there instead of a regular file (a FIFO is not "no such file")
+            raise system.error(key, why)
     templates = system.path_of("report.templates")
     if templates is not None and not templates.is_dir():
-        raise system.error("report.templates", f"{templates}: no such folder")
+        there = "no such folder" if not templates.exists() else "not a folder"
+        raise system.error("report.templates", f"{templates}: {there}")
     perturbations = system.get("targets.required_perturbations")
     if perturbations is not None:
         from assurance.perturbations import PERTURBATIONS
@@ -72,8 +77,9 @@ def check_model(system: SystemFile, names: tuple[str, ...]) -> None:
     kind = build.model_kind(system)
     path = system.path_of("model.path")
     if path is not None:
-        if not path.is_file():
-            raise system.error("model.path", f"{path}: no such file")
+        why = not_regular(path, what="model file")
+        if why:
+            raise system.error("model.path", why)
         suffix = {"pt": ".pt", "onnx": ".onnx"}.get(kind)
         if suffix and path.suffix.lower() != suffix:
             raise system.error("model.path", f"{path}: a {kind!r} model is a {suffix} file")

@@ -57,6 +57,17 @@ def gate_problem(path: Path) -> str | None:
     return None
 
 
+def gate_refusal(path: Path) -> str | None:
+    """:func:`gate_problem`, with a gate that cannot be used at all (unreadable, a FIFO, altered, inconsistent) its
+    loader's line: why the gate at ``path`` is refused, None when it is not."""
+    from el.errors import FrameGateError
+
+    try:
+        return gate_problem(path)
+    except FrameGateError as exc:
+        return str(exc)
+
+
 def card_problem(path: Path, labels: LabelSet) -> str | None:
     """Why the calibration card at ``path`` makes no sense (one line naming the file), None when it does. Read with
     its own loader (``el.monitors.calibration.load_calibration``: format, hash, spec at the threshold)."""

@@ -11,12 +11,13 @@ same fields) are both made from it, so what a campaign assesses is what flies.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from assurance.system import build
-from assurance.system.loader import SystemFile
+from assurance.system.loader import SystemFile, SystemFileError
 from el.config import CoreConfig
 from el.labels import UAVID, LabelSet
 from el.odd import OperatingDomain
@@ -53,7 +54,8 @@ class System:
               waivers: str | None = None) -> System:
         """The system of ``file``, with a command line's ``--model`` and ``--gate`` (``none``: no gate) winning.
         Every section is read and checked here (``SystemFileError`` naming the file and the key); the calibration
-        card is read when the deployed pair is (:meth:`deployed`): ``uav-el calibrate`` may be about to write it."""
+        card is read when the deployed pair is (:meth:`deployed`): ``uav-el calibrate`` may be about to write it. The
+        frame gate it ends up with is checked for sense (``assurance.system.sense``), a ``--gate`` as a file's is."""
         from el.pipeline import DEFAULT_TIME_BUDGET_S
 
         labels = build.label_set(file)
@@ -64,7 +66,8 @@ class System:
         budget = file.get("targets.time_budget_s", DEFAULT_TIME_BUDGET_S)
         return cls(file=file, labels=labels, core=build.core_config(file), odd=build.odd(file),
                    poses=build.poses_policy(file), model=model, monitor=build.monitor_spec(file) or "",
-                   calibration=file.path_of("monitor.calibration"), gate=_gate(file, gate, shipped=model is None),
+                   calibration=file.path_of("monitor.calibration"),
+                   gate=_checked_gate(file, gate, _gate(file, gate, shipped=model is None)),
                    budget_s=None if budget is None else float(budget), targets=build.targets(file),
                    waivers=build.waivers(file, waivers), report=build.report_settings(file))
 
@@ -124,6 +127,24 @@ def _gate(file: SystemFile, given: str | Path | None, *, shipped: bool) -> Path 
     if value is not None:
         return None if str(value) == NO_GATE else file.path_of("monitor.gate")
     return DEPLOYED_GATE if shipped else None
+
+
+def _checked_gate(file: SystemFile, given: str | Path | None, gate: Path | None) -> Path | None:
+    """``gate`` (the frame gate the system ends up with), refused (``SystemFileError`` naming the gate file) when it
+    makes no sense (``assurance.system.sense.gate_problem``: its threshold outside the scores it was fitted on) or
+    cannot be read (a FIFO, a device: the bounded reader's line). The system file's gate was checked when the file
+    was loaded; a ``--gate`` (``given``) had no such check, so a re-hashed gate passing every frame flew. A path
+    with nothing at it is left to the command that loads the gate, whose loader names it (one line, exit 2)."""
+    from assurance.system.sense import gate_refusal
+
+    if gate is None or not os.path.lexists(gate):
+        return gate
+    why = gate_refusal(gate)
+    if why:
+        if given is not None:
+            raise SystemFileError(f"--gate {why}")  # why opens with the gate file's path
+        raise file.error("monitor.gate", why) if file.get("monitor.gate") is not None else SystemFileError(why)
+    return gate
 
 
 __all__ = ["NO_GATE", "System"]

@@ -21,13 +21,15 @@ from __future__ import annotations
 import json
 import logging
 import os
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from el.errors import WeightsError
+from el.deadline import stop_at_deadline
+from el.errors import BudgetExceeded, WeightsError
 from el.hashing import sha256_bytes
 
 ENGINE_ENV = "UAV_EL_ENGINE"
@@ -236,6 +238,30 @@ def open_session(data: bytes, where: str | Path, threads: int | None = None) -> 
         raise WeightsError(f"{where}: ONNX Runtime cannot load the model: {first}") from None
 
 
+def run_session(session: Any, names: list[str], feeds: dict[str, Any], where: str) -> list[Any]:
+    """``session.run(names, feeds)``, cancelled at the decision's deadline (issue 39).
+
+    Inside a decision (an active ``el.deadline`` deadline) the run gets its own ``RunOptions``, whose ``terminate``
+    the deadline sets from another thread when it passes or is cancelled (:func:`el.deadline.stop_at_deadline`):
+    ONNX Runtime then abandons the run at its next operator and this raises ``BudgetExceeded`` (the decision is
+    ``timeout``), instead of computing on for a decision already returned. A run that ends before the deadline is
+    the plain run (options change no number); outside a decision (campaigns, probes) nothing is armed."""
+    options = onnxruntime().RunOptions()
+    stopped = threading.Event()
+
+    def stop() -> None:  # the deadline's timer thread, or the hard stop's
+        stopped.set()
+        options.terminate = True
+
+    with stop_at_deadline(stop, where) as armed:
+        try:
+            return session.run(names, feeds, options) if armed else session.run(names, feeds)
+        except Exception:
+            if stopped.is_set():
+                raise BudgetExceeded(f"ONNX Runtime run cancelled at the decision's deadline during {where}") from None
+            raise
+
+
 def metadata(session: Any) -> dict[str, str]:
     """The model's ``metadata_props`` (key -> string)."""
     return dict(session.get_modelmeta().custom_metadata_map)
@@ -311,8 +337,8 @@ class OnnxEngine:
 
     def with_trunk(self, batch: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
         """Logits and the trunk outputs (:attr:`trunk_names`) of a batch, from one pass."""
-        out = self._session.run([self._logits, *self.trunk_names],
-                                {self._input: np.ascontiguousarray(batch, np.float32)})
+        out = run_session(self._session, [self._logits, *self.trunk_names],
+                          {self._input: np.ascontiguousarray(batch, np.float32)}, "segmentation")
         return out[0], out[1:]
 
     def __getstate__(self) -> dict[str, Any]:
@@ -323,7 +349,8 @@ class OnnxEngine:
 
     def logits(self, batch: np.ndarray) -> np.ndarray:
         """Logits of a (B, 3, H, W) float32 batch."""
-        return self._session.run([self._logits], {self._input: np.ascontiguousarray(batch, np.float32)})[0]
+        return run_session(self._session, [self._logits], {self._input: np.ascontiguousarray(batch, np.float32)},
+                           "segmentation")[0]
 
 
 def engine_for(weights_path: str | Path, weights_sha256: str | None, threads: int | None = None

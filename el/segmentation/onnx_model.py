@@ -48,7 +48,7 @@ from el.labels import LabelSet
 from el.rgb import check_rgb
 from el.segmentation.contract import OutputClasses
 from el.segmentation.frame_tap import frame_tap
-from el.segmentation.onnx_engine import metadata, open_session, read_checked
+from el.segmentation.onnx_engine import metadata, open_session, read_checked, run_session
 
 MIN_SIZE = 16
 META_CONTRACT = "uav_el.contract"
@@ -273,7 +273,7 @@ class OnnxModel:
         h, w = rgb.shape[:2]
         tap = what == "frame" and self.tap_frames
         names = [self._output, *(self._trunk if tap else [])]
-        outs = self._session.run(names, {self._input: self.contract.to_input(rgb)})
+        outs = run_session(self._session, names, {self._input: self.contract.to_input(rgb)}, f"{what} segmentation")
         out = outs[0]
         probs = self.contract.to_probs(out, w, h, what)[self._order]
         if tap:  # the frame gate's statistics, from this very pass (channels in the label set's order)
@@ -311,7 +311,7 @@ class OnnxModel:
         for idx in groups.values():
             checkpoint("patch segmentation")
             batch = np.concatenate([self.contract.to_input(patches[i]) for i in idx])
-            raw = np.asarray(self._session.run([self._output], {self._input: batch})[0])
+            raw = np.asarray(run_session(self._session, [self._output], {self._input: batch}, "patch segmentation")[0])
             if raw.ndim != 4 or raw.shape[0] != len(idx):
                 raise ValueError(f"patches: the ONNX output is {raw.shape}, expected a batch of {len(idx)}")
             for j, i in enumerate(idx):
