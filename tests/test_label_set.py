@@ -328,7 +328,9 @@ def test_build_monitor_refuses_a_set_for_a_plugin_that_takes_none():
 
     register_monitor("nolabels", factory)
     try:
-        with pytest.raises(ValueError, match="'nolabels' .* does not take a label set"):
+        from el.monitors.capabilities import MonitorSupportError
+
+        with pytest.raises(MonitorSupportError, match="'nolabels' .* does not take a label set"):  # at build
             build_monitor("nolabels", labels=FIELDS)
     finally:
         unregister_monitor("nolabels")
