@@ -133,3 +133,17 @@ def test_the_overlay_shades_the_stripes_of_the_decisions_own_pose():
     assert (nadir.default_area.x, nadir.default_area.y) == (192.0, 108.0)
     assert min(c.y for c in nadir.candidates) < 43  # candidates in the former top stripes
     assert _first_reachable_row({}, 384, 216) == 43  # a decision that records no pose: the nominal one
+
+
+def test_a_system_file_sets_the_reach(tmp_path):
+    """``[safety] reach_m`` reaches the core: a longer reach targets the paper's far stripes too."""
+    from assurance.system import default_system
+    from assurance.system.find import load_system
+    from assurance.system.system import System
+
+    path = tmp_path / "uav-el.toml"
+    path.write_text("[safety]\nreach_m = 200.0\n")
+    far = System.build(load_system(path)).core
+    shipped = System.build(default_system()).core
+    assert far.reach_m == 200.0 and far.geometry(3840, 2160).first_reachable_row == 0
+    assert shipped.reach_m == 90.0 and shipped.geometry(3840, 2160).first_reachable_row == 432

@@ -113,6 +113,9 @@ def core_config(system: SystemFile, **overrides: Any) -> CoreConfig:
     width = system.get("model.working_width")
     if width is not None:
         kwargs["working_width"] = int(width)
+    reach = system.get("safety.reach_m")
+    if reach is not None:
+        kwargs["reach_m"] = float(reach)
     kwargs.update({k: v for k, v in overrides.items() if v is not None})
     return CoreConfig(**kwargs)
 
