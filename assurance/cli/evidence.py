@@ -45,29 +45,23 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run_system(args: argparse.Namespace, run: Path) -> object:
     """The system file the report is about: the one given (or found in the working directory), else the run's own
-    (recorded in its manifest, found where it was and unchanged), else the embedded default."""
+    as its signed manifest records it (the document itself, as ``uav-el verify`` reads it: no file at the path the
+    manifest names is read), else the embedded default."""
+    from assurance.campaign.readouts import RunError, read_manifest
     from assurance.cli.system_options import system_of
-    from assurance.system.find import load_system
+    from assurance.system.loader import system_from_record
 
     system = system_of(args)
     if not system.default:
         return system
-    import json
-
     try:
-        recorded = json.loads((run / "manifest.json").read_text(encoding="utf-8")).get("system") or {}
-    except (OSError, ValueError):
+        recorded = read_manifest(run).get("system") or {}
+    except (OSError, ValueError, RunError):
+        return system  # the report's own run checks name what is wrong with the run
+    if recorded.get("default", True) or not recorded.get("document"):
         return system
-    path = recorded.get("path")
-    if recorded.get("default", True) or not path:
-        return system
-    if not Path(path).is_file():
-        raise CommandError(f"{run}: the run assessed the system file {path}, not found here; give it with --system")
-    found = load_system(path)
-    if found.sha256 != recorded.get("sha256"):
-        raise CommandError(f"{path}: changed since the run {run} assessed it (SHA-256 {found.sha256[:12]}, the "
-                           f"run's {str(recorded.get('sha256'))[:12]}); give the run's system file with --system")
-    print(f"system file: {path} (the run's own)", file=sys.stderr)
+    found = system_from_record(recorded)
+    print(f"system file: {found.label} (the run's own)", file=sys.stderr)
     return found
 
 

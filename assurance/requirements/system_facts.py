@@ -4,11 +4,12 @@ The registry's texts are written once for every system: where they name the came
 the scenes or the forbidden classes they use a placeholder (``{camera}``, ``{pose}``, ``{ground}``, ``{scenes}``,
 ``{forbidden}``) filled from these facts. ``facts_of`` derives them from a built system (its camera, nominal pose,
 declared domain, pose policy and label set), so a report about another system says nothing of the shipped one;
-``SHIPPED_FACTS`` are the embedded default's (what a registry loaded without a system reads).
+``shipped_facts`` are the embedded default's (what a registry loaded without a system reads).
 """
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from typing import Any
 
@@ -103,14 +104,16 @@ def facts_of_file(file: Any) -> dict[str, str]:
     """The facts of a system file (``assurance.system.SystemFile``): the system built from it, as :func:`facts_of`;
     the embedded default's are :func:`shipped_facts`."""
     if file is None or getattr(file, "default", False):
-        return shipped_facts()
+        return dict(shipped_facts())
     from assurance.system.system import System
 
     return facts_of(System.build(file))
 
 
+@functools.cache
 def shipped_facts() -> dict[str, str]:
-    """The embedded default system's facts (the shipped camera, pose and UAVid classes), without building it."""
+    """The embedded default system's facts (the shipped camera, pose and UAVid classes), without building it;
+    computed once (every registry load renders its texts from them). Callers copy before changing them."""
     from el.camera import PHANTOM4, Pose
     from el.config import CoreConfig
     from el.labels import UAVID
