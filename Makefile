@@ -18,7 +18,7 @@ setup: $(VENV)/.installed
 $(VENV)/.installed: pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	$(VENV)/bin/pip install -q --upgrade "pip>=24"
-	$(VENV)/bin/pip install -q -c constraints.txt -e ".[dev,pdf,distributed,onnx,fast]"
+	$(VENV)/bin/pip install -q -c constraints.txt -e ".[dev,pdf,distributed,onnx,fast,train,docs,bench,browser]"
 	touch $@
 
 ## The main job on the embedded default: synthetic test scenes -> shipped model -> demo campaign
