@@ -81,11 +81,12 @@ def sweep_figure(table: pd.DataFrame, choices: Sequence[Choice]) -> Figure:
     return fig
 
 
-def write_sweep(out: Path, table: pd.DataFrame, choices: Sequence[Choice]) -> str:
-    """Write sweep.csv, sweep.md and sweep.png into ``out`` (atomically) and return the Markdown."""
+def write_sweep(out: Path, table: pd.DataFrame, choices: Sequence[Choice], note: str = "") -> str:
+    """Write sweep.csv, sweep.md and sweep.png into ``out`` (atomically) and return the Markdown; ``note``: a last
+    line (the threshold criterion)."""
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_bytes(out / "sweep.csv", table.to_csv(index=False).encode())
-    md = choice_markdown(table, choices)
+    md = choice_markdown(table, choices) + (f"\n{note}\n" if note else "")
     atomic_write_bytes(out / "sweep.md", md.encode())
     fig = sweep_figure(table, choices)
     FigureCanvasAgg(fig)

@@ -20,6 +20,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                                                     "file's [monitor] spec)")
     p.add_argument("--miss-rate", type=float, default=0.05, help="largest P(accept an unsafe candidate) (0.05)")
     p.add_argument("--confidence", type=float, default=0.95, help="confidence of the bound (0.95)")
+    p.add_argument("--criterion", default="guarantee", choices=("guarantee", "f1", "g-mean", "tnr-at-recall"),
+                   help="how the threshold is chosen (recorded in the card): guarantee (default: the miss-rate bound "
+                        "above), or the monitor benchmark's f1, g-mean, tnr-at-recall (largest threshold with recall "
+                        "of unsafe candidates >= --recall); those give no guarantee")
+    p.add_argument("--recall", type=float, default=0.95, help="the recall of --criterion tnr-at-recall (0.95)")
     p.add_argument("--out", required=True, type=Path, help="calibration card to write (JSON)")
     model_option(p)
     p.add_argument("--images", type=int, help="use the first N scenes of --data")
@@ -39,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         doc = calibrate_on_data(data, monitor, miss_rate=args.miss_rate, confidence=args.confidence,
                                 weights=system.model, images=args.images, core=system.core,
-                                progress=not args.quiet)
+                                progress=not args.quiet, criterion=args.criterion, recall=args.recall)
     except ValueError as exc:  # CalibrationError, WeightsError, a bad spec: one line
         raise CommandError(str(exc)) from None
     write_json(args.out, doc, indent=2)
@@ -48,6 +53,6 @@ def run(args: argparse.Namespace) -> int:
     print(f"{b['spec']}: threshold {b['threshold']:.6g} from {c['unsafe']} truly unsafe of {c['candidates']} "
           f"candidates ({b['split']['images']} scenes); {c['unsafe_accepted']} unsafe accepted, "
           f"{c['safe_rejected']} of {c['safe']} safe rejected")
-    print(f"guarantee: {b['guarantee']}")
+    print(f"criterion: {b['criterion']['name']}; guarantee: {b['guarantee']}")
     print(f"card written to {args.out}")
     return 0

@@ -23,13 +23,22 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--gate", metavar="GATE.json", help="also replay a frame gate (uav-el fit-gate): the run's frames "
                                                         "are re-perturbed with its seeds and scored; needs --data")
     p.add_argument("--data", help="the run's scenes (for --gate)")
+    p.add_argument("--criterion", default="fewest-unsafe", metavar="NAME",
+                   choices=("fewest-unsafe", "g-star", "guarantee", "f1", "g-mean", "tnr-at-recall"),
+                   help="how each monitor's threshold is chosen (written in sweep.md): fewest-unsafe (default, the "
+                        "paper's), g-star, guarantee (calibration bound: --miss-rate, --confidence), f1, g-mean, "
+                        "tnr-at-recall (--recall)")
+    p.add_argument("--recall", type=float, default=0.95, help="recall of --criterion tnr-at-recall (0.95)")
+    p.add_argument("--miss-rate", type=float, default=0.05, help="miss rate of --criterion guarantee (0.05)")
+    p.add_argument("--confidence", type=float, default=0.95, help="confidence of --criterion guarantee (0.95)")
     p.add_argument("--choose", action="store_true", help="print the threshold each monitor would be deployed at, "
                                                           "and the best of them")
 
 
 def run(args: argparse.Namespace) -> int:
+    from assurance.analysis.criteria import criterion_line, sweep_by_criterion
     from assurance.analysis.sweep import SweepError
-    from assurance.analysis.sweep_report import sweep_run, write_sweep
+    from assurance.analysis.sweep_report import write_sweep
     from assurance.campaign.readouts import RunError, load_table
 
     run_dir = Path(args.run)
@@ -37,8 +46,9 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(f"{run_dir}: no such run folder")
     try:
         images, candidates = load_table(run_dir, "images"), load_table(run_dir, "candidates")
-        table, choices = sweep_run(images, candidates, args.monitors, args.walks)
-    except (SweepError, RunError) as exc:
+        table, choices = sweep_by_criterion(images, candidates, args.monitors, args.walks, args.criterion,
+                                            recall=args.recall, miss_rate=args.miss_rate, confidence=args.confidence)
+    except (SweepError, RunError, ValueError) as exc:
         raise CommandError(f"{run_dir}: {exc}") from None
     out = args.out or run_dir
     gate = None
@@ -46,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
         if not args.data:
             raise CommandError("--gate needs --data (the run's scenes)")
         gate = bound_gate(args.gate, run_dir)  # refused before anything is written
-    md = write_sweep(out, table, choices)
+    md = write_sweep(out, table, choices, note=criterion_line(args.criterion, args.recall))
     if gate is not None:
         md += gate_section(run_dir, Path(args.data), gate, images, candidates, choices[0], out)
         from assurance.files import atomic_write_bytes

@@ -29,13 +29,12 @@ from __future__ import annotations
 
 import datetime as _dt
 import hashlib
-import math
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.stats import binom
 
+from assurance.analysis.guarantee import _check_rates, calibrate_threshold, min_unsafe_needed
 from assurance.paths import shown_path
 from el.monitors.calibration import CalibrationError, card_document
 from el.monitors.spec import THRESHOLD, parse_monitor_spec
@@ -44,60 +43,23 @@ __all__ = ["CalibrationError", "calibrate_threshold", "calibration_body",
            "min_unsafe_needed"]
 
 
-def _check_rates(miss_rate: float, confidence: float) -> None:
-    for name, v in (("miss rate", miss_rate), ("confidence", confidence)):
-        if isinstance(v, bool) or not isinstance(v, int | float) or not 0.0 < float(v) < 1.0:
-            raise CalibrationError(f"{name} must lie in (0, 1), got {v!r}")
-
-
-def min_unsafe_needed(miss_rate: float, confidence: float) -> int:
-    """Fewest unsafe calibration candidates that can certify ``miss_rate`` at ``confidence`` (k = 1)."""
-    _check_rates(miss_rate, confidence)
-    return int(math.ceil(math.log(1.0 - confidence) / math.log(1.0 - miss_rate)))
-
-
-def calibrate_threshold(unsafe_scores: Any, miss_rate: float, confidence: float) -> dict[str, Any]:
-    """The threshold with the guarantee above, from the scores of the truly unsafe calibration candidates.
-
-    Returns ``{"threshold", "k", "n", "bound", "accepted"}``: ``bound`` is the Clopper-Pearson upper
-    bound of the miss rate at ``confidence`` (``<= miss_rate``), ``accepted`` the unsafe calibration
-    candidates the threshold accepts.
-    """
-    from assurance.analysis.metrics import clopper_pearson_upper
-
-    _check_rates(miss_rate, confidence)
-    s = np.sort(np.asarray(unsafe_scores, dtype=np.float64))
-    if s.ndim != 1 or np.isnan(s).any():
-        raise CalibrationError("unsafe scores must be a one-dimensional array without NaN")
-    n = int(s.size)
-    delta = 1.0 - confidence
-    # largest k in 1..n with P(Bin(n, miss_rate) <= k - 1) <= delta
-    cdf = binom.cdf(np.arange(n), n, miss_rate)  # cdf[j] = P(Bin <= j), j = k - 1
-    ok = np.flatnonzero(cdf <= delta)
-    if n == 0 or ok.size == 0:
-        need = min_unsafe_needed(miss_rate, confidence)
-        raise CalibrationError(f"{n} truly unsafe calibration candidate(s): at least {need} are needed to "
-                               f"certify a miss rate of {miss_rate:g} at confidence {confidence:g}")
-    k = int(ok[-1]) + 1
-    threshold = float(np.nextafter(s[k - 1], -np.inf))
-    if not math.isfinite(threshold):
-        raise CalibrationError(f"the {k}-th smallest unsafe score is {s[k - 1]!r}: no finite threshold below it")
-    accepted = int((s <= threshold).sum())
-    return {"threshold": threshold, "k": k, "n": n, "accepted": accepted,
-            "bound": clopper_pearson_upper(accepted, n, confidence)}
-
-
 def calibration_body(scores: Any, unsafe: Any, *, monitor: str, miss_rate: float, confidence: float,
                      split: dict[str, Any], weights: dict[str, Any],
-                     monitor_model: str | None = None) -> dict[str, Any]:
+                     monitor_model: str | None = None, criterion: str = "guarantee",
+                     recall: float = 0.95) -> dict[str, Any]:
     """The card body: the calibrated threshold from the candidates' scores and truths, with what it rests on
-    (``monitor_model``: the SHA-256 of the monitor's fitted model file, if it has one)."""
+    (``monitor_model``: the SHA-256 of the monitor's fitted model file, if it has one) and the criterion that
+    chose it (``assurance.analysis.criteria``; another than ``guarantee`` gives no guarantee: see
+    :func:`criterion_body`)."""
     base = parse_monitor_spec(monitor)
     if base is None:
         raise CalibrationError("'none' has no threshold to calibrate")
     base = base.base
     s = np.asarray(scores, dtype=np.float64)
     y = np.asarray(unsafe, dtype=bool)
+    if criterion != "guarantee":
+        return criterion_body(s, y, base.name, criterion, recall, split=split, weights=weights,
+                              monitor_model=monitor_model)
     res = calibrate_threshold(s[y], miss_rate, confidence)
     sep = "," if ":" in base.name else ":"
     spec = parse_monitor_spec(f"{base.name}{sep}{THRESHOLD}={res['threshold']!r}")
@@ -116,13 +78,42 @@ def calibration_body(scores: Any, unsafe: Any, *, monitor: str, miss_rate: float
         "method": ("order statistic + binomial tail (Wilks 1941; Clopper-Pearson 1934); "
                    "assurance/fitting/calibration.py"),
         "split": split, "weights": weights, "monitor_model": {"sha256": monitor_model},
+        "criterion": {"name": "guarantee", "recall": None},
+        "created": _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC"),
+    }
+
+
+def criterion_body(s: np.ndarray, y: np.ndarray, monitor: str, criterion: str, recall: float, *,
+                   split: dict[str, Any], weights: dict[str, Any], monitor_model: str | None) -> dict[str, Any]:
+    """A card whose threshold a benchmark criterion chose (``f1``, ``g-mean``, ``tnr-at-recall``): the same fields,
+    with ``miss_rate``, ``confidence``, ``bound`` and ``order_statistic_k`` None (no guarantee) and the criterion."""
+    from assurance.analysis.criteria import candidate_threshold
+
+    try:
+        threshold, note = candidate_threshold(criterion, s, y, recall=recall)
+    except ValueError as exc:
+        raise CalibrationError(str(exc)) from None
+    sep = "," if ":" in monitor else ":"
+    spec = parse_monitor_spec(f"{monitor}{sep}{THRESHOLD}={threshold!r}")
+    safe, bad = s[~y], s[y]
+    return {
+        "monitor": monitor, "spec": spec.name, "threshold": threshold,
+        "miss_rate": None, "confidence": None, "bound": None, "order_statistic_k": None,
+        "counts": {"candidates": int(s.size), "unsafe": int(bad.size), "safe": int(safe.size),
+                   "unsafe_accepted": int((bad <= threshold).sum()), "safe_rejected": int((safe > threshold).sum())},
+        "safe_rejected_rate": float((safe > threshold).mean()) if safe.size else None,
+        "guarantee": f"none: the threshold was chosen by criterion {criterion!r} on this sample ({note})",
+        "method": f"criterion {criterion!r} (assurance/analysis/criteria.py)",
+        "split": split, "weights": weights, "monitor_model": {"sha256": monitor_model},
+        "criterion": {"name": criterion, "recall": recall if criterion == "tnr-at-recall" else None, "note": note},
         "created": _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC"),
     }
 
 
 def calibrate_on_data(data: str | Path, monitor: str, *, miss_rate: float, confidence: float,
                       weights: str | dict[str, Any] | None = None, images: int | None = None, segmenter: Any = None,
-                      core: Any = None, progress: bool = False) -> dict[str, Any]:
+                      core: Any = None, progress: bool = False, criterion: str = "guarantee",
+                      recall: float = 0.95) -> dict[str, Any]:
     """Score every candidate of the clean scenes in ``data`` with ``monitor`` and calibrate it: the card document.
 
     The candidates, their truth and the scores come from the campaign's own task code (perturbation
@@ -172,7 +163,7 @@ def calibrate_on_data(data: str | Path, monitor: str, *, miss_rate: float, confi
         split={"path": shown_path(data), "images": len(tasks), "sha256": h.hexdigest(),
                "perturbation": "none"},
         weights=network,
-        monitor_model=monitor_model,
+        monitor_model=monitor_model, criterion=criterion, recall=recall,
     )
     return card_document(body)
 

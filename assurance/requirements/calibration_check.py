@@ -27,6 +27,11 @@ def check_calibrated_miss_rate(candidates: Any, card: Any, perturbation: str = "
     from assurance.analysis.intervals import BOUND_MISSED, decide_rate_bound
     from assurance.requirements import records as rq
 
+    if card.body.get("miss_rate") is None or card.body.get("confidence") is None:
+        chosen = (card.body.get("criterion") or {}).get("name", "another criterion")
+        return rq.Evidence(f"miss rate of the calibrated monitor ({card.spec})", rq.INSUFFICIENT,
+                           f"insufficient evidence: the card's threshold was chosen by criterion {chosen!r}, which "
+                           "carries no miss-rate guarantee to test; calibrate with --criterion guarantee")
     name = f"miss rate of the calibrated monitor ({card.spec}) <= {card.body['miss_rate']:g}"
     if candidates is None or len(candidates) == 0:
         return rq.Evidence(name, rq.INSUFFICIENT, "insufficient evidence: no candidates in the run")

@@ -64,6 +64,9 @@ def model_kind(model: Any) -> str:
     name = type(model).__name__
     if name == "OnnxModel":
         return "an ONNX network, which runs without dropout"
+    if name == "OnnxSegmenter":  # the base install: torch, which runs MC dropout, is the train extra
+        return ("the shipped network's ONNX export, run without torch (MC dropout needs torch: pip install "
+                "'uav-el-assurance[train]')")
     has_dropout = getattr(model, "has_dropout", None)
     if has_dropout is not None:
         return "a torch network " + ("with dropout layers" if has_dropout else "without dropout layers")

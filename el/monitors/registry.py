@@ -33,6 +33,11 @@ BUILTIN: dict[str, str] = {
     "entropy": "el.monitors.softmax_scores:EntropyMonitor",
     "energy": "el.monitors.softmax_scores:EnergyMonitor",
     "learned": "el.monitors.learned:LearnedMonitor",
+    "odin": "el.monitors.odin:ODINMonitor",
+    "doctor": "el.monitors.doctor:DOCTORMonitor",
+    "mahalanobis": "el.monitors.mahalanobis:MahalanobisMonitor",
+    "gmm": "el.monitors.gmm:GMMMonitor",
+    "outside_box": "el.monitors.outside_box:OutsideBoxMonitor",
 }
 """Monitors of this repository: name -> ``module:Class`` (imported when first used)."""
 
