@@ -32,13 +32,17 @@ a run identifies by their own SHA-256)."""
 
 
 def package_dirs() -> list[Path]:
-    """The folders of the installed ``el`` and ``assurance`` packages (found without importing them)."""
+    """The folders of the installed ``el`` and ``assurance`` packages (found without importing them) and of the
+    report's templates (``evidence_templates``, beside ``assurance``)."""
     out = []
     for name in PACKAGES:
         spec = util.find_spec(name)
         locations = list(spec.submodule_search_locations or []) if spec else []
         if locations:
             out.append(Path(locations[0]).resolve())
+    templates = install_root() / "evidence_templates"  # the report's packaged templates, beside assurance
+    if templates.is_dir():
+        out.append(templates.resolve())
     return out
 
 

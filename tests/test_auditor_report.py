@@ -23,7 +23,8 @@ def test_report_shows_hazards_argument_and_issre(auditor_report):
     html = (auditor_report / "evidence.html").read_text("utf-8")
     for anchor in ('id="hazards"', 'id="argument"', 'id="issre"'):
         assert anchor in html
-    assert html.count("data:image/svg+xml;base64,") == 4  # top page + one per strategy
+    assert html.count('<div class="gsn-view"') == 4  # inline SVG: top page + one per strategy
+    assert "data:image/svg+xml" not in html and 'href="#req-EL-R01"' in html  # its elements link
     doc = json.loads((auditor_report / "evidence.json").read_text("utf-8"))
     assert [h["id"] for h in doc["hazards"]["hazards"]][:2] == ["H1", "H2"]
     assert doc["argument"]["problems"] == []

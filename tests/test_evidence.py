@@ -119,7 +119,9 @@ def test_report_files_html_json_pdf(report):
 
 def test_html_escapes_everything_user_controlled(report):
     _, doc, html = report
-    assert SCRIPT not in html and "<script" not in html
+    from assurance.evidence.linking import SCRIPT as OWN
+
+    assert SCRIPT not in html and html.count("<script") == 1 and f"<script>{OWN}</script>" in html  # its own only
     assert "&lt;script&gt;alert(&#39;x&#39;)&lt;/script&gt;" in html  # the monitor reason, escaped
     assert 'run&lt;&amp;&gt;&#34;x' in html and 'run<&>"x' not in html  # the run folder name
     assert "w&lt;b&gt;&#34;&amp;&#39;.pt" in html and WEIRD_WEIGHTS not in html  # a configuration value
@@ -211,7 +213,7 @@ def test_waiver_accepts_a_listed_failure_but_not_under_strict(pytester, monitor_
 
     soon = (dt.datetime.now(dt.UTC).date() + dt.timedelta(days=100)).isoformat()  # within the declared maximum
     waivers = tmp_path / "waivers.yaml"
-    waivers.write_text("waivers:\n  - id: EL-R04\n    reason: known <bad> variant\n    tracked_by: issue 0\n"
+    waivers.write_text("waivers:\n  - id: EL-R04\n    reason: known <bad> variant\n    tracked_by: monitor work\n"
                        f"    owner: monitor maintainers\n    expires: {soon}\n")
     args = ("--run", monitor_runs["broken"], "--out", tmp_path / "bad", "--no-pdf", "--boot", 100,
             "--registry", lenient)
@@ -231,7 +233,7 @@ def test_waiver_accepts_a_listed_failure_but_not_under_strict(pytester, monitor_
     html = (tmp_path / "bad" / "evidence.html").read_text()
     assert "known &lt;bad&gt; variant" in html and "owner monitor maintainers" in html
     cover = html.split("<nav>")[0]  # page 1: the waived failure is still a failure
-    assert "EL-R04 (failed, waived)" in cover and "Gate: WAIVED" in cover
+    assert 'href="#req-EL-R04">EL-R04</a> (failed, waived)' in cover and "Gate: WAIVED" in cover  # id linked
     assert evidence_cli(*args, "--waivers", waivers, "--strict") == 1
     other = tmp_path / "other.yaml"
     other.write_text("waivers:\n  - id: EL-R09\n    reason: r\n    tracked_by: t\n    owner: o\n    expires: 99.0.0\n")
@@ -252,7 +254,8 @@ def test_waiver_accepts_a_listed_failure_but_not_under_strict(pytester, monitor_
         assert why in capsys.readouterr().err
 
 
-def test_missing_weasyprint_keeps_the_html_and_says_what_to_install(monitor_runs, tmp_path, monkeypatch):
+def test_missing_weasyprint_keeps_the_html_and_says_what_to_install(monitor_runs, tmp_path, monkeypatch, capsys,
+                                                                    evidence_cli):
     from helpers import allow_weaker_registry
 
     allow_weaker_registry(monkeypatch)
@@ -265,10 +268,13 @@ def test_missing_weasyprint_keeps_the_html_and_says_what_to_install(monitor_runs
     lenient = lenient_registry(tmp_path)  # nothing verified blocks on this small run: the PDF alone is tested
     rep = generate(monitor_runs["good"], out, n_boot=100, registry=lenient)
     assert rep.html.is_file() and rep.pdf is None and not (out / "evidence.pdf").exists()
-    assert "pip install weasyprint" in rep.pdf_error and "libpango" in rep.pdf_error
+    assert "pip install 'uav-el-assurance[pdf]'" in rep.pdf_error and "libpango" in rep.pdf_error  # a wheel's
     assert rep.exit_code == 0  # the PDF counts only with --strict
     assert generate(monitor_runs["good"], out, n_boot=100, strict=True, registry=lenient).exit_code == 1
-    assert any("pip install weasyprint" in line for line in rep.summary_lines())
+    assert rep.pdf_error in rep.warnings and not any("uav-el-assurance[pdf]" in s for s in rep.summary_lines())
+    assert evidence_cli("--run", monitor_runs["good"], "--out", out, "--boot", 50, "--registry", lenient) == 0
+    said = capsys.readouterr()
+    assert "uav-el-assurance[pdf]" in said.err and "uav-el-assurance[pdf]" not in said.out  # on stderr
 
 
 def test_results_of_another_run_fail_the_gate(pytester, monitor_runs, tmp_path):
@@ -293,7 +299,7 @@ def _forge(doc: dict, state: str = rq.VERIFIED) -> dict:
 
 def test_hostile_1_forged_requirement_states_never_pass_the_gate(pytester, monitor_runs, evidence_cli, tmp_path,
                                                                   capsys):
-    """Case 1 of issue 19: states set to "verified" by hand, with --strict, exit 1 (they passed before)."""
+    """Hostile case 1: states set to "verified" by hand, with --strict, exit 1 (they passed before)."""
     results = pytest_results(pytester, monitor_runs["broken"], tmp_path, "-k", "monitor_coverage")
     doc = json.loads(results.read_text())
     assert doc["context"]["run_digest"] and doc["context"]["code_sha256"]
@@ -327,7 +333,7 @@ def test_hostile_1_forged_requirement_states_never_pass_the_gate(pytester, monit
 
 
 def test_hostile_2_altered_shard_is_named_and_gets_no_report(tiny_campaign, tmp_path, evidence_cli, capsys):
-    """Case 2 of issue 19: true_unsafe flipped in one shard: evidence and table exit 4 naming the shard and
+    """Hostile case 2: true_unsafe flipped in one shard: evidence and table exit 4 naming the shard and
     file; a re-run of the campaign re-computes that shard and says so."""
     from conftest import TINY_WW
     from helpers import OracleSegmenter
@@ -365,7 +371,7 @@ def test_cli_errors(evidence_cli, tmp_path, capsys):
 
 
 # ------------------------------------------------------------------------------------------------
-# Formats auditors' tools read (issue 19)
+# Formats auditors' tools read
 # ------------------------------------------------------------------------------------------------
 def _schema(name: str) -> dict:
     from importlib import resources
@@ -431,7 +437,7 @@ def test_shipped_waivers_name_an_owner_and_have_not_expired():
 
     waivers = load_waivers(ROOT / "assurance" / "waivers.yaml")
     assert waivers and all(w["owner"] and w["tracked_by"] for w in waivers.values())
-    assert "EL-R09" not in waivers  # decided on the release run: no waiver needed (issue 21)
+    assert "EL-R09" not in waivers  # decided on the release run: no waiver needed
     assert not [rid for rid, w in waivers.items() if waiver_expired(w)], "a shipped waiver expired: fix or renew it"
 
 

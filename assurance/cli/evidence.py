@@ -35,11 +35,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "$UAV_EL_TRUSTED_KEYS, else the local signing key's own (uav-el keys)")
     p.add_argument("--templates", metavar="DIR",
                    help="report templates overriding the packaged ones file by file (copy any file of "
-                        "assurance/templates/ into DIR and edit it; default: the system file's [report] templates)")
+                        "evidence_templates/ into DIR and edit it; default: the system file's [report] templates)")
     p.add_argument("--accept-deviation", metavar="TARGET", action="append", default=[],
                    help="accept a target the system sets looser than the certification basis (the packaged "
                         "registry's), by name (repeat for several); the report's first page records it. An "
                         "unaccepted deviation fails the gate")
+    p.add_argument("--benchmark", metavar="DIR", help="a uav-el benchmark --out folder: adds its monitor comparison "
+                   "as a section (re-derived from its CSV tables; never moves the gate)")
     p.add_argument("--boot", type=int, default=2000, help="bootstrap resamples of the results table (default 2000)")
 
 
@@ -118,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
                           targets=targets, targets_source=str(Path(args.targets).resolve()) if args.targets else None,
                           strict=args.strict, pdf=not args.no_pdf, n_boot=args.boot, waivers=args.waivers,
                           templates=args.templates, system=run_system(args, Path(args.run)), trusted=trusted,
-                          accepted_deviations=tuple(args.accept_deviation))
+                          accepted_deviations=tuple(args.accept_deviation), benchmark=args.benchmark)
     except DamagedRunError:
         raise  # exit 4: the run's readouts fail verification
     except (RegistryError, RunError, ValueError) as exc:

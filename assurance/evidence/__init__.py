@@ -5,7 +5,9 @@ registry and the requirement results of a test session (``uav-el verify RUN``, J
 written by ``assurance.requirements.pytest_plugin``), and writes into ``out``:
 
 - ``evidence.html``: self-contained (CSS inline, images as data URIs), rendered from the Jinja2
-  templates in ``assurance/templates/`` (autoescape on, undefined variables are errors);
+  templates in the ``evidence_templates`` package (immutable sandbox, autoescape on, undefined variables are
+  errors); every requirement, hazard, test and artefact has an anchor, linked both ways (``navigation``,
+  ``linking``: one inline filter script, allowed by the page's Content-Security-Policy);
 - ``evidence.pdf``: the same HTML through WeasyPrint (skipped with a clear message if it is missing);
 - ``evidence.json``: identity, requirement states, campaign checks and the results table, for tools;
 - ``results.csv``: the results table the report shows; ``traceability.csv``: one row per (requirement,
@@ -20,8 +22,10 @@ Everything the templates show is computed in this package, as finished strings: 
 nothing. Modules: ``report`` (``generate``), ``context`` (inputs and the template context), ``gate``
 (binding and verdict), ``waivers``, ``matrix`` (the report's checks from the check registry, the
 requirement matrix, traceability), ``identity`` (what was assessed, baseline comparison),
-``sections`` (domain, results, sample size, limitations, examples), ``render`` (HTML, PDF, files),
-``text`` (formatting).
+``sections`` (domain, results, sample size, limitations, examples), ``outline`` (the section registry: which
+sections, in which order, rendered by which template), ``navigation`` (anchors, the test list with source
+links, the report's files), ``render`` (HTML, PDF, files), ``linking`` (the last pass over the HTML: requirement
+ids linked, the filter script and its Content-Security-Policy), ``text`` (formatting).
 The gate (``EvidenceReport.exit_code``): 1 when a requirement is failed (and not waived), when the
 requirement results are not bound to this run, code and registry (the run digest, code hash and
 registry hash their test session recorded), when a state contradicts its own tests or this report's

@@ -100,8 +100,39 @@ def auditor_context(inp: Any, gate: Any, identity_rows: list[dict[str, Any]], *,
     return {"data_record": record, "model_log": mlog,
             "issre": issre, "issre_rows": issre_rows, "issre_file": ISSRE_FILE,
             "hazards": hazard_view(log, gate.states), "hazards_file": log.path.name, "hazards_sha256": log.sha256,
-            "argument_pages": argument_pages(nodes), "argument_problems": problems, "argument_file": ARGUMENT_FILE,
+            "argument_pages": argument_pages(nodes, links=argument_links(nodes, inp.registry.ids, log)),
+            "argument_problems": problems, "argument_file": ARGUMENT_FILE,
             "argument_counts": _counts(nodes), "argument": to_gsn2x(nodes), "amlas": index}
+
+
+FIXED_LINKS = {"G-TOP": "#cover", "C-ODD": "#domain", "C-SYS": "#identity", "C-HAZ": "#hazards",
+               "J-GATE": "#matrix", "S-ML": "#amlas"}
+"""Where the argument's fixed elements link in the report."""
+
+
+def argument_links(nodes: dict[str, Any], rids: Any, log: Any) -> dict[str, str]:
+    """Argument element -> the report's anchor it stands for: a requirement's goal, its waiver and its test
+    evidence -> the requirement's row; its campaign-check evidence -> the check; a hazard's goal -> the hazard;
+    a strategy -> its page; the AMLAS elements -> the AMLAS index; the context -> its section."""
+    from assurance.evidence.navigation import anchor, req_anchor
+
+    reqs, hazards = set(rids), {h.id for h in log.hazards}
+    out = dict(FIXED_LINKS)
+    for nid, node in nodes.items():
+        kind, _, rest = nid.partition("-")
+        if nid in out:
+            continue
+        if node.kind == "Strategy":
+            out[nid] = f"#argument-{nid}"
+        elif rest.startswith("AMLAS"):
+            out[nid] = "#amlas"
+        elif kind in ("G", "J") and rest in reqs:
+            out[nid] = f"#{req_anchor(rest)}"
+        elif kind == "G" and rest in hazards:
+            out[nid] = f"#{anchor('haz', rest)}"
+        elif kind == "Sn" and rest[:-2] in reqs:
+            out[nid] = f"#{anchor('check', rest[:-2])}" if rest.endswith("-C") else f"#{req_anchor(rest[:-2])}"
+    return out
 
 
 def _counts(nodes: dict[str, Any]) -> str:

@@ -46,7 +46,8 @@ class EvidenceReport:
         return [rid for rid, s in self.states.items() if s == state]
 
     def summary_lines(self) -> list[str]:
-        """One line per state (with the ids of the failed and not-verified ones) and where the report is."""
+        """One line per state (with the ids of the failed and not-verified ones) and where the report is (why there
+        is no PDF only when it was not asked for: a PDF that failed is among the warnings, for stderr)."""
         lines = []
         for state in rq.STATES:
             ids = self.ids(state)
@@ -56,7 +57,7 @@ class EvidenceReport:
         lines += [f"gate problem: {p}" for p in self.problems]
         files = [self.html] + ([self.pdf] if self.pdf else []) + [self.json]
         lines.append("report: " + ", ".join(str(f) for f in files))
-        if self.pdf_error:
+        if self.pdf_error and self.pdf_error not in self.warnings:  # a PDF that could not be made: a warning
             lines.append(self.pdf_error)
         return lines
 
@@ -145,8 +146,10 @@ def failure_detail(res: rq.RequirementResult, limit: int = 400) -> str:
     first = next((t for t in res.tests if t.outcome in rq.FAILING and t.message), None)
     if first is None:
         return ""
-    line = first.message.strip().splitlines()[0].removeprefix("Failed: ").strip()
-    return line if len(line) <= limit else line[: limit - 3] + "..."
+    from assurance.evidence.navigation import clean_message
+
+    line = clean_message(first.message.strip().splitlines()[0].removeprefix("Failed: ").strip())
+    return line if len(line) <= limit else line[: limit - 4].rsplit(" ", 1)[0] + " ..."  # cut at a word
 
 
 @dataclass

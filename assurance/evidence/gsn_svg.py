@@ -8,6 +8,7 @@ import base64
 import textwrap
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 from xml.sax.saxutils import escape
 
 from assurance.evidence.argument import Node
@@ -127,35 +128,91 @@ def _text(b: _Box) -> str:
     return "".join(rows)
 
 
-def _edge(a: _Box, b: _Box, ctx: bool) -> str:
+def _edge(a: _Box, b: _Box, ctx: bool, page: str) -> str:
     x1, y1, x2, y2 = a.x + a.w, a.y + a.h / 2, b.x, b.y + b.h / 2
     mid = (x1 + x2) / 2
     marker, dash = ("ctx", ' stroke-dasharray="3 2"') if ctx else ("sup", "")
     return (f'<path d="M{x1},{y1} C{mid},{y1} {mid},{y2} {x2 - 2},{y2}" fill="none" stroke="#667085" '
-            f'stroke-width="1"{dash} marker-end="url(#{marker})"/>')
+            f'stroke-width="1"{dash} marker-end="url(#{marker}{page})"/>')
+
+
+_Layout = tuple[list[_Box], list[tuple[_Box, _Box, bool]], float, float]
+
+
+def _node(b: _Box, links: Mapping[str, str] | None, anchored: set[str]) -> str:
+    """One box with its text; inline (``links`` given): the element's anchor where it is developed, its full text
+    as a tooltip, and a link (a reference box: to where the element is developed; else: to its requirement, hazard
+    or evidence in the report)."""
+    drawn = _shape(b) + _text(b)
+    if links is None:
+        return drawn
+    attrs = ""
+    if not b.ref and b.node.id not in anchored:
+        anchored.add(b.node.id)
+        attrs = f' id="{escape(gsn_anchor(b.node.id), QUOTE)}"'
+    title = f"<title>{escape(b.node.id + ': ' + b.node.text)}</title>"
+    href = links.get(b.node.id, "")
+    if href:
+        return f'<a href="{escape(href, QUOTE)}"{attrs}>{title}{drawn}</a>'
+    return f"<g{attrs}>{title}{drawn}</g>"
+
+
+def _render(layout: _Layout, *, links: Mapping[str, str] | None = None, anchored: set[str] | None = None,
+            page: str = "") -> str:
+    boxes, edges, w, h = layout
+    anchored = set() if anchored is None else anchored
+    defs = (f'<defs><marker id="sup{page}" viewBox="0 0 10 10" refX="9" refY="5" markerWidth="7" markerHeight="7" '
+            'orient="auto"><path d="M0,0 L10,5 L0,10 z" fill="#344054"/></marker>'
+            f'<marker id="ctx{page}" viewBox="0 0 10 10" refX="9" refY="5" markerWidth="7" markerHeight="7" '
+            'orient="auto"><path d="M0,0 L10,5 L0,10 z" fill="#fff" stroke="#344054"/></marker></defs>')
+    body = "".join(_edge(a, b, c, page) for a, b, c in edges) + "".join(_node(b, links, anchored) for b in boxes)
+    xmlns = "" if links is not None else ' xmlns="http://www.w3.org/2000/svg"'  # inline in HTML: none needed
+    return (f'<svg{xmlns} width="{w:.0f}" height="{h:.0f}" viewBox="0 0 {w:.0f} {h:.0f}" '
+            f'font-family="DejaVu Sans, Arial, sans-serif">{defs}{body}</svg>')
 
 
 def page_svg(nodes: Mapping[str, Node], root: str, *, expand_root_only: bool = False) -> str:
     """One page of the argument as an SVG document: the tree under ``root``."""
-    home = primary_parents(nodes)
-    boxes, edges, w, h = _layout(nodes, root, home, expand_root_only)
-    defs = ('<defs><marker id="sup" viewBox="0 0 10 10" refX="9" refY="5" markerWidth="7" markerHeight="7" '
-            'orient="auto"><path d="M0,0 L10,5 L0,10 z" fill="#344054"/></marker>'
-            '<marker id="ctx" viewBox="0 0 10 10" refX="9" refY="5" markerWidth="7" markerHeight="7" orient="auto">'
-            '<path d="M0,0 L10,5 L0,10 z" fill="#fff" stroke="#344054"/></marker></defs>')
-    body = "".join(_edge(a, b, c) for a, b, c in edges) + "".join(_shape(b) + _text(b) for b in boxes)
-    return (f'<svg xmlns="http://www.w3.org/2000/svg" width="{w:.0f}" height="{h:.0f}" viewBox="0 0 {w:.0f} {h:.0f}" '
-            f'font-family="DejaVu Sans, Arial, sans-serif">{defs}{body}</svg>')
+    return _render(_layout(nodes, root, primary_parents(nodes), expand_root_only))
 
 
-def argument_pages(nodes: Mapping[str, Node], top: str = "G-TOP") -> list[dict[str, str]]:
-    """The argument's figures: the top page, then one per strategy; each with a title and an SVG data URI."""
+QUOTE = {'"': "&quot;"}
+
+
+def gsn_anchor(nid: str) -> str:
+    """The HTML id of an argument element where the report draws it developed."""
+    from assurance.evidence.navigation import anchor
+
+    return anchor("gsn", nid)
+
+
+def argument_pages(nodes: Mapping[str, Node], top: str = "G-TOP", links: Mapping[str, str] | None = None
+                   ) -> list[dict[str, Any]]:
+    """The argument's figures: the top page, then one per strategy; each with a title, an SVG data URI and the SVG
+    to put inline, whose elements link (``links``: element id -> the report's anchor of its requirement, hazard or
+    evidence; an element drawn as a reference links to where it is developed) and carry their anchors."""
+    from markupsafe import Markup
+
     def uri(svg: str) -> str:
         return "data:image/svg+xml;base64," + base64.b64encode(svg.encode("utf-8")).decode("ascii")
 
-    pages = [{"title": f"{top}: the top goal, its context and strategies", "id": top,
-              "uri": uri(page_svg(nodes, top, expand_root_only=True))}]
-    for sid in nodes[top].supported_by:
-        if sid in nodes:
-            pages.append({"title": f"{sid}: {nodes[sid].text}", "id": sid, "uri": uri(page_svg(nodes, sid))})
-    return pages
+    home = primary_parents(nodes)
+    roots = [(top, True)] + [(sid, False) for sid in nodes[top].supported_by if sid in nodes]
+    layouts = {r: _layout(nodes, r, home, only) for r, only in roots}
+    targets = {b.node.id: f"#{gsn_anchor(b.node.id)}" for r, _ in roots for b in layouts[r][0] if not b.ref}
+    inline_links = {**(links or {}), **{nid: href for nid, href in targets.items() if nid not in (links or {})}}
+    drawn: set[str] = set()  # an element's anchor where first drawn: a strategy's page before the top page
+    pages = []
+    for n, (r, _) in enumerate([*roots[1:], roots[0]]):
+        svg = _render(layouts[r], links=_with_refs(layouts[r], inline_links, targets), anchored=drawn, page=f"-{n}")
+        title = f"{top}: the top goal, its context and strategies" if r == top else f"{r}: {nodes[r].text}"
+        pages.append({"title": title, "id": r, "anchor": f"argument-{r}", "uri": uri(_render(layouts[r])),
+                      "svg": Markup(svg)})
+    return [pages[-1], *pages[:-1]]
+
+
+def _with_refs(layout: _Layout, links: Mapping[str, str], targets: Mapping[str, str]) -> dict[str, str]:
+    """``links`` with each reference box of the page sent to where its element is developed."""
+    out = dict(links)
+    out.update({b.node.id: targets[b.node.id] for b in layout[0] if b.ref and b.node.id in targets})
+    return out

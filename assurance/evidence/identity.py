@@ -65,8 +65,8 @@ def identity(run: Path, man: Mapping[str, Any], registry: rq.Registry, req_path:
                                      f"{__version__} (this report)", "sha256": "", "note": ""},
         {"item": "Code (git)", "value": f"campaign: {code.get('git_commit') or _no_commit(code)}",
          "sha256": "", "note": f"report: {now_commit or _no_commit(now)}"},
-        {"item": "Code (package files)", "value": f"{n_files} files of el/ and assurance/ as {now['source']} at "
-                                                  "report time", "sha256": code_sha,
+        {"item": "Code (package files)", "value": f"{n_files} files of el/, assurance/ and evidence_templates/ as "
+                                                  f"{now['source']} at report time", "sha256": code_sha,
          "note": f"campaign: {code['sha256'] if code.get('sha256') else 'not recorded'}; a '-dirty' commit means "
                  "uncommitted changes: rely on this hash"},
         {"item": "System file", "value": _system_text(man), "sha256": (man.get("system") or {}).get("sha256") or "",
@@ -171,20 +171,39 @@ def baseline_view(baseline: Path, man: Mapping[str, Any], ident: Mapping[str, An
                           "cls": cls})
         rows.append({"scenario": f"{rec['perturbation']} (s{int(rec['severity'])})", "monitor": rec["monitor"],
                      "status": status, "cells": cells})
-    req_changes: list[dict[str, str]] = []
+    req_changes: list[dict[str, Any]] = []
     req_note = ""
+    by_requirement: dict[str, dict[str, Any]] = {}
     if baseline_requirements is not None:
         bres, _ = rq.load_results(baseline_requirements, registry)
         for rid, res in results.items():
             old = bres[rid].state
-            if old != res.state:
+            tests = changed_tests(bres[rid], res)
+            by_requirement[rid] = {"baseline": old, "changed": old != res.state, "tests": tests}
+            if old != res.state or tests:
                 req_changes.append({"id": rid, "title": res.title, "baseline": old, "current": res.state,
-                                    "baseline_class": STATE_CLASS[old], "current_class": STATE_CLASS[res.state]})
-        req_note = (f"{len(req_changes)} requirement state(s) changed since the baseline "
-                    f"({baseline_requirements})." if req_changes else
-                    f"No requirement changed state since the baseline ({baseline_requirements}).")
+                                    "baseline_class": STATE_CLASS[old], "current_class": STATE_CLASS[res.state],
+                                    "tests": tests})
+        req_changes.sort(key=lambda r: r["baseline"] == r["current"])  # state changes first
+        moved = sum(r["baseline"] != r["current"] for r in req_changes)
+        req_note = (f"{moved} requirement state(s) changed since the baseline, {len(req_changes) - moved} more "
+                    f"requirement(s) with a test added, removed or of another outcome ({baseline_requirements})."
+                    if req_changes else
+                    f"No requirement changed state or test outcome since the baseline ({baseline_requirements}).")
     else:
         req_note = ("The baseline's requirement results were not given (--baseline-requirements): "
                     "state changes cannot be shown.")
     return {"run": str(baseline), "identity": identity, "figures": [f.replace("_", " ") for f in figs],
-            "rows": rows, "requirements": req_changes, "requirements_note": req_note}
+            "rows": rows, "requirements": req_changes, "requirements_note": req_note, "by_requirement": by_requirement}
+
+
+def changed_tests(before: rq.RequirementResult, now: rq.RequirementResult) -> list[dict[str, str]]:
+    """The claiming tests of a requirement whose outcome differs from the baseline's (added and removed ones too),
+    each with its anchor in the report's test list (none for a removed test)."""
+    from assurance.evidence.navigation import anchor, short_name
+
+    old = {t.nodeid: t.outcome for t in before.tests}
+    new = {t.nodeid: t.outcome for t in now.tests}
+    return [{"name": short_name(n), "anchor": anchor("test", n) if n in new else "",
+             "baseline": old.get(n, "absent"), "current": new.get(n, "absent")}
+            for n in dict.fromkeys([*new, *old]) if old.get(n) != new.get(n)]

@@ -12,6 +12,15 @@ from pathlib import Path
 from typing import Any
 
 from assurance import requirements as rq
+from assurance.evidence.navigation import (
+    anchor,
+    clean_message,
+    message_view,
+    outcome_class,
+    req_anchor,
+    short_name,
+    status_summary,
+)
 from assurance.evidence.render import rel
 from assurance.evidence.text import STATE_CLASS, STATUS_CLASS, STATUS_TEXT, fmt
 
@@ -47,37 +56,65 @@ def check_view(ev: rq.Evidence) -> dict[str, Any]:
             return fmt(v, 4) if abs(v) < 10 else fmt(v, 1)
         return "n/a" if v is None else str(v)
 
-    return {"id": ev.requirement, "name": ev.name, "status": STATUS_TEXT[ev.status],
-            "status_class": STATUS_CLASS[ev.status], "summary": ev.summary,
+    return {"id": ev.requirement, "anchor": anchor("check", ev.requirement), "name": ev.name,
+            "status": STATUS_TEXT[ev.status], "status_class": STATUS_CLASS[ev.status],
+            "summary": clean_message(ev.summary),
             "columns": [c.replace("_", " ") for c in ev.columns],
             "rows": [[cell(r.get(c)) for c in ev.columns] for r in ev.rows[:60]],
             "more": f"{len(ev.rows) - 60} more rows in evidence.json" if len(ev.rows) > 60 else ""}
 
 
 def matrix(registry: rq.Registry, results: Mapping[str, rq.RequirementResult],
-            checks: Mapping[str, rq.Evidence], run: Path, csv_name: str) -> list[dict[str, Any]]:
-    """The requirement -> test -> result matrix: one row per requirement with its tests, artefacts and check."""
+           checks: Mapping[str, rq.Evidence], run: Path, csv_name: str) -> list[dict[str, Any]]:
+    """The requirement -> test -> result matrix: one row per requirement with its anchor, tests (each with its
+    anchor and full message), artefacts (with the anchors of their entries in the report's file list) and check."""
     rows = []
     for req in registry:
         res = results[req.id]
         files = list(dict.fromkeys(t.nodeid.split("::")[0] for t in res.tests))
-        artefacts = [f"test file {f}" for f in files]
+        links = [{"text": f"test file {f}", "key": f"test:{f}"} for f in files]
         if "campaign" in req.verification_kind:
-            artefacts.append(f"campaign run {run}")
-        artefacts += [ARTEFACT_TEXT[a].format(csv=csv_name) for a in rq.artefacts_of(req.id)]
+            links.append({"text": f"campaign run {run}", "key": "run"})
+        links += [{"text": ARTEFACT_TEXT[a].format(csv=csv_name), "key": csv_name if a == "results_table" else
+                   "evidence.json"} for a in rq.artefacts_of(req.id)]
+        for link in links:
+            link["anchor"] = anchor("art", link["key"])
         check = checks.get(req.id)
         rows.append({
-            "id": req.id, "title": req.title, "method": req.verification_method, "acceptance": req.acceptance,
+            "id": req.id, "anchor": req_anchor(req.id), "text_anchor": anchor("reqtext", req.id),
+            "title": req.title, "method": req.verification_method, "acceptance": req.acceptance,
             "state": res.state, "state_class": STATE_CLASS[res.state], "reason": res.reason,
             "short_reason": short_reason(res),
-            "tests": [{"nodeid": t.nodeid, "outcome": t.outcome,
-                       "outcome_class": ("verified" if t.outcome in rq.PASSING else
-                                         "failed" if t.outcome in rq.FAILING else "not-verified"),
-                       "message": t.message[:300]} for t in res.tests],
-            "artefacts": artefacts,
-            "check": (f"campaign check: {STATUS_TEXT[check.status]}: {check.summary}" if check else ""),
+            "tests": [{"nodeid": t.nodeid, "name": short_name(t.nodeid), "anchor": anchor("test", t.nodeid),
+                       "outcome": t.outcome, "outcome_class": outcome_class(t.outcome),
+                       "message": clean_message(t.message), "msg": message_view(t.message)} for t in res.tests],
+            "artefacts": [link["text"] for link in links], "artefact_links": links,
+            "check": (f"campaign check: {status_summary(STATUS_TEXT[check.status], check.summary)}" if check else ""),
+            "check_anchor": anchor("check", req.id) if check else "",
+            "hazards": [],  # filled from the hazard log (navigation.link_hazards)
         })
     return rows
+
+
+def artefact_users(rows: list[dict[str, Any]]) -> dict[str, list[str]]:
+    """Artefact key -> the requirements whose matrix row names it (the way back from an artefact)."""
+    users: dict[str, list[str]] = {}
+    for r in rows:
+        for link in r["artefact_links"]:
+            users.setdefault(link["key"], []).append(r["id"])
+    return users
+
+
+def link_hazards(rows: list[dict[str, Any]], hazards: list[dict[str, Any]]) -> None:
+    """Give each matrix row the hazards its requirement mitigates, and each hazard's mitigations their anchors."""
+    by_req: dict[str, list[dict[str, str]]] = {}
+    for h in hazards:
+        h["anchor"] = anchor("haz", h["id"])
+        for m in h["mitigations"]:
+            m["anchor"] = req_anchor(m["id"])
+            by_req.setdefault(m["id"], []).append({"id": h["id"], "anchor": h["anchor"]})
+    for r in rows:
+        r["hazards"] = by_req.get(r["id"], [])
 
 
 def short_reason(res: rq.RequirementResult) -> str:

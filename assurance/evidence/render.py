@@ -12,10 +12,15 @@ from typing import Any
 
 ROOT = Path(__file__).resolve().parents[2]
 """The project root (paths under it are written relative to it)."""
-TEMPLATES_DIR = Path(__file__).resolve().parents[1] / "templates"  # package data: found by an installed wheel too
+
+TEMPLATES_DIR = ROOT / "evidence_templates"
+"""The packaged templates: the ``evidence_templates`` package beside ``assurance`` (package data of the wheel, in
+site-packages; the checkout's top-level folder when editable). Found by this file's place, never by a search of
+``sys.path``, so that a folder of that name in the working directory is never taken for the packaged cover."""
 TEMPLATE = "report.html.j2"
-PDF_HINT = ("install WeasyPrint (`pip install weasyprint`, or `pip install -e '.[pdf]'`) and the Pango "
-            "library it needs (Debian/Ubuntu: `apt-get install libpango-1.0-0 libpangoft2-1.0-0`)")
+PDF_HINT = ("install WeasyPrint with the toolkit's pdf extra (`pip install 'uav-el-assurance[pdf]'`; in a source "
+            "checkout `pip install -e '.[pdf]'`) and the Pango library it needs (Debian/Ubuntu: "
+            "`apt-get install libpango-1.0-0 libpangoft2-1.0-0`)")
 
 
 FAULTS_CSV = "faults.csv"
@@ -150,10 +155,15 @@ def verdict_phrases(html: str, verdict: str) -> Counter[str]:
 
 def render_html(context: Mapping[str, Any], templates: str | Path | None = None) -> str:
     """The report's HTML from its finished context: the body from the (possibly user-supplied) templates, and
-    the first page (gate verdict, summary) from the packaged cover, put first in the body by the toolkit.
+    the first page (gate verdict, summary) from the packaged cover, put first in the body by the toolkit, which
+    then links the requirement ids and adds its script (:func:`finish_html`).
     TemplateError naming the file and line of a broken or unsafe template, or naming what a supplied template
     says against the gate's verdict (beyond what the packaged templates quote from the evidence, such as the
-    fault table's expected outputs)."""
+    fault table's expected outputs). The sections and their order come from the section registry
+    (``assurance.evidence.outline``)."""
+    from assurance.evidence.outline import outline
+
+    context = {**outline(context), **context}  # the sections of the registry, unless the caller lists its own
     supplied = bool(templates) and Path(str(templates)) != TEMPLATES_DIR
     body = _render(environment(templates), TEMPLATE, context)
     if supplied:
@@ -167,7 +177,17 @@ def render_html(context: Mapping[str, Any], templates: str | Path | None = None)
         where = Path(str(templates)) if supplied else TEMPLATES_DIR
         raise TemplateError(f"{where / TEMPLATE}: the report template has no <body> element to put the first page in")
     cover = _render(environment(None), COVER, context)
-    return body[:opening.end()] + "\n" + cover + body[opening.end():]
+    return finish_html(body[:opening.end()] + "\n" + cover + body[opening.end():], context)
+
+
+def finish_html(html: str, context: Mapping[str, Any]) -> str:
+    """The toolkit's last pass (``assurance.evidence.linking``): every requirement id of the text a link to its
+    anchor, the Content-Security-Policy, the filter script."""
+    from assurance.evidence.linking import finish
+    from assurance.evidence.navigation import req_anchor
+
+    ids = [str(r["id"]) for r in context.get("requirements") or []]
+    return finish(html, ids, {i: req_anchor(i) for i in ids})
 
 
 def rel(path: str | Path | None) -> str | None:

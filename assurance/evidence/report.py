@@ -11,6 +11,7 @@ from typing import Any
 
 from assurance import requirements as rq
 from assurance.evidence.auditor import ARGUMENT_FILE, ISSRE_FILE, auditor_context, auditor_document
+from assurance.evidence.benchmark_section import read_benchmark
 from assurance.evidence.context import (
     Inputs,
     campaign_context,
@@ -22,6 +23,7 @@ from assurance.evidence.context import (
 from assurance.evidence.gate import EvidenceReport, Gate, decide_gate
 from assurance.evidence.identity import baseline_view
 from assurance.evidence.matrix import TRACE_COLUMNS, traceability_rows
+from assurance.evidence.navigation import anchor, req_anchor
 from assurance.evidence.render import (
     FAULTS_CSV,
     RefusedResourceError,
@@ -105,6 +107,27 @@ def _finish(files: _Files, document: dict[str, Any]) -> None:
     write_text(files.sums, "".join(f"{h}  {p.name}\n" for p, h in sums))
 
 
+def navigation_context(inp: Inputs, context: dict[str, Any], pdf: bool) -> dict[str, Any]:
+    """The report's navigation (``assurance.evidence.navigation``): the tests with their sources, the files
+    beside the report, the hazards of each requirement's row; the anchors linking them both ways."""
+    from assurance.campaign.integrity import code_sha256
+    from assurance.evidence.matrix import artefact_users, link_hazards
+    from assurance.evidence.navigation import code_statement, files_view, tests_view
+
+    tests = tests_view(inp.results, inp.req_doc, inp.out)
+    link_hazards(context["matrix"], context["hazards"])
+    for r in context["requirements"]:
+        r["anchor"], r["text_anchor"] = req_anchor(r["id"]), anchor("reqtext", r["id"])
+    changes = (context.get("baseline") or {}).get("by_requirement") or {}
+    for r in context["matrix"]:  # what changed per requirement since the baseline (--baseline-requirements)
+        c = changes.get(r["id"])
+        r["since"] = "" if c is None else (f"baseline: {c['baseline']}" + (" (changed)" if c["changed"] else "")
+                                           + (f"; {len(c['tests'])} test(s) changed" if c["tests"] else ""))
+    return {"tests": tests, "tests_code": code_statement(inp.req_doc, code_sha256() if inp.req_doc else None),
+            "files": files_view(inp.out, inp.run, str(rel(inp.run)), inp.csv_path.name, tests,
+                                artefact_users(context["matrix"]), pdf)}
+
+
 def _system_settings(system: Any, waivers: Any, templates: Any, targets: Any, targets_source: Any,
                      accepted: tuple[str, ...]) -> tuple[Any, Any, Any, Any, list[Any]]:
     """The system file's waivers, templates and targets where none were given, and its deviations from the
@@ -137,6 +160,18 @@ def _label_classes(system: Any) -> list[dict[str, str]]:
              "category": c.category or "no category declared"} for c in labels.classes]
 
 
+def _report_context(inp: Inputs, gate: Gate, campaign: dict[str, Any], base: dict[str, Any] | None, created: str,
+                    n_boot: int, pdf: bool, *, system: Any, basis: Any, accepted: tuple[str, ...],
+                    bench: dict[str, Any] | None) -> dict[str, Any]:
+    """What the templates render: the report's sections, the auditor's, the basis, the benchmark, the links."""
+    context = template_context(inp, gate, campaign, base, created, n_boot)
+    context.update({**auditor_context(inp, gate, campaign["identity"], n_boot=n_boot), "label_classes":
+                    _label_classes(system), "commands": commands(inp, accepted), "benchmark": bench,
+                    "deviations": [{**d.to_dict(), "text": d.text()} for d in basis]})
+    context.update(navigation_context(inp, context, pdf))
+    return context
+
+
 def generate(
     run: str | Path,
     out: str | Path,
@@ -155,6 +190,7 @@ def generate(
     system: Any = None,
     trusted: Mapping[str, Any] | None = None,
     accepted_deviations: tuple[str, ...] = (),
+    benchmark: str | Path | None = None,
 ) -> EvidenceReport:
     """Write the evidence report of ``run`` into ``out`` and return what the gate says.
 
@@ -170,8 +206,10 @@ def generate(
     statement ``uav-el verify`` wrote, pinned to this run, registry, targets, waivers and system (a gate problem
     otherwise); without, the report says the signatures were not checked. ``accepted_deviations``: the targets
     the auditor accepts looser than the basis (``assurance.requirements.basis``); any other deviation fails the gate.
+    ``benchmark``: a ``uav-el benchmark --out`` folder, shown as a section that never moves the gate.
     """
     run, out = Path(run), Path(out)
+    bench = read_benchmark(benchmark) if benchmark else None  # read first: a bad folder stops before any work
     waivers, templates, targets, targets_source, basis = _system_settings(
         system, waivers, templates, targets, targets_source, accepted_deviations)
     inp = read_inputs(run, out, requirements=requirements, baseline=baseline, registry=registry, n_boot=n_boot,
@@ -188,17 +226,13 @@ def generate(
                           Path(baseline_requirements) if baseline_requirements else None, n_boot)
             if baseline else None)
     created = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
-    context = template_context(inp, gate, campaign, base, created, n_boot)
-    context["deviations"] = [{**d.to_dict(), "text": d.text()} for d in basis]
-    context["commands"] = commands(inp, tuple(accepted_deviations))
-    context["label_classes"] = _label_classes(system)
-    context.update(auditor_context(inp, gate, campaign["identity"], n_boot=n_boot))
+    context = _report_context(inp, gate, campaign, base, created, n_boot, pdf, system=system, basis=basis,
+                              accepted=tuple(accepted_deviations), bench=bench)
     html = render_html(context, inp.templates)
     files = _Files(out, inp.csv_path)
     write_text(files.html, html)
     write_csv_rows(files.trace, traceability_rows(inp.registry, inp.results, run, inp.csv_path), TRACE_COLUMNS)
-    if files.pdf.exists():
-        files.pdf.unlink()  # never leave a PDF of an earlier report beside this one
+    files.pdf.unlink(missing_ok=True)  # never leave a PDF of an earlier report beside this one
     pdf_error = None if pdf else "PDF not written (--no-pdf)"
     faults = bool(context["faults"])
 
@@ -215,5 +249,6 @@ def generate(
         pdf_error = _write_pdf(html, files, faults)
         exit_code = finish(pdf_error)
     return EvidenceReport(out=out, html=files.html, json=files.json, pdf=None if pdf_error else files.pdf,
-                          pdf_error=pdf_error, states=gate.states, exit_code=exit_code, warnings=inp.warnings,
-                          problems=inp.problems, waived=gate.waived, blocking=gate.blocking)
+                          pdf_error=pdf_error, states=gate.states, exit_code=exit_code, problems=inp.problems,
+                          warnings=inp.warnings + ([pdf_error] if pdf and pdf_error else []),  # stderr, not stdout
+                          waived=gate.waived, blocking=gate.blocking)

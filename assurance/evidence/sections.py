@@ -137,7 +137,8 @@ def sample_size(table: Any, registry: rq.Registry, n_boot: int) -> list[str]:
         f"Over all scenarios of the deployed monitor ({p['deployed_monitor']}) there were {k_tot} unsafe "
         f"landing(s) in {n_tot} decisions (the scenarios share their test images, so these are not "
         "independent trials; the per-scenario bounds are the ones to read).",
-        f"Gains, monitor metrics and overhead carry 95% percentile-bootstrap intervals over images ({n_boot} "
+        f"Gains, monitor metrics and overhead carry 95% BCa bootstrap intervals over images (bias-corrected and "
+        f"accelerated; the percentile interval of the same resamples where BCa is undefined; {n_boot} "
         "resamples, fixed seed; one set of resampled images for every figure of a scenario). They describe "
         "the sampling variability of these test images only: they say nothing about scene types, cameras, "
         "poses, weather or sensor faults the campaign did not contain. Monitor metrics are pooled over "
