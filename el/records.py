@@ -62,6 +62,14 @@ def weights_sha256_of(model: Any) -> str | None:
     return value if isinstance(value, str) and value else None
 
 
+def network_identities(model: Any) -> tuple[str, ...]:
+    """The identities a record fitted on a network may name for ``model``: its ``weights_sha256`` and, for the
+    packaged ONNX export of the shipped weights, those weights' (``source_weights_sha256``, which only the
+    package's own engine record sets: ``el.segmentation.onnx_engine.shipped_export_source``)."""
+    found = (weights_sha256_of(model), getattr(model, "source_weights_sha256", None))
+    return tuple(v for v in found if isinstance(v, str) and v)
+
+
 def short(digest: str | None) -> str:
     """The first 12 hex digits of a digest and an ellipsis, or ``none``."""
     return f"{digest[:12]}..." if digest else "none"
@@ -108,7 +116,7 @@ class HashedRecord:
         """
         have = weights_sha256_of(segmenter)
         want = self.network_sha256
-        if not (isinstance(want, str) and want and have == want):
+        if not (isinstance(want, str) and want and want in network_identities(segmenter)):
             raise self.ERROR(f"{self.path}: {self.WHAT} fitted on network {short(want)}, but the "
                              f"segmenter runs {short(have)}: refit it for this network"
                              + ("" if want else " (the record names no network)"))

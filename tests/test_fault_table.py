@@ -1,4 +1,4 @@
-"""``uav-el fault-table`` (issue 19): the fault-injection table, and its appendix in the evidence report."""
+"""``uav-el fault-table``: the fault-injection table, and its appendix in the evidence report."""
 
 from __future__ import annotations
 

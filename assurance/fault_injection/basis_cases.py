@@ -1,7 +1,9 @@
-"""Fault-injection cases of the certification basis and the model pin (rows ``T18``..``T20``, issue 39): an applicant
-who declares a road safe, loosens the targets to 0.999, or swaps an ONNX network's external weights after pinning.
-The first two fail the evidence gate, naming the deviation (the auditor may accept one only by name); the third is
-refused before any frame, naming ``model.sha256``.
+"""Fault-injection cases of the certification basis and the model pin (rows ``T18``..``T20``, ``T22``..``T24``): an
+applicant who declares a road safe, loosens the targets to 0.999, swaps an ONNX network's external weights after
+pinning or after the run, points them out of the model's folder (at the auditor's key), or flies the shipped
+network as its plain ONNX export (once a way to fly it with no frame gate). A deviation fails the evidence gate,
+naming it (the auditor may accept one only by name); a swapped or escaping weights file is refused naming it; the
+shipped export keeps the shipped gate, which sends a photograph to the default action.
 """
 
 from __future__ import annotations
@@ -34,8 +36,8 @@ def _loose_targets(ws: Path) -> list[str]:
     return _evidence(ws, "loose-targets", "--system", system)
 
 
-def _swapped_external_weights(ws: Path) -> list[str]:
-    """An ONNX network whose weights live in ``weights.bin`` beside it, pinned by the system file, then swapped."""
+def _external_net(ws: Path, name: str, location: str = "weights.bin") -> Path:
+    """``WS/NAME/net.onnx``: a 1x1-convolution network on UAVid's classes whose weights lie in ``location``."""
     import io
     import warnings
 
@@ -43,9 +45,8 @@ def _swapped_external_weights(ws: Path) -> list[str]:
     import torch
 
     from el.labels import UAVID
-    from el.segmentation.onnx_engine import read_onnx
 
-    folder = ws / "external-net"
+    folder = ws / name
     folder.mkdir(exist_ok=True)
     path = folder / "net.onnx"
     torch.manual_seed(0)
@@ -56,16 +57,80 @@ def _swapped_external_weights(ws: Path) -> list[str]:
         torch.onnx.export(net, (torch.rand(1, 3, 16, 16),), buf, input_names=["x"], output_names=["y"],
                           dynamic_axes={"x": {2: "h", 3: "w"}}, opset_version=17, dynamo=False)
     onnx.save_model(onnx.load_from_string(buf.getvalue()), str(path), save_as_external_data=True,
-                    all_tensors_to_one_file=True, location="weights.bin", size_threshold=0)
-    pin = read_onnx(path).sha256
-    weights = folder / "weights.bin"
-    data = bytearray(weights.read_bytes())
-    data[0] ^= 0xFF  # the swap, after pinning: the .onnx file itself is unchanged
-    weights.write_bytes(bytes(data))
+                    all_tensors_to_one_file=True, location=location, size_threshold=0)
+    return path
+
+
+def _onnx_system(ws: Path, name: str, path: Path, pin: str | None) -> Path:
+    from el.labels import UAVID
+
     names = ", ".join(f'"{n}"' for n in UAVID.names)
-    system = _system(ws, "sys-swapped", f'[model]\npath = "{path}"\nsha256 = "{pin}"\n[model.onnx]\n'
-                                        f"class_names = [{names}]\n")
+    sha = f'sha256 = "{pin}"\n' if pin else ""
+    return _system(ws, name, f'[model]\npath = "{path}"\n{sha}[model.onnx]\nclass_names = [{names}]\n')
+
+
+def _flip_first_byte(path: Path) -> None:
+    data = bytearray(path.read_bytes())
+    data[0] ^= 0xFF
+    path.write_bytes(bytes(data))
+
+
+def _swapped_external_weights(ws: Path) -> list[str]:
+    """An ONNX network whose weights live in ``weights.bin`` beside it, pinned by the system file, then swapped."""
+    from el.segmentation.onnx_engine import read_onnx
+
+    path = _external_net(ws, "external-net")
+    pin = read_onnx(path).sha256
+    _flip_first_byte(path.parent / "weights.bin")  # the swap, after pinning: the .onnx file itself is unchanged
+    system = _onnx_system(ws, "sys-swapped", path, pin)
     return ["land", str(first_image(ws)), "--monitor", "lhd", "--system", str(system)]
+
+
+def _external_outside_folder(ws: Path) -> list[str]:
+    """An ONNX network whose external data location climbs out of its folder to the auditor's signing key."""
+    key = ws / "sign.key"  # the auditor's signing key, by a name as long as the location it replaces
+    key.write_bytes(b"-----BEGIN PRIVATE KEY-----\nstand-in\n-----END PRIVATE KEY-----\n")
+    path = _external_net(ws, "escaping-net", location="weights.bin")
+    raw = path.read_bytes().replace(b"weights.bin", b"../" + key.name.encode(), 1)  # same length: 11 bytes
+    path.write_bytes(raw)
+    return ["land", str(first_image(ws)), "--monitor", "lhd", "--system", str(_onnx_system(ws, "sys-escape", path,
+                                                                                           None))]
+
+
+def _external_swapped_after_run(ws: Path) -> list[str]:
+    """A campaign flown on an ONNX network with external weights, whose ``weights.bin`` is swapped after the run."""
+    from assurance.fault_injection.case import prepare
+
+    path = _external_net(ws, "after-run-net")
+    system = _onnx_system(ws, "sys-after-run", path, None)
+    run = ws / "run-onnx-external"
+    if not (run / "manifest.json").exists():
+        prepare(["campaign", "--data", ws / "data", "--out", run, "--system", system, "--perturbations", "none",
+                 "--monitors", "lhd", "--images", "2", "--quiet"])
+        _flip_first_byte(path.parent / "weights.bin")
+    return _evidence(ws, "after-run", "--system", system, run=run)
+
+
+def _shipped_export_on_photo(ws: Path) -> list[str]:
+    """The shipped network's packaged ONNX export named as a system file's ``[model]`` (no gate named), flown on a
+    blurred-noise "photograph" far from the scenes the network knows: the shipped frame gate must still fly."""
+    import cv2
+    import numpy as np
+
+    from el.segmentation.onnx_engine import SHIPPED_DIR
+
+    photo = ws / "photograph.png"
+    rng = np.random.default_rng(0)
+    cv2.imwrite(str(photo), cv2.GaussianBlur((rng.random((180, 320, 3)) * 255).astype(np.uint8), (0, 0), 3))
+    system = _system(ws, "sys-shipped-onnx", f'[model]\npath = "{SHIPPED_DIR / "model.onnx"}"\n')
+    return ["land", str(photo), "--system", str(system)]
+
+
+def onnxruntime_available() -> bool:
+    """Whether ONNX Runtime can be imported (the shipped network's export can run)."""
+    from el.segmentation.onnx_engine import have_onnxruntime
+
+    return have_onnxruntime()
 
 
 def onnx_export_available() -> bool:
@@ -84,5 +149,13 @@ BASIS_CASES: tuple[Case, ...] = (
     Case("T19-targets-loosened", "a system file loosening the unsafe-landing bound to 0.999 at confidence 0.5",
          _loose_targets, 1, "unsafe_landing_bound = 0.999 is looser than the basis's 0.05"),
     *((Case("T20-swapped-external-weights", "an ONNX network's weights.bin swapped after the system file pinned it",
-            _swapped_external_weights, 2, "model.sha256"),) if onnx_export_available() else ()),
+            _swapped_external_weights, 2, "model.sha256"),
+       Case("T23-external-data-outside-folder", "an ONNX network whose external data location is ../ (a key)",
+            _external_outside_folder, 2, "leads out of the model file's folder"),
+       Case("T24-external-weights-after-run", "an ONNX network's weights.bin swapped after the campaign ran",
+            _external_swapped_after_run, 1, "weights.bin: changed since the run was made",
+            pick="gate problem")) if onnx_export_available() else ()),
+    *((Case("T22-shipped-onnx-no-gate", "the shipped network's own ONNX export as a system's [model], on a photograph",
+            _shipped_export_on_photo, 0, "out_of_domain: frame gate", pick="decision:"),)
+      if onnxruntime_available() else ()),
 )

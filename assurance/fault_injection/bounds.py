@@ -1,4 +1,4 @@
-"""Fault-injection cases of issue 31: bounded resources and no silent loss (rows ``R1``..``R15`` of the table).
+"""Fault-injection cases: bounded resources and no silent loss (rows ``R1``..``R15`` of the table).
 
 Each case injects one hostile input into copies under the workspace (``assurance.fault_injection.case``) and
 returns the ``uav-el`` command that must refuse it, bound it or survive it.

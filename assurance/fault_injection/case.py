@@ -72,7 +72,7 @@ def campaign_argv(ws: Path, out: Path, *extra: str, data: Path | None = None, we
     """``uav-el campaign`` on the workspace's data (or ``data``) and tiny weights (or ``weights``), into ``out``."""
     return ["campaign", "--data", str(data or ws / "data"), "--out", str(out), "--weights",
             str(weights or ws / "tiny.pt"),
-            "--perturbations", "none", "--monitors", "lhd", "--images", "2", "--quiet", *extra]
+            "--perturbations", "none", "--monitors", "lhd", "--images", "2", *extra]
 
 
 def first_image(ws: Path) -> Path:

@@ -1,4 +1,4 @@
-"""Fault-injection cases of issue 31: a gate that verifies what it says, and models bound to the run (``G1``..``G9``).
+"""Fault-injection cases: a gate that verifies what it says, and models bound to the run (``G1``..``G9``).
 
 Each case forges what a hostile user would (a deselected or uncollectable requirement test, a weaker registry or
 targets, a waiver of a passing requirement, a model file re-hashed after the run, an edited manifest, a

@@ -1,4 +1,4 @@
-"""Fault-injection cases of issue 31: forged evidence and a gate that means what it says (rows ``S1``..``S4``).
+"""Fault-injection cases: forged evidence and a gate that means what it says (rows ``S1``..``S4``).
 
 The workspace's run was signed by the campaign with the local key (``assurance.attest.keys``); each case forges
 a copy of it, or the waivers, and returns the ``uav-el evidence`` command that must refuse it.

@@ -1,4 +1,4 @@
-"""Fault injection: issue 19's hostile-user cases and a few bad inputs, replayed through the real command line.
+"""Fault injection: the hostile-user cases (H1-H8) and a few bad inputs, replayed through the real command line.
 
 ``build_workspace`` makes a scratch workspace (two 320x180 synthetic scenes, a tiny CNN's weights, a 2-image
 campaign run); ``run_cases`` injects each fault into a copy of what it needs and runs ``uav-el`` in-process
@@ -196,9 +196,9 @@ CASES: tuple[Case, ...] = (
          "DEFAULT action", "decision:"),
     Case("B5-missing-run", "table on a folder that is not a run",
          lambda ws: ["table", ws / "no-run", "--boot", "20"], 2),
-    *BOUNDS_CASES,  # issue 31: bounded resources, no silent loss
-    *SIGNING_CASES,  # issue 31: forged evidence, the gate's policy
-    *GATE_CASES,  # issue 31: a gate that verifies what it says, models bound to the run
+    *BOUNDS_CASES,  # bounded resources, no silent loss
+    *SIGNING_CASES,  # forged evidence, the gate's policy
+    *GATE_CASES,  # a gate that verifies what it says, models bound to the run
     *APPLICANT_CASES,  # the auditor's trust boundary: supplied templates never execute, read files or contradict
 )
 

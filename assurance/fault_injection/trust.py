@@ -1,5 +1,5 @@
 """Fault-injection cases of the auditor's trust boundary beyond the templates' contents (rows ``T5``..``T17`` and
-``T21``, issue 39): every file an applicant supplies is read bounded, and what it says is checked before any work
+``T21``): every file an applicant supplies is read bounded, and what it says is checked before any work
 starts.
 
 A FIFO or ``/dev/zero`` given as a label set, waivers or targets; a 200 MB poses sidecar; a system file nested

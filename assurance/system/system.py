@@ -64,10 +64,11 @@ class System:
         if model is None and not shipped:
             model = build.model_source(file)
         budget = file.get("targets.time_budget_s", DEFAULT_TIME_BUDGET_S)
+        carries_shipped_gate = model is None or (labels == UAVID and _shipped_export(model))
         return cls(file=file, labels=labels, core=build.core_config(file), odd=build.odd(file),
                    poses=build.poses_policy(file), model=model, monitor=build.monitor_spec(file) or "",
                    calibration=file.path_of("monitor.calibration"),
-                   gate=_checked_gate(file, gate, _gate(file, gate, shipped=model is None)),
+                   gate=_checked_gate(file, gate, _gate(file, gate, shipped=carries_shipped_gate)),
                    budget_s=None if budget is None else float(budget), targets=build.targets(file),
                    waivers=build.waivers(file, waivers), report=build.report_settings(file))
 
@@ -127,6 +128,21 @@ def _gate(file: SystemFile, given: str | Path | None, *, shipped: bool) -> Path 
     if value is not None:
         return None if str(value) == NO_GATE else file.path_of("monitor.gate")
     return DEPLOYED_GATE if shipped else None
+
+
+def _shipped_export(model: Any) -> bool:
+    """Whether a system file's model is the shipped network's packaged ONNX export (the very file, by its SHA-256,
+    as the package's engine record names it) with no class map: on the shipped classes it carries the shipped frame
+    gate."""
+    from el.hashing import sha256_file
+    from el.segmentation.onnx_engine import shipped_export_source
+
+    if not isinstance(model, dict) or model.get("kind") != "onnx" or model.get("class_map") or model.get("classes"):
+        return False
+    path = model.get("path")
+    if not path or not os.path.isfile(path):
+        return False  # a FIFO or a device is not hashed here: its loader names the problem
+    return shipped_export_source(sha256_file(path)) is not None
 
 
 def _checked_gate(file: SystemFile, given: str | Path | None, gate: Path | None) -> Path | None:

@@ -18,6 +18,7 @@ and the checked file is there, else torch), ``torch``, or ``onnx`` (ONNX Runtime
 
 from __future__ import annotations
 
+import functools
 import json
 import logging
 import os
@@ -39,6 +40,7 @@ logger = logging.getLogger(__name__)
 MISSING = "ONNX models need onnxruntime: pip install 'uav-el-assurance[onnx]'"
 EXTERNAL_FORMAT = "uav-el-onnx-external/1"
 EXTERNAL_KEY = b"location"
+SHIPPED_DIR = Path(__file__).resolve().parent / "weights"  # the package's own weights, card and export record
 
 
 def onnxruntime() -> Any:
@@ -239,7 +241,7 @@ def open_session(data: bytes, where: str | Path, threads: int | None = None) -> 
 
 
 def run_session(session: Any, names: list[str], feeds: dict[str, Any], where: str) -> list[Any]:
-    """``session.run(names, feeds)``, cancelled at the decision's deadline (issue 39).
+    """``session.run(names, feeds)``, cancelled at the decision's deadline (no work goes on after the answer).
 
     Inside a decision (an active ``el.deadline`` deadline) the run gets its own ``RunOptions``, whose ``terminate``
     the deadline sets from another thread when it passes or is cancelled (:func:`el.deadline.stop_at_deadline`):
@@ -278,6 +280,24 @@ def engine_choice() -> str:
 def record_path(weights_path: str | Path) -> Path:
     """The engine record of a weights file: ``NAME.onnx.json``."""
     return Path(weights_path).with_suffix(".onnx.json")
+
+
+@functools.lru_cache(maxsize=8)
+def shipped_export_source(onnx_sha256: str) -> str | None:
+    """The shipped weights' SHA-256 when ``onnx_sha256`` is the identity of their packaged ONNX export, else None.
+
+    Vouched for by the package's own files only (the engine record beside the shipped weights and their card),
+    never by a record or metadata beside a user's file: a hash a file carries about itself proves nothing. This
+    is what lets the shipped network run as a plain ``.onnx`` file keep the records fitted on it (the shipped
+    frame gate, card and learned monitor)."""
+    try:
+        record = json.loads((SHIPPED_DIR / "model.onnx.json").read_text(encoding="utf-8"))
+        card = json.loads((SHIPPED_DIR / "model.json").read_text(encoding="utf-8"))
+        bound = record["weights_sha256"] if record.get("format") == RECORD_FORMAT else None
+        same = record["onnx_sha256"] == onnx_sha256 and bound == card["weights_sha256"]
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return None
+    return bound if same and isinstance(bound, str) else None
 
 
 def engine_record(weights_sha256: str, onnx_sha256: str, opset: int) -> dict[str, Any]:

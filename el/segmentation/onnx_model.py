@@ -48,7 +48,7 @@ from el.labels import LabelSet
 from el.rgb import check_rgb
 from el.segmentation.contract import OutputClasses
 from el.segmentation.frame_tap import frame_tap
-from el.segmentation.onnx_engine import metadata, open_session, read_checked, run_session
+from el.segmentation.onnx_engine import metadata, open_session, read_checked, run_session, shipped_export_source
 
 MIN_SIZE = 16
 META_CONTRACT = "uav_el.contract"
@@ -237,6 +237,7 @@ class OnnxModel:
                  threads: int | None = None, working_width: int = 1024, session: Any = None) -> None:
         self.path, self.contract, self.labels = str(path), contract, labels
         self.weights_sha256, self.threads, self.working_width = sha256, threads, int(working_width)
+        self.source_weights_sha256 = shipped_export_source(sha256)  # the shipped weights, for their packaged export
         if session is None:
             session = open_session(read_checked(path, sha256)[0], path, threads)
         self._session = session
