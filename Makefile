@@ -10,8 +10,9 @@ RELEASE_SCENES ?= 70
 RELEASE_RUN    ?= runs/release
 REPORTS ?= reports
 JOBS   ?= 2
+VERIFY_FLAGS ?=  # make demo: -q (the evidence step prints the requirement summary); CI: pytest's whole output
 
-.PHONY: setup demo scenes campaign requirements evidence release-evidence release-campaign test test-all bench lint clean
+.PHONY: setup demo scenes campaign requirements evidence release-evidence release-campaign test test-all bench lint docs clean
 
 setup: $(VENV)/.installed
 
@@ -24,7 +25,7 @@ $(VENV)/.installed: pyproject.toml constraints.txt
 ## The main job on the embedded default: synthetic test scenes -> shipped model -> demo campaign
 ## -> requirement tests -> evidence report (reports/evidence.html and .pdf).
 demo: setup scenes campaign
-	@$(MAKE) --no-print-directory evidence DEMO_GATE=report
+	@$(MAKE) --no-print-directory evidence DEMO_GATE=report VERIFY_FLAGS=-q
 	@echo "Evidence report: $(REPORTS)/evidence.html and $(REPORTS)/evidence.pdf"
 
 scenes: setup
@@ -33,7 +34,7 @@ scenes: setup
 
 campaign: setup
 	$(PY) -m assurance campaign --preset demo --data $(DATA)/test --out $(RUN) --images $(DEMO_SCENES) --jobs $(JOBS)
-	$(PY) -m assurance table $(RUN) --compare --out $(REPORTS)
+	$(PY) -m assurance table $(RUN) --compare --out $(REPORTS) -q
 
 ## Requirement tests against the campaign run; their results feed the evidence gate.
 requirements: setup
@@ -45,7 +46,7 @@ requirements: setup
 ## `requirements` property per test), then the report (HTML, PDF/A-3b with the
 ## JSON, CSVs, JUnit XML and SHA256SUMS attached, traceability.csv).
 evidence: setup
-	-$(PY) -m assurance verify $(RUN) --out $(REPORTS) --tests tests
+	-$(PY) -m assurance verify $(RUN) --out $(REPORTS) --tests tests $(VERIFY_FLAGS)
 	$(PY) -m assurance fault-table --out $(REPORTS)/faults.csv
 	@rc=0; $(PY) -m assurance evidence --run $(RUN) --out $(REPORTS) || rc=$$?; \
 	if [ $$rc -eq 1 ] && [ "$(DEMO_GATE)" = report ]; then \
@@ -78,6 +79,11 @@ bench: setup
 
 lint: setup
 	$(VENV)/bin/ruff check el assurance tests benchmarks
+
+## The documentation site (mkdocs.yml, docs/) into site/; --strict: a warning (a broken link or anchor) fails it.
+## Not -q: mkdocs -q hides the warnings from --strict too, and the build then passes.
+docs: setup
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict -d site
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache .hypothesis

@@ -11,6 +11,7 @@ the same guard (dask's own watchdog, a thread that needs the GIL to exit, is the
 from __future__ import annotations
 
 import ctypes
+import logging
 import os
 import signal
 import sys
@@ -99,19 +100,34 @@ def dask_parent_pid(scheduler: str | None) -> int | None:
     return os.getpid() if method in DIRECT_CHILD_METHODS else None
 
 
+def dask_logging_follows_ours() -> None:
+    """dask's loggers (``distributed.*``) at this process's level (WARNING by default, INFO at ``-v``, ERROR at
+    ``-q``), here and in the worker processes a local cluster starts (they read ``DASK_LOGGING__DISTRIBUTED``
+    when they import dask); a level the user set in that variable wins."""
+    level = logging.getLevelName(max(logging.getLogger().getEffectiveLevel(), logging.DEBUG))
+    os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", str(level).lower())
+    import distributed  # noqa: F401  (sets up its loggers at import: set their level after)
+
+    try:
+        logging.getLogger("distributed").setLevel(os.environ["DASK_LOGGING__DISTRIBUTED"].upper())
+    except ValueError:  # not a level name: dask's own reading of the variable stands
+        pass
+
+
 def dask_map(fn: Callable[..., Any], items: Iterable[Any], *, jobs: int, scheduler: str | None,
              **kwargs: Any) -> Iterator[Any]:
     """``fn(item, parent_pid=..., **kwargs)`` for every item on dask.distributed (a running ``scheduler``, else a
     local cluster of ``jobs`` one-thread worker processes), results as they complete. ``fn`` calls
     :func:`die_with_parent` with ``parent_pid``."""
+    dask_logging_follows_ours()
     from dask.distributed import Client, LocalCluster, as_completed
 
     cluster = None
     if scheduler:
         client = Client(scheduler)
-    else:
+    else:  # no dashboard; the scheduler's own HTTP routes on a free local port, not 8787
         cluster = LocalCluster(n_workers=max(1, jobs), threads_per_worker=1, processes=True,
-                               dashboard_address=None)
+                               dashboard_address=None, scheduler_kwargs={"dashboard_address": "127.0.0.1:0"})
         client = Client(cluster)
     try:
         futures = client.map(fn, list(items), parent_pid=dask_parent_pid(scheduler), pure=False, **kwargs)

@@ -1,4 +1,4 @@
-"""Campaign throughput: the effect of work sharing and of parallel workers, as ratios (issue 6).
+"""Campaign throughput: the effect of work sharing and of parallel workers, as ratios.
 
 - sharing: one grid run (every configuration per task, features shared) vs the sum of
   single-configuration runs over the same tasks;

@@ -1,4 +1,4 @@
-"""Decision latency end to end on 3840x2160 PNG frames, per monitor configuration (issue 5).
+"""Decision latency end to end on 3840x2160 PNG frames, per monitor configuration.
 
 For each configuration: read the PNG, segment, find and rank candidates, walk them with the monitor
 (``el.pipeline.EmergencyLanding.decide`` on the file path, the call a flight computer makes).

@@ -5,7 +5,7 @@ and each configuration, ``el.pipeline.EmergencyLanding.decide`` on the file path
 monitor walk), median and p95 over the frames; the engines are interleaved frame by frame (and the whole
 measure repeated ``--rounds`` times) so that other load on the shared CPU hits both alike. Also counts the
 frames whose decision (action, selected candidate, candidate positions) differs between the engines.
-Target on 2 cores (issue 29): deployed decision on a 3840x2160 PNG < 0.35 s median.
+Target on 2 cores (the decision-time goal): deployed decision on a 3840x2160 PNG < 0.35 s median.
 
 The deployed configuration is measured twice: as the flight loop judges it (``monitor.check``, one candidate at
 a time) and ``batched``: the score walk's judge asks ``monitor.check_many`` for every candidate of the frame at

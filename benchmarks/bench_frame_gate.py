@@ -1,4 +1,4 @@
-"""Decision time with the frame gate deployed vs without (issue 32): target at most 10% above.
+"""Decision time with the frame gate deployed vs without: target at most 10% above.
 
 Two systems with the deployed monitor, each on its own copy of the shipped network: one with
 ``PipelineConfig(gate=GATE.json)`` (the frame pass keeps its statistics, ``Segmenter.tap_frames``; the gate scores

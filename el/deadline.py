@@ -9,7 +9,7 @@ chunks, the CM's stages and its per-region k-means, the monitor walk. A step bet
 not interrupted by them (a network's forward pass, a PNG decode); ``el.pipeline`` adds the hard stop that returns
 the default action at the deadline whatever is running (``run_with_deadline``).
 
-So that the stopped work does not go on computing after that answer (issue 39), a step whose engine can be
+So that the stopped work does not go on computing after that answer, a step whose engine can be
 cancelled runs inside :func:`stop_at_deadline`: its ``stop`` is called from another thread at the deadline (a
 ``threading.Timer`` armed at the remaining budget, on a wall clock only: an injected clock's seconds are not the
 timer's) or when the deadline is cancelled (the hard stop), and the step then raises ``BudgetExceeded``. ONNX

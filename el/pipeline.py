@@ -43,14 +43,14 @@ from el.walk import HAZARD, SCORE, Judge, Step
 Clock = Callable[[], float]
 DEFAULT_TIME_BUDGET_S = 10.0
 DEPLOYED_MONITOR = "learned:walk=score,threshold=0.8563253044730293"
-"""The shipped runtime monitor, chosen on the validation split (README, "The deployed monitor"): the learned
+"""The shipped runtime monitor, chosen on the validation split (docs/results.md, docs/monitors.md): the learned
 candidate monitor (``el/monitors/data/learned.json``), candidates walked by its score (``el.walk``),
 at the threshold of its calibration card :data:`DEPLOYED_CALIBRATION` (a test checks they agree)."""
 DEPLOYED_CALIBRATION = Path(__file__).resolve().parent / "monitors" / "data" / "calibration.json"
 DEPLOYED_GATE: Path | None = Path(__file__).resolve().parent / "monitors" / "data" / "frame_gate.json"
 """The frame gate the command line deploys when it runs the shipped network (None: none): a Mahalanobis gate on the
 frame pass's trunk statistics, fitted and thresholded on 3840x2160 training and validation frames under the
-in-domain perturbations (README, "Frame gates"). ``PipelineConfig.gate`` is what the flight code deploys; the
+in-domain perturbations (docs/results.md). ``PipelineConfig.gate`` is what the flight code deploys; the
 command line sets it to this unless ``--gate``/``[monitor] gate`` say otherwise."""
 MIN_FRAME_SIZE = 16  # px: the smallest frame side the segmenter takes (el.segmentation.inference.MIN_SIZE)
 logger = logging.getLogger(__name__)  # faults with their tracebacks; the decision keeps only the reason

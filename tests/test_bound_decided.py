@@ -1,4 +1,4 @@
-"""Issue 41: a rate bound is decided at any sample size. Failed when the one-sided Clopper-Pearson lower bound already
+"""A rate bound is decided at any sample size. Failed when the one-sided Clopper-Pearson lower bound already
 exceeds the target, verified when the upper bound is within it (and the run is as large as required), undecidable
 only in between; a failed bound fails the evidence gate with its numbers."""
 

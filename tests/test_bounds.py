@@ -1,4 +1,4 @@
-"""Issue 31, bounded resources and no silent loss: pixel limit from the header, EXIF orientation, YAML without
+"""Bounded resources and no silent loss: pixel limit from the header, EXIF orientation, YAML without
 aliases, seeds, --jobs, thresholds inside a monitor's score range, the decision's deadline inside stages and
 its hard stop, shard names that cannot collide, meta in the data hash, configuration faults, index repair."""
 

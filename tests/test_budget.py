@@ -1,4 +1,4 @@
-"""The time budget binds inside the monitoring stage (issue 19, case 3): MC dropout runs in chunks of the
+"""The time budget binds inside the monitoring stage (hostile case 3): MC dropout runs in chunks of the
 same draw, the clock is read between chunks and between candidates, and memory stays at one chunk."""
 
 from __future__ import annotations
@@ -59,7 +59,7 @@ def test_decisions_that_fit_the_budget_are_unchanged(seg):
 
 @pytest.mark.requirements("EL-R07")
 def test_a_huge_mc_draw_ends_in_timeout_within_budget_plus_ten_percent(seg):
-    """Issue 19, case 3: 'lhd+ch+mcd:tau=0.25,n=1000,rho=0.5' with a 10 s budget. Each chunk of MC samples
+    """Hostile case 3: 'lhd+ch+mcd:tau=0.25,n=1000,rho=0.5' with a 10 s budget. Each chunk of MC samples
     costs 1 s on the injected clock: the walk stops between chunks, before the budget is spent, and
     the drone takes the default action with reason 'timeout' (before: one 1000-sample batch, 43 s)."""
     clock = FakeClock()

@@ -1,5 +1,5 @@
-"""Any camera and any pose (issue 29, [camera]): intrinsics from a camera sheet, the geometry's validity,
-and worked example 3's property: no candidate disc of the ground-truth pipeline touches a forbidden
+"""Any camera and any pose ([camera]): intrinsics from a camera sheet, the geometry's validity,
+and the per-frame pose worked example's property: no candidate disc of the ground-truth pipeline touches a forbidden
 pixel at any pose in 20-120 m, 30-90 degrees, with random intrinsics."""
 
 import math
@@ -93,7 +93,7 @@ def test_the_default_geometry_and_the_stated_envelope_are_valid():
 
 
 def test_a_pose_that_sees_the_horizon_drops_those_stripes_and_a_roll_below_the_margin_is_refused():
-    # issue 41: rows that see the horizon, or ground beyond reach_m, are unreachable stripes, not a refusal
+    # rows that see the horizon, or ground beyond reach_m, are unreachable stripes, not a refusal
     g = CameraGeometry(width=3840, height=2160, pose=Pose(pitch_deg=12.0))
     assert geometry_problem(g) is None and g.first_reachable_row == 1944  # the bottom stripe alone, ~84 m ahead
     # with a long reach, row 432 (3.1 deg down) is reachable; a roll tilts it below the 3 degree margin

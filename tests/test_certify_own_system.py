@@ -1,7 +1,7 @@
-"""The README's walkthrough, "Certify your own system", end to end on tiny data: a network not trained here (the
-shipped one exported to ONNX stands in for it), data in another palette with per-frame poses, the user's own
-camera and targets, all declared in examples/my-drone/uav-el.toml (used unchanged); the evidence PDF names that
-network's hash and the system file. No edit to the package."""
+"""The second example of docs/certify.md ("Certify your own system") end to end on tiny data: a network not
+trained here (the shipped one exported to ONNX stands in for it), data in another palette with per-frame poses,
+the user's own camera and targets, all declared in examples/my-drone/uav-el.toml (used unchanged); the evidence
+PDF names that network's hash and the system file. No edit to the package."""
 
 import json
 import shutil

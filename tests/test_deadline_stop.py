@@ -1,4 +1,4 @@
-"""Work stops at the deadline (issue 39): an ONNX Runtime run in flight when the decision's time budget passes is
+"""Work stops at the deadline: an ONNX Runtime run in flight when the decision's time budget passes is
 cancelled (``RunOptions.terminate``, set from the deadline's timer or the hard stop), so the decision ends as
 ``timeout`` promptly instead of computing on in the background; torch, which cannot be cancelled mid-pass, starts
 no further pass after the deadline. Decisions within their budget are those without one.

@@ -3,7 +3,7 @@ network of its own (6 classes, exported with plain ``torch.onnx.export``, no pro
 mapped onto the Semantic Drone Dataset's 23 classes, a nadir camera (23.5 mm sensor, 16 mm lens) with per-frame
 poses, scenes in that palette. ``land``, ``fit-monitor``, ``fit-gate``, ``calibrate``, a campaign, ``verify`` and
 ``evidence`` all work; the default area is the ground below the drone (the frame's centre); the report is about this
-system and nothing of the shipped one. The README's walkthrough "Certify your own system" runs these steps."""
+system and nothing of the shipped one. The walkthrough in docs/certify.md runs these steps."""
 
 import json
 import re

@@ -1,4 +1,4 @@
-"""Issue 32, the deployable frame gate: ``uav-el fit-gate`` writes a hash-checked file bound to its network; with
+"""The deployable frame gate: ``uav-el fit-gate`` writes a hash-checked file bound to its network; with
 it the pipeline records the gate's score and threshold in every decision, refuses constant, noise and thick-fog
 frames (``out_of_domain: frame gate ...``), and fails safe on a corrupt file, a file for another network or a
 gate that cannot score (default action, the reason recorded; exit 2 at the CLI)."""
@@ -103,7 +103,8 @@ def _refused(system, frames):
 
 def test_a_gate_fitted_on_clean_frames_refuses_thick_fog(setup, tmp_path):
     """Fitted with fog 1-3 (as fit-gate does), a tiny network's fog 5 looks like the fog it was fitted on, as the
-    shipped network's does (README): the same file fitted on clean frames refuses it, with constant and noise."""
+    shipped network's does (docs/results.md): the same file fitted on clean frames refuses it, with constant and
+    noise."""
     from el.monitors.frame_gate import frame_gate_document
     from el.monitors.gates import GATES
 
@@ -253,7 +254,7 @@ def test_the_shipped_gate_is_bound_to_the_shipped_network_and_deployed():
     from el.monitors.frame_gate import load_frame_gate
 
     shipped = Path(el.pipeline.__file__).parent / "monitors" / "data" / "frame_gate.json"
-    assert el.pipeline.DEPLOYED_GATE == shipped.resolve()  # fitted on 3840x2160 frames, the camera's (README)
+    assert el.pipeline.DEPLOYED_GATE == shipped.resolve()  # fitted on 3840x2160 frames, the camera's (docs/results.md)
     gate = load_frame_gate(shipped)
     card = json.loads((shipped.parents[2] / "segmentation" / "weights" / "model.json").read_text())
     assert gate.network_sha256 == card["weights_sha256"] and gate.kind == "mahalanobis"

@@ -1,4 +1,4 @@
-"""Issue 32, the frame gates: they read the segmentation pass's own trunk and logits (no second trunk pass),
+"""The frame gates: they read the segmentation pass's own trunk and logits (no second trunk pass),
 and with a tiny network fitted on in-domain frames they flag constant, noise and severity-5 fog frames."""
 
 from __future__ import annotations

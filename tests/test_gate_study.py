@@ -1,4 +1,4 @@
-"""Issue 32, the frame-gate study's frames (``assurance.fitting.gate_frames``): the out-of-domain sets it makes and
+"""The frame-gate study's frames (``assurance.fitting.gate_frames``): the out-of-domain sets it makes and
 its tap cache, saved set by set so that a rerun taps only the sets it lacks."""
 
 from __future__ import annotations

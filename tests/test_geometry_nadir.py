@@ -1,4 +1,4 @@
-"""Geometry for any camera and pose (issue 41): the default area is the ground below the UAV and the
+"""Geometry for any camera and pose: the default area is the ground below the UAV and the
 unreachable stripes follow from the pose, not a fixed share; the paper's 45 degree case is unchanged."""
 
 import json
@@ -49,7 +49,7 @@ def test_the_papers_oblique_case_keeps_the_bottom_centre_disc_and_drops_the_top_
     assert area.basis == "nearest_ground" and area.x == W / 2
     assert area.y + area.radius_px == pytest.approx(H)  # tangent to the bottom edge
     assert area.radius_px == pytest.approx(_radius_at(cfg, area.y), abs=1e-6)
-    # today's numbers (before issue 41), at full and at working resolution
+    # the numbers before the geometry followed the pose, at full and at working resolution
     assert (area.y, area.radius_px) == pytest.approx((1993.0065205960693, 166.99347940393068), abs=1e-9)
     assert reachable_working_row((W, H), (1024, 576), cfg) == (115, 432)
     assert cfg.geometry(1024, 576).first_reachable_row == 115

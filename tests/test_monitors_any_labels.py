@@ -1,4 +1,4 @@
-"""Monitors on any label set and network (issue 41 item 4, issue 40): CH beyond 16 classes, softmax scores
+"""Monitors on any label set and network: CH beyond 16 classes, softmax scores
 normalised by the network's class count, MC dropout refused at build in user terms, the shipped scores kept."""
 
 from __future__ import annotations
@@ -233,7 +233,7 @@ class FakeUavidSegmenter:
         return self._probs((n, 8, *rgb.shape[:2]), seed + int(rgb.sum()) % 1000)
 
 
-# Obtained BEFORE this change (issue 41 item 4) by running exactly test_shipped_uavid_scores_are_unchanged's loop
+# Obtained BEFORE monitors served any label set, by running exactly test_shipped_uavid_scores_are_unchanged's loop
 # on the unchanged code (build_monitor(spec, labels=UAVID), check(...)), printing float(score).hex(), accepted
 # and reason: the shipped UAVid monitors must keep bit-identical scores and verdicts.
 SHIPPED_REFERENCE = {

@@ -1,4 +1,4 @@
-"""Issue 32, the declared operating domain: a frame whose pose or size is outside it ends in the default action
+"""The declared operating domain: a frame whose pose or size is outside it ends in the default action
 with reason outside_odd naming the dimension (a decision, not a fault); the system file declares it; campaign
 readouts record it; EL-R17 fails when a landing is made outside the domain."""
 

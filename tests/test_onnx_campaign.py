@@ -1,5 +1,5 @@
 """An ONNX network in campaigns and in flight: the manifest names its file, monitors needing the network's
-inside are refused before anything runs, and (worked example 1 of issue 29) the same campaign natively and
+inside are refused before anything runs, and (the ONNX worked example) the same campaign natively and
 through the ONNX export gives the same decisions."""
 
 from __future__ import annotations

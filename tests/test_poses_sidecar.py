@@ -1,4 +1,4 @@
-"""Per-frame poses (issue 29, [camera], worked example 3): the seqNN/poses.csv sidecar, scenes rendered at
+"""Per-frame poses ([camera], the per-frame pose worked example): the seqNN/poses.csv sidecar, scenes rendered at
 per-frame heights and pitches, campaigns and the ground-truth pipeline planning each frame at its pose,
 and the camera/pose options of ``uav-el land`` and ``uav-el synth``."""
 

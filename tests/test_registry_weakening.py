@@ -1,5 +1,5 @@
 """A registry or targets weaker than the system's is named parameter by parameter; model files changed after a run
-are named; EL-R16 is judged by its bound, with a minimum sample, on the test split only (issue 31)."""
+are named; EL-R16 is judged by its bound, with a minimum sample, on the test split only."""
 
 from __future__ import annotations
 

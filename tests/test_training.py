@@ -322,9 +322,9 @@ def test_train_and_model_card_cli(datasets, tmp_path, uav_el, capsys) -> None:
         "train", "--data", str(train_dir), "--val", str(val_dir), "--out", str(out), "--steps", "4",
         "--batch", "2", "--crop", "32", "--hd-crops", "0.03", "--hd-crop", "32-48", "--arch", "msdlite",
         "--widths", "8,8,16",
-        "--working-width", "64", "--hd-eval-size", "48", "--cache-dir", str(tmp_path / "cache"), "--quiet",
+        "--working-width", "64", "--hd-eval-size", "48", "--cache-dir", str(tmp_path / "cache"),
         "--seed", "3",
-    ])
+    ])  # not --quiet: the summary lines are on stdout
     captured = capsys.readouterr()
     assert rc == 0, captured.err
     assert "validation mIoU" in captured.out and "baseline" in captured.out

@@ -1,4 +1,4 @@
-"""Issue 39, the trust boundary: every file a user hands the toolkit is read bounded (``el.userfiles``), and what
+"""The trust boundary: every file a user hands the toolkit is read bounded (``el.userfiles``), and what
 it says is checked before any work starts.
 
 A FIFO, a device or a folder is refused before a read that could block; a file over its kind's cap is refused
@@ -315,7 +315,7 @@ def test_a_template_that_is_a_fifo_or_dev_zero_is_refused_naming_it(tmp_path, fi
                 env.get_template(name)  # Jinja's own loader passed over it for the packaged one
         with pytest.raises(TemplateError, match=r"auditor_issre.html.j2: a FIFO \(named pipe\)"):
             _render(env, "auditor_issre.html.j2", {})  # one line naming it, not a rendering failure
-    assert env.get_template("macros.html.j2").filename.endswith("assurance/templates/macros.html.j2")  # a gap
+    assert env.get_template("macros.html.j2").filename.endswith("evidence_templates/macros.html.j2")  # a gap
 
 
 def test_evidence_with_a_fifo_template_is_exit_2_naming_it(tiny_campaign, tmp_path, fifo, capsys):

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import logging
 import os
 import signal
 import sys
 
 import pytest
 
-from assurance.workers import dask_map, dask_parent_pid
+from assurance.workers import dask_logging_follows_ours, dask_map, dask_parent_pid
 
 linux_only = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux only")
 
@@ -50,3 +51,26 @@ def test_dask_workers_die_with_a_sigkilled_campaign(tmp_path):
 
     ws = build_workspace(tmp_path, main=main)
     assert killed_campaign_survivors(ws, ws / "killed", backend="dask") == []
+
+
+def test_dask_s_log_lines_follow_the_toolkit_s_level_unless_the_user_set_theirs(monkeypatch):
+    """WARNING by default (no INFO line per worker and comm), INFO at -v; DASK_LOGGING__DISTRIBUTED wins."""
+    pytest.importorskip("distributed")
+    root, dist = logging.getLogger(), logging.getLogger("distributed")
+    levels = root.level, dist.level
+    monkeypatch.delenv("DASK_LOGGING__DISTRIBUTED", raising=False)
+    try:
+        root.setLevel(logging.WARNING)
+        dask_logging_follows_ours()
+        assert os.environ["DASK_LOGGING__DISTRIBUTED"] == "warning" and dist.level == logging.WARNING
+        del os.environ["DASK_LOGGING__DISTRIBUTED"]
+        root.setLevel(logging.INFO)
+        dask_logging_follows_ours()
+        assert dist.level == logging.INFO
+        os.environ["DASK_LOGGING__DISTRIBUTED"] = "error"
+        dask_logging_follows_ours()
+        assert dist.level == logging.ERROR
+    finally:
+        os.environ.pop("DASK_LOGGING__DISTRIBUTED", None)
+        root.setLevel(levels[0])
+        dist.setLevel(levels[1])

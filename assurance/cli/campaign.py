@@ -88,7 +88,10 @@ def run(args: argparse.Namespace) -> int:
     summary = run_campaign(data, args.out, config, jobs=args.jobs, backend=args.backend,
                            scheduler=args.scheduler, progress=not args.quiet, records=cards, system=system.file,
                            signing_key=key)
-    print(describe(summary))
+    head, *problems = describe(summary).splitlines()
+    print(head)
+    for line in problems if not summary.get("config_faults") else ():  # warnings, shown under -q too
+        print(line, file=sys.stderr)  # (tasks that faulted for a configuration reason: the one error line below)
     print(f"signed: {summary['attestation']} (key {key.keyid[:16]}, {key.source})")
     print(f"readouts in {args.out}; results table: uav-el table {args.out}")
     if summary.get("config_faults"):  # every such task measured nothing: fail loud (exit 2)
@@ -126,7 +129,8 @@ def _monitors(args: argparse.Namespace, system: Any, deployed: str | None, cards
     except MonitorSupportError as exc:
         raise CommandError(str(exc)) from None
     for name, why in choice.left_out:
-        print(f"uav-el campaign: left out {name!r}: the network of {system.label} cannot run it ({why})")
+        print(f"uav-el campaign: left out {name!r}: the network of {system.label} cannot run it ({why})",
+              file=sys.stderr)
     if not choice.monitors:
         raise CommandError(f"no monitor configuration of preset {args.preset!r} can run on the network of "
                            f"{system.label}: give --monitors")
@@ -144,4 +148,4 @@ def _say_scenes(data: Any, images: int | None, args: argparse.Namespace) -> None
     if total > images:
         why = "--images" if args.images is not None else f"the {args.preset} preset's size"
         print(f"uav-el campaign: evaluating the first {images} of the {total} scenes of {data} ({why}); "
-              "the others are not evaluated")
+              "the others are not evaluated", file=sys.stderr)

@@ -141,7 +141,6 @@ def _reissue(path: Path, args: argparse.Namespace) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    from assurance.fitting.network.card import verify_card
     from el.segmentation.weights import DEFAULT_WEIGHTS, read_card
 
     path = args.weights or DEFAULT_WEIGHTS
@@ -165,6 +164,8 @@ def run(args: argparse.Namespace) -> int:
         else:
             _print_card(card, path)
         return 0
+    from assurance.fitting.network.card import verify_card  # torch (the train extra): only to recompute figures
+
     result = verify_card(path, val_dir=args.data, train_dir=args.train, threads=args.threads,
                          iou_tol=args.tolerance, progress=functools.partial(progress, enabled=not args.quiet))
     recorded = read_card(path).get("candidates")

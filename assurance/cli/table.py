@@ -68,7 +68,8 @@ def run(args: argparse.Namespace) -> int:
     md += "\n### Where the time went\n\n" + stages_markdown(stage_table(args.run), wall_seconds(args.run))
     md += "\nMonitoring time per candidate, by configuration:\n\n" + monitor_costs_markdown(monitor_costs(args.run))
     atomic_write_bytes(out / "results.md", md.encode())
-    print(md)
+    if not getattr(args, "quiet", 0):  # -q: the files and one line
+        print(md)
     written = [out / "results.csv", out / "results.md"] + ([out / "comparison.csv"] if args.compare else [])
     if args.readme:
         written.append(write_readme(args.run, df, args.readme))

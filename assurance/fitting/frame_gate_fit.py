@@ -25,7 +25,8 @@ from assurance.paths import shown_path
 from el.monitors.frame_gate import frame_gate_document, start_taps
 from el.monitors.gates import GATES, WHAT
 
-DEFAULT_QUANTILE = 0.997  # the shipped gate's: the smallest meeting the policy in both validation folds (README)
+# the shipped gate's: the smallest meeting the policy in both validation folds (docs/results.md)
+DEFAULT_QUANTILE = 0.997
 FEATURES = WHAT  # what each tap feature is, recorded in the file
 CHOICES = ("auto", "trunk", "output")
 """``uav-el fit-gate --features``: ``auto`` (the trunk's statistics where the network gives them, else its

@@ -1,7 +1,8 @@
 """Checking a fitted frame gate (``uav-el fit-gate``) on other scenes: each scene clean and under each in-domain
 perturbation at severity 3 (the study's validation frames, ``assurance.fitting.gate_frames``), scored from the
 frame pass's own tap; the share flagged per perturbation. Used to check the gate at another frame size than it was
-fitted on (README, "Frame gates": fitted on 1024x576 renders, it flags most 3840x2160 frames).
+fitted on (docs/results.md, "How the frame gate was chosen": fitted on 1024x576 renders, it flags most
+3840x2160 frames).
 
 Run: ``python -m assurance.fitting.gate_check GATE.json DATA [--working-width 1024]``.
 """

@@ -1,4 +1,4 @@
-"""The frames of the frame-gate study (issue 32), each tapped once by the frame's own segmentation pass and kept
+"""The frames of the frame-gate study, each tapped once by the frame's own segmentation pass and kept
 in one cache (``taps.npz``): the gate variants are then fitted and measured on the cached features in seconds.
 
 Sets (the test split is never read): ``train`` (every training scene clean, under each in-domain perturbation at a

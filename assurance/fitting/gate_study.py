@@ -1,4 +1,4 @@
-"""Choosing the out-of-domain frame gate by measurement (issue 32): every candidate of ``el.monitors.gates`` on
+"""Choosing the out-of-domain frame gate by measurement: every candidate of ``el.monitors.gates`` on
 the same frames (``assurance.fitting.gate_frames``, tapped once into ``taps.npz``), fitted on the TRAINING split
 with the in-domain perturbations applied, thresholded at a stated quantile of one half of the VALIDATION scenes
 perturbed in-domain at severity 3 and measured on the other half (both ways: scenes 0-34 -> 35-69 and back), at

@@ -148,6 +148,7 @@ def fit_learned_body(train: CandidateSet, val: CandidateSet, *, cs: Sequence[flo
         "mean": [float(v) for v in scaler.mean_], "scale": [float(v) for v in scaler.scale_],
         "coef": [float(v) for v in clf.coef_[0]], "intercept": float(clf.intercept_[0]),
         "threshold": threshold, "C": float(best_c), "mcd": {"n": int(mcd_n), "rho": float(mcd_rho)},
+        "criterion": {"name": "tnr-at-recall", "recall": recall, "on": "held-out candidates"},
         "selection": {"C_auroc": [{"C": c, "auroc": a} for a, _, c in trials], "recall_target": recall,
                       "held_out_auroc": best_auc,
                       "held_out_recall": float(rejected[val.y].mean()),

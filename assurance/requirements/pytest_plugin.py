@@ -64,6 +64,7 @@ _CONTEXT = pytest.StashKey[dict[str, Any]]()
 _ERRORS = pytest.StashKey[list[str]]()
 _WRITTEN = pytest.StashKey[Any]()
 _TARGETS = pytest.StashKey[Any]()
+_BOUND = pytest.StashKey[bool]()
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
@@ -103,12 +104,26 @@ def pytest_configure(config: pytest.Config) -> None:
     config.pluginmanager.register(_Recorder(config), "uav_el_requirements_recorder")
     if _setting(config, "requirements_registry", "uav_el_registry") or _targets_file(config):
         registry(config)  # a bad registry or targets file given on the command line is a usage error at once
-    if not hasattr(config, "workerinput"):
+    if _run_asked(config):
         _bind(config)
+    # else bound when the session asks for a run (a test claiming a requirement or using the campaign_run or
+    # requirement_registry fixture, or a report to write): a session that does not pays nothing here
+
+
+RUN_FIXTURES = ("campaign_run", "requirement_registry")
+
+
+def _run_asked(config: pytest.Config) -> bool:
+    """Whether the session names a campaign run (option, ``$UAV_EL_RUN`` or ini ``uav_el_run``)."""
+    return bool(config.getoption("uav_el_run", None) or os.environ.get(RUN_ENV) or config.getini("uav_el_run"))
 
 
 def _bind(config: pytest.Config) -> None:
-    """Bind the session to its campaign run (``assurance.requirements.binding``): digest, system file, targets."""
+    """Bind the session to its campaign run (``assurance.requirements.binding``): digest, system file, targets;
+    once (an xdist worker never: the controller binds)."""
+    if hasattr(config, "workerinput") or config.stash.get(_BOUND, False):
+        return
+    config.stash[_BOUND] = True
     from assurance.requirements import binding
 
     run = binding.run_path(config.getoption("uav_el_run", None), str(config.getini("uav_el_run") or ""),
@@ -217,6 +232,9 @@ class _Recorder:
                                       items: list[pytest.Item]) -> None:
         claims = config.stash[_CLAIMS]
         problems: list[str] = []
+        if any(item.get_closest_marker(MARKER) or set(RUN_FIXTURES) & set(getattr(item, "fixturenames", ()))
+               for item in items):
+            _bind(config)  # the session asks for a run: bound before any test uses its registry or targets
         for item in items:
             marks = list(item.iter_markers(MARKER))
             if not marks:
@@ -261,6 +279,7 @@ class _Recorder:
         path = _report_path(config)
         if path is None:
             return
+        _bind(config)  # a report is always bound to its run (or records that there is none)
         from assurance.requirements import results_document
 
         results = session_results(config)

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import json
 import os
-import sys
 from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
@@ -258,14 +257,10 @@ def _write_job(args: tuple[str, int, int, str, tuple[int, int], ViewPlan | None]
 
 
 def _iterate(items: Iterator[str], total: int, desc: str, enabled: bool) -> Iterator[str]:
-    """Progress bar on stderr when enabled."""
-    if not enabled:
-        yield from items
-        return
-    from tqdm import tqdm
+    """Progress on stderr when enabled: a bar on a terminal, plain lines otherwise (``assurance.progress``)."""
+    from assurance.progress import progress
 
-    yield from tqdm(items, total=total, desc=desc, file=sys.stderr, dynamic_ncols=True,
-                    mininterval=0.5 if sys.stderr.isatty() else 5.0)
+    yield from progress(items, total=total, desc=desc, enabled=enabled)
 
 
 def write_dataset(out: str | Path, n: int, seed: int = 0, split: str = "train",

@@ -14,7 +14,10 @@ A model spec is what a user writes in a command or a system file:
   accelerator, a torch module wrapped in :class:`~el.segmentation.inference.Segmenter`).
 
 Weights files are SHA-256 checked against their card before ``torch.load(weights_only=True)``; every
-problem raises ``WeightsError`` naming the file or the spec.
+problem raises ``WeightsError`` naming the file or the spec. Without torch (an optional heavy dependency: the
+``train`` extra) the shipped network, or a ``.pt`` file with its export record, runs from its checked ONNX export
+(:class:`el.segmentation.onnx_segmenter.OnnxSegmenter`, the same decisions); any other torch network is a
+``TorchMissing`` naming the extra.
 """
 
 from __future__ import annotations
@@ -27,7 +30,6 @@ from typing import Any
 
 from el.errors import WeightsError
 from el.segmentation.contract import OutputClasses, check_model
-from el.segmentation.inference import Segmenter
 
 ENTRY_POINT_GROUP = "uav_el.models"
 SHIPPED = "shipped"
@@ -112,6 +114,19 @@ def load_model(spec: str | Path | None = None, *, threads: int | None = None, de
         raise WeightsError(str(exc)) from None
 
 
-def _segmenter(path: str | Path | None, threads: int | None, device: str, working_width: int | None) -> Segmenter:
+def _segmenter(path: str | Path | None, threads: int | None, device: str, working_width: int | None) -> Any:
+    """The ``Segmenter`` of a weights file (None: the shipped one); without torch (the optional heavy dependency, the
+    ``train`` extra) its checked ONNX export under ONNX Runtime (``el.segmentation.onnx_segmenter``), same decisions."""
+    from el.torch_extra import have_torch
+
     width = {} if working_width is None else {"working_width": working_width}
+    if not have_torch():
+        from el.segmentation.onnx_segmenter import OnnxSegmenter
+        from el.torch_extra import TorchMissing, missing_line
+
+        if device != "cpu":
+            raise TorchMissing(missing_line(f"device {device!r}"))
+        return OnnxSegmenter.load(path, threads=threads, **width)
+    from el.segmentation.inference import Segmenter
+
     return Segmenter.load(path, threads=threads, device=device, **width)

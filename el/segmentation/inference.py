@@ -14,7 +14,9 @@ and the runtime monitors what they need (docs/architecture.md sections 3.2 and 3
 - :meth:`Segmenter.mc_dropout`: N softmax samples with dropout active (the MCD monitor).
 
 Inputs are RGB uint8 arrays (H, W, 3); anything else, or an output that is not finite, raises
-ValueError, which the decision loop turns into the default action.
+ValueError, which the decision loop turns into the default action. The frame steps are
+:class:`el.segmentation.frame_passes.FramePasses` (shared, torch-free); without torch (the ``train`` extra) the
+shipped network runs from its ONNX export in :class:`el.segmentation.onnx_segmenter.OnnxSegmenter` instead.
 
 Plugging in another network::
 
@@ -39,39 +41,26 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 import torch
 from torch import nn
 
-from el.camera import working_size
 from el.deadline import checkpoint
 from el.errors import WeightsError
 from el.labels import UAVID, LabelSet
-from el.rgb import check_rgb
 from el.segmentation.batching import unit_nchw
+from el.segmentation.frame_passes import MIN_SIZE, FramePasses, check_finite, check_frame_rgb
 from el.segmentation.frame_tap import frame_tap
 from el.segmentation.lazy_trunk import LazyTrunk as _LazyTrunk
 from el.segmentation.lazy_trunk import resolve as _resolve
 from el.segmentation.model import MCDropout, upsample_logits
 from el.segmentation.patch_passes import PatchPasses
-from el.segmentation.pooling import check_pooling, downsample_probs
+from el.segmentation.pooling import check_pooling
 from el.segmentation.protocol import EvalProtocol, card_protocol, check_frame_scales
 from el.segmentation.weights import DEFAULT_WEIGHTS, card_path, load_weights
 
-MIN_SIZE = 16  # smallest patch side (px) a Segmenter accepts
-
-
-def _check_rgb(rgb: Any, what: str) -> np.ndarray:
-    return check_rgb(rgb, what, min_size=MIN_SIZE)
-
-
-def _check_finite(probs: np.ndarray, what: str) -> np.ndarray:
-    # One summing pass: NaN and inf propagate through a sum of values in [0, 1] (or NaN/inf).
-    if not np.isfinite(probs.sum(dtype=np.float64)):
-        bad = int((~np.isfinite(probs)).sum())
-        raise ValueError(f"{what}: segmentation output has {bad} non-finite values (NaN or inf)")
-    return probs
+_check_rgb = check_frame_rgb
+_check_finite = check_finite
 
 
 def _checked(model: nn.Module, x: torch.Tensor, where: str) -> torch.Tensor:
@@ -110,7 +99,7 @@ def softmax_classes(logits: torch.Tensor) -> torch.Tensor:
     return torch.softmax(logits, dim=1)
 
 
-class Segmenter(PatchPasses):
+class Segmenter(FramePasses, PatchPasses):
     """Softmax segmentation of frames and patches, with MC dropout, around one network.
 
     Parameters
@@ -257,58 +246,18 @@ class Segmenter(PatchPasses):
             raise ValueError(f"{what}: model returned {got}, expected logits of shape {shape}")
         return self._probs_checked(softmax_classes(logits.float()), shape, what)
 
+    def _engine_probs(self, logits: np.ndarray, shape: tuple[int, ...], what: str) -> np.ndarray:
+        """Softmax of ONNX Runtime's logits (a numpy array), by torch as every other pass of this segmenter."""
+        with torch.inference_mode():
+            return self._probs(torch.from_numpy(logits), shape, what)
+
     @staticmethod
     def _probs_checked(probs: torch.Tensor, shape: tuple[int, ...], what: str) -> np.ndarray:
         if tuple(probs.shape) != shape:
             raise ValueError(f"{what}: model returned {tuple(probs.shape)}, expected {shape}")
         return _check_finite(probs.cpu().numpy(), what)
 
-    def working_size(self, width: int, height: int) -> tuple[int, int]:
-        """(width, height) of the working resolution for a frame of the given size."""
-        return working_size(width, height, self.working_width)
-
-    # -- prediction ----------------------------------------------------------------------------
-    def predict_frame(self, rgb: np.ndarray) -> np.ndarray:
-        """Softmax of a frame at the working resolution.
-
-        Parameters
-        ----------
-        rgb : ndarray of shape (H, W, 3), uint8
-            The full-resolution frame.
-
-        Returns
-        -------
-        ndarray of shape (8, h, w), float32, with ``(w, h) = working_size(W, H)``.
-        """
-        _check_rgb(rgb, "frame")
-        self.last_tap = None  # FrameTap of this frame's first pass (el.segmentation.frame_tap)
-        w, h = self.working_size(rgb.shape[1], rgb.shape[0])
-        if (rgb.shape[1], rgb.shape[0]) != (w, h):
-            rgb = cv2.resize(rgb, (w, h), interpolation=cv2.INTER_AREA)
-        _check_rgb(rgb, "frame at working resolution")
-        total = None
-        for scale in self.frame_scales:
-            checkpoint("segmentation")  # the decision's deadline, between the network's passes
-            probs = self._frame_at_scale(rgb, scale)
-            total = probs if total is None else total + probs
-        if len(self.frame_scales) > 1:
-            total /= np.float32(len(self.frame_scales))
-        return total
-
-    def _frame_at_scale(self, rgb: np.ndarray, scale: float) -> np.ndarray:
-        """Softmax (8, h, w) of a working-resolution frame fed to the network resized by ``scale``."""
-        h, w = rgb.shape[:2]
-        size = (max(MIN_SIZE, round(w * scale)), max(MIN_SIZE, round(h * scale)))
-        view = rgb if size == (w, h) else cv2.resize(rgb, size, interpolation=cv2.INTER_LINEAR)
-        if not self.frame_flip:
-            probs = self._predict([view], "frame")[0]
-        else:
-            pair = self._predict([view, np.ascontiguousarray(view[:, ::-1])], "frame")
-            probs = 0.5 * (pair[0] + pair[1][:, :, ::-1])
-        if size != (w, h):  # back to the working resolution, over each pixel's footprint
-            probs = downsample_probs(probs, (w, h), self.frame_pooling, labels=self.labels)
-        return np.ascontiguousarray(probs, dtype=np.float32)
-
+    # -- prediction (frames: el.segmentation.frame_passes) --------------------------------------
     def predict_patch(self, rgb_patch: np.ndarray, *, features: Any = None) -> np.ndarray:
         """Softmax of a patch at its own resolution: ndarray (8, h, w) float32 for a (h, w, 3) uint8 patch.
 

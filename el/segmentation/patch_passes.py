@@ -14,7 +14,6 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import torch
 
 from el.deadline import checkpoint
 from el.rgb import check_rgb
@@ -33,7 +32,8 @@ def _softmax(k: int, probs: np.ndarray) -> np.ndarray:
 
 class PatchPasses:
     """The batched patch passes of a Segmenter (a mixin: it reads the segmenter's ``engine``, ``model``, ``labels``,
-    ``_lock``, ``_to_tensor`` and ``_probs``)."""
+    ``_lock``, ``_to_tensor``, ``_probs`` and ``_engine_probs``: the softmax of ONNX Runtime's numpy logits). Under
+    ONNX Runtime no torch is imported here (the torch-free ``el.segmentation.onnx_segmenter``)."""
 
     patch_workers: int | None = None  # ONNX Runtime sessions segmenting patches side by side (None: engine threads)
     if TYPE_CHECKING:  # what the segmenter provides
@@ -42,9 +42,11 @@ class PatchPasses:
         labels: Any
         _lock: Any
 
-        def _to_tensor(self, images: list[np.ndarray]) -> torch.Tensor: ...
+        def _to_tensor(self, images: list[np.ndarray]) -> Any: ...
 
-        def _probs(self, logits: torch.Tensor, shape: tuple[int, ...], what: str) -> np.ndarray: ...
+        def _probs(self, logits: Any, shape: tuple[int, ...], what: str) -> np.ndarray: ...
+
+        def _engine_probs(self, logits: np.ndarray, shape: tuple[int, ...], what: str) -> np.ndarray: ...
 
     def predict_patches(self, patches: list[np.ndarray], *, then: Then | None = None) -> list[Any]:
         """Softmax of several patches, each as :meth:`predict_patch` gives it alone; the order is kept.
@@ -68,12 +70,16 @@ class PatchPasses:
                             largest_first)
         out: list[Any] = [None] * len(patches)
         shapes = [p.shape[:2] for p in patches]
-        for size, idx in group_by_padded_size(shapes, padding_multiple(self.model)).items():
+        for size, idx in group_by_padded_size(shapes, self._padding_multiple()).items():
             checkpoint("patch segmentation")
             probs = self._predict_cropped(padded_batch(patches, idx, size), [shapes[i] for i in idx])
             for i, p in zip(idx, probs, strict=True):
                 out[i] = then(i, p)
         return out
+
+    def _padding_multiple(self) -> int:
+        """What the network edge-pads its input to (``el.segmentation.batching.padding_multiple``)."""
+        return padding_multiple(self.model)
 
     def _patch_pool(self) -> PatchPool | None:
         """The sessions that segment patches side by side (``el.segmentation.patch_pool``), built at first use:
@@ -101,19 +107,21 @@ class PatchPasses:
         """:meth:`predict_patch` of one patch on ``engine`` (one of the pool's sessions): the same computation."""
         checkpoint("patch segmentation")
         h, w = rgb_patch.shape[:2]
-        with torch.inference_mode():
-            logits = torch.from_numpy(engine.logits(unit_nchw([rgb_patch])))
-            return np.ascontiguousarray(self._probs(logits, (1, self.labels.num_classes, h, w), "patch")[0])
+        logits = engine.logits(unit_nchw([rgb_patch]))
+        return np.ascontiguousarray(self._engine_probs(logits, (1, self.labels.num_classes, h, w), "patch")[0])
 
     def _predict_cropped(self, images: list[np.ndarray], shapes: list[tuple[int, int]]) -> list[np.ndarray]:
         """Softmax of a batch of equal-size (padded) images, each cropped to its shape (h, w) before the softmax."""
+        c = self.labels.num_classes
+        if getattr(self, "engine", None) is not None:  # ONNX Runtime: numpy logits, no torch needed
+            raw = self.engine.logits(unit_nchw(images))
+            crops = [np.ascontiguousarray(raw[j:j + 1, :, :h, :w]) for j, (h, w) in enumerate(shapes)]  # a lone pass's
+            return [np.ascontiguousarray(self._engine_probs(x, (1, c, h, w), "patch")[0])
+                    for x, (h, w) in zip(crops, shapes, strict=True)]
+        import torch  # a torch network's batch (the Segmenter of a torch module: torch is installed)
+
         with torch.inference_mode():
-            if getattr(self, "engine", None) is not None:
-                logits = torch.from_numpy(self.engine.logits(unit_nchw(images)))
-                crops = [logits[j:j + 1, :, :h, :w].contiguous() for j, (h, w) in enumerate(shapes)]  # a lone pass's
-            else:
-                logits = self.model(self._to_tensor(images))
-                crops = [logits[j:j + 1, :, :h, :w] for j, (h, w) in enumerate(shapes)]  # as the network crops
-            c = self.labels.num_classes
+            logits = self.model(self._to_tensor(images))
+            crops = [logits[j:j + 1, :, :h, :w] for j, (h, w) in enumerate(shapes)]  # as the network crops
             return [np.ascontiguousarray(self._probs(x, (1, c, h, w), "patch")[0])
                     for x, (h, w) in zip(crops, shapes, strict=True)]

@@ -14,8 +14,6 @@ conservative downsampling of label maps in the core model.
 from __future__ import annotations
 
 import numpy as np
-import torch
-import torch.nn.functional as F
 
 from el.labels import LabelSet
 
@@ -50,6 +48,11 @@ def downsample_probs(probs: np.ndarray, size: tuple[int, int], pooling: str = "a
         raise ValueError("conservative pooling needs the label set (which classes are forbidden)")
     if c != labels.num_classes:
         raise ValueError(f"conservative pooling needs the {labels.num_classes} classes, got {c}")
+    # torch: the optional heavy dependency (the train extra), imported only for conservative pooling
+    from el.torch_extra import require_torch
+
+    torch = require_torch("conservative frame pooling")
+    F = torch.nn.functional
     forbidden, safe = list(labels.forbidden_ids), list(labels.safe_ids)
     t = torch.from_numpy(np.ascontiguousarray(probs, dtype=np.float32))[None]
     out = torch.empty((1, c, h, w), dtype=torch.float32)

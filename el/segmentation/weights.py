@@ -16,13 +16,13 @@ from __future__ import annotations
 import io
 import json
 from pathlib import Path
-from typing import Any
-
-import torch
+from typing import TYPE_CHECKING, Any
 
 from el.errors import WeightsError
 from el.hashing import sha256_bytes, sha256_file  # noqa: F401  (re-exported)
-from el.segmentation.architectures import build_model
+
+if TYPE_CHECKING:
+    import torch
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
 DEFAULT_WEIGHTS = WEIGHTS_DIR / "model.pt"
@@ -55,6 +55,28 @@ def read_card(weights_path: str | Path) -> dict[str, Any]:
     return card
 
 
+def checked_weights(weights_path: str | Path | None = None) -> tuple[Path, bytes, dict[str, Any]]:
+    """The weights file's path, bytes and card, its SHA-256 checked against the card (torch is not needed)."""
+    path = Path(weights_path) if weights_path is not None else DEFAULT_WEIGHTS
+    if not path.exists():
+        hint = " (train one with `uav-el train`)" if weights_path is None else ""
+        raise WeightsError(f"{path}: weights file not found{hint}")
+    if not path.is_file():
+        raise WeightsError(f"{path}: not a file")
+    card = read_card(path)
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise WeightsError(f"{path}: cannot read weights: {exc}") from exc
+    digest = sha256_bytes(data)
+    if digest != card["weights_sha256"]:
+        raise WeightsError(
+            f"{path}: SHA-256 mismatch: file has {digest}, {card_path(path).name} records "
+            f"{card['weights_sha256']} (the weights were altered or replaced)"
+        )
+    return path, data, card
+
+
 def _unpickling_reason(exc: Exception) -> str:
     """Why torch refused a file, without torch's advice to retry with ``weights_only=False`` (never do:
     that would run the pickled code this check exists to refuse)."""
@@ -76,23 +98,12 @@ def load_weights(weights_path: str | Path | None = None, *, device: str | torch.
     Returns ``(model in eval mode, card)``. Raises WeightsError when the weights file or its card
     is missing, the hash does not match, or the state dict does not fit the recorded architecture.
     """
-    path = Path(weights_path) if weights_path is not None else DEFAULT_WEIGHTS
-    if not path.exists():
-        hint = " (train one with `uav-el train`)" if weights_path is None else ""
-        raise WeightsError(f"{path}: weights file not found{hint}")
-    if not path.is_file():
-        raise WeightsError(f"{path}: not a file")
-    card = read_card(path)
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise WeightsError(f"{path}: cannot read weights: {exc}") from exc
-    digest = sha256_bytes(data)
-    if digest != card["weights_sha256"]:
-        raise WeightsError(
-            f"{path}: SHA-256 mismatch: file has {digest}, {card_path(path).name} records "
-            f"{card['weights_sha256']} (the weights were altered or replaced)"
-        )
+    from el.torch_extra import require_torch  # torch: the optional heavy dependency, imported only here
+
+    torch = require_torch("loading a .pt weights file")
+    from el.segmentation.architectures import build_model
+
+    path, data, card = checked_weights(weights_path)
     try:
         state = torch.load(io.BytesIO(data), map_location=device, weights_only=True)
     except Exception as exc:  # torch raises several types for corrupt or unsafe files

@@ -1,19 +1,18 @@
-"""Requirement tests that need no campaign: the pose-error margin (EL-R14) and weights integrity (EL-R15)."""
+"""Requirement tests that need no campaign: the pose-error margin (EL-R14) and weights integrity (EL-R15).
+
+No torch: they run in a base install too (the shipped network's ONNX export), as ``uav-el verify`` runs them."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-import torch
 
 from assurance import requirements as rq
-from assurance.fitting.network.weights_io import save_weights
 from el.config import CoreConfig
+from el.errors import WeightsError
 from el.pipeline import EmergencyLanding, PipelineConfig
-from el.segmentation import Segmenter
-from el.segmentation.architectures import build_model
-from el.segmentation.model import ArchConfig
-from el.segmentation.weights import WeightsError, load_weights
+from el.segmentation.factory import load_model
+from el.torch_extra import have_torch
 
 
 @pytest.mark.requirements("EL-R14")
@@ -59,44 +58,64 @@ def _scene() -> np.ndarray:
 
 
 @pytest.fixture(scope="module")
-def tiny_weights(tmp_path_factory):
-    torch.manual_seed(0)
-    model = build_model(ArchConfig(widths=(8, 8, 8), decoder_channels=8))
-    path = tmp_path_factory.mktemp("weights") / "tiny.pt"
-    save_weights(model, path)
-    return path
+def shipped_copy(tmp_path_factory):
+    """A copy of the shipped weights with their card and checked ONNX export: what any install loads (torch runs the
+    weights; a base install, without torch, runs the export, ``el.segmentation.onnx_segmenter``)."""
+    import shutil
+
+    from el.segmentation.weights import DEFAULT_WEIGHTS
+
+    folder = tmp_path_factory.mktemp("weights")
+    for name in ("model.pt", "model.json", "model.onnx", "model.onnx.json"):
+        shutil.copyfile(DEFAULT_WEIGHTS.parent / name, folder / name)
+    return folder / "model.pt"
 
 
-def _altered(src, dst):
-    data = bytearray(src.read_bytes())
+def _altered(src, dst, suffix=".pt"):
+    """A copy of the network's files with one bit flipped in the middle of its ``suffix`` file."""
+    for name in (".pt", ".json", ".onnx", ".onnx.json"):
+        dst.with_suffix(name).write_bytes(src.with_suffix(name).read_bytes())
+    target = dst.with_suffix(suffix)
+    data = bytearray(target.read_bytes())
     data[len(data) // 2] ^= 0x01  # one flipped bit in the middle of the tensors
-    dst.write_bytes(bytes(data))
-    dst.with_suffix(".json").write_bytes(src.with_suffix(".json").read_bytes())  # the original card
+    target.write_bytes(bytes(data))
     return dst
 
 
 @pytest.mark.requirements("EL-R15")
-def test_altered_weights_are_refused_before_use(tiny_weights, tmp_path):
-    load_weights(tiny_weights)  # the intact file loads
-    bad = _altered(tiny_weights, tmp_path / "altered.pt")
+def test_altered_weights_are_refused_before_use(shipped_copy, tmp_path):
+    load_model(shipped_copy)  # the intact file loads
+    bad = _altered(shipped_copy, tmp_path / "altered.pt")
     with pytest.raises(WeightsError, match="SHA-256 mismatch") as exc:
-        load_weights(bad)
+        load_model(bad)
     assert "altered.pt" in str(exc.value)
-    with pytest.raises(WeightsError, match="SHA-256 mismatch"):
-        Segmenter.load(bad)
+    if have_torch():  # the torch loader itself checks too
+        from el.segmentation.weights import load_weights
+
+        with pytest.raises(WeightsError, match="SHA-256 mismatch"):
+            load_weights(bad)
 
 
 @pytest.mark.requirements("EL-R15")
-def test_weights_without_their_card_are_refused(tiny_weights, tmp_path):
+def test_an_altered_onnx_export_is_refused_before_use(shipped_copy, tmp_path, monkeypatch):
+    monkeypatch.setenv("UAV_EL_ENGINE", "onnx")  # the export must run (auto falls back to torch where it can)
+    bad = _altered(shipped_copy, tmp_path / "altered.pt", ".onnx")
+    with pytest.raises(WeightsError, match="SHA-256 mismatch") as exc:
+        load_model(bad)
+    assert "altered.onnx" in str(exc.value)
+
+
+@pytest.mark.requirements("EL-R15")
+def test_weights_without_their_card_are_refused(shipped_copy, tmp_path):
     lone = tmp_path / "lone.pt"
-    lone.write_bytes(tiny_weights.read_bytes())
+    lone.write_bytes(shipped_copy.read_bytes())
     with pytest.raises(WeightsError, match="model card not found"):
-        load_weights(lone)
+        load_model(lone)
 
 
 @pytest.mark.requirements("EL-R15", "EL-R06")
-def test_pipeline_with_altered_weights_takes_the_default_action(tiny_weights, tmp_path):
-    bad = _altered(tiny_weights, tmp_path / "altered.pt")
+def test_pipeline_with_altered_weights_takes_the_default_action(shipped_copy, tmp_path):
+    bad = _altered(shipped_copy, tmp_path / "altered.pt")
     el = EmergencyLanding(PipelineConfig(core=CoreConfig(working_width=128)), weights=bad)
     d = el.decide(_scene())
     assert d.action == "default" and d.reason.startswith("fault: model") and "SHA-256 mismatch" in d.reason

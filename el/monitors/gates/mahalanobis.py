@@ -4,7 +4,7 @@ Ledoit-Wolf's with ``shrinkage=None``), computed in numpy.
 
 The distance is kept exactly along the ``COMPONENTS`` directions of largest training variance; the remaining
 directions share their mean (shrunk) variance, so a fitted gate is d x k numbers, not d x d (the shipped file stays
-small). ``COMPONENTS``, ``SHRINKAGE`` and the threshold quantile were chosen on validation scenes (README)."""
+small). ``COMPONENTS``, ``SHRINKAGE`` and the threshold quantile were chosen on validation scenes (docs/results.md)."""
 
 from __future__ import annotations
 
