@@ -16,10 +16,12 @@ VERIFY_FLAGS ?=  # make demo: -q (the evidence step prints the requirement summa
 
 setup: $(VENV)/.installed
 
+# pip -qq: its errors only (a machine's pip configuration can print a warning per index it names, per package)
+
 $(VENV)/.installed: pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
-	$(VENV)/bin/pip install -q --upgrade "pip>=24"
-	$(VENV)/bin/pip install -q -c constraints.txt -e ".[dev,pdf,distributed,onnx,fast,train,docs,bench,browser]"
+	$(VENV)/bin/pip install -qq --upgrade "pip>=24"
+	$(VENV)/bin/pip install -qq -c constraints.txt -e ".[dev,pdf,distributed,onnx,fast,train,docs,bench,browser]"
 	touch $@
 
 ## The main job on the embedded default: synthetic test scenes -> shipped model -> demo campaign
