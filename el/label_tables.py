@@ -16,14 +16,17 @@ from typing import Any
 
 import numpy as np
 
+from el.class_names import check_class_names
+
 MAX_CLASSES = 256  # class ids travel as uint8
 CLASS_KEYS = ("id", "name", "rgb", "forbidden", "hazard_score", "category")
 CATEGORIES = ("road", "vehicle", "building", "person", "animal", "water", "obstacle", "bare_ground", "vegetation",
               "tree", "marker", "unknown")
 """Hazard categories a class may declare (``category``): what the ground is, whatever the label set calls it. The
-certification basis (``assurance.requirements.basis``) says which must be forbidden; road, vehicle and building
-are the paper's hazards (avoid roads at all costs; do not land on cars or buildings), water the ground a parachute
-cannot be recovered from; person and animal are listed so that a set's choice about them is visible."""
+certification basis (``assurance.requirements.basis``) says which must be forbidden, and pins the category of the
+well-known class names (``el.class_names.PINNED_CATEGORIES``: a set cannot redeclare road's); road, vehicle and
+building are the paper's hazards (avoid roads at all costs; do not land on cars or buildings), water the ground a
+parachute cannot be recovered from; person and animal are listed so that a set's choice about them is visible."""
 IGNORE_KEYS = ("rgb", "id", "counts_as", "name")
 IGNORE_COUNTS_AS = ("forbidden", "excluded")
 """How the ground truth treats an ignored pixel: ``forbidden`` (default: unknown ground cannot be shown
@@ -234,6 +237,7 @@ def validate_classes(set_name: str, classes: tuple[LabelClass, ...]) -> None:
     dup_names = sorted({x for x in names if names.count(x) > 1})
     if dup_names:
         raise ValueError(f"label set {set_name!r}: duplicate class names {dup_names}")
+    check_class_names(set_name, names)  # no look-alike of a well-known name, no two classes that look alike
     colours = [tuple(int(v) for v in c.rgb) for c in classes]
     for k, rgb in enumerate(colours):
         first = colours.index(rgb)

@@ -355,8 +355,8 @@ def load_label_set(source: str | Path) -> LabelSet:
     try:
         if isinstance(data, dict) and isinstance(data.get("hierarchy"), str):
             ref = p.parent / data["hierarchy"]
-            try:
-                data = {**data, "hierarchy": safeyaml.load_file(ref)}
+            try:  # beside the label set: a name (or a link) leading out of its folder is refused
+                data = {**data, "hierarchy": safeyaml.load_file(ref, what="hierarchy file", within=p.parent)}
             except (OSError, yaml.YAMLError) as err:
                 raise ValueError(f"hierarchy file {ref}: {err}") from None
         return LabelSet.from_dict(data)

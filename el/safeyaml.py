@@ -35,19 +35,21 @@ class BoundedSafeLoader(yaml.SafeLoader):
         return super().compose_node(parent, index)
 
 
-def safe_load(text: str | bytes, *, max_bytes: int = MAX_YAML_BYTES) -> Any:
+def safe_load(text: str | bytes, *, max_bytes: int = MAX_YAML_BYTES,
+              loader: type[BoundedSafeLoader] | None = None) -> Any:
     """Parse one YAML document like ``yaml.safe_load``, refusing aliases, documents over ``max_bytes`` and
-    documents nested deeper than ``el.userfiles.MAX_DEPTH``."""
+    documents nested deeper than ``el.userfiles.MAX_DEPTH``; ``loader``: a subclass of :class:`BoundedSafeLoader`
+    (default: it)."""
     size = len(text.encode("utf-8")) if isinstance(text, str) else len(text)
     if size > max_bytes:
         raise YamlLimitError(f"YAML document of {size} bytes exceeds the limit of {max_bytes} bytes")
 
     def parse(source: str | bytes) -> Any:
-        loader = BoundedSafeLoader(source)
+        parser = (loader or BoundedSafeLoader)(source)
         try:
-            return loader.get_single_data()
+            return parser.get_single_data()
         finally:
-            loader.dispose()
+            parser.dispose()
 
     try:
         return userfiles.parse_bounded(parse, text, where="YAML document")  # type: ignore[arg-type]
@@ -55,12 +57,14 @@ def safe_load(text: str | bytes, *, max_bytes: int = MAX_YAML_BYTES) -> Any:
         raise YamlLimitError(str(exc)) from None
 
 
-def load_file(path: str | Path, *, max_bytes: int = MAX_YAML_BYTES, what: str = "YAML file") -> Any:
-    """``safe_load`` of a file read through ``el.userfiles.read_text`` (a regular file, at most ``max_bytes``):
-    ``YamlLimitError`` naming the file when it cannot be read or is outside the limits, ``YAMLError`` when it does
-    not parse."""
+def load_file(path: str | Path, *, max_bytes: int = MAX_YAML_BYTES, what: str = "YAML file",
+              within: str | Path | None = None, loader: type[BoundedSafeLoader] = BoundedSafeLoader) -> Any:
+    """``safe_load`` of a file read through ``el.userfiles.read_text`` (a regular file, at most ``max_bytes``,
+    inside ``within`` when given): ``YamlLimitError`` naming the file when it cannot be read or is outside the
+    limits, ``YAMLError`` when it does not parse. ``loader``: a subclass of :class:`BoundedSafeLoader` (e.g. one
+    that keeps dates as text)."""
     try:
-        text = userfiles.read_text(path, what=what, max_bytes=max_bytes)
+        text = userfiles.read_text(path, what=what, max_bytes=max_bytes, within=within)
     except userfiles.UserFileError as exc:
         raise YamlLimitError(str(exc)) from None
-    return safe_load(text, max_bytes=max_bytes)
+    return safe_load(text, max_bytes=max_bytes, loader=loader)

@@ -2,7 +2,7 @@
 targets, registry, keys, report templates, fitted records (frame gates, calibration cards, learned monitors).
 
 Whoever wrote such a file may be hostile (an applicant's evidence package is read by an auditor). A plain
-``Path.read_text`` of it trusts three things this module does not:
+``Path.read_text`` of it trusts four things this module does not:
 
 - that it is a regular file: a FIFO blocks the reader for ever, ``/dev/zero`` (or a link to it) never ends.
   The path is refused unless ``stat`` says regular file, then opened with ``O_NONBLOCK`` (an open that cannot hang
@@ -10,6 +10,12 @@ Whoever wrote such a file may be hostile (an applicant's evidence package is rea
   byte is read;
 - that it is small: its size is checked against a cap for its kind before reading, and the read stops at
   ``cap + 1`` bytes, so a file that grows while read is refused too;
+- where it lies: a path that resolves (symbolic links followed) under ``/proc``, ``/sys`` or ``/dev`` is refused
+  whatever ``stat`` says (``/proc/self/pagemap`` is a "regular file" of size 0 that reads for hundreds of GB;
+  ``/proc/self/environ`` holds the CI's secrets), and, given ``within=FOLDER``, a path that resolves outside that
+  folder (a symbolic link out of a template folder, which a tar keeps) is refused naming the link and its target.
+  The check is made on the path before it is opened and again on what was opened (``/proc/self/fd``), so a link
+  swapped in between is caught;
 - that its structure is shallow: :func:`check_depth` bounds the nesting of a parsed document without recursion,
   :func:`parse_bounded` turns a parser's ``RecursionError`` into a refusal, and :func:`toml_nesting` measures a
   TOML text's nesting (brackets, braces, dotted keys) before ``tomllib`` sees it (``tomllib`` recurses on
@@ -38,10 +44,22 @@ MAX_KEY_BYTES = 1 << 20
 MAX_POSES_BYTES = 2 << 20
 """A ``poses.csv`` sidecar: ~20 bytes a frame, so about 100 000 frames of one sequence (an hour at 30 fps is
 108 000; each frame is an image of the sequence). Parsed, 2 MiB is ~3 s and ~60 MB here (8 MiB: 14 s, 230 MB)."""
+MAX_META_BYTES = 1 << 20
+"""A scene's ``meta/*.json`` (pose, seed, style, class shares: about 2 kB), read by the evidence and the campaign:
+data folders are not signed, so one may be a FIFO or ``/dev/zero``."""
 MAX_RECORD_BYTES = 64 << 20
 """A fitted record (``el.records``: frame gate, calibration card, learned monitor). The largest kind is a knn frame
 gate, which keeps its training frames' features (frames x dims numbers, ~20 bytes each: the shipped Mahalanobis
 gate is 0.65 MB); 64 MiB is ~3 million numbers."""
+MAX_MODEL_BYTES = 8 << 30
+"""A model file that is hashed (weights, an ONNX file or its external data, a learned monitor): read in chunks, so
+memory stays constant; the cap bounds the time (8 GiB: a network of 2 billion float32 parameters; the shipped
+network is 8 MB)."""
+MAX_HASHED_BYTES = MAX_MODEL_BYTES
+"""The default cap of :func:`sha256` (and ``el.hashing.sha256_file``): the largest file the toolkit hashes is a
+model."""
+KERNEL_ROOTS = ("/proc", "/sys", "/dev")
+"""File systems that are the kernel's interface, not files: never a user's file, whatever ``stat`` says."""
 MAX_DEPTH = 32
 """Nesting of a parsed settings document (the deepest shipped one, a class hierarchy, nests 6 levels)."""
 
@@ -55,37 +73,126 @@ class UserFileError(UavElError, ValueError):
     """A user's file refused before or while it is read: one line naming the file and the problem."""
 
 
-def read_bytes(path: str | Path, *, what: str, max_bytes: int) -> bytes:
+def read_bytes(path: str | Path, *, what: str, max_bytes: int, within: str | Path | None = None) -> bytes:
     """The bytes of the regular file ``path`` (a ``what``, e.g. "waivers file": how messages name it), at most
     ``max_bytes`` of them.
 
     Refused (``UserFileError``) without blocking and before any read: a path that is missing or cannot be
     opened, anything but a regular file (a FIFO, a device, a socket, a folder; a symbolic link is followed and
-    judged by what it points at), a file over ``max_bytes``. A file that grows past the cap while read is
-    refused too: at most ``max_bytes + 1`` bytes are ever read.
+    judged by what it points at), a path resolving under ``/proc``, ``/sys`` or ``/dev`` (:data:`KERNEL_ROOTS`),
+    with ``within`` a path resolving outside that folder (:func:`check_path`), a file over ``max_bytes``. A file
+    that grows past the cap while read is refused too: at most ``max_bytes + 1`` bytes are ever read.
     """
     p = Path(path)
-    flags = os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_NOCTTY", 0) | getattr(os, "O_CLOEXEC", 0)
     try:
-        _check_regular(p, os.stat(p), what)  # a device is not even opened (opening one may act on it)
-        fd = os.open(p, flags)
-    except FileNotFoundError:
-        raise UserFileError(f"{p}: cannot read {what}: no such file") from None
+        fd = _open_regular(p, what, within)
     except OSError as exc:
-        raise UserFileError(f"{p}: cannot read {what}: {exc.strerror or exc}") from None
+        raise _os_refusal(p, what, exc) from None
     try:
         info = os.fstat(fd)
-        _check_regular(p, info, what)  # what was opened, if the path changed since the stat
         if info.st_size > max_bytes:
             raise UserFileError(f"{p}: {info.st_size} bytes exceeds the limit of {max_bytes} bytes for a {what}")
         data = _read_at_most(fd, max_bytes + 1)
     except OSError as exc:
-        raise UserFileError(f"{p}: cannot read {what}: {exc.strerror or exc}") from None
+        raise _os_refusal(p, what, exc) from None
     finally:
         os.close(fd)
     if len(data) > max_bytes:
         raise UserFileError(f"{p}: grew past the limit of {max_bytes} bytes for a {what} while read")
     return data
+
+
+def sha256(path: str | Path, *, what: str = "file", max_bytes: int = MAX_HASHED_BYTES,
+           within: str | Path | None = None, chunk: int = 1 << 22) -> str:
+    """Hex SHA-256 of the regular file ``path``, read in chunks of ``chunk`` bytes (memory stays constant), refused
+    as :func:`read_bytes` refuses (a FIFO, a device, ``/proc``, ``/sys``, ``/dev``, outside ``within``, over
+    ``max_bytes``, also while read). A missing or unopenable file raises the ``OSError`` itself
+    (``FileNotFoundError``: as ``open`` would), so callers that handle those keep working."""
+    import hashlib
+
+    p = Path(path)
+    fd = _open_regular(p, what, within)
+    try:
+        info = os.fstat(fd)
+        if info.st_size > max_bytes:
+            raise UserFileError(f"{p}: {info.st_size} bytes exceeds the limit of {max_bytes} bytes for a {what}")
+        h, seen = hashlib.sha256(), 0
+        while block := os.read(fd, min(chunk, max_bytes + 1 - seen) or 1):
+            seen += len(block)
+            if seen > max_bytes:
+                raise UserFileError(f"{p}: grew past the limit of {max_bytes} bytes for a {what} while read")
+            h.update(block)
+    finally:
+        os.close(fd)
+    return h.hexdigest()
+
+
+def _os_refusal(p: Path, what: str, exc: OSError) -> UserFileError:
+    if isinstance(exc, FileNotFoundError):
+        return UserFileError(f"{p}: cannot read {what}: no such file")
+    return UserFileError(f"{p}: cannot read {what}: {exc.strerror or exc}")
+
+
+def _open_regular(p: Path, what: str, within: str | Path | None) -> int:
+    """A read-only descriptor of the regular file ``p``, checked before it is opened (``stat``: a device is not
+    even opened, as opening one may act on it; where it resolves: :func:`check_path`) and after (``fstat`` and the
+    path of what was opened, if the path changed meanwhile). ``OSError`` as raised; refusals as UserFileError."""
+    flags = os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_NOCTTY", 0) | getattr(os, "O_CLOEXEC", 0)
+    _check_regular(p, os.stat(p), what)
+    check_path(p, what=what, within=within)
+    fd = os.open(p, flags)
+    try:
+        _check_regular(p, os.fstat(fd), what)  # what was opened, if the path changed since the stat
+        opened = _fd_path(fd)
+        if opened is not None:  # where what was opened lies (a link swapped in after the check above)
+            _check_location(p, Path(opened), what, within)
+    except BaseException:
+        os.close(fd)
+        raise
+    return fd
+
+
+def _fd_path(fd: int) -> str | None:
+    """The path of what ``fd`` refers to (Linux: ``/proc/self/fd``), None where the system does not say."""
+    try:
+        target = os.readlink(f"/proc/self/fd/{fd}")
+    except OSError:
+        return None
+    return target if target.startswith("/") else None
+
+
+def check_path(path: str | Path, *, what: str, within: str | Path | None = None) -> Path:
+    """The real path of ``path`` (every symbolic link followed), or ``UserFileError`` when it is no place for a
+    user's file: under ``/proc``, ``/sys`` or ``/dev`` (:data:`KERNEL_ROOTS`), or, with ``within`` (a folder),
+    outside that folder (itself resolved): a symbolic link leading out of it is named with its target, as is a
+    ``..`` path. Nothing is opened or read; a path that does not exist is not refused here (reading it is)."""
+    p = Path(path)
+    real = Path(os.path.realpath(p))
+    _check_location(p, real, what, within)
+    return real
+
+
+def _check_location(p: Path, real: Path, what: str, within: str | Path | None) -> None:
+    for root in KERNEL_ROOTS:
+        if real == Path(root) or real.is_relative_to(root):
+            how = f"a symbolic link to {_link_target(p)}, which resolves to {real}" if p.is_symlink() else \
+                f"resolves to {real}"
+            raise UserFileError(f"{p}: {how}, under {root}: a {what} must be a regular file, not a file of the "
+                                f"kernel's {root} interface")
+    if within is None:
+        return
+    folder = Path(os.path.realpath(within))
+    if real == folder or not real.is_relative_to(folder):
+        how = f"a symbolic link to {_link_target(p)}" if p.is_symlink() else f"resolves to {real}"
+        raise UserFileError(f"{p}: {how}, outside its folder {within}: a {what} must lie inside its folder "
+                            "(a symbolic link out of it is refused)")
+
+
+def _link_target(p: Path) -> str:
+    try:
+        return os.readlink(p)
+    except OSError:
+        return str(os.path.realpath(p))
 
 
 def _check_regular(p: Path, info: os.stat_result, what: str) -> None:
@@ -95,13 +202,15 @@ def _check_regular(p: Path, info: os.stat_result, what: str) -> None:
         raise UserFileError(f"{p}: {kind}, not a regular file (a {what} must be a regular file)")
 
 
-def not_regular(path: str | Path, *, what: str) -> str | None:
-    """Why ``path`` cannot be read as a ``what`` (one line naming it), judged by ``stat`` alone, so without opening
-    or reading it; None for a regular file. For a check that a file named in settings is there, before it is read:
-    "no such file" for nothing at all, else what it is instead (a FIFO is not reported as missing)."""
+def not_regular(path: str | Path, *, what: str, within: str | Path | None = None) -> str | None:
+    """Why ``path`` cannot be read as a ``what`` (one line naming it), judged by ``stat`` and where it resolves
+    (:func:`check_path`: ``/proc``, ``/sys``, ``/dev``, outside ``within``), so without opening or reading it; None
+    for a regular file. For a check that a file named in settings is there, before it is read: "no such file" for
+    nothing at all, else what it is instead (a FIFO is not reported as missing)."""
     p = Path(path)
     try:
         _check_regular(p, os.stat(p), what)
+        check_path(p, what=what, within=within)
     except FileNotFoundError:
         return f"{p}: no such file"
     except OSError as exc:
@@ -123,14 +232,28 @@ def _read_at_most(fd: int, limit: int) -> bytes:
     return b"".join(chunks)
 
 
-def read_text(path: str | Path, *, what: str, max_bytes: int, encoding: str = "utf-8") -> str:
+def read_text(path: str | Path, *, what: str, max_bytes: int, encoding: str = "utf-8",
+              within: str | Path | None = None) -> str:
     """:func:`read_bytes`, decoded (``encoding``; ``utf-8-sig`` drops a byte-order mark); text that does not
     decode is refused naming the byte."""
-    data = read_bytes(path, what=what, max_bytes=max_bytes)
+    data = read_bytes(path, what=what, max_bytes=max_bytes, within=within)
     try:
         return data.decode(encoding)
     except UnicodeDecodeError as exc:
         raise UserFileError(f"{path}: the {what} is not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+
+
+def read_json(path: str | Path, *, what: str, max_bytes: int, within: str | Path | None = None,
+              max_depth: int = MAX_DEPTH) -> Any:
+    """:func:`read_text`, parsed as JSON nested at most ``max_depth`` deep (:func:`parse_bounded`); text that is
+    not JSON is refused too (``UserFileError`` naming the file)."""
+    import json
+
+    text = read_text(path, what=what, max_bytes=max_bytes, within=within)
+    try:
+        return parse_bounded(json.loads, text, where=str(path), max_depth=max_depth)
+    except json.JSONDecodeError as exc:
+        raise UserFileError(f"{path}: the {what} is not valid JSON ({exc})") from None
 
 
 def parse_bounded(parse: Callable[[str], T], text: str, *, where: str, max_depth: int = MAX_DEPTH) -> T:

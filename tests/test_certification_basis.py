@@ -33,15 +33,17 @@ def test_looser_targets_and_a_road_declared_safe_are_deviations():
     assert names == ["min_images_per_perturbation", "unsafe_landing_bound", "confidence", "class:road"]
     text = {d.name: d.text() for d in found}
     assert "0.999" in text["unsafe_landing_bound"] and "0.05" in text["unsafe_landing_bound"]
-    assert "not accepted" in text["class:road"] and "--accept-deviation class:road" in text["class:road"]
+    assert "not accepted" in text["class:road"] and "--accept-deviation class:road=safe" in text["class:road"]
     assert deviations({"unsafe_landing_bound": 0.01, "confidence": 0.99}, labels=UAVID) == []  # stricter: none
 
 
-def test_a_deviation_is_accepted_only_by_its_name():
-    found = deviations({"unsafe_landing_bound": 0.1}, ["unsafe_landing_bound"], labels=UAVID)
+def test_a_deviation_is_accepted_only_by_its_name_and_value():
+    found = deviations({"unsafe_landing_bound": 0.1}, ["unsafe_landing_bound=0.1"], labels=UAVID)
     assert [(d.name, d.accepted) for d in found] == [("unsafe_landing_bound", True)]
     with pytest.raises(ValueError, match="does not deviate from the basis on it"):
-        deviations({}, ["confidence"], labels=UAVID)
+        deviations({}, ["confidence=0.5"], labels=UAVID)
+    with pytest.raises(ValueError, match="NAME=VALUE"):  # a plain name binds no value: refused
+        deviations({"unsafe_landing_bound": 0.1}, ["unsafe_landing_bound"], labels=UAVID)
 
 
 def test_a_safe_class_without_a_category_cannot_be_checked():

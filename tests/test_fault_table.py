@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import pytest
 
@@ -126,16 +127,63 @@ def test_issue_31_gate_cases_with_a_test_session_behave(workspace):
 
 
 def test_trust_boundary_cases_behave(workspace):
-    """An applicant's templates (T1..T4): no code runs, no local file or network URL is read, no contradicting verdict
-    is printed; each is exit 2 with one line naming the problem."""
+    """An applicant's templates and files (T1.., T25.., T50..): no code runs, no local file or network URL is read,
+    the first page states the gate's own verdict whatever the folder holds (checked on the report each case leaves),
+    and a template that loops, allocates or recurses is exit 2 naming it."""
     from assurance.fault_injection.applicant import APPLICANT_CASES
 
     assert {c.id for c in APPLICANT_CASES} <= {c.id for c in fi.CASES}
-    rows = fi.run_cases(workspace, APPLICANT_CASES, main=main)
+    own = [c for c in APPLICANT_CASES if not re.match(r"T[34]\d-", c.id)]  # T30.., T40..: their own tests below
+    rows = fi.run_cases(workspace, own, main=main)
     for r in rows:
         assert r["result"] == "pass", r
     assert not (workspace / "T1-executed").exists()
     by = {r["case"]: r for r in rows}
     if "T2-template-file-attachment" in by:  # with the PDF renderer (the pdf extra) installed
-        assert "stand-in-signing-key.pem" in by["T2-template-file-attachment"]["outcome"]
-        assert not (workspace / "rep-attach" / "evidence.pdf").exists()
+        assert (workspace / "rep-attach" / "evidence.pdf").exists()
+        assert "stand-in-signing-key" not in (workspace / "rep-attach" / "evidence.html").read_text("utf-8")
+
+
+def _issue_50_reader_cases():
+    from assurance.fault_injection.trust import TRUST_CASES
+
+    return [c for c in TRUST_CASES if c.id[:3] in {f"T3{n}" for n in range(10)}]
+
+
+@pytest.mark.parametrize("case", _issue_50_reader_cases(), ids=lambda c: c.id)
+def test_issue_50_reader_cases_behave(workspace, case):
+    """One reader for every applicant file (T30..T39): a link out of a template or label-set folder, a /proc path
+    or a FIFO as a recorded model file, a FIFO or /dev/zero as scene meta, a table past its row cap, a module of the
+    working folder, braces in a system fact, an impossible waiver date: each behaves (never hangs, never a
+    traceback), one line naming the file and the problem where it is refused."""
+    assert case.id in {c.id for c in fi.CASES}
+    row = fi.run_case(case, workspace, main=main)
+    assert row["result"] == "pass", row
+    if case.id.startswith("T30"):
+        assert "OUTSIDE-SECRET" not in "".join(p.read_text("utf-8") for p in (workspace / "rep-template-link")
+                                               .glob("*.html"))
+    if case.id.startswith("T34"):
+        assert not (workspace / "applicant-cwd" / "IMPORTED").exists()
+    if case.id.startswith("T35"):
+        html = (workspace / "rep-braces" / "evidence.html").read_text("utf-8")
+        assert "Cam {A} {confidence:pct}" in html and "Cam {A} 95%" not in html
+
+
+def _issue_50_basis_cases():
+    from assurance.fault_injection.basis_cases import BASIS_CASES
+
+    return [c for c in BASIS_CASES if c.id[:3] in {f"T4{n}" for n in range(10)}]
+
+
+@pytest.mark.parametrize("case", _issue_50_basis_cases(), ids=lambda c: c.id)
+def test_issue_50_basis_cases_behave(workspace, case):
+    """Everything that judged the run is pinned, the basis owns the hazard categories, an acceptance binds its value
+    (T40..T49): a label set swapped back after the run is a gate problem naming its file, road declared safe as
+    bare_ground is the deviation class:road, a look-alike of road is refused (exit 2), 0.06 does not accept 0.999 and
+    a plain --accept-deviation NAME is refused."""
+    assert case.id in {c.id for c in fi.CASES}
+    row = fi.run_case(case, workspace, main=main)
+    assert row["result"] == "pass", row
+    if case.id.startswith("T40"):  # the auditor's report says it on its first page too
+        html = (workspace / "rep-label-pin" / "evidence.html").read_text("utf-8")
+        assert "labels-pinned.yaml: changed since the run was made" in html

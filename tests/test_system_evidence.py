@@ -62,20 +62,19 @@ def test_requirement_results_of_another_system_file_are_refused(system_run, tmp_
     assert system_problems(system_run["system"], man, ok, system_run["run"]) == []
 
 
-def test_a_template_folder_overrides_the_packaged_templates_file_by_file(system_run, tmp_path):
-    from assurance.evidence.render import TEMPLATES_DIR
-
+def test_a_system_files_section_templates_replace_the_packaged_ones_when_asked(system_run, tmp_path):
     tpl = system_run["root"] / "tpl"
     tpl.mkdir(exist_ok=True)
-    css = (TEMPLATES_DIR / "evidence.css").read_text() + "\n/* ACME house style */\n"
-    (tpl / "evidence.css").write_text(css)
+    (tpl / "section_limitations.html.j2").write_text("<section id='limitations'><p>ACME limits</p></section>")
+    (tpl / "evidence.css").write_text("/* ACME house style */\n")  # never used: the stylesheet is the toolkit's
     path = system_run["root"] / "styled.toml"
     path.write_text(system_run["system"].path.read_text() + '\n[report]\ntemplates = "tpl"\n'
                     if "[report]" not in system_run["system"].path.read_text() else
                     system_run["system"].path.read_text().replace("[report]", '[report]\ntemplates = "tpl"'))
     styled = load_system(path)
     report = generate(system_run["run"], tmp_path / "styled", pdf=False, n_boot=50, system=styled,
-                      requirements=None)
+                      requirements=None, system_templates=True)
     html = report.html.read_text()
-    assert "ACME house style" in html and "What was assessed" in html  # the rest from the packaged templates
+    assert "ACME limits" in html and "What was assessed" in html  # the rest from the packaged templates
+    assert "ACME house style" not in html and "<code>evidence.css</code>" in html
     assert any("another system file" in p for p in report.problems)  # a different file than the run's

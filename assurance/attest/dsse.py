@@ -94,13 +94,17 @@ def write_envelope(path: str | Path, envelope: Mapping) -> None:
 
 def read_envelope(path: str | Path) -> dict:
     """Read an envelope file; ``AttestationError`` naming the file when it is missing, too large or not JSON."""
+    from el import userfiles
+
     p = Path(path)
     if not p.is_file():
         raise AttestationError(f"{p}: missing (no signed attestation)")
     if p.stat().st_size > MAX_ENVELOPE_BYTES:
         raise AttestationError(f"{p}: {p.stat().st_size} bytes, more than an attestation may hold")
-    try:
-        data = json.loads(p.read_text(encoding="utf-8"))
+    try:  # bounded: a link to /proc (a "regular file" of size 0) or a file that grows is refused
+        data = json.loads(userfiles.read_text(p, what="signed attestation", max_bytes=MAX_ENVELOPE_BYTES))
+    except userfiles.UserFileError as exc:
+        raise AttestationError(str(exc)) from None
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise AttestationError(f"{p}: not a JSON envelope ({exc})") from None
     if not isinstance(data, dict):

@@ -19,6 +19,7 @@ from assurance.attest.dsse import read_envelope, write_envelope
 from assurance.attest.keys import SigningKey
 from assurance.attest.statement import make_statement, open_statement, sign_statement, subject_problems
 from assurance.campaign import readouts
+from assurance.campaign.label_pin import predicate_fields
 from el.hashing import sha256_file
 
 if TYPE_CHECKING:
@@ -57,6 +58,7 @@ def _predicate(run: Path, man: Mapping[str, Any], summary: Mapping[str, Any] | N
         "monitor_models": man.get("monitor_models") or {},
         "data_sha256": (man.get("data") or {}).get("sha256"),
         "system_sha256": (man.get("system") or {}).get("sha256"),
+        **predicate_fields(man),  # the label set and class hierarchy that judged the readouts (label_pin)
         "code": man.get("code") or {},
     }
 

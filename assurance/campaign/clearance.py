@@ -7,12 +7,11 @@ with the pose the scene was **rendered** with (its meta), not the pose the plann
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
-from assurance.dataio.uavid import Sample
+from assurance.dataio.uavid import Sample, read_meta
 from assurance.scenes.world import World, pixel_clearance_m
 from el.camera import CameraGeometry, Intrinsics, Pose
 
@@ -21,12 +20,16 @@ _CACHE: dict[str, tuple[World, dict]] = {}
 
 def load_meta(path: str | Path) -> dict:
     """A scene's meta JSON; ValueError naming the file when missing or malformed."""
+    from el.userfiles import UserFileError
+
     path = Path(path)
-    try:
-        return json.loads(path.read_text(encoding="utf-8"))
+    try:  # read bounded (a FIFO or /dev/zero there is refused, naming it)
+        return read_meta(path)
     except FileNotFoundError:
         raise ValueError(f"{path}: no meta file (only synthetic scenes carry a world model)") from None
-    except (OSError, json.JSONDecodeError) as exc:
+    except UserFileError:
+        raise
+    except (OSError, ValueError) as exc:
         raise ValueError(f"{path}: unreadable meta file: {exc}") from None
 
 

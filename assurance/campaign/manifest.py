@@ -27,14 +27,15 @@ if TYPE_CHECKING:
 
 
 def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *, threads: int | None = None,
-             segmenter: str = "weights", model: Any = None, system: Mapping[str, Any] | None = None
-             ) -> dict[str, Any]:
+             segmenter: str = "weights", model: Any = None, system: Mapping[str, Any] | None = None,
+             labels: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """Identity of a campaign: config, seeds, versions, git commit, hashes of weights and data.
 
     ``threads`` (torch threads per worker) is recorded because floating-point sums, hence the
     readouts' last digits, depend on it: a re-run reproduces the readouts with the same count.
     ``model``: the loaded model, for the weights hash a model registered by name reports. ``system``: the
-    record of the system file the campaign assesses (``SystemFile.record()``).
+    record of the system file the campaign assesses (``SystemFile.record()``). ``labels``: the content hashes of the
+    label set and class hierarchy the readouts are judged with (``assurance.campaign.label_pin.flown_labels``).
     """
     from el.hashing import sha256_file
 
@@ -58,6 +59,7 @@ def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *,
         "threads_per_worker": threads,
         "segmenter": segmenter,
         **({"system": dict(system)} if system is not None else {}),
+        **({"labels": dict(labels)} if labels is not None else {}),
         "code": code_identity(),
         "versions": {"python": sys.version.split()[0], "numpy": np.__version__,
                      "torch": torch_version(), "onnxruntime": _dist_version("onnxruntime"),

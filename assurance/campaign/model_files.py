@@ -4,6 +4,10 @@ A network's weights and card, the learned monitors' model files, and the package
 network, the learned monitor, the calibration card, the out-of-domain gate). Each self-hashed file only proves it
 was not damaged; re-hashing one after an edit (a monitor made to accept everything) hides the edit from the file
 itself, not from the run's signed record: ``changed_model_files`` names every file that differs now.
+
+Every file is hashed through the bounded reader (``el.userfiles``, at most ``MAX_MODEL_BYTES``, in chunks): a
+manifest entry the applicant wrote (and re-signed) naming ``/proc/self/pagemap``, a FIFO or a device is a problem
+naming it, never a read that does not end.
 """
 
 from __future__ import annotations
@@ -15,6 +19,7 @@ from typing import Any
 from assurance.code_identity import install_root
 from el.hashing import sha256_file
 from el.labels import LabelSet
+from el.userfiles import MAX_MODEL_BYTES, UserFileError
 
 PACKAGED = ("el/monitors/data", "el/segmentation/weights")
 """Folders (under the install root) of the packaged models and their cards."""
@@ -71,19 +76,29 @@ def model_files(weights: Mapping[str, Any] | None, monitors: Sequence[str], labe
         d = root / folder
         if d.is_dir():
             paths += [p for p in d.iterdir() if p.suffix in SUFFIXES]
-    return {_label(p): sha256_file(p) for p in sorted(set(paths)) if p.is_file()}
+    return {_label(p): sha256_file(p, what="model file", max_bytes=MAX_MODEL_BYTES)
+            for p in sorted(set(paths)) if p.is_file()}
 
 
 def changed_model_files(recorded: Mapping[str, str] | None) -> tuple[list[str], list[str]]:
-    """(problems, unchecked): a recorded model file that differs now, one line each naming it and both hashes;
-    the files not found here (an auditor without the user's weights), which cannot be checked."""
+    """(problems, unchecked): a recorded model file that differs now, one line each naming it and both hashes, or
+    one that cannot be a model file (a FIFO, a device, a path under ``/proc``, ``/sys`` or ``/dev``, a file over
+    ``MAX_MODEL_BYTES``: refused unread, named); the files not found here (an auditor without the user's weights),
+    which cannot be checked."""
     problems, unchecked = [], []
     for label, digest in sorted((recorded or {}).items()):
         path = _resolve(label)
-        if not path.is_file():
+        try:
+            now = sha256_file(path, what="model file", max_bytes=MAX_MODEL_BYTES)
+        except FileNotFoundError:
             unchecked.append(label)
             continue
-        now = sha256_file(path)
+        except (OSError, UserFileError) as exc:
+            why = str(exc) if isinstance(exc, UserFileError) else str(exc.strerror or exc)
+            why = why.removeprefix(f"{path}: ")  # the refusal names the file: the line does already
+            problems.append(f"{label}: a model file the run records, refused unread ({why}); the run's evidence "
+                            "cannot be shown to be about the file it names")
+            continue
         if now != digest:
             problems.append(f"{label}: changed since the run was made (SHA-256 {digest[:12]} then, {now[:12]} now): "
                             "the run's evidence is about the file as it was; re-run the campaign")

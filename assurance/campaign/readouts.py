@@ -14,11 +14,18 @@ complete or absent: an interrupted campaign never leaves half a shard, and a re-
 shards that exist **and verify**. The hashes make a run tamper-evident: ``check_shard`` names the
 file of a shard that no longer matches its SHA256SUMS or the index (altered, truncated, missing),
 and ``assurance.campaign.integrity.verify_run`` checks a whole run and computes its digest.
+
+Hashes prove only that a table is the one the runner (or whoever re-sealed and re-signed it) wrote, not that it
+is small: a 9 MB ``candidates.parquet`` of 100 million rows fills 8 GB once loaded. Every table is therefore read
+through :func:`read_table_file`: the file through the bounded reader (a regular file inside the run, at most
+``MAX_TABLE_FILE_BYTES``), then its Parquet footer (rows, columns, decoded bytes) checked against caps derived from
+the manifest (:func:`table_caps`) before one row is decoded.
 """
 
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 import os
 import re
@@ -60,6 +67,23 @@ COLUMNS: dict[str, tuple[str, ...]] = {
 """Columns every loaded table has (a faulted task's row holds only the task's keys and the fault)."""
 _SAFE = re.compile(r"[^A-Za-z0-9_.-]+")
 
+MAX_CANDIDATES_PER_FRAME = 10_000
+"""Rows one monitor configuration may add to a table for one task (one frame): the kernel keeps about ``n_star``
+(20 by default, at most 1000) representatives, at least one a region; 10 000 is 500 times the default. A task's
+shard may hold ``monitors x MAX_CANDIDATES_PER_FRAME`` rows in either table (``images`` holds one a configuration)."""
+MAX_RUN_ROWS = 20_000_000
+"""Rows one table of a whole run may hold, whatever its manifest says (about 1.6 GB loaded at ~80 bytes a row):
+a run of 250 000 tasks (the manifest's own cap, ``MAX_RUN_JSON_BYTES``) x 3 configurations x 20 candidates is
+15 million."""
+MAX_TABLE_FILE_BYTES = 256 << 20
+"""A shard's Parquet file on disk (an honest one is a few kB: one frame's readouts)."""
+MAX_TABLE_DECODED_BYTES = 512 << 20
+"""A shard's table once decoded, by its footer's uncompressed sizes (a few long strings compress well too)."""
+MAX_RUN_DECODED_BYTES = 4 << 30
+"""One table of a whole run once decoded, by the footers' uncompressed sizes."""
+MAX_TABLE_COLUMNS = 256
+"""Columns of a shard's table (the runner writes about 40)."""
+
 
 def shard_name(perturbation: str, severity: int, key: str) -> str:
     """Folder name of a task's shard, e.g. ``fog-s3__seq00_000012-1f3a9c0b2d4e6f70``: a readable prefix, then 16 hex
@@ -74,7 +98,7 @@ def init_run(run_dir: Path, manifest: dict[str, Any]) -> None:
     run_dir.mkdir(parents=True, exist_ok=True)
     path = run_dir / "manifest.json"
     if path.exists():
-        old = json.loads(path.read_text())
+        old = read_manifest(run_dir)  # bounded
         if old.get("format") in OLD_FORMATS:
             raise RunError(f"{run_dir}: a run of readouts format {old['format']} (shard names that could collide, a "
                            f"data hash without meta/*.json); it still reads with `uav-el table` and `uav-el evidence`, "
@@ -153,11 +177,17 @@ def check_shard(run_dir: str | Path, name: str, expected: Mapping[str, str] | No
     sums = read_sums(folder)
     if sums is None:
         return f"{SUMS} missing or malformed"
+    from el.userfiles import UserFileError
+
     for f in shard_files():
         path = folder / f
         if not path.is_file():
             return f"{f} missing"
-        if sha256_file(path) != sums[f]:
+        try:  # a regular file inside the run, never /proc or a device through a link
+            digest = sha256_file(path, what="readouts table", max_bytes=MAX_TABLE_FILE_BYTES, within=run_dir)
+        except (OSError, UserFileError) as exc:
+            return f"{f} unreadable ({exc})"
+        if digest != sums[f]:
             return f"{f} differs from its {SUMS} (altered or truncated)"
     if expected is not None and dict(expected) != sums:
         diff = sorted(f for f in shard_files() if expected.get(f) != sums.get(f))
@@ -181,8 +211,9 @@ def shard_done(run_dir: Path, name: str) -> bool:
     if (folder / SUMS).exists() or has_integrity(run_dir):
         return check_shard(run_dir, name) is None
     try:  # a legacy shard: done if both tables read (a truncated file does not)
+        caps = table_caps(read_manifest(run_dir))
         for f in shard_files():
-            pd.read_parquet(folder / f)
+            read_table_file(folder / f, max_rows=caps[0])
     except Exception:
         return False
     return True
@@ -278,14 +309,96 @@ def core_hazard(images: pd.DataFrame) -> pd.Series:
     return images["h_top"].fillna(images["h_default"])
 
 
+def table_caps(manifest: Mapping[str, Any]) -> tuple[int, int]:
+    """(rows of one shard's table, rows of one table of the whole run) a run's tables may hold: a task (a shard)
+    ``configurations x MAX_CANDIDATES_PER_FRAME``, the run its tasks (the larger of the manifest's ``tasks`` and
+    its task list) times that, both at most ``MAX_RUN_ROWS``."""
+    config = manifest.get("config") if isinstance(manifest.get("config"), Mapping) else {}
+    monitors = config.get("monitors") if isinstance(config.get("monitors"), list | tuple) else []
+    declared = manifest.get("tasks")
+    order = manifest.get("shard_order")
+    tasks = max(declared if isinstance(declared, int) and not isinstance(declared, bool) else 0,
+                len(order) if isinstance(order, list) else 0, 1)
+    per_task = max(1, len(monitors)) * MAX_CANDIDATES_PER_FRAME
+    return min(per_task, MAX_RUN_ROWS), min(tasks * per_task, MAX_RUN_ROWS)
+
+
+def read_table_file(path: str | Path, *, max_rows: int, within: str | Path | None = None,
+                    max_decoded: int = MAX_TABLE_DECODED_BYTES) -> pd.DataFrame:
+    """One shard's Parquet table, read bounded: the file through ``el.userfiles`` (a regular file, inside
+    ``within`` when given, at most ``MAX_TABLE_FILE_BYTES``), then refused (``RunError`` naming it) before any row
+    is decoded when its footer declares more than ``max_rows`` rows, ``MAX_TABLE_COLUMNS`` columns or
+    ``max_decoded`` bytes uncompressed."""
+    data, _, _ = _checked_table(Path(path), max_rows=max_rows, within=within, max_decoded=max_decoded)
+    return _decode_table(Path(path), data, max_rows)
+
+
+def _checked_table(path: Path, *, max_rows: int, within: str | Path | None, max_decoded: int
+                   ) -> tuple[bytes, int, int]:
+    """(the file's bytes, the rows and the decoded bytes its footer declares), refused as ``read_table_file``
+    says; nothing decoded yet."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from el import userfiles
+
+    try:
+        data = userfiles.read_bytes(path, what="readouts table", max_bytes=MAX_TABLE_FILE_BYTES, within=within)
+    except userfiles.UserFileError as exc:
+        raise RunError(str(exc)) from None
+    try:
+        meta = pq.ParquetFile(pa.BufferReader(data)).metadata
+    except (pa.ArrowException, OSError, ValueError) as exc:
+        raise RunError(f"{path}: not a readable Parquet table ({exc})") from None
+    rows = max(meta.num_rows, sum(meta.row_group(i).num_rows for i in range(meta.num_row_groups)))
+    decoded = sum(meta.row_group(i).total_byte_size for i in range(meta.num_row_groups))
+    if rows > max_rows:
+        raise RunError(f"{path}: {rows} rows exceeds the limit of {max_rows} rows for one task's readouts "
+                       f"(its monitor configurations x {MAX_CANDIDATES_PER_FRAME} candidates); refused before "
+                       "it is loaded")
+    if meta.num_columns > MAX_TABLE_COLUMNS:
+        raise RunError(f"{path}: {meta.num_columns} columns exceeds the limit of {MAX_TABLE_COLUMNS} for a readouts "
+                       "table")
+    if decoded > max_decoded:
+        raise RunError(f"{path}: {decoded} bytes once decoded exceeds the limit of {max_decoded} bytes for one "
+                       "task's readouts; refused before it is loaded")
+    return data, rows, decoded
+
+
+def _decode_table(path: Path, data: bytes, max_rows: int) -> pd.DataFrame:
+    import pyarrow as pa
+
+    try:
+        frame = pd.read_parquet(io.BytesIO(data))
+    except (pa.ArrowException, OSError, ValueError) as exc:
+        raise RunError(f"{path}: not a readable Parquet table ({exc})") from None
+    if len(frame) > max_rows:  # a footer that under-declared its rows
+        raise RunError(f"{path}: {len(frame)} rows exceeds the limit of {max_rows} rows for one task's readouts")
+    return frame
+
+
 def load_table(run_dir: str | Path, table: str) -> pd.DataFrame:
-    """Concatenate one table over every finished shard, in a fixed (sorted) order."""
+    """Concatenate one table over every finished shard, in a fixed (sorted) order. Each shard is read bounded
+    (:func:`read_table_file`: a regular file inside the run, its footer checked before a row is decoded), and the
+    rows and decoded bytes of the shards so far are checked against the run's caps (:func:`table_caps`,
+    ``MAX_RUN_DECODED_BYTES``) before the next is decoded: ``RunError`` naming the run past either."""
     if table not in TABLES:
         raise ValueError(f"unknown table {table!r}; valid: {TABLES}")
-    read_manifest(run_dir)
-    frames = [pd.read_parquet(p / f"{table}.parquet") for p in shard_dirs(run_dir)
-              if (p / "images.parquet").is_file()]
-    frames = [f for f in frames if len(f)]
+    per_shard, per_run = table_caps(read_manifest(run_dir))
+    root = Path(run_dir).resolve()
+    frames, rows, decoded = [], 0, 0
+    for p in (d / f"{table}.parquet" for d in shard_dirs(run_dir) if (d / "images.parquet").is_file()):
+        data, n, size = _checked_table(p, max_rows=per_shard, within=root, max_decoded=MAX_TABLE_DECODED_BYTES)
+        rows, decoded = rows + n, decoded + size
+        if rows > per_run:
+            raise RunError(f"{run_dir}: its {table} tables hold more than {per_run} rows together, the limit for the "
+                           "run's tasks and monitor configurations; refused before they are loaded")
+        if decoded > MAX_RUN_DECODED_BYTES:
+            raise RunError(f"{run_dir}: its {table} tables take more than {MAX_RUN_DECODED_BYTES} bytes once "
+                           "decoded; refused before they are loaded")
+        frame = _decode_table(p, data, per_shard)
+        if len(frame):
+            frames.append(frame)
     if not frames:
         return pd.DataFrame(columns=list(COLUMNS[table]))
     df = pd.concat(frames, ignore_index=True)

@@ -22,6 +22,7 @@ from typing import Any
 from assurance.campaign import readouts
 from assurance.campaign.attestation import sign_run
 from assurance.campaign.faults import config_faults
+from assurance.campaign.label_pin import check_resumed_labels, flown_labels
 from assurance.campaign.manifest import (  # noqa: F401  (re-exported)
     check_monitor_networks,
     manifest,
@@ -138,8 +139,9 @@ def run_campaign(
         system = default_system()
     man = manifest(data, config, tasks, threads=threads,
                    segmenter="weights" if segmenter is None else type(segmenter).__name__, model=network,
-                   system=system.record())
+                   system=system.record(), labels=flown_labels(system, network))
     readouts.init_run(run_dir, man)
+    check_resumed_labels(run_dir, man)  # a resumed run's shards were judged with its manifest's classes
     repaired = _set_aside_damaged(run_dir, tasks)
     todo = [t for t in tasks if not readouts.shard_done(run_dir, t.shard_name)]
     t0 = time.perf_counter()

@@ -43,12 +43,22 @@ def stage_table(run_dir: str | Path) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+MAX_LOG_BYTES = 16 << 20
+"""A run's ``log.jsonl``: one line of a few hundred bytes per campaign invocation."""
+
+
 def wall_seconds(run_dir: str | Path) -> float | None:
     """Sum of the wall times of the run's campaign invocations (resumes included), None if unlogged."""
+    from el import userfiles
+
     path = Path(run_dir) / "log.jsonl"
     if not path.is_file():
         return None
-    lines = [json.loads(line) for line in path.read_text(encoding="utf-8").splitlines() if line.strip()]
+    try:  # bounded: a line per campaign invocation (a link to /proc or a huge log is not read)
+        text = userfiles.read_text(path, what="campaign log", max_bytes=MAX_LOG_BYTES)
+    except userfiles.UserFileError:
+        return None
+    lines = [json.loads(line) for line in text.splitlines() if line.strip()]
     return float(sum(entry.get("seconds", 0.0) for entry in lines)) if lines else None
 
 

@@ -34,12 +34,23 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="public keys whose signatures are accepted (a PEM file, or a folder of *.pem/*.pub); default: "
                         "$UAV_EL_TRUSTED_KEYS, else the local signing key's own (uav-el keys)")
     p.add_argument("--templates", metavar="DIR",
-                   help="report templates overriding the packaged ones file by file (copy any file of "
-                        "evidence_templates/ into DIR and edit it; default: the system file's [report] templates)")
-    p.add_argument("--accept-deviation", metavar="TARGET", action="append", default=[],
-                   help="accept a target the system sets looser than the certification basis (the packaged "
-                        "registry's), by name (repeat for several); the report's first page records it. An "
-                        "unaccepted deviation fails the gate")
+                   help="section templates replacing the packaged ones file by file (copy a section_*.html.j2 or "
+                        "auditor_*.html.j2 of evidence_templates/ into DIR and edit it); rendered with time and "
+                        "memory limits and cleaned to an allow-list of markup; the first page, layout and "
+                        "stylesheet are always the toolkit's, and the first page names the folder with its hash "
+                        "(default: the packaged templates only)")
+    p.add_argument("--template-seconds", type=float, default=None, metavar="S",
+                   help="wall-time limit of the supplied templates' rendering, per template (default 60); past it "
+                        "the template is refused (exit 2)")
+    p.add_argument("--system-templates", action="store_true",
+                   help="use the system file's [report] templates as --templates (an applicant's convenience; an "
+                        "auditor's report takes none unasked)")
+    p.add_argument("--accept-deviation", metavar="NAME=VALUE", action="append", default=[],
+                   help="accept a deviation from the certification basis (the packaged registry's) at the value the "
+                        "system sets, e.g. unsafe_landing_bound=0.06 or class:road=safe (a class's value is its "
+                        "state, safe or forbidden; numbers compare numerically; repeat for several); the report's "
+                        "first page records it with both values. A deviation not accepted, or accepted at another "
+                        "value, fails the gate; a plain NAME is refused")
     p.add_argument("--benchmark", metavar="DIR", help="a uav-el benchmark --out folder: adds its monitor comparison "
                    "as a section (re-derived from its CSV tables; never moves the gate)")
     p.add_argument("--boot", type=int, default=2000, help="bootstrap resamples of the results table (default 2000)")
@@ -106,6 +117,8 @@ def run(args: argparse.Namespace) -> int:
         load_waivers(args.waivers)
     if args.templates and not Path(args.templates).is_dir():
         raise CommandError(f"--templates {args.templates}: not a folder")
+    if args.template_seconds is not None and not 0 < args.template_seconds <= 3600:  # NaN fails both
+        raise CommandError(f"--template-seconds {args.template_seconds}: must be in (0, 3600]")
     from assurance.attest import AttestationError
     from assurance.attest.keys import load_trusted_keys
 
@@ -120,7 +133,8 @@ def run(args: argparse.Namespace) -> int:
                           targets=targets, targets_source=str(Path(args.targets).resolve()) if args.targets else None,
                           strict=args.strict, pdf=not args.no_pdf, n_boot=args.boot, waivers=args.waivers,
                           templates=args.templates, system=run_system(args, Path(args.run)), trusted=trusted,
-                          accepted_deviations=tuple(args.accept_deviation), benchmark=args.benchmark)
+                          accepted_deviations=tuple(args.accept_deviation), benchmark=args.benchmark,
+                          system_templates=args.system_templates, template_seconds=args.template_seconds)
     except DamagedRunError:
         raise  # exit 4: the run's readouts fail verification
     except (RegistryError, RunError, ValueError) as exc:

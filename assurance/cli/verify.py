@@ -9,7 +9,6 @@ It runs ``assurance/requirements/suite`` (and a user's own requirement tests giv
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import sys
 from pathlib import Path
@@ -66,7 +65,9 @@ def _check_system(args: argparse.Namespace, run: Path) -> None:
     system = getattr(args, "system_file", None)
     if system is None or system.default:
         return
-    recorded = (json.loads((run / "manifest.json").read_text(encoding="utf-8")).get("system") or {}).get("sha256")
+    from assurance.campaign.readouts import read_manifest
+
+    recorded = (read_manifest(run).get("system") or {}).get("sha256")  # bounded: the applicant's run
     if recorded and recorded != system.sha256:
         raise CommandError(f"{system.label}: the run {run} assessed another system file (SHA-256 {recorded[:12]}, "
                            f"this one {system.sha256[:12]}); give the run's system file with --system")

@@ -14,11 +14,11 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from assurance.files import atomic_write_bytes
 from el import userfiles
@@ -124,12 +124,29 @@ def sequence_poses(seq_dir: Path, frames: set[str]) -> dict[str, FramePose]:
     return poses
 
 
+def read_meta(path: str | Path) -> dict[str, Any]:
+    """A scene's meta JSON (``meta/*.json``: pose, seed, split, style, world model), read through the bounded
+    reader (``el.userfiles``: a regular file of at most ``MAX_META_BYTES``, never under ``/proc``, ``/sys`` or
+    ``/dev``): data folders are not signed, so one may be a FIFO or a link to ``/dev/zero``. ``FileNotFoundError``
+    when there is none; ``ValueError`` (``UserFileError``) naming the file when it is refused, not JSON or not an
+    object."""
+    from el import userfiles
+
+    p = Path(path)
+    if not p.exists() and not p.is_symlink():
+        raise FileNotFoundError(f"{p}: no such file")
+    doc = userfiles.read_json(p, what="scene meta file", max_bytes=userfiles.MAX_META_BYTES)
+    if not isinstance(doc, dict):
+        raise userfiles.UserFileError(f"{p}: a scene meta file holds a JSON object")
+    return doc
+
+
 def meta_pose(meta_path: Path) -> Pose | None:
     """The pose a synthetic scene was rendered at (its meta JSON), None when there is no meta file."""
-    if not meta_path.is_file():
+    if not meta_path.is_file():  # a FIFO or a device there is not a meta file, never read
         return None
-    try:
-        pose = json.loads(meta_path.read_text(encoding="utf-8"))["pose"]
+    try:  # read bounded: a link to /proc, an oversized file is refused, naming it
+        pose = read_meta(meta_path)["pose"]
         return Pose(height_m=float(pose["height_m"]), pitch_deg=float(pose["pitch_deg"]))
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise DataError(f"{meta_path}: no readable pose in the meta file: {exc}") from None

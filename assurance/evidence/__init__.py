@@ -49,6 +49,7 @@ from assurance.evidence.render import (
     pdf_attachment_names,
     rel,
     render_html,
+    render_report,
     write_pdf,
 )
 from assurance.evidence.report import EVIDENCE_FORMAT, generate
@@ -81,6 +82,7 @@ __all__ = [
     "pdf_attachment_names",
     "rel",
     "render_html",
+    "render_report",
     "traceability_rows",
     "waiver_expired",
     "write_pdf",

@@ -3,6 +3,7 @@ finished context its templates render."""
 
 from __future__ import annotations
 
+import shlex
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -12,6 +13,7 @@ from assurance import requirements as rq
 from assurance.analysis.table import results_table, write_csv
 from assurance.campaign import readouts
 from assurance.campaign.integrity import RunCheck, verify_run
+from assurance.campaign.label_pin import label_problems
 from assurance.campaign.model_files import changed_model_files
 from assurance.evidence.gate import GATE_CLASS, Gate, requirement_results, weakening_problems
 from assurance.evidence.identity import identity
@@ -107,6 +109,9 @@ def read_inputs(run: Path, out: Path, *, requirements: str | Path | None, baseli
     checks = run_checks(reg, ctx)
     check_problems(checks, results, problems, warnings)
     problems.extend(system_problems(system, man, req_doc, run))
+    pinned, unpinned = label_problems(system, man, attestation.predicate if attestation is not None else None, run)
+    problems.extend(pinned)  # the label set or class hierarchy changed since the run (label_pin)
+    warnings.extend(unpinned)
     problems.extend(check.missing_problems())  # tasks the manifest names with no readouts
     changed, unchecked = changed_model_files(man.get("model_files"))
     problems.extend(changed)
@@ -220,7 +225,7 @@ def campaign_context(inp: Inputs) -> dict[str, Any]:
     from assurance.evidence.gallery import Scenes, decision_examples, perturbation_gallery
 
     man, images, candidates, reg = inp.manifest, inp.images, inp.candidates, inp.registry
-    identity_rows, ident = identity(inp.run, man, reg, inp.req_path, inp.req_doc, inp.csv_path, inp.templates,
+    identity_rows, ident = identity(inp.run, man, reg, inp.req_path, inp.req_doc, inp.csv_path, TEMPLATES_DIR,
                                     inp.check)
     identity_rows[:0] = [signature_row(inp.attestation), results_signature_row(inp)]
     ident["campaign_signed_by"] = inp.attestation.keyid if inp.attestation is not None else None
@@ -276,7 +281,7 @@ def extra_tests(req_doc: Mapping[str, Any] | None) -> list[str]:
 
 def commands(inp: Inputs, accepted: tuple[str, ...] = ()) -> list[str]:
     """The commands that reproduce the run, the requirement results and this report (with the system file, the
-    added requirement tests and the accepted deviations they were made with)."""
+    added requirement tests and the accepted deviations they were made with, ``NAME=VALUE`` each)."""
     man, run, out, cfg = inp.manifest, inp.run, inp.out, inp.manifest["config"]
     src = inp.registry.targets_source
     tfile = src if inp.registry.targets and src and Path(src).suffix == ".json" else None
@@ -292,7 +297,8 @@ def commands(inp: Inputs, accepted: tuple[str, ...] = ()) -> list[str]:
         + (f" --targets {tfile}" if tfile else ""),
         f"uav-el evidence --run {run} --out {out}{system}"
         + (f" --requirements {inp.req_path}" if inp.req_path else "")
-        + (f" --targets {tfile}" if tfile else "") + "".join(f" --accept-deviation {a}" for a in accepted),
+        + (f" --targets {tfile}" if tfile else "")
+        + "".join(f" --accept-deviation {shlex.quote(a)}" for a in accepted),  # NAME=VALUE: the values it binds
     ]
 
 

@@ -2,11 +2,8 @@
 
 from __future__ import annotations
 
-import re
 import warnings
-from collections import Counter
 from collections.abc import Mapping, Sequence
-from html import unescape as html_unescape
 from pathlib import Path
 from typing import Any
 
@@ -41,33 +38,34 @@ def faults_table(out: Path, warnings: list[str]) -> list[dict[str, str]] | None:
 
 
 COVER = "cover.html.j2"
-"""The first page (gate verdict, summary): always the packaged file, never a template folder's."""
+"""The first page (gate verdict, summary): always the packaged file, included by the packaged shell."""
 
 
 def environment(templates: str | Path | None = None) -> Any:
     """The Jinja2 environment of the report: the immutable sandbox (a template reaches no Python internals and
-    changes nothing), autoescape on, strict undefined. A user's template folder overrides the packaged templates
-    file by file (the packaged ones fill the gaps); every template is read through the bounded reader
-    (:func:`bounded_loader`)."""
+    changes nothing), autoescape on, strict undefined. With a supplied template folder, its files come first and
+    the packaged templates fill the gaps (a supplied section may import the packaged macros); every template is
+    read through the bounded reader (:func:`bounded_loader`)."""
     from jinja2 import StrictUndefined
     from jinja2.sandbox import ImmutableSandboxedEnvironment
 
-    folders = [Path(templates)] if templates and Path(templates) != TEMPLATES_DIR else []
-    return ImmutableSandboxedEnvironment(loader=bounded_loader([*folders, TEMPLATES_DIR]), autoescape=True,
-                                         undefined=StrictUndefined, trim_blocks=True, lstrip_blocks=True,
-                                         keep_trailing_newline=True)
+    folder = _supplied_folder(templates)
+    return ImmutableSandboxedEnvironment(loader=bounded_loader([folder] if folder else [], TEMPLATES_DIR),
+                                         autoescape=True, undefined=StrictUndefined, trim_blocks=True,
+                                         lstrip_blocks=True, keep_trailing_newline=True)
 
 
 MAX_TEMPLATE_BYTES = 1 << 20
 """A report template (or its stylesheet): a page of markup, not data (the packaged report is 14 KB)."""
 
 
-def bounded_loader(folders: Sequence[Path]) -> Any:
-    """A Jinja2 loader of the templates in ``folders`` (the first folder holding a name wins) that reads each
-    through ``el.userfiles``: a template folder is the applicant's, so a name there that is a FIFO, a device (or a
-    link to one), a folder or a file over :data:`MAX_TEMPLATE_BYTES` is refused (``UserFileError`` naming it)
-    before a read that could block or never end, instead of being skipped for the packaged one (Jinja's own
-    ``FileSystemLoader`` passes over what ``isfile`` denies, and reads what it takes with a plain ``open``)."""
+def bounded_loader(supplied: Sequence[Path], packaged: Path = TEMPLATES_DIR) -> Any:
+    """A Jinja2 loader of the templates in the ``supplied`` folders, then the ``packaged`` one (the first folder
+    holding a name wins). A supplied folder is the applicant's: each file of it is read through ``el.userfiles``,
+    confined to its folder (a symbolic link out of it, a FIFO, a device, a folder or a file over
+    :data:`MAX_TEMPLATE_BYTES` is refused, ``UserFileError`` naming it, before a read that could block, never end
+    or disclose the auditor's files), and recorded in ``.reads`` (relative path -> SHA-256)."""
+    import hashlib
     import os
 
     from jinja2 import BaseLoader, TemplateNotFound
@@ -76,19 +74,27 @@ def bounded_loader(folders: Sequence[Path]) -> Any:
     from el.userfiles import read_text
 
     class BoundedLoader(BaseLoader):
+        reads: dict[str, str]
+
         def get_source(self, environment: Any, template: str) -> tuple[str, str, Any]:
             pieces = split_template_path(template)  # refuses ".." (no way out of the folders)
-            for folder in folders:
+            for folder in (*supplied, packaged):
                 path = folder.joinpath(*pieces)
                 if os.path.lexists(path):  # whatever is there (a FIFO too) is judged by the reader, not skipped
                     break
             else:
                 raise TemplateNotFound(template)
-            text = read_text(path, what="report template", max_bytes=MAX_TEMPLATE_BYTES)
+            own = folder != packaged
+            text = read_text(path, what="report template", max_bytes=MAX_TEMPLATE_BYTES,
+                             **({"within": folder} if own else {}))
+            if own:
+                self.reads["/".join(pieces)] = hashlib.sha256(text.encode("utf-8")).hexdigest()
             mtime = _mtime_ns(path)
             return text, os.path.normpath(path), lambda: _mtime_ns(path) == mtime
 
-    return BoundedLoader()
+    loader = BoundedLoader()
+    loader.reads = {}
+    return loader
 
 
 def _mtime_ns(path: Path) -> int | None:
@@ -140,54 +146,122 @@ def _render(env: Any, name: str, context: Mapping[str, Any]) -> str:
                             f"{type(exc).__name__}: {exc}") from None
 
 
-_BODY = re.compile(r"<body\b[^>]*>", re.IGNORECASE)
-_TAG = re.compile(r"<[^>]*>")
-_VERDICT = re.compile(r"\bgate\b\W{0,24}(passed|failed|waived|incomplete|pass|fail)\b", re.IGNORECASE)
+SHELL_FILES = ("report.html.j2", "cover.html.j2")
+"""The packaged files of the report's shell (page, head and first page): a template folder's file of one of these
+names, or any stylesheet there, is never used (the report says so)."""
 
 
-def verdict_phrases(html: str, verdict: str) -> Counter[str]:
-    """Phrases of ``html``'s text that state a gate verdict other than ``verdict`` ("Gate: PASSED" on a failed
-    gate), with their counts."""
-    text = " ".join(html_unescape(_TAG.sub(" ", html)).split())
-    return Counter(m.group(0) for m in _VERDICT.finditer(text)
-                   if not verdict.lower().startswith(m.group(1).lower()))
+def _supplied_folder(templates: str | Path | None) -> Path | None:
+    """The applicant's template folder, None for the packaged templates."""
+    if not templates:
+        return None
+    folder = Path(str(templates))
+    return None if folder.resolve() == TEMPLATES_DIR.resolve() else folder
+
+
+def _unused_files(folder: Path) -> list[str]:
+    """The shell files and stylesheets of a supplied folder (never used), by name."""
+    import os
+
+    names = [n for n in SHELL_FILES if os.path.lexists(folder / n)]
+    try:
+        names += sorted(e.name for e in os.scandir(folder) if e.name.lower().endswith(".css"))[:20]
+    except OSError:
+        pass
+    return names
+
+
+def _render_supplied(folder: Path, name: str, context: Mapping[str, Any], seconds: float | None
+                     ) -> tuple[str, dict[str, str]]:
+    """One supplied template rendered in a bounded child (:mod:`assurance.evidence.bounded`): its markup and the
+    files it read (path relative to the folder -> SHA-256)."""
+    from assurance.evidence import bounded
+
+    def work() -> tuple[str, dict[str, str]]:
+        env = environment(folder)
+        try:
+            html = _render(env, name, context)
+        except MemoryError:
+            raise TemplateError(f"{folder / name}: report template refused: it needs more than the memory "
+                                "limit") from None
+        except RecursionError:
+            raise TemplateError(f"{folder / name}: report template refused: it recurses without end (a template "
+                                "including itself?)") from None
+        if len(html) > MAX_SECTION_CHARS:
+            raise TemplateError(f"{folder / name}: report template refused: it renders {len(html):,} characters, "
+                                f"more than {MAX_SECTION_CHARS:,}")
+        return html, dict(env.loader.reads)
+
+    try:
+        return bounded.run_bounded(work, what=f"{folder / name}: report template", seconds=seconds or bounded.SECONDS,
+                                   memory_bytes=bounded.MEMORY_BYTES)
+    except bounded.BoundedRenderError as exc:
+        raise TemplateError(str(exc)) from None
+
+
+MAX_SECTION_CHARS = 64 << 20
+"""A supplied section's rendered markup (the packaged gallery, images inline, is a few MB)."""
+
+
+def _folder_digest(reads: Mapping[str, str]) -> str:
+    """SHA-256 over the supplied files the report read (relative path and content hash, sorted)."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for rel_path, digest in sorted(reads.items()):
+        h.update(f"{rel_path}:{digest}\n".encode())
+    return h.hexdigest()
+
+
+def render_report(context: Mapping[str, Any], templates: str | Path | None = None, *, seconds: float | None = None
+                  ) -> tuple[str, dict[str, Any] | None]:
+    """The report's HTML from its finished context, and what a supplied template folder contributed (None: the
+    packaged templates only). The shell (doctype, head, Content-Security-Policy, stylesheet, first page, table of
+    contents, section order, script) is the packaged ``report.html.j2``, rendered by the toolkit; a supplied folder
+    replaces section templates only (``outline.SECTIONS``), each rendered in a bounded child and cleaned as an HTML
+    fragment (:func:`assurance.evidence.sanitise.clean_fragment`) before it is put in the page (``seconds``: the
+    wall-time limit of each, default ``bounded.SECONDS``). TemplateError
+    naming the file (and line) of a broken, unsafe, endless or oversized template."""
+    import os
+
+    from markupsafe import Markup
+
+    from assurance.evidence.linking import CSP, SCRIPT, link_ids, script_hash
+    from assurance.evidence.navigation import req_anchor
+    from assurance.evidence.outline import SECTIONS, outline
+    from assurance.evidence.sanitise import clean_fragment
+
+    context = {**outline(context), **context}  # the sections of the registry, unless the caller lists its own
+    folder = _supplied_folder(templates)
+    shown = {s["id"] for s in context["sections"]}
+    supplied: dict[str, str] = {}
+    reads: dict[str, str] = {}
+    if folder is not None:
+        for name in context["section_templates"]:
+            if name in SHELL_FILES or not os.path.lexists(folder / name):
+                continue
+            html, read = _render_supplied(folder, name, context, seconds)
+            own = {s.id for s in SECTIONS if s.template == name and s.id in shown}
+            supplied[name] = clean_fragment(html, own)
+            reads.update(read)
+    about = None
+    if folder is not None:
+        about = {"folder": str(folder), "sha256": _folder_digest(reads), "files": sorted(reads),
+                 "sections": sorted(supplied), "unused": _unused_files(folder)}
+    context = {**context, "supplied_templates": about}
+    env = environment(None)
+    parts = [{"template": name, "supplied": name in supplied,
+              "html": Markup(supplied[name]) if name in supplied else Markup(_render(env, name, context))}
+             for name in context["section_templates"]]
+    shell = {"csp": Markup(CSP.format(hash=script_hash())), "script": Markup(SCRIPT), "parts": parts}
+    html = _render(env, TEMPLATE, {**context, "shell": shell})
+    ids = [str(r["id"]) for r in context.get("requirements") or []]
+    return link_ids(html, ids, {i: req_anchor(i) for i in ids}), about
 
 
 def render_html(context: Mapping[str, Any], templates: str | Path | None = None) -> str:
-    """The report's HTML from its finished context: the body from the (possibly user-supplied) templates, and
-    the first page (gate verdict, summary) from the packaged cover, put first in the body by the toolkit, which
-    then links the requirement ids and adds its script (:func:`finish_html`).
-    TemplateError naming the file and line of a broken or unsafe template, or naming what a supplied template
-    says against the gate's verdict (beyond what the packaged templates quote from the evidence, such as the
-    fault table's expected outputs). The sections and their order come from the section registry
-    (``assurance.evidence.outline``)."""
-    from assurance.evidence.outline import outline
-
-    context = {**outline(context), **context}  # the sections of the registry, unless the caller lists its own
-    supplied = bool(templates) and Path(str(templates)) != TEMPLATES_DIR
-    body = _render(environment(templates), TEMPLATE, context)
-    if supplied:
-        verdict = str(context["gate"])
-        said = verdict_phrases(body, verdict) - verdict_phrases(_render(environment(None), TEMPLATE, context), verdict)
-        if said:
-            raise TemplateError(f"{templates}: the supplied report templates state a gate verdict the gate did not "
-                                f"give ({'; '.join(repr(s) for s in sorted(said))}; the gate is {verdict}): refused")
-    opening = _BODY.search(body)
-    if opening is None:
-        where = Path(str(templates)) if supplied else TEMPLATES_DIR
-        raise TemplateError(f"{where / TEMPLATE}: the report template has no <body> element to put the first page in")
-    cover = _render(environment(None), COVER, context)
-    return finish_html(body[:opening.end()] + "\n" + cover + body[opening.end():], context)
-
-
-def finish_html(html: str, context: Mapping[str, Any]) -> str:
-    """The toolkit's last pass (``assurance.evidence.linking``): every requirement id of the text a link to its
-    anchor, the Content-Security-Policy, the filter script."""
-    from assurance.evidence.linking import finish
-    from assurance.evidence.navigation import req_anchor
-
-    ids = [str(r["id"]) for r in context.get("requirements") or []]
-    return finish(html, ids, {i: req_anchor(i) for i in ids})
+    """The report's HTML (:func:`render_report`, without what the supplied folder contributed)."""
+    return render_report(context, templates)[0]
 
 
 def rel(path: str | Path | None) -> str | None:

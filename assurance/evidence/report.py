@@ -27,8 +27,9 @@ from assurance.evidence.navigation import anchor, req_anchor
 from assurance.evidence.render import (
     FAULTS_CSV,
     RefusedResourceError,
+    TemplateError,
     rel,
-    render_html,
+    render_report,
     write_csv_rows,
     write_pdf,
     write_text,
@@ -72,9 +73,22 @@ def _write_pdf(html: str, files: _Files, faults: bool) -> str | None:
         raise
 
 
+def _render_page(context: dict[str, Any], templates: Path | None, files: _Files, seconds: float | None
+                 ) -> tuple[str, dict[str, Any] | None]:
+    """The report's HTML and what supplied templates contributed (``render_report``); a refused template removes
+    any earlier report from the folder (none is left that could pass for this run's) before it is raised."""
+    try:
+        return render_report(context, templates, seconds=seconds)
+    except TemplateError:
+        for f in (files.html, files.pdf, files.json, files.sums):
+            f.unlink(missing_ok=True)
+        raise
+
+
 def evidence_document(inp: Inputs, gate: Gate, ident: dict[str, Any], base: dict[str, Any] | None, *,
                       created: str, strict: bool, files: _Files, faults: bool, n_unsafe: int,
-                      pdf_error: str | None, exit_code: int, basis: list[Any] | None = None) -> dict[str, Any]:
+                      pdf_error: str | None, exit_code: int, basis: list[Any] | None = None,
+                      templates: dict[str, Any] | None = None) -> dict[str, Any]:
     """``evidence.json``: identity, gate, requirement states, the report's checks and the results table."""
     reg, results = inp.registry, inp.results
     return {
@@ -97,6 +111,7 @@ def evidence_document(inp: Inputs, gate: Gate, ident: dict[str, Any], base: dict
                   "faults": rel(files.faults) if faults else None},
         "pdf_error": pdf_error,
         "basis": {"deviations": [d.to_dict() for d in basis or []]},
+        "templates": templates,  # None: the packaged templates only; else the supplied folder, its hash and use
     }
 
 
@@ -129,9 +144,11 @@ def navigation_context(inp: Inputs, context: dict[str, Any], pdf: bool) -> dict[
 
 
 def _system_settings(system: Any, waivers: Any, templates: Any, targets: Any, targets_source: Any,
-                     accepted: tuple[str, ...]) -> tuple[Any, Any, Any, Any, list[Any]]:
-    """The system file's waivers, templates and targets where none were given, and its deviations from the
-    certification basis (``assurance.requirements.basis``) with the auditor's acceptances."""
+                     accepted: tuple[str, ...], system_templates: bool = False) -> tuple[Any, Any, Any, Any, list[Any]]:
+    """The system file's waivers and targets where none were given (its report templates only when
+    ``system_templates`` asks for them: an applicant-side convenience an auditor's report never takes unasked), and
+    its deviations from the certification basis (``assurance.requirements.basis``) with the auditor's
+    acceptances."""
     from assurance.requirements.basis import deviations
 
     if system is None:
@@ -139,7 +156,8 @@ def _system_settings(system: Any, waivers: Any, templates: Any, targets: Any, ta
     from assurance.system import build as system_build
 
     waivers = system_build.waivers(system, str(waivers) if waivers else None)
-    templates = templates or system_build.report_settings(system)["templates"]
+    if system_templates and not templates:
+        templates = system_build.report_settings(system)["templates"]
     if targets is None:  # the system file's [targets] (and R, beta, deployed monitor) judge the requirements
         targets, targets_source = system_build.targets(system), targets_source or f"{system.label} [targets]"
     return waivers, templates, targets, targets_source, deviations(system_build.targets(system), accepted,
@@ -156,8 +174,16 @@ def _label_classes(system: Any) -> list[dict[str, str]]:
         from assurance.system import build as system_build
 
         labels = system_build.label_set(system)
-    return [{"name": c.name, "state": "forbidden" if c.forbidden else "safe",
-             "category": c.category or "no category declared"} for c in labels.classes]
+    from assurance.requirements.basis import class_category
+
+    def category(c: Any) -> str:  # the category the basis judges it by: a well-known name's is pinned
+        judged, pinned = class_category(c)
+        if pinned is not None:
+            return f"{pinned}, pinned" + (f"; declared {c.category}" if c.category not in (None, pinned) else "")
+        return judged if c.category is not None else f"{judged}: none declared"
+
+    return [{"name": c.name, "state": "forbidden" if c.forbidden else "safe", "category": category(c)}
+            for c in labels.classes]
 
 
 def _report_context(inp: Inputs, gate: Gate, campaign: dict[str, Any], base: dict[str, Any] | None, created: str,
@@ -176,27 +202,18 @@ def generate(
     run: str | Path,
     out: str | Path,
     *,
-    requirements: str | Path | None = None,
-    baseline: str | Path | None = None,
-    baseline_requirements: str | Path | None = None,
-    registry: str | Path | rq.Registry | None = None,
-    targets: Mapping[str, Any] | None = None,
-    targets_source: str | None = None,
-    strict: bool = False,
-    waivers: str | Path | None = None,
-    pdf: bool = True,
-    n_boot: int = 2000,
-    templates: str | Path | None = None,
-    system: Any = None,
-    trusted: Mapping[str, Any] | None = None,
-    accepted_deviations: tuple[str, ...] = (),
-    benchmark: str | Path | None = None,
+    requirements: str | Path | None = None, baseline: str | Path | None = None,
+    baseline_requirements: str | Path | None = None, registry: str | Path | rq.Registry | None = None,
+    targets: Mapping[str, Any] | None = None, targets_source: str | None = None,
+    strict: bool = False, waivers: str | Path | None = None, pdf: bool = True, n_boot: int = 2000,
+    templates: str | Path | None = None, system: Any = None, trusted: Mapping[str, Any] | None = None,
+    accepted_deviations: tuple[str, ...] = (), benchmark: str | Path | None = None,
+    system_templates: bool = False, template_seconds: float | None = None,
 ) -> EvidenceReport:
     """Write the evidence report of ``run`` into ``out`` and return what the gate says.
 
-    ``requirements``: the plugin's results JSON; None looks for ``out/requirements.json`` and, without
-    one, leaves every requirement "not verified". ``baseline``: an earlier run to compare with;
-    ``baseline_requirements``: that run's results JSON (for requirement state changes). ``system``: the system
+    ``requirements``: the plugin's results JSON (default ``out/requirements.json``; without, all "not verified").
+    ``baseline``, ``baseline_requirements``: an earlier run and its results JSON to compare with. ``system``: the system
     file assessed (``assurance.system.SystemFile``): its waivers, report settings and identity; a run or
     requirement results about another system file fail the gate. ``registry``: a path, or a loaded ``Registry``
     (with its targets); ``targets``: overrides of its parameters (``Registry.with_targets``, from
@@ -207,11 +224,12 @@ def generate(
     otherwise); without, the report says the signatures were not checked. ``accepted_deviations``: the targets
     the auditor accepts looser than the basis (``assurance.requirements.basis``); any other deviation fails the gate.
     ``benchmark``: a ``uav-el benchmark --out`` folder, shown as a section that never moves the gate.
+    ``templates``, ``system_templates``, ``template_seconds``: supplied section templates (``render_report``).
     """
     run, out = Path(run), Path(out)
     bench = read_benchmark(benchmark) if benchmark else None  # read first: a bad folder stops before any work
     waivers, templates, targets, targets_source, basis = _system_settings(
-        system, waivers, templates, targets, targets_source, accepted_deviations)
+        system, waivers, templates, targets, targets_source, accepted_deviations, system_templates)
     inp = read_inputs(run, out, requirements=requirements, baseline=baseline, registry=registry, n_boot=n_boot,
                       templates=templates, system=system, targets=targets, targets_source=targets_source,
                       trusted=trusted)
@@ -228,8 +246,8 @@ def generate(
     created = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
     context = _report_context(inp, gate, campaign, base, created, n_boot, pdf, system=system, basis=basis,
                               accepted=tuple(accepted_deviations), bench=bench)
-    html = render_html(context, inp.templates)
     files = _Files(out, inp.csv_path)
+    html, supplied = _render_page(context, inp.templates, files, template_seconds)
     write_text(files.html, html)
     write_csv_rows(files.trace, traceability_rows(inp.registry, inp.results, run, inp.csv_path), TRACE_COLUMNS)
     files.pdf.unlink(missing_ok=True)  # never leave a PDF of an earlier report beside this one
@@ -240,7 +258,8 @@ def generate(
         exit_code = gate.exit_code(strict, pdf_error)
         _finish(files, {**evidence_document(inp, gate, campaign["ident"], base, created=created, strict=strict,
                                             files=files, faults=faults, n_unsafe=campaign["n_unsafe"],
-                                            pdf_error=pdf_error, exit_code=exit_code, basis=basis),
+                                            pdf_error=pdf_error, exit_code=exit_code, basis=basis,
+                                            templates=supplied),
                           **auditor_document(context)})
         return exit_code
 

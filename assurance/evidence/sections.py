@@ -3,7 +3,6 @@ example decisions."""
 
 from __future__ import annotations
 
-import json
 import math
 from collections import Counter
 from collections.abc import Mapping, Sequence
@@ -16,6 +15,8 @@ from assurance.evidence.text import ci, fmt, pct, to_float
 
 def scene_types(scenes: Any, keys: Sequence[str]) -> tuple[str, bool]:
     """What the scenes were (styles and lighting from their meta JSON), and whether they are synthetic."""
+    from assurance.dataio.uavid import read_meta
+
     styles: Counter[str] = Counter()
     lights: Counter[str] = Counter()
     synthetic = False
@@ -24,7 +25,7 @@ def scene_types(scenes: Any, keys: Sequence[str]) -> tuple[str, bool]:
         if sample is None:
             continue
         try:
-            meta = json.loads(sample.meta_path().read_text(encoding="utf-8"))
+            meta = read_meta(sample.meta_path())  # bounded: data folders are not signed
         except (OSError, ValueError):
             continue
         synthetic = True

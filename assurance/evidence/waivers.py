@@ -31,8 +31,8 @@ def load_waivers(path: str | Path) -> dict[str, dict[str, str]]:
     from el import safeyaml
 
     path = Path(path)
-    try:  # a regular file of at most 1 MiB (a FIFO or a device refused before any read), no aliases
-        data = safeyaml.load_file(path, what="waivers file") or {}
+    try:  # a regular file of at most 1 MiB (a FIFO or a device refused before any read), no aliases, dates as text
+        data = safeyaml.load_file(path, what="waivers file", loader=_text_dates_loader()) or {}
     except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
         text = str(exc)  # a refusal of the file itself names it already
         raise ValueError(text if text.startswith(f"{path}: ") else f"{path}: unreadable waivers file: {text}") from None
@@ -43,9 +43,10 @@ def load_waivers(path: str | Path) -> dict[str, dict[str, str]]:
         if not isinstance(w, dict) or not all(str(w.get(k) or "").strip() for k in WAIVER_FIELDS):
             raise ValueError(f"{path}: waiver {i + 1} needs an id, a reason, tracked_by, an owner and expires "
                              "(a date YYYY-MM-DD or a version X.Y.Z)")
-        expires = str(w["expires"]).strip()
-        _expiry(expires, path, i)
         rid = str(w["id"])
+        expires = str(w["expires"]).strip()
+        kind, value = _expiry(expires, path, i, rid)
+        expires = value.isoformat() if kind == "date" else expires  # 2026-1-5 as 2026-01-05
         if rid in out:
             raise ValueError(f"{path}: {rid} is waived twice")
         out[rid] = {"reason": " ".join(str(w["reason"]).split()), "tracked_by": str(w["tracked_by"]),
@@ -58,18 +59,33 @@ def _version_tuple(text: str) -> tuple[int, ...]:
     return tuple(int(x) for x in text.split("."))
 
 
-def _expiry(expires: str, path: Path, i: int) -> tuple[str, Any]:
-    """A waiver's expiry as ('date', date) or ('version', tuple); ValueError naming the file and the waiver."""
+def _text_dates_loader() -> type:
+    """The bounded YAML loader keeping dates as written (``2026-02-30`` would fail inside the YAML parser, naming
+    neither the file nor the waiver; :func:`_expiry` reads the text)."""
+    from el import safeyaml
+
+    class TextDates(safeyaml.BoundedSafeLoader):
+        pass
+
+    TextDates.add_constructor("tag:yaml.org,2002:timestamp", lambda loader, node: loader.construct_scalar(node))
+    return TextDates
+
+
+def _expiry(expires: str, path: Path, i: int, rid: str | None = None) -> tuple[str, Any]:
+    """A waiver's expiry as ('date', date) or ('version', tuple); ValueError naming the file and the waiver (its
+    number and, when known, its id)."""
     import re
 
-    if re.fullmatch(r"\d{4}-\d{2}-\d{2}", expires):
+    which = f"waiver {i + 1}" + (f" ({rid})" if rid else "")
+    why = ""
+    if m := re.fullmatch(r"(\d{4})-(\d{1,2})-(\d{1,2})", expires):
         try:
-            return "date", _dt.date.fromisoformat(expires)
-        except ValueError:
-            pass
+            return "date", _dt.date(*(int(g) for g in m.groups()))
+        except ValueError as exc:
+            why = f": not a date of the calendar ({exc})"
     elif re.fullmatch(r"\d+(\.\d+){0,2}", expires):
         return "version", _version_tuple(expires)
-    raise ValueError(f"{path}: waiver {i + 1}: expires must be a date YYYY-MM-DD or a version X.Y.Z, got {expires!r}")
+    raise ValueError(f"{path}: {which}: expires must be a date YYYY-MM-DD or a version X.Y.Z, got {expires!r}{why}")
 
 
 def waiver_expired(waiver: Mapping[str, str], *, today: _dt.date | None = None, version: str = __version__) -> bool:

@@ -2,8 +2,13 @@
 applicant who declares a road safe, loosens the targets to 0.999, swaps an ONNX network's external weights after
 pinning or after the run, points them out of the model's folder (at the auditor's key), or flies the shipped
 network as its plain ONNX export (once a way to fly it with no frame gate). A deviation fails the evidence gate,
-naming it (the auditor may accept one only by name); a swapped or escaping weights file is refused naming it; the
-shipped export keeps the shipped gate, which sends a photograph to the default action.
+naming it (the auditor may accept one only at its value); a swapped or escaping weights file is refused naming it;
+the shipped export keeps the shipped gate, which sends a photograph to the default action.
+
+Rows ``T40``..``T44``: what judged the run is pinned and the basis owns the hazard categories. A label set file
+swapped back after the run (flown with road safe) is a gate problem naming it; road declared safe as
+``bare_ground`` is the deviation ``class:road``; a Cyrillic look-alike of road is refused; an acceptance binds the
+value (0.06 does not accept 0.999) and a plain name is refused.
 """
 
 from __future__ import annotations
@@ -126,6 +131,64 @@ def _shipped_export_on_photo(ws: Path) -> list[str]:
     return ["land", str(photo), "--system", str(system)]
 
 
+def _uavid_doc(**road: object) -> dict:
+    """UAVid's label set as a document, its road updated with ``road``."""
+    from el.labels import UAVID
+
+    doc = UAVID.to_dict()
+    next(c for c in doc["classes"] if c["name"] == "road").update(road)
+    return doc
+
+
+def _write_labels(path: Path, doc: dict) -> Path:
+    import yaml
+
+    path.write_text(yaml.safe_dump(doc, sort_keys=False, allow_unicode=True), encoding="utf-8")
+    return path
+
+
+def _label_set_swapped_back(ws: Path) -> list[str]:
+    """A campaign flown with a label set file declaring road safe (the tiny network's classes mapped onto it one to
+    one), the honest file put back under the same name after the run: the readouts were judged with road safe."""
+    from assurance.fault_injection.case import prepare
+    from el.labels import UAVID
+
+    labels = ws / "labels-pinned.yaml"
+    names = ", ".join(f'{n} = "{n}"' for n in UAVID.names)
+    system = _system(ws, "sys-label-pin", f'[model]\npath = "tiny.pt"\nclass_map = {{ {names} }}\n'
+                                          f'[labels]\nfile = "{labels.name}"\n')
+    run = ws / "run-label-pin"
+    if not (run / "manifest.json").exists():
+        _write_labels(labels, _uavid_doc(forbidden=False, hazard_score=0.0))
+        prepare(["campaign", "--data", ws / "data", "--out", run, "--system", system, "--perturbations", "none",
+                 "--monitors", "lhd", "--images", "2", "--quiet"])
+    _write_labels(labels, _uavid_doc())  # the honest file, back under the same name
+    return _evidence(ws, "label-pin", "--system", system, run=run)
+
+
+def _road_safe_bare_ground(ws: Path) -> list[str]:
+    """UAVid's road declared safe with the hazard category ``bare_ground`` (once a way past the basis)."""
+    labels = _write_labels(ws / "labels-road-bare.yaml", _uavid_doc(forbidden=False, hazard_score=0.0,
+                                                                     category="bare_ground"))
+    return _evidence(ws, "road-bare", "--system", _system(ws, "sys-road-bare", f'[labels]\nfile = "{labels.name}"\n'))
+
+
+def _lookalike_road(ws: Path) -> list[str]:
+    """A Latin ``road`` (forbidden, a colour no pixel has) beside a Cyrillic look-alike ``r\u043ead`` that owns road's
+    colour and is declared safe: the first page would read "road (road): forbidden"."""
+    doc = _uavid_doc(rgb=[1, 2, 3])
+    doc["classes"].append({"id": len(doc["classes"]), "name": "r\u043ead", "rgb": [128, 64, 128], "forbidden": False,
+                           "hazard_score": 0.0, "category": "bare_ground"})
+    labels = _write_labels(ws / "labels-lookalike.yaml", doc)
+    return _evidence(ws, "lookalike", "--system", _system(ws, "sys-lookalike", f'[labels]\nfile = "{labels.name}"\n'))
+
+
+def _loose_bound(ws: Path, name: str, *accept: str) -> list[str]:
+    """An unsafe-landing bound loosened to 0.999, with the auditor's ``--accept-deviation`` options ``accept``."""
+    system = _system(ws, f"sys-{name}", "[targets]\nunsafe_landing_bound = 0.999\n")
+    return _evidence(ws, name, "--system", system, *(a for v in accept for a in ("--accept-deviation", v)))
+
+
 def onnxruntime_available() -> bool:
     """Whether ONNX Runtime can be imported (the shipped network's export can run)."""
     from el.segmentation.onnx_engine import have_onnxruntime
@@ -148,6 +211,20 @@ BASIS_CASES: tuple[Case, ...] = (
          "class:road"),
     Case("T19-targets-loosened", "a system file loosening the unsafe-landing bound to 0.999 at confidence 0.5",
          _loose_targets, 1, "unsafe_landing_bound = 0.999 is looser than the basis's 0.05"),
+    Case("T40-label-set-swapped-back", "a campaign flown with a label set declaring road safe, the honest file put "
+         "back under its name after the run", _label_set_swapped_back, 1,
+         "labels-pinned.yaml: changed since the run was made", pick="gate problem: label set file"),
+    Case("T41-road-safe-bare-ground", "UAVid's road declared safe with the hazard category bare_ground",
+         _road_safe_bare_ground, 1, "class:road = declared safe with category bare_ground", pick="class:road"),
+    Case("T42-lookalike-road-class", "a Cyrillic look-alike 'r\u043ead' owning road's colour, safe, beside a Latin "
+         "road", _lookalike_road, 2, "looks like the well-known class name 'road'"),
+    Case("T43-accepted-value-mismatch", "--accept-deviation unsafe_landing_bound=0.06 on a bound of 0.999",
+         lambda ws: _loose_bound(ws, "accept-mismatch", "unsafe_landing_bound=0.06"), 1,
+         "the auditor accepted unsafe_landing_bound=0.06, but the system's value is 0.999",
+         pick="unsafe_landing_bound = 0.999"),
+    Case("T44-accept-deviation-plain-name", "--accept-deviation unsafe_landing_bound (a name binds no value)",
+         lambda ws: _loose_bound(ws, "accept-plain", "unsafe_landing_bound"), 2,
+         "--accept-deviation unsafe_landing_bound=0.999"),
     *((Case("T20-swapped-external-weights", "an ONNX network's weights.bin swapped after the system file pinned it",
             _swapped_external_weights, 2, "model.sha256"),
        Case("T23-external-data-outside-folder", "an ONNX network whose external data location is ../ (a key)",

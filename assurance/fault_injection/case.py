@@ -25,6 +25,7 @@ class Case:
     expected: int
     expect_text: str = ""  # words the output must hold (e.g. the decision's reason)
     pick: str = ""  # the output line holding this is the outcome (default: first stderr line)
+    check: Callable[[Path], str | None] | None = None  # after the command: what is wrong with what it left, or None
 
 
 _CLI: list[CliMain] = []  # the command line the cases run through (set by ``fault_injection.run_case``)

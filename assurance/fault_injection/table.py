@@ -223,9 +223,10 @@ def run_case(case: Case, ws: Path, *, main: CliMain) -> dict[str, str]:
         argv = [str(a) for a in case.make(ws)]
         code, out, err = run_cli(main, argv)
     text = out + err
-    ok = code == case.expected and case.expect_text in text and "Traceback" not in text
+    problem = case.check(ws) if case.check is not None else None
+    ok = code == case.expected and case.expect_text in text and "Traceback" not in text and problem is None
     command = "uav-el " + " ".join(a.replace(str(ws), "WS") if str(ws) in a else a for a in argv)
-    outcome = _outcome(case, out, err).replace(str(ws), "WS")
+    outcome = _outcome(case, out, err).replace(str(ws), "WS") + (f" [{problem}]" if problem else "")
     return {"case": case.id, "injected": case.injected, "command": command, "expected": str(case.expected),
             "observed": str(code), "outcome": outcome, "result": "pass" if ok else "FAIL"}
 

@@ -34,6 +34,7 @@ FOLDS = {"A->B": (lambda sc: sc < SPLIT, lambda sc: sc >= SPLIT),
 def domain_refused(root: Path, name: str, count: int) -> np.ndarray:
     """Per frame of the synthetic set ``name``: whether the embedded default's declared domain refuses its pose
     (from the scene's meta, as its telemetry would give it) or its size."""
+    from assurance.dataio.uavid import read_meta
     from assurance.system import default_system
     from assurance.system.build import odd
     from el.camera import Pose
@@ -41,7 +42,7 @@ def domain_refused(root: Path, name: str, count: int) -> np.ndarray:
     domain = odd(default_system())
     out = []
     for path in scene_images(root / name)[:count]:
-        meta = json.loads((path.parent.parent / "meta" / f"{path.stem}.json").read_text())
+        meta = read_meta(path.parent.parent / "meta" / f"{path.stem}.json")
         pose = Pose(height_m=meta["pose"]["height_m"], pitch_deg=meta["pose"]["pitch_deg"])
         out.append(domain.outside(pose, tuple(meta["image_size"])) is not None)
     return np.array(out, bool)

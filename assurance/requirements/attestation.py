@@ -49,9 +49,12 @@ def sign_session_results(run: str | Path, out: str | Path, key: SigningKey, *, w
 
     run, out = Path(run), Path(out)
     results = out / "requirements.json"
-    doc = json.loads(results.read_text(encoding="utf-8"))
+    from assurance.campaign.readouts import MAX_RUN_JSON_BYTES, read_manifest
+    from el import userfiles
+
+    doc = json.loads(userfiles.read_text(results, what="requirement results", max_bytes=MAX_RUN_JSON_BYTES))
     ctx, reg = doc.get("context") or {}, doc.get("registry") or {}
-    manifest = json.loads((run / "manifest.json").read_text(encoding="utf-8"))
+    manifest = read_manifest(run)  # bounded
     pins = results_pins(run, manifest, reg, ctx.get("run_digest") or "", waivers)
     pins.update(code=ctx.get("code"), waivers=str(waivers) if waivers else None, **dict(extra or {}))
     return sign_results(results, key, pins, junit=out / "junit.xml")

@@ -3,76 +3,195 @@
 An applicant's system file may set its targets (``[targets]``, R and beta of ``[safety]``). Stricter ones are the
 applicant's choice; a looser one (a higher unsafe-landing bound, a lower confidence, fewer images, a smaller
 radius, a longer deadline...) is a **deviation** from the basis: listed on the report's first page with both
-values, and failing the gate unless the auditor accepts it by name (``uav-el evidence --accept-deviation``,
-recorded in the report). The deployed monitor and its card describe the system, not the basis: never deviations.
-The label set is part of the basis too: every class declares a hazard category, and a class of a category the
-registry's ``forbidden_categories`` lists (road, vehicle, building, water) declared safe is a deviation
-(``class:NAME``), as is a safe class that declares no category.
+values, and failing the gate unless the auditor accepts it at its value
+(``uav-el evidence --accept-deviation NAME=VALUE``, recorded in the report; a VALUE that is not the system's accepts
+nothing). The deployed monitor and its card describe the system, not the basis: never deviations.
+
+The label set is part of the basis too. The basis owns the hazard categories of the well-known class names
+(``el.class_names.PINNED_CATEGORIES``: road, street, paved area, car, building, person, water, ...; compared once
+NFKC-normalised and case-folded, a look-alike of one is refused when the set is read); another class takes the
+category it declares, or ``unknown`` when it declares none. A deviation (``class:NAME``) is a class of a category
+the registry's ``forbidden_categories`` lists (road, vehicle, building, water) declared safe, a safe class of
+category ``unknown`` because it declares none, or a class declaring another category than the one its name pins.
 """
 
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
+
+from el.class_names import pinned_category
 
 SYSTEM_CHOICES = ("deployed_monitor", "calibration_card", "forbidden_categories")
 """Parameters that name parts of the system assessed rather than a target: not compared with the basis."""
+SAFE, FORBIDDEN = "safe", "forbidden"
+"""The value of a class deviation (``--accept-deviation class:NAME=safe``): the class's state in the label set."""
+UNKNOWN = "unknown"
 
 
 @dataclass(frozen=True)
 class Deviation:
-    """One target the system sets looser than the basis: its name, both values, and whether it was accepted."""
+    """One way the system is looser than the basis: its name, both values, what the auditor accepted.
+
+    ``value`` is what ``--accept-deviation NAME=VALUE`` must give (the system's value; for a class its state,
+    ``safe`` or ``forbidden``); None: ``system``. ``given``: the VALUE the auditor gave for this name; the deviation
+    is ``accepted`` only when it is the system's value (:func:`value_matches`)."""
 
     name: str
     basis: Any
     system: Any
     accepted: bool = False
+    value: Any = None
+    given: str | None = None
+    relation: str = "is looser than"
+
+    @property
+    def bound(self) -> Any:
+        """The value an acceptance binds (``value``, else ``system``)."""
+        return self.system if self.value is None else self.value
+
+    def acceptance(self) -> str:
+        """The option that accepts this deviation at the system's value."""
+        return f"--accept-deviation {self.name}={value_text(self.bound)}"
 
     def text(self) -> str:
-        """One line: the parameter, the system's and the basis's values, and its state."""
-        state = "accepted by the auditor" if self.accepted else \
-            f"not accepted (the auditor may accept it with --accept-deviation {self.name})"
-        return f"{self.name} = {_show(self.system)} is looser than the basis's {_show(self.basis)}: {state}"
+        """One line: the parameter, the system's and the basis's values, and its state (for an accepted one, what
+        the auditor accepted; for a value that is not the system's, both)."""
+        if self.accepted:
+            state = f"accepted by the auditor at this value ({self.name}={self.given})"
+        elif self.given is not None:
+            state = (f"not accepted: the auditor accepted {self.name}={self.given}, but the system's value is "
+                     f"{value_text(self.bound)}")
+        else:
+            state = f"not accepted (the auditor may accept it with {self.acceptance()})"
+        return f"{self.name} = {_show(self.system)} {self.relation} the basis's {_show(self.basis)}: {state}"
 
     def to_dict(self) -> dict[str, Any]:
-        return {"name": self.name, "basis": self.basis, "system": self.system, "accepted": self.accepted}
+        return {"name": self.name, "basis": self.basis, "system": self.system, "accepted": self.accepted,
+                "value": self.bound, "accepted_value": self.given}
 
 
 def _show(value: Any) -> str:
     return value if isinstance(value, str) else json.dumps(value, sort_keys=True, default=str)
 
 
+def value_text(value: Any) -> str:
+    """A value as ``--accept-deviation NAME=VALUE`` spells it: a number or a string as it is, ``true``/``false``,
+    a list as its items joined by commas, a mapping as JSON."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, list | tuple):
+        return ",".join(map(str, value))
+    return _show(value)
+
+
+def _same_number(a: Any, b: Any) -> bool:
+    try:
+        x, y = float(a), float(b)
+    except (TypeError, ValueError):
+        return False
+    return math.isfinite(x) and x == y and not isinstance(a, bool) and not isinstance(b, bool)
+
+
+def value_matches(bound: Any, text: str) -> bool:
+    """Whether the auditor's VALUE ``text`` is the system's value ``bound``: numbers numerically (``0.06`` is
+    ``0.060``), strings exactly, a list as comma-separated items in any order, a mapping as JSON (numbers in it
+    numerically)."""
+    if isinstance(bound, bool):
+        return text.strip().lower() == value_text(bound)
+    if isinstance(bound, int | float):
+        return _same_number(text.strip(), bound)
+    if isinstance(bound, str):
+        return text == bound
+    if isinstance(bound, list | tuple):
+        items = [t.strip() for t in text.split(",")] if text.strip() else []
+        return sorted(items) == sorted(str(v) for v in bound)
+    if isinstance(bound, Mapping):
+        try:
+            given = json.loads(text)
+        except ValueError:
+            return False
+        return isinstance(given, dict) and set(given) == set(bound) and all(
+            _same_number(given[k], v) if isinstance(v, int | float) else given[k] == v for k, v in bound.items())
+    return text == _show(bound)
+
+
+def class_category(c: Any) -> tuple[str, str | None]:
+    """(the category the basis judges class ``c`` by, the category its name pins or None): the pinned one for a
+    well-known name, else the one it declares, else ``unknown``."""
+    pinned = pinned_category(c.name)
+    return pinned or c.category or UNKNOWN, pinned
+
+
+def _class_deviation(c: Any, must: set[str]) -> Deviation | None:
+    state = FORBIDDEN if c.forbidden else SAFE
+    category, pinned = class_category(c)
+    declared = c.category
+    redeclared = pinned is not None and declared is not None and declared != pinned
+    why = f", pinned for the name {c.name!r}" if pinned is not None else ""
+    name = f"class:{c.name}"
+    if state == SAFE and category in must:
+        return Deviation(name, f"forbidden (category {category}{why})",
+                         "declared safe" + (f" with category {declared}" if redeclared else ""), value=state)
+    if state == SAFE and pinned is None and declared is None:
+        return Deviation(name, f"forbidden (category {UNKNOWN}: a class the basis does not know that declares no "
+                               "hazard category, el.label_tables.CATEGORIES)", "declared safe without one", value=state)
+    if redeclared:
+        return Deviation(name, f"category {pinned} ({why[2:]})", f"{state}, declared category {declared}",
+                         value=state, relation="differs from")
+    return None
+
+
 def label_deviations(labels: Any, must_forbid: Iterable[str]) -> list[Deviation]:
-    """The classes of ``labels`` declared safe although their hazard category is one the basis forbids
-    (``must_forbid``: the registry's ``forbidden_categories``), or declared safe with no category at all (the basis
-    cannot check them), named ``class:NAME``."""
+    """The classes of ``labels`` that weaken the basis, named ``class:NAME``: declared safe although their hazard
+    category is one the basis forbids (``must_forbid``: the registry's ``forbidden_categories``; a well-known
+    name's category is the pinned one, whatever the set declares), declared safe with no category and a name the
+    basis does not know (category ``unknown``), or declaring another category than their name's pinned one."""
     must = set(must_forbid)
-    out = []
-    for c in labels.classes:
-        if c.forbidden:
+    return [d for c in labels.classes if (d := _class_deviation(c, must)) is not None]
+
+
+def _offers(accepted: Iterable[str], found: list[Deviation]) -> dict[str, str]:
+    """``{name: VALUE}`` of the auditor's ``NAME=VALUE`` acceptances; ValueError for a plain NAME (one line giving
+    the form), a name given twice, or a name the system does not deviate on."""
+    by_name = {d.name: d for d in found}
+    names = sorted(by_name, key=len, reverse=True)  # the longest name first: class:a=b before class:a
+    out: dict[str, str] = {}
+    unknown = []
+    for item in map(str, accepted):
+        name = next((n for n in names if item.startswith(f"{n}=")), None)
+        if item in by_name or "=" not in item:
+            hint = f" (here: {by_name[item].acceptance()})" if item in by_name else ""
+            raise ValueError(f"--accept-deviation {item}: give the value you accept, --accept-deviation NAME=VALUE"
+                             f"{hint}; a deviation is accepted only at the value the system sets")
+        if name is None:
+            unknown.append(item.partition("=")[0])
             continue
-        if c.category in must:
-            out.append(Deviation(f"class:{c.name}", f"forbidden (category {c.category})", "declared safe"))
-        elif c.category is None:
-            out.append(Deviation(f"class:{c.name}", "a declared hazard category (el.label_tables.CATEGORIES)",
-                                 "declared safe without one"))
+        if name in out:
+            raise ValueError(f"--accept-deviation {name}: given twice ({name}={out[name]}, {item}); give it once")
+        out[name] = item[len(name) + 1:]
+    if unknown:
+        raise ValueError(f"--accept-deviation {', '.join(unknown)}: the system does not deviate from the basis on "
+                         f"{'it' if len(unknown) == 1 else 'them'}"
+                         + (f" (its deviations: {', '.join(d.name for d in found)})" if found else " (it has none)"))
     return out
 
 
 def deviations(targets: Mapping[str, Any] | None, accepted: Iterable[str] = (), labels: Any = None) -> list[Deviation]:
     """The system's ``targets`` (``assurance.system.build.targets``) that are looser than the packaged registry's
     parameters, in the registry's order, then the classes of its ``labels`` that weaken the basis
-    (:func:`label_deviations`); ``accepted``: the names the auditor accepts. An accepted name the system does not
-    deviate on is a ``ValueError`` (a typo must not pass silently)."""
+    (:func:`label_deviations`); ``accepted``: the auditor's acceptances, ``NAME=VALUE`` each (a deviation is
+    accepted only when VALUE is the system's value, :func:`value_matches`). A plain NAME, or a name the system does
+    not deviate on, is a ``ValueError`` (a typo must not pass silently)."""
     from assurance.requirements.registry import load_registry
     from assurance.requirements.weakening import STRONGER, _weaker
 
     basis = load_registry(None)
     effective = basis.with_targets(dict(targets or {}), source="the system's targets").parameters
-    accepted = set(accepted)
-    out = []
+    found = []
     for name, ref in basis.parameters.items():
         if name in SYSTEM_CHOICES or name not in effective:
             continue
@@ -80,16 +199,13 @@ def deviations(targets: Mapping[str, Any] | None, accepted: Iterable[str] = (), 
         kind = STRONGER.get(name)
         if kind is None or not _weaker(kind, ref, given):
             continue
-        out.append(Deviation(name, ref, given, accepted=name in accepted))
+        found.append(Deviation(name, ref, given))
     if labels is not None:
-        out += [Deviation(d.name, d.basis, d.system, accepted=d.name in accepted)
-                for d in label_deviations(labels, basis.parameters.get("forbidden_categories") or ())]
-    unknown = sorted(accepted - {d.name for d in out})
-    if unknown:
-        raise ValueError(f"--accept-deviation {', '.join(unknown)}: the system does not deviate from the basis on "
-                         f"{'it' if len(unknown) == 1 else 'them'}"
-                         + (f" (its deviations: {', '.join(d.name for d in out)})" if out else " (it has none)"))
-    return out
+        found += label_deviations(labels, basis.parameters.get("forbidden_categories") or ())
+    offers = _offers(accepted, found)
+    return [d if d.name not in offers else
+            replace(d, given=offers[d.name], accepted=value_matches(d.bound, offers[d.name])) for d in found]
 
 
-__all__ = ["SYSTEM_CHOICES", "Deviation", "deviations", "label_deviations"]
+__all__ = ["FORBIDDEN", "SAFE", "SYSTEM_CHOICES", "Deviation", "class_category", "deviations", "label_deviations",
+           "value_matches", "value_text"]

@@ -10,7 +10,6 @@ another run, code, registry, targets or system file.
 
 from __future__ import annotations
 
-import json
 import logging
 import os
 from pathlib import Path
@@ -59,8 +58,10 @@ def run_facts(run: Path) -> dict[str, Any]:
 def system_of_run(run: Path) -> dict[str, Any]:
     """The run's system file as the requirement results record it: its hash, and the targets of a system file
     that is not the embedded default (``_targets``, ``_targets_source``: applied by the plugin, not recorded)."""
-    try:
-        record = json.loads((run / "manifest.json").read_text(encoding="utf-8")).get("system") or {}
+    from assurance.campaign.readouts import read_manifest
+
+    try:  # bounded: the applicant's run folder
+        record = read_manifest(run).get("system") or {}
     except (OSError, ValueError, AttributeError):
         return {"system_sha256": None}
     out: dict[str, Any] = {"system_sha256": record.get("sha256")}

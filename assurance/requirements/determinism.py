@@ -188,8 +188,6 @@ def check_rerun(run: str | Path, *, shards: int = 1, work_dir: str | Path, threa
     The tasks re-run are the first ones (sorted shard names) of a perturbation that draws random numbers,
     so the per-image seeding is exercised too. ``segmenter`` replaces the model of the manifest's weights.
     """
-    import pandas as pd
-
     from assurance.campaign import readouts
     from assurance.campaign.run import execute
 
@@ -209,11 +207,13 @@ def check_rerun(run: str | Path, *, shards: int = 1, work_dir: str | Path, threa
     (work / readouts.SHARDS).mkdir(parents=True, exist_ok=True)
     rows = []
     threads = threads or man.get("threads_per_worker") or os.cpu_count() or 1
+    max_rows = readouts.table_caps(man)[0]  # each table read bounded (a re-sealed shard of 100 M rows)
     for shard in pick:  # the campaign's own thread count: float sums depend on it
         execute(tasks[shard], config, str(work), threads, segmenter)
         for table in readouts.TABLES:
-            a = pd.read_parquet(run / readouts.SHARDS / shard / f"{table}.parquet")
-            b = pd.read_parquet(work / readouts.SHARDS / shard / f"{table}.parquet")
+            a = readouts.read_table_file(run / readouts.SHARDS / shard / f"{table}.parquet", max_rows=max_rows,
+                                         within=run)
+            b = readouts.read_table_file(work / readouts.SHARDS / shard / f"{table}.parquet", max_rows=max_rows)
             diff = _differing_columns(a, b)
             rows.append({"shard": shard, "table": table, "rows": len(a), "differing_columns": ", ".join(diff) or "-"})
     cols = ("shard", "table", "rows", "differing_columns")

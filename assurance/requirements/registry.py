@@ -206,11 +206,14 @@ def _build(path: Path, sha: str, sources: dict[str, str], defaults: dict[str, An
            targets: dict[str, Any], source: str | None, facts: Mapping[str, str] | None = None) -> Registry:
     """The registry with ``targets`` (already validated) over ``defaults``, its texts rendered from the result
     and the system's ``facts`` (the shipped system's when None)."""
-    from assurance.requirements.system_facts import check_facts, shipped_facts
+    from assurance.requirements.system_facts import TEMPLATE_FACTS, check_facts, shipped_facts
 
     params = {**defaults, **targets}
     facts = check_facts(dict(facts) if facts else shipped_facts())
-    text_params = {**params, **{k: _text(f"{path}: system facts", facts, k, params) for k in facts}}
+    # a fact is a value, substituted once into the registry's texts: its own braces are never read as placeholders
+    # (a camera "Cam {A}", a class "{confidence:pct} x"); only the toolkit's wording of the pose is a template
+    text_params = {**params, **{k: _text(f"{path}: system facts", facts, k, params) if k in TEMPLATE_FACTS
+                                else " ".join(facts[k].split()) for k in facts}}
     reqs: dict[str, Requirement] = {}
     for i, entry in enumerate(templates["requirements"]):
         rid = entry["id"]  # the schema checked its form

@@ -128,6 +128,10 @@ def results_document(registry: Registry, results: Mapping[str, RequirementResult
     }
 
 
+MAX_RESULTS_BYTES = 64 << 20
+"""A requirement results file (``requirements.json`` or an ``evidence.json``): a few hundred kB for the registry."""
+
+
 def load_results(path: str | Path, registry: Registry) -> tuple[dict[str, RequirementResult], dict[str, Any]]:
     """Read a results JSON written by the plugin (or an ``evidence.json``, which carries the same states);
     returns (results for every registry id, the document).
@@ -135,11 +139,15 @@ def load_results(path: str | Path, registry: Registry) -> tuple[dict[str, Requir
     Requirements of the registry absent from the file are "not verified" ("not in the test results");
     ids in the file that the registry lacks are ignored (listed in ``doc['ignored_ids']``).
     """
+    from el import userfiles
+
     path = Path(path)
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{path}: requirement results not found (run: uav-el verify RUN --out DIR)") from None
+    if not path.exists() and not path.is_symlink():
+        raise FileNotFoundError(f"{path}: requirement results not found (run: uav-el verify RUN --out DIR)")
+    try:  # bounded: a FIFO, a device, a link to /proc or a file over 64 MiB is refused unread
+        doc = json.loads(userfiles.read_text(path, what="requirement results", max_bytes=MAX_RESULTS_BYTES))
+    except userfiles.UserFileError as exc:
+        raise ValueError(str(exc)) from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ValueError(f"{path}: unreadable requirement results ({exc})") from None
     if not isinstance(doc, dict) or doc.get("format") not in (RESULTS_FORMAT, "uav-el-evidence/1"):

@@ -5,6 +5,11 @@ the scenes or the forbidden classes they use a placeholder (``{camera}``, ``{pos
 ``{forbidden}``) filled from these facts. ``facts_of`` derives them from a built system (its camera, nominal pose,
 declared domain, pose policy and label set), so a report about another system says nothing of the shipped one;
 ``shipped_facts`` are the embedded default's (what a registry loaded without a system reads).
+
+A fact is literal text, never a template: a camera named ``Cam {A}`` or a class named ``{confidence:pct} x`` is
+shown as written (formatting it would fail blaming the packaged registry, or print "95% x"). The one exception is
+the toolkit's own wording of :data:`TEMPLATE_FACTS` (the pose's errors are the registry's parameters), which holds
+numbers and fixed words only, user text escaped (:func:`escape`).
 """
 
 from __future__ import annotations
@@ -14,6 +19,14 @@ from collections.abc import Sequence
 from typing import Any
 
 FACT_KEYS = ("camera", "view", "pose", "ground", "scenes", "forbidden", "safe", "label_set")
+TEMPLATE_FACTS = ("pose",)
+"""Facts whose text holds the registry's placeholders (``{pose_error.height:pct}``), rendered with its parameters;
+every other fact is substituted as literal text."""
+
+
+def escape(text: str) -> str:
+    """``text`` as literal text inside a template of :data:`TEMPLATE_FACTS` (braces doubled)."""
+    return text.replace("{", "{{").replace("}", "}}")
 NADIR_PITCH_DEG = 80.0  # a nominal pitch at or beyond this looks (almost) straight down: a nadir view
 
 
@@ -50,7 +63,7 @@ def pose_text(pose: Any, odd: Any, policy: str) -> str:
     source = {"nominal": "every frame planned with the nominal pose",
               "sidecar": "each frame's own pose from the flight log where it has one, else the nominal pose",
               "required": "each frame's own pose from the flight log (a frame without one takes the default "
-                          "action)"}.get(policy, f"pose policy {policy!r}")
+                          "action)"}.get(policy, f"pose policy {escape(repr(policy))}")
     declared = f"; declared domain {', '.join(ranges)}" if ranges else ""
     return (f"height {pose.height_m:g} m, pitch {pose.pitch_deg:g} degrees below the horizon (nominal){declared}; "
             f"{source}; errors up to {{pose_error.height:pct}} in height and {{pose_error.pitch:pct}} in pitch")
@@ -133,13 +146,14 @@ def shipped_facts() -> dict[str, str]:
 
 
 def check_facts(facts: dict[str, str]) -> dict[str, str]:
-    """The facts with every key present and every value a finite, non-empty string (placeholders inside a fact,
-    such as ``{pose_error.height:pct}``, are rendered with the registry's parameters afterwards)."""
+    """The facts with every key present and every value a finite, non-empty string (the placeholders of a
+    :data:`TEMPLATE_FACTS` fact, such as ``{pose_error.height:pct}``, are rendered with the registry's parameters
+    afterwards; every other fact is literal text)."""
     missing = [k for k in FACT_KEYS if not isinstance(facts.get(k), str) or not facts[k].strip()]
     if missing:
         raise ValueError(f"system facts missing: {', '.join(missing)}")
     return {k: facts[k] for k in FACT_KEYS}
 
 
-__all__ = ["FACT_KEYS", "camera_text", "check_facts", "facts_of", "facts_of_file", "forbidden_text", "pose_text",
-           "shipped_facts", "view_of"]
+__all__ = ["FACT_KEYS", "TEMPLATE_FACTS", "camera_text", "check_facts", "escape", "facts_of", "facts_of_file",
+           "forbidden_text", "pose_text", "shipped_facts", "view_of"]

@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 
 from assurance.dataio.poses import POSES_FILE, write_poses
-from assurance.dataio.uavid import sample_paths, write_image
+from assurance.dataio.uavid import read_meta, sample_paths, write_image
 from assurance.files import atomic_write_bytes
 from assurance.scenes.builder import Builder
 from assurance.scenes.layout import build_city
@@ -148,7 +148,7 @@ def _check_rendered(root: Path, index: int, view: ViewPlan | None, seed: int) ->
     if view is None:
         return False
     meta_path = sample_paths(root, *frame_location(index))[2]
-    meta = json.loads(meta_path.read_text(encoding="utf-8"))
+    meta = read_meta(meta_path)
     pose = view.pose_for(seed)
     want = {"pose": {"height_m": pose.height_m, "pitch_deg": pose.pitch_deg}, "intrinsics": view.intrinsics.to_dict()}
     for key, value in want.items():

@@ -153,8 +153,11 @@ class ClassHierarchy:
 
     @classmethod
     def from_yaml(cls, path: str | Path, *, labels: LabelSet) -> ClassHierarchy:
-        """Load a hierarchy file: ``root: NAME`` and ``children: {parent: [children]}``."""
-        text = Path(path).read_text(encoding="utf-8")
+        """Load a hierarchy file: ``root: NAME`` and ``children: {parent: [children]}``, read through the bounded
+        reader (``el.userfiles``: a regular file of at most 1 MiB; a FIFO or a device refused before any read)."""
+        from el import userfiles
+
+        text = userfiles.read_text(path, what="hierarchy file", max_bytes=safeyaml.MAX_YAML_BYTES)
         return cls._from_text(text, str(path), labels=labels)
 
     @classmethod

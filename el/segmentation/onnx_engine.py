@@ -93,10 +93,12 @@ def read_onnx(path: str | Path) -> OnnxFile:
     p = Path(path)
     if not p.is_file():
         raise WeightsError(f"{p}: ONNX file not found")
-    try:
-        data = p.read_bytes()
-    except OSError as exc:
-        raise WeightsError(f"{p}: cannot read the ONNX file: {exc}") from None
+    from el import userfiles
+
+    try:  # bounded: never under /proc, /sys or /dev, at most MAX_MODEL_BYTES
+        data = userfiles.read_bytes(p, what="ONNX file", max_bytes=userfiles.MAX_MODEL_BYTES)
+    except userfiles.UserFileError as exc:
+        raise WeightsError(str(exc)) from None
     digest = sha256_bytes(data)
     if EXTERNAL_KEY not in data:  # no tensor can name an external file without a "location" entry
         return OnnxFile(data, digest, {})
@@ -200,9 +202,12 @@ def _inline(tensor: Any, model: Path, blobs: dict[str, bytes]) -> None:
     location = info.get("location", "")
     target, rel = _confined(model, location)
     if rel not in blobs:
-        try:
-            blobs[rel] = target.read_bytes()
-        except OSError as exc:
+        from el import userfiles
+
+        try:  # bounded, and confined to the model's folder (``_confined`` checked the name; this what it opens)
+            blobs[rel] = userfiles.read_bytes(target, what="external data file", max_bytes=userfiles.MAX_MODEL_BYTES,
+                                              within=model.parent)
+        except userfiles.UserFileError as exc:
             raise WeightsError(f"{model}: external data location {location!r}: cannot read it: {exc}") from None
     blob = blobs[rel]
     try:
@@ -396,8 +401,11 @@ def engine_for(weights_path: str | Path, weights_sha256: str | None, threads: in
 def _checked_engine(weights_path: str | Path, weights_sha256: str | None, threads: int | None) -> OnnxEngine:
     rec_path = record_path(weights_path)
     onnx_path = Path(weights_path).with_suffix(".onnx")
-    try:
-        record = json.loads(rec_path.read_text(encoding="utf-8"))
+    from el import userfiles
+
+    try:  # bounded (a UserFileError is a ValueError: named below)
+        record = json.loads(userfiles.read_text(rec_path, what="ONNX engine record",
+                                                max_bytes=userfiles.MAX_RECORD_BYTES))
         if not isinstance(record, dict) or record.get("format") != RECORD_FORMAT:
             raise ValueError(f"not a {RECORD_FORMAT} record")
         bound, onnx_sha = record["weights_sha256"], record["onnx_sha256"]

@@ -41,8 +41,12 @@ def read_card(weights_path: str | Path) -> dict[str, Any]:
     path = card_path(weights_path)
     if not path.is_file():
         raise WeightsError(f"{path}: model card not found (expected next to {Path(weights_path).name})")
-    try:
-        card = json.loads(path.read_text(encoding="utf-8"))
+    from el import userfiles
+
+    try:  # bounded: a link to /proc or a device, a file over 64 MiB is refused unread
+        card = json.loads(userfiles.read_text(path, what="model card", max_bytes=userfiles.MAX_RECORD_BYTES))
+    except userfiles.UserFileError as exc:
+        raise WeightsError(str(exc)) from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise WeightsError(f"{path}: unreadable model card: {exc}") from exc
     if not isinstance(card, dict):
@@ -64,10 +68,12 @@ def checked_weights(weights_path: str | Path | None = None) -> tuple[Path, bytes
     if not path.is_file():
         raise WeightsError(f"{path}: not a file")
     card = read_card(path)
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise WeightsError(f"{path}: cannot read weights: {exc}") from exc
+    from el import userfiles
+
+    try:  # bounded: a link to /proc/self/pagemap is a "regular file" that reads for hundreds of GB
+        data = userfiles.read_bytes(path, what="weights file", max_bytes=userfiles.MAX_MODEL_BYTES)
+    except userfiles.UserFileError as exc:
+        raise WeightsError(str(exc)) from None
     digest = sha256_bytes(data)
     if digest != card["weights_sha256"]:
         raise WeightsError(

@@ -1,0 +1,119 @@
+"""Class names the certification basis knows, compared as a reader sees them (docs/architecture.md 2.1).
+
+A label set names its own classes, and declares for each a hazard category (``el.label_tables.CATEGORIES``). For
+the well-known names of :data:`PINNED_CATEGORIES` (road, street, car, building, person, water, ...) the category is
+not the set's to choose: the certification basis (``assurance.requirements.basis``) pins it, and a set declaring
+another one deviates from the basis. Two spellings a reader cannot tell apart must not be two classes:
+
+- :func:`class_key` is how names are compared: NFKC, case-folded, every run of separators (``_``, ``-``, any dash,
+  any space) one space: ``Paved_Area``, ``paved-area`` and ``PAVED AREA`` are one name, ``paved area``;
+- :func:`skeleton` is what a name looks like, after Unicode TS 39 (a small skeleton: NFKD, combining marks and
+  invisible format characters dropped, the common Cyrillic and Greek look-alikes of Latin letters and the digits
+  ``0``/``1`` read as ``o``/``l``, ``rn`` as ``m``, case-folded): the Cyrillic ``rоad`` and ``road`` share one.
+
+:func:`check_class_names` refuses a set holding a class that looks like a well-known name without being it (its
+category would escape the pin), or two classes that look alike (the reader of a report cannot tell which is which).
+This module holds data and pure functions: ``el`` and ``assurance`` both read it.
+"""
+
+from __future__ import annotations
+
+import re
+import unicodedata
+from collections.abc import Iterable, Mapping
+
+_BY_CATEGORY: dict[str, tuple[str, ...]] = {
+    "road": ("road", "street", "paved area", "highway", "motorway", "freeway", "asphalt", "carriageway",
+             "roadway", "avenue", "parking lot", "driveway"),
+    "vehicle": ("vehicle", "car", "truck", "lorry", "bus", "van", "motorcycle", "motorbike", "bicycle", "bike",
+                "scooter", "tractor", "train", "tram", "static car", "moving car", "parked car"),
+    "building": ("building", "roof", "rooftop", "house", "wall", "window", "door", "garage", "shed", "tower"),
+    "person": ("person", "human", "pedestrian", "people", "rider", "cyclist", "crowd"),
+    "animal": ("animal", "dog", "cat", "horse", "cow", "sheep", "livestock"),
+    "water": ("water", "pool", "swimming pool", "river", "lake", "sea", "pond", "ocean", "canal", "stream",
+              "fountain"),
+    "obstacle": ("fence", "fence pole", "pole", "obstacle", "power line"),
+}
+
+
+def _plural(name: str) -> str:
+    return name + ("es" if name.endswith(("s", "sh", "ch", "x")) else "s")
+
+
+PINNED_CATEGORIES: Mapping[str, str] = {
+    form: category for category, names in _BY_CATEGORY.items() for name in names for form in (name, _plural(name))
+}
+"""Well-known class name (as :func:`class_key` writes it; plurals too) -> the hazard category the basis pins."""
+
+_SEPARATORS = re.compile(r"[\s_\-\u2010-\u2015\u2212\u2043\ufe58\ufe63\uff0d]+")
+_LOOKALIKES = str.maketrans({
+    # Cyrillic
+    "а": "a", "в": "b", "е": "e", "ё": "e", "к": "k", "м": "m", "н": "h", "о": "o", "р": "p", "с": "c", "т": "t",
+    "у": "y", "х": "x", "ѕ": "s", "і": "i", "ї": "i", "ј": "j", "ԁ": "d", "ԛ": "q", "ԝ": "w", "һ": "h", "ӏ": "l",
+    "А": "a", "В": "b", "Е": "e", "К": "k", "М": "m", "Н": "h", "О": "o", "Р": "p", "С": "c", "Т": "t", "У": "y",
+    "Х": "x", "Ѕ": "s", "І": "l", "Ј": "j", "Ԁ": "d", "Ԛ": "q", "Ԝ": "w", "Һ": "h", "Ӏ": "l",
+    # Greek
+    "α": "a", "ο": "o", "ρ": "p", "ν": "v", "ι": "i", "κ": "k", "τ": "t", "υ": "u", "χ": "x", "ϲ": "c", "ϳ": "j",
+    "Α": "a", "Β": "b", "Ε": "e", "Η": "h", "Ι": "l", "Κ": "k", "Μ": "m", "Ν": "n", "Ο": "o", "Ρ": "p", "Τ": "t",
+    "Χ": "x", "Υ": "y", "Ζ": "z", "Ϲ": "c",
+    # Latin look-alikes of other Latin letters and digits (TS 39 reads capital I as l)
+    "I": "l", "0": "o", "1": "l", "ı": "i", "ȷ": "j", "ɡ": "g", "ɑ": "a",
+})
+
+
+def class_key(name: str) -> str:
+    """How class names are compared: NFKC, case-folded, separators one space, trimmed (``Paved_Area`` ->
+    ``paved area``)."""
+    return _SEPARATORS.sub(" ", unicodedata.normalize("NFKC", str(name)).casefold()).strip()
+
+
+def skeleton(name: str) -> str:
+    """What a name looks like (a small Unicode TS 39 skeleton): two names with one skeleton are confusable."""
+    text = unicodedata.normalize("NFKD", str(name))
+    text = "".join(ch for ch in text if not unicodedata.combining(ch)
+                   and unicodedata.category(ch) not in ("Cf", "Cc", "Mn", "Me"))
+    text = unicodedata.normalize("NFKC", text.translate(_LOOKALIKES)).casefold().translate(_LOOKALIKES)
+    text = _SEPARATORS.sub(" ", text).strip()
+    return text.replace("rn", "m").replace("vv", "w")
+
+
+def pinned_category(name: str) -> str | None:
+    """The hazard category the basis pins for a well-known class name (any spelling :func:`class_key` merges);
+    None for a name it does not know."""
+    return PINNED_CATEGORIES.get(class_key(name))
+
+
+_KNOWN_SKELETONS: dict[str, str] = {}
+for _known in PINNED_CATEGORIES:
+    _KNOWN_SKELETONS.setdefault(skeleton(_known), _known)
+
+
+def shown(name: str) -> str:
+    """A name as a message shows it: its repr, and its escapes when it holds anything but printable ASCII (a
+    Cyrillic ``о`` reads as ``o``)."""
+    text = repr(name)
+    return text if text.isascii() else f"{text} (written {ascii(name)})"
+
+
+def check_class_names(set_name: str, names: Iterable[str]) -> None:
+    """ValueError naming the label set and the class when a class looks like a well-known name without being it,
+    or two classes look alike (one :func:`class_key` or one :func:`skeleton`)."""
+    seen: dict[str, str] = {}
+    for name in names:
+        key, sk = class_key(name), skeleton(name)
+        known = _KNOWN_SKELETONS.get(sk)
+        if known is not None and key not in PINNED_CATEGORIES:
+            raise ValueError(f"label set {set_name!r}: class {shown(name)} looks like the well-known class name "
+                             f"{known!r} (Unicode TS 39 skeleton {sk!r}) but is not it: refused (its hazard category "
+                             f"would escape the basis's pin, {PINNED_CATEGORIES[known]}); call it {known!r} or give "
+                             "it a name of its own")
+        for other in (seen.get(f"key:{key}"), seen.get(f"skeleton:{sk}")):
+            if other is not None and other != name:
+                raise ValueError(f"label set {set_name!r}: classes {shown(other)} and {shown(name)} look alike (one "
+                                 f"name once normalised and case-folded, or one Unicode TS 39 skeleton {sk!r}): "
+                                 "refused; give each class a distinct name")
+        seen.setdefault(f"key:{key}", name)
+        seen.setdefault(f"skeleton:{sk}", name)
+
+
+__all__ = ["PINNED_CATEGORIES", "check_class_names", "class_key", "pinned_category", "shown", "skeleton"]
