@@ -78,3 +78,24 @@ def test_a_system_files_section_templates_replace_the_packaged_ones_when_asked(s
     assert "ACME limits" in html and "What was assessed" in html  # the rest from the packaged templates
     assert "ACME house style" not in html and "<code>evidence.css</code>" in html
     assert any("another system file" in p for p in report.problems)  # a different file than the run's
+
+
+def test_verify_and_evidence_without_system_judge_the_runs_own(system_run, tmp_path, monkeypatch, capsys):
+    """Run from a folder holding no uav-el.toml, ``verify RUN`` binds the run's own system (its waivers: none here),
+    not the shipped one's, and says so; ``evidence`` then finds no waivers mismatch."""
+    from assurance import cli
+
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    out = tmp_path / "out"
+    cli.main(["verify", str(system_run["run"]), "--out", str(out), "-k", "not rerun", "-q"])
+    printed = capsys.readouterr()
+    assert "(the run's own)" in printed.err
+    assert "--system" not in printed.out  # the "next:" command needs none: evidence takes the run's own too
+    doc = json.loads((out / "requirements.dsse.json").read_text())
+    assert doc  # signed
+    cli.main(["evidence", "--run", str(system_run["run"]), "--out", str(out), "--no-pdf", "--boot", "20"])
+    capsys.readouterr()
+    problems = json.loads((out / "evidence.json").read_text())["gate"]["problems"]
+    assert not any("waivers" in p for p in problems), problems

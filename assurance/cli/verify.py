@@ -60,6 +60,22 @@ def pytest_args(args: argparse.Namespace, out: Path) -> list[str]:
     return argv
 
 
+def _judge_the_runs_system(args: argparse.Namespace, run: Path) -> None:
+    """Without a system file given (or found in the working directory), the system judged is the run's own, as its
+    signed manifest records it (``evidence`` takes the same): its waivers are the ones the results are signed with,
+    never the shipped system's. Says which system it judges (stderr)."""
+    from assurance.cli.evidence import run_system
+
+    given = getattr(args, "system_file", None)
+    if given is not None and not given.default:
+        return
+    system = run_system(args, run)  # prints "system file: LABEL (the run's own)" when it is the run's
+    if not system.default:
+        args.system_file, args.system_from_run = system, True
+    else:
+        print("system file: the embedded default (the shipped system; the run records no other)", file=sys.stderr)
+
+
 def _check_system(args: argparse.Namespace, run: Path) -> None:
     """A system file given (or found) must be the one the run assessed: the results are judged on the run's."""
     system = getattr(args, "system_file", None)
@@ -102,6 +118,7 @@ def run(args: argparse.Namespace) -> int:
     for t in args.tests:
         if not Path(t).exists():
             raise CommandError(f"--tests {t}: no such file or folder")
+    _judge_the_runs_system(args, run_dir)
     _check_system(args, run_dir)
     _warn_weaker(args)
     key, campaign = _signer_and_campaign(args, run_dir)
@@ -120,7 +137,8 @@ def run(args: argparse.Namespace) -> int:
     signed = _sign(args, run_dir, out, key, campaign)
     print(f"signed: {signed} (key {key.keyid[:16]}, {key.source})")
     system = getattr(args, "system_file", None)
-    given = f" --system {system.label}" if system is not None and not system.default else ""
+    given = (f" --system {system.label}" if system is not None and not system.default
+             and not getattr(args, "system_from_run", False) else "")
     print(f"requirement results: {out / 'requirements.json'}, {out / 'junit.xml'} "
           f"(next: uav-el evidence --run {args.run} --out {args.out}{given})")
     return 1 if rc == pytest.ExitCode.TESTS_FAILED else 0
