@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import signal
 from pathlib import Path
 
 import numpy as np
@@ -161,3 +163,18 @@ def bench_system(folder: Path) -> Path:
     from assurance.fault_injection.case import write_small_frame_system
 
     return write_small_frame_system(folder)
+
+
+@contextlib.contextmanager
+def within_seconds(seconds: int):
+    """Fail (instead of hanging the session) when the block runs longer than ``seconds``."""
+    def expire(signum, frame):
+        raise TimeoutError(f"blocked for more than {seconds} s")
+
+    old = signal.signal(signal.SIGALRM, expire)
+    signal.alarm(seconds)
+    try:
+        yield
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, old)

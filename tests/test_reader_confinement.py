@@ -8,37 +8,21 @@ names the file and the waiver.
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
 import json
 import os
-import signal
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+from helpers import within_seconds
 
 from el import userfiles
 from el.hashing import sha256_file
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "mkfifo") or not Path("/proc/self").exists(),
                                 reason="needs FIFOs and /proc (Linux)")
-
-
-@contextlib.contextmanager
-def within_seconds(seconds: int):
-    """Fail (instead of hanging the session) when the block runs longer than ``seconds``."""
-    def expire(signum, frame):
-        raise TimeoutError(f"blocked for more than {seconds} s")
-
-    old = signal.signal(signal.SIGALRM, expire)
-    signal.alarm(seconds)
-    try:
-        yield
-    finally:
-        signal.alarm(0)
-        signal.signal(signal.SIGALRM, old)
 
 
 @pytest.fixture

@@ -12,34 +12,18 @@ is refused naming it, never read, skipped or reported missing.
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
-import signal
 import time
 from pathlib import Path
 
 import pytest
+from helpers import within_seconds as within
 
 from assurance.cli import main
 from el import userfiles
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs FIFOs (POSIX)")
-
-
-@contextlib.contextmanager
-def within(seconds: int):
-    """Fail (instead of hanging the session) when the block runs longer than ``seconds``."""
-    def expire(signum, frame):
-        raise TimeoutError(f"blocked for more than {seconds} s")
-
-    old = signal.signal(signal.SIGALRM, expire)
-    signal.alarm(seconds)
-    try:
-        yield
-    finally:
-        signal.alarm(0)
-        signal.signal(signal.SIGALRM, old)
 
 
 def one_line(capsys, *needles: str) -> str:
