@@ -89,9 +89,7 @@ def read_bytes(path: str | Path, *, what: str, max_bytes: int, within: str | Pat
     except OSError as exc:
         raise _os_refusal(p, what, exc) from None
     try:
-        info = os.fstat(fd)
-        if info.st_size > max_bytes:
-            raise UserFileError(f"{p}: {info.st_size} bytes exceeds the limit of {max_bytes} bytes for a {what}")
+        _check_size(p, os.fstat(fd), max_bytes, what)
         data = _read_at_most(fd, max_bytes + 1)
     except OSError as exc:
         raise _os_refusal(p, what, exc) from None
@@ -113,9 +111,7 @@ def sha256(path: str | Path, *, what: str = "file", max_bytes: int = MAX_HASHED_
     p = Path(path)
     fd = _open_regular(p, what, within)
     try:
-        info = os.fstat(fd)
-        if info.st_size > max_bytes:
-            raise UserFileError(f"{p}: {info.st_size} bytes exceeds the limit of {max_bytes} bytes for a {what}")
+        _check_size(p, os.fstat(fd), max_bytes, what)
         h, seen = hashlib.sha256(), 0
         while block := os.read(fd, min(chunk, max_bytes + 1 - seen) or 1):
             seen += len(block)
@@ -125,6 +121,12 @@ def sha256(path: str | Path, *, what: str = "file", max_bytes: int = MAX_HASHED_
     finally:
         os.close(fd)
     return h.hexdigest()
+
+
+def _check_size(p: Path, info: os.stat_result, max_bytes: int, what: str) -> None:
+    """Refuse ``p`` when ``info`` (its fstat) says it is larger than ``max_bytes``, before any read."""
+    if info.st_size > max_bytes:
+        raise UserFileError(f"{p}: {info.st_size} bytes exceeds the limit of {max_bytes} bytes for a {what}")
 
 
 def _os_refusal(p: Path, what: str, exc: OSError) -> UserFileError:

@@ -122,8 +122,7 @@ def test_read_json_names_the_file(tmp_path):
 
 # -- scene meta ------------------------------------------------------------------------------------
 def test_scene_meta_that_is_a_fifo_or_dev_zero_is_passed_over_never_read(tmp_path):
-    from assurance.dataio.poses import meta_pose
-    from assurance.dataio.uavid import read_meta
+    from assurance.dataio.poses import meta_pose, read_meta
     from assurance.evidence.records import scene_meta
 
     meta = tmp_path / "seq00" / "meta"

@@ -11,7 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from assurance.dataio.uavid import Sample, read_meta
+from assurance.dataio.poses import read_meta
+from assurance.dataio.uavid import Sample
 from assurance.scenes.world import World, pixel_clearance_m
 from el.camera import CameraGeometry, Intrinsics, Pose
 

@@ -90,14 +90,14 @@ def _dist_version(name: str) -> str:
 def scene_splits(tasks: Sequence[Task]) -> dict[str, int]:
     """Frames per split their scene's ``meta/*.json`` declares (synthetic scenes; none for data without meta):
     EL-R16 judges a calibration card on the test split only."""
-    import json
+    from assurance.dataio.poses import read_meta
 
     out: dict[str, int] = {}
     for sample in {t.sample.key: t.sample for t in tasks}.values():
         path = sample.meta_path()
-        try:
-            split = json.loads(path.read_text(encoding="utf-8")).get("split") if path.is_file() else None
-        except (OSError, ValueError, AttributeError):
+        try:  # bounded, as every scene meta file is read: a FIFO or a link to /proc is passed over
+            split = read_meta(path).get("split") if path.is_file() else None
+        except (OSError, ValueError):
             split = None
         if isinstance(split, str):
             out[split] = out.get(split, 0) + 1

@@ -56,28 +56,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--boot", type=int, default=2000, help="bootstrap resamples of the results table (default 2000)")
 
 
-def run_system(args: argparse.Namespace, run: Path) -> object:
-    """The system file the report is about: the one given (or found in the working directory), else the run's own
-    as its signed manifest records it (the document itself, as ``uav-el verify`` reads it: no file at the path the
-    manifest names is read), else the embedded default."""
-    from assurance.campaign.readouts import RunError, read_manifest
-    from assurance.cli.system_options import system_of
-    from assurance.system.loader import system_from_record
-
-    system = system_of(args)
-    if not system.default:
-        return system
-    try:
-        recorded = read_manifest(run).get("system") or {}
-    except (OSError, ValueError, RunError):
-        return system  # the report's own run checks name what is wrong with the run
-    if recorded.get("default", True) or not recorded.get("document"):
-        return system
-    found = system_from_record(recorded)
-    print(f"system file: {found.label} (the run's own)", file=sys.stderr)
-    return found
-
-
 def refuse_out_inside_run(out: Path, *runs: Path) -> None:
     """Refuse an output folder that is, or lies inside, a campaign run folder (``runs`` given, or any folder above
     ``out`` holding a run's ``manifest.json`` with its ``shards/`` or shard index): the report writes
@@ -100,6 +78,7 @@ def refuse_out_inside_run(out: Path, *runs: Path) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from assurance.campaign.readouts import DamagedRunError, RunError
+    from assurance.cli.system_options import run_system
     from assurance.evidence import generate
     from assurance.requirements import RegistryError, read_targets_file
 

@@ -36,3 +36,26 @@ def assessed(args: argparse.Namespace) -> System:
         system = System.build(system_of(args), model=getattr(args, "weights", None), gate=getattr(args, "gate", None))
         args.assessed_system = system
     return system
+
+
+def run_system(args: argparse.Namespace, run: Path) -> SystemFile:
+    """The system file a command about a run (``evidence``, ``verify``) judges: the one given (or found in the
+    working directory), else the run's own as its signed manifest records it (the document itself: no file at the
+    path the manifest names is read), else the embedded default. Says so on stderr when it is the run's own."""
+    import sys
+
+    from assurance.campaign.readouts import RunError, read_manifest
+    from assurance.system.loader import system_from_record
+
+    system = system_of(args)
+    if not system.default:
+        return system
+    try:
+        recorded = read_manifest(run).get("system") or {}
+    except (OSError, ValueError, RunError):
+        return system  # the report's own run checks name what is wrong with the run
+    if recorded.get("default", True) or not recorded.get("document"):
+        return system
+    found = system_from_record(recorded)
+    print(f"system file: {found.label} (the run's own)", file=sys.stderr)
+    return found

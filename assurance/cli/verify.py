@@ -64,7 +64,7 @@ def _judge_the_runs_system(args: argparse.Namespace, run: Path) -> None:
     """Without a system file given (or found in the working directory), the system judged is the run's own, as its
     signed manifest records it (``evidence`` takes the same): its waivers are the ones the results are signed with,
     never the shipped system's. Says which system it judges (stderr)."""
-    from assurance.cli.evidence import run_system
+    from assurance.cli.system_options import run_system
 
     given = getattr(args, "system_file", None)
     if given is not None and not given.default:

@@ -14,7 +14,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from assurance.dataio.poses import POSES_FILE, read_meta, sequence_poses  # noqa: F401  (read_meta re-exported)
+from assurance.dataio.poses import POSES_FILE, sequence_poses
 from assurance.files import atomic_write_bytes, public_mode  # noqa: F401  (re-exported)
 from el.camera import Pose
 from el.errors import DataError

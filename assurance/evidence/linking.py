@@ -1,7 +1,8 @@
-"""The toolkit's last pass over the report's HTML, whatever template made it: every requirement id in the text
-becomes a link to the requirement's anchor, the filter script (plain JavaScript, a few lines, nothing fetched) goes
-in, and a Content-Security-Policy lets the browser run that script only (by its hash) and fetch nothing: a script
-or an event handler a supplied template carries never runs, and the page stays readable without JavaScript."""
+"""What the report's shell (``evidence_templates/report.html.j2``) puts in the page besides the templates' markup,
+and the last pass over it: the filter script (plain JavaScript, a few lines, nothing fetched), a
+Content-Security-Policy that lets the browser run that script only (by its hash) and fetch nothing, and
+:func:`link_ids`, which makes every requirement id in the text a link to the requirement's anchor. The page stays
+readable without JavaScript."""
 
 from __future__ import annotations
 
@@ -70,11 +71,8 @@ def script_hash(script: str = SCRIPT) -> str:
     return "sha256-" + base64.b64encode(hashlib.sha256(script.encode("utf-8")).digest()).decode("ascii")
 
 
-_DOCTYPE = re.compile(r"\A\s*<!DOCTYPE[^>]*>", re.IGNORECASE)
 _SKIP = re.compile(r"<(script|style|svg|textarea|title|pre)\b.*?</\1\s*>", re.IGNORECASE | re.DOTALL)
 _TAG = re.compile(r"<[^>]*>")
-_HEAD = re.compile(r"\A\s*(?:<!DOCTYPE[^>]*>)?\s*(?:<html\b[^>]*>)?\s*<head\b[^>]*>", re.IGNORECASE)
-_BODY_END = re.compile(r"</body\s*>", re.IGNORECASE)
 
 
 def link_ids(markup: str, ids: Iterable[str], anchor: dict[str, str]) -> str:
@@ -102,18 +100,3 @@ def link_ids(markup: str, ids: Iterable[str], anchor: dict[str, str]) -> str:
     out.append(rest if depth else words.sub(
         lambda w: f'<a class="rid" href="#{html.escape(anchor[by_text[w.group(1)]])}">{w.group(1)}</a>', rest))
     return "".join(out)
-
-
-def finish(markup: str, ids: Iterable[str], anchor: dict[str, str]) -> str:
-    """The report as written: requirement ids linked, the Content-Security-Policy first in the document (right
-    after its doctype), the filter script last in its body."""
-    markup = link_ids(markup, ids, anchor)
-    meta = f'<meta http-equiv="Content-Security-Policy" content="{CSP.format(hash=script_hash())}">\n'
-    head = _HEAD.match(markup)  # right after <head> when nothing comes before it; else first after the doctype
-    doctype = _DOCTYPE.match(markup)
-    at = head.end() if head else doctype.end() if doctype else 0
-    markup = markup[:at] + ("\n" if at else "") + meta + markup[at:].lstrip("\n")
-    script = f"<script>{SCRIPT}</script>\n"
-    ends = list(_BODY_END.finditer(markup))
-    at = ends[-1].start() if ends else len(markup)
-    return markup[:at] + script + markup[at:]

@@ -29,9 +29,9 @@ def _json(path: Path) -> dict[str, Any] | None:
 
 def scene_meta(folder: str | Path) -> list[dict[str, Any]]:
     """The meta JSON of every scene of a UAVid-layout folder (none for data without it), each read bounded
-    (``assurance.dataio.uavid.read_meta``: a FIFO, ``/dev/zero`` or an oversized file there is passed over, never
+    (``assurance.dataio.poses.read_meta``: a FIFO, ``/dev/zero`` or an oversized file there is passed over, never
     read: data folders are not signed)."""
-    from assurance.dataio.uavid import read_meta
+    from assurance.dataio.poses import read_meta
 
     out = []
     for p in sorted(Path(folder).glob("*/meta/*.json")):

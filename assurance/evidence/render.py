@@ -146,7 +146,7 @@ def _render(env: Any, name: str, context: Mapping[str, Any]) -> str:
                             f"{type(exc).__name__}: {exc}") from None
 
 
-SHELL_FILES = ("report.html.j2", "cover.html.j2")
+SHELL_FILES = (TEMPLATE, COVER)
 """The packaged files of the report's shell (page, head and first page): a template folder's file of one of these
 names, or any stylesheet there, is never used (the report says so)."""
 

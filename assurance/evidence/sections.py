@@ -15,7 +15,7 @@ from assurance.evidence.text import ci, fmt, pct, to_float
 
 def scene_types(scenes: Any, keys: Sequence[str]) -> tuple[str, bool]:
     """What the scenes were (styles and lighting from their meta JSON), and whether they are synthetic."""
-    from assurance.dataio.uavid import read_meta
+    from assurance.dataio.poses import read_meta
 
     styles: Counter[str] = Counter()
     lights: Counter[str] = Counter()

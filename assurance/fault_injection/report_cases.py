@@ -1,4 +1,4 @@
-"""Fault-injection cases of the report's shell (rows ``T2``..``T4``, ``T25``..``T29``, ``T50``..``T54``): what a
+"""Fault-injection cases of the report's shell (rows ``T1``..``T4``, ``T25``..``T29``, ``T50``..``T54``): what a
 hostile applicant's template folder does to the document the auditor reads.
 
 The shell (head, Content-Security-Policy, stylesheet, first page, section order) is the toolkit's; a supplied folder
@@ -41,6 +41,11 @@ def first_page(html: str) -> str:
     return html[start:end] if 0 <= start < end else ""
 
 
+def _states_alone(page: str, verdict: str) -> bool:
+    """Whether ``page`` says "Gate: VERDICT" and no other gate verdict."""
+    return f"Gate: {verdict}" in page and not any(f"Gate: {v}" in page for v in ("PASSED", "FAILED") if v != verdict)
+
+
 def _report_says_gate(name: str, *, pdf: bool = False, absent: tuple[str, ...] = ()) -> Callable[[Path], str | None]:
     """A check: ``rep-NAME``'s first page (and page 1 of its PDF with ``pdf``) states the gate's verdict and no
     other; none of ``absent`` is anywhere in the HTML."""
@@ -52,9 +57,7 @@ def _report_says_gate(name: str, *, pdf: bool = False, absent: tuple[str, ...] =
             verdict = json.loads((out / "evidence.json").read_text("utf-8"))["gate"]["result"]
         except (OSError, ValueError, KeyError) as exc:
             return f"no report to check ({type(exc).__name__})"
-        page = first_page(html)
-        others = [v for v in ("PASSED", "FAILED") if v != verdict and f"Gate: {v}" in page]
-        if f"Gate: {verdict}" not in page or others:
+        if not _states_alone(first_page(html), verdict):
             return f"first page does not state the gate's verdict {verdict} alone"
         found = [a for a in absent if a in html]
         if found:
@@ -70,8 +73,8 @@ def _report_says_gate(name: str, *, pdf: bool = False, absent: tuple[str, ...] =
                 attached = list(reader.attachments)
             except Exception as exc:  # noqa: BLE001 - the row names what is wrong
                 return f"PDF unreadable ({type(exc).__name__})"
-            if f"Gate: {verdict}" not in first or any(f"Gate: {v}" in first for v in ("PASSED",) if v != verdict):
-                return f"page 1 of the PDF does not state {verdict}"
+            if not _states_alone(first, verdict):
+                return f"page 1 of the PDF does not state the gate's verdict {verdict} alone"
             if any(a in name_ for name_ in attached for a in absent):
                 return "the PDF attaches a supplied file"
         return None
@@ -86,6 +89,13 @@ def _no_report(name: str) -> Callable[[Path], str | None]:
         return f"{left[0]} left in --out" if left else None
 
     return check
+
+
+def _sandbox_escape(ws: Path) -> list[str]:
+    """A section reaching the os module through a global's __init__.__globals__ to run a shell command."""
+    marker = ws / "T1-executed"
+    body = "{{ cycler.__init__.__globals__.os.system('touch " + str(marker) + "') }}"
+    return _evidence(ws, "sandbox", _folder(ws, "sandbox", _section(body)), "--no-pdf")
 
 
 def _file_attachment(ws: Path) -> list[str]:
@@ -196,6 +206,8 @@ def _no_templates_used(name: str) -> Callable[[Path], str | None]:
 
 _GATE = "gate: FAILED"
 REPORT_CASES: tuple[Case, ...] = (
+    Case("T1-template-sandbox-escape", "a report template calling os.system through cycler.__init__.__globals__",
+         _sandbox_escape, 2, "report template refused", check=_no_report("sandbox")),
     Case("T2-template-file-attachment", "a section attaching file:///... (a key file) to the PDF", _file_attachment, 1,
          _GATE, "gate:", _report_says_gate("attach", pdf=True, absent=("file://", "stand-in-signing-key"))),
     Case("T3-template-claims-passed", "a section printing 'Gate: PASSED' with the gate's own classes on a failed gate",

@@ -34,7 +34,7 @@ FOLDS = {"A->B": (lambda sc: sc < SPLIT, lambda sc: sc >= SPLIT),
 def domain_refused(root: Path, name: str, count: int) -> np.ndarray:
     """Per frame of the synthetic set ``name``: whether the embedded default's declared domain refuses its pose
     (from the scene's meta, as its telemetry would give it) or its size."""
-    from assurance.dataio.uavid import read_meta
+    from assurance.dataio.poses import read_meta
     from assurance.system import default_system
     from assurance.system.build import odd
     from el.camera import Pose

@@ -17,8 +17,8 @@ from typing import Any
 import cv2
 import numpy as np
 
-from assurance.dataio.poses import POSES_FILE, write_poses
-from assurance.dataio.uavid import read_meta, sample_paths, write_image
+from assurance.dataio.poses import POSES_FILE, read_meta, write_poses
+from assurance.dataio.uavid import sample_paths, write_image
 from assurance.files import atomic_write_bytes
 from assurance.scenes.builder import Builder
 from assurance.scenes.layout import build_city
