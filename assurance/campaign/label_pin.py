@@ -5,33 +5,29 @@ CH monitor's class hierarchy. A system file names its label set by path or prese
 after the run (flown with road declared safe, the honest file put back under the same name) would leave the
 evidence judged on one set and reported on another. The manifest (a subject of the campaign's signed statement,
 ``assurance.campaign.attestation``) therefore records their content SHA-256 (:func:`label_record`): of the
-canonical JSON of the set as flown (``LabelSet.to_dict``: classes, colours, states, hazard scores, categories,
-ignore colour, declared tree) and of the tree the CH monitor used (``el.monitors.hierarchy.default_hierarchy``:
-nodes and parents), the built-in and packaged sets included. ``uav-el evidence`` recomputes both from the system it
-judges (:func:`label_problems`): a difference is a gate problem naming the file.
+canonical JSON (``el.records.body_sha256``) of the set as flown (``LabelSet.to_dict``: classes, colours, states,
+hazard scores, categories, ignore colour, declared tree) and of the tree the CH monitor used
+(``el.monitors.hierarchy.default_hierarchy``: nodes and parents), the built-in and packaged sets included.
+``uav-el evidence`` recomputes both from the system it judges (:func:`label_problems`): a difference is a gate
+problem naming the file.
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
+
+from el.records import body_sha256
 
 PREDICATE_KEYS = ("label_set_sha256", "hierarchy_sha256")
 """What a campaign statement signed by this toolkit carries of the label pin (present, even null, in every statement
 it signs: their presence tells a run signed by a toolkit that pins its label set)."""
 
 
-def _sha256(doc: Any) -> str:
-    text = json.dumps(doc, sort_keys=True, separators=(",", ":"), ensure_ascii=False, allow_nan=False)
-    return hashlib.sha256(text.encode("utf-8")).hexdigest()
-
-
 def label_set_sha256(labels: Any) -> str:
     """SHA-256 of a label set's canonical content (its ``to_dict``, categories included, as sorted-key JSON)."""
-    return _sha256(labels.to_dict())
+    return body_sha256(labels.to_dict())
 
 
 def hierarchy_sha256(labels: Any) -> str:
@@ -41,8 +37,8 @@ def hierarchy_sha256(labels: Any) -> str:
     try:
         tree = default_hierarchy(labels)
     except ValueError:  # a declared tree the CH monitor refuses (a campaign without CH flies): pinned as declared
-        return _sha256({"declared": labels.to_dict().get("hierarchy")})
-    return _sha256({"nodes": list(tree.nodes), "parents": [int(p) for p in tree.parents]})
+        return body_sha256({"declared": labels.to_dict().get("hierarchy")})
+    return body_sha256({"nodes": list(tree.nodes), "parents": [int(p) for p in tree.parents]})
 
 
 def _declared_tree_file(label_file: Path) -> Path | None:
@@ -132,10 +128,6 @@ def label_problems(system: Any, man: Mapping[str, Any], predicate: Mapping[str, 
     if not isinstance(rec, Mapping) or not rec.get("sha256"):
         text = (f"{run}: the run does not pin its label set and class hierarchy (no content hashes in its manifest): "
                 "the classes it was judged with cannot be shown to be the system's")
-        # A gate problem only when a pinning toolkit signed the run (its statement carries the keys, verified against
-        # the trusted keys): that signer could have pinned and did not. A run of an older toolkit, or one read
-        # without keys (nothing then tells who wrote its manifest), stays readable with a warning: failing it would
-        # say nothing about the run itself, only about when it was made.
         signed_new = predicate is not None and all(k in predicate for k in PREDICATE_KEYS)
         return ([text], []) if signed_new else ([], [text + " (a run made before they were pinned)"])
     from assurance.system import build
