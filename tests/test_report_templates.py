@@ -1,5 +1,5 @@
-"""Report templates a user replaces: a folder by option (or the system file) overrides the packaged templates file by
-file; a broken template is exit 2 naming the file and the line."""
+"""Section templates a user replaces: a folder given by option (or the system file's, with --system-templates)
+replaces the packaged section templates file by file; a broken template is exit 2 naming the file and the line."""
 
 from __future__ import annotations
 
