@@ -41,21 +41,35 @@ def assessed(args: argparse.Namespace) -> System:
 def run_system(args: argparse.Namespace, run: Path) -> SystemFile:
     """The system file a command about a run (``evidence``, ``verify``) judges: the one given (or found in the
     working directory), else the run's own as its signed manifest records it (the document itself: no file at the
-    path the manifest names is read), else the embedded default. Says so on stderr when it is the run's own."""
-    import sys
+    path the manifest names is read), else the embedded default. Says on stderr which one it judges, and why."""
+    system = system_of(args)
+    if not system.default:
+        where = "given" if getattr(args, "system", None) else "found in the working directory"
+        _say_judged(f"{system.label} ({where})")
+        return system
+    found = _recorded_system(run)
+    if found is None:
+        _say_judged("the embedded default (the shipped system; the run records no other)")
+        return system
+    _say_judged(f"{found.label} (the run's own)")
+    return found
 
+
+def _recorded_system(run: Path) -> SystemFile | None:
+    """The system file the run's signed manifest records, None when it records the default (or none)."""
     from assurance.campaign.readouts import RunError, read_manifest
     from assurance.system.loader import system_from_record
 
-    system = system_of(args)
-    if not system.default:
-        return system
     try:
         recorded = read_manifest(run).get("system") or {}
     except (OSError, ValueError, RunError):
-        return system  # the report's own run checks name what is wrong with the run
+        return None  # the report's own run checks name what is wrong with the run
     if recorded.get("default", True) or not recorded.get("document"):
-        return system
-    found = system_from_record(recorded)
-    print(f"system file: {found.label} (the run's own)", file=sys.stderr)
-    return found
+        return None
+    return system_from_record(recorded)
+
+
+def _say_judged(what: str) -> None:
+    import sys
+
+    print(f"system judged: {what}", file=sys.stderr)

@@ -67,13 +67,9 @@ def _judge_the_runs_system(args: argparse.Namespace, run: Path) -> None:
     from assurance.cli.system_options import run_system
 
     given = getattr(args, "system_file", None)
-    if given is not None and not given.default:
-        return
-    system = run_system(args, run)  # prints "system file: LABEL (the run's own)" when it is the run's
-    if not system.default:
+    system = run_system(args, run)  # says which system it judges
+    if (given is None or given.default) and not system.default:
         args.system_file, args.system_from_run = system, True
-    else:
-        print("system file: the embedded default (the shipped system; the run records no other)", file=sys.stderr)
 
 
 def _check_system(args: argparse.Namespace, run: Path) -> None:
