@@ -30,6 +30,13 @@ def test_cases_cover_issue_19_and_bad_inputs():
         assert any(i.startswith(f"H{n}-") for i in ids), n
 
 
+def test_quick_slice_names_known_cases_of_every_family():
+    """``--quick`` (make demo) replays one or two cases of each family, each a case of the table."""
+    ids = {c.id for c in fi.CASES}
+    assert set(fi.QUICK) <= ids and len(fi.QUICK) < len(ids)
+    assert {i[0] for i in fi.QUICK} == {i[0] for i in ids}  # H, B, R, S, G, T
+
+
 def test_fast_cases_behave_and_the_report_shows_the_appendix(workspace, tmp_path):
     rows = fi.run_cases(workspace, [c for c in fi.CASES if c.id in FAST], main=main)
     assert [r["case"] for r in rows] == list(FAST)
@@ -47,6 +54,7 @@ def test_fast_cases_behave_and_the_report_shows_the_appendix(workspace, tmp_path
     rep = generate(workspace / "run", out, pdf=False, n_boot=20)
     html = rep.html.read_text(encoding="utf-8")
     assert "Appendix: fault injection" in html and "H8-json-is-a-folder" in html
+    assert f"This table holds {len(rows)} of the {len(fi.CASES)}" in " ".join(html.split())  # a slice, said so
     assert "<script>alert" not in html and "&lt;script&gt;" in html
     doc = json.loads(rep.json.read_text())
     assert doc["files"]["faults"].endswith("faults.csv")

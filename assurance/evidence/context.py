@@ -18,7 +18,7 @@ from assurance.campaign.model_files import changed_model_files
 from assurance.evidence.gate import GATE_CLASS, Gate, requirement_results, weakening_problems
 from assurance.evidence.identity import identity
 from assurance.evidence.matrix import check_problems, check_view, matrix, run_checks
-from assurance.evidence.render import TEMPLATES_DIR, faults_table, rel
+from assurance.evidence.render import TEMPLATES_DIR, fault_case_count, faults_table, rel
 from assurance.evidence.sections import (
     domain,
     limitations,
@@ -414,5 +414,5 @@ def template_context(inp: Inputs, gate: Gate, campaign: dict[str, Any], base: di
         + _design_time_scope(inp),
         "baseline": base,
         "commands": commands(inp),
-        "faults": faults_table(inp.out, inp.warnings),
+        "faults": faults_table(inp.out, inp.warnings), "fault_cases": fault_case_count(),
     }

@@ -37,6 +37,14 @@ def faults_table(out: Path, warnings: list[str]) -> list[dict[str, str]] | None:
         return None
 
 
+def fault_case_count() -> int:
+    """How many fault-injection cases this toolkit replays (``uav-el fault-table`` without ``--quick``): the
+    appendix says when the table next to the report holds fewer (a slice, ``make demo``)."""
+    from assurance.fault_injection.table import CASES
+
+    return len(CASES)
+
+
 COVER = "cover.html.j2"
 """The first page (gate verdict, summary): always the packaged file, included by the packaged shell."""
 
