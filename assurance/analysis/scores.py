@@ -20,6 +20,7 @@ import numpy as np
 import pandas as pd
 from sklearn import metrics as skm
 
+from assurance.analysis.auroc_batch import GroupedAuroc
 from assurance.analysis.intervals import image_bootstrap
 
 __all__ = ["auroc", "auroc_markdown", "auroc_table", "grouped_auroc_ci", "roc_curve"]
@@ -83,17 +84,7 @@ def grouped_auroc_ci(groups: Any, scores: Any, unsafe: Any, *, n_boot: int = 100
     uniq, inv = np.unique(np.asarray(groups), return_inverse=True)
     if len(uniq) < 2:
         return math.nan, math.nan
-    members = [np.flatnonzero(inv == i) for i in range(len(uniq))]
-    s, y = np.asarray(scores, dtype=np.float64), np.asarray(unsafe, dtype=bool)
-
-    def statistic(idx: np.ndarray) -> np.ndarray:  # one AUROC per sample of groups (rows of idx)
-        flat = idx.reshape(-1, idx.shape[-1])
-        out = np.empty(len(flat))
-        for b, sample in enumerate(flat):
-            rows = np.concatenate([members[i] for i in sample])
-            out[b] = auroc(s[rows], y[rows])
-        return out.reshape(idx.shape[:-1])
-
+    statistic = GroupedAuroc(inv, len(uniq), scores, unsafe)  # every sample at once, each equal to auroc()'s
     return image_bootstrap(len(uniq), statistic, n_boot=n_boot, conf=conf, seed=seed)
 
 

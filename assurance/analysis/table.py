@@ -45,11 +45,15 @@ def image_readouts(images: pd.DataFrame, candidates: pd.DataFrame) -> dict[tuple
     return out
 
 
-def results_table(run_dir: str | Path, *, n_boot: int = 2000, seed: int = 0) -> pd.DataFrame:
-    """One row per scenario, columns ``RESULT_COLUMNS`` + ``faults``, in the campaign's order."""
+def results_table(run_dir: str | Path, *, n_boot: int = 2000, seed: int = 0, images: pd.DataFrame | None = None,
+                  candidates: pd.DataFrame | None = None) -> pd.DataFrame:
+    """One row per scenario, columns ``RESULT_COLUMNS`` + ``faults``, in the campaign's order.
+
+    ``images`` / ``candidates``: the run's tables (``readouts.load_table``) where the caller has them already,
+    so that a command reads each once."""
     man = readouts.read_manifest(run_dir)
-    images = readouts.load_table(run_dir, "images")
-    candidates = readouts.load_table(run_dir, "candidates")
+    images = readouts.load_table(run_dir, "images") if images is None else images
+    candidates = readouts.load_table(run_dir, "candidates") if candidates is None else candidates
     if images.empty:
         raise readouts.RunError(f"{run_dir}: no finished shard yet")
     per_scen = image_readouts(images, candidates)

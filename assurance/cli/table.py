@@ -48,7 +48,8 @@ def run(args: argparse.Namespace) -> int:
               "run the same `uav-el campaign` command to complete it)", file=sys.stderr)
     if check.legacy:
         print(f"warning: {args.run}: written before shard hashes; its readouts cannot be verified", file=sys.stderr)
-    df = results_table(args.run, n_boot=args.boot)
+    candidates = readouts.load_table(args.run, "candidates")  # read once: the results and the AUROC tables
+    df = results_table(args.run, n_boot=args.boot, candidates=candidates)
     if args.check_readme:
         return check_readme(args.run, df, args.check_readme)
     faulted = int(df.drop_duplicates(["perturbation", "severity"])["faults"].sum()) if len(df) else 0
@@ -64,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
         md += "\n### Beside the published results (Guerin et al., ICRA 2022)\n\n" + compare_markdown(merged)
         md += "\n### The paper's findings, asked of both tables\n\n" + findings_markdown(findings(df, load_reference()))
     md += "\n### Monitor scores: AUROC (unsafe candidates as positives, 95% bootstrap interval over images)\n\n"
-    md += auroc_markdown(auroc_table(readouts.load_table(args.run, "candidates"), n_boot=min(args.boot, 1000)))
+    md += auroc_markdown(auroc_table(candidates, n_boot=min(args.boot, 1000)))
     md += "\n### Where the time went\n\n" + stages_markdown(stage_table(args.run), wall_seconds(args.run))
     md += "\nMonitoring time per candidate, by configuration:\n\n" + monitor_costs_markdown(monitor_costs(args.run))
     atomic_write_bytes(out / "results.md", md.encode())
