@@ -81,7 +81,7 @@ def test_evidence_uses_the_runs_system_file_and_refuses_another(walkthrough, tmp
 
     out = tmp_path / "own"
     cli.main(["evidence", "--run", str(walkthrough["run"]), "--out", str(out), "--no-pdf", "--boot", "20"])
-    assert "(the run's own)" in capsys.readouterr().err  # no --system: the run's system file, found and unchanged
+    assert "(the run's own)" in capsys.readouterr().out  # no --system: the run's system file, found and unchanged
     doc = json.loads((out / "evidence.json").read_text())
     assert doc["identity"]["system_sha256"] == sha256_file(walkthrough["system"])
     other = tmp_path / "other.toml"

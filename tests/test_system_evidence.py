@@ -89,13 +89,13 @@ def test_verify_and_evidence_without_system_judge_the_runs_own(system_run, tmp_p
     elsewhere.mkdir()
     monkeypatch.chdir(elsewhere)
     out = tmp_path / "out"
-    cli.main(["verify", str(system_run["run"]), "--out", str(out), "-k", "not rerun", "-q"])
+    cli.main(["verify", str(system_run["run"]), "--out", str(out), "-k", "not rerun"])
     printed = capsys.readouterr()
-    assert "system judged: " in printed.err and "(the run's own)" in printed.err
+    assert "system judged: " in printed.out and "(the run's own)" in printed.out
     assert "--system" not in printed.out  # the "next:" command needs none: evidence takes the run's own too
     doc = json.loads((out / "requirements.dsse.json").read_text())
     assert doc  # signed
     cli.main(["evidence", "--run", str(system_run["run"]), "--out", str(out), "--no-pdf", "--boot", "20"])
-    assert "(the run's own)" in capsys.readouterr().err  # evidence says which system it judged too
+    assert "(the run's own)" in capsys.readouterr().out  # evidence says which system it judged too
     problems = json.loads((out / "evidence.json").read_text())["gate"]["problems"]
     assert not any("waivers" in p for p in problems), problems

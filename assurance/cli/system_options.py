@@ -41,7 +41,7 @@ def assessed(args: argparse.Namespace) -> System:
 def run_system(args: argparse.Namespace, run: Path) -> SystemFile:
     """The system file a command about a run (``evidence``, ``verify``) judges: the one given (or found in the
     working directory), else the run's own as its signed manifest records it (the document itself: no file at the
-    path the manifest names is read), else the embedded default. Says on stderr which one it judges, and why."""
+    path the manifest names is read), else the embedded default. Says which one it judges, and why (stdout)."""
     system = system_of(args)
     if not system.default:
         where = "given" if getattr(args, "system", None) else "found in the working directory"
@@ -70,6 +70,5 @@ def _recorded_system(run: Path) -> SystemFile | None:
 
 
 def _say_judged(what: str) -> None:
-    import sys
-
-    print(f"system judged: {what}", file=sys.stderr)
+    """One line on stdout (stderr stays the one line that says what went wrong, when something does)."""
+    print(f"system judged: {what}")
