@@ -10,6 +10,7 @@ RELEASE_SCENES ?= 70
 RELEASE_RUN    ?= runs/release
 REPORTS ?= reports
 JOBS   ?= 2
+TEST_JOBS ?= 2  # pytest-xdist workers of make test (a test file stays on one worker: its module fixtures built once)
 FAULT_FLAGS ?=  # make demo: --quick (a representative slice of the fault table; make faults and CI replay all)
 VERIFY_FLAGS ?=  # make demo: -q (the evidence step prints the requirement summary); CI: pytest's whole output
 
@@ -76,7 +77,7 @@ release-campaign: setup
 ## The test suite (fast; long tests are marked slow, checks of a campaign run are marked campaign:
 ## both are left out here; the evidence step runs the campaign checks).
 test: setup
-	$(PY) -m pytest -q -m "not slow and not campaign" --junitxml $(REPORTS)/junit-tests.xml
+	$(PY) -m pytest -q -m "not slow and not campaign" -n $(TEST_JOBS) --dist loadfile --junitxml $(REPORTS)/junit-tests.xml
 
 test-all: setup
 	$(PY) -m pytest -q

@@ -1,10 +1,11 @@
 """Decision time with the frame gate deployed vs without: target at most 10% above.
 
 Two systems with the deployed monitor, each on its own copy of the shipped network: one with
-``PipelineConfig(gate=GATE.json)`` (the frame pass keeps its statistics, ``Segmenter.tap_frames``; the gate scores
-them, ``el.monitors.frame_gate``), one without. Each frame is decided by both, interleaved (A/B), by
-``EmergencyLanding.decide`` on the image array; median and mean over the frames. By default: the deployed gate
-(``el.pipeline.DEPLOYED_GATE``) on synthetic validation scenes at the camera's 3840x2160, made in a temporary folder.
+``PipelineConfig(gate=GATE.json)`` (the frame pass returns its statistics with its probabilities,
+``predict_frame(rgb, stats=True)``; the gate scores them, ``el.monitors.frame_gate``), one without. Each frame is
+decided by both, interleaved (A/B), by ``EmergencyLanding.decide`` on the image array; median and mean over the
+frames. By default: the deployed gate (``el.pipeline.DEPLOYED_GATE``) on synthetic validation scenes at the camera's
+3840x2160, made in a temporary folder.
 
     .venv/bin/python benchmarks/bench_frame_gate.py [--gate GATE.json] [--data data/gate4k/val] [--frames 10]
 """

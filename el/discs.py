@@ -31,6 +31,12 @@ def disc_window_mask(disc: Disc, x0: int, y0: int, x1: int, y1: int) -> np.ndarr
     The window is given in full-resolution pixel indices (columns x0..x1-1, rows y0..y1-1) and may
     be larger than the disc (a monitor's patch has a context margin).
     """
-    cols = np.arange(x0, x1, dtype=np.float64) + 0.5 - disc.x
-    rows = np.arange(y0, y1, dtype=np.float64) + 0.5 - disc.y
-    return rows[:, None] ** 2 + cols[None, :] ** 2 <= disc.radius_px * disc.radius_px
+    return window_sq_distances(disc.x, disc.y, x0, y0, x1, y1) <= disc.radius_px * disc.radius_px
+
+
+def window_sq_distances(x: float, y: float, x0: int, y0: int, x1: int, y1: int) -> np.ndarray:
+    """ndarray of shape (y1 - y0, x1 - x0), float64: the squared distance from each pixel centre of the window to
+    the point (x, y), as :func:`disc_window_mask` compares it (one grid serves every disc with that centre)."""
+    cols = np.arange(x0, x1, dtype=np.float64) + 0.5 - x
+    rows = np.arange(y0, y1, dtype=np.float64) + 0.5 - y
+    return rows[:, None] ** 2 + cols[None, :] ** 2

@@ -4,7 +4,8 @@ the CM's candidates -> the judge -> the walk -> a ``Decision``.
 Every user of the flight function runs this code: the flight loop (``el.pipeline.EmergencyLanding``, a lazy judge
 under the deadline), a campaign task (``assurance.campaign.task``: every configuration's verdicts from one
 judging pass, each concluded here) and the ground-truth pipeline (a label-map segmenter and no monitor). What differs
-between them is plugged in: how the frame is read, the segmenter, and the judge.
+between them is plugged in: how the frame is read, the segmenter, and the judge. :func:`build_parts` is the one place
+their :class:`Parts` are put together (the label set taken from the network, the frame gate bound to it).
 
 :func:`prepare` runs the stages up to the candidates and returns a :class:`Frame`; a stage that settles the decision
 before the walk (a fault, a frame outside the declared domain, one the frame gate refuses, the deadline) sets
@@ -30,8 +31,9 @@ from el.deadline import Deadline
 from el.decision import Candidate, Decision
 from el.errors import BudgetExceeded
 from el.labels import LabelSet
-from el.monitors.frame_gate import FrameGate, judge_frame
+from el.monitors.frame_gate import FrameGate, bind_frame_gate, judge_frame
 from el.odd import OperatingDomain
+from el.segmentation.contract import labels_of, segment_frame
 from el.walk import HAZARD, Judge, Step, WalkOutcome, walk_candidates
 
 REFUSALS = ("outside_odd", "out_of_domain")
@@ -41,6 +43,10 @@ Clock = Callable[[], float]
 Reader = Callable[[dict[str, Any]], np.ndarray]
 """Reads the frame (filling the decision's ``input`` record it is given) and returns the array the segmenter takes
 and the monitors judge; its width and height are the frame's."""
+POSE_SOURCES = ("nominal", "frame", "command_line")
+"""Where the pose a decision was planned with came from (``input.pose.source``): the system's nominal pose, the
+frame's own (a flight log, a campaign frame's sidecar), or a tool's command line (``uav-el land --height/--pitch``)."""
+NOMINAL_SIZE = (3840, 2160)
 logger = logging.getLogger(__name__)  # faults with their tracebacks; the decision keeps only the reason
 
 
@@ -60,7 +66,20 @@ class Parts:
     gate: FrameGate | None = None
     fault: str | None = None
     record: dict[str, Any] = field(default_factory=dict)
-    nominal_size: tuple[int, int] = (3840, 2160)
+    nominal_size: tuple[int, int] = NOMINAL_SIZE
+
+
+def build_parts(segmenter: Any, core: CoreConfig, *, labels: LabelSet | None = None, odd: OperatingDomain | None = None,
+                gate: FrameGate | None = None, fault: str | None = None, record: dict[str, Any] | None = None,
+                nominal_size: tuple[int, int] = NOMINAL_SIZE) -> Parts:
+    """The parts a decision runs with, put together here for every user of the kernel (flight, campaign, ground
+    truth). The label set is the network's (``labels_of``) unless given; a frame gate is bound to the network
+    (``el.monitors.frame_gate.bind_frame_gate``: fitted on it, and it returns frame statistics), ``FrameGateError``
+    otherwise, so no part set holds a gate its network cannot feed."""
+    if gate is not None:
+        bind_frame_gate(gate, segmenter)
+    return Parts(segmenter=segmenter, labels=labels_of(segmenter) if labels is None else labels, core=core, odd=odd,
+                 gate=gate, fault=fault, record=dict(record or {}), nominal_size=nominal_size)
 
 
 @dataclass
@@ -92,9 +111,12 @@ def frame_core(core: CoreConfig, pose: Pose | None) -> CoreConfig:
     return replace(core, pose=Pose(**{k: float(v) for k, v in values.items()}))  # checked again, plain floats
 
 
-def pose_record(pose: Pose, *, nominal: bool) -> dict[str, Any]:
-    """The pose a decision was planned with, as its JSON records it (``input.pose``)."""
-    return {**{f.name: getattr(pose, f.name) for f in fields(pose)}, "source": "nominal" if nominal else "frame"}
+def pose_record(pose: Pose, *, source: str) -> dict[str, Any]:
+    """The pose a decision was planned with and where it came from (:data:`POSE_SOURCES`), as its JSON records it
+    (``input.pose``)."""
+    if source not in POSE_SOURCES:
+        raise ValueError(f"pose source must be one of {', '.join(POSE_SOURCES)}, got {source!r}")
+    return {**{f.name: getattr(pose, f.name) for f in fields(pose)}, "source": source}
 
 
 def _fault(stage: str, exc: BaseException, info: dict[str, Any]) -> str:
@@ -102,7 +124,7 @@ def _fault(stage: str, exc: BaseException, info: dict[str, Any]) -> str:
     return f"fault: {stage}: {type(exc).__name__}: {exc}"
 
 
-def prepare(read: Reader, parts: Parts, *, pose: Pose | None = None, roll_deg: float = 0.0,
+def prepare(read: Reader, parts: Parts, *, pose: Pose | None = None, pose_source: str = "frame", roll_deg: float = 0.0,
             budget: Deadline | None = None, clock: Clock = time.perf_counter, evaluate: bool = False,
             raise_faults: bool = False, info: dict[str, Any] | None = None,
             timings: dict[str, float] | None = None) -> Frame:
@@ -110,7 +132,8 @@ def prepare(read: Reader, parts: Parts, *, pose: Pose | None = None, roll_deg: f
     campaign records a fault of its task with the exception itself).
 
     ``pose`` (and ``roll_deg``, not modelled: checked within the flat-ground model's tolerance): the frame's pose;
-    None is the nominal ``parts.core.pose``. ``budget``: checked between the stages. ``evaluate``: past a refusal
+    None is the nominal ``parts.core.pose``. ``pose_source``: where ``pose`` came from (:data:`POSE_SOURCES`; the
+    decision records ``nominal`` without one). ``budget``: checked between the stages. ``evaluate``: past a refusal
     (declared domain, frame gate) the later stages still run, for the readouts. ``info`` and ``timings``: the
     decision's records, filled in place (a caller that stops the decision from another thread reads them).
     """
@@ -131,7 +154,7 @@ def prepare(read: Reader, parts: Parts, *, pose: Pose | None = None, roll_deg: f
         timings["read_s"] = clock() - t
         frame.stage = "pose"
         frame.core = frame_core(parts.core, pose)
-        info["pose"] = pose_record(frame.core.pose, nominal=pose is None)
+        info["pose"] = pose_record(frame.core.pose, source="nominal" if pose is None else pose_source)
         if roll_deg:
             info["pose"]["roll_deg"] = float(roll_deg)  # not modelled: a pose error within MAX_ROLL_DEG
         if parts.fault:
@@ -147,7 +170,8 @@ def prepare(read: Reader, parts: Parts, *, pose: Pose | None = None, roll_deg: f
 
         frame.stage = "segmentation"
         t = clock()
-        probs = parts.segmenter.predict_frame(rgb)
+        # with a gate, the frame's statistics come back with its probabilities, from the same pass
+        probs, stats = segment_frame(parts.segmenter, rgb, stats=parts.gate is not None)
         if not isinstance(probs, np.ndarray) or not np.isfinite(probs).all():
             raise ValueError("segmentation returned non-finite scores")
         frame.probs = probs
@@ -156,7 +180,7 @@ def prepare(read: Reader, parts: Parts, *, pose: Pose | None = None, roll_deg: f
 
         if parts.gate is not None:
             frame.stage = "frame_gate"
-            refused = judge_frame(parts.gate, parts.segmenter, info)
+            refused = judge_frame(parts.gate, stats, info)
             if refused:  # no evidence of safety for this frame: a decision, not a fault
                 settle(refused)
                 if not evaluate:
@@ -230,15 +254,17 @@ def default(frame: Frame, parts: Parts, reason: str, budget: Deadline, *, candid
 
 
 def decide_frame(read: Reader, parts: Parts, judge: Judge | None, *, walk: str = HAZARD, pose: Pose | None = None,
-                 roll_deg: float = 0.0, budget: Deadline | None = None, clock: Clock = time.perf_counter,
-                 evaluate_all: bool = False, before: Step | None = None, after: Step | None = None,
-                 info: dict[str, Any] | None = None, timings: dict[str, float] | None = None) -> Decision:
+                 pose_source: str = "frame", roll_deg: float = 0.0, budget: Deadline | None = None,
+                 clock: Clock = time.perf_counter, evaluate_all: bool = False, before: Step | None = None,
+                 after: Step | None = None, info: dict[str, Any] | None = None,
+                 timings: dict[str, float] | None = None) -> Decision:
     """One frame through the kernel: :func:`prepare` then :func:`conclude`; never raises."""
     budget = budget or Deadline(clock, None)
-    frame = prepare(read, parts, pose=pose, roll_deg=roll_deg, budget=budget, clock=clock, info=info,
-                    timings=timings)
+    frame = prepare(read, parts, pose=pose, pose_source=pose_source, roll_deg=roll_deg, budget=budget, clock=clock,
+                    info=info, timings=timings)
     return conclude(frame, parts, judge, walk=walk, budget=budget, clock=clock, evaluate_all=evaluate_all,
                     before=before, after=after)[0]
 
 
-__all__ = ["REFUSALS", "Frame", "Parts", "conclude", "decide_frame", "default", "frame_core", "pose_record", "prepare"]
+__all__ = ["NOMINAL_SIZE", "POSE_SOURCES", "REFUSALS", "Frame", "Parts", "build_parts", "conclude", "decide_frame",
+           "default", "frame_core", "pose_record", "prepare"]

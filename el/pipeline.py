@@ -29,11 +29,11 @@ from el.decision import Decision, Disc, MonitorVerdict
 from el.errors import BudgetExceeded
 from el.hashing import sha256_bytes
 from el.imageio import MAX_PIXELS, check_max_pixels, read_image_hashed
-from el.kernel import Frame, Parts, conclude, default, frame_core, prepare
+from el.kernel import Frame, Parts, build_parts, conclude, default, frame_core, prepare
 from el.labels import UAVID
 from el.monitors import CandidateContext, Monitor, build_monitor, monitor_name, parse_monitor_spec
 from el.monitors.capabilities import check_monitor_capabilities
-from el.monitors.frame_gate import bind_frame_gate
+from el.monitors.frame_gate import load_frame_gate
 from el.monitors.patch_judge import batch_judge
 from el.odd import OperatingDomain
 from el.rgb import check_rgb
@@ -52,8 +52,31 @@ DEPLOYED_GATE: Path | None = Path(__file__).resolve().parent / "monitors" / "dat
 frame pass's trunk statistics, fitted and thresholded on 3840x2160 training and validation frames under the
 in-domain perturbations (docs/results.md). ``PipelineConfig.gate`` is what the flight code deploys; the
 command line sets it to this unless ``--gate``/``[monitor] gate`` say otherwise."""
+_NOT_BUILT = {"model": "segmentation model not loaded", "monitor": "runtime monitor {!r} not built",
+              "frame_gate": "frame gate not usable"}
 MIN_FRAME_SIZE = 16  # px: the smallest frame side the segmenter takes (el.segmentation.inference.MIN_SIZE)
 logger = logging.getLogger(__name__)  # faults with their tracebacks; the decision keeps only the reason
+
+
+@dataclass(frozen=True)
+class FrameFile:
+    """An image file read and decoded once by the flight reader (:meth:`read`: size capped from the header, hashed
+    while decoded): a tool that needs the pixels too (``uav-el land --overlay``) decodes the frame once and hands it
+    to :meth:`EmergencyLanding.decide`, which records it as the file it was read from (path, SHA-256, EXIF)."""
+
+    path: Path
+    rgb: np.ndarray
+    meta: dict[str, int]
+    sha256: str
+    read_s: float = 0.0
+
+    @classmethod
+    def read(cls, path: str | Path, *, max_pixels: int = MAX_PIXELS) -> FrameFile:
+        """Read and decode ``path`` (``el.imageio.read_image_hashed``; its one-line error for a bad file);
+        ``read_s``: the seconds it took, which a decision on it counts against its budget as if it had read it."""
+        t = time.perf_counter()
+        rgb, meta, digest = read_image_hashed(path, max_pixels=max_pixels)
+        return cls(Path(path), rgb, meta, digest, time.perf_counter() - t)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -177,15 +200,17 @@ class EmergencyLanding:
         segmenter: Any = None,
         weights: str | Path | None = None,
         clock: Clock = time.perf_counter,
+        log: Any = None,
     ) -> None:
         self.config = config or PipelineConfig()
         self.clock = clock
+        self.log = log  # an el.flightlog.FlightLog: each decision appended to it (opt-in; its write never raises)
         self._lock = threading.Lock()
         self.fault: str | None = None
+        self.errors: dict[str, Exception] = {}
         self.segmenter = segmenter
         self.monitor: Monitor | None = None
         self.walk = HAZARD
-        self.gate: Any = None
         self.labels = UAVID
         try:
             if segmenter is None:
@@ -196,8 +221,7 @@ class EmergencyLanding:
                 check_model(segmenter)
             self.labels = labels_of(self.segmenter)  # the system's label set is the one its network segments into
         except Exception as exc:  # missing/altered weights: every decision is the default action
-            self.fault = f"fault: model: {type(exc).__name__}: {exc}"
-            logger.exception("segmentation model not loaded; every decision will be the default action")
+            self._refuse("model", exc)
         try:
             spec = calibrated_spec(self.config.monitor, self.config.calibration)
             self.walk = getattr(parse_monitor_spec(spec), "walk", HAZARD)
@@ -207,44 +231,72 @@ class EmergencyLanding:
             )
             check_monitor_bindings(self.monitor, spec, self.config.calibration, self.segmenter)
         except Exception as exc:
-            self.fault = self.fault or f"fault: monitor: {type(exc).__name__}: {exc}"
-            logger.exception("runtime monitor %r not built; every decision will be the default action",
-                             self.config.monitor)
+            self._refuse("monitor", exc)
+        gate = None
         if self.config.gate:
             try:
-                self.gate = bind_frame_gate(self.config.gate, self.segmenter)
+                gate = load_frame_gate(self.config.gate)
             except Exception as exc:
-                self.fault = self.fault or f"fault: frame_gate: {type(exc).__name__}: {exc}"
-                logger.exception("frame gate not usable; every decision will be the default action")
+                self._refuse("frame_gate", exc)
+        self.parts = self._parts(gate if self.segmenter is not None else None)  # no network: no gate to bind
+        self.gate = self.parts.gate
 
+    def _refuse(self, part: str, exc: Exception) -> None:
+        """Keep a part that could not be built (``errors``; the first is every decision's ``fault``), with its
+        traceback in the log. Called inside the ``except`` block."""
+        self.errors.setdefault(part, exc)
+        self.fault = self.fault or f"fault: {part}: {type(exc).__name__}: {exc}"
+        logger.exception("%s; every decision will be the default action", _NOT_BUILT[part].format(self.config.monitor))
 
-    @property
-    def parts(self) -> Parts:
-        """The deployed parts the kernel decides with (``el.kernel.Parts``)."""
-        return Parts(segmenter=self.segmenter, labels=self.labels, core=self.config.core, odd=self.config.odd,
-                     gate=self.gate, fault=self.fault, record=self.config.to_dict(),
-                     nominal_size=self.config.nominal_size)
+    def _parts(self, gate: Any) -> Parts:
+        """The deployed parts the kernel decides with (``el.kernel.build_parts``, built once); a gate the network
+        cannot carry (fitted on another, or no frame statistics) is a fault and left out."""
+        cfg = self.config
+
+        def build(frame_gate: Any) -> Parts:
+            return build_parts(self.segmenter, cfg.core, labels=self.labels, odd=cfg.odd, gate=frame_gate,
+                               fault=self.fault, record=cfg.to_dict(), nominal_size=cfg.nominal_size)
+
+        try:
+            return build(gate)
+        except Exception as exc:
+            self._refuse("frame_gate", exc)
+            return build(None)
 
     # -- the decision ----------------------------------------------------------------------------
-    def decide(self, image: np.ndarray | str | Path, pose: Pose | None = None) -> Decision:
-        """Decide where to land for one frame (an RGB uint8 array or an image file); never raises.
+    def decide(self, image: np.ndarray | str | Path | FrameFile, pose: Pose | None = None, *,
+               pose_source: str = "frame") -> Decision:
+        """Decide where to land for one frame (:meth:`decide_now`) and append the decision to the flight log when
+        one was given (``log``, ``el.flightlog``); never raises."""
+        decision = self.decide_now(image, pose, pose_source=pose_source)
+        if self.log is not None:
+            self.log.write(decision, segmenter=self.segmenter, frame=getattr(image, "rgb", image))
+        return decision
+
+    def decide_now(self, image: np.ndarray | str | Path | FrameFile, pose: Pose | None = None, *,
+                   pose_source: str = "frame") -> Decision:
+        """Decide where to land for one frame (an RGB uint8 array, an image file, or a :class:`FrameFile` already
+        decoded); never raises.
 
         ``pose``: the camera's height and pitch when the frame was taken (from the flight log); None is the
         configured nominal pose (``config.core.pose``). It sets the safety radius in pixels and is recorded in the
-        decision's ``input.pose``. The decision is the kernel's (``el.kernel``), with this system's parts and its
+        decision's ``input.pose`` with ``pose_source`` (``el.kernel.POSE_SOURCES``: ``frame``, or ``command_line``
+        for a pose typed by hand). The decision is the kernel's (``el.kernel``), with this system's parts and its
         monitor judging candidates lazily under the deadline.
         """
         cfg = self.config
         budget = Deadline(self.clock, cfg.time_budget_s)
+        if isinstance(image, FrameFile) and self.clock is time.perf_counter:
+            budget.start -= image.read_s  # the decode done before the call counts, as decide(path) counts it
         timings: dict[str, float] = {}
         info: dict[str, Any] = {}
         if not (cfg.hard_stop and cfg.time_budget_s is not None and self.clock is time.perf_counter):
             with active(budget):
-                return self._decide(image, pose, budget, timings, info)
+                return self._decide(image, (pose, pose_source), budget, timings, info)
 
         def locked() -> Decision:  # one decision at a time: a stopped one ends at its next checkpoint
             with self._lock:
-                return self._decide(image, pose, budget, timings, info)
+                return self._decide(image, (pose, pose_source), budget, timings, info)
 
         finished, decision = run_with_deadline(locked, budget)
         if finished:
@@ -258,23 +310,28 @@ class EmergencyLanding:
             pass
         return default(frame, self.parts, "timeout", budget)
 
-    def _decide(self, image: np.ndarray | str | Path, pose: Pose | None, budget: Deadline,
+    def _decide(self, image: np.ndarray | str | Path | FrameFile, pose: tuple[Pose | None, str], budget: Deadline,
                 timings: dict[str, float], info: dict[str, Any]) -> Decision:
-        """The kernel's decision, with ``budget`` checked between stages and (as the active deadline) inside them."""
+        """The kernel's decision, with ``budget`` checked between stages and (as the active deadline) inside them;
+        ``pose``: the frame's pose and where it came from."""
         parts = self.parts
-        frame = prepare(lambda record: self._read(image, record), parts, pose=pose, budget=budget,
-                        clock=self.clock, info=info, timings=timings)
+        frame = prepare(lambda record: self._read(image, record), parts, pose=pose[0], pose_source=pose[1],
+                        budget=budget, clock=self.clock, info=info, timings=timings)
+        if isinstance(image, FrameFile) and "read_s" in frame.timings:
+            frame.timings["read_s"] += image.read_s  # decoded before the call (FrameFile.read)
         judge, before, after = self._judge(frame, budget)
         return conclude(frame, parts, judge, walk=self.walk, budget=budget, clock=self.clock,
                         evaluate_all=self.config.evaluate_all, before=before, after=after)[0]
 
     # -- stages ----------------------------------------------------------------------------------
-    def _read(self, image: np.ndarray | str | Path, info: dict[str, Any]) -> np.ndarray:
+    def _read(self, image: np.ndarray | str | Path | FrameFile, info: dict[str, Any]) -> np.ndarray:
         if isinstance(image, str | Path):
-            path = Path(image)
-            info["path"] = str(path)
-            rgb, meta, info["sha256"] = read_image_hashed(path, max_pixels=self.config.max_pixels)  # read once
-            info.update(meta)  # exif_orientation, when one was applied
+            info["path"] = str(Path(image))  # recorded even when the file cannot be read
+            image = FrameFile.read(image, max_pixels=self.config.max_pixels)  # read once, hashed while decoded
+        if isinstance(image, FrameFile):
+            info["path"], info["sha256"] = str(image.path), image.sha256
+            info.update(image.meta)  # exif_orientation, when one was applied
+            rgb = image.rgb
         else:
             rgb = image
             if not isinstance(rgb, np.ndarray):
@@ -370,6 +427,7 @@ __all__ = [
     "DEFAULT_TIME_BUDGET_S",
     "Disc",
     "EmergencyLanding",
+    "FrameFile",
     "PipelineConfig",
     "decide",
 ]

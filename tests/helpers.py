@@ -178,3 +178,22 @@ def within_seconds(seconds: int):
     finally:
         signal.alarm(0)
         signal.signal(signal.SIGALRM, old)
+
+
+class TappedOracle(OracleSegmenter):
+    """A perfect segmentation (so that frames have candidates to judge and land on) whose frame pass also runs
+    ``seg`` (a tiny network), returning its frame statistics for the frame gate (``predict_frame(rgb,
+    stats=True)``); it reports ``weights_sha256`` as the network's hash."""
+
+    frame_stats = True
+
+    def __init__(self, seg, working_width: int, weights_sha256: str) -> None:
+        super().__init__(working_width)
+        self.seg, self.weights_sha256 = seg, weights_sha256
+
+    def predict_frame(self, rgb, *, stats=False):
+        from el.segmentation.frame_tap import FramePass
+
+        found = self.seg.predict_frame(rgb, stats=stats)
+        probs = super().predict_frame(rgb)
+        return FramePass(probs, found.stats) if stats else probs

@@ -9,7 +9,7 @@ import json
 
 import numpy as np
 import pytest
-from helpers import TINY_ARCH, FakeClock, OracleSegmenter, write_textured_scenes
+from helpers import TINY_ARCH, FakeClock, TappedOracle, write_textured_scenes
 
 from assurance.campaign.run import CampaignConfig, plan, run_task, task_seed
 from assurance.dataio.uavid import read_image
@@ -26,33 +26,6 @@ MONITORS = ("lhd", "lhd+ch:tau=0.25")
 BUDGET = 5.0
 
 
-class TappedOracle(OracleSegmenter):
-    """A perfect segmentation (so that frames have candidates to judge and land on) whose frame pass also runs the
-    tiny network, keeping its frame statistics for the frame gate (``tap_frames``, ``last_tap``)."""
-
-    weights_sha256 = SHA
-
-    def __init__(self, seg) -> None:
-        super().__init__(WW)
-        self.seg = seg
-
-    @property
-    def tap_frames(self):
-        return self.seg.tap_frames
-
-    @tap_frames.setter
-    def tap_frames(self, value):
-        self.seg.tap_frames = value
-
-    @property
-    def last_tap(self):
-        return self.seg.last_tap
-
-    def predict_frame(self, rgb):
-        self.seg.predict_frame(rgb)
-        return super().predict_frame(rgb)
-
-
 class SlowOn:
     """The tiny network, with a forward pass that takes (by the injected clock) longer than the budget on some
     frames: the deadline must stop those frames the same way in flight and in the campaign."""
@@ -66,10 +39,10 @@ class SlowOn:
     def __setattr__(self, name, value):
         setattr(self.seg, name, value)
 
-    def predict_frame(self, rgb):
+    def predict_frame(self, rgb, **kwargs):
         if int(rgb[0, 0, 0]) in self.slow:
             self.clock.t += 2 * BUDGET
-        return self.seg.predict_frame(rgb)
+        return self.seg.predict_frame(rgb, **kwargs)
 
 
 @pytest.fixture(scope="module")
@@ -92,16 +65,14 @@ def world(tmp_path_factory, one_torch_thread):
     # a threshold inside the campaign frames' scores, so that the gate refuses some of them and passes others
     scores = []
     for p in sorted((root / "data" / "seq00").glob("Images/*.png")):
-        seg.tap_frames = True
-        seg.predict_frame(read_image(p))
-        scores.append(gate.score(seg.last_tap))
+        scores.append(gate.score(seg.predict_frame(read_image(p), stats=True).stats))
     body = dict(doc["body"])
     body["threshold"] = float(np.median(scores))
     path = _write(root / "gate.json", frame_gate_document(body))
     odd = OperatingDomain.from_dict({"height_m": [40, 60], "pitch_deg": [36, 54], "image_width": [120, 130],
                                      "image_height": [60, 80], "aspect": [1.5, 2.0]})
-    return {"root": root, "seg": TappedOracle(seg), "gate": {"path": str(path), "sha256": load_frame_gate(path).sha256},
-            "odd": odd}
+    return {"root": root, "seg": TappedOracle(seg, WW, SHA),
+            "gate": {"path": str(path), "sha256": load_frame_gate(path).sha256}, "odd": odd}
 
 
 def _write(path, doc):
@@ -191,3 +162,17 @@ def test_monitor_coverage_holds_where_the_gate_and_the_domain_refuse_frames(worl
     assert any(k in keys for k in zip(accepted["key"], accepted["perturbation"], accepted["monitor"], strict=True))
     evidence = check_monitor_coverage(images, candidates)
     assert evidence.status == "pass", evidence.message()
+
+
+def test_one_place_builds_the_kernel_s_parts():
+    """Flight, the campaign task and the ground truth get their ``Parts`` from ``el.kernel.build_parts`` (the label
+    set from the network, the gate bound to it): no other module constructs them."""
+    import re
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    makers = {str(p.relative_to(root)) for folder in ("el", "assurance") for p in (root / folder).rglob("*.py")
+              if re.search(r"(?<![\w.])Parts\(", p.read_text("utf-8"))}
+    assert makers == {"el/kernel.py"}, makers
+    users = {"el/pipeline.py", "assurance/campaign/task.py", "assurance/campaign/gt_pipeline.py"}
+    assert all("build_parts(" in (root / u).read_text("utf-8") for u in users)

@@ -69,8 +69,8 @@ def test_the_gate_file_records_what_it_was_fitted_and_thresholded_on(setup):
     assert b["training"]["frames"] == 30 * 11 and b["validation"]["frames"] == 6 * 6
     assert b["validation"]["scenes"] == [0, 6] and len(b["training"]["sha256"]) == 64
     gate = load_frame_gate(setup["gate"])
-    setup["seg"].predict_frame(_held_out(setup)[0])
-    assert gate.dims == b["features"]["dims"] == setup["seg"].last_tap.pooled.size  # trunk levels' mean and std
+    stats = setup["seg"].predict_frame(_held_out(setup)[0], stats=True).stats
+    assert gate.dims == b["features"]["dims"] == stats.pooled.size  # trunk levels' mean and std
     assert gate.threshold == b["threshold"] and gate.sha256 == setup["doc"]["sha256"]
 
 
@@ -109,14 +109,9 @@ def test_a_gate_fitted_on_clean_frames_refuses_thick_fog(setup, tmp_path):
     from el.monitors.gates import GATES
 
     seg, gate = setup["seg"], GATES["mahalanobis"]
-    seg.tap_frames = True
 
     def features(frames):
-        rows = []
-        for rgb in frames:
-            seg.predict_frame(rgb)
-            rows.append(gate.embed(seg.last_tap))
-        return np.array(rows)
+        return np.array([gate.embed(seg.predict_frame(rgb, stats=True).stats) for rgb in frames])
 
     train = [read_image(p) for p in sorted((setup["root"] / "train").glob("**/Images/*.png"))]
     body = dict(setup["doc"]["body"], params=gate.fit(features(train)))
@@ -150,15 +145,41 @@ def test_a_bad_gate_file_is_a_fault_and_the_default_action(setup, tmp_path):
         assert d.input["frame_gate"] is None
 
 
-def test_a_gate_that_cannot_score_the_frame_fails_safe(setup):
+def test_a_gate_that_cannot_score_the_frame_fails_safe(setup, monkeypatch):
+    from el.segmentation.frame_tap import FramePass
+
     system = _system(setup, setup["gate"])
-    system.segmenter.tap_frames = False  # the pass keeps no statistics: the gate cannot judge the frame
-    try:
-        d = system.decide(_held_out(setup)[0])
-    finally:
-        system.segmenter.tap_frames = True
+    seg, own = system.segmenter, system.segmenter.predict_frame
+    # the pass returns no statistics for this frame: the gate cannot judge it
+    monkeypatch.setattr(seg, "predict_frame", lambda rgb, *, stats=False: FramePass(own(rgb), None) if stats
+                        else own(rgb))
+    d = system.decide(_held_out(setup)[0])
     assert d.action == "default" and d.reason.startswith("fault: frame_gate: ValueError: the segmentation pass")
     assert d.input["frame_gate"]["score"] is None and d.input["frame_gate"]["threshold"] > 0
+
+
+def test_a_network_without_frame_statistics_cannot_carry_a_gate(setup):
+    """A plugin network that returns no frame statistics (``FRAME_STATS``) with a gate fitted on its identity: the
+    gate is refused when the system is built, and every decision is the default action naming why."""
+
+    class Plain:  # the seam's two methods only, claiming the network the gate was fitted on
+        weights_sha256 = SHA
+
+        def __init__(self, seg):
+            self.seg = seg
+
+        def predict_frame(self, rgb):
+            return self.seg.predict_frame(rgb)
+
+        def predict_patch(self, rgb_patch):
+            return self.seg.predict_patch(rgb_patch)
+
+    cfg = PipelineConfig(core=CoreConfig(working_width=WW), monitor="lhd", time_budget_s=None, gate=str(setup["gate"]))
+    system = EmergencyLanding(cfg, segmenter=Plain(setup["seg"]))
+    d = system.decide(_held_out(setup)[0])
+    assert system.gate is None and "frame_gate" in system.errors
+    assert d.action == "default" and d.reason.startswith("fault: frame_gate: FrameGateError") \
+        and "returns no frame statistics" in d.reason and d.input["frame_gate"] is None
 
 
 def test_cli_fit_gate_and_land_with_it(setup, tmp_path, capsys, monkeypatch):
@@ -278,3 +299,19 @@ def test_sweep_replays_a_frame_gate_and_gate_check_scores_other_scenes(setup):
     assert set(rows) == {"none:0", "brightness:3", "fog:3", "motion_blur:3", "shifted_pixels:3", "pixel_trap:3"}
     assert all(r["frames"] == 12 and 0 <= r["flagged"] <= 12 and r["max"] >= r["median"] for r in rows.values())
     assert rows["none:0"]["flagged"] <= 1  # 6 of its 12 clean scenes set the threshold
+
+
+def test_the_kernel_parts_bind_the_gate_to_their_network(setup):
+    """``el.kernel.build_parts``, the one maker of the kernel's parts (flight, campaign, ground truth), binds a gate
+    to the network: kept for the network it was fitted on, refused for another."""
+    from helpers import OracleSegmenter
+
+    from el.errors import FrameGateError
+    from el.kernel import build_parts
+    from el.monitors.frame_gate import load_frame_gate
+
+    gate = load_frame_gate(setup["gate"])
+    parts = build_parts(setup["seg"], CoreConfig(working_width=WW), gate=gate)
+    assert parts.gate is gate and parts.labels == UAVID and parts.fault is None
+    with pytest.raises(FrameGateError, match="fitted on network"):
+        build_parts(OracleSegmenter(WW), CoreConfig(working_width=WW), gate=gate)

@@ -21,9 +21,7 @@ IN_DOMAIN = ("none", "brightness", "fog", "motion_blur", "shifted_pixels", "pixe
 @pytest.fixture(scope="module")
 def tiny():
     torch.manual_seed(0)
-    seg = Segmenter(build_model(ArchConfig(widths=(8, 8, 8), decoder_channels=8)), working_width=128, labels=UAVID)
-    seg.tap_frames = True  # off by default: a system without a frame gate pays nothing
-    return seg
+    return Segmenter(build_model(ArchConfig(widths=(8, 8, 8), decoder_channels=8)), working_width=128, labels=UAVID)
 
 
 def _frames(seeds, rng_seed):
@@ -37,11 +35,7 @@ def _frames(seeds, rng_seed):
 
 
 def _taps(seg, frames):
-    out = []
-    for f in frames:
-        seg.predict_frame(f)
-        out.append(seg.last_tap)
-    return out
+    return [seg.predict_frame(f, stats=True).stats for f in frames]
 
 
 def test_the_frame_pass_taps_its_own_trunk_once(tiny, monkeypatch):
@@ -49,11 +43,25 @@ def test_the_frame_pass_taps_its_own_trunk_once(tiny, monkeypatch):
     calls = []
     trunk = tiny.model.trunk
     monkeypatch.setattr(tiny.model, "trunk", lambda x: calls.append(1) or trunk(x))
-    probs = tiny.predict_frame(rgb)
-    assert len(calls) == 1 and tiny.last_tap.pooled is not None and np.isfinite(tiny.last_tap.energy)
+    probs, tap = tiny.predict_frame(rgb, stats=True)
+    assert len(calls) == 1 and tap.pooled is not None and np.isfinite(tap.energy)
     with torch.inference_mode():  # the same logits as the network's own forward pass
         ref = torch.softmax(tiny.model(tiny._to_tensor([rgb_working(tiny, rgb)])), 1)
     assert np.allclose(probs, ref[0].numpy(), atol=1e-6)
+
+
+def test_the_statistics_come_back_with_the_frame_they_describe(tiny):
+    """No side channel: ``predict_frame(rgb, stats=True)`` returns the statistics of that frame's own pass with its
+    probabilities, the same probabilities as without them, and the model keeps nothing between calls (two frames
+    segmented in either order give each its own statistics)."""
+    a, b = ids_to_colors(tiny_scene(0)), ids_to_colors(tiny_scene(1))
+    first, second = tiny.predict_frame(a, stats=True), tiny.predict_frame(b, stats=True)
+    assert np.allclose(first.probs, tiny.predict_frame(a), atol=1e-6)
+    assert first.stats.energy != second.stats.energy
+    again = tiny.predict_frame(a, stats=True)  # after another frame: its own statistics, not the last frame's
+    assert again.stats.energy == pytest.approx(first.stats.energy) and np.allclose(again.stats.pooled,
+                                                                                   first.stats.pooled)
+    assert not any("tap" in name for name in vars(tiny))
 
 
 def rgb_working(seg, rgb):

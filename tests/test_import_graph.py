@@ -1,4 +1,5 @@
-"""The import graph of ``el`` and ``assurance`` has no cycle, and ``el`` never imports ``assurance``.
+"""The import graph of ``el`` and ``assurance`` has no cycle, ``el`` never imports ``assurance``, and each package
+imports only downwards through its layers (``LAYERS``, ``EL_LAYERS``).
 
 What counts as an edge A -> B (module A imports module B):
 
@@ -199,43 +200,68 @@ LAYERS = (
     ("fitting", ("fitting",)),
     ("requirements", ("requirements",)),
     ("fault_injection", ("fault_injection",)),
+    ("inservice", ("inservice",)),
     ("evidence", ("evidence",)),
     ("cli", ("cli", "__main__")),
 )
 """The harness's layers, bottom first: a module imports only from its own layer's parts or from layers below
 (imports inside functions included). The data on disk (UAVid layout, poses) below the synthetic scenes; the system
 file below the campaign that runs it; analysis of readouts above the campaign; the fitting tools above both;
-requirements above what they judge; fault injection above what it exercises; the report above the requirements;
+requirements above what they judge; fault injection above what it exercises; in-service evidence (flight logs against
+a run) above the requirements it names; the report above the requirements and the in-service evidence it shows;
 the command line on top."""
 
 
+EL_LAYERS = (
+    ("base", ("(root)", "errors", "rgb", "imageheader", "imageio", "userfiles", "hashing", "records", "safeyaml",
+              "torch_extra", "deadline", "decision")),
+    ("labels", ("class_names", "label_tables", "labels")),
+    ("geometry", ("camera", "config", "odd", "discs")),
+    ("core", ("regions", "representatives", "forbidden", "ranking", "candidates", "core")),
+    ("segmentation", ("segmentation",)),
+    ("monitors", ("walk", "monitors")),
+    ("flight", ("kernel", "pipeline", "flightlog")),
+)
+"""The flight code's layers, bottom first, under the same rule: the base (errors, bounded file reading, hashing,
+the deadline, the decision record) below the label sets; the camera geometry, declared domain and discs above them;
+the core model (candidates, regions, ranking) above the geometry; the network seam above both; the monitors (and the
+walk that asks them) above the network whose patches they segment; the kernel, the pipeline and its flight log on
+top."""
+
+PACKAGE_LAYERS = {"assurance": LAYERS, "el": EL_LAYERS}
+
+
 def layer_of(module: str) -> int | None:
-    """The layer index of an ``assurance`` module (None: not the harness)."""
+    """The layer index of a module of ``el`` or ``assurance`` in its package's layers (None: neither package)."""
     parts = module.split(".")
-    if parts[0] != "assurance":
+    layers = PACKAGE_LAYERS.get(parts[0])
+    if layers is None:
         return None
     part = parts[1] if len(parts) > 1 else "(root)"
-    for i, (_, members) in enumerate(LAYERS):
+    for i, (_, members) in enumerate(layers):
         if part in members:
             return i
-    raise AssertionError(f"{module}: its part {part!r} of assurance is in no layer of LAYERS")
+    raise AssertionError(f"{module}: its part {part!r} of {parts[0]} is in no layer of its package's layers")
 
 
-def test_every_harness_module_has_a_layer() -> None:
+def test_every_module_has_a_layer() -> None:
     for module in import_graph():
         layer_of(module)
 
 
-def test_the_harness_imports_only_downwards() -> None:
+def test_each_package_imports_only_downwards() -> None:
+    """The harness and the flight code each import only from their own layer or below (``el`` never imports
+    ``assurance`` at all: above)."""
     bad = []
     for module, targets in import_graph().items():
         mine = layer_of(module)
         if mine is None:
             continue
+        layers = PACKAGE_LAYERS[module.split(".")[0]]
         for target in targets:
-            theirs = layer_of(target)
+            theirs = layer_of(target) if target.split(".")[0] == module.split(".")[0] else None
             if theirs is not None and theirs > mine:
-                bad.append(f"{module} ({LAYERS[mine][0]}) -> {target} ({LAYERS[theirs][0]})")
+                bad.append(f"{module} ({layers[mine][0]}) -> {target} ({layers[theirs][0]})")
     assert not bad, "imports against the layer order:\n" + "\n".join(sorted(bad))
 
 
@@ -250,3 +276,4 @@ def test_a_layer_violation_is_reported(tmp_path: Path) -> None:
     graph = import_graph(tmp_path)
     assert "assurance.cli" in graph["assurance.dataio.io"]
     assert layer_of("assurance.dataio.io") < layer_of("assurance.cli")
+    assert layer_of("el.camera") < layer_of("el.core") < layer_of("el.monitors.lhd") < layer_of("el.pipeline")

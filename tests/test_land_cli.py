@@ -75,10 +75,16 @@ def test_land_options_reach_the_configuration(main, scene, tmp_path):
     rc = main(["land", "--labels", str(labels), "--json", str(out), "--mode", "paper", "--height", "40",
                "--pitch", "50", "--camera", "phantom3pro", "--working-width", "128"])
     assert rc == 0
-    core = json.loads(out.read_text())["config"]["core"]
+    d = json.loads(out.read_text())
+    core = d["config"]["core"]
     assert core["mode"] == "paper"
-    assert core["pose"] == {"height_m": 40.0, "pitch_deg": 50.0}
     assert core["intrinsics"]["name"] == "phantom3pro"
+    # the pose typed on the command line plans the frame and is recorded as such; the nominal pose stays the system's
+    assert d["input"]["pose"] == {"height_m": 40.0, "pitch_deg": 50.0, "source": "command_line"}
+    assert core["pose"] == {"height_m": 50.0, "pitch_deg": 45.0}
+    jsonschema.validate(d, decision_schema())
+    rc = main(["land", "--labels", str(labels), "--json", str(out), "--working-width", "128"])
+    assert rc == 0 and json.loads(out.read_text())["input"]["pose"]["source"] == "nominal"  # none given
 
 
 def test_positional_image_with_labels_is_the_image_to_draw_on(main, scene, tmp_path):
@@ -175,11 +181,16 @@ def test_model_pipeline_with_weights(main, scene, tmp_path, capsys, monkeypatch)
     save_weights(build_model(ArchConfig(widths=(8, 8, 8), ms_channels=8, decoder_channels=8)), weights)
     _, image = scene
     out, ov = tmp_path / "d.json", tmp_path / "ov.png"
-    code = main(["land", str(image), "--weights", str(weights), "--monitor", "lhd+ch:tau=0.25", "--json", str(out),
-                 "--overlay", str(ov), "--working-width", "1024"])
-    assert code == 0, capsys.readouterr().err
+    log = tmp_path / "flight.jsonl"
+    for _ in range(2):  # --log appends one record per decision
+        code = main(["land", str(image), "--weights", str(weights), "--monitor", "lhd+ch:tau=0.25", "--json",
+                     str(out), "--overlay", str(ov), "--working-width", "1024", "--log", str(log)])
+        assert code == 0, capsys.readouterr().err
     d = json.loads(out.read_text())
     jsonschema.validate(d, decision_schema())
+    records = [json.loads(line) for line in log.read_text().splitlines()]
+    assert len(records) == 2 and records[0]["frame"]["sha256"] == d["input"]["sha256"]
+    assert records[1]["action"] == d["action"]
     assert d["config"]["monitor"] == "lhd+ch:tau=0.25"
     assert read_image(ov).shape == (H, W, 3)
     bad = tmp_path / "bad.png"
@@ -243,3 +254,32 @@ def test_overlay_on_labels_and_on_an_image():
     edge = on_labels[124, 128 + 20]
     assert edge[2] > edge[0]
     assert cv2 is not None
+
+
+def test_land_builds_each_part_and_decodes_the_frame_once(main, scene, tmp_path, monkeypatch):
+    """``uav-el land`` (model pipeline, the shipped system with its monitor and gate) loads the network, builds the
+    monitor, reads the gate in the flight code and decodes the frame once each, also when it draws the overlay; a
+    pose typed on the command line is recorded as such."""
+    import collections
+
+    import el.imageio
+    import el.pipeline
+    from assurance.system.system import System
+
+    calls: collections.Counter = collections.Counter()
+
+    def count(owner, name, key):
+        fn = getattr(owner, name)
+        monkeypatch.setattr(owner, name, lambda *a, **k: calls.update([key]) or fn(*a, **k))
+
+    count(System, "segmenter", "model")
+    count(el.pipeline, "build_monitor", "monitor")
+    count(el.pipeline, "load_frame_gate", "gate")
+    count(el.imageio, "_decode_frame", "decode")
+    _, image = scene
+    out, ov = tmp_path / "d.json", tmp_path / "ov.png"
+    assert main(["land", str(image), "--json", str(out), "--overlay", str(ov), "--height", "48"]) == 0
+    assert calls == {"model": 1, "monitor": 1, "gate": 1, "decode": 1}, calls
+    d = json.loads(out.read_text())
+    assert d["input"]["frame_gate"] is not None and d["input"]["pose"]["source"] == "command_line"
+    assert d["input"]["pose"]["height_m"] == 48.0 and read_image(ov).shape == (H, W, 3)

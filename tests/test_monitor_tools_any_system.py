@@ -105,11 +105,10 @@ def test_fit_gate_fits_on_a_class_mapped_onnx_networks_output(gated):
     assert gate.features == "output" and gate.dims == 2 * len(CLASSES)  # the network's own 6 logits, mean and std
     assert gate.network_sha256 == sha256_file(gated["root"] / "unet.onnx")
     seg = System.build(load_system(gated["system"])).segmenter()
-    assert not hasattr(seg.network, "model") and hasattr(seg, "tap_frames")  # an ONNX file: no trunk, taps kept
-    seg.tap_frames = True
-    seg.predict_frame(np.zeros((H, W, 3), np.uint8))
-    assert seg.last_tap is seg.network.last_tap and seg.last_tap.pooled is None
-    assert np.isfinite(gate.score(seg.last_tap))
+    assert not hasattr(seg.network, "model") and seg.frame_stats  # an ONNX file: no trunk, its statistics returned
+    probs, stats = seg.predict_frame(np.zeros((H, W, 3), np.uint8), stats=True)
+    assert probs.shape[0] == seg.labels.num_classes and stats.pooled is None
+    assert np.isfinite(gate.score(stats))
 
 
 def test_the_fitted_gate_runs_in_flight_and_in_the_campaign(gated, tmp_path, capsys):
@@ -347,6 +346,8 @@ def test_fit_monitor_refuses_mcd_features_on_a_network_without_dropout(user, tmp
 def test_a_class_mapped_torch_network_keeps_its_trunk_statistics(one_torch_thread):
     import torch
 
+    from el.errors import FrameGateError
+    from el.monitors.frame_gate import check_frame_stats
     from el.segmentation.architectures import build_model
     from el.segmentation.class_map import MappedModel
     from el.segmentation.inference import Segmenter
@@ -355,15 +356,18 @@ def test_a_class_mapped_torch_network_keeps_its_trunk_statistics(one_torch_threa
     torch.manual_seed(0)
     seg = Segmenter(build_model(TINY_ARCH), working_width=64, card={"weights_sha256": "7e" * 32}, labels=UAVID)
     mapped = MappedModel(seg, TO_CITY_SURVEY, city)
-    assert mapped.network_classes == 8 and mapped.tap_frames is False
-    mapped.tap_frames = True
-    assert seg.tap_frames is True
-    mapped.predict_frame(ids_to_colors(scene_ids(128, 72)))
-    tap = mapped.last_tap
-    assert tap is seg.last_tap and tap.pooled is not None and tap.output.shape == (2 * UAVID.num_classes,)
+    assert mapped.network_classes == 8 and mapped.frame_stats is True
+    rgb = ids_to_colors(scene_ids(128, 72))
+    probs, tap = mapped.predict_frame(rgb, stats=True)
+    own = seg.predict_frame(rgb, stats=True).stats  # the network's own statistics, in its own classes
+    assert probs.shape[0] == city.num_classes and np.array_equal(probs, mapped.predict_frame(rgb))
+    assert tap.pooled is not None and tap.output.shape == (2 * UAVID.num_classes,)
+    assert np.array_equal(tap.output, own.output) and np.array_equal(tap.pooled, own.pooled)
 
     class Plain(OracleSegmenter):
         pass
 
     bare = MappedModel(Plain(64), TO_CITY_SURVEY, city)
-    assert not hasattr(bare, "tap_frames") and bare.last_tap is None  # nothing to pass through: a gate is refused
+    assert bare.frame_stats is False and bare.predict_frame(rgb, stats=True).stats is None  # nothing to pass on
+    with pytest.raises(FrameGateError, match="returns no frame statistics"):  # so a gate is refused
+        check_frame_stats(bare, "gate.json")

@@ -159,3 +159,72 @@ def test_every_landing_is_on_a_monitor_accepted_candidate(seed, road, monitor):
 def test_bad_monitor_spec_fails_at_configuration():
     with pytest.raises(ValueError, match="lhd"):
         PipelineConfig(monitor="lhd+foo")
+
+
+def test_a_frame_decoded_once_is_recorded_as_its_file(tmp_path):
+    """``decide(FrameFile.read(path))``: the caller keeps the decoded pixels and the decision is the one the path
+    gives, recorded as that file (path, SHA-256, size); a pose passed with its source is recorded with it."""
+    from el.camera import Pose
+    from el.hashing import sha256_file
+    from el.pipeline import FrameFile
+
+    path = tmp_path / "frame.png"
+    write_image(path, scene_image(scene_ids()))
+    frame = FrameFile.read(path)
+    system = make()
+    a, b = system.decide(path), system.decide(frame)
+    assert frame.rgb.shape == (H, W, 3) and b.input["sha256"] == sha256_file(path) == a.input["sha256"]
+    assert (a.action, a.selected, a.reason, a.input["path"]) == (b.action, b.selected, b.reason, b.input["path"])
+    typed = system.decide(frame, pose=Pose(height_m=48.0, pitch_deg=45.0), pose_source="command_line")
+    assert typed.input["pose"] == {"height_m": 48.0, "pitch_deg": 45.0, "source": "command_line"}
+    assert system.decide(frame, pose=Pose(height_m=48.0, pitch_deg=45.0)).input["pose"]["source"] == "frame"
+    assert a.input["pose"]["source"] == "nominal"
+    jsonschema.validate(json.loads(typed.to_json()), decision_schema())
+    bad = system.decide(frame, pose=Pose(height_m=48.0, pitch_deg=45.0), pose_source="guessed")
+    assert bad.action == "default" and bad.reason.startswith("fault: pose") and "guessed" in bad.reason
+
+
+def test_a_frame_decoded_before_the_call_counts_against_the_budget(tmp_path):
+    """The decode of a :class:`FrameFile` (done before ``decide``) counts as ``decide(path)``'s own read does: in
+    the frame's ``read_s`` and against the time budget."""
+    from dataclasses import replace
+
+    from el.pipeline import FrameFile
+
+    path = tmp_path / "frame.png"
+    write_image(path, scene_image(scene_ids()))
+    frame = FrameFile.read(path)
+    assert frame.read_s > 0
+    slow = replace(frame, read_s=30.0)  # a decode that took longer than the budget
+    system = make(budget=10.0)
+    late = system.decide(slow)
+    assert late.action == "default" and "timeout" in late.reason
+    assert system.decide(frame).reason != late.reason
+
+
+def test_the_pose_sources_are_the_decision_schema_s():
+    from el.kernel import POSE_SOURCES
+
+    schema = decision_schema()["properties"]["input"]["properties"]["pose"]["properties"]["source"]
+    assert tuple(schema["enum"]) == POSE_SOURCES
+
+
+def test_the_flight_system_builds_its_parts_once_and_keeps_what_failed(tmp_path):
+    """``EmergencyLanding`` builds its ``parts`` once (``el.kernel.build_parts``); a part that cannot fly is kept in
+    ``errors`` with its exception and the first is every decision's fault."""
+    from el.kernel import Parts
+
+    system = make()
+    assert isinstance(system.parts, Parts) and system.parts is system.parts and system.errors == {}
+    assert system.parts.labels == system.labels and system.parts.record == system.config.to_dict()
+    broken = EmergencyLanding(PipelineConfig(core=CoreConfig(working_width=WW), monitor="lhd",
+                                             gate=str(tmp_path / "missing.json")), segmenter=OracleSegmenter(WW))
+    assert set(broken.errors) == {"frame_gate"} and broken.parts.gate is None
+    assert broken.fault.startswith("fault: frame_gate: FrameGateError") and str(broken.errors["frame_gate"]) in \
+        broken.fault
+    assert broken.decide(scene_image(scene_ids())).reason == broken.fault
+
+
+def test_a_file_that_cannot_be_read_is_named_in_the_decision(tmp_path):
+    d = make().decide(tmp_path / "missing.png")
+    assert d.reason.startswith("fault: read") and d.input["path"] == str(tmp_path / "missing.png")

@@ -191,8 +191,7 @@ def test_land_with_a_custom_camera(main, tmp_path, capsys):
                  "--sensor-width", "6.3", "--hfov", "70", "--height", "30", "--pitch", "80", "--roll", "2"]) == 0
     d = json.loads(out.read_text())
     assert d["config"]["core"]["intrinsics"]["sensor_width_mm"] == 6.3
-    assert d["config"]["core"]["pose"] == {"height_m": 30.0, "pitch_deg": 80.0}
-    assert d["input"]["pose"]["roll_deg"] == 2.0
+    assert d["input"]["pose"] == {"height_m": 30.0, "pitch_deg": 80.0, "source": "command_line", "roll_deg": 2.0}
     assert main(["land", "--labels", str(tmp_path / "l.png"), "--json", str(out), "--working-width", "96",
                  "--camera", "phantom4", "--focal", "4.4"]) == 0
     assert json.loads(out.read_text())["config"]["core"]["intrinsics"]["focal_mm"] == 4.4
@@ -210,7 +209,8 @@ def test_land_with_a_custom_camera(main, tmp_path, capsys):
     assert main(["land", "--labels", str(tmp_path / "l.png"), "--json", str(out), "--working-width", "96",
                  "--hfov", "110", "--pitch", "20"]) == 0
     d = json.loads(out.read_text())
-    assert d["config"]["core"]["pose"] == {"height_m": 50.0, "pitch_deg": 20.0} and not d["reason"].startswith("fault")
+    assert d["input"]["pose"] == {"height_m": 50.0, "pitch_deg": 20.0, "source": "command_line"}
+    assert not d["reason"].startswith("fault")
     config = CoreConfig(working_width=96, intrinsics=Intrinsics.from_fov(110.0), pose=Pose(pitch_deg=20.0))
     result = run_core(probs_from_labels(ids, (96, 54), labels=UAVID), (192, 108), config, labels=UAVID)
     assert 0 < result.first_reachable_row < 108 and result.candidates

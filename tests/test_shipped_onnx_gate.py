@@ -66,11 +66,11 @@ def test_the_gate_binds_to_the_export_and_not_to_another_network(tmp_path):
     model = load_onnx_model(EXPORT, labels=UAVID)
     assert _shipped_weights_sha() in network_identities(model)
     bind_frame_gate(DEPLOYED_GATE, model)  # no FrameGateError: the export is the gate's network
-    assert model.tap_frames
+    assert model.frame_stats  # and it returns the statistics the gate reads
 
     class Other:  # a network claiming the shipped weights' export as its source by an attribute of its own
         weights_sha256 = "1" * 64
-        tap_frames = False
+        frame_stats = True
         source_weights_sha256 = None
 
     with pytest.raises(FrameGateError, match="fitted on network"):

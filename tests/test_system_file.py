@@ -156,7 +156,8 @@ def test_land_reads_the_system_file_and_options_win(land, scene, tmp_path, capsy
     core = json.loads(out.read_text())["config"]["core"]
     assert core["pose"] == {"height_m": 30, "pitch_deg": 60} and core["safety"]["radius_m"] == 3
     assert land(["land", "--labels", str(labels), "--system", str(system), "--height", "40", "--json", str(out)]) == 0
-    assert json.loads(out.read_text())["config"]["core"]["pose"]["height_m"] == 40
+    d = json.loads(out.read_text())  # the option wins for the frame, recorded as the command line's pose
+    assert d["input"]["pose"]["height_m"] == 40 and d["input"]["pose"]["source"] == "command_line"
 
 
 def test_a_bad_system_file_is_exit_2_with_one_line_and_nothing_written(land, scene, tmp_path, capsys):

@@ -20,9 +20,11 @@ import pandas as pd
 
 from assurance.campaign import readouts
 from assurance.campaign.run import task_seed
-from assurance.dataio.uavid import iter_samples, read_image
+from assurance.dataio.layouts import iter_samples
+from assurance.dataio.uavid import read_image
 from assurance.perturbations import perturb
 from el.monitors.frame_gate import FrameGate, load_frame_gate
+from el.segmentation.contract import segment_frame
 
 
 def load_gate(path: str | Path) -> FrameGate:
@@ -31,10 +33,8 @@ def load_gate(path: str | Path) -> FrameGate:
 
 
 def gate_score(gate: FrameGate, segmenter: Any, rgb: np.ndarray) -> float:
-    """The gate's score of one frame, from the frame pass's tap."""
-    segmenter.tap_frames = True
-    segmenter.predict_frame(rgb)
-    return gate.score(segmenter.last_tap)
+    """The gate's score of one frame, from the statistics its segmentation pass returned."""
+    return gate.score(segment_frame(segmenter, rgb, stats=True).stats)
 
 
 def frame_distances(run: str | Path, data: str | Path, gate_path: str | Path, segmenter: Any,

@@ -17,7 +17,6 @@ import pandas as pd
 
 from assurance.analysis.metrics import RESULT_COLUMNS, ImageReadout, ScenarioMetrics, rows_to_frame
 from assurance.campaign import readouts
-from assurance.perturbations import severities_of
 
 PAPER_FIGURES = ("g_cm", "mcc", "f1", "precision", "recall", "fp_rate", "g_rm", "overhead_s", "g_star")
 HEADERS = {"g_cm": "G_CM", "mcc": "MCC", "f1": "F1", "precision": "Precision", "recall": "Recall",
@@ -79,7 +78,9 @@ def results_table(run_dir: str | Path, *, n_boot: int = 2000, seed: int = 0, ima
 
 
 def _scenario_order(cfg: dict[str, Any]) -> list[tuple[str, int]]:
-    return [(p, int(s)) for p in cfg["perturbations"] for s in severities_of(p, cfg["severities"])]
+    from assurance.campaign.task import scenario_pairs
+
+    return scenario_pairs(cfg["perturbations"], cfg["severities"], cfg.get("severity_caps"))
 
 
 def write_csv(df: pd.DataFrame, path: str | Path) -> None:

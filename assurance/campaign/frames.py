@@ -12,8 +12,9 @@ from typing import Any
 
 import numpy as np
 
+from assurance.dataio.layouts import read_sample_labels
 from assurance.dataio.poses import NOMINAL, frame_pose
-from assurance.dataio.uavid import Sample, read_labels
+from assurance.dataio.uavid import Sample
 from el.camera import Pose, check_geometry
 from el.decision import Candidate
 from el.errors import DataError
@@ -50,7 +51,7 @@ def frame_truth(sample: Sample, labels: Any, shape: tuple[int, ...]) -> tuple[An
     label map or one of another size."""
     if sample.label_path is None:
         raise DataError(f"{sample.image_path}: no label map (the campaign needs ground truth)")
-    ids = read_labels(sample.label_path, labels=labels)
+    ids = read_sample_labels(sample, labels)
     if ids.shape != tuple(shape):
         raise DataError(f"{sample.label_path}: label size differs from the image")
     return labels, ids
@@ -63,7 +64,7 @@ def outside_odd(odd: dict[str, Any] | None, pose: Pose, size: tuple[int, int]) -
 
 def frame_gate(gate: dict[str, str] | None, segmenter: Any) -> FrameGate | None:
     """The campaign's frame gate (read once per worker), refused (ValueError, a fault of the task) when its file
-    changed since the run recorded it or it was fitted on another network; turns the segmenter's frame tap on."""
+    changed since the run recorded it or it was fitted on another network (``el.kernel.build_parts`` binds it)."""
     if not gate:
         return None
     key = (gate["path"], gate["sha256"])
@@ -74,7 +75,6 @@ def frame_gate(gate: dict[str, str] | None, segmenter: Any) -> FrameGate | None:
                              f"{loaded.sha256[:12]}..., recorded {gate['sha256'][:12]}...)")
         _GATES[key] = loaded
     _GATES[key].check_network(segmenter)
-    segmenter.tap_frames = True
     return _GATES[key]
 
 

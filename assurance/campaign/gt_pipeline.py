@@ -18,14 +18,15 @@ from typing import Any
 
 import numpy as np
 
+from assurance.dataio.layouts import read_label_file, read_sample_labels
 from assurance.dataio.poses import NOMINAL, frame_pose
-from assurance.dataio.uavid import DataError, Sample, check_same_size, read_labels
+from assurance.dataio.uavid import DataError, Sample, check_same_size
 from el.camera import Pose, working_size
 from el.config import CoreConfig
 from el.core import default_area, probs_from_labels
 from el.decision import Decision, decision_schema  # noqa: F401  (re-exported)
 from el.hashing import sha256_file
-from el.kernel import Parts, decide_frame
+from el.kernel import build_parts, decide_frame
 from el.labels import LabelSet
 from el.odd import OperatingDomain
 
@@ -66,6 +67,7 @@ def decide_from_labels(
     clock: Callable[[], float] = time.perf_counter,
     labels: LabelSet,
     pose: Pose | None = None,
+    pose_source: str = "frame",
     roll_deg: float = 0.0,
     odd: OperatingDomain | None = None,
 ) -> Decision:
@@ -75,9 +77,10 @@ def decide_from_labels(
     ``input_info`` goes to the decision's ``"input"`` (path, sha256; width and height are filled
     in). ``read_s`` is the time already spent reading the input. ``labels``: the label set of the
     ids (the system's). ``pose`` (and ``roll_deg``): the frame's pose, as ``el.pipeline``'s; None is
-    ``config.pose``. ValueError for a malformed map; a pose the flat-ground model cannot plan with
-    (``el.camera.check_geometry``) gives the default action with reason ``"fault: pose: <error>"``,
-    a failure inside the CM ``"fault: candidates: <error>"``. ``odd``: the declared operating domain; a pose or
+    ``config.pose``; ``pose_source``: where it came from (``el.kernel.POSE_SOURCES``). ValueError for a
+    malformed map; a pose the flat-ground model cannot plan with (``el.camera.check_geometry``) gives the
+    default action with reason ``"fault: pose: <error>"``, a failure inside the CM
+    ``"fault: candidates: <error>"``. ``odd``: the declared operating domain; a pose or
     size outside it is the default action with reason ``outside_odd: ...``, as the flight pipeline decides it.
     """
     config = config or CoreConfig()
@@ -85,8 +88,8 @@ def decide_from_labels(
     W, H = _check_ids(ids, labels)
     record = {"pipeline": PIPELINE, "monitor": None, "core": config.to_dict(),
               **({"odd": odd.to_dict()} if odd is not None else {})}
-    parts = Parts(segmenter=LabelMapSegmenter(ids, labels, config.working_width), labels=labels, core=config,
-                  odd=odd, record=record, nominal_size=(W, H))
+    parts = build_parts(LabelMapSegmenter(ids, labels, config.working_width), config, labels=labels, odd=odd,
+                        record=record, nominal_size=(W, H))
 
     def read(info: dict[str, Any]) -> np.ndarray:
         info.update(input_info or {})
@@ -94,7 +97,7 @@ def decide_from_labels(
         del info["frame_gate"]  # no frame gate on a label map
         return ids
 
-    decision = decide_frame(read, parts, None, pose=pose, roll_deg=roll_deg, clock=clock)
+    decision = decide_frame(read, parts, None, pose=pose, pose_source=pose_source, roll_deg=roll_deg, clock=clock)
     decision.timings["read_s"] = float(read_s)
     decision.timings["total_s"] += float(read_s)
     return decision
@@ -107,18 +110,23 @@ def decide_from_label_file(
     config: CoreConfig | None = None,
     labels: LabelSet,
     pose: Pose | None = None,
+    pose_source: str = "frame",
     roll_deg: float = 0.0,
     odd: OperatingDomain | None = None,
+    encoding: str = "rgb",
+    id_offset: int = 0,
 ) -> tuple[Decision, np.ndarray]:
     """Read a colour label PNG (``labels``' palette) and decide; returns (decision, class ids).
 
     The optional image is only checked for size (it is for drawing) and identified in
-    ``input["image"]``; ``odd`` as :func:`decide_from_labels`. DataError (from ``assurance.dataio.uavid``) for a
+    ``input["image"]``; ``pose``, ``pose_source`` and ``odd`` as :func:`decide_from_labels`; ``encoding`` and
+    ``id_offset`` how the file codes classes (``assurance.dataio.layouts.read_label_file``). DataError (from
+    ``assurance.dataio.uavid``) for a
     missing, unreadable or inconsistent file.
     """
     labels_path = Path(labels_path)
     t0 = time.perf_counter()
-    ids = read_labels(labels_path, labels)
+    ids = read_label_file(labels_path, labels, encoding=encoding, id_offset=id_offset)
     info: dict[str, Any] = {"path": str(labels_path), "sha256": sha256_file(labels_path), "kind": "labels"}
     if image_path is not None:
         image_path = Path(image_path)
@@ -128,7 +136,7 @@ def decide_from_label_file(
         info["image"] = {"path": str(image_path), "sha256": sha256_file(image_path)}
     read_s = time.perf_counter() - t0
     return decide_from_labels(ids, config=config, input_info=info, read_s=read_s, labels=labels, pose=pose,
-                              roll_deg=roll_deg, odd=odd), ids
+                              pose_source=pose_source, roll_deg=roll_deg, odd=odd), ids
 
 
 def decide_sample(sample: Sample, *, labels: LabelSet, config: CoreConfig | None = None,
@@ -142,13 +150,14 @@ def decide_sample(sample: Sample, *, labels: LabelSet, config: CoreConfig | None
     try:
         pose, roll, source = frame_pose(sample, poses, config.pose)
     except DataError as exc:
-        ids = labels.planning_ids(read_labels(sample.label_path, labels))
+        ids = labels.planning_ids(read_sample_labels(sample, labels))
         W, H = _check_ids(ids, labels)
         info = {"path": str(sample.label_path), "kind": "labels", "width": W, "height": H}
         return Decision(action="default", reason=f"fault: pose: {type(exc).__name__}: {exc}", selected=None,
                         candidates=[], default_area=default_area(W, H, config), timings={}, input=info,
                         config={"pipeline": PIPELINE, "monitor": None, "core": config.to_dict()})
     decision, _ = decide_from_label_file(sample.label_path, config=config, labels=labels,
-                                         pose=None if source == NOMINAL else pose, roll_deg=roll)
+                                         pose=None if source == NOMINAL else pose, roll_deg=roll,
+                                         encoding=sample.label_encoding, id_offset=sample.id_offset)
     return decision
 

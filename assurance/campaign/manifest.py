@@ -49,10 +49,11 @@ def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *,
         "format": readouts.FORMAT_VERSION,
         "config": config.to_dict(),
         "data": {"path": str(Path(data).resolve()), "images": len({t.sample.key for t in tasks}),
-                 "sha256": h.hexdigest(), "splits": scene_splits(tasks)},
+                 "sha256": h.hexdigest(), "splits": scene_splits(tasks), **_data_spec(data)},
         "weights": weights_record,
         "monitor_models": monitor_models(config.monitors, labels_of(model)),
         "model_files": model_files(weights_record, config.monitors, labels_of(model)),
+        **_perturbation_domain(config),
         "tasks": len(tasks),
         "integrity": readouts.INTEGRITY,
         "shard_order": [t.shard_name for t in tasks],
@@ -65,6 +66,22 @@ def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *,
                      "torch": torch_version(), "onnxruntime": _dist_version("onnxruntime"),
                      "platform": platform.platform()},
     }
+
+
+def _perturbation_domain(config: CampaignConfig) -> dict[str, Any]:
+    """``perturbation_domain``: whether each perturbation ran inside the declared domain
+    (``assurance.campaign.perturbation_plan.domain_record``); nothing for a run that declares none."""
+    from assurance.campaign.perturbation_plan import domain_record
+
+    record = domain_record(config.perturbations, config.scenarios(), config.odd)
+    return {} if record is None else {"perturbation_domain": record}
+
+
+def _data_spec(data: Any) -> dict[str, Any]:
+    """``{"spec": ...}`` for data read through a ``[data]`` table (``assurance.dataio.layouts.DataSpec``, its root
+    resolved): what re-reads the run's frames (``layouts.data_source``); nothing for a folder, read as before."""
+    to_dict = getattr(data, "to_dict", None)
+    return {} if to_dict is None else {"spec": {**to_dict(), "path": str(Path(data).resolve())}}
 
 
 def torch_version() -> str:

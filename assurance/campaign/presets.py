@@ -8,7 +8,8 @@ the network its fitted model was made on). A configuration the network cannot ru
 when the preset brought it in; the campaign is refused (:class:`MonitorSupportError`, naming the configuration)
 when it is the deployed one or the user asked for it (``--monitors``, a calibration card). A preset evaluates
 every frame of the data unless it states a number (``images``: the release evidence's size) or ``--images`` cuts
-it; the command says so when either does.
+it; the command says so when either does. A preset's perturbations are the system's (the keyword ``declared``:
+``assurance.campaign.perturbation_plan``) unless it names them.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from dataclasses import dataclass, field
 from importlib import resources
 from typing import Any
 
+from assurance.campaign.perturbation_plan import Planned, default_plan, expand, severity_caps
 from assurance.campaign.run import CampaignConfig
 from el import safeyaml
 from el.monitors import DEMO_GRID, PAPER_GRID
@@ -126,20 +128,29 @@ def campaign_monitors(preset: str, *, deployed: str | None = None, given: Sequen
     return MonitorChoice(tuple(kept), tuple(left))
 
 
-def preset_config(name: str, *, deployed: str | None = None, **overrides: Any) -> CampaignConfig:
+def preset_config(name: str, *, deployed: str | None = None, plan: Sequence[Planned] | None = None,
+                  **overrides: Any) -> CampaignConfig:
     """The CampaignConfig of a named preset, with non-None overrides applied; ``deployed``: the monitor the
-    preset's ``deployed`` keyword stands for (the system file's). ``images``: the preset's stated number of
-    scenes (None: every frame of the data)."""
+    preset's ``deployed`` keyword stands for (the system file's); ``plan``: the system's perturbations the preset's
+    ``declared`` keyword stands for (``assurance.campaign.perturbation_plan.system_plan``; None: the embedded
+    default's, the paper's six). A declared maximum below the severities caps that perturbation's
+    (``severity_caps``) unless the severities are given or the preset goes ``beyond_declared``. ``images``: the
+    preset's stated number of scenes (None: every frame of the data)."""
     presets = load_presets()
     if name not in presets:
         raise ValueError(f"unknown preset {name!r}; valid: {', '.join(presets)}")
     p = presets[name]
+    plan = default_plan() if plan is None else tuple(plan)
     monitors = resolve_monitors(p["monitors"], deployed)
+    perturbations = tuple(overrides.get("perturbations") or expand(p["perturbations"], plan))
+    severities = tuple(overrides.get("severities") or p["severities"])
+    capped = not overrides.get("severities") and not p.get("beyond_declared")
     kwargs: dict[str, Any] = {
-        "perturbations": tuple(p["perturbations"]),
-        "severities": tuple(p["severities"]),
+        "perturbations": perturbations,
+        "severities": severities,
         "monitors": tuple(monitors),
         "images": p.get("images"),
+        "severity_caps": severity_caps(plan, perturbations, severities) if capped else None,
     }
     kwargs.update({k: v for k, v in overrides.items() if v is not None})
     return CampaignConfig(**kwargs)

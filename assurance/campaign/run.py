@@ -35,7 +35,7 @@ from assurance.campaign.task import (  # noqa: F401  (re-exported)
     task_parts,
     task_seed,
 )
-from assurance.dataio.uavid import iter_samples
+from assurance.dataio.layouts import iter_samples
 from assurance.workers import bounded_jobs, dask_map, die_with_parent
 
 # ------------------------------------------------------------------------------------------------

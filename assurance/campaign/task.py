@@ -15,7 +15,7 @@ from __future__ import annotations
 import hashlib
 import time
 import traceback
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -35,12 +35,12 @@ from assurance.campaign.judging import _timed, judge_candidates
 from assurance.campaign.truth import true_hazard
 from assurance.dataio.poses import check_policy
 from assurance.dataio.uavid import Sample
-from assurance.perturbations import PERTURBATIONS, perturb, severities_of
+from assurance.perturbations import PERTURBATIONS, TRAITS, perturb, severities_of
 from el.config import CoreConfig, check_seed
 from el.core import default_area
 from el.deadline import Deadline
 from el.imageio import read_image_meta
-from el.kernel import Frame, Parts, conclude, prepare
+from el.kernel import Frame, Parts, build_parts, conclude, prepare
 from el.monitors import DEMO_GRID, build_monitor, parse_monitor_spec
 from el.monitors.spec import walk_of
 from el.odd import OperatingDomain
@@ -51,6 +51,20 @@ from el.walk import walk_candidates
 # ------------------------------------------------------------------------------------------------
 # Configuration
 # ------------------------------------------------------------------------------------------------
+def scenario_pairs(perturbations: Sequence[str], severities: Sequence[int],
+                   caps: Mapping[str, int] | None = None) -> list[tuple[str, int]]:
+    """A campaign's (perturbation, severity) pairs in order: each perturbation at every severity (one not graded,
+    'none', at the first only), a capped one at those up to its cap, else at the cap itself."""
+    out: list[tuple[str, int]] = []
+    for p in perturbations:
+        sev = [int(s) for s in severities_of(p, severities)]
+        cap = (caps or {}).get(p)
+        if cap is not None and TRAITS[p].graded:
+            sev = [s for s in sev if s <= cap] or [int(cap)]
+        out.extend((p, s) for s in sev)
+    return out
+
+
 @dataclass(frozen=True, kw_only=True)
 class CampaignConfig:
     """What a campaign evaluates. Recorded in the run manifest; a resumed run must match it."""
@@ -69,6 +83,8 @@ class CampaignConfig:
     gate: dict[str, str] | None = None  # the frame gate {"path", "sha256"} (el.monitors.frame_gate); None: none
     time_budget_s: float | None = None  # the flight's deadline (with the task's clock); None: none, so that the
     # readouts do not depend on the machine's speed
+    severity_caps: dict[str, int] | None = None  # per perturbation, a declared maximum below the severities (it runs
+    # at those up to it, else at it: scenario_pairs; assurance.campaign.perturbation_plan); None: none
 
     def __post_init__(self) -> None:
         unknown = [p for p in self.perturbations if p not in PERTURBATIONS]
@@ -95,10 +111,14 @@ class CampaignConfig:
         check_seed(self.seed)
         check_policy(self.poses)
         outside_odd(self.odd, self.core.pose, (1920, 1080))  # a malformed declaration fails here
+        bad_caps = {p: c for p, c in (self.severity_caps or {}).items()
+                    if p not in PERTURBATIONS or isinstance(c, bool) or not isinstance(c, int) or not 1 <= c <= 5}
+        if bad_caps:
+            raise ValueError(f"severity caps must map perturbations to integers in 1..5, got {bad_caps}")
 
     def scenarios(self) -> list[tuple[str, int]]:
         """(perturbation, severity) pairs; one not graded by severity ('none') is evaluated once, at the first."""
-        return [(p, s) for p in self.perturbations for s in severities_of(p, self.severities)]
+        return scenario_pairs(self.perturbations, self.severities, self.severity_caps)
 
     def to_dict(self) -> dict[str, Any]:
         """The manifest's ``config``; ``poses`` only when not nominal, so a nominal run records as before."""
@@ -106,7 +126,7 @@ class CampaignConfig:
         d["core"] = self.core.to_dict()
         if self.poses == "nominal":
             del d["poses"]
-        for key in ("odd", "gate", "time_budget_s"):
+        for key in ("odd", "gate", "time_budget_s", "severity_caps"):
             if d[key] is None:
                 del d[key]
         return d
@@ -135,11 +155,11 @@ def task_seed(seed: int, key: str, perturbation: str, severity: int) -> list[int
 
 
 def task_parts(config: CampaignConfig, segmenter: Any, labels: Any) -> Parts:
-    """The flight kernel's parts for a campaign's frames: its network, label set, CM configuration, declared domain
-    and frame gate (read once per worker, refused when its file changed or it was fitted on another network)."""
+    """The flight kernel's parts for a campaign's frames (``el.kernel.build_parts``, as flight builds them): its
+    network, label set, CM configuration, declared domain and frame gate (read once per worker, refused when its file
+    changed, it was fitted on another network or the network returns no frame statistics)."""
     odd = None if config.odd is None else OperatingDomain.from_dict(config.odd)
-    return Parts(segmenter=segmenter, labels=labels, core=config.core, odd=odd,
-                 gate=frame_gate(config.gate, segmenter))
+    return build_parts(segmenter, config.core, labels=labels, odd=odd, gate=frame_gate(config.gate, segmenter))
 
 
 def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Callable[[], float] = time.perf_counter,

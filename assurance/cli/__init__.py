@@ -43,6 +43,7 @@ COMMANDS: dict[str, str] = {
     "benchmark": "benchmark",
     "verify": "verify",
     "evidence": "evidence",
+    "in-service": "in_service",
     "fault-table": "fault_table",
     "keys": "keys",
 }
@@ -64,6 +65,7 @@ SUMMARIES: dict[str, str] = {
     "benchmark": "compare monitors at each threshold criterion; Friedman test, Nemenyi CD diagram",
     "verify": "run the requirement checks and your requirement tests against a campaign run",
     "evidence": "write the evidence report (HTML, PDF, JSON) of a campaign run and decide the gate",
+    "in-service": "compare flight logs with the certification run and judge the in-service SPIs (exit 1 on a breach)",
     "fault-table": "replay the fault-injection cases through the command line and write their table",
     "keys": "show the Ed25519 key that signs campaigns and requirement results",
 }
@@ -72,7 +74,7 @@ module, and what it needs, is imported only when that command runs or shows its 
 
 # Commands that decide, evaluate or report: they take --system FILE (else ./uav-el.toml, else the embedded default).
 SYSTEM_COMMANDS = ("preview", "land", "campaign", "calibrate", "fit-monitor", "fit-gate", "benchmark", "verify",
-                   "evidence")
+                   "evidence", "in-service")
 SYSTEM_HELP = ("the system under assessment (uav-el.toml: model, camera, poses, labels, safety, monitor, data, "
                "targets, waivers, report); default: ./uav-el.toml if present, else the embedded default (the "
                "shipped system); options given here win over the file")
@@ -80,7 +82,8 @@ SYSTEM_HELP = ("the system under assessment (uav-el.toml: model, camera, poses, 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_FLIGHT_FAULT, EXIT_DAMAGED_RUN, EXIT_INTERNAL = 0, 1, 2, 3, 4, 70
 EXIT_CODES: dict[int, str] = {
     EXIT_OK: "success",
-    EXIT_FAILED: "a requirement failed (evidence gate; with --strict also one not verified)",
+    EXIT_FAILED: "a requirement failed (evidence gate; with --strict also one not verified); in-service: an SPI "
+                 "breached",
     EXIT_BAD_INPUT: "bad input or options (one line naming the file and the problem); campaign: tasks faulted for "
                     "a configuration reason, not their data",
     EXIT_FLIGHT_FAULT: "land: a fault in the flight path; the default action was taken",

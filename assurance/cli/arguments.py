@@ -23,8 +23,9 @@ def frame_scales(text: str) -> tuple[float, ...]:
 def model_option(p: argparse.ArgumentParser) -> None:
     """``--weights`` / ``--model``: the segmentation model a command runs (``system_options.load_model`` reads it)."""
     p.add_argument("--weights", "--model", dest="weights", metavar="MODEL",
-                   help="segmentation model: a .pt weights file with its card, or a registered uav_el.models "
-                        "name (NAME or NAME:ARG); default: the shipped model")
+                   help="segmentation model: a .pt weights file with its card, an .onnx file, or a registered "
+                        "uav_el.models name (NAME or NAME:ARG); default: the system's network ([model] of the "
+                        "system file; the shipped one without)")
 
 
 def fit_split_options(p: argparse.ArgumentParser) -> None:

@@ -67,7 +67,7 @@ def _fit_detectors(args: argparse.Namespace) -> list[str]:
     """Fit the feature-space detectors on ``--fit`` and write their records into ``--out``: their specs."""
     from assurance.cli.fit_monitor import write_json
     from assurance.cli.system_options import assessed
-    from assurance.dataio.uavid import iter_samples
+    from assurance.dataio.layouts import iter_samples
     from assurance.fitting.detectors import FAMILIES, detector_document, fit_detector_body
     from assurance.fitting.learned_monitor import collect_candidates
     from assurance.fitting.network_identity import network_record

@@ -15,7 +15,8 @@ HELP = ("calibrate a monitor's threshold on held-out scenes: P(accept an unsafe 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--data", help="calibration scenes in the UAVid layout, with labels (e.g. data/val); default: the "
-                                  "system file's [data] val")
+                                  "system file's [data] val; clean, and under each perturbation the system file "
+                                  "declares in its own [odd] perturbations")
     p.add_argument("--monitor", metavar="SPEC", help="monitor to calibrate, e.g. lhd, msp (default: the system "
                                                     "file's [monitor] spec)")
     p.add_argument("--miss-rate", type=float, default=0.05, help="largest P(accept an unsafe candidate) (0.05)")
@@ -31,6 +32,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from assurance.campaign.perturbation_plan import fit_levels
     from assurance.cli.system_options import assessed
     from assurance.fitting.calibration import calibrate_on_data
 
@@ -44,7 +46,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         doc = calibrate_on_data(data, monitor, miss_rate=args.miss_rate, confidence=args.confidence,
                                 weights=system.model, images=args.images, core=system.core,
-                                progress=not args.quiet, criterion=args.criterion, recall=args.recall)
+                                progress=not args.quiet, criterion=args.criterion, recall=args.recall,
+                                perturbations=fit_levels(system))  # its own [odd] perturbations; None: clean
     except ValueError as exc:  # CalibrationError, WeightsError, a bad spec: one line
         raise CommandError(str(exc)) from None
     write_json(args.out, doc, indent=2)

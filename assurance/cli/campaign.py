@@ -7,6 +7,7 @@ import sys
 from typing import Any
 
 from assurance.campaign.faults import config_fault_line
+from assurance.campaign.perturbation_plan import domain_record, outside_lines, system_plan
 from assurance.campaign.presets import load_presets, preset_config
 from assurance.campaign.run import describe, run_campaign
 from assurance.cli.arguments import model_option
@@ -18,12 +19,15 @@ HELP = "run or resume an evaluation campaign (perturbations x test images x moni
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--data", help="test scenes in the UAVid layout (with Labels); default: the system file's "
-                                  "[data] test")
+    p.add_argument("--data", help="labelled test scenes, a folder of a known layout (uavid, semantic-drone, "
+                                  "aeroscapes: detected); default: the system file's [data] test")
     p.add_argument("--out", required=True, help="run folder (created; re-running resumes it)")
     p.add_argument("--preset", default="demo", choices=sorted(load_presets()),
                    help="campaign preset (default: demo); the options below override its fields")
-    p.add_argument("--perturbations", nargs="+", metavar="NAME", help="perturbations to apply")
+    p.add_argument("--perturbations", nargs="+", metavar="NAME",
+                   help="perturbations to apply (default: the preset's; its `declared`: the system's [odd] "
+                        "perturbations and [targets] required_perturbations, with none); one outside the declared "
+                        "domain runs, said and marked in the run")
     p.add_argument("--severities", nargs="+", type=int, metavar="S", help="severities 1-5")
     p.add_argument("--monitors", nargs="+", metavar="SPEC", help="monitor configurations, e.g. lhd 'lhd+ch:tau=0.25'")
     p.add_argument("--calibration", nargs="+", metavar="CALIB.json",
@@ -69,8 +73,9 @@ def run(args: argparse.Namespace) -> int:
 
         gate = load_frame_gate(system.gate)
         cards.append(gate)  # checked against the campaign's network with the cards
+    plan = system_plan(system)  # the system's perturbations: what the preset's `declared` stands for
     config = preset_config(
-        args.preset, deployed=deployed, core=system.core,
+        args.preset, deployed=deployed, plan=plan, core=system.core,
         perturbations=tuple(args.perturbations) if args.perturbations else None,
         severities=tuple(args.severities) if args.severities else None,
         monitors=monitors,
@@ -78,6 +83,9 @@ def run(args: argparse.Namespace) -> int:
         poses=args.poses or system.poses, odd=system.odd.to_dict(),
         gate=None if gate is None else {"path": gate.path, "sha256": gate.sha256},
     )
+    for line in outside_lines(domain_record(config.perturbations, config.scenarios(), config.odd), plan,
+                              system.label):
+        print(f"uav-el campaign: {line}", file=sys.stderr)
     _say_scenes(data, config.images, args)
     from assurance.attest import AttestationError
     from assurance.attest.keys import load_signing_key
@@ -140,7 +148,7 @@ def _monitors(args: argparse.Namespace, system: Any, deployed: str | None, cards
 def _say_scenes(data: Any, images: int | None, args: argparse.Namespace) -> None:
     """One line when the campaign evaluates fewer scenes than the data holds: how many, of how many, and why
     (``--images``, or the preset's stated size)."""
-    from assurance.dataio.uavid import iter_samples
+    from assurance.dataio.layouts import iter_samples
 
     if images is None:
         return

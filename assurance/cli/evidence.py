@@ -53,6 +53,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "value, fails the gate; a plain NAME is refused")
     p.add_argument("--benchmark", metavar="DIR", help="a uav-el benchmark --out folder: adds its monitor comparison "
                    "as a section (re-derived from its CSV tables; never moves the gate)")
+    p.add_argument("--in-service", metavar="DIR", help="a uav-el in-service --out folder: adds its signed SPI verdicts "
+                   "and the claims a breach undermines as a section (never moves the gate)")
     p.add_argument("--boot", type=int, default=2000, help="bootstrap resamples of the results table (default 2000)")
 
 
@@ -113,6 +115,7 @@ def run(args: argparse.Namespace) -> int:
                           strict=args.strict, pdf=not args.no_pdf, n_boot=args.boot, waivers=args.waivers,
                           templates=args.templates, system=run_system(args, Path(args.run)), trusted=trusted,
                           accepted_deviations=tuple(args.accept_deviation), benchmark=args.benchmark,
+                          in_service=args.in_service,
                           system_templates=args.system_templates, template_seconds=args.template_seconds)
     except DamagedRunError:
         raise  # exit 4: the run's readouts fail verification

@@ -10,7 +10,8 @@ from assurance.errors import CommandError
 from el.monitors.gates import GATES
 
 HELP = ("fit the frame gate (a candidate of el.monitors.gates reading the frame pass's own features) on training "
-        "scenes with the in-domain perturbations applied; threshold at a quantile of validation scenes at severity 3")
+        "scenes with the in-domain perturbations applied (the system file's [odd] perturbations, else the shipped "
+        "six); threshold at a quantile of validation scenes at severity 3")
 FEATURE_CHOICES = ("auto", "trunk", "output")  # assurance.fitting.frame_gate_fit.CHOICES (not imported at start-up)
 
 
@@ -34,11 +35,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from assurance.campaign.perturbation_plan import fit_levels
     from assurance.cli.system_options import assessed, train_val_dirs
     from assurance.fitting.frame_gate_fit import DEFAULT_QUANTILE, fit_gate, parse_scenes
     from assurance.fitting.network_identity import network_record
 
     system = assessed(args)
+    levels = fit_levels(system)  # a system file's own [odd] perturbations; None: the shipped gate's six
     train_val_dirs(args, system.file)
     for flag, text in (("--train-scenes", args.train_scenes), ("--val-scenes", args.val_scenes)):
         try:
@@ -52,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
         doc = fit_gate(args.data, args.val, segmenter, kind=args.kind, quantile=quantile,
                        train_scenes=args.train_scenes, val_scenes=args.val_scenes,
                        weights=network_record(segmenter, system.model), features=args.features,
-                       progress=not (args.no_progress or getattr(args, "quiet", False)))
+                       progress=not (args.no_progress or getattr(args, "quiet", False)), perturbations=levels)
     except ValueError as exc:
         raise CommandError(str(exc)) from None
     write_json(args.out, doc, indent=None)

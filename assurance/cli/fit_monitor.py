@@ -21,7 +21,8 @@ HELP = ("train the learned candidate monitor (logistic regression on candidate f
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--data", help="training scenes with labels (e.g. data/train); default: the system file's "
                                   "[data] train")
-    p.add_argument("--val", help="held-out scenes for C and the threshold (default: every 5th scene of --data)")
+    p.add_argument("--val", help="held-out scenes for C and the threshold (default: the system file's [data] val; "
+                                 "without one, every 5th scene of --data)")
     p.add_argument("--out", required=True, type=Path, help="model file to write (e.g. el/monitors/data/learned.json)")
     model_option(p)
     p.add_argument("--recall", type=float, default=0.95,
@@ -29,7 +30,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--mcd", type=int, default=0, metavar="N",
                    help="add MC-dropout spread features from N samples (0: off, the cheap default)")
     p.add_argument("--images", type=int, help="use the first N scenes of each split")
-    p.add_argument("--working-width", type=int, help="working resolution width (default: the flight code's)")
+    p.add_argument("--working-width", type=int, help="working resolution width (default: the system's, [model] "
+                                                      "working_width of the system file, else the flight code's)")
 
 
 def run(args: argparse.Namespace) -> int:

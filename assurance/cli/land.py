@@ -14,8 +14,10 @@ default action, which is still written and drawn.
 from __future__ import annotations
 
 import argparse
+import sys
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 from assurance.dataio.uavid import image_size, read_image, write_image
 from assurance.errors import CommandError
@@ -24,6 +26,7 @@ from el.camera import CAMERAS, MAX_ROLL_DEG, Pose, geometry_problem
 from el.config import MODES, CoreConfig, make_intrinsics
 from el.decision import Decision
 from el.imageio import MAX_PIXELS, check_max_pixels
+from el.kernel import frame_core
 from el.pipeline import DEFAULT_TIME_BUDGET_S
 
 HELP = "decide where to land for one frame (model pipeline, or the ground-truth pipeline with --labels)"
@@ -38,6 +41,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--image", type=Path, metavar="IMAGE.png", help="image to draw the overlay on")
     parser.add_argument("--json", type=Path, metavar="OUT.json", help="write the decision as JSON")
     parser.add_argument("--overlay", type=Path, metavar="OUT.png", help="draw the decision into a PNG")
+    parser.add_argument("--log", type=Path, metavar="FILE", help="append the decision's record to this flight log "
+                        "(el.flightlog, JSON lines; model pipeline; uav-el in-service reads it)")
     parser.add_argument("--height", type=float, default=None, metavar="M",
                         help=f"flight height above the ground in metres (default: the system file's, else "
                              f"{Pose().height_m})")
@@ -90,33 +95,36 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="evaluation mode: run the monitor on every candidate (the decision is unchanged)")
 
 
-def config_from_args(args: argparse.Namespace) -> CoreConfig:
-    """The CM configuration: the system file's camera, pose and safety radius, with the options given on the
-    command line winning (CommandError names a bad value)."""
-    from assurance.cli.system_options import system_of
-    from assurance.system import build as system_build
-
-    system = system_of(args)
-    if system_build.poses_policy(system) == "required" and (args.height is None or args.pitch is None):
-        raise CommandError(f"{system.label}: camera.poses is 'required' (every frame flies its own pose): give this "
+def config_from_args(args: argparse.Namespace, base: CoreConfig, poses: str,
+                     label: str) -> tuple[CoreConfig, Pose | None]:
+    """The CM configuration and the frame's pose: the system's configuration ``base`` (camera, nominal pose, safety
+    radius) with the lens, mode and working-width options given on the command line winning, and the pose
+    ``--height``/``--pitch`` give (over the nominal pose's other value; None when neither is given: the nominal
+    pose). ``poses`` is the system's pose policy, ``label`` names its file. CommandError names a bad value."""
+    if poses == "required" and (args.height is None or args.pitch is None):
+        raise CommandError(f"{label}: camera.poses is 'required' (every frame flies its own pose): give this "
                            "frame's --height and --pitch")
-    base = system_build.core_config(system)
     lens = (args.camera, args.sensor_width, args.sensor_height, args.focal, args.hfov)
     try:
         intrinsics = base.intrinsics if all(v is None for v in lens) else make_intrinsics(
             args.camera, sensor_width_mm=args.sensor_width, sensor_height_mm=args.sensor_height, focal_mm=args.focal,
             hfov_deg=args.hfov)
-        pose = Pose(height_m=base.pose.height_m if args.height is None else args.height,
-                    pitch_deg=base.pose.pitch_deg if args.pitch is None else args.pitch)
-        return replace(base, mode=args.mode or base.mode, working_width=args.working_width or base.working_width,
-                       pose=pose, intrinsics=intrinsics)
+        pose = None if args.height is None and args.pitch is None else Pose(
+            height_m=base.pose.height_m if args.height is None else args.height,
+            pitch_deg=base.pose.pitch_deg if args.pitch is None else args.pitch)
+        core = replace(base, mode=args.mode or base.mode, working_width=args.working_width or base.working_width,
+                       intrinsics=intrinsics)
+        frame_core(core, pose)  # the pose checked with the rest
+        return core, pose
     except ValueError as exc:
         raise CommandError(f"camera/pose options: {exc}") from None
 
 
-def check_frame_geometry(config: CoreConfig, path: Path, roll_deg: float) -> None:
-    """Refuse (one line) a camera, pose and roll the flat-ground model cannot plan with on this frame's size."""
-    width, height = image_size(path)
+def check_frame_geometry(config: CoreConfig, path: Path, roll_deg: float,
+                         size: tuple[int, int] | None = None) -> None:
+    """Refuse (one line) a camera, pose and roll the flat-ground model cannot plan with on this frame's size
+    (``size``, else read from the file's header)."""
+    width, height = size or image_size(path)
     problem = geometry_problem(config.geometry(width, height), roll_deg=roll_deg)
     if problem:
         raise CommandError(f"{path}: {problem}")
@@ -159,11 +167,13 @@ def run(args: argparse.Namespace) -> int:
     from assurance.cli.system_options import system_of
     from assurance.system import build as system_build
 
-    config = config_from_args(args)
     system = system_of(args)
+    config, pose = config_from_args(args, system_build.core_config(system), system_build.poses_policy(system),
+                                    system.label)
     if args.labels.is_file():  # a missing file is the reader's one-line error
-        check_frame_geometry(config, args.labels, args.roll)
-    decision, ids = decide_from_label_file(args.labels, image_path=image_path, config=config, roll_deg=args.roll,
+        check_frame_geometry(frame_core(config, pose), args.labels, args.roll)
+    decision, ids = decide_from_label_file(args.labels, image_path=image_path, config=config, pose=pose,
+                                           pose_source="command_line", roll_deg=args.roll,
                                            labels=system_build.label_set(system), odd=system_build.odd(system))
     image = read_image(image_path) if image_path is not None else None  # a bad image is an error too
 
@@ -173,55 +183,78 @@ def run(args: argparse.Namespace) -> int:
 
 
 def run_model(args: argparse.Namespace) -> int:
-    """The model pipeline: segmentation -> candidates -> monitored walk (el.pipeline)."""
-    from el.pipeline import EmergencyLanding, PipelineConfig
+    """The model pipeline (el.pipeline): the system's network, monitor and frame gate built once, the frame decoded
+    once, then segmentation -> frame gate -> candidates -> monitored walk."""
+    from assurance.cli.system_options import assessed
+    from el.pipeline import EmergencyLanding, FrameFile
 
     if args.image is not None:
         raise CommandError("--image is for the ground-truth pipeline; give the image as IMAGE")
-    from assurance.cli.system_options import assessed
-
-    image_path = Path(args.image_arg)
     check_max_pixels(args.max_pixels)
-    read_image(image_path, max_pixels=args.max_pixels)  # bad input is a usage error here (in flight: default action)
-    core = config_from_args(args)
-    check_frame_geometry(core, image_path, args.roll)  # so is a pose the model cannot plan with
+    frame = FrameFile.read(args.image_arg, max_pixels=args.max_pixels)  # a usage error here (in flight: default)
     system = assessed(args)  # the system under assessment, with --model and --gate
-    monitor, calibration = system.deployed() if args.monitor is None and args.calibration is None else (
-        args.monitor or system.monitor or PipelineConfig().monitor, args.calibration or system.calibration)
-    budget = args.budget if args.budget is not None else system.budget_s
-    if calibration is not None:  # a bad card is a usage error here (in flight it is the default action)
-        from el.monitors.calibration import load_calibration
-        from el.pipeline import calibrated_spec
-
-        own = args.calibration is None and system.file.sets("monitor.spec")  # the system's pair: its spec on its card
-        monitor = args.monitor or (monitor if own else load_calibration(calibration).monitor)
-        calibrated_spec(monitor, str(calibration))
-    from el.monitors import build_monitor
-    from el.pipeline import check_monitor_bindings
-
-    try:
-        segmenter = system.segmenter(threads=args.threads, working_width=core.working_width)
-    except ValueError as exc:  # WeightsError: a model named here is a usage error (one line, exit 2); the
-        if not system.shipped_network:  # shipped one missing is a flight fault: the default action, exit 3
-            raise CommandError(str(exc)) from None
-        segmenter = None
-    built = build_monitor(monitor, labels=system.labels)  # one that cannot be built (a missing model file): exit 2
-    gates = []
-    if system.gate is not None:  # a bad gate is a usage error here (in flight it is the default action)
-        from el.monitors.frame_gate import load_frame_gate
-
-        gates.append(load_frame_gate(system.gate))
-    # a monitor fitted, or a card calibrated, on another network or model than it runs: one line, exit 2
-    check_monitor_bindings(built, monitor, calibration, segmenter)
-    for gate in gates if segmenter is not None else ():
-        gate.check_network(segmenter)  # a gate fitted on another network: one line, exit 2
-    config = system.flight_config(core=core, monitor=monitor, time_budget_s=budget, seed=args.seed,
-                                  evaluate_all=args.evaluate_all, max_pixels=args.max_pixels,
-                                  calibration=str(calibration) if calibration else None)
-    decision = EmergencyLanding(config, segmenter=segmenter).decide(image_path)
-    _write_outputs(args, decision, image=read_image(image_path) if args.overlay else None, labels=None)
+    core, pose = config_from_args(args, system.core, system.poses, system.label)
+    check_frame_geometry(frame_core(core, pose), frame.path, args.roll, (frame.rgb.shape[1], frame.rgb.shape[0]))
+    monitor, calibration = _monitor_of(args, system)
+    segmenter = _network(args, system, core)
+    config = system.flight_config(core=core, monitor=monitor, seed=args.seed, evaluate_all=args.evaluate_all,
+                                  time_budget_s=args.budget if args.budget is not None else system.budget_s,
+                                  max_pixels=args.max_pixels, calibration=str(calibration) if calibration else None)
+    log = _flight_log(args, system)
+    landing = EmergencyLanding(config, segmenter=segmenter, log=log)  # the monitor built and the gate bound, once
+    for part in ("monitor", "frame_gate"):  # a part that cannot fly is a usage error here (in flight: default action)
+        if part in landing.errors:
+            raise landing.errors[part]
+    decision = landing.decide(frame, pose=pose, pose_source="command_line")
+    _write_outputs(args, decision, image=frame.rgb if args.overlay else None, labels=None)
     print(summary(decision))
+    if log is not None:
+        log.close()
+        if log.failures:
+            print(f"warning: {args.log}: the decision's record could not be written ({log.last_error})",
+                  file=sys.stderr)
     return 3 if decision.reason.startswith("fault") else 0
+
+
+def _flight_log(args: argparse.Namespace, system: Any) -> Any:
+    """The flight log ``--log`` names (appended to), the system file's SHA-256 its identity; None without it."""
+    if args.log is None:
+        return None
+    from el.flightlog import FlightLog
+
+    log = FlightLog(args.log, system_sha256=system.file.sha256)
+    if log.fault:
+        raise CommandError(log.fault)
+    return log
+
+
+def _monitor_of(args: argparse.Namespace, system: Any) -> tuple[str | None, Path | None]:
+    """The monitor spec and calibration card to fly: ``--monitor``/``--calibration``, else the system's deployed
+    pair (a card given without a spec deploys the card's own monitor)."""
+    if args.monitor is None and args.calibration is None:
+        return system.deployed()
+    from el.pipeline import PipelineConfig
+
+    monitor, calibration = args.monitor or system.monitor or PipelineConfig().monitor, \
+        args.calibration or system.calibration
+    if calibration is not None and not args.monitor:
+        own = args.calibration is None and system.file.sets("monitor.spec")  # the system's pair: its spec on its card
+        if not own:
+            from el.monitors.calibration import load_calibration
+
+            monitor = load_calibration(calibration).monitor  # a bad card: its one line, exit 2
+    return monitor, calibration
+
+
+def _network(args: argparse.Namespace, system: Any, core: CoreConfig) -> Any:
+    """The system's network, loaded once; a model named here that cannot be loaded is a usage error (one line, exit
+    2), the shipped one missing a flight fault (None: the default action, exit 3)."""
+    try:
+        return system.segmenter(threads=args.threads, working_width=core.working_width)
+    except ValueError as exc:  # WeightsError
+        if not system.shipped_network:
+            raise CommandError(str(exc)) from None
+        return None
 
 
 def _write_outputs(args: argparse.Namespace, decision: Decision, *, image, labels) -> None:

@@ -7,11 +7,12 @@ from pathlib import Path
 
 from assurance.errors import CommandError
 
-HELP = "Write a preview PNG of a UAVid-layout dataset: image | colour labels side by side, with a legend."
+HELP = "Write a preview PNG of a dataset (any layout): image | colour labels side by side, with a legend."
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--data", required=True, type=Path, help="dataset root (ROOT/seqNN/Images, Labels)")
+    parser.add_argument("--data", type=Path, help="dataset folder, its layout detected (uavid, semantic-drone, "
+                        "aeroscapes); default: the system file's [data] test (a folder or a table)")
     which = parser.add_mutually_exclusive_group()
     which.add_argument("--index", type=int, help="preview sample K (0-based, in sorted order; default 0)")
     which.add_argument("--count", type=int, help="preview the first K samples, one row each")
@@ -21,9 +22,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from assurance.cli.system_options import system_of
-    from assurance.dataio.uavid import iter_samples, read_image, read_labels, write_image
+    from assurance.dataio.layouts import iter_samples, read_sample_labels
+    from assurance.dataio.uavid import read_image, write_image
     from assurance.scenes.preview import make_preview
-    from assurance.system.build import label_set
+    from assurance.system.build import data_root, label_set
 
     labels = label_set(system_of(args))  # the system's classes: its palette and its legend
 
@@ -31,6 +33,7 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(f"--out must be a .png file, got {args.out}")
     if not 64 <= args.width <= 4096:
         raise CommandError(f"--width must lie in [64, 4096], got {args.width}")
+    args.data = data_root(system_of(args), "test", args.data)  # --data, else [data] test
     samples = list(iter_samples(args.data))
     if args.count is not None:
         if args.count < 1:
@@ -43,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
         chosen = [samples[index]]
     pairs = []
     for s in chosen:
-        image, ids = read_image(s.image_path), read_labels(s.label_path, labels)
+        image, ids = read_image(s.image_path), read_sample_labels(s, labels)
         if image.shape[:2] != ids.shape:
             raise CommandError(f"{s.label_path}: label size differs from its image {s.image_path}")
         pairs.append((image, ids))

@@ -105,7 +105,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from assurance.dataio.uavid import iter_samples
+    from assurance.dataio.layouts import iter_samples
     from assurance.fitting.network import data as D
     from assurance.fitting.network.train_config import TrainConfig, steps_for_epochs
     from assurance.fitting.network.training import train

@@ -55,10 +55,14 @@ def write_labels(path: str | Path, ids: np.ndarray, labels: LabelSet) -> None:
 
 @dataclass(frozen=True)
 class Sample:
-    """One image of a UAVid-layout dataset and its label file (None when the set is unlabelled).
+    """One image of a dataset and its label file (None when the set is unlabelled), in any layout
+    (``assurance.dataio.layouts``).
 
-    ``pose`` and ``roll_deg``: the frame's line of its sequence's ``poses.csv`` (``poses_path``, None when
-    the sequence has none), read when ``iter_samples`` is asked to (``assurance.dataio.poses``)."""
+    ``pose`` and ``roll_deg``: the frame's line of its poses CSV (``poses_path``, None when there is none), read
+    when ``iter_samples`` is asked to (``assurance.dataio.poses``). ``label_encoding``: how the label file codes
+    classes, ``rgb`` (the label set's palette) or ``ids`` (grey values, class id = value - ``id_offset``), so a
+    worker decodes it with the sample alone. ``meta_dir``: where a synthetic scene's meta JSON would lie (None:
+    the UAVid layout's ``seqNN/meta``)."""
 
     sequence: str
     frame: str
@@ -67,13 +71,17 @@ class Sample:
     pose: Pose | None = None
     roll_deg: float = 0.0
     poses_path: Path | None = None
+    label_encoding: str = "rgb"
+    id_offset: int = 0
+    meta_dir: Path | None = None
 
     @property
     def key(self) -> str:
         return f"{self.sequence}/{self.frame}"
 
     def meta_path(self) -> Path:
-        return self.image_path.parent.parent / META_DIR / f"{self.frame}.json"
+        folder = self.meta_dir if self.meta_dir is not None else self.image_path.parent.parent / META_DIR
+        return folder / f"{self.frame}.json"
 
 
 def iter_samples(root: str | Path, *, require_labels: bool = True, check_sizes: bool = False,

@@ -55,6 +55,7 @@ class Inputs:
     system: Any = None  # the system file assessed (assurance.system.SystemFile)
     attestation: Any = None  # the run's verified signed statement (assurance.campaign.attestation.RunAttestation)
     results_signed_by: str | None = None  # the keyid that signed the requirement results, when verified
+    facts: Any = None  # what the report states about the system (assurance.evidence.facts.ReportFacts)
 
     @property
     def deployed(self) -> str:
@@ -65,21 +66,19 @@ class Inputs:
 def read_inputs(run: Path, out: Path, *, requirements: str | Path | None, baseline: str | Path | None,
                 registry: str | Path | rq.Registry | None, n_boot: int, templates: str | Path | None,
                 system: Any = None, targets: Mapping[str, Any] | None = None,
-                targets_source: str | None = None, trusted: Mapping[str, Any] | None = None) -> Inputs:
+                targets_source: str | None = None, trusted: Mapping[str, Any] | None = None,
+                waivers: str | Path | None = None) -> Inputs:
     """Read and verify the run (and the baseline's shards), write ``results.csv``, read the requirement results
     and run the report's checks; a damaged run raises ``readouts.DamagedRunError``. With ``trusted`` keys, the
     run's signed statement must verify against one of them and match the files
-    (``UnattestedRunError`` naming what does not)."""
+    (``UnattestedRunError`` naming what does not). The report's facts about the system (``facts``) are built here,
+    once, from the system file, the run's manifest and its readouts (and the ``waivers`` file the gate reads)."""
     templates = Path(templates) if templates else TEMPLATES_DIR
     if not templates.is_dir():
         raise FileNotFoundError(f"{templates}: report template folder not found")
     warnings: list[str] = []
     reg = (registry if isinstance(registry, rq.Registry) else rq.load_registry(registry)).with_targets(
         targets, source=targets_source)
-    if system is not None:  # the texts about the system assessed: its camera, pose and forbidden classes
-        from assurance.requirements.system_facts import facts_of_file
-
-        reg = reg.for_system(facts_of_file(system))
     man = readouts.read_manifest(run)
     check = verify_run(run).raise_if_damaged()
     attestation = None
@@ -95,6 +94,10 @@ def read_inputs(run: Path, out: Path, *, requirements: str | Path | None, baseli
         verify_run(baseline).raise_if_damaged()
     images = readouts.load_table(run, "images")
     candidates = readouts.load_table(run, "candidates")
+    from assurance.evidence.facts import report_facts
+
+    facts = report_facts(system, man, images, size=readouts.input_size(images), waivers=waivers)
+    reg = reg.for_system(facts.texts)  # the texts about the system assessed: its camera, pose, domain, classes
     table = results_table(run, n_boot=n_boot)
     out.mkdir(parents=True, exist_ok=True)
     csv_path = out / "results.csv"
@@ -121,7 +124,7 @@ def read_inputs(run: Path, out: Path, *, requirements: str | Path | None, baseli
     if deployed not in man["config"]["monitors"]:
         warnings.append(f"the deployed monitor {deployed!r} (registry) was not evaluated by this campaign")
     return Inputs(run, out, templates, reg, man, check, images, candidates, table, csv_path, req_path, results,
-                  req_doc, checks, warnings, problems, system, attestation)
+                  req_doc, checks, warnings, problems, system, attestation, facts=facts)
 
 
 def system_problems(system: Any, man: dict[str, Any], req_doc: dict[str, Any] | None, run: Path) -> list[str]:
@@ -154,7 +157,8 @@ def system_view(inp: Inputs) -> dict[str, Any] | None:
     return {"label": sysf.label if sysf.path is None else str(rel(sysf.path)), "sha256": sysf.sha256,
             "name": sysf.name, "values": [{"key": k, "value": v} for k, v in sysf.values()],
             "model_sha256": weights.get("sha256") or "not recorded",
-            "model": weights.get("path") or weights.get("model") or "the shipped network"}
+            "model": weights.get("path") or weights.get("model") or "a model object handed to the campaign (no file "
+                                                                    "recorded)"}
 
 
 def _ships_gate(man: Mapping[str, Any]) -> bool:
@@ -164,15 +168,6 @@ def _ships_gate(man: Mapping[str, Any]) -> bool:
 
     gate = (man.get("config") or {}).get("gate") or {}
     return bool(gate) and DEPLOYED_GATE.is_file() and gate.get("sha256") == sha256_file(DEPLOYED_GATE)
-
-
-def _gate_text(man: Mapping[str, Any]) -> str:
-    """What guards the declared operating domain in the run: the frame gate it ran, or telemetry alone."""
-    gate = (man.get("config") or {}).get("gate")
-    if not gate:
-        return ("none: the operating domain is guarded by telemetry only (the declared pose and image size); "
-                "a frame unlike the training data is not detected")
-    return f"{gate.get('path')} (SHA-256 {str(gate.get('sha256'))[:16]})"
 
 
 def _plots(inp: Inputs) -> list[dict[str, str]]:
@@ -221,7 +216,8 @@ def results_signature_row(inp: Inputs) -> dict[str, str]:
 
 def campaign_context(inp: Inputs) -> dict[str, Any]:
     """The run's part of the context: identity, operating domain, pictures, plots, results and limitations."""
-    from assurance.evidence.domain_section import frame_gate_view, odd_rows
+    from assurance.dataio.layouts import data_source
+    from assurance.evidence.domain_section import frame_gate_view, mark_outside, odd_rows
     from assurance.evidence.gallery import Scenes, decision_examples, perturbation_gallery
 
     man, images, candidates, reg = inp.manifest, inp.images, inp.candidates, inp.registry
@@ -230,7 +226,7 @@ def campaign_context(inp: Inputs) -> dict[str, Any]:
     identity_rows[:0] = [signature_row(inp.attestation), results_signature_row(inp)]
     ident["campaign_signed_by"] = inp.attestation.keyid if inp.attestation is not None else None
     ident["results_signed_by"] = inp.results_signed_by
-    scenes = Scenes(man["data"]["path"], man["config"]["seed"])
+    scenes = Scenes(data_source(man["data"]), man["config"]["seed"])
     if scenes.error:
         inp.warnings.append(scenes.error)
     ok = images[images["fault"].fillna("") == ""] if len(images) else images
@@ -243,7 +239,7 @@ def campaign_context(inp: Inputs) -> dict[str, Any]:
     return {
         "ident": ident, "synthetic": synthetic,
         "identity": identity_rows,
-        "domain": domain(man, reg, readouts.input_size(images), scene_text, len(keys)),
+        "domain": domain(man, reg, readouts.input_size(images), scene_text, len(keys), inp.facts),
         "odd": odd_rows(man, images, reg.parameters["pose_error"]),
         "frame_gates": frame_gate_view() if _ships_gate(man) else None,
         "gallery": perturbation_gallery(scenes, keys[0] if keys else None, gallery_perts),
@@ -253,8 +249,8 @@ def campaign_context(inp: Inputs) -> dict[str, Any]:
         "unsafe": unsafe, "n_unsafe": n_unsafe, "n_unsafe_pictures": len(unsafe),
         "scenes_error": scenes.error,
         "plots": _plots(inp),
-        "results": results_view(inp.table, inp.deployed, float(params["unsafe_landing_bound"]),
-                                float(params["confidence"])),
+        "results": mark_outside(results_view(inp.table, inp.deployed, float(params["unsafe_landing_bound"]),
+                                             float(params["confidence"])), inp.table, man),
         "deployed": inp.deployed, "bound": pct(params["unsafe_landing_bound"]),
         "confidence": rq.confidence_text(params["confidence"]), "ub_label": ub_label(params["confidence"]),
     }
@@ -289,7 +285,9 @@ def commands(inp: Inputs, accepted: tuple[str, ...] = ()) -> list[str]:
     tests = extra_tests(inp.req_doc)
     return [
         f"uav-el campaign{system} --data {man['data']['path']} --out {run} --perturbations "
-        f"{' '.join(cfg['perturbations'])} --severities {' '.join(str(s) for s in cfg['severities'])} --monitors "
+        f"{' '.join(cfg['perturbations'])}"  # capped severities (a declared maximum below 3): the preset's, not given
+        + ("" if cfg.get("severity_caps") else f" --severities {' '.join(str(s) for s in cfg['severities'])}")
+        + " --monitors "
         + " ".join(f"'{m}'" for m in cfg["monitors"])
         + (f" --images {cfg['images']}" if cfg.get("images") else "") + f" --seed {cfg['seed']}"
         + (f" --weights {cfg['weights']}" if cfg.get("weights") and not system else ""),
@@ -350,13 +348,24 @@ def run_scope(inp: Inputs, states: dict[str, str]) -> dict[str, Any] | None:
 
 def _decide_command(inp: Inputs) -> dict[str, str]:
     """The command that decides every requirement: the release target for the shipped system, else a campaign of
-    the system's own file on every frame of its data."""
+    the system's own file on every frame of its data, under its perturbations (its preset's default,
+    ``assurance.campaign.perturbation_plan.system_plan``; ``--perturbations`` only when the registry requires one the
+    file does not bring), named when they are not the shipped six."""
+    from assurance.campaign.perturbation_plan import default_plan, system_plan
+
     if inp.system is None or inp.system.default:
         return {"command": "make release-evidence", "about": "about 25 minutes on 2 cores"}
     need = rq.images_needed(float(inp.registry.parameters["unsafe_landing_bound"]),
                             float(inp.registry.parameters["confidence"]))
-    return {"command": f"uav-el campaign --system {inp.system.label} --out {inp.run} (at least {need} frames per "
-                       "perturbation in its [data] test)", "about": ""}
+    planned = [p.name for p in system_plan(inp.system)]
+    missing = [p for p in inp.registry.parameters.get("required_perturbations") or [] if p not in planned]
+    names = planned + missing
+    flag = f" --perturbations {' '.join(names)}" if missing else ""
+    shipped = names == [p.name for p in default_plan()]
+    return {"command": f"uav-el campaign --system {inp.system.label} --out {inp.run}{flag} (at least {need} frames "
+                       "per perturbation in its [data] test)",
+            "about": "" if shipped else f"under {', '.join(names)}: the system's declared and required "
+                                         "perturbations"}
 
 
 def _design_time_scope(inp: Inputs) -> list[str]:
@@ -393,7 +402,7 @@ def template_context(inp: Inputs, gate: Gate, campaign: dict[str, Any], base: di
         "identity": campaign["identity"],
         "domain": campaign["domain"], "odd": campaign["odd"], "frame_gates": campaign["frame_gates"],
         "domain_text": [{"name": k.replace("_", " "), "value": v} for k, v in reg.operating_domain.items()],
-        "facts": dict(reg.facts), "frame_gate": _gate_text(inp.manifest),
+        "facts": inp.facts.view(), "frame_gate": inp.facts.frame_gate,
         "parameters": [{"name": k.replace("_", " "), "value": _parameter_text(v)} for k, v in reg.parameters.items()],
         "matrix": matrix(reg, results, inp.checks, inp.run, inp.csv_path.name),
         "requirements": [{"id": r.id, "title": r.title, "text": r.text, "rationale": r.rationale,
@@ -410,7 +419,7 @@ def template_context(inp: Inputs, gate: Gate, campaign: dict[str, Any], base: di
         "examples": campaign["examples"], "unsafe": campaign["unsafe"], "n_unsafe": campaign["n_unsafe"],
         "n_unsafe_pictures": campaign["n_unsafe_pictures"],
         "scenes_error": campaign["scenes_error"],
-        "limitations": limitations(inp.manifest, reg, results, campaign["synthetic"], inp.table)
+        "limitations": limitations(inp.manifest, reg, results, campaign["synthetic"], inp.table, inp.facts)
         + _design_time_scope(inp),
         "baseline": base,
         "commands": commands(inp),

@@ -58,7 +58,8 @@ def odd_rows(man: Mapping[str, Any], images: Any, pose_error: Mapping[str, float
     beyond = sorted({f"{p} {s}" for p, s in evaluated if not odd.covers(p, s)})
     if beyond:
         rows.append({"name": "Evaluated beyond", "declared": "outside the declared perturbations",
-                     "evidence": ", ".join(beyond) + ": evaluated by the campaign, not covered by the declaration"})
+                     "evidence": ", ".join(beyond) + ": evaluated by the campaign, not covered by the declaration; "
+                                 f"marked {OUTSIDE_MARK} in the results"})
     out = frames[frames["reason"].astype(str).str.startswith(OUTSIDE_ODD)] if n else frames
     per = out.groupby("perturbation")["key"].nunique().to_dict() if len(out) else {}
     rows.append({"name": "Frames outside", "declared": "default action, reason outside_odd",
@@ -73,6 +74,23 @@ def odd_rows(man: Mapping[str, Any], images: Any, pose_error: Mapping[str, float
                      "evidence": "frames refused: " + ", ".join(f"{p}: {per.get(p, 0)}"
                                                                for p in dict.fromkeys(scored["perturbation"]))})
     return rows
+
+
+OUTSIDE_MARK = "(outside the declared domain)"
+
+
+def mark_outside(view: dict[str, Any], table: Any, man: Mapping[str, Any]) -> dict[str, Any]:
+    """The results view (``sections.results_view``: one row per ``table`` record, in order) with each scenario the
+    run evaluated outside its declared domain marked (``assurance.campaign.perturbation_plan.outside_scenarios``)."""
+    from assurance.campaign.perturbation_plan import outside_scenarios
+
+    outside = outside_scenarios(man)
+    if not outside or not len(table):
+        return view
+    for row, rec in zip(view["rows"], table.to_dict("records"), strict=True):
+        if row["scenario"] and (str(rec["perturbation"]), int(rec["severity"])) in outside:
+            row["scenario"] = f"{row['scenario']} {OUTSIDE_MARK}"
+    return view
 
 
 def frame_gate_view() -> dict[str, Any] | None:

@@ -21,7 +21,8 @@ import numpy as np
 
 from assurance.campaign.readouts import image_size
 from assurance.campaign.run import task_seed
-from assurance.dataio.uavid import Sample, iter_samples, read_image
+from assurance.dataio.layouts import DataSpec, iter_samples
+from assurance.dataio.uavid import Sample, read_image
 from assurance.perturbations import perturb
 
 GALLERY_SEVERITY = 3
@@ -41,8 +42,8 @@ def jpeg_uri(rgb: np.ndarray, width: int, quality: int = 85) -> str:
 class Scenes:
     """The run's test images by key, perturbed as the campaign did (one cached at a time)."""
 
-    def __init__(self, data: str | Path, seed: int) -> None:
-        self.data = Path(data)
+    def __init__(self, data: str | Path | DataSpec, seed: int) -> None:
+        self.data = data if isinstance(data, DataSpec) else Path(data)
         self.seed = int(seed)
         self.error = ""
         self.samples: dict[str, Sample] = {}

@@ -5,7 +5,9 @@ skipped or uncollected test decides nothing) unless the registry declares it und
 size (``size_limited``, on a run smaller than the release preset), or when there is an integrity problem
 (results not signed or not bound to this run, code and registry; a state contradicting its own tests or
 this report's check of the run; a waiver that is expired, of an unknown or non-failed requirement, by an
-undeclared owner or too far ahead); WAIVED (exit 0) when every failure is waived; INCOMPLETE when only
+undeclared owner or too far ahead), or when the system deviates from the certification basis and the auditor did
+not accept it (``assurance.requirements.basis``: a looser target or a hazardous class declared safe; counted apart
+from the integrity problems); WAIVED (exit 0) when every failure is waived; INCOMPLETE when only
 undecidable requirements are not verified (exit 1 with ``strict``, which also ignores waivers and fails
 on a missing PDF); PASSED otherwise.
 """
@@ -23,6 +25,8 @@ from assurance.campaign.integrity import RunCheck, code_sha256
 from assurance.evidence.waivers import DEFAULT_MAX_WAIVER_DAYS, load_waivers, waiver_expired, waiver_problems
 
 GATE_CLASS = {"FAILED": "failed", "WAIVED": "failed", "INCOMPLETE": "not-verified", "PASSED": "verified"}
+DEVIATION = "deviation from the certification basis"
+"""How a gate problem that is a deviation not accepted (``assurance.requirements.basis``) opens."""
 
 
 @dataclass
@@ -206,5 +210,16 @@ def decide_gate(results: Mapping[str, rq.RequirementResult], problems: list[str]
             + (f", {left} of them blocking" if left and undecided_ok else ""))
     text = "; ".join(parts) or "every requirement verified"
     if problems:
-        text = f"{len(problems)} integrity problem(s) (below); " + text
+        text = f"{problem_count(problems)} (below); " + text
     return Gate(result, text, states, failed, not_verified, waived, blocking, waiver_list, problems)
+
+
+def problem_count(problems: Sequence[str]) -> str:
+    """The gate problems by kind: deviations from the certification basis not accepted (they open with
+    :data:`DEVIATION`) and integrity problems (every other: results not bound or not signed, a state contradicting
+    its tests, a waiver that cannot stand, a label set changed since the run, ...)."""
+    deviations = sum(str(p).startswith(DEVIATION) for p in problems)
+    parts = [f"{deviations} deviation(s) from the certification basis not accepted"] if deviations else []
+    if len(problems) > deviations:
+        parts.append(f"{len(problems) - deviations} integrity problem(s)")
+    return " and ".join(parts)

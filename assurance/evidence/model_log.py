@@ -1,10 +1,12 @@
 """The model development log (AMLAS [U], with the internal test results [X]) from the network's model card and the
-shipped monitors' cards: data, schedule, selection rule, validation figures, and what the test split was used for."""
+cards of the monitors the run used: data, schedule, selection rule, validation figures, and what the test split was
+used for."""
 
 from __future__ import annotations
 
 from typing import Any
 
+from assurance.evidence.facts import gate_features
 from assurance.evidence.records import model_cards
 
 
@@ -53,7 +55,7 @@ def network_rows(card: dict[str, Any], test_sha: str) -> list[dict[str, str]]:
 
 
 def monitor_rows(monitors: dict[str, dict[str, Any]]) -> list[dict[str, str]]:
-    """The shipped monitors' development, from their cards."""
+    """The development of the monitors the run used, from their cards (the frame gate as its file says it is)."""
     rows = []
     learned = monitors.get("learned.json")
     if learned:
@@ -68,14 +70,13 @@ def monitor_rows(monitors: dict[str, dict[str, Any]]) -> list[dict[str, str]]:
                                                           f"{cal.get('guarantee')}"})
     gate = monitors.get("frame_gate.json")
     if gate:
-        tap = (gate.get("features") or {}).get("tap")
-        rows.append({"item": "Frame gate", "value": f"{gate.get('kind', '?')} on {tap} trunk statistics; threshold "
-                                                    f"at quantile {gate.get('quantile')} of the validation scores"})
+        rows.append({"item": "Frame gate", "value": f"{gate_features(gate)}; threshold at quantile "
+                                                    f"{gate.get('quantile')} of the validation scores"})
     return rows
 
 
 def model_log(manifest: dict[str, Any], calibration_card: Any = None) -> dict[str, Any]:
-    """The model development log of the run's network and the shipped monitors (empty parts when a card is missing)."""
+    """The model development log of the run's network and monitors (empty parts when a card is missing)."""
     card, monitors = model_cards(manifest, calibration_card)
     test_sha = str((manifest.get("data") or {}).get("sha256") or "")
     history = [{"step": h.get("step"), "loss": f"{h.get('loss', float('nan')):.3f}",

@@ -38,6 +38,7 @@ SECTIONS: list[Section] = [
     Section("examples", "Decisions and unsafe landings", "section_examples.html.j2"),
     Section("changes", "What changed", "section_changes.html.j2", when="baseline"),
     Section("benchmark", "Monitor benchmark", "section_benchmark.html.j2", when="benchmark"),
+    Section("in-service", "In service", "section_in_service.html.j2", when="in_service"),
     Section("data-record", "Data-management record", "auditor_records.html.j2"),
     Section("model-log", "Model development log", "auditor_records.html.j2"),
     Section("amlas", "AMLAS index", "auditor_records.html.j2"),

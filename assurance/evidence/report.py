@@ -20,7 +20,7 @@ from assurance.evidence.context import (
     template_context,
     undecidable_here,
 )
-from assurance.evidence.gate import EvidenceReport, Gate, decide_gate
+from assurance.evidence.gate import DEVIATION, EvidenceReport, Gate, decide_gate
 from assurance.evidence.identity import baseline_view
 from assurance.evidence.matrix import TRACE_COLUMNS, traceability_rows
 from assurance.evidence.navigation import anchor, req_anchor
@@ -188,12 +188,13 @@ def _label_classes(system: Any) -> list[dict[str, str]]:
 
 def _report_context(inp: Inputs, gate: Gate, campaign: dict[str, Any], base: dict[str, Any] | None, created: str,
                     n_boot: int, pdf: bool, *, system: Any, basis: Any, accepted: tuple[str, ...],
-                    bench: dict[str, Any] | None) -> dict[str, Any]:
+                    bench: dict[str, Any] | None, in_service: Any = None) -> dict[str, Any]:
     """What the templates render: the report's sections, the auditor's, the basis, the benchmark, the links."""
     context = template_context(inp, gate, campaign, base, created, n_boot)
     context.update({**auditor_context(inp, gate, campaign["identity"], n_boot=n_boot), "label_classes":
                     _label_classes(system), "commands": commands(inp, accepted), "benchmark": bench,
-                    "deviations": [{**d.to_dict(), "text": d.text()} for d in basis]})
+                    "deviations": [{**d.to_dict(), "text": d.text()} for d in basis],
+                    "in_service": in_service and in_service.context(inp.check.digest)})  # assurance.inservice.section
     context.update(navigation_context(inp, context, pdf))
     return context
 
@@ -208,7 +209,7 @@ def generate(
     strict: bool = False, waivers: str | Path | None = None, pdf: bool = True, n_boot: int = 2000,
     templates: str | Path | None = None, system: Any = None, trusted: Mapping[str, Any] | None = None,
     accepted_deviations: tuple[str, ...] = (), benchmark: str | Path | None = None,
-    system_templates: bool = False, template_seconds: float | None = None,
+    system_templates: bool = False, template_seconds: float | None = None, in_service: str | Path | None = None,
 ) -> EvidenceReport:
     """Write the evidence report of ``run`` into ``out`` and return what the gate says.
 
@@ -228,12 +229,15 @@ def generate(
     """
     run, out = Path(run), Path(out)
     bench = read_benchmark(benchmark) if benchmark else None  # read first: a bad folder stops before any work
+    from assurance.inservice.section import read_in_service  # ``in_service``: an uav-el in-service --out folder
+
+    service = read_in_service(in_service, trusted) if in_service else None
     waivers, templates, targets, targets_source, basis = _system_settings(
         system, waivers, templates, targets, targets_source, accepted_deviations, system_templates)
     inp = read_inputs(run, out, requirements=requirements, baseline=baseline, registry=registry, n_boot=n_boot,
                       templates=templates, system=system, targets=targets, targets_source=targets_source,
-                      trusted=trusted)
-    inp.problems.extend(f"deviation from the certification basis: {d.text()}" for d in basis if not d.accepted)
+                      trusted=trusted, waivers=waivers)
+    inp.problems.extend(f"{DEVIATION}: {d.text()}" for d in basis if not d.accepted)
     if trusted is not None:
         check_results_signature(inp, waivers, trusted)
     campaign = campaign_context(inp)
@@ -245,7 +249,7 @@ def generate(
             if baseline else None)
     created = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
     context = _report_context(inp, gate, campaign, base, created, n_boot, pdf, system=system, basis=basis,
-                              accepted=tuple(accepted_deviations), bench=bench)
+                              accepted=tuple(accepted_deviations), bench=bench, in_service=service)
     files = _Files(out, inp.csv_path)
     html, supplied = _render_page(context, inp.templates, files, template_seconds)
     write_text(files.html, html)

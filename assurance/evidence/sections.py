@@ -44,18 +44,19 @@ def scene_types(scenes: Any, keys: Sequence[str]) -> tuple[str, bool]:
 
 
 def domain(man: Mapping[str, Any], registry: rq.Registry, size: tuple[int, int] | None, scene_text: str,
-           n_images: int) -> list[dict[str, str]]:
-    """The operating domain the run covered: pose, camera, images, safety radius and its margin, scenes."""
+           n_images: int, facts: Any) -> list[dict[str, str]]:
+    """The operating domain the run covered: pose and where each frame's came from, camera, images, safety radius
+    and its margin, the stripes that may hold a landing, scenes (``facts``: ``assurance.evidence.facts``)."""
     cfg = man["config"]
     core = cfg["core"]
-    pose, intr, safety = core["pose"], core["intrinsics"], core["safety"]
+    pose, safety = core["pose"], core["safety"]
     pe = registry.parameters["pose_error"]
     need = rq.pose_margin(core, size, pe)[0]["required_beta"] if size is not None else None
     rows = [
         {"name": "Height", "value": f"{pose['height_m']:g} m (nominal; errors up to {pe['height']:.0%} declared)"},
         {"name": "Pitch", "value": f"{pose['pitch_deg']:g} degrees below the horizon (errors up to {pe['pitch']:.0%})"},
-        {"name": "Camera", "value": f"{intr.get('name', '?')}: sensor width {intr['sensor_width_mm']:g} mm, "
-                                    f"focal length {intr['focal_mm']:g} mm, pinhole, square pixels"},
+        {"name": "Pose source", "value": facts.pose_source},
+        {"name": "Camera", "value": facts.camera},
         {"name": "Images", "value": (f"{size[0]}x{size[1]} px, working resolution width {core['working_width']}"
                                      if size else f"working resolution width {core['working_width']}")},
         {"name": "Safety radius", "value": f"R = {safety['radius_m']:g} m, beta = {safety['beta']:g}"},
@@ -64,8 +65,8 @@ def domain(man: Mapping[str, Any], registry: rq.Registry, size: tuple[int, int] 
                    f"(el.camera.required_beta, worst case over the reachable rows): "
                    f"{'covered' if need <= safety['beta'] else 'NOT covered'} by beta = {safety['beta']:g}")
          if need is not None else "n/a (no evaluated image)"},
-        {"name": "Landing area", "value": "top 2 of 10 image stripes never reachable; candidate discs wholly "
-                                          f"inside the image; mode {core['mode']}, N* = {core['n_star']}"},
+        {"name": "Landing area", "value": f"{facts.stripes}; candidate discs wholly inside the image; mode "
+                                          f"{core['mode']}, N* = {core['n_star']}"},
         {"name": "Scenes", "value": f"{n_images} test images; {scene_text}"},
         {"name": "Perturbations", "value": ", ".join(cfg["perturbations"]) + " at severit"
                                            + ("y " if len(cfg["severities"]) == 1 else "ies ")
@@ -154,7 +155,7 @@ def sample_size(table: Any, registry: rq.Registry, n_boot: int) -> list[str]:
 
 
 def limitations(man: Mapping[str, Any], registry: rq.Registry, results: Mapping[str, rq.RequirementResult],
-                 synthetic: bool, table: Any) -> list[str]:
+                 synthetic: bool, table: Any, facts: Any) -> list[str]:
     """What the evidence does not cover: synthetic scenes, geometry, timings, what was not evaluated or verified."""
     from assurance.perturbations import PERTURBATIONS, SEVERITIES
     from el.monitors import PAPER_GRID
@@ -167,8 +168,10 @@ def limitations(man: Mapping[str, Any], registry: rq.Registry, results: Mapping[
                    "does (materials, shadows, look-alike classes, people and cars); a campaign on real labelled "
                    "footage (UAVid or the applicant's own) is needed before any operational claim.")
     else:
-        out.append("The provenance of the test data is as recorded in the manifest; this report cannot tell "
-                   "whether the images represent the intended operations.")
+        declared = (f"as the system file declares it ([data] provenance: {facts.data_provenance})"
+                    if facts.data_provenance else "not declared (no scene meta, no [data] provenance)")
+        out.append(f"The provenance of the test data is {declared}; this report cannot tell whether the images "
+                   "represent the intended operations.")
     out.append("Geometry assumes flat ground, a pinhole camera without lens distortion and a known nominal pose; "
                "slopes, roofs as landing surfaces, and pose errors beyond the declared box are outside the domain. "
                "The default action's landing area is a proxy: a disc on the ground below the UAV (its nadir point "

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import hashlib
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -110,14 +111,26 @@ def criterion_body(s: np.ndarray, y: np.ndarray, monitor: str, criterion: str, r
     }
 
 
+def _scenarios(perturbations: Sequence[tuple[str, int]] | None) -> dict[str, Any]:
+    """The calibration campaign's perturbations, severities and caps: clean only, or clean and each of
+    ``perturbations`` at its severity (at most 3, the presets' severity)."""
+    if perturbations is None:
+        return {"perturbations": ("none",)}
+    levels = {str(n): int(s) for n, s in perturbations if n != "none"}
+    caps = {n: s for n, s in levels.items() if s < 3}
+    return {"perturbations": ("none", *levels), "severities": (3,), "severity_caps": caps or None}
+
+
 def calibrate_on_data(data: str | Path, monitor: str, *, miss_rate: float, confidence: float,
                       weights: str | dict[str, Any] | None = None, images: int | None = None, segmenter: Any = None,
                       core: Any = None, progress: bool = False, criterion: str = "guarantee",
-                      recall: float = 0.95) -> dict[str, Any]:
-    """Score every candidate of the clean scenes in ``data`` with ``monitor`` and calibrate it: the card document.
+                      recall: float = 0.95, perturbations: Sequence[tuple[str, int]] | None = None) -> dict[str, Any]:
+    """Score every candidate of the scenes in ``data`` with ``monitor`` and calibrate it: the card document.
 
-    The candidates, their truth and the scores come from the campaign's own task code (perturbation
-    ``none``), so a calibrated threshold means on test readouts what it meant here.
+    The candidates, their truth and the scores come from the campaign's own task code, so a calibrated threshold
+    means on test readouts what it meant here. The scenes are clean (perturbation ``none``), or, with
+    ``perturbations`` ((name, severity): a system's declared ones, ``assurance.campaign.perturbation_plan.
+    fit_levels``), clean and under each of those.
     """
     from assurance.campaign.run import CampaignConfig, Task, plan, run_task
     from assurance.fitting.network_identity import network_record
@@ -130,7 +143,7 @@ def calibrate_on_data(data: str | Path, monitor: str, *, miss_rate: float, confi
         raise CalibrationError("'none' has no threshold to calibrate")
     from el.monitors import build_monitor
 
-    config = CampaignConfig(perturbations=("none",), monitors=(base.base.name,), images=images, weights=weights,
+    config = CampaignConfig(**_scenarios(perturbations), monitors=(base.base.name,), images=images, weights=weights,
                             core=core or CoreConfig())
     tasks = plan(data, config)
     if not tasks:
@@ -155,13 +168,14 @@ def calibrate_on_data(data: str | Path, monitor: str, *, miss_rate: float, confi
     if faults:
         raise CalibrationError(f"{len(faults)} scene(s) failed: {faults[0]}")
     h = hashlib.sha256()
-    for t in tasks:
-        for f in (t.sample.image_path, t.sample.label_path):
+    samples = list({t.sample.key: t.sample for t in tasks}.values())  # each scene once, in the tasks' order
+    for sample in samples:
+        for f in (sample.image_path, sample.label_path):
             h.update(f"{Path(f).relative_to(data)}:{sha256_file(f)}\n".encode())
     body = calibration_body(
         scores, unsafe, monitor=base.base.name, miss_rate=miss_rate, confidence=confidence,
-        split={"path": shown_path(data), "images": len(tasks), "sha256": h.hexdigest(),
-               "perturbation": "none"},
+        split={"path": shown_path(data), "images": len(samples), "sha256": h.hexdigest(),
+               "perturbation": ", ".join(p if p == "none" else f"{p} s{s}" for p, s in config.scenarios())},
         weights=network,
         monitor_model=monitor_model, criterion=criterion, recall=recall,
     )

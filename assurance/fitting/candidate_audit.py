@@ -17,7 +17,8 @@ from typing import Any
 import numpy as np
 
 from assurance.campaign.truth import disc_pixels
-from assurance.dataio.uavid import iter_samples, read_image, read_labels
+from assurance.dataio.layouts import iter_samples, read_sample_labels
+from assurance.dataio.uavid import read_image
 from assurance.fitting.separation import disc_scores, separation
 from el.config import CoreConfig
 from el.core import run_core
@@ -54,7 +55,7 @@ def candidate_audit(segmenter: Any, data_dir: str | Path, *, core: CoreConfig | 
     rows: list[dict[str, Any]] = []
     evidence = evidence and callable(getattr(segmenter, "predict_patch", None))  # a frame-only segmenter: none
     for s in items:
-        rgb, ids = read_image(s.image_path), read_labels(s.label_path, labels)
+        rgb, ids = read_image(s.image_path), read_sample_labels(s, labels)
         if ids.shape != rgb.shape[:2]:
             raise ValueError(f"{s.label_path}: label size {ids.shape} differs from the image {rgb.shape[:2]}")
         result = run_core(segmenter.predict_frame(rgb), (rgb.shape[1], rgb.shape[0]), core, labels=labels)

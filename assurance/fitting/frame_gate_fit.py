@@ -2,9 +2,11 @@
 ``el.monitors.gates`` fitted on the training scenes with the in-domain perturbations applied (each scene clean,
 under each perturbation at a severity drawn from 1-3, and at severity 3), thresholded at a stated quantile of
 validation scenes under each perturbation at severity 3 (``assurance.fitting.gate_frames``: the study's frames).
+The in-domain perturbations are the shipped gate's six, or those a system file declares
+(``assurance.campaign.perturbation_plan.fit_levels``), each at most at its declared maximum.
 
-Any network that keeps its frame pass's statistics can be fitted (``el.monitors.frame_gate.keeps_taps``: the shipped
-``Segmenter``, an ONNX file, either behind a class map). A Mahalanobis or kNN gate reads the trunk's pooled
+Any network that returns its frame pass's statistics can be fitted (``el.monitors.frame_gate.returns_frame_stats``:
+the shipped ``Segmenter``, an ONNX file, either behind a class map). A Mahalanobis or kNN gate reads the trunk's pooled
 statistics where the network gives them (``features="pooled"``), else the pooled statistics of its output, which
 every network has (``"output"``); ``features`` chooses.
 """
@@ -12,17 +14,17 @@ every network has (``"output"``); ``features`` chooses.
 from __future__ import annotations
 
 import datetime as _dt
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from assurance.dataio.uavid import iter_samples
-from assurance.fitting.gate_frames import IN_DOMAIN, scene_images, training_frames, validation_frames
+from assurance.dataio.layouts import iter_samples
+from assurance.fitting.gate_frames import in_domain, scene_images, training_frames, validation_frames
 from assurance.fitting.learned_monitor import split_sha256
 from assurance.paths import shown_path
-from el.monitors.frame_gate import frame_gate_document, start_taps
+from el.monitors.frame_gate import check_frame_stats, frame_gate_document
 from el.monitors.gates import GATES, WHAT
 
 # the shipped gate's: the smallest meeting the policy in both validation folds (docs/results.md)
@@ -49,12 +51,13 @@ def parse_scenes(text: str | None) -> tuple[int, int | None]:
 
 
 def tap_of(segmenter: Any, rgb: np.ndarray) -> Any:
-    """The frame pass's statistics of ``rgb`` (``FrameTap``); ValueError when the network kept none."""
-    segmenter.predict_frame(rgb)
-    tap = getattr(segmenter, "last_tap", None)
+    """The frame pass's statistics of ``rgb`` (``FrameTap``); ValueError when the network returned none."""
+    from el.segmentation.contract import segment_frame
+
+    tap = segment_frame(segmenter, rgb, stats=True).stats
     if tap is None:
-        raise ValueError(f"the segmentation model {type(segmenter).__name__} segmented a frame but kept no frame "
-                         "statistics (last_tap): a frame gate cannot be fitted on it")
+        raise ValueError(f"the segmentation model {type(segmenter).__name__} segmented a frame but returned no frame "
+                         "statistics (predict_frame(rgb, stats=True)): a frame gate cannot be fitted on it")
     return tap
 
 
@@ -81,7 +84,7 @@ def embed(gate: Any, segmenter: Any, frames: Iterable[tuple[int, str, np.ndarray
     None: the gate's default)."""
     from assurance.progress import progress as bar
 
-    start_taps(segmenter, "frame gate")
+    check_frame_stats(segmenter, "frame gate")
     which = features or gate.FEATURES[0]
     rows = []
     for _, _, rgb in bar(frames, total=total, desc=desc, enabled=progress):
@@ -98,12 +101,25 @@ def _split(path: str | Path, first: int, count: int | None) -> dict[str, Any]:
             "sha256": split_sha256(samples, path, labels=False)}
 
 
+def _named(domain: Sequence[tuple[str, int]]) -> str:
+    """The perturbations a gate is fitted under, as its file records them (``none`` aside)."""
+    return ", ".join(name for name, _ in domain[1:]) or "no perturbation"
+
+
+def _capped(domain: Sequence[tuple[str, int]]) -> str:
+    """What the record adds when a declared maximum below 3 capped a perturbation's severity."""
+    low = [f"{name} {top}" for name, top in domain[1:] if top < 3]
+    return f" (at most the declared maximum: {', '.join(low)})" if low else ""
+
+
 def fit_gate(data: str | Path, val: str | Path, segmenter: Any, *, kind: str = "mahalanobis",
              quantile: float = DEFAULT_QUANTILE, train_scenes: str | None = None, val_scenes: str | None = None,
-             weights: dict[str, Any], progress: bool = False, features: str = "auto") -> dict[str, Any]:
+             weights: dict[str, Any], progress: bool = False, features: str = "auto",
+             perturbations: Sequence[tuple[str, int]] | None = None) -> dict[str, Any]:
     """The gate document: fitted on ``data``, thresholded at ``quantile`` of ``val`` (``uav-el fit-gate``);
-    ``features``: :data:`CHOICES` (what the Mahalanobis and kNN gates read). ValueError (one line) for a network
-    that keeps no frame statistics."""
+    ``features``: :data:`CHOICES` (what the Mahalanobis and kNN gates read); ``perturbations``: the in-domain ones
+    as (name, top severity) (a system's declared ones, ``assurance.campaign.perturbation_plan.fit_levels``; None:
+    the shipped gate's six). ValueError (one line) for a network that keeps no frame statistics."""
     if kind not in GATES:
         raise ValueError(f"unknown gate kind {kind!r}; known: {', '.join(sorted(GATES))}")
     if not 0.0 < quantile < 1.0:
@@ -111,27 +127,29 @@ def fit_gate(data: str | Path, val: str | Path, segmenter: Any, *, kind: str = "
     gate = GATES[kind]
     t_first, t_count = parse_scenes(train_scenes)
     v_first, v_count = parse_scenes(val_scenes)
-    train_paths, val_paths = scene_images(Path(data), t_first, t_count), scene_images(Path(val), v_first, v_count)
+    train_paths, val_paths = scene_images(data, t_first, t_count), scene_images(val, v_first, v_count)
     if len(train_paths) < 2 or not val_paths:
         raise ValueError(f"{len(train_paths)} training scene(s) in {data} and {len(val_paths)} validation scene(s) "
                          f"in {val}: need >= 2 and >= 1")
-    n = len(IN_DOMAIN)
-    start_taps(segmenter, "frame gate")
+    domain = in_domain(perturbations)
+    n = len(domain)
+    check_frame_stats(segmenter, "frame gate")
     tap = gate_features(kind, features, tap_of(segmenter, next(training_frames(train_paths[:1]))[2]))
-    train = embed(gate, segmenter, training_frames(train_paths), (2 * n - 1) * len(train_paths), "training frames",
-                  progress, tap)
-    held = embed(gate, segmenter, validation_frames(list(enumerate(val_paths, v_first)), (3,)),
+    train = embed(gate, segmenter, training_frames(train_paths, levels=perturbations),
+                  (2 * n - 1) * len(train_paths), "training frames", progress, tap)
+    held = embed(gate, segmenter, validation_frames(list(enumerate(val_paths, v_first)), (3,), levels=perturbations),
                  n * len(val_paths), "validation frames", progress, tap)
     params = gate.fit(train)
     scores = gate.score(params, held)
     body = {"kind": kind, "features": {"tap": tap, "what": FEATURES[tap], "dims": int(train.shape[1])},
             "params": params, "threshold": float(np.quantile(scores, quantile)), "quantile": float(quantile),
             "training": {**_split(data, t_first, t_count), "frames": int(train.shape[0]),
-                         "perturbations": "each scene clean, under each of " + ", ".join(IN_DOMAIN[1:])
-                                          + " at a severity drawn from 1-3 (seeded per scene) and at severity 3"},
+                         "perturbations": "each scene clean, under each of " + _named(domain)
+                                          + " at a severity drawn from 1-3 (seeded per scene) and at severity 3"
+                                          + _capped(domain)},
             "validation": {**_split(val, v_first, v_count), "frames": int(held.shape[0]),
-                           "perturbations": "each scene clean and under each of " + ", ".join(IN_DOMAIN[1:])
-                                            + " at severity 3",
+                           "perturbations": "each scene clean and under each of " + _named(domain)
+                                            + " at severity 3" + _capped(domain),
                            "median": float(np.median(scores)), "max": float(scores.max())},
             "weights": weights, "created": _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")}
     return frame_gate_document(body)

@@ -16,18 +16,17 @@ from typing import Any
 import numpy as np
 
 from assurance.fitting.gate_frames import scene_images, validation_frames
-from el.monitors.frame_gate import load_frame_gate, start_taps
+from el.monitors.frame_gate import bind_frame_gate, load_frame_gate
+from el.segmentation.contract import segment_frame
 
 
 def check(gate_path: str | Path, data: str | Path, segmenter: Any) -> dict[str, dict[str, float]]:
     """Per perturbation (``name:severity``): frames, flagged, median and max score."""
     gate = load_frame_gate(gate_path)
-    gate.check_network(segmenter)
-    start_taps(segmenter, gate.path)
+    bind_frame_gate(gate, segmenter)  # fitted on this network, which returns frame statistics
     scores: dict[str, list[float]] = {}
     for _, what, rgb in validation_frames(list(enumerate(scene_images(Path(data)))), (3,)):
-        segmenter.predict_frame(rgb)
-        scores.setdefault(what, []).append(gate.score(segmenter.last_tap))
+        scores.setdefault(what, []).append(gate.score(segment_frame(segmenter, rgb, stats=True).stats))
     return {w: {"frames": len(v), "flagged": int((np.array(v) > gate.threshold).sum()),
                 "median": float(np.median(v)), "max": float(np.max(v))} for w, v in scores.items()}
 

@@ -14,14 +14,15 @@ the gate must judge frames as the camera delivers them, area-downscaled to the n
 from __future__ import annotations
 
 import sys
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
 import cv2
 import numpy as np
 
-from assurance.dataio.uavid import iter_samples, read_image
+from assurance.dataio.layouts import DataSpec, iter_samples
+from assurance.dataio.uavid import read_image
 from assurance.perturbations import perturb
 from assurance.system.build import DEFAULT_IMAGE_SIZE
 
@@ -45,7 +46,7 @@ def fit16x9(rgb: np.ndarray, size: tuple[int, int] = SIZE) -> np.ndarray:
     return cv2.resize(np.ascontiguousarray(rgb), size, interpolation=cv2.INTER_CUBIC if small else cv2.INTER_AREA)
 
 
-def scene_images(data: Path, first: int = 0, count: int | None = None) -> list[Path]:
+def scene_images(data: str | Path | DataSpec, first: int = 0, count: int | None = None) -> list[Path]:
     samples = list(iter_samples(data, require_labels=False))[first:None if count is None else first + count]
     return [s.image_path for s in samples]
 
@@ -54,26 +55,41 @@ def perturbed(rgb: np.ndarray, name: str, severity: int, seed: Any) -> np.ndarra
     return rgb if name == "none" else perturb(rgb, name, severity, np.random.default_rng(seed))
 
 
-def training_frames(paths: list[Path], seed: int = 1) -> Iterator[tuple[int, str, np.ndarray]]:
-    """Every training scene clean, under each in-domain perturbation at a severity in 1-3 (seeded per scene), and
-    under each at severity 3, the declared maximum (11 frames a scene)."""
+def in_domain(levels: Sequence[tuple[str, int]] | None = None) -> tuple[tuple[str, int], ...]:
+    """The in-domain perturbations as (name, top severity), ``none`` first: ``levels`` (a system's declared ones,
+    ``assurance.campaign.perturbation_plan.fit_levels``), else the shipped gate's :data:`IN_DOMAIN` at 3."""
+    if levels is None:
+        return tuple((name, 3) for name in IN_DOMAIN)
+    rest = tuple((str(n), int(s)) for n, s in levels if n != "none")
+    return (("none", 3), *rest)
+
+
+def training_frames(paths: list[Path], seed: int = 1, levels: Sequence[tuple[str, int]] | None = None
+                    ) -> Iterator[tuple[int, str, np.ndarray]]:
+    """Every training scene clean, under each in-domain perturbation (:func:`in_domain` of ``levels``) at a
+    severity in 1-3 (seeded per scene; at most its top), and under each at its top, the declared maximum (3: 11
+    frames a scene for the shipped six)."""
+    domain = in_domain(levels)
     for i, path in enumerate(paths):
         rgb = read_image(path)
-        sev = np.random.default_rng([seed, i]).integers(1, 4, len(IN_DOMAIN))
-        for name, s in zip(IN_DOMAIN, sev, strict=True):
-            yield i, f"{name}:{0 if name == 'none' else int(s)}", perturbed(rgb, name, int(s), [seed, i, int(s)])
-        for name in IN_DOMAIN[1:]:
-            yield i, f"{name}:3", perturbed(rgb, name, 3, [seed + 4, i, 3])
+        sev = np.random.default_rng([seed, i]).integers(1, 4, len(domain))
+        for (name, top), drawn in zip(domain, sev, strict=True):
+            s = min(int(drawn), top)
+            yield i, f"{name}:{0 if name == 'none' else s}", perturbed(rgb, name, s, [seed, i, s])
+        for name, top in domain[1:]:
+            yield i, f"{name}:{top}", perturbed(rgb, name, top, [seed + 4, i, top])
 
 
-def validation_frames(paths: list[tuple[int, Path]], severities: tuple[int, ...], seed: int = 3
-                      ) -> Iterator[tuple[int, str, np.ndarray]]:
+def validation_frames(paths: list[tuple[int, Path]], severities: tuple[int, ...], seed: int = 3,
+                      levels: Sequence[tuple[str, int]] | None = None) -> Iterator[tuple[int, str, np.ndarray]]:
     """Every (index, validation scene) under each perturbation at each of ``severities`` (clean once, when 3 is
-    asked)."""
+    asked); with ``levels`` (:func:`in_domain`), a system's declared perturbations, each at most at its top."""
+    names = IN_DOMAIN if levels is None else tuple(n for n, _ in in_domain(levels))
+    tops = dict(in_domain(levels)) if levels is not None else {}
     for i, path in paths:
         rgb = read_image(path)
-        for name in IN_DOMAIN:
-            for s in severities:
+        for name in names:
+            for s in dict.fromkeys(min(level, tops.get(name, level)) for level in severities):
                 if name == "none" and s != 3:
                     continue
                 yield i, f"{name}:{0 if name == 'none' else s}", perturbed(rgb, name, s, [seed, i, s])
@@ -190,8 +206,8 @@ def collect(root: Path, segmenter: Any, out: Path, **limits: Any) -> Path:
 
     from assurance.files import atomic_write_bytes
     from assurance.progress import progress
+    from el.segmentation.contract import segment_frame
 
-    segmenter.tap_frames = True
     old = load(out) if out.is_file() else {k: np.asarray([]) for k in KEYS}
     rows: dict[str, list[Any]] = {k: list(old[k]) for k in KEYS}
     done = frozenset(str(s) for s in rows["set"])
@@ -206,8 +222,7 @@ def collect(root: Path, segmenter: Any, out: Path, **limits: Any) -> Path:
         if current is not None and name != current:
             save()
         current = name
-        segmenter.predict_frame(rgb)
-        tap = segmenter.last_tap
+        tap = segment_frame(segmenter, rgb, stats=True).stats
         for key, value in zip(KEYS, (name, i, what, tap.pooled, tap.energy, tap.msp), strict=True):
             rows[key].append(value)
     save()

@@ -29,7 +29,8 @@ from typing import Any
 import numpy as np
 
 from assurance.campaign.truth import true_hazard
-from assurance.dataio.uavid import Sample, iter_samples, read_image, read_labels
+from assurance.dataio.layouts import iter_samples, read_sample_labels
+from assurance.dataio.uavid import Sample, read_image
 from assurance.paths import shown_path
 from el.config import CoreConfig
 from el.core import run_core
@@ -79,7 +80,7 @@ def collect_candidates(data: str | Path, segmenter: Any, *, core: CoreConfig | N
     rows, truth, scene = [], [], []
     labels = labels_of(segmenter)  # the network's classes: the data's palette and what is forbidden
     for i, s in enumerate(bar(samples, total=len(samples), desc=desc, enabled=progress)):
-        rgb, ids = read_image(s.image_path), read_labels(s.label_path, labels)
+        rgb, ids = read_image(s.image_path), read_sample_labels(s, labels)
         if ids.shape != rgb.shape[:2]:
             raise ValueError(f"{s.label_path}: label size {ids.shape} differs from the image {rgb.shape[:2]}")
         probs = segmenter.predict_frame(rgb)

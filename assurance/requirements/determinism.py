@@ -98,9 +98,10 @@ def _replan(man: Mapping[str, Any], config: Any, own_model: bool) -> list[Any] |
     """The run's tasks planned again on its data folder, or why they cannot be (data or weights gone or changed)."""
     from assurance.campaign.run import manifest as make_manifest
     from assurance.campaign.run import plan
+    from assurance.dataio.layouts import data_source
 
-    data = Path(man["data"]["path"])
-    if not data.is_dir():
+    data = data_source(man["data"])  # the run's [data] table when it had one
+    if not Path(data).is_dir():
         return f"insufficient evidence: the run's data folder {data} is gone"
     weights = (man.get("weights") or {}).get("path")
     named = (man.get("weights") or {}).get("model")

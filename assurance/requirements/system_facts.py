@@ -1,9 +1,10 @@
 """What the requirement texts and the declared operating domain say about the system assessed.
 
 The registry's texts are written once for every system: where they name the camera, the pose, the ground rule,
-the scenes or the forbidden classes they use a placeholder (``{camera}``, ``{pose}``, ``{ground}``, ``{scenes}``,
-``{forbidden}``) filled from these facts. ``facts_of`` derives them from a built system (its camera, nominal pose,
-declared domain, pose policy and label set), so a report about another system says nothing of the shipped one;
+the scenes, the conditions or the forbidden classes they use a placeholder (``{camera}``, ``{pose}``, ``{ground}``,
+``{scenes}``, ``{conditions}``, ``{forbidden}``) filled from these facts. ``facts_of`` derives them from a built system
+(its camera, nominal pose, declared domain and its perturbations, pose policy and label set), so a report about
+another system says nothing of the shipped one;
 ``shipped_facts`` are the embedded default's (what a registry loaded without a system reads).
 
 A fact is literal text, never a template: a camera named ``Cam {A}`` or a class named ``{confidence:pct} x`` is
@@ -18,7 +19,7 @@ import functools
 from collections.abc import Sequence
 from typing import Any
 
-FACT_KEYS = ("camera", "view", "pose", "ground", "scenes", "forbidden", "safe", "label_set")
+FACT_KEYS = ("camera", "view", "pose", "ground", "scenes", "conditions", "forbidden", "safe", "label_set")
 TEMPLATE_FACTS = ("pose",)
 """Facts whose text holds the registry's placeholders (``{pose_error.height:pct}``), rendered with its parameters;
 every other fact is substituted as literal text."""
@@ -43,10 +44,28 @@ def view_of(pitch_deg: float) -> str:
     return "nadir view (looking straight down)" if pitch_deg >= NADIR_PITCH_DEG else "oblique view"
 
 
-def camera_text(intrinsics: Any, pitch_deg: float) -> str:
-    """The camera as the operating domain names it: name, sensor, lens, field of view and view."""
-    return (f"camera '{intrinsics.name}' ({intrinsics.sensor_width_mm:g} mm sensor width, {intrinsics.focal_mm:.3g} "
+def camera_text(intrinsics: Any, pitch_deg: float, *, named: bool = True) -> str:
+    """The camera as the operating domain names it: name (``named``: declared; else said to be undeclared), sensor,
+    lens, field of view and view."""
+    who = f"camera '{intrinsics.name}'" if named else "a camera of no declared name"
+    return (f"{who} ({intrinsics.sensor_width_mm:g} mm sensor width, {intrinsics.focal_mm:.3g} "
             f"mm focal length, {intrinsics.hfov_deg:.1f} degrees horizontal field of view), {view_of(pitch_deg)}")
+
+
+SHIPPED_CONDITIONS = ("daylight; the six perturbations of ICRA22 at severity 3 (brightness, fog, motion blur, "
+                      "shifted pixels, pixel trap, none)")
+"""The shipped system's conditions (the paper's protocol, which its release run follows)."""
+
+
+def conditions_text(file: Any, odd: Any) -> str:
+    """The conditions a system's evidence is declared for: the perturbations and maximum severities of its
+    ``[odd]`` (the embedded default's when its file declares none, and said so; a maximum of 0 declares nothing),
+    and the unperturbed frames."""
+    levels = {n: s for n, s in dict(getattr(odd, "perturbations", None) or {}).items() if s > 0}
+    listed = ", ".join(f"{n.replace('_', ' ')} up to severity {s}" for n, s in levels.items())
+    source = ("as declared in [odd] perturbations of its system file" if file.sets("odd.perturbations") else
+              "its system file declares none: the embedded default's [odd] perturbations")
+    return f"the unperturbed frames and {listed} ({source})" if listed else f"the unperturbed frames only ({source})"
 
 
 def _range(values: Any, unit: str) -> str | None:
@@ -76,16 +95,20 @@ def forbidden_text(labels: Any) -> str:
 
 def facts_of(system: Any) -> dict[str, str]:
     """The facts of a built ``assurance.system.System`` (its camera, pose, declared domain, label set)."""
+    from assurance.system.build import camera_named
+
     core, labels = system.core, system.labels
     pose = core.pose
     name = getattr(system.file, "name", None) or system.label
     data = "the system's own data sets ([data] of its system file)"
+    shipped = bool(system.file.default)
     return {
-        "camera": camera_text(core.intrinsics, pose.pitch_deg),
+        "camera": camera_text(core.intrinsics, pose.pitch_deg, named=camera_named(system.file)),
         "view": view_of(pose.pitch_deg),
         "pose": pose_text(pose, system.odd, system.poses),
         "ground": ground_text(system),
-        "scenes": f"the scenes of {name}: {data}" if not system.file.default else SHIPPED_SCENES,
+        "scenes": f"the scenes of {name}: {data}" if not shipped else SHIPPED_SCENES,
+        "conditions": SHIPPED_CONDITIONS if shipped else conditions_text(system.file, system.odd),
         "forbidden": forbidden_text(labels),
         "safe": _names([labels.names[i] for i in labels.safe_ids], "and"),
         "label_set": labels.name,
@@ -139,6 +162,7 @@ def shipped_facts() -> dict[str, str]:
                  "to {pose_error.height:pct} in height and {pose_error.pitch:pct} in pitch"),
         "ground": _ground(3840, 2160, CoreConfig()),
         "scenes": SHIPPED_SCENES,
+        "conditions": SHIPPED_CONDITIONS,
         "forbidden": forbidden_text(UAVID),
         "safe": _names([UAVID.names[i] for i in UAVID.safe_ids], "and"),
         "label_set": UAVID.name,
@@ -155,5 +179,5 @@ def check_facts(facts: dict[str, str]) -> dict[str, str]:
     return {k: facts[k] for k in FACT_KEYS}
 
 
-__all__ = ["FACT_KEYS", "TEMPLATE_FACTS", "camera_text", "check_facts", "escape", "facts_of", "facts_of_file",
-           "forbidden_text", "pose_text", "shipped_facts", "view_of"]
+__all__ = ["FACT_KEYS", "SHIPPED_CONDITIONS", "TEMPLATE_FACTS", "camera_text", "check_facts", "conditions_text",
+           "escape", "facts_of", "facts_of_file", "forbidden_text", "pose_text", "shipped_facts", "view_of"]

@@ -34,7 +34,7 @@ def make_preview(pairs: list[tuple[np.ndarray, np.ndarray]], *, labels: LabelSet
         h, w = ids.shape
         ph = max(1, round(panel_width * h / w))
         img = cv2.resize(image, (panel_width, ph), interpolation=cv2.INTER_AREA)
-        lab = cv2.resize(labels.palette[ids], (panel_width, ph), interpolation=cv2.INTER_NEAREST)
+        lab = cv2.resize(labels.ids_to_colors(ids), (panel_width, ph), interpolation=cv2.INTER_NEAREST)
         gap = np.full((ph, 6, 3), 255, np.uint8)
         rows.append(np.concatenate([img, gap, lab], axis=1))
         rows.append(np.full((6, rows[-1].shape[1], 3), 255, np.uint8))

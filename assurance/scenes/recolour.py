@@ -18,7 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from assurance.dataio.uavid import LABEL_DIR, iter_samples, read_labels, write_labels
+from assurance.dataio.layouts import iter_samples, read_sample_labels, write_label_file
+from assurance.dataio.uavid import LABEL_DIR
 from el.errors import DataError
 from el.labels import MAX_CLASSES, LabelSet
 
@@ -96,10 +97,11 @@ def recolour_dataset(src: str | Path, dst: str | Path, source_labels: LabelSet, 
     counts = np.zeros(MAX_CLASSES, np.int64)
     for s in samples:
         assert s.label_path is not None
-        out = recolour_labels(read_labels(s.label_path, source_labels), lut, source_labels, target_labels,
+        out = recolour_labels(read_sample_labels(s, source_labels), lut, source_labels, target_labels,
                               s.label_path)
         counts += np.bincount(out.ravel(), minlength=MAX_CLASSES)
-        write_labels(dst / s.label_path.relative_to(src), out, target_labels)
+        write_label_file(dst / s.label_path.relative_to(src), out, target_labels, encoding=s.label_encoding,
+                         id_offset=s.id_offset)  # in the source's own encoding
     names = {**{c.id: c.name for c in target_labels.classes},
              **({} if target_labels.ignore is None else {target_labels.ignore.id: target_labels.ignore.name})}
     return {"labels": len(samples), "pixels": {names[i]: int(counts[i]) for i in np.flatnonzero(counts)}}

@@ -8,6 +8,7 @@ it). Errors name the system file and the key (``SystemFileError``).
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -70,8 +71,8 @@ def intrinsics(system: SystemFile) -> Intrinsics:
     focal = float(system.get("camera.focal_mm", base.focal_mm))
     if system.get("camera.hfov_deg") is not None:
         focal = width / (2.0 * math.tan(math.radians(float(system.get("camera.hfov_deg"))) / 2.0))
-    custom = any(system.sets(f"camera.{k}") for k in ("sensor_width_mm", "focal_mm", "hfov_deg"))
-    name = system.get("camera.name") or (f"{preset}-custom" if custom else base.name)
+    name = system.get("camera.name") or (
+        f"custom (sensor {width:g} mm, focal {focal:.3g} mm)" if _custom_lens(system) else base.name)
     kwargs: dict[str, Any] = {"sensor_width_mm": width, "focal_mm": focal, "name": str(name)}
     if system.get("camera.sensor_height_mm") is not None:
         kwargs["sensor_height_mm"] = float(system.get("camera.sensor_height_mm"))
@@ -79,6 +80,17 @@ def intrinsics(system: SystemFile) -> Intrinsics:
         return Intrinsics(**kwargs)
     except ValueError as exc:
         raise system.error("camera", str(exc)) from None
+
+
+def _custom_lens(system: SystemFile) -> bool:
+    """Whether the file sets the lens or sensor itself (not only a preset)."""
+    return any(system.sets(f"camera.{k}") for k in ("sensor_width_mm", "focal_mm", "hfov_deg"))
+
+
+def camera_named(system: SystemFile) -> bool:
+    """Whether the camera's name is declared: ``camera.name``, or a preset's own name for the preset's own lens (a
+    custom lens without a name is named for what it is, ``custom (sensor W mm, focal F mm)``, by :func:`intrinsics`)."""
+    return system.get("camera.name") is not None or not _custom_lens(system)
 
 
 def nominal_pose(system: SystemFile) -> Pose:
@@ -261,16 +273,26 @@ def check_deployed_calibration(system: SystemFile) -> None:
         raise system.error("monitor.spec", str(exc)) from None
 
 
-def data_root(system: SystemFile, split: str, given: str | Path | None = None) -> Path:
-    """The data set of a split: the option given, else ``[data] <split>``; a clear error when neither."""
+def data_root(system: SystemFile, split: str, given: str | Path | None = None) -> Any:
+    """The data set of a split: the option given (a folder, its layout detected), else ``[data] <split>``: a folder,
+    or a table read as an ``assurance.dataio.layouts.DataSpec`` (its ``path`` resolved against the file's folder);
+    a clear error when neither, or for a bad table or a missing folder. Path-like either way."""
     if given is not None:
         return Path(given)
-    root = system.path_of(f"data.{split}")
-    if root is None:
+    value = system.get(f"data.{split}")
+    if value is None:
         raise system.error(f"data.{split}", f"not set; give the {split} data with --data or in [data] {split}")
-    if not root.is_dir():
-        raise system.error(f"data.{split}", f"{root}: no such folder")
-    return root
+    source: Any = system.path_of(f"data.{split}")
+    if isinstance(value, Mapping):
+        from assurance.dataio.layouts import DataSpec
+
+        try:
+            source = DataSpec.from_dict({**value, "path": system.path_of(f"data.{split}.path")})
+        except ValueError as exc:
+            raise system.error(f"data.{split}", str(exc)) from None
+    if not Path(source).is_dir():
+        raise system.error(f"data.{split}", f"{source}: no such folder")
+    return source
 
 
 def targets(system: SystemFile) -> dict[str, Any]:
@@ -319,3 +341,9 @@ def report_settings(system: SystemFile) -> dict[str, Any]:
 
 def describe_path(p: Path | None) -> str:
     return "" if p is None else str(p)
+
+
+def in_service(system: SystemFile) -> dict[str, Any]:
+    """The safety performance indicators ``[in_service]`` declares (``uav-el in-service``, ``assurance.inservice``):
+    empty when the file declares none."""
+    return dict(system.get("in_service") or {})

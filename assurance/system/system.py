@@ -82,8 +82,9 @@ class System:
         """How messages name the system file."""
         return self.file.label
 
-    def data(self, split: str, given: str | Path | None = None) -> Path:
-        """The data set of ``split``: ``given``, else the file's ``[data] <split>`` (a clear error when neither)."""
+    def data(self, split: str, given: str | Path | None = None) -> Any:
+        """The data set of ``split``: ``given``, else the file's ``[data] <split>``, a folder or a table (a ``Path``
+        or an ``assurance.dataio.layouts.DataSpec``, both path-like; a clear error when neither)."""
         return build.data_root(self.file, split, given)
 
     def segmenter(self, *, threads: int | None = None, working_width: int | None = None) -> Any:

@@ -1,14 +1,15 @@
 """The deployed frame gate: one fitted candidate of ``el.monitors.gates``, read from its hash-checked JSON file
-(``uav-el fit-gate``), scoring the statistics the frame's own segmentation pass kept (the model's ``last_tap``,
-``el/segmentation/frame_tap.py``: no second pass). Any network that keeps them can carry a gate: the shipped
-``Segmenter`` (torch or ONNX Runtime), an ONNX file (``OnnxModel``) and either behind a class map (``MappedModel``
-passes its network's tap through). The file's ``features.tap`` says which statistics it reads: ``pooled`` (the
+(``uav-el fit-gate``), scoring the statistics the frame's own segmentation pass returned with its probabilities
+(``predict_frame(rgb, stats=True)``, ``el/segmentation/frame_tap.py``: no second pass, nothing kept on the model).
+Any network offering them (``el.segmentation.contract.FRAME_STATS``) can carry a gate: the shipped ``Segmenter``
+(torch or ONNX Runtime), an ONNX file (``OnnxModel``) and either behind a class map (``MappedModel`` passes its
+network's statistics through). The file's ``features.tap`` says which statistics it reads: ``pooled`` (the
 trunk's), ``output`` (the logits', every network's) or ``energy``.
 
 A frame whose score is above the threshold ends in the default action with reason
 ``out_of_domain: frame gate <kind> score S > threshold T`` (a decision: there is no evidence of safety there);
-a fault of the gate (no tap, wrong feature count, a non-finite score) is a fault of the decision (default action,
-the reason recorded). The file binds the gate to the network it was fitted on (``weights.sha256``).
+a fault of the gate (no statistics, wrong feature count, a non-finite score) is a fault of the decision (default
+action, the reason recorded). The file binds the gate to the network it was fitted on (``weights.sha256``).
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ import numpy as np
 from el.errors import FrameGateError
 from el.monitors.gates import GATES
 from el.records import HashedRecord
+from el.segmentation.contract import FRAME_STATS, has_capability
 
 FRAME_GATE_FORMAT = "uav-el-frame-gate/1"
 OUT_OF_DOMAIN = "out_of_domain"
@@ -72,13 +74,13 @@ class FrameGate(HashedRecord):
     def needs_trunk(self) -> bool:
         return self.features == "pooled"
 
-    def score(self, tap: Any) -> float:
-        """The frame's score from its :class:`~el.segmentation.frame_tap.FrameTap`; ValueError when the pass kept
-        none, the features do not match the fitted ones, or the score is not finite."""
-        if tap is None:
-            raise ValueError("the segmentation pass kept no frame statistics (the model's tap_frames is off)")
+    def score(self, stats: Any) -> float:
+        """The frame's score from its pass's :class:`~el.segmentation.frame_tap.FrameTap`; ValueError when the pass
+        returned none, the features do not match the fitted ones, or the score is not finite."""
+        if stats is None:
+            raise ValueError("the segmentation pass returned no frame statistics (predict_frame(rgb, stats=True))")
         gate = GATES[self.kind]
-        x = np.asarray(gate.embed(tap, self.features), np.float64)
+        x = np.asarray(gate.embed(stats, self.features), np.float64)
         if x.shape != (self.dims,):
             raise ValueError(f"the frame has {x.size} features, the gate {self.path} was fitted on {self.dims} "
                              "(another network or engine?)")
@@ -133,39 +135,39 @@ def load_frame_gate(path: str | Path) -> FrameGate:
     return FrameGate(str(p), digest, body, params)
 
 
-def keeps_taps(model: Any) -> bool:
-    """Whether a segmentation model can keep its frame pass's statistics for a frame gate (``tap_frames`` and
-    ``last_tap``: the shipped ``Segmenter``, an ``OnnxModel``, a ``MappedModel`` over either)."""
-    return hasattr(model, "tap_frames")
+def returns_frame_stats(model: Any) -> bool:
+    """Whether a segmentation model returns its frame pass's statistics for a frame gate (``FRAME_STATS``: the
+    shipped ``Segmenter``, an ``OnnxModel``, a ``MappedModel`` over either)."""
+    return has_capability(model, FRAME_STATS)
 
 
-def start_taps(model: Any, where: str) -> None:
-    """Turn ``model.tap_frames`` on; ``FrameGateError`` naming ``where`` for a model that keeps no statistics."""
-    if not keeps_taps(model):
+def check_frame_stats(model: Any, where: str) -> None:
+    """``FrameGateError`` naming ``where`` for a model that returns no frame statistics (a gate cannot read it)."""
+    if not returns_frame_stats(model):
         inner = getattr(model, "network", model)
-        raise FrameGateError(f"{where}: the segmentation model {type(inner).__name__} keeps no frame statistics "
-                             "(tap_frames, last_tap): a frame gate cannot read it")
-    model.tap_frames = True
+        raise FrameGateError(f"{where}: the segmentation model {type(inner).__name__} returns no frame statistics "
+                             "(predict_frame(rgb, stats=True), el.segmentation.contract.FRAME_STATS): a frame gate "
+                             "cannot read it")
 
 
-def bind_frame_gate(path: str | Path, segmenter: Any) -> FrameGate:
-    """Load the gate at ``path`` for ``segmenter``: refused (its error, one line) when fitted on another network
-    or when the segmenter cannot keep its frame pass's statistics; turns ``segmenter.tap_frames`` on."""
-    gate = load_frame_gate(path)
+def bind_frame_gate(gate: FrameGate | str | Path, segmenter: Any) -> FrameGate:
+    """The gate (a loaded one, or the file at a path) for ``segmenter``: refused (its error, one line) when fitted on
+    another network or when the segmenter returns no frame statistics. Changes nothing on the segmenter."""
+    gate = gate if isinstance(gate, FrameGate) else load_frame_gate(gate)
     if segmenter is None:
         raise FrameGateError(f"{gate.path}: no segmentation network to bind the frame gate to")
     gate.check_network(segmenter)
-    start_taps(segmenter, gate.path)
+    check_frame_stats(segmenter, gate.path)
     return gate
 
 
-def judge_frame(gate: FrameGate, segmenter: Any, info: dict[str, Any]) -> str | None:
-    """Score the frame the segmenter just segmented; record it in ``info["frame_gate"]`` and return the
+def judge_frame(gate: FrameGate, stats: Any, info: dict[str, Any]) -> str | None:
+    """Score a frame from its segmentation pass's statistics; record it in ``info["frame_gate"]`` and return the
     ``out_of_domain`` reason when it is above the threshold. ValueError (a fault) when it cannot be scored."""
-    score = gate.score(getattr(segmenter, "last_tap", None))
+    score = gate.score(stats)
     info["frame_gate"] = gate.record(score)
     return gate.reason(score)
 
 
-__all__ = ["FRAME_GATE_FORMAT", "OUT_OF_DOMAIN", "FrameGate", "bind_frame_gate", "frame_gate_document", "judge_frame",
-           "keeps_taps", "load_frame_gate", "start_taps"]
+__all__ = ["FRAME_GATE_FORMAT", "OUT_OF_DOMAIN", "FrameGate", "bind_frame_gate", "check_frame_stats",
+           "frame_gate_document", "judge_frame", "load_frame_gate", "returns_frame_stats"]

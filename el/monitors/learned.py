@@ -43,7 +43,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from el.decision import Disc
-from el.discs import disc_window_mask
+from el.discs import disc_window_mask, window_sq_distances
 from el.errors import LearnedModelError
 from el.forbidden import forbidden_pixels, top_scores
 from el.labels import UAVID, LabelSet
@@ -183,6 +183,81 @@ def mcd_spread(samples: np.ndarray, disc_mask: np.ndarray, labels: LabelSet) -> 
     return [float(std.mean()), float(std.max())]
 
 
+def disc_summary(forbidden: list[np.ndarray], top_forbidden: np.ndarray, top_safe: np.ndarray
+                 ) -> tuple[list[float], list[float]]:
+    """:func:`disc_stats` and :func:`class_max` of a disc from each forbidden class's scores on its m pixels and the
+    pixels' top forbidden and top safe scores, (m,) each: the same numbers (the classes summed in the same order, in
+    float64), with only the forbidden classes' sum converted to float64."""
+    m = top_forbidden.shape[0]
+    if m == 0:
+        return [1.0, 1.0, 1.0, 1.0], [1.0] * len(forbidden)  # nothing seen: as bad as it gets
+    forbidden_p = forbidden[0].astype(np.float64)
+    for scores in forbidden[1:]:
+        forbidden_p += scores  # class after class, as sum(axis=0) adds them
+    margin = top_forbidden.astype(np.float64) - top_safe
+    return ([float(forbidden_p.max()), float(forbidden_p.mean()),
+             float(np.count_nonzero(top_forbidden >= top_safe) / m), float(margin.max())],
+            [float(scores.max()) for scores in forbidden])
+
+
+def patch_stats(patch_probs: np.ndarray, patch: Patch, candidate: Any, margin: float, labels: LabelSet
+                ) -> tuple[list[float], float, list[float]]:
+    """The HD disc's :func:`disc_stats`, the :func:`edge_distance` and the HD disc's :func:`class_max` (of
+    ``take_disc(patch_probs, patch.disc_mask)``): the same numbers, from one pass of the patch's top scores and
+    the forbidden classes alone picked out of the disc."""
+    top_forbidden, top_safe = top_scores(patch_probs, labels)
+    edge = nearest_forbidden(top_forbidden >= top_safe, patch, candidate, margin)
+    idx = np.flatnonzero(patch.disc_mask)  # the disc's pixels in raster order, as take_disc picks them
+    forbidden = [np.ravel(patch_probs[c]).take(idx) for c in labels.forbidden_ids]
+    stats, largest = disc_summary(forbidden, np.ravel(top_forbidden).take(idx), np.ravel(top_safe).take(idx))
+    return stats, edge, largest
+
+
+def nearest_forbidden(forbidden: np.ndarray, patch: Patch, candidate: Any, margin: float) -> float:
+    """:func:`edge_distance` from the patch's forbidden pixels (h, w) bool: the same squared distances, their
+    minimum found row by row (the smallest x^2 of a row's forbidden pixels, plus the row's y^2: rounding is
+    monotonic, so the minimum is the same float)."""
+    cap = (1.0 + margin) * math.sqrt(2.0) - 1.0
+    h, w = forbidden.shape
+    x = patch.offset[0] + (np.arange(w) + 0.5) / patch.scale - candidate.x
+    y = patch.offset[1] + (np.arange(h) + 0.5) / patch.scale - candidate.y
+    d2 = float((np.where(forbidden, x * x, np.inf).min(axis=1) + y * y).min())
+    if d2 == math.inf:  # no forbidden pixel in the patch
+        return cap
+    return min(max(math.sqrt(d2) / candidate.radius_px - 1.0, -1.0), cap)
+
+
+def frame_features(frame: np.ndarray, candidate: Any, scale: float, labels: LabelSet
+                   ) -> tuple[list[float], list[float], list[float]]:
+    """The frame disc's :func:`disc_stats`, the :func:`context_stats` and the frame disc's :func:`class_max` (of
+    :func:`frame_disc`): the same numbers, every disc's pixels picked from one grid of squared distances (as
+    :func:`frame_disc_mask` draws them) and the forbidden probability summed once over the context window."""
+    h, w = frame.shape[1:]
+    x0, y0, x1, y1 = frame_window((h, w), candidate, scale, max(CONTEXT_SCALES))  # holds every disc
+    d2 = window_sq_distances(candidate.x * scale, candidate.y * scale, x0, y0, x1, y1)
+    centre = (min(max(int(candidate.y * scale), 0), h - 1) - y0, min(max(int(candidate.x * scale), 0), w - 1) - x0)
+
+    def disc(radii: float) -> np.ndarray:
+        r = candidate.radius_px * scale * radii
+        mask = d2 <= r * r
+        if not mask.any():
+            mask[centre] = True  # a disc smaller than a pixel: the pixel under its centre
+        return mask
+
+    ys, xs = np.nonzero(disc(1.0))
+    pixels = frame[:, ys + y0, xs + x0]  # (C, m), raster order
+    stats, largest = disc_summary([pixels[c] for c in labels.forbidden_ids], *top_scores(pixels, labels))
+    first, *rest = labels.forbidden_ids
+    window = frame[first, y0:y1, x0:x1].astype(np.float64)
+    for c in rest:
+        window += frame[c, y0:y1, x0:x1]  # class after class, as context_stats sums them
+    context: list[float] = []
+    for k in CONTEXT_SCALES:
+        forbidden_p = window[disc(k)]
+        context += [float(forbidden_p.max()), float(forbidden_p.mean())]
+    return stats, context, largest
+
+
 def candidate_features(patch_probs: np.ndarray, patch: Patch, context: CandidateContext, *, margin: float,
                        mcd_samples: np.ndarray | None = None, labels: LabelSet) -> np.ndarray:
     """The feature vector of one candidate: :func:`base_features` (:data:`BASE_FEATURES` for UAVid), then
@@ -199,18 +274,10 @@ def candidate_features(patch_probs: np.ndarray, patch: Patch, context: Candidate
         validate_scores(frame, frame.shape[1:], "frame softmax", labels=labels)
     cand = context.candidate
     width, height = context.frame_size
-    scale = frame.shape[2] / width
-    lr_disc = frame_disc(frame, cand, scale)
-    hd_disc = take_disc(patch_probs, patch.disc_mask)
-    values = [
-        *disc_stats(lr_disc, labels),
-        *disc_stats(hd_disc, labels),
-        edge_distance(patch_probs, patch, cand, margin, labels),
-        cand.y / height, cand.radius_px / height, float(cand.hazard),
-        *context_stats(frame, cand, scale, labels),
-        *class_max(hd_disc, labels),
-        *class_max(lr_disc, labels),
-    ]
+    lr_stats, ctx_stats, lr_max = frame_features(frame, cand, frame.shape[2] / width, labels)
+    hd_stats, edge, hd_max = patch_stats(patch_probs, patch, cand, margin, labels)
+    values = [*lr_stats, *hd_stats, edge, cand.y / height, cand.radius_px / height, float(cand.hazard),
+              *ctx_stats, *hd_max, *lr_max]
     if mcd_samples is not None:
         values += mcd_spread(mcd_samples, patch.disc_mask, labels)
     out = np.asarray(values, dtype=np.float64)

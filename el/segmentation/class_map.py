@@ -10,8 +10,8 @@ probabilities, reordered: sums of one term are exact.
 Capabilities pass through where the class map keeps their meaning: ``mc_dropout`` (each sample is
 mapped), ``patch_trunk`` (the trunk is class-free; ``predict_patch`` and ``mc_dropout`` take its
 ``features=`` and map their output), the trunk features of the out-of-domain gate (``model.trunk``
-and ``working_size``: class-free) and the frame pass's statistics a frame gate reads (``tap_frames``,
-``last_tap``: the network's own, in its own classes, like the gate fitted on it). Not passed: ``fast_mc``
+and ``working_size``: class-free) and the frame pass's statistics a frame gate reads (``predict_frame(rgb,
+stats=True)``: the network's own, in its own classes, like the gate fitted on it). Not passed: ``fast_mc``
 (the chunked MC path reads the network's head directly and would bypass the map), so MC dropout goes
 through the mapped ``mc_dropout`` in one draw: in flight, a large MCD ``n`` is not cut into budget-checked
 chunks. ``network_classes``: the network's own class count (softmax scores are normalised by it).
@@ -30,7 +30,16 @@ from typing import Any
 import numpy as np
 
 from el.labels import LabelSet
-from el.segmentation.contract import MC_DROPOUT, PATCH_TRUNK, check_model, has_capability, labels_of
+from el.segmentation.contract import (
+    FRAME_STATS,
+    MC_DROPOUT,
+    PATCH_TRUNK,
+    check_model,
+    has_capability,
+    labels_of,
+    segment_frame,
+)
+from el.segmentation.frame_tap import FramePass
 
 
 def check_class_map(network: LabelSet, system: LabelSet, mapping: Mapping[str, str],
@@ -140,28 +149,16 @@ class MappedModel:
         return int(self.network_labels.num_classes)
 
     @property
-    def tap_frames(self) -> bool:
-        """Whether the network keeps its frame pass's statistics for a frame gate (AttributeError for a network
-        that cannot: ``hasattr`` then says no, as for any model without them)."""
-        if not hasattr(self.network, "tap_frames"):
-            raise AttributeError(f"{type(self.network).__name__} keeps no frame statistics (tap_frames)")
-        return bool(self.network.tap_frames)
+    def frame_stats(self) -> bool:
+        """Whether the network returns its frame pass's statistics (``FRAME_STATS``): the map passes them through
+        untouched, in the network's own classes."""
+        return has_capability(self.network, FRAME_STATS)
 
-    @tap_frames.setter
-    def tap_frames(self, value: bool) -> None:
-        if not hasattr(self.network, "tap_frames"):
-            raise AttributeError(f"{type(self.network).__name__} keeps no frame statistics (tap_frames)")
-        self.network.tap_frames = value
-
-    @property
-    def last_tap(self) -> Any:
-        """The network's statistics of the frame it last segmented (``el.segmentation.frame_tap.FrameTap``; None
-        when it kept none): the map does not touch them."""
-        return getattr(self.network, "last_tap", None)
-
-    def predict_frame(self, rgb: np.ndarray) -> np.ndarray:
-        """The network's frame probabilities summed onto the system's classes: (C_sys, h, w) float32."""
-        return self._map(self.network.predict_frame(rgb), 0)
+    def predict_frame(self, rgb: np.ndarray, *, stats: bool = False) -> np.ndarray | FramePass:
+        """The network's frame probabilities summed onto the system's classes: (C_sys, h, w) float32; with ``stats``
+        a ``FramePass`` of them and the network's statistics of the pass (None from a network without them)."""
+        probs, found = segment_frame(self.network, rgb, stats=stats)
+        return FramePass(self._map(probs, 0), found) if stats else self._map(probs, 0)
 
     def predict_patch(self, rgb_patch: np.ndarray, **kwargs: Any) -> np.ndarray:
         """The network's patch probabilities summed onto the system's classes (``features=`` passed on)."""

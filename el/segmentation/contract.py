@@ -3,10 +3,10 @@
 A model maps a full-resolution RGB frame to class probabilities over its system's label set at the
 working resolution, and a full-resolution patch to probabilities at the patch's own resolution. It may
 offer capabilities that some monitors need (MC dropout for MCD, a trunk shared between calls for
-faster campaigns, trunk features for the out-of-domain gate); a monitor that needs a missing one fails
-loudly, which the decision loop turns into the default action. :class:`el.segmentation.Segmenter`
-(any ``torch.nn.Module``) is the built-in implementation; :func:`el.segmentation.factory.load_model`
-builds one from a spec.
+faster campaigns, trunk features, a frame pass's statistics for the frame gate); a monitor or gate that
+needs a missing one is refused when the system is built, which the decision loop turns into the default
+action. :class:`el.segmentation.Segmenter` (any ``torch.nn.Module``) is the built-in implementation;
+:func:`el.segmentation.factory.load_model` builds one from a spec.
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ import numpy as np
 
 from el.labels import UAVID, LabelSet
 from el.records import weights_sha256_of  # noqa: F401  (re-exported: part of the seam)
+from el.segmentation.frame_tap import FramePass
 
 MC_DROPOUT = "mc_dropout"
 """Capability ``mc_dropout(rgb_patch, n, keep_prob, seed, *, features=None, window=None) -> (n, C, h, w)``:
@@ -28,7 +29,11 @@ and passed as ``features=`` to ``predict_patch`` and ``mc_dropout`` (None when t
 TRUNK_FEATURES = "trunk"
 """Capability: the network's trunk (``model.trunk``) and ``working_size(W, H)``, read by the out-of-domain
 gate's trunk embedding."""
-CAPABILITIES = (MC_DROPOUT, PATCH_TRUNK, TRUNK_FEATURES)
+FRAME_STATS = "frame_stats"
+"""Capability ``predict_frame(rgb, *, stats=True) -> (probs, stats)``: the frame's probabilities with the statistics of
+the same pass (:class:`el.segmentation.frame_tap.FramePass`; ``stats`` a ``FrameTap`` or None), read by a frame gate.
+A model declares it with the attribute ``frame_stats = True``; :func:`segment_frame` asks for them."""
+CAPABILITIES = (MC_DROPOUT, PATCH_TRUNK, TRUNK_FEATURES, FRAME_STATS)
 
 
 @runtime_checkable
@@ -39,7 +44,8 @@ class SegmentationModel(Protocol):
     resolution ``(w, h) = working_size(W, H)``. ``predict_patch(rgb_patch)``: (h, w, 3) uint8 -> (C, h, w)
     at the patch's resolution, deterministic. Optional attributes, read with :func:`labels_of` and
     :func:`weights_sha256_of`: ``labels`` (a :class:`el.labels.LabelSet`; UAVid when absent) and
-    ``weights_sha256`` (the identity cards and fitted monitors are bound to; None when absent).
+    ``weights_sha256`` (the identity cards and fitted monitors are bound to; None when absent). A model offering
+    :data:`FRAME_STATS` also takes ``predict_frame(rgb, stats=True)`` and returns ``(probs, stats)``.
     """
 
     def predict_frame(self, rgb: np.ndarray) -> np.ndarray: ...
@@ -83,7 +89,19 @@ def has_capability(model: Any, capability: str) -> bool:
         raise ValueError(f"unknown capability {capability!r}; known: {', '.join(CAPABILITIES)}")
     if capability == TRUNK_FEATURES:
         return callable(getattr(getattr(model, "model", None), "trunk", None))
+    if capability == FRAME_STATS:
+        return getattr(model, FRAME_STATS, False) is True
     return callable(getattr(model, capability, None))
+
+
+def segment_frame(model: Any, rgb: np.ndarray, *, stats: bool = False) -> FramePass:
+    """``model``'s probabilities of a frame and, with ``stats``, the statistics of the same pass (:data:`FRAME_STATS`).
+    A model without that capability is asked for the probabilities alone: its statistics are None, and a frame gate
+    cannot score the frame (``FrameGate.score`` refuses it: a fault of the decision)."""
+    if not (stats and has_capability(model, FRAME_STATS)):
+        return FramePass(model.predict_frame(rgb), None)
+    probs, found = model.predict_frame(rgb, stats=True)
+    return FramePass(probs, found)
 
 
 def check_model(model: Any, what: str = "segmentation model") -> Any:

@@ -1,5 +1,7 @@
-"""What a frame's own forward pass computed, kept for the frame gates (``el.monitors.gates``): the gates read it
-instead of running the network a second time.
+"""What a frame's own forward pass computed, returned with its probabilities for the frame gates
+(``el.monitors.gates``): the gates read it instead of running the network a second time.
+``predict_frame(rgb, stats=True)`` returns a :class:`FramePass`, the probabilities and these statistics of the same
+pass; nothing is kept on the model between calls.
 
 ``pooled``: per-channel mean and standard deviation over space of every trunk level (None when the network has
 no trunk, or runs in ONNX Runtime from a file without trunk outputs); ``output``: per-class mean and standard
@@ -12,7 +14,7 @@ softmax. Energy, MSP and the output statistics are read on a 1-in-4 pixel grid.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -29,6 +31,14 @@ class FrameTap:
     msp: float
     pooled: np.ndarray | None = None
     output: np.ndarray | None = None
+
+
+class FramePass(NamedTuple):
+    """A frame's probabilities (C, h, w) and the statistics of the pass that computed them (``predict_frame(rgb,
+    stats=True)``); ``stats`` None: the model returned none, so a frame gate cannot score the frame."""
+
+    probs: np.ndarray
+    stats: FrameTap | None
 
 
 def trunk_levels(features: Any) -> list[Any]:

@@ -50,7 +50,7 @@ from el.errors import WeightsError
 from el.labels import UAVID, LabelSet
 from el.segmentation.batching import unit_nchw
 from el.segmentation.frame_passes import MIN_SIZE, FramePasses, check_finite, check_frame_rgb
-from el.segmentation.frame_tap import frame_tap
+from el.segmentation.frame_tap import FrameTap, frame_tap
 from el.segmentation.lazy_trunk import LazyTrunk as _LazyTrunk
 from el.segmentation.lazy_trunk import resolve as _resolve
 from el.segmentation.model import MCDropout, upsample_logits
@@ -145,8 +145,6 @@ class Segmenter(FramePasses, PatchPasses):
     """
 
     labels: LabelSet
-    tap_frames: bool = False  # keep each frame pass's FrameTap (last_tap) for a frame gate (el.monitors.gates)
-    last_tap: Any = None
 
     def __init__(self, model: nn.Module, *, threads: int | None = None, device: str | torch.device = "cpu",
                  card: dict[str, Any] | None = None, working_width: int = 1024, frame_flip: bool = False,
@@ -295,25 +293,32 @@ class Segmenter(FramePasses, PatchPasses):
             return self.model.trunk(self._to_tensor([rgb_patch]))
 
     def _predict(self, images: list[np.ndarray], what: str) -> np.ndarray:
+        return self._run(images, what, False)[0]
+
+    def _frame_pass(self, images: list[np.ndarray], stats: bool) -> tuple[np.ndarray, FrameTap | None]:
+        return self._run(images, "frame", stats)
+
+    def _run(self, images: list[np.ndarray], what: str, stats: bool) -> tuple[np.ndarray, FrameTap | None]:
+        """The softmax of a batch and, with ``stats``, the statistics of its first image from this very pass (one
+        pass: the trunk is read where the network or the ONNX export has one)."""
         h, w = images[0].shape[:2]
         with torch.inference_mode():
             features = None
             if getattr(self, "engine", None) is not None:
                 batch = unit_nchw(images)
-                if what == "frame" and self.tap_frames and getattr(self.engine, "trunk_names", None):  # one pass
+                if stats and getattr(self.engine, "trunk_names", None):  # one pass, the trunk's outputs kept
                     raw, features = self.engine.with_trunk(batch)
                     logits = torch.from_numpy(raw)
                 else:
                     logits = torch.from_numpy(self.engine.logits(batch))
-            elif what == "frame" and self.tap_frames and self.fast_mc:  # one pass, split: the gates read its trunk
+            elif stats and self.fast_mc:  # one pass, split: the gates read its trunk
                 features = self.model.trunk(self._to_tensor(images))
                 logits = self.model.head(features)
             else:
                 logits = self.model(self._to_tensor(images))
-            if what == "frame" and self.tap_frames and self.last_tap is None and isinstance(logits, torch.Tensor):
-                self.last_tap = frame_tap(logits, features)
             # C-contiguous: frames feed the core model's OpenCV and numpy code.
-            return np.ascontiguousarray(self._probs(logits, (len(images), self.labels.num_classes, h, w), what))
+            probs = np.ascontiguousarray(self._probs(logits, (len(images), self.labels.num_classes, h, w), what))
+            return probs, (frame_tap(logits, features) if stats else None)
 
     # -- Monte-Carlo dropout -------------------------------------------------------------------
     def mc_dropout(self, rgb_patch: np.ndarray, n: int, keep_prob: float, seed: int, *,

@@ -238,6 +238,9 @@ def open_session(data: bytes, where: str | Path, threads: int | None = None) -> 
     if threads is not None:
         options.intra_op_num_threads = threads
     options.log_severity_level = 3  # errors only: the fault path reports them
+    # no spin-waiting after a run: a spinning frame-session thread competes with the HD patch workers on 2 cores
+    # (benchmarks/bench_stages.py --no-spinning measured the deployed decision 0.44 -> 0.35 s wall, same decisions)
+    options.add_session_config_entry("session.intra_op.allow_spinning", "0")
     try:
         return ort.InferenceSession(data, options, providers=["CPUExecutionProvider"])
     except Exception as exc:  # onnxruntime raises its own classes for a malformed graph

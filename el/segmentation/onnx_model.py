@@ -47,7 +47,7 @@ from el.errors import WeightsError
 from el.labels import LabelSet
 from el.rgb import check_rgb
 from el.segmentation.contract import OutputClasses
-from el.segmentation.frame_tap import frame_tap
+from el.segmentation.frame_tap import FramePass, FrameTap, frame_tap
 from el.segmentation.onnx_engine import metadata, open_session, read_checked, run_session, shipped_export_source
 
 MIN_SIZE = 16
@@ -226,12 +226,11 @@ class OnnxModel:
 
     ``labels``: the system's label set, or the network's own :class:`OutputClasses`; ``weights_sha256``: the
     file's identity; ``contract``; ``path``. Picklable (worker processes): the session is opened again from
-    the file, checked against its identity. ``tap_frames``: keep each frame pass's statistics in ``last_tap``
-    for a frame gate (``el.segmentation.frame_tap``): the output's always, the trunk's when the file declares
-    trunk outputs (``trunk.*``, as ``uav-el export-onnx`` writes them)."""
+    the file, checked against its identity. ``predict_frame(rgb, stats=True)``: the frame's probabilities with the
+    statistics of the same pass for a frame gate (``el.segmentation.frame_tap``): the output's always, the trunk's
+    when the file declares trunk outputs (``trunk.*``, as ``uav-el export-onnx`` writes them)."""
 
-    tap_frames: bool = False
-    last_tap: Any = None
+    frame_stats = True  # el.segmentation.contract.FRAME_STATS
 
     def __init__(self, path: str | Path, contract: OnnxContract, labels: LabelSet | OutputClasses, sha256: str, *,
                  threads: int | None = None, working_width: int = 1024, session: Any = None) -> None:
@@ -258,44 +257,44 @@ class OnnxModel:
         self._order = np.array([contract.class_names.index(n) for n in labels.names])
 
     def __getstate__(self) -> dict[str, Any]:
-        skip = ("_session", "_input", "_output", "_order", "_batch_free", "_trunk", "last_tap")
+        skip = ("_session", "_input", "_output", "_order", "_batch_free", "_trunk")
         return {k: v for k, v in self.__dict__.items() if k not in skip}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__init__(state["path"], state["contract"], state["labels"], state["weights_sha256"],  # type: ignore[misc]
                       threads=state["threads"], working_width=state["working_width"])
-        self.tap_frames = bool(state.get("tap_frames", False))
 
     def working_size(self, width: int, height: int) -> tuple[int, int]:
         """(width, height) of the working resolution for a frame of the given size."""
         return working_size(width, height, self.working_width)
 
-    def _run(self, rgb: np.ndarray, what: str) -> np.ndarray:
+    def _run(self, rgb: np.ndarray, what: str, stats: bool = False) -> tuple[np.ndarray, FrameTap | None]:
+        """The probabilities of one image and, with ``stats``, the statistics of this very pass."""
         h, w = rgb.shape[:2]
-        tap = what == "frame" and self.tap_frames
-        names = [self._output, *(self._trunk if tap else [])]
+        names = [self._output, *(self._trunk if stats else [])]
         outs = run_session(self._session, names, {self._input: self.contract.to_input(rgb)}, f"{what} segmentation")
         out = outs[0]
-        probs = self.contract.to_probs(out, w, h, what)[self._order]
-        if tap:  # the frame gate's statistics, from this very pass (channels in the label set's order)
-            raw = np.asarray(out)
-            raw = raw.transpose(0, 3, 1, 2) if self.contract.output_layout == "nhwc" else raw
-            self.last_tap = frame_tap(raw[:, self._order], outs[1:] or None,
-                                      probabilities=self.contract.output == "probabilities")
-        return np.ascontiguousarray(probs, dtype=np.float32)
+        probs = np.ascontiguousarray(self.contract.to_probs(out, w, h, what)[self._order], dtype=np.float32)
+        if not stats:
+            return probs, None
+        raw = np.asarray(out)  # the frame gate's statistics, channels in the label set's order
+        raw = raw.transpose(0, 3, 1, 2) if self.contract.output_layout == "nhwc" else raw
+        return probs, frame_tap(raw[:, self._order], outs[1:] or None,
+                                probabilities=self.contract.output == "probabilities")
 
-    def predict_frame(self, rgb: np.ndarray) -> np.ndarray:
-        """(C, h, w) float32 probabilities at the working resolution of an (H, W, 3) uint8 frame."""
+    def predict_frame(self, rgb: np.ndarray, *, stats: bool = False) -> np.ndarray | FramePass:
+        """(C, h, w) float32 probabilities at the working resolution of an (H, W, 3) uint8 frame; with ``stats`` a
+        :class:`~el.segmentation.frame_tap.FramePass` of them and the pass's statistics."""
         check_rgb(rgb, "frame", min_size=MIN_SIZE)
-        self.last_tap = None
         w, h = self.working_size(rgb.shape[1], rgb.shape[0])
         if (rgb.shape[1], rgb.shape[0]) != (w, h):
             rgb = cv2.resize(rgb, (w, h), interpolation=cv2.INTER_AREA)
-        return self._run(check_rgb(rgb, "frame at working resolution", min_size=MIN_SIZE), "frame")
+        probs, tap = self._run(check_rgb(rgb, "frame at working resolution", min_size=MIN_SIZE), "frame", stats)
+        return FramePass(probs, tap) if stats else probs
 
     def predict_patch(self, rgb_patch: np.ndarray) -> np.ndarray:
         """(C, h, w) float32 probabilities of an (h, w, 3) uint8 patch at its own resolution."""
-        return self._run(check_rgb(rgb_patch, "patch", min_size=MIN_SIZE), "patch")
+        return self._run(check_rgb(rgb_patch, "patch", min_size=MIN_SIZE), "patch")[0]
 
     def predict_patches(self, patches: list[np.ndarray]) -> list[np.ndarray]:
         """:meth:`predict_patch` of each patch, in order. Patches fed to the network at one size (the contract's
@@ -304,7 +303,7 @@ class OnnxModel:
         for i, p in enumerate(patches):
             check_rgb(p, f"patch {i}", min_size=MIN_SIZE)
         if not self._batch_free:
-            return [self._run(p, "patch") for p in patches]
+            return [self._run(p, "patch")[0] for p in patches]
         groups: dict[tuple[int, int], list[int]] = {}
         for i, p in enumerate(patches):
             groups.setdefault(self.contract.net_size(p.shape[1], p.shape[0]), []).append(i)

@@ -25,7 +25,7 @@ from el.errors import WeightsError
 from el.labels import UAVID, LabelSet
 from el.segmentation.batching import unit_nchw
 from el.segmentation.frame_passes import FramePasses, check_finite, check_frame_rgb
-from el.segmentation.frame_tap import frame_tap
+from el.segmentation.frame_tap import FrameTap, frame_tap
 from el.segmentation.patch_passes import PatchPasses
 from el.segmentation.pooling import check_pooling
 from el.segmentation.protocol import card_protocol, check_frame_scales
@@ -50,12 +50,10 @@ class OnnxSegmenter(FramePasses, PatchPasses):
     """The shipped network (or a ``.pt`` network with its checked ONNX export) under ONNX Runtime, without torch.
 
     Build it with :meth:`load`; the attributes are :class:`~el.segmentation.inference.Segmenter`'s (``card``,
-    ``labels``, ``working_width``, ``frame_flip``, ``frame_scales``, ``frame_pooling``, ``engine``, ``tap_frames``,
-    ``last_tap``), ``model`` is None (no torch module)."""
+    ``labels``, ``working_width``, ``frame_flip``, ``frame_scales``, ``frame_pooling``, ``engine``; frames with their
+    statistics, ``predict_frame(rgb, stats=True)``), ``model`` is None (no torch module)."""
 
     labels: LabelSet
-    tap_frames: bool = False  # keep each frame pass's FrameTap (last_tap) for a frame gate (el.monitors.gates)
-    last_tap: Any = None
     model = None
     fast_mc = False
     has_dropout = False
@@ -130,13 +128,19 @@ class OnnxSegmenter(FramePasses, PatchPasses):
         return self._predict([rgb_patch], "patch")[0]
 
     def _predict(self, images: list[np.ndarray], what: str) -> np.ndarray:
+        return self._run(images, what, False)[0]
+
+    def _frame_pass(self, images: list[np.ndarray], stats: bool) -> tuple[np.ndarray, FrameTap | None]:
+        return self._run(images, "frame", stats)
+
+    def _run(self, images: list[np.ndarray], what: str, stats: bool) -> tuple[np.ndarray, FrameTap | None]:
+        """The softmax of a batch and, with ``stats``, the statistics of its first image from this very pass."""
         h, w = images[0].shape[:2]
         batch = unit_nchw(images)
         features = None
-        if what == "frame" and self.tap_frames and getattr(self.engine, "trunk_names", None):  # one pass
+        if stats and getattr(self.engine, "trunk_names", None):  # one pass, the trunk's outputs kept
             logits, features = self.engine.with_trunk(batch)
         else:
             logits = self.engine.logits(batch)
-        if what == "frame" and self.tap_frames and self.last_tap is None:
-            self.last_tap = frame_tap(logits, features)
-        return np.ascontiguousarray(self._engine_probs(logits, (len(images), self.labels.num_classes, h, w), what))
+        probs = self._engine_probs(logits, (len(images), self.labels.num_classes, h, w), what)
+        return np.ascontiguousarray(probs), (frame_tap(logits, features) if stats else None)

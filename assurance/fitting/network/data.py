@@ -32,7 +32,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from assurance.dataio.uavid import DataError, Sample, iter_samples, read_image, read_labels
+from assurance.dataio.layouts import iter_samples, read_sample_labels
+from assurance.dataio.uavid import DataError, Sample, read_image
 from assurance.files import atomic_write_bytes
 from el.camera import NUM_STRIPES, UNREACHABLE_STRIPES, working_size
 from el.hashing import sha256_file
@@ -116,8 +117,8 @@ class Manifest:
 
 def dataset_manifest(root: str | Path, *, threads: int = 2) -> Manifest:
     """List a UAVid-layout folder (labels required) and hash its files. DataError if empty or broken."""
+    samples = tuple(iter_samples(root, require_labels=True))  # any layout (a DataSpec keeps its patterns)
     root = Path(root)
-    samples = tuple(iter_samples(root, require_labels=True))
     if not samples:
         raise DataError(f"{root}: no images found")
     paths = [p for s in samples for p in (s.image_path, s.label_path)]
@@ -192,7 +193,7 @@ def _load_one(sample: Sample, hashes: tuple[str, str], params: PrepParams, cache
             path.unlink(missing_ok=True)  # a broken cache entry is rebuilt
     if sample.label_path is None:
         raise DataError(f"{sample.image_path}: no label file (training and evaluation need labels)")
-    ids = read_labels(sample.label_path, TRAINING_LABELS)
+    ids = read_sample_labels(sample, TRAINING_LABELS)
     prep = prepare_sample(sample.key, read_image(sample.image_path), ids, params)
     if path is not None:
         buf = io.BytesIO()

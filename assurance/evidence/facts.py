@@ -1,0 +1,238 @@
+"""What the evidence report states about the system assessed, as one record (:class:`ReportFacts`) built once per
+report (:func:`report_facts`) from the system file (the user's, the run's own as its signed manifest records it, or
+the embedded default) and the run's signed manifest and per-frame readouts.
+
+Every sentence of the report about the system takes its facts from here: the registry's texts (camera, pose,
+ground, scenes, conditions, forbidden classes: ``assurance.requirements.system_facts``), the camera as evaluated and
+whether its name was declared, which image stripes may hold a landing, where each frame's pose came from, the
+data's provenance and licence as declared (``"not declared"`` otherwise: never guessed), the development data the
+file declares (resolved against the file's folder), the frame gate as its file says, the waiver file, and the
+release run's size (the shipped system's only). A literal about the shipped system is never said of another.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+NOT_DECLARED = "not declared"
+POLICIES = {"nominal": "the nominal pose for every frame", "sidecar": "each frame's own pose where it has one, else "
+            "the nominal pose", "required": "each frame's own pose (a frame without one is a fault of its task)"}
+"""The campaign's pose policy (``assurance.dataio.poses.POLICIES``) in words."""
+SOURCES = {"frame": "its own pose from its sequence's poses.csv", "meta": "the pose its scene meta records",
+           "nominal": "the nominal pose"}
+"""Where a frame's pose came from (the ``pose_source`` readout) in words."""
+
+
+@dataclass(frozen=True)
+class DeclaredData:
+    """A development data set the system file declares (``[model.provenance] training_data`` or
+    ``validation_data``), resolved against the file's folder; ``inside``: it lies in that folder (only such a
+    folder is read: the report never reads the auditor's other files)."""
+
+    key: str
+    role: str
+    letter: str
+    path: Path
+    inside: bool
+
+
+@dataclass(frozen=True)
+class ReportFacts:
+    """The report's facts about the system assessed (see the module docstring)."""
+
+    shipped: bool
+    system: str
+    texts: Mapping[str, str]
+    camera: str
+    stripes: str
+    pose_source: str
+    frame_gate: str
+    waivers: str
+    release_images: int | None = None
+    data_provenance: str | None = None
+    data_licence: str | None = None
+    data_folders: tuple[Path, ...] = ()
+    trained_by: str | None = None
+    model_licence: str | None = None
+    declared_data: tuple[DeclaredData, ...] = field(default_factory=tuple)
+
+    def view(self) -> dict[str, Any]:
+        """The facts as the templates read them (``facts.camera``, ``facts.forbidden``, ``facts.stripes``, ...)."""
+        return {**self.texts, "shipped": self.shipped, "system": self.system, "camera_evaluated": self.camera,
+                "stripes": self.stripes, "pose_source": self.pose_source, "frame_gate": self.frame_gate,
+                "waivers": self.waivers, "release_images": self.release_images,
+                "data_provenance": self.data_provenance or NOT_DECLARED,
+                "data_licence": self.data_licence or NOT_DECLARED}
+
+    def declared_for(self, folder: str | Path | None) -> tuple[str | None, str | None]:
+        """The provenance and licence the system file declares for one of its ``[data]`` folders (``[data]
+        provenance``, ``[data] licence``; None each where it declares none); (None, None) for another folder."""
+        if not folder or _resolved(folder) not in self.data_folders:
+            return None, None
+        return self.data_provenance, self.data_licence
+
+
+def _resolved(path: str | Path) -> Path:
+    return Path(path).expanduser().resolve()
+
+
+def _data_folders(file: Any) -> tuple[Path, ...]:
+    """The folders of the file's ``[data]`` splits, resolved against its folder (a split given as a table: its
+    ``path``)."""
+    out = []
+    for split in ("train", "val", "test"):
+        value = file.get(f"data.{split}")
+        if isinstance(value, Mapping):
+            value = value.get("path")
+        if isinstance(value, str) and value:
+            p = Path(value).expanduser()
+            out.append(_resolved(p if p.is_absolute() else Path(file.base) / p))
+    return tuple(out)
+
+
+def _declared_data(file: Any) -> tuple[DeclaredData, ...]:
+    """The development data ``[model.provenance]`` declares, resolved against the system file's folder."""
+    out = []
+    for key, role, letter in (("training_data", "network training", "N"),
+                              ("validation_data", "network validation", "O")):
+        path = file.path_of(f"model.provenance.{key}")
+        if path is not None:
+            out.append(DeclaredData(key, role, letter, path, _resolved(path).is_relative_to(_resolved(file.base))))
+    return tuple(out)
+
+
+def _ok_frames(images: Any) -> Any:
+    """The evaluated frames without a fault, one row per frame (perturbations share a frame's pose and size)."""
+    if images is None or not len(images):
+        return None
+    ok = images[images["fault"].fillna("") == ""]
+    return ok.drop_duplicates("key") if len(ok) else None
+
+
+def camera_row(core: Mapping[str, Any], named: bool) -> str:
+    """The camera as the run evaluated it (its manifest's intrinsics), saying when its name was not declared."""
+    intr = core["intrinsics"]
+    note = "" if named else " (name not declared in the system file)"
+    return (f"{intr.get('name', '?')}{note}: sensor width {intr['sensor_width_mm']:g} mm, focal length "
+            f"{intr['focal_mm']:.3g} mm, pinhole, square pixels")
+
+
+def stripes_text(core: Mapping[str, Any], frames: Any, size: tuple[int, int] | None) -> str:
+    """Which image stripes may hold a landing (``el.camera.CameraGeometry.unreachable_stripes``) at the poses and
+    sizes of the evaluated frames (else the nominal pose at ``size``)."""
+    from el.camera import MIN_DEPRESSION_DEG, NUM_STRIPES, Pose
+    from el.config import CoreConfig
+
+    try:
+        cfg = CoreConfig.from_dict(dict(core))
+        cases = {(int(w), int(h), float(a), float(p)) for w, h, a, p in zip(
+            frames["width"], frames["height"], frames["height_m"], frames["pitch_deg"], strict=True)} \
+            if frames is not None and {"width", "height", "height_m", "pitch_deg"} <= set(frames.columns) else set()
+        if not cases and size is not None:
+            cases = {(size[0], size[1], cfg.pose.height_m, cfg.pose.pitch_deg)}
+        counts = sorted({replace(cfg, pose=Pose(height_m=a, pitch_deg=p)).geometry(w, h).unreachable_stripes
+                         for w, h, a, p in cases})
+    except (TypeError, ValueError, KeyError) as exc:
+        return f"not computed ({exc})"
+    if not counts:
+        return "not computed (no evaluated frame)"
+    poses = "at the nominal pose" if len(cases) == 1 else f"over the {len(cases)} poses and sizes of the frames"
+    why = (f"(el.camera.CameraGeometry {poses}: a stripe is a landing target when its top row looks at least "
+           f"{MIN_DEPRESSION_DEG:g} degrees below the horizon and sees ground within {cfg.reach_m:g} m)")
+    if counts == [0]:
+        return f"all {NUM_STRIPES} image stripes reachable, none excluded {why}"
+    shown = f"{counts[0]}" if len(counts) == 1 else f"{counts[0]} to {counts[-1]}"
+    return f"top {shown} of {NUM_STRIPES} image stripes never reachable {why}"
+
+
+def pose_source_text(config: Mapping[str, Any], frames: Any) -> str:
+    """The campaign's pose policy and where the evaluated frames' poses came from (the ``pose_source`` readouts)."""
+    policy = str(config.get("poses") or "nominal")
+    text = f"{POLICIES.get(policy, repr(policy))} (pose policy {policy})"
+    if frames is None or "pose_source" not in frames:
+        return text + "; no evaluated frame"
+    counts = frames["pose_source"].fillna("").astype(str).value_counts()
+    parts = [f"{n} frame(s) planned with {SOURCES.get(s, repr(s))}" for s, n in sorted(counts.items())]
+    return f"{text}; {', '.join(parts)}"
+
+
+def gate_features(doc: Mapping[str, Any] | None) -> str:
+    """What a frame gate file says it is: its kind and the features it reads (the file's own ``features.what``,
+    else ``el.monitors.gates.features.WHAT`` of its tap)."""
+    from el.monitors.gates.features import WHAT
+
+    doc = doc or {}
+    features = doc.get("features") or {}
+    tap = str(features.get("tap") or "?")
+    what = features.get("what") or WHAT.get(tap, f"the {tap!r} statistics of the frame pass")
+    return f"{doc.get('kind', '?')} on {what}"
+
+
+def _record(path: Path) -> dict[str, Any] | None:
+    """A fitted record's body, read bounded (a run's manifest names the file; None when unreadable)."""
+    import json
+
+    from el.userfiles import MAX_RECORD_BYTES, read_text
+
+    try:
+        doc = json.loads(read_text(path, what="record", max_bytes=MAX_RECORD_BYTES))
+    except (OSError, ValueError):  # UserFileError is a ValueError
+        return None
+    return doc.get("body", doc) if isinstance(doc, dict) else None
+
+
+def frame_gate_text(config: Mapping[str, Any]) -> str:
+    """What guards the declared operating domain in the run: the frame gate it ran (as its file says), or telemetry
+    alone."""
+    gate = config.get("gate")
+    if not gate:
+        return ("none: the operating domain is guarded by telemetry only (the declared pose and image size); "
+                "a frame unlike the training data is not detected")
+    path = gate.get("path")
+    doc = _record(Path(path)) if path else None
+    what = gate_features(doc) if doc else "its file is not readable here"
+    return f"{path} (SHA-256 {str(gate.get('sha256'))[:16]}): {what}"
+
+
+def waivers_text(waivers: Any, shipped: bool) -> str:
+    """The waiver file the gate read, or why there is none."""
+    if not waivers:
+        return "none" if shipped else ("none (the system file names no [waivers] file; the shipped waivers document "
+                                       "the shipped system only)")
+    from assurance.evidence.render import rel
+
+    return f"{rel(waivers)}" + (" (the shipped system's)" if shipped else "")
+
+
+def report_facts(system: Any, manifest: Mapping[str, Any], images: Any = None, *,
+                 size: tuple[int, int] | None = None, waivers: Any = None) -> ReportFacts:
+    """The report's facts of ``system`` (an ``assurance.system.SystemFile``; None: the embedded default) and the
+    run (its signed ``manifest`` and ``images`` readouts; ``size``: the evaluated frames' size)."""
+    from assurance.requirements.system_facts import facts_of_file
+    from assurance.system import build, default_system
+
+    file = system if system is not None else default_system()
+    shipped = bool(file.default)
+    cfg = manifest.get("config") or {}
+    core = cfg.get("core") or {}
+    frames = _ok_frames(images)
+    release = None
+    if shipped:
+        from assurance.campaign.presets import preset_config
+
+        release = preset_config("release").images
+    return ReportFacts(
+        shipped=shipped, system=file.label, texts=facts_of_file(file),
+        camera=camera_row(core, build.camera_named(file)), stripes=stripes_text(core, frames, size),
+        pose_source=pose_source_text(cfg, frames), frame_gate=frame_gate_text(cfg),
+        waivers=waivers_text(waivers, shipped), release_images=release,
+        data_provenance=file.get("data.provenance"), data_licence=file.get("data.licence"),
+        data_folders=_data_folders(file), trained_by=file.get("model.provenance.trained_by"),
+        model_licence=file.get("model.provenance.licence"),
+        declared_data=() if shipped else _declared_data(file))
+
+
+__all__ = ["NOT_DECLARED", "DeclaredData", "ReportFacts", "gate_features", "report_facts", "stripes_text"]

@@ -1,0 +1,315 @@
+"""Read flight logs (``el.flightlog``) in one streaming pass and in bounded memory, whatever their size.
+
+Each log is read line by line (a line longer than ``el.flightlog.MAX_RECORD_BYTES`` is passed over without being
+held), hashed as it is read, and folded into a :class:`LogSummary`: counts (decisions, refusals, default actions,
+deadline overruns, reasons, poses outside the declared domain), fixed-size seeded reservoir samples of the frame
+gate's scores, the monitor's candidate scores and the decision times (exact below their capacity), and a timeline of
+at most ``2 * MAX_WINDOWS`` windows. Nothing grows with the log but the counters, so a 1 GB log reads in the memory
+of a small one.
+
+A damaged line (not UTF-8, not JSON, not a record of this format, a field of the wrong type, too long) is counted
+and the first few are named (file and line), never fatal. A record of another system (its network, system file or
+frame gate differs from the one expected) stops the read with :class:`OtherSystemError`, one line naming the file,
+the line and both identities.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import random
+from collections import Counter
+from collections.abc import Iterable, Iterator, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from el import userfiles
+from el.camera import Pose
+from el.flightlog import DOMAIN_VERDICTS, FORMAT, MAX_RECORD_BYTES, MAX_TEXT
+from el.odd import OperatingDomain
+
+RESERVOIR = 200_000
+"""Values kept per sample (frame-gate scores, candidate scores, decision times): exact below it, a uniform seeded
+sample above (1.6 MB each); the two-sample tests and the 95th percentile are computed on it."""
+MAX_WINDOWS = 64
+"""The timeline keeps between MAX_WINDOWS and 2 * MAX_WINDOWS windows of equal decision counts (merged in pairs)."""
+NAMED_DAMAGED = 10
+"""Damaged lines named (file:line: problem) per summary; all are counted."""
+MAX_MONITORS = 16
+"""Distinct monitor configurations counted by name; further ones are counted together (a log flies one)."""
+SEED = 20_240_601
+IDENTITY_KEYS = ("network_sha256", "system_sha256", "gate_sha256")
+REASON_KINDS = ("accepted", "all_rejected", "no_candidate", "timeout", "out_of_domain", "outside_odd", "fault")
+
+
+class OtherSystemError(ValueError):
+    """A flight log written by another system than the one it is compared with: one line naming both."""
+
+
+class Reservoir:
+    """A uniform sample of at most ``capacity`` values of a stream (Vitter's algorithm R, seeded: deterministic)."""
+
+    def __init__(self, capacity: int = RESERVOIR, seed: int = SEED) -> None:
+        self.capacity, self.seen = int(capacity), 0
+        self.values: list[float] = []
+        self._rng = random.Random(seed)
+
+    def add(self, value: float) -> None:
+        self.seen += 1
+        if len(self.values) < self.capacity:
+            self.values.append(value)
+            return
+        k = self._rng.randrange(self.seen)
+        if k < self.capacity:
+            self.values[k] = value
+
+
+@dataclass
+class Window:
+    """A stretch of consecutive decisions: its counts and its first and last time (seconds since the epoch)."""
+
+    start_s: float
+    end_s: float
+    n: int = 0
+    refusals: int = 0
+    defaults: int = 0
+    overruns: int = 0
+
+    def merge(self, other: Window) -> Window:
+        return Window(min(self.start_s, other.start_s), max(self.end_s, other.end_s), self.n + other.n,
+                      self.refusals + other.refusals, self.defaults + other.defaults, self.overruns + other.overruns)
+
+
+@dataclass
+class Timeline:
+    """Rates over time in bounded memory: windows of ``size`` decisions; past ``2 * MAX_WINDOWS`` windows,
+    neighbours merge in pairs and ``size`` doubles."""
+
+    size: int = 1
+    windows: list[Window] = field(default_factory=list)
+
+    def add(self, t: float, refused: bool, default: bool, overrun: bool) -> None:
+        if not self.windows or self.windows[-1].n >= self.size:
+            self.windows.append(Window(t, t))
+            if len(self.windows) > 2 * MAX_WINDOWS:
+                pairs = zip(self.windows[0:-1:2], self.windows[1:-1:2], strict=True)
+                self.windows = [a.merge(b) for a, b in pairs] + [self.windows[-1]]
+                self.size *= 2
+        w = self.windows[-1]
+        w.start_s, w.end_s = min(w.start_s, t), max(w.end_s, t)
+        w.n, w.refusals, w.defaults, w.overruns = (w.n + 1, w.refusals + refused, w.defaults + default,
+                                                   w.overruns + overrun)
+
+
+@dataclass
+class LogSummary:
+    """What the logs hold, folded in one pass (see the module docstring)."""
+
+    files: list[dict[str, Any]] = field(default_factory=list)
+    records: int = 0
+    damaged: int = 0
+    damaged_lines: list[str] = field(default_factory=list)
+    identity: dict[str, Any] | None = None
+    monitors: Counter[str] = field(default_factory=Counter)
+    gate_scores: Reservoir = field(default_factory=Reservoir)
+    gate_thresholds: set[float] = field(default_factory=set)
+    refusals: int = 0
+    candidate_scores: Reservoir = field(default_factory=Reservoir)
+    judged: int = 0
+    rejected: int = 0
+    defaults: int = 0
+    overruns: int = 0
+    times: Reservoir = field(default_factory=Reservoir)
+    reasons: Counter[str] = field(default_factory=Counter)
+    domain: Counter[str] = field(default_factory=Counter)
+    pose_outside: Counter[str] = field(default_factory=Counter)
+    pose_range: dict[str, list[float]] = field(default_factory=dict)
+    timeline: Timeline = field(default_factory=Timeline)
+
+    def damage(self, where: str, problem: str) -> None:
+        self.damaged += 1
+        if len(self.damaged_lines) < NAMED_DAMAGED:
+            self.damaged_lines.append(f"{where}: {problem}")
+
+
+def reason_kind(reason: str) -> str:
+    """The kind of a decision's reason (:data:`REASON_KINDS`; ``other`` for one this toolkit does not write)."""
+    for kind in REASON_KINDS:
+        if reason == kind or reason.startswith(kind + ":"):
+            return kind
+    return "other"
+
+
+def _lines(path: Path, digest: Any) -> Iterator[tuple[int, bytes | None]]:
+    """(line number, bytes) of each line of ``path``, hashed into ``digest`` as read; None for a line longer than
+    ``MAX_RECORD_BYTES`` (read past in bounded pieces, never held whole)."""
+    with open(path, "rb") as handle:
+        number = 0
+        while True:
+            line = handle.readline(MAX_RECORD_BYTES + 1)
+            if not line:
+                return
+            number += 1
+            digest.update(line)
+            if len(line) > MAX_RECORD_BYTES and not line.endswith(b"\n"):
+                while line and not line.endswith(b"\n"):  # the rest of the over-long line, piece by piece
+                    line = handle.readline(1 << 20)
+                    digest.update(line)
+                yield number, None
+            else:
+                yield number, line
+
+
+def _num(value: Any, what: str, *, null: bool = True) -> float | None:
+    if value is None and null:
+        return None
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise ValueError(f"{what} is not a number")
+    return float(value)
+
+
+def _obj(value: Any, what: str, *, null: bool = False) -> dict[str, Any] | None:
+    if value is None and null:
+        return None
+    if not isinstance(value, dict):
+        raise ValueError(f"{what} is not an object")
+    return value
+
+
+def parse_record(line: bytes) -> dict[str, Any]:
+    """A record's fields this reader folds, checked (ValueError naming the first problem)."""
+    try:
+        doc = json.loads(line.decode("utf-8"))
+    except UnicodeDecodeError:
+        raise ValueError("not UTF-8 text") from None
+    except (json.JSONDecodeError, RecursionError):
+        raise ValueError("not a JSON record (cut short by a crash, or corrupted)") from None
+    doc = _obj(doc, "the line")
+    if doc.get("format") != FORMAT:
+        raise ValueError(f"format {str(doc.get('format'))[:40]!r}, not {FORMAT}")
+    system = _obj(doc.get("system"), "system")
+    identity = {k: system.get(k) for k in IDENTITY_KEYS}
+    if any(v is not None and not isinstance(v, str) for v in identity.values()):
+        raise ValueError("a system identity is not a string")
+    if doc.get("action") not in ("land", "default") or not isinstance(doc.get("reason"), str):
+        raise ValueError("action or reason missing")
+    gate = _obj(doc.get("frame_gate"), "frame_gate", null=True)
+    cands = _obj(doc.get("candidates"), "candidates")
+    judged = cands.get("judged")
+    if not isinstance(judged, list) or not all(isinstance(c, dict) and isinstance(c.get("accepted"), bool)
+                                               for c in judged):
+        raise ValueError("candidates.judged is not a list of verdicts")
+    deadline = _obj(doc.get("deadline"), "deadline")
+    pose = _obj(doc.get("pose"), "pose", null=True)
+    frame = _obj(doc.get("frame"), "frame")
+    verdict = str((_obj(doc.get("domain"), "domain")).get("verdict"))
+    return {"identity": identity, "monitor": str(system.get("monitor"))[:MAX_TEXT], "action": doc["action"],
+            "reason": doc["reason"], "unix_s": _num(doc.get("unix_s"), "unix_s", null=False),
+            "gate_score": None if gate is None else _num(gate.get("score"), "frame_gate.score"),
+            "gate_threshold": None if gate is None else _num(gate.get("threshold"), "frame_gate.threshold"),
+            "scores": [_num(c.get("score"), "a candidate score") for c in judged],
+            "accepted": [c["accepted"] for c in judged],
+            "dropped": int(_num(cands.get("dropped", 0), "candidates.dropped") or 0),
+            "total_s": _num(deadline.get("total_s"), "deadline.total_s"), "overrun": bool(deadline.get("overrun")),
+            "height_m": None if pose is None else _num(pose.get("height_m"), "pose.height_m"),
+            "pitch_deg": None if pose is None else _num(pose.get("pitch_deg"), "pose.pitch_deg"),
+            "size": (frame.get("width"), frame.get("height")),
+            "domain": verdict if verdict in DOMAIN_VERDICTS else "unknown"}
+
+
+def _check_identity(summary: LogSummary, identity: dict[str, Any], expected: Mapping[str, Any] | None,
+                    where: str) -> None:
+    """Refuse a record of another system than ``expected`` (or than the logs' first record, without one)."""
+    want = dict(expected) if expected is not None else summary.identity
+    if want is None:
+        summary.identity = identity
+        return
+    for key in IDENTITY_KEYS:
+        if key in want and identity.get(key) != want[key]:
+            found, expected_value = (str(v)[:12] if v else "none recorded" for v in (identity.get(key), want[key]))
+            raise OtherSystemError(f"{where}: a decision of another system ({key.replace('_', ' ')} {found}, "
+                                   f"expected {expected_value}): refused; a flight log is compared only with the "
+                                   "certification run of its own system")
+    summary.identity = summary.identity or identity
+
+
+def _pose(summary: LogSummary, rec: Mapping[str, Any], odd: OperatingDomain | None) -> None:
+    h, p = rec["height_m"], rec["pitch_deg"]
+    for name, value in (("height_m", h), ("pitch_deg", p)):
+        if value is not None:
+            lo, hi = summary.pose_range.get(name, [value, value])
+            summary.pose_range[name] = [min(lo, value), max(hi, value)]
+    w, hgt = rec["size"]
+    if odd is None or h is None or p is None or not isinstance(w, int) or not isinstance(hgt, int):
+        return
+    try:
+        found = odd.outside(Pose(height_m=h, pitch_deg=p), (w, hgt))
+    except ValueError:
+        found = "outside_odd: pose unplannable"
+    if found:
+        summary.pose_outside[found.split(":", 1)[1].split()[0]] += 1
+
+
+def fold(summary: LogSummary, rec: Mapping[str, Any], odd: OperatingDomain | None) -> None:
+    """Add one parsed record to ``summary``."""
+    summary.records += 1
+    known = rec["monitor"] in summary.monitors or len(summary.monitors) < MAX_MONITORS
+    summary.monitors[rec["monitor"] if known else "(more configurations)"] += 1
+    kind = reason_kind(rec["reason"])
+    summary.reasons[kind] += 1
+    summary.domain[rec["domain"]] += 1
+    refused, default, overrun = kind == "out_of_domain", rec["action"] == "default", rec["overrun"]
+    summary.refusals += refused
+    summary.defaults += default
+    summary.overruns += overrun
+    if rec["gate_score"] is not None:
+        summary.gate_scores.add(rec["gate_score"])
+    if rec["gate_threshold"] is not None and len(summary.gate_thresholds) < 8:
+        summary.gate_thresholds.add(rec["gate_threshold"])
+    for score, accepted in zip(rec["scores"], rec["accepted"], strict=True):
+        summary.judged += 1
+        summary.rejected += not accepted
+        if score is not None:
+            summary.candidate_scores.add(score)
+    if rec["total_s"] is not None:
+        summary.times.add(rec["total_s"])
+    _pose(summary, rec, odd)
+    summary.timeline.add(rec["unix_s"], refused, default, overrun)
+
+
+def read_logs(paths: Iterable[str | Path], *, expected: Mapping[str, Any] | None = None,
+              odd: OperatingDomain | None = None, summary: LogSummary | None = None) -> LogSummary:
+    """Fold every record of the logs at ``paths`` into one summary (see the module docstring). ``expected``: the
+    identity every record must carry (``IDENTITY_KEYS``; a key left out is not checked); ``odd``: the declared domain
+    the poses are checked against. A path that is no regular file raises ``userfiles.UserFileError`` (one line)."""
+    summary = summary or LogSummary()
+    for path in paths:
+        p = Path(path)
+        problem = userfiles.not_regular(p, what="flight log")
+        if problem:
+            raise userfiles.UserFileError(problem)
+        digest, before, damaged = hashlib.sha256(), summary.records, summary.damaged
+        size = p.stat().st_size
+        for number, line in _lines(p, digest):
+            where = f"{p}:{number}"
+            if line is None:
+                summary.damage(where, f"longer than {MAX_RECORD_BYTES} bytes")
+                continue
+            if not line.strip():
+                continue
+            try:
+                rec = parse_record(line)
+            except ValueError as exc:
+                summary.damage(where, str(exc))
+                continue
+            _check_identity(summary, rec["identity"], expected, where)
+            fold(summary, rec, odd)
+        summary.files.append({"path": str(p), "sha256": digest.hexdigest(), "bytes": size,
+                              "records": summary.records - before, "damaged": summary.damaged - damaged})
+    return summary
+
+
+__all__ = ["MAX_WINDOWS", "RESERVOIR", "LogSummary", "OtherSystemError", "Reservoir", "Timeline", "fold",
+           "parse_record", "read_logs", "reason_kind"]

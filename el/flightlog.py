@@ -1,0 +1,301 @@
+"""The flight log: one JSON line per decision, appended as it is made, for in-service evidence (``uav-el in-service``).
+
+Opt-in: a flight function given a :class:`FlightLog` (``EmergencyLanding(..., log=FlightLog(path))``,
+``uav-el land --log FILE``) calls :meth:`FlightLog.write` after each decision. A record holds what a certificate's
+assumptions can be checked against in service, never the frame itself (its SHA-256 only; a sample of frames on
+request): the time, the frame's hash and size, the pose and its source, the declared domain's verdict, the frame
+gate's score and threshold, the candidate count and each judged candidate's monitor score and verdict, the action,
+reason and default-area basis, the stage timings and the deadline, and the system's identity (network and
+system-file SHA-256). The format is versioned (:data:`FORMAT`) and described by ``el/data/flightlog.schema.json``.
+
+Append-only and crash-safe: each record is written whole with one ``write``, then flushed and (by default)
+``fsync``-ed, so a crash loses at most the record being written and leaves at most one damaged last line, which a
+reader counts and passes over; a log reopened after such a crash starts on a new line. Every record is at most
+:data:`MAX_RECORD_BYTES` long (reasons cut, judged candidates past :data:`MAX_LOGGED_CANDIDATES` counted, not
+listed). Fail safe: :meth:`FlightLog.write` never raises; a failure is counted (``failures``, ``last_error``) and
+logged once, and the decision stands.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import logging
+import math
+import os
+import threading
+import time
+from collections.abc import Callable, Mapping
+from importlib import resources
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+
+from el.decision import Decision, _finite
+
+FORMAT = "uav-el-flight-log/1"
+"""The record format: a reader refuses records of another major version."""
+MAX_RECORD_BYTES = 16 * 1024
+"""The longest record line, in UTF-8 bytes, newline included (a decision with 64 judged candidates takes ~6 kB)."""
+MAX_LOGGED_CANDIDATES = 64
+"""Judged candidates listed per record; more are counted in ``candidates.dropped``."""
+MAX_TEXT = 240
+"""Characters kept of a reason or a monitor name (a fault's message can be long)."""
+TIMING_KEYS = ("read_s", "segmentation_s", "candidates_s", "monitoring_s", "overhead_s", "total_s")
+"""The stage timings a record keeps (seconds)."""
+DOMAIN_VERDICTS = ("inside", "outside", "not_declared", "unknown")
+logger = logging.getLogger(__name__)
+
+Clock = Callable[[], float]
+
+
+def _text(value: Any) -> str | None:
+    return None if value is None else str(value)[:MAX_TEXT]
+
+
+def _num(value: Any) -> float | None:
+    """A finite float, else None (JSON has no NaN)."""
+    if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
+        return None
+    v = float(value)
+    return v if math.isfinite(v) else None
+
+
+def domain_verdict(decision: Decision) -> dict[str, Any]:
+    """Whether the decision's frame was inside the declared domain its configuration records (``config.odd``):
+    ``outside`` (the flight's own ``outside_odd`` reason, or its pose and size found outside here), ``inside``,
+    ``not_declared`` (no domain configured) or ``unknown`` (no pose or size recorded: a frame never read)."""
+    from el.camera import Pose
+    from el.odd import OUTSIDE_ODD, OperatingDomain
+
+    reason = decision.reason
+    if reason.startswith(OUTSIDE_ODD):
+        return {"verdict": "outside", "reason": _text(reason)}
+    declared = decision.config.get("odd")
+    if not declared:
+        return {"verdict": "not_declared", "reason": None}
+    pose, info = decision.input.get("pose") or {}, decision.input
+    try:
+        odd = OperatingDomain.from_dict(declared)
+        found = odd.outside(Pose(height_m=float(pose["height_m"]), pitch_deg=float(pose["pitch_deg"])),
+                            (int(info["width"]), int(info["height"])))
+    except (KeyError, TypeError, ValueError):
+        return {"verdict": "unknown", "reason": None}
+    return {"verdict": "outside" if found else "inside", "reason": _text(found)}
+
+
+def _candidates(decision: Decision) -> dict[str, Any]:
+    """The candidate count and the judged candidates' monitor scores and verdicts (at most
+    :data:`MAX_LOGGED_CANDIDATES`; the rest counted in ``dropped``)."""
+    judged = [c for c in decision.candidates if c.monitor is not None]
+    listed = [{"rank": int(c.rank), "score": _num(c.monitor.score), "threshold": _num(c.monitor.threshold),
+               "accepted": bool(c.monitor.accepted)} for c in judged[:MAX_LOGGED_CANDIDATES]]
+    return {"count": len(decision.candidates), "judged": listed, "dropped": max(0, len(judged) - len(listed))}
+
+
+def _gate(decision: Decision) -> dict[str, Any] | None:
+    gate = decision.input.get("frame_gate")
+    if not isinstance(gate, Mapping):
+        return None
+    from el.monitors.frame_gate import OUT_OF_DOMAIN
+
+    return {"kind": _text(gate.get("kind")), "score": _num(gate.get("score")),
+            "threshold": _num(gate.get("threshold")), "refused": decision.reason.startswith(OUT_OF_DOMAIN)}
+
+
+def _deadline(decision: Decision) -> dict[str, Any]:
+    budget, total = _num(decision.config.get("time_budget_s")), _num(decision.timings.get("total_s"))
+    over = decision.reason == "timeout" or (budget is not None and total is not None and total > budget)
+    return {"budget_s": budget, "total_s": total, "overrun": bool(over)}
+
+
+def flight_record(decision: Decision, *, seq: int, unix_s: float, identity: Mapping[str, Any],
+                  frame_sample: str | None = None) -> dict[str, Any]:
+    """The log record of one decision (see the module docstring and ``el/data/flightlog.schema.json``):
+    ``identity`` holds the system's ``network_sha256`` and ``system_sha256``; ``unix_s`` is the wall-clock time."""
+    info, pose, area = decision.input, decision.input.get("pose"), decision.default_area
+    stamp = _dt.datetime.fromtimestamp(unix_s, _dt.UTC).isoformat(timespec="microseconds").replace("+00:00", "Z")
+    gate = info.get("frame_gate") if isinstance(info.get("frame_gate"), Mapping) else {}
+    record: dict[str, Any] = {
+        "format": FORMAT, "seq": int(seq), "time": stamp, "unix_s": float(unix_s),
+        "system": {"network_sha256": identity.get("network_sha256"), "system_sha256": identity.get("system_sha256"),
+                   "monitor": _text(decision.config.get("monitor")), "gate_sha256": gate.get("sha256"),
+                   "calibration": _text(decision.config.get("calibration"))},
+        "frame": {"sha256": info.get("sha256"), "width": info.get("width"), "height": info.get("height")},
+        "pose": None if not isinstance(pose, Mapping) else {
+            "height_m": _num(pose.get("height_m")), "pitch_deg": _num(pose.get("pitch_deg")),
+            "source": _text(pose.get("source"))},
+        "domain": domain_verdict(decision),
+        "frame_gate": _gate(decision),
+        "candidates": _candidates(decision),
+        "action": decision.action, "reason": _text(decision.reason), "selected": decision.selected,
+        "default_area": {"x": _num(area.x), "y": _num(area.y), "radius_px": _num(area.radius_px),
+                         "basis": area.basis},
+        "timings": {k: _num(decision.timings[k]) for k in TIMING_KEYS if k in decision.timings},
+        "deadline": _deadline(decision),
+    }
+    if frame_sample is not None:
+        record["frame_sample"] = frame_sample
+    return _finite(record)
+
+
+def record_line(record: Mapping[str, Any]) -> str:
+    """One record as its log line (compact JSON, newline-terminated), at most :data:`MAX_RECORD_BYTES` bytes: a record
+    still too long once its candidates are capped lists none of them (``dropped`` counts them all)."""
+    line = json.dumps(record, separators=(",", ":"), allow_nan=False, ensure_ascii=False) + "\n"
+    if len(line.encode("utf-8")) <= MAX_RECORD_BYTES:
+        return line
+    cands = dict(record["candidates"])
+    cands["dropped"], cands["judged"] = int(cands.get("dropped", 0)) + len(cands.get("judged", [])), []
+    line = json.dumps({**record, "candidates": cands}, separators=(",", ":"), allow_nan=False,
+                      ensure_ascii=False) + "\n"
+    if len(line.encode("utf-8")) > MAX_RECORD_BYTES:
+        raise ValueError(f"a flight-log record of {len(line)} bytes exceeds {MAX_RECORD_BYTES} bytes")
+    return line
+
+
+class FlightLog:
+    """An append-only flight log (see the module docstring).
+
+    Parameters
+    ----------
+    target : path or writable text file
+        A path is opened in append mode (created if missing); a file object is written to as it is (the caller
+        closes it). A path that cannot be opened is kept as ``fault``: every write then fails, counted, and the
+        decisions stand.
+    network_sha256, system_sha256 : str or None
+        The system's identity: the network's weights SHA-256 (else taken from the segmenter given to
+        :meth:`write`) and the system file's SHA-256 (``uav-el.toml``; None when there is none).
+    fsync : bool
+        ``os.fsync`` after every record (the default: a crash or power loss keeps every record written);
+        False: flushed only.
+    sample_every, sample_dir : int, path
+        Keep every ``sample_every``-th frame as a PNG in ``sample_dir`` for later review (0, the default: no frame
+        is kept); the record names the file (``frame_sample``).
+    clock : callable returning seconds since the epoch
+        The records' wall-clock time (inject one in tests).
+    """
+
+    def __init__(self, target: str | Path | IO[str], *, network_sha256: str | None = None,
+                 system_sha256: str | None = None, fsync: bool = True, sample_every: int = 0,
+                 sample_dir: str | Path | None = None, clock: Clock = time.time) -> None:
+        if isinstance(sample_every, bool) or not isinstance(sample_every, int) or sample_every < 0:
+            raise ValueError(f"sample_every must be a non-negative integer, got {sample_every!r}")
+        if sample_every and sample_dir is None:
+            raise ValueError("sample_every needs a sample_dir to keep the frames in")
+        self.identity = {"network_sha256": network_sha256, "system_sha256": system_sha256}
+        self.fsync, self.clock = bool(fsync), clock
+        self.sample_every, self.sample_dir = sample_every, None if sample_dir is None else Path(sample_dir)
+        self.seq, self.written, self.failures, self.sample_failures = 0, 0, 0, 0
+        self.fault: str | None = None
+        self.last_error: str | None = None
+        self._lock = threading.Lock()
+        self._owned = not hasattr(target, "write")
+        self.path = Path(target) if self._owned else None  # type: ignore[arg-type]
+        self._file: IO[str] | None = None
+        try:
+            self._file = self._open(Path(target)) if self._owned else target  # type: ignore[arg-type,assignment]
+        except (OSError, ValueError) as exc:
+            self.fault = f"{target}: cannot open the flight log: {exc}"
+            logger.error("%s; decisions go unlogged", self.fault)
+
+    @staticmethod
+    def _open(path: Path) -> IO[str]:
+        """Open ``path`` for appending; a last line left without its newline (a crash) is ended first."""
+        handle = open(path, "a", encoding="utf-8")  # noqa: SIM115  (kept open for the flight)
+        try:
+            if handle.tell() > 0:
+                with open(path, "rb") as raw:
+                    raw.seek(-1, os.SEEK_END)
+                    if raw.read(1) != b"\n":
+                        handle.write("\n")
+                        handle.flush()
+        except BaseException:
+            handle.close()
+            raise
+        return handle
+
+    def write(self, decision: Decision, *, segmenter: Any = None, frame: np.ndarray | None = None) -> bool:
+        """Append the record of ``decision``; True when it was written. Never raises: a failure (the disk full, the
+        file closed, a record that cannot be built) is counted in ``failures`` and ``last_error``, and logged once.
+        ``segmenter``: the network that decided (its ``weights_sha256`` is the identity when none was given);
+        ``frame``: the decided frame, kept as a sample when sampling is on."""
+        with self._lock:
+            seq = self.seq
+            self.seq += 1
+            try:
+                if self._file is None:
+                    raise OSError(self.fault or "the flight log is closed")
+                identity = dict(self.identity)
+                if identity["network_sha256"] is None:
+                    identity["network_sha256"] = _weights_sha256(segmenter)
+                sample = self._sample_safely(seq, decision, frame)
+                line = record_line(flight_record(decision, seq=seq, unix_s=float(self.clock()), identity=identity,
+                                                 frame_sample=sample))
+                self._file.write(line)
+                self._file.flush()
+                if self.fsync:
+                    os.fsync(self._file.fileno())
+            except Exception as exc:  # fail safe: the decision stands, unlogged
+                self.failures += 1
+                self.last_error = f"{type(exc).__name__}: {exc}"
+                if self.failures == 1:
+                    logger.error("flight log: a record could not be written (%s); counting further failures",
+                                 self.last_error)
+                return False
+            self.written += 1
+            return True
+
+    def _sample_safely(self, seq: int, decision: Decision, frame: np.ndarray | None) -> str | None:
+        """:meth:`_sample`, a failure counted in ``sample_failures`` (the record is still written, without it)."""
+        try:
+            return self._sample(seq, decision, frame)
+        except Exception as exc:
+            self.sample_failures += 1
+            if self.sample_failures == 1:
+                logger.error("flight log: a frame sample could not be kept (%s: %s)", type(exc).__name__, exc)
+            return None
+
+    def _sample(self, seq: int, decision: Decision, frame: np.ndarray | None) -> str | None:
+        """Keep the frame as a PNG named by its SHA-256 when this record is sampled; the file's name, else None."""
+        if not self.sample_every or seq % self.sample_every or not isinstance(frame, np.ndarray) \
+                or self.sample_dir is None:
+            return None
+        import cv2
+
+        name = f"{str(decision.input.get('sha256') or seq)[:32]}.png"
+        ok, data = cv2.imencode(".png", np.ascontiguousarray(frame[..., ::-1]))
+        if not ok:
+            raise ValueError("the frame sample could not be encoded as PNG")
+        self.sample_dir.mkdir(parents=True, exist_ok=True)
+        (self.sample_dir / name).write_bytes(data.tobytes())
+        return name
+
+    def close(self) -> None:
+        """Close a log opened from a path (a file object given is the caller's to close)."""
+        with self._lock:
+            if self._owned and self._file is not None:
+                self._file.close()
+            self._file = None
+
+    def __enter__(self) -> FlightLog:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _weights_sha256(segmenter: Any) -> str | None:
+    value = getattr(segmenter, "weights_sha256", None)
+    return value if isinstance(value, str) and value else None
+
+
+def flightlog_schema() -> dict[str, Any]:
+    """The JSON Schema of a flight-log record (``el/data/flightlog.schema.json``)."""
+    text = resources.files("el").joinpath("data/flightlog.schema.json").read_text(encoding="utf-8")
+    return json.loads(text)
+
+
+__all__ = ["FORMAT", "MAX_LOGGED_CANDIDATES", "MAX_RECORD_BYTES", "FlightLog", "domain_verdict", "flight_record",
+           "flightlog_schema", "record_line"]
