@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from assurance.campaign.frame_cache import cached, file_key
 from assurance.dataio.layouts import read_sample_labels
 from assurance.dataio.poses import NOMINAL, frame_pose
 from assurance.dataio.uavid import Sample
@@ -51,7 +52,8 @@ def frame_truth(sample: Sample, labels: Any, shape: tuple[int, ...]) -> tuple[An
     label map or one of another size."""
     if sample.label_path is None:
         raise DataError(f"{sample.image_path}: no label map (the campaign needs ground truth)")
-    ids = read_sample_labels(sample, labels)
+    key = file_key(sample.label_path, labels, sample.label_encoding, sample.id_offset)
+    ids = cached("labels", key, lambda: read_sample_labels(sample, labels))
     if ids.shape != tuple(shape):
         raise DataError(f"{sample.label_path}: label size differs from the image")
     return labels, ids

@@ -19,7 +19,7 @@ from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
-from assurance.campaign import readouts
+from assurance.campaign import frame_cache, readouts
 from assurance.campaign.attestation import sign_run
 from assurance.campaign.faults import config_faults
 from assurance.campaign.label_pin import check_resumed_labels, flown_labels
@@ -73,11 +73,13 @@ def execute(task: Task, config: CampaignConfig, run_dir: str, threads: int, segm
 
 
 def plan(data: str | Path, config: CampaignConfig) -> list[Task]:
-    """All tasks of a campaign, in a fixed order (scenario-major)."""
+    """All tasks of a campaign, in a fixed order (scene-major: a scene's scenarios one after the other, so that a
+    worker given them as one batch decodes the scene once, ``assurance.campaign.frame_cache``). A task's readouts do
+    not depend on the order (its seed is its own, ``task_seed``)."""
     samples = list(iter_samples(data, require_labels=True, poses=config.poses != "nominal"))
     if config.images is not None:
         samples = samples[: config.images]
-    return [Task(p, s, sample) for p, s in config.scenarios() for sample in samples]
+    return [Task(p, s, sample) for sample in samples for p, s in config.scenarios()]
 
 
 def run_campaign(
@@ -117,6 +119,7 @@ def run_campaign(
     run_dir = Path(run_dir)
     if run_dir.exists() and not run_dir.is_dir():
         raise readouts.RunError(f"{run_dir}: exists and is not a folder (--out names the run folder)")
+    frame_cache.clear()  # this process's kept frame (a sequential run) is never one of an earlier campaign's
     tasks = plan(data, config)
     if not tasks:
         raise ValueError(f"{data}: no images to evaluate")
@@ -235,7 +238,8 @@ def _dispatch(todo: list[Task], config: CampaignConfig, run_dir: Path, *, jobs: 
     from joblib import Parallel, delayed
 
     par = Parallel(n_jobs=jobs, backend="loky", return_as="generator_unordered",  # workers die with this process
-                   initializer=die_with_parent, initargs=(os.getpid(),))
+                   initializer=die_with_parent, initargs=(os.getpid(),),
+                   batch_size=len(config.scenarios()))  # a scene's scenarios to one worker: decoded once
     gen = par(delayed(execute)(t, config, str(run_dir), threads, segmenter, expected_models, os.getpid())
               for t in todo)
     with warnings.catch_warnings():

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from assurance.campaign import readouts
+from assurance.campaign.frame_cache import cached, file_key
 from assurance.campaign.frames import (
     check_frame_pose,
     clearance_of,
@@ -213,7 +214,7 @@ def _judged_frame(task: Task, config: CampaignConfig, segmenter: Any, clock: Cal
     timings: dict[str, float] = {"read_s": 0.0}  # the readouts' column order: read, perturb, segmentation, ...
 
     def read(info: dict[str, Any]) -> np.ndarray:
-        rgb, found = read_image_meta(s.image_path)
+        rgb, found = cached("image", file_key(s.image_path), lambda: read_image_meta(s.image_path))
         meta.update(found)  # EXIF orientation
         check_frame_pose(config, s, pose, roll, (rgb.shape[1], rgb.shape[0]))
         truth.append(frame_truth(s, labels, rgb.shape[:2])[1])
