@@ -121,9 +121,13 @@ def shipped(tiny_campaign, tmp_path_factory):
             "html": report.html.read_text("utf-8"), "size": (256, 144), "frames": 10}
 
 
+FLIGHT_POSES = (18.0, 20.0, 22.0)  # the foreign system's test frames' own heights (its flight.csv)
+
+
 def _foreign_files(root: Path) -> Path:
-    """A nadir ONNX system with its own classes, per-frame poses, [odd] perturbations, and data without scene meta;
-    its training data inside its folder, its validation data outside (not read)."""
+    """A nadir ONNX system with its own classes, per-frame poses (its test data's from the poses file its [data.test]
+    table names, FLIGHT_POSES), [odd] perturbations, and data without scene meta; its training data inside its
+    folder, its validation data outside (not read)."""
     from test_onnx_foreign_classes import CLASSES, DRONE, MEAN, STD, TO_DRONE, UNREACHABLE, export
 
     folder = root / "survey"
@@ -136,8 +140,9 @@ def _foreign_files(root: Path) -> Path:
             ids[:, 40 + 20 * i: 60 + 20 * i] = DRONE.ids["paved-area"]
             write_sample(folder / "data" / split, "seq00", f"{i:06d}", (rng.random((120, 160, 3)) * 255).astype(
                 np.uint8), ids, labels=DRONE)
-        (folder / "data" / split / "seq00" / "poses.csv").write_text(
-            "frame,height_m,pitch_deg\n" + "".join(f"{i:06d},{20 + i},90\n" for i in range(n)))
+        poses = "frame,height_m,pitch_deg\n" + "".join(f"{i:06d},{FLIGHT_POSES[i]},90\n" for i in range(n))
+        target = folder / "data" / split / ("flight.csv" if split == "test" else "seq00/poses.csv")
+        target.write_text(poses)
     (root / "outside").mkdir()
     class_map = ", ".join(f'{k} = "{v}"' for k, v in TO_DRONE.items())
     path = folder / "uav-el.toml"
@@ -174,8 +179,10 @@ pitch_deg = [85.0, 90.0]
 perturbations = {{ gaussian_noise = 2 }}
 [monitor]
 spec = "lhd"
-[data]
-test = "data/test"
+[data.test]
+path = "data/test"
+layout = "uavid"
+poses = "flight.csv"
 ''')
     return path
 
@@ -308,8 +315,9 @@ def test_pose_source(case):
     policy = case["system"].get("camera.poses")
     row = case["page"].row("domain", "Pose source")
     assert f"(pose policy {policy})" in row
-    if policy == "required":
-        assert f"{case['frames']} frame(s) planned with its own pose from its sequence's poses.csv" in row
+    if policy == "required":  # from the poses file the [data.test] table names, not a sequence's poses.csv
+        flight = (case["system"].path_of("data.test.path") / "flight.csv").resolve()
+        assert f"{case['frames']} frame(s) planned with its own pose from the data's poses file {flight}" in row
     else:
         assert f"{case['frames']} frame(s) planned with the nominal pose" in row
 
@@ -398,6 +406,123 @@ def test_run_size_and_deciding_command(case):
     assert ("make release-evidence" in cover) == system.default
     if not system.default:
         assert re.search(r"uav-el campaign --system \S*uav-el\.toml --out ", cover), cover
+
+
+def _scope(cover: str) -> tuple[str, str]:
+    """The cover's run-size note: the requirements it calls undecidable at this size, and the deciding command."""
+    undecided = re.search(r"leaves these requirements not verified: (.*?)\. The registry declares", cover)
+    command = re.search(r"decides every requirement on the deployed system: (.*?) \(", cover)
+    assert undecided and command, cover
+    return undecided.group(1), command.group(1)
+
+
+def test_the_deciding_command_and_what_no_run_size_decides(case):
+    """A new run folder (a campaign into this one would resume it and refuse another configuration); a requirement
+    whose check lacks a calibration card is not 'undecidable at this size': a card decides it."""
+    page, system, doc = case["page"], case["system"], case["doc"]
+    cover = page.text("cover")
+    undecided, command = _scope(cover)
+    card = doc["parameters"].get("calibration_card")
+    assert ("EL-R16" in undecided) == bool(card), undecided
+    assert ("EL-R16 is left not verified at any run size: a calibration card decides it (uav-el calibrate" in cover) \
+        == (not card)
+    if not system.default:
+        out = re.search(r"--out (\S+)", command)
+        assert out and out.group(1).endswith("-full"), command
+        assert "at least 59 frames per perturbation" in cover  # the bound's images, not the release preset's 70
+
+
+def test_decisive_run_size_is_the_bounds_for_another_system(foreign, shipped):
+    from types import SimpleNamespace
+
+    from assurance import requirements as rq
+    from assurance.campaign.presets import preset_config
+    from assurance.evidence.context import decisive_images
+
+    reg = rq.load_registry()
+    assert decisive_images(SimpleNamespace(system=foreign["system"], registry=reg)) == rq.images_needed(0.05, 0.95)
+    assert decisive_images(SimpleNamespace(system=shipped["system"], registry=reg)) == preset_config("release").images
+
+
+def test_reproduce_keeps_the_data_table(case):
+    """The campaign command reads the run's [data] test table (layout, split, poses), not its bare folder."""
+    campaign = next(t for s, t in case["page"].blocks if s == "reproduce" and t.startswith("uav-el campaign"))
+    campaign = campaign.split("uav-el verify")[0]
+    assert ("--data" in campaign) == (case["name"] != "foreign"), campaign  # foreign: a [data.test] table
+
+
+def test_frame_gate_shows_the_files_sha256(tmp_path):
+    """One hash per file: the gate file's SHA-256 (as the AMLAS index shows it), or the record's body hash said so."""
+    from assurance.evidence.facts import frame_gate_text
+    from el.hashing import sha256_file
+    from el.records import body_sha256
+
+    body = {"kind": "mahalanobis", "features": {"tap": "output"}}
+    path = tmp_path / "gate.json"
+    path.write_text(json.dumps({"format": "uav-el-frame-gate/1", "body": body, "sha256": body_sha256(body)}))
+    text = frame_gate_text({"gate": {"path": str(path), "sha256": body_sha256(body)}})
+    assert f"(SHA-256 {sha256_file(path)[:16]})" in text and body_sha256(body)[:16] not in text
+    changed = frame_gate_text({"gate": {"path": str(path), "sha256": "0" * 64}})
+    assert f"record body SHA-256 {'0' * 16}" in changed and sha256_file(path)[:16] not in changed
+
+
+def test_pose_texts_follow_the_frames_own_poses(case):
+    page = case["page"]
+    height, pitch = page.row("domain", "Height"), page.row("domain", "Pitch")
+    odd = {cells[0]: cells for sec, cells in page.rows if sec == "domain" and len(cells) == 3}
+    limits = page.text("limitations")
+    if case["name"] == "foreign":  # planned with each frame's own pose, from its flight.csv
+        lo, hi = min(FLIGHT_POSES), max(FLIGHT_POSES)
+        assert height.startswith(f"{lo:g} to {hi:g} m (each frame's own pose, from the data's poses file ")
+        assert "nominal" not in height and "flight.csv" in pitch
+        assert "around each frame's own pose" in odd["Height"][2] and "around the nominal" not in odd["Height"][2]
+        assert odd["Pitch"][2].endswith("to 90 deg over the evaluated frames"), odd["Pitch"]  # never past nadir
+        assert "a known pose per frame" in limits and "known nominal pose" not in limits
+    else:
+        assert "(nominal; errors up to" in height and "a known nominal pose" in limits
+    for cells in odd.values():
+        assert not re.search(r"to (9[1-9]|1[0-9]{2})(\.\d+)? deg", cells[2]), cells
+
+
+def test_the_ml_argument_names_the_deployed_monitor(case):
+    html = case["html"]
+    deployed = case["doc"]["parameters"]["deployed_monitor"]
+    if deployed.startswith("learned"):
+        assert "segmentation network and learned runtime monitor" in html
+    else:
+        assert "learned runtime monitor" not in html
+        assert f"segmentation network and deployed runtime monitor {deployed.split(':')[0]}" in html
+
+
+def test_packaged_texts_say_nothing_of_the_shipped_system(case):
+    html, page = case["html"], case["page"]
+    assert "(the perturbations of ICRA22)" not in html and "0 unsafe landings in 70 images" not in html
+    if not case["system"].default:
+        assert "ICRA22 at severity" not in html
+    assert ("over urban areas" in page.row("domain", "platform")) == case["system"].default
+    if not case["system"].default:
+        assert "urban" not in page.row("domain", "platform")
+
+
+def test_messages_count_what_is_short():
+    import pandas as pd
+
+    from assurance import requirements as rq
+    from assurance.requirements.checks import IMAGES_NEEDED_LEGEND
+
+    images = pd.DataFrame([{"perturbation": "noise", "severity": 3, "key": f"k{i}", "fault": ""} for i in range(8)])
+    ev = rq.check_perturbation_coverage(images, ["noise", "fog"], 10)
+    assert "noise with 8 evaluated images, fewer than the 10 needed; fog not evaluated" in ev.summary, ev.summary
+    table = pd.DataFrame([{"monitor": "lhd", "perturbation": "noise", "severity": 3, "images": 8, "g_star": 0.1,
+                           "g_star_lo95": 0.05, "g_star_hi95": 0.2, "unsafe_landing_rate": 0.75},
+                          {"monitor": "lhd", "perturbation": "none", "severity": 3, "images": 12, "g_star": 0.1,
+                           "g_star_lo95": float("nan"), "g_star_hi95": float("nan"), "unsafe_landing_rate": 0.75}])
+    ev = rq.check_safety_gain(table, "lhd", ["noise"], 10)
+    assert "noise (s3) with 8 images, fewer than the 10 needed" in ev.summary
+    assert "none (s3) has no G* interval" in ev.summary
+    ev = rq.check_unsafe_landing_bound(table, "lhd", 0.05, ["noise"], 0.95)
+    verdict, legend = ev.summary.split("\n")
+    assert ev.status == rq.FAIL and "images_needed" not in verdict and legend == IMAGES_NEEDED_LEGEND
 
 
 def test_waivers(case):

@@ -427,7 +427,7 @@ def test_perturbation_coverage_counts_images(tiny_tables):
     images, _, _ = tiny_tables
     assert rq.check_perturbation_coverage(images, PAPER_PERTURBATIONS, 10).status == rq.PASS
     short = rq.check_perturbation_coverage(images, PAPER_PERTURBATIONS, 11)
-    assert short.status == rq.INSUFFICIENT and "fewer than 11" in short.summary
+    assert short.status == rq.INSUFFICIENT and "10 evaluated images, fewer than the 11 needed" in short.summary
     faulted = images.copy()
     faulted.loc[faulted["perturbation"] == "fog", "fault"] = "ValueError: unreadable"
     assert rq.check_perturbation_coverage(faulted, PAPER_PERTURBATIONS, 10).status == rq.INSUFFICIENT

@@ -50,7 +50,7 @@ COMMANDS: dict[str, str] = {
 
 SUMMARIES: dict[str, str] = {
     "synth": "generate synthetic oblique urban scenes in the UAVid layout",
-    "preview": "write a preview PNG of a UAVid-layout data set",
+    "preview": "write a preview PNG of a data set (any layout) with its labels in the label set's colours",
     "recolour": "copy a data set with its label maps re-coloured into another label set's palette",
     "land": "decide where to land for one frame (model pipeline, or ground truth with --labels)",
     "train": "train the segmentation network and write its weights and model card",
@@ -75,6 +75,8 @@ module, and what it needs, is imported only when that command runs or shows its 
 # Commands that decide, evaluate or report: they take --system FILE (else ./uav-el.toml, else the embedded default).
 SYSTEM_COMMANDS = ("preview", "land", "campaign", "calibrate", "fit-monitor", "fit-gate", "benchmark", "verify",
                    "evidence", "in-service")
+WRITES: dict[str, tuple[str, ...]] = {"fit-gate": ("monitor.gate",), "calibrate": ("monitor.calibration",)}
+"""System-file keys naming a file the command writes: it need not be there yet (the gate ``uav-el fit-gate`` fits)."""
 SYSTEM_HELP = ("the system under assessment (uav-el.toml: model, camera, poses, labels, safety, monitor, data, "
                "targets, waivers, report); default: ./uav-el.toml if present, else the embedded default (the "
                "shipped system); options given here win over the file")
@@ -250,7 +252,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command in SYSTEM_COMMANDS:
             from assurance.system import find_system
 
-            args.system_file = find_system(args.system)
+            args.system_file = find_system(args.system, writes=WRITES.get(args.command, ()))
         with _quieted(bool(getattr(args, "quiet", False)) and args.command not in KEEPS_STDOUT_WHEN_QUIET):
             return int(args._run(args) or 0)
     except DamagedRunError as exc:

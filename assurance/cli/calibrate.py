@@ -14,8 +14,9 @@ HELP = ("calibrate a monitor's threshold on held-out scenes: P(accept an unsafe 
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--data", help="calibration scenes in the UAVid layout, with labels (e.g. data/val); default: the "
-                                  "system file's [data] val; clean, and under each perturbation the system file "
+    p.add_argument("--data", help="labelled calibration scenes, a folder of a known layout (uavid, semantic-drone, "
+                                  "aeroscapes: detected; e.g. data/val); default: the system file's [data] val (a "
+                                  "folder or a table); clean, and under each perturbation the system file "
                                   "declares in its own [odd] perturbations")
     p.add_argument("--monitor", metavar="SPEC", help="monitor to calibrate, e.g. lhd, msp (default: the system "
                                                     "file's [monitor] spec)")

@@ -67,7 +67,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="valid pixels: exact disc, or the paper's stripes and squares (default: exact)",
     )
     parser.add_argument("--working-width", type=int, default=None, metavar="PX",
-                        help=f"working resolution width (default: {CoreConfig().working_width})")
+                        help="working resolution width: the frame is resized to it, aspect kept (default: the "
+                             f"system file's [model] working_width, else {CoreConfig().working_width})")
     parser.add_argument("--monitor", default=None, metavar="SPEC",
                         help="runtime monitor: none, lhd, 'lhd+ch:tau=0.25', 'lhd+mcd:n=10,rho=0.9', "
                              "'lhd+ch+mcd:tau=0.125,n=30,rho=0.5', a registered monitor such as msp "
@@ -81,8 +82,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "above its threshold takes the default action (out_of_domain); its score is in the "
                              "decision JSON")
     parser.add_argument("--weights", "--model", dest="weights", metavar="MODEL",
-                        help="segmentation model: a .pt weights file with its card, or a name registered in the "
-                             "uav_el.models entry points (NAME or NAME:ARG); default: the shipped model")
+                        help="segmentation model: a .pt weights file with its card, an .onnx file, or a name "
+                             "registered in the uav_el.models entry points (NAME or NAME:ARG); default: the system's "
+                             "network ([model] of the system file; the shipped one without)")
     parser.add_argument("--budget", type=float, default=None, metavar="S",
                         help="time budget in seconds; past it, the default action (default: the system file's "
                              f"[targets] time_budget_s, else {DEFAULT_TIME_BUDGET_S})")

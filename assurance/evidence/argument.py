@@ -95,10 +95,19 @@ AMLAS_STAGES = ((1, "ML safety assurance scoping"), (2, "ML safety requirements 
                 (5, "Model verification assurance"), (6, "Model deployment assurance"))
 
 
+def monitor_words(spec: Any) -> str:
+    """The deployed runtime monitor by its kind (``learned:walk=...`` -> the learned one, ``lhd+ch:tau=0.25`` ->
+    ``lhd+ch``), as the argument names it beside the network."""
+    kind = str(spec or "").split(":", 1)[0].strip()
+    if kind == "learned":
+        return "learned runtime monitor"
+    return f"deployed runtime monitor {kind}" if kind and kind != "none" else "no runtime monitor deployed"
+
+
 def _ml_nodes(a: ArgumentInputs) -> list[Node]:
     """The AMLAS strategy: one goal per stage, supported by that stage's artefacts (undeveloped without any)."""
-    strat = Node("S-ML", "Argument over the ML component (segmentation network and learned runtime monitor) "
-                         "per AMLAS stage")
+    strat = Node("S-ML", f"Argument over the ML component (segmentation network and "
+                         f"{monitor_words(a.registry.parameters.get('deployed_monitor'))}) per AMLAS stage")
     out = [strat]
     for stage, name in AMLAS_STAGES:
         items = [x for x in a.amlas if x.get("stage") == stage]

@@ -84,7 +84,7 @@ def auditor_context(inp: Any, gate: Any, identity_rows: list[dict[str, Any]], *,
     argument's gsn2x YAML beside the report."""
     log = load_hazards(hazards, inp.registry)
     card = inp.registry.parameters.get("calibration_card")
-    record, mlog = data_record(inp.manifest, inp.facts, card), model_log(inp.manifest, card)
+    record, mlog = data_record(inp.manifest, inp.facts, card, inp.system), model_log(inp.manifest, card)
     index = amlas_index(identity_rows, [entry("A", "Hazard log", str(rel(log.path)), log.sha256),
                                         *package_entries(inp, record)])
     args = ArgumentInputs(

@@ -275,16 +275,37 @@ def extra_tests(req_doc: Mapping[str, Any] | None) -> list[str]:
     return out
 
 
+def _data_option(inp: Inputs) -> str:
+    """The campaign's ``--data``: none when the run read the system file's ``[data] test`` table as it is now (a
+    recorded spec keeps its layout, split list and poses file, which ``--data FOLDER`` would drop), else the
+    folder, with the spec's keys said when it recorded one the system file no longer gives."""
+    data = inp.manifest["data"]
+    spec = data.get("spec")
+    if not spec:
+        return f" --data {data['path']}"
+    if inp.system is not None and not inp.system.default:
+        from assurance.system.build import data_root
+
+        try:
+            now = data_root(inp.system, "test")
+        except ValueError:  # SystemFileError: [data] test unset, a bad table or a missing folder
+            now = None
+        if now is not None and hasattr(now, "to_dict") and {**now.to_dict(), "path": str(Path(now).resolve())} == spec:
+            return ""  # the system file's [data] test: the same spec
+    keys = ", ".join(f"{k} = {v!r}" for k, v in spec.items() if k != "path")
+    return f" --data {data['path']} (the run read it as a [data] test table with {keys}: give that table)"
+
+
 def commands(inp: Inputs, accepted: tuple[str, ...] = ()) -> list[str]:
     """The commands that reproduce the run, the requirement results and this report (with the system file, the
     added requirement tests and the accepted deviations they were made with, ``NAME=VALUE`` each)."""
-    man, run, out, cfg = inp.manifest, inp.run, inp.out, inp.manifest["config"]
+    run, out, cfg = inp.run, inp.out, inp.manifest["config"]
     src = inp.registry.targets_source
     tfile = src if inp.registry.targets and src and Path(src).suffix == ".json" else None
     system = f" --system {inp.system.label}" if inp.system is not None and not inp.system.default else ""
     tests = extra_tests(inp.req_doc)
     return [
-        f"uav-el campaign{system} --data {man['data']['path']} --out {run} --perturbations "
+        f"uav-el campaign{system}{_data_option(inp)} --out {run} --perturbations "
         f"{' '.join(cfg['perturbations'])}"  # capped severities (a declared maximum below 3): the preset's, not given
         + ("" if cfg.get("severity_caps") else f" --severities {' '.join(str(s) for s in cfg['severities'])}")
         + " --monitors "
@@ -315,32 +336,59 @@ def images_per_perturbation(inp: Inputs) -> int:
     return int(ok.groupby("perturbation")["key"].nunique().min()) if ok is not None and len(ok) else 0
 
 
-def undecidable_here(inp: Inputs) -> list[str]:
-    """The registry's ``size_limited`` requirements when the run is smaller than the release preset, else none:
-    the only ones whose 'not verified' does not fail the gate."""
+def decisive_images(inp: Inputs) -> int:
+    """The images per perturbation from which the run size no longer limits a requirement: the release preset's for
+    the shipped system, else the fewest that can show the unsafe-landing bound (``rq.images_needed``)."""
     from assurance.campaign.presets import preset_config
 
     release = preset_config("release").images
-    if release is not None and images_per_perturbation(inp) >= release:
+    if (inp.system is None or inp.system.default) and release is not None:
+        return release
+    p = inp.registry.parameters
+    return rq.images_needed(float(p["unsafe_landing_bound"]), float(p["confidence"]))
+
+
+DECIDED_BY = {"calibration_card": "a calibration card decides it (uav-el calibrate, named in the system file's "
+                                  "[monitor] calibration)"}
+"""What decides a requirement whose check reads an unset parameter: no run size does."""
+
+
+def not_size_limited(inp: Inputs) -> dict[str, str]:
+    """The registry's ``size_limited`` requirements that no run size decides here (a parameter their check reads is
+    unset, e.g. no calibration card), each with what decides it."""
+    out = {}
+    for rid in inp.registry.parameters.get("size_limited") or []:
+        unset = [n for c in rq.checks_of(rid) for n in c.parameters if n in DECIDED_BY
+                 and not inp.registry.parameters.get(n)]
+        if unset:
+            out[rid] = DECIDED_BY[unset[0]]
+    return out
+
+
+def undecidable_here(inp: Inputs) -> list[str]:
+    """The registry's ``size_limited`` requirements when the run is smaller than :func:`decisive_images`, else none:
+    the only ones whose 'not verified' does not fail the gate (one no run size decides is not among them)."""
+    if images_per_perturbation(inp) >= decisive_images(inp):
         return []
     failed = {ev.requirement for ev in inp.checks.values() if ev.status == "fail"}  # shown missed at any size
-    return [rid for rid in inp.registry.parameters.get("size_limited") or [] if rid not in failed]
+    other = not_size_limited(inp)
+    return [rid for rid in inp.registry.parameters.get("size_limited") or [] if rid not in failed | set(other)]
 
 
 def run_scope(inp: Inputs, states: dict[str, str]) -> dict[str, Any] | None:
-    """For a run smaller than the release preset (e.g. the demo): its size, the requirements it leaves
-    undecided and the command that decides them; None for a release-sized run."""
-    from assurance.campaign.presets import preset_config
-
-    release = preset_config("release")
+    """For a run smaller than :func:`decisive_images` (e.g. the demo): its size, the requirements it leaves
+    undecided, those no run size decides (and what does), and the command that decides them; None otherwise."""
     n = images_per_perturbation(inp)
-    if release.images is not None and n >= release.images:
+    if n >= decisive_images(inp):
         return None
-    limited = set(inp.registry.parameters.get("size_limited") or [])
+    other = not_size_limited(inp)
+    limited = set(inp.registry.parameters.get("size_limited") or []) - set(other)
     undecided = [rid for rid, st in states.items() if st == rq.NOT_VERIFIED and rid in limited]
     p = inp.registry.parameters
     bound, conf = float(p["unsafe_landing_bound"]), float(p["confidence"])
-    return {"images": n, "release_images": release.images, "undecided": ", ".join(undecided) or "none",
+    return {"images": n, "undecided": ", ".join(undecided) or "none",
+            "other": "; ".join(f"{rid} is left not verified at any run size: {why}" for rid, why in other.items()
+                               if states.get(rid) == rq.NOT_VERIFIED),
             **_decide_command(inp), "bound": pct(bound), "confidence": rq.confidence_text(conf),
             "bound_images": rq.images_needed(bound, conf),
             "bound_claims": ", ".join(rq.requirements_reading("unsafe_landing_bound")) or "the bound"}
@@ -350,20 +398,20 @@ def _decide_command(inp: Inputs) -> dict[str, str]:
     """The command that decides every requirement: the release target for the shipped system, else a campaign of
     the system's own file on every frame of its data, under its perturbations (its preset's default,
     ``assurance.campaign.perturbation_plan.system_plan``; ``--perturbations`` only when the registry requires one the
-    file does not bring), named when they are not the shipped six."""
+    file does not bring), named when they are not the shipped six, into a new run folder beside this one (a
+    campaign into this one would resume it, and refuses another configuration)."""
     from assurance.campaign.perturbation_plan import default_plan, system_plan
 
     if inp.system is None or inp.system.default:
         return {"command": "make release-evidence", "about": "about 25 minutes on 2 cores"}
-    need = rq.images_needed(float(inp.registry.parameters["unsafe_landing_bound"]),
-                            float(inp.registry.parameters["confidence"]))
+    need = decisive_images(inp)
     planned = [p.name for p in system_plan(inp.system)]
     missing = [p for p in inp.registry.parameters.get("required_perturbations") or [] if p not in planned]
     names = planned + missing
     flag = f" --perturbations {' '.join(names)}" if missing else ""
     shipped = names == [p.name for p in default_plan()]
-    return {"command": f"uav-el campaign --system {inp.system.label} --out {inp.run}{flag} (at least {need} frames "
-                       "per perturbation in its [data] test)",
+    return {"command": f"uav-el campaign --system {inp.system.label} --out {inp.run}-full{flag} (a new run folder; "
+                       f"at least {need} frames per perturbation in its [data] test)",
             "about": "" if shipped else f"under {', '.join(names)}: the system's declared and required "
                                          "perturbations"}
 

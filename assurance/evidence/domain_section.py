@@ -19,6 +19,25 @@ def _within(values: Any, lo: float, hi: float) -> int:
     return int(((values >= lo) & (values <= hi)).sum())
 
 
+PHYSICAL = {"height_m": (0.0, None), "pitch_deg": (0.0, 90.0)}
+"""The physical range of a pose dimension (a pitch is at most 90 degrees below the horizon: straight down)."""
+
+
+def _margin(frames: Any, col: str, nominal: float, error: float, unit: str) -> str:
+    """What the pose-error margin of beta covers: ``error`` around the nominal pose, or around each frame's own
+    pose when the frames were planned with their own (``pose_source``), clipped to the physical range."""
+    own = (frames[(frames["pose_source"].fillna("nominal") != "nominal") & frames[col].notna()]
+           if frames is not None and "pose_source" in frames else None)
+    floor, ceil = PHYSICAL[col]
+    framed = own is not None and len(own) > 0
+    lo, hi = (float(own[col].min()), float(own[col].max())) if framed else (nominal, nominal)
+    around = "each frame's own pose" if framed else f"the nominal {nominal:g}{unit}"
+    a, b = max(floor, lo * (1 - error)), hi * (1 + error)
+    b = min(ceil, b) if ceil is not None else b
+    return (f"; the safety coefficient beta absorbs {error:.0%} around {around} (the pose-error margin), i.e. "
+            f"{a:.3g} to {b:.3g}{unit}" + (" over the evaluated frames" if framed else ""))
+
+
 def odd_rows(man: Mapping[str, Any], images: Any, pose_error: Mapping[str, float]) -> list[dict[str, str]]:
     """One row per declared dimension (name, declared, evidence); empty when the run declares no domain."""
     record = man["config"].get("odd")
@@ -34,9 +53,7 @@ def odd_rows(man: Mapping[str, Any], images: Any, pose_error: Mapping[str, float
                                            ("Pitch", "pitch_deg", odd.pitch_deg, " deg", "pitch")):
         seen = (f"{n} evaluated frames at {_span(frames[col], unit)} ({_within(frames[col], lo, hi)} inside)"
                 if n and col in frames else "no evaluated frame")
-        margin = (f"; the safety coefficient beta absorbs {pose_error[err]:.0%} around the nominal "
-                  f"{nominal[col]:g}{unit} (the pose-error margin), i.e. {nominal[col] * (1 - pose_error[err]):g} to "
-                  f"{nominal[col] * (1 + pose_error[err]):g}{unit}")
+        margin = _margin(frames if n and col in frames else None, col, nominal[col], pose_error[err], unit)
         rows.append({"name": name, "declared": f"{lo:g} to {hi:g}{unit}", "evidence": seen + margin})
     sizes = (sorted({(int(w), int(h)) for w, h in zip(frames["width"], frames["height"], strict=True)})
              if n else [])

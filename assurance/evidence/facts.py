@@ -5,15 +5,16 @@ the embedded default) and the run's signed manifest and per-frame readouts.
 Every sentence of the report about the system takes its facts from here: the registry's texts (camera, pose,
 ground, scenes, conditions, forbidden classes: ``assurance.requirements.system_facts``), the camera as evaluated and
 whether its name was declared, which image stripes may hold a landing, where each frame's pose came from, the
-data's provenance and licence as declared (``"not declared"`` otherwise: never guessed), the development data the
-file declares (resolved against the file's folder), the frame gate as its file says, the waiver file, and the
-release run's size (the shipped system's only). A literal about the shipped system is never said of another.
+data's provenance and licence as declared (``"not declared"`` otherwise: never guessed; the development data the
+file declares is the data record's, ``assurance.evidence.records``), the frame gate as its file says, the waiver
+file, and the release run's size (the shipped system's only). A literal about the shipped system is never said of
+another.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -21,22 +22,11 @@ NOT_DECLARED = "not declared"
 POLICIES = {"nominal": "the nominal pose for every frame", "sidecar": "each frame's own pose where it has one, else "
             "the nominal pose", "required": "each frame's own pose (a frame without one is a fault of its task)"}
 """The campaign's pose policy (``assurance.dataio.poses.POLICIES``) in words."""
-SOURCES = {"frame": "its own pose from its sequence's poses.csv", "meta": "the pose its scene meta records",
+SOURCES = {"frame": "its own pose from {poses}", "meta": "the pose its scene meta records",
            "nominal": "the nominal pose"}
-"""Where a frame's pose came from (the ``pose_source`` readout) in words."""
-
-
-@dataclass(frozen=True)
-class DeclaredData:
-    """A development data set the system file declares (``[model.provenance] training_data`` or
-    ``validation_data``), resolved against the file's folder; ``inside``: it lies in that folder (only such a
-    folder is read: the report never reads the auditor's other files)."""
-
-    key: str
-    role: str
-    letter: str
-    path: Path
-    inside: bool
+"""Where a frame's pose came from (the ``pose_source`` readout) in words; ``{poses}``: the file (:func:`poses_file`)."""
+SEQUENCE_POSES = "its sequence's poses.csv"
+"""Where a UAVid split's frames take their own poses from (a sidecar per sequence)."""
 
 
 @dataclass(frozen=True)
@@ -57,7 +47,8 @@ class ReportFacts:
     data_folders: tuple[Path, ...] = ()
     trained_by: str | None = None
     model_licence: str | None = None
-    declared_data: tuple[DeclaredData, ...] = field(default_factory=tuple)
+    own_poses: Mapping[str, tuple[float, float]] | None = None  # height_m, pitch_deg: min and max of own poses
+    poses_from: str = ""  # where the frames' own poses came from (poses_file)
 
     def view(self) -> dict[str, Any]:
         """The facts as the templates read them (``facts.camera``, ``facts.forbidden``, ``facts.stripes``, ...)."""
@@ -90,17 +81,6 @@ def _data_folders(file: Any) -> tuple[Path, ...]:
         if isinstance(value, str) and value:
             p = Path(value).expanduser()
             out.append(_resolved(p if p.is_absolute() else Path(file.base) / p))
-    return tuple(out)
-
-
-def _declared_data(file: Any) -> tuple[DeclaredData, ...]:
-    """The development data ``[model.provenance]`` declares, resolved against the system file's folder."""
-    out = []
-    for key, role, letter in (("training_data", "network training", "N"),
-                              ("validation_data", "network validation", "O")):
-        path = file.path_of(f"model.provenance.{key}")
-        if path is not None:
-            out.append(DeclaredData(key, role, letter, path, _resolved(path).is_relative_to(_resolved(file.base))))
     return tuple(out)
 
 
@@ -148,14 +128,47 @@ def stripes_text(core: Mapping[str, Any], frames: Any, size: tuple[int, int] | N
     return f"top {shown} of {NUM_STRIPES} image stripes never reachable {why}"
 
 
-def pose_source_text(config: Mapping[str, Any], frames: Any) -> str:
-    """The campaign's pose policy and where the evaluated frames' poses came from (the ``pose_source`` readouts)."""
+def poses_file(data: Mapping[str, Any] | None) -> str:
+    """Where the run's frames took their own poses from (``assurance.dataio.layouts``): the ``poses`` file its
+    ``[data]`` table names, a flat layout's ``ROOT/poses.csv``, or a UAVid split's per-sequence ``poses.csv``."""
+    from assurance.dataio.layouts import data_source, resolve
+    from assurance.dataio.poses import POSES_FILE
+
+    data = data or {}
+    spec = data.get("spec") or {}
+    if spec.get("poses"):
+        return f"the data's poses file {Path(str(spec['path'])) / str(spec['poses'])}"
+    try:
+        resolved = resolve(data_source(data))
+    except (OSError, ValueError, KeyError):  # the data is not readable here: the layout is unknown
+        return "the data's poses file"
+    if resolved.layout == "uavid":
+        return SEQUENCE_POSES
+    return f"the data's poses file {Path(resolved.path) / POSES_FILE}"
+
+
+def own_pose_span(frames: Any) -> Mapping[str, tuple[float, float]] | None:
+    """The range (min, max) of ``height_m`` and ``pitch_deg`` over the evaluated frames planned with their own pose
+    (``pose_source`` other than ``nominal``); None when every frame took the nominal pose."""
+    if frames is None or not {"pose_source", "height_m", "pitch_deg"} <= set(frames.columns):
+        return None
+    own = frames[(frames["pose_source"].fillna("nominal") != "nominal") & frames["height_m"].notna()]
+    if not len(own):
+        return None
+    return {c: (float(own[c].min()), float(own[c].max())) for c in ("height_m", "pitch_deg")}
+
+
+def pose_source_text(config: Mapping[str, Any], frames: Any, data: Mapping[str, Any] | None = None) -> str:
+    """The campaign's pose policy and where the evaluated frames' poses came from (the ``pose_source`` readouts;
+    ``data``: the manifest's data record, which names the poses file)."""
     policy = str(config.get("poses") or "nominal")
     text = f"{POLICIES.get(policy, repr(policy))} (pose policy {policy})"
     if frames is None or "pose_source" not in frames:
         return text + "; no evaluated frame"
     counts = frames["pose_source"].fillna("").astype(str).value_counts()
-    parts = [f"{n} frame(s) planned with {SOURCES.get(s, repr(s))}" for s, n in sorted(counts.items())]
+    where = poses_file(data) if "frame" in counts else ""
+    parts = [f"{n} frame(s) planned with {SOURCES[s].replace('{poses}', where) if s in SOURCES else repr(s)}"
+             for s, n in sorted(counts.items())]
     return f"{text}; {', '.join(parts)}"
 
 
@@ -194,7 +207,25 @@ def frame_gate_text(config: Mapping[str, Any]) -> str:
     path = gate.get("path")
     doc = _record(Path(path)) if path else None
     what = gate_features(doc) if doc else "its file is not readable here"
-    return f"{path} (SHA-256 {str(gate.get('sha256'))[:16]}): {what}"
+    return f"{path} ({gate_identity(path, gate.get('sha256'), doc)}): {what}"
+
+
+def gate_identity(path: str | None, recorded: Any, body: Mapping[str, Any] | None) -> str:
+    """The gate file's SHA-256 (the one the AMLAS index shows) when its body is still the one the run recorded
+    (``recorded``: the record's body hash); else the recorded body hash, labelled as such."""
+    from el.hashing import sha256_file
+    from el.records import body_sha256
+
+    body_hash = f"record body SHA-256 {str(recorded)[:16]}, as the run recorded it"
+    if not path or body is None or not Path(path).is_file():
+        return body_hash + "; the file is not readable here"
+    try:
+        same = body_sha256(dict(body)) == recorded
+    except (TypeError, ValueError):
+        same = False
+    if not same:
+        return body_hash + "; the file's body differs now"
+    return f"SHA-256 {sha256_file(Path(path))[:16]}"
 
 
 def waivers_text(waivers: Any, shipped: bool) -> str:
@@ -219,6 +250,7 @@ def report_facts(system: Any, manifest: Mapping[str, Any], images: Any = None, *
     cfg = manifest.get("config") or {}
     core = cfg.get("core") or {}
     frames = _ok_frames(images)
+    own = own_pose_span(frames)
     release = None
     if shipped:
         from assurance.campaign.presets import preset_config
@@ -227,12 +259,13 @@ def report_facts(system: Any, manifest: Mapping[str, Any], images: Any = None, *
     return ReportFacts(
         shipped=shipped, system=file.label, texts=facts_of_file(file),
         camera=camera_row(core, build.camera_named(file)), stripes=stripes_text(core, frames, size),
-        pose_source=pose_source_text(cfg, frames), frame_gate=frame_gate_text(cfg),
+        pose_source=pose_source_text(cfg, frames, manifest.get("data")), frame_gate=frame_gate_text(cfg),
         waivers=waivers_text(waivers, shipped), release_images=release,
         data_provenance=file.get("data.provenance"), data_licence=file.get("data.licence"),
         data_folders=_data_folders(file), trained_by=file.get("model.provenance.trained_by"),
         model_licence=file.get("model.provenance.licence"),
-        declared_data=() if shipped else _declared_data(file))
+        own_poses=own,
+        poses_from=poses_file(manifest.get("data")) if own else "")
 
 
-__all__ = ["NOT_DECLARED", "DeclaredData", "ReportFacts", "gate_features", "report_facts", "stripes_text"]
+__all__ = ["NOT_DECLARED", "ReportFacts", "gate_features", "report_facts", "stripes_text"]

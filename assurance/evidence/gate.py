@@ -2,7 +2,9 @@
 
 FAILED (exit 1) when a requirement failed and is not waived, when one is not verified (a deselected,
 skipped or uncollected test decides nothing) unless the registry declares it undecidable at this run
-size (``size_limited``, on a run smaller than the release preset), or when there is an integrity problem
+size (``size_limited``, on a run smaller than ``assurance.evidence.context.decisive_images``, and only when the run
+size is what leaves it undecided: not a requirement no run size decides here, such as the calibration requirement
+without a calibration card), or when there is an integrity problem
 (results not signed or not bound to this run, code and registry; a state contradicting its own tests or
 this report's check of the run; a waiver that is expired, of an unknown or non-failed requirement, by an
 undeclared owner or too far ahead), or when the system deviates from the certification basis and the auditor did
@@ -179,11 +181,11 @@ class Gate:
 def decide_gate(results: Mapping[str, rq.RequirementResult], problems: list[str], waivers: str | Path | None,
                 strict: bool, *, undecidable: Sequence[str] = (), policy: Mapping[str, Any] | None = None) -> Gate:
     """The gate's verdict. A requirement not verified blocks unless it is in ``undecidable`` (the registry's
-    ``size_limited`` on a run smaller than the release preset), or always with ``strict``. A bound the data
-    already show missed is "failed" at any run size (``decide_rate_bound``), so it blocks like any failure and the
-    text names it with its numbers (``failure_detail``). Waivers that cannot stand (``waiver_problems`` under
-    ``policy``: the registry's ``waiver_owners`` and ``waiver_max_days``) and expired waivers are added to
-    ``problems`` (the caller's list)."""
+    ``size_limited`` on a run too small to decide them: ``assurance.evidence.context.undecidable_here``), or always
+    with ``strict``. A bound the data already show missed is "failed" at any run size (``decide_rate_bound``), so
+    it blocks like any failure and the text names it with its numbers (``failure_detail``). Waivers that cannot
+    stand (``waiver_problems`` under ``policy``: the registry's ``waiver_owners`` and ``waiver_max_days``) and
+    expired waivers are added to ``problems`` (the caller's list)."""
     states = {rid: r.state for rid, r in results.items()}
     failed = [rid for rid, s in states.items() if s == rq.FAILED]
     not_verified = [rid for rid, s in states.items() if s == rq.NOT_VERIFIED]

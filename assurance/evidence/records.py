@@ -1,7 +1,8 @@
 """The data-management record and the model development log of the evidence package (AMLAS [Q], [U], [X]): every data
 set the run and the system's models used (provenance, seeds, split, counts, class balance, hashes, licence), the
-checks that the test split is disjoint from the development data (computed here, not asserted; each one that could
-not run is named with why), and the network's and monitors' development from their cards and training records.
+checks that the test split is disjoint from the development data (``assurance.evidence.disjoint``: computed here, not
+asserted, on every data layout; each one that could not run is named with why), and the network's and monitors'
+development from their cards and training records.
 
 A data set's provenance and licence come from its own declaration: the scene meta of this toolkit's generator
 beside its frames (or, for the package's own cards, the package's documented synthetic scenes), the system file's
@@ -13,9 +14,21 @@ from __future__ import annotations
 
 import json
 from collections import Counter
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from assurance.evidence.disjoint import (
+    disjoint_summary,
+    disjointness,
+    frame_metas,
+    read_frames,
+    seeds_of,
+    set_label,
+    source_of,
+    spec_of,
+    used,
+)
 from assurance.evidence.facts import NOT_DECLARED
 from assurance.evidence.render import ROOT, rel
 from assurance.scenes.generate import SPLIT_BASE
@@ -52,12 +65,6 @@ def scene_meta(folder: str | Path) -> list[dict[str, Any]]:
         except (OSError, ValueError):
             continue
     return out
-
-
-def _image_hashes(folder: Path) -> set[str]:
-    from el.hashing import sha256_file
-
-    return {sha256_file(p) for p in sorted(folder.glob("*/Images/*")) if p.is_file()}
 
 
 def _seed_text(seeds: list[int]) -> str:
@@ -105,40 +112,62 @@ def _package(path: Path | None) -> bool:
 
 def _row(name: str, role: str, letter: str, path: Any, images: Any, sha: Any, **more: Any) -> dict[str, Any]:
     """A data-record row; ``folder``: the folder the disjointness checks read (absolute; empty: not read, with
-    ``unread`` saying why)."""
+    ``unread`` saying why); ``spec``: how its frames are read there (a ``[data]`` table's keys: layout, split, ...;
+    empty: the folder's layout detected); ``scenes``: the [first, end) of its frames that were used (empty: all)."""
     return {"name": name, "role": role, "letter": letter, "path": str(path or ""), "images": images,
             "sha256": str(sha or ""), "generator": more.get("generator", ""), "seeds": more.get("seeds", ""),
             "balance": more.get("balance", ""), "licence": more.get("licence", ""), "record": more.get("record", ""),
             "provenance": more.get("provenance", ""), "folder": str(more.get("folder") or ""),
-            "unread": more.get("unread", "")}
+            "unread": more.get("unread", ""), "spec": dict(more.get("spec") or {}),
+            "scenes": list(more.get("scenes") or [])}
+
+
+def _card_folder(d: dict[str, Any], package: bool) -> tuple[Path | None, dict[str, Any], str]:
+    """Where a card's data set is here: (folder, spec keys, why not). A card of ``uav-el fit-gate`` records the
+    data's absolute root and how it was read (``spec``); the package's own cards name theirs relative to the
+    project root; any other relative path is relative to where the card was made, which it does not record."""
+    path, spec = d.get("path"), d.get("spec") if isinstance(d.get("spec"), dict) else {}
+    given = Path(str(path)) if path else None
+    if given is not None and package and not given.is_absolute():
+        return ROOT / given, {k: v for k, v in spec.items() if k != "path"}, ""
+    if spec.get("path") and Path(str(spec["path"])).is_absolute():
+        return Path(str(spec["path"])), {k: v for k, v in spec.items() if k != "path"}, ""
+    if given is not None and given.is_absolute():
+        return given, {}, ""
+    if given is None:
+        return None, {}, ""
+    return None, {}, (f"{path}: cannot be located: its record names it relative to the folder it was made in, and "
+                      "not that folder (made again with this version of uav-el, it records where the data are)")
 
 
 def _card_set(name: str, role: str, letter: str, d: dict[str, Any], *, package: bool, record: str,
-              images_key: str = "images", **more: Any) -> dict[str, Any]:
-    """A row of a development set a card records: its folder resolved (relative to the project root for the
-    package's own cards; another card's relative path is relative to where it was made, which it does not record),
-    its provenance and licence from its scene meta when it is here, else the package's declaration."""
-    path = d.get("path")
-    given = Path(str(path)) if path else None
-    folder = None
-    unread = ""
-    if given is not None and (given.is_absolute() or package):
-        folder = given if given.is_absolute() else ROOT / given
-    elif given is not None:
-        unread = (f"{path}: the card names it relative to the folder it was made in, which it does not record")
-    metas = scene_meta(folder) if folder is not None and folder.is_dir() else []
+              images_key: str = "images", facts: Any = None, cache: dict[str, Any] | None = None,
+              **more: Any) -> dict[str, Any]:
+    """A row of a development set a card records: its folder resolved (:func:`_card_folder`), its provenance and
+    licence from its scene meta when it is here, else the system file's ``[data]`` declaration for that folder,
+    else the package's."""
+    folder, spec, unread = _card_folder(d, package)
+    frames = read_frames(source_of(folder, spec), cache) if folder is not None and folder.is_dir() else None
+    metas = frame_metas(used(frames["samples"], d.get("scenes"))) if frames else []
     gens = _generated(metas)
+    declared, licence = facts.declared_for(folder) if facts is not None and folder is not None else (None, None)
     provenance = (f"generated by {gens} (scene meta)" if gens else
+                  f"{declared} (declared: [data] provenance)" if declared else
                   "the package's synthetic scenes (docs/model-card.md)" if package else NOT_DECLARED)
-    return _row(name, role, letter, path, d.get(images_key), d.get("sha256"), record=record, provenance=provenance,
-                licence=licence_of(metas, None, package=package), folder=folder, unread=unread, **more)
+    shown = d.get("path") if d.get("path") else ""
+    return _row(name, role, letter, shown, d.get(images_key), d.get("sha256"), record=record, provenance=provenance,
+                licence=licence_of(metas, licence, package=package), folder=folder, unread=unread, spec=spec,
+                scenes=d.get("scenes") if isinstance(d.get("scenes"), list) else [], **more)
 
 
 def development_sets(card: dict[str, Any] | None, monitors: dict[str, dict[str, Any]],
-                     package: dict[str, bool] | None = None) -> list[dict[str, Any]]:
+                     package: dict[str, bool] | None = None, facts: Any = None,
+                     cache: dict[str, Any] | None = None) -> list[dict[str, Any]]:
     """The development data the network and the monitors were made with, as their cards record them (``package``:
-    which of them, by role, ``card`` for the network's, are the package's own)."""
+    which of them, by role, ``card`` for the network's, are the package's own; ``facts``: the system file's
+    ``[data]`` declarations, for a set in one of its folders)."""
     package = package or {}
+    common = {"facts": facts, "cache": cache}
     rows = []
     train = ((card or {}).get("training") or {}).get("data") or {}
     freqs = ((card or {}).get("training") or {}).get("class_frequencies")
@@ -147,7 +176,7 @@ def development_sets(card: dict[str, Any] | None, monitors: dict[str, dict[str, 
         d = train.get(split) or {}
         if d:
             rows.append(_card_set(f"{split} ({d.get('path')})", role, letter, d, package=ours, record="model card",
-                                  seeds=f"the {split} seed range of uav-el synth (from {SPLIT_BASE[split]})"
+                                  **common, seeds=f"the {split} seed range of uav-el synth (from {SPLIT_BASE[split]})"
                                   if ours else "", balance=_card_balance(freqs, ours) if split == "train" else ""))
     learned = monitors.get("learned.json") or {}
     splits = learned.get("splits") or {}
@@ -157,136 +186,89 @@ def development_sets(card: dict[str, Any] | None, monitors: dict[str, dict[str, 
         if d:
             where = splits.get("train" if key == "training" else "held_out")
             rows.append(_card_set(f"{where or '?'}", role, letter, {**d, "path": where},
-                                  package=package.get("learned.json", False), record="learned.json",
+                                  package=package.get("learned.json", False), record="learned.json", **common,
                                   balance=f"{d.get('unsafe')} unsafe of {d.get('candidates')} candidates"))
     split = (monitors.get("calibration.json") or {}).get("split") or {}
     if split:
         rows.append(_card_set(str(split.get("path")), "monitor calibration (threshold)", "O", split,
-                              package=package.get("calibration.json", False), record="calibration.json"))
+                              package=package.get("calibration.json", False), record="calibration.json", **common))
     gate = monitors.get("frame_gate.json") or {}
     for key, role in (("training", "frame gate fit"), ("validation", "frame gate threshold")):
         d = gate.get(key) or {}
         if d:
             rows.append(_card_set(str(d.get("path")), role, "N" if key == "training" else "O", d,
                                   package=package.get("frame_gate.json", False), record="frame_gate.json",
-                                  images_key="frames"))
+                                  images_key="frames", **common))
     return rows
 
 
-def declared_sets(facts: Any) -> list[dict[str, Any]]:
-    """The network's development data a system file declares (``[model.provenance]``: training and validation
-    folders, resolved against the file's folder; who trained it), as data-record rows: the disjointness checks read
-    their images where they are here, inside the file's folder only."""
+PROVENANCE_DATA = (("training_data", "network training", "N"), ("validation_data", "network validation", "O"))
+"""The development data ``[model.provenance]`` may declare: key, the data record's role, AMLAS letter."""
+
+
+def provenance_data(system: Any) -> list[tuple[str, str, Any, str]]:
+    """The network's development data a system file declares (``[model.provenance] training_data`` and
+    ``validation_data``): (role, letter, source, problem), each a folder (its layout detected) or a table like a
+    ``[data]`` split's (``path``, ``layout``, ``split``, ...: ``assurance.dataio.layouts.DataSpec``), its path
+    resolved against the file's folder; ``problem``: why a table cannot be read (empty when it can)."""
+    from assurance.dataio.layouts import DataSpec
+
+    out: list[tuple[str, str, Any, str]] = []
+    if system is None or getattr(system, "default", False):
+        return out
+    for key, role, letter in PROVENANCE_DATA:
+        value = system.get(f"model.provenance.{key}")
+        if isinstance(value, Mapping):
+            folder = system.path_of(f"model.provenance.{key}.path") or Path(system.base)
+            try:
+                out.append((role, letter, DataSpec.from_dict({**value, "path": folder}), ""))
+            except (TypeError, ValueError) as exc:
+                out.append((role, letter, folder, f"model.provenance.{key}: {exc}"))
+        elif value is not None:
+            out.append((role, letter, system.path_of(f"model.provenance.{key}"), ""))
+    return out
+
+
+def declared_sets(facts: Any, system: Any = None, cache: dict[str, Any] | None = None) -> list[dict[str, Any]]:
+    """The network's development data a system file declares (:func:`provenance_data`; who trained it), as
+    data-record rows: their frames are counted, hashed and compared with the test data's where they are here,
+    inside the file's folder only."""
     if facts is None:
         return []
     who = facts.trained_by or NOT_DECLARED
     rows = []
-    for d in facts.declared_data:
-        here = d.inside and d.path.is_dir()
-        metas = scene_meta(d.path) if here else []
+    for role, letter, source, problem in provenance_data(system):
+        root = Path(source)
+        inside = root.resolve().is_relative_to(Path(system.base).resolve())
+        spec = {k: v for k, v in spec_of(source).items() if k != "path"}
+        unread = problem or ("" if inside else f"{root} lies outside the system file's folder: not read")
+        frames = read_frames(source, cache) if not unread else None
+        ok = frames is not None and not frames["error"]
+        metas = frame_metas(frames["samples"]) if ok else []
         gens = _generated(metas)
-        unread = "" if d.inside else f"{d.path} lies outside the system file's folder: not read"
-        rows.append(_row(f"{d.role}: {d.path}" + ("" if d.inside else " (outside the system file's folder: not read)"),
-                         d.role, d.letter, d.path, len(list(d.path.glob("seq*/Images/*.png"))) if here else None,
-                         "", record=facts.system, folder=d.path.resolve() if d.inside else "", unread=unread,
+        shown = set_label({"path": str(root), "spec": spec})
+        rows.append(_row(f"{role}: {shown}" + ("" if inside else " (outside the system file's folder: not read)"),
+                         role, letter, root, len(frames["samples"]) if ok else None, frames["sha256"] if ok else "",
+                         record=facts.system, folder=root.resolve() if inside else "", unread=unread, spec=spec,
                          provenance=(f"generated by {gens} (scene meta); " if gens else "") + f"trained by {who}",
-                         licence=licence_of(metas, facts.model_licence or facts.declared_for(d.path)[1])))
+                         licence=licence_of(metas, facts.model_licence or facts.declared_for(root)[1])))
     return rows
 
 
-def _folder_check(test_images: set[str], seeds: list[int], folder: Path, shown: str) -> dict[str, str]:
-    """The check that no image file or scene seed of the test data is in ``folder`` (not checked when either holds
-    no image in the UAVid layout, ``seqNN/Images/``: a pass over no image would say nothing)."""
-    dev_images = _image_hashes(folder)
-    if not test_images or not dev_images:
-        empty = "the test data" if not test_images else shown
-        return {"check": f"no scene or image shared with {shown}", "result": "not checked",
-                "detail": f"no image in the UAVid layout (seqNN/Images/) of {empty}"}
-    shared = test_images & dev_images
-    dev_seeds = {int(m["seed"]) for m in scene_meta(folder) if "seed" in m}
-    common = sorted(dev_seeds & set(seeds))
-    return {"check": f"no scene or image shared with {shown}", "result": "fail" if shared or common else "pass",
-            "detail": f"{len(shared)} identical image file(s), {len(common)} common seed(s) "
-                      f"({len(test_images)} test images, {len(dev_seeds)} development scenes)"}
-
-
-def disjointness(test_metas: list[dict[str, Any]], test_sha: str, test_folder: Path | None,
-                 dev: list[dict[str, Any]]) -> list[dict[str, str]]:
-    """Checks that the test data shares nothing with the development data: seed ranges, data-set hashes, and, where
-    the development data are on this machine, scene seeds and image bytes. Each check: what, result, detail; one
-    that could not run says ``not checked`` and why."""
-    from assurance.scenes.generate import split_of_seed
-
-    checks = []
-    seeds = [int(m["seed"]) for m in test_metas if "seed" in m]
-    if seeds:
-        wrong = [s for s in seeds if split_of_seed(s) != "test"]
-        checks.append({"check": "test scenes' seeds lie in the test split's seed range", "result":
-                       "pass" if not wrong else "fail", "detail": f"{len(seeds)} seeds checked" + (
-                           f"; outside: {wrong[:5]}" if wrong else "")})
-    else:
-        checks.append({"check": "test scenes' seeds lie in the test split's seed range", "result": "not checked",
-                       "detail": "the test data carry no scene meta, so no seeds"})
-    checks.append(_hash_check(test_sha, dev))
-    test_images: set[str] | None = None
-    seen: set[str] = set()
-    for r in dev:
-        shown = r["path"] or r["name"]
-        if shown in seen or not (r["path"] or r.get("unread")):
-            continue
-        seen.add(shown)
-        if r.get("unread"):  # never read: outside the system file's folder, or a path relative to nothing known
-            checks.append({"check": f"no scene or image shared with {shown}", "result": "not checked",
-                           "detail": r["unread"]})
-            continue
-        where = r.get("folder") or r["path"]
-        folder = Path(where) if Path(where).is_absolute() else ROOT / where
-        if not folder.is_dir() or test_folder is None or not test_folder.is_dir():
-            missing = shown if not folder.is_dir() else f"the test data folder {test_folder}"
-            checks.append({"check": f"no scene or image shared with {shown}", "result": "not checked",
-                           "detail": f"{missing} is not on this machine"})
-            continue
-        if test_images is None:
-            test_images = _image_hashes(test_folder)
-        checks.append(_folder_check(test_images, seeds, folder, shown))
-    return checks
-
-
-def _hash_check(test_sha: str, dev: list[dict[str, Any]]) -> dict[str, str]:
-    """The check that the test data's hash is none of the development data's (not checked when no development data
-    set records a hash: a comparison with nothing shows nothing)."""
-    what = "the test data's hash is none of the development data's"
-    hashed = [r for r in dev if r["sha256"]]
-    if not hashed:
-        return {"check": what, "result": "not checked", "detail": "no development data set recorded" if not dev else
-                f"none of the {len(dev)} development data set(s) records its hash"}
-    same = [r["name"] for r in hashed if r["sha256"] == test_sha]
-    return {"check": what, "result": "fail" if same else "pass",
-            "detail": f"compared with {len(hashed)} development data set(s)" + (
-                f" (of {len(dev)}; the others record no hash)" if len(hashed) < len(dev) else "")
-            + (f"; equal: {', '.join(same)}" if same else "")}
-
-
-def disjoint_summary(checks: list[dict[str, str]]) -> str:
-    """What the disjointness checks show, in a line: failed, every one ran and passed, or how many ran and which
-    did not (and why)."""
-    failed = [c["check"] for c in checks if c["result"] == "fail"]
-    skipped = [f"{c['check']} ({c['detail']})" for c in checks if c["result"] == "not checked"]
-    ran = len(checks) - len(skipped)
-    head = (f"NOT disjoint: failed: {'; '.join(failed)}" if failed else
-            "disjoint: every check ran for this report and passed" if not skipped else
-            f"{ran} of {len(checks)} checks ran for this report and passed")
-    return head + (f"; not checked: {'; '.join(skipped)}" if skipped else "")
-
-
-def data_record(manifest: dict[str, Any], facts: Any = None, calibration_card: Any = None) -> dict[str, Any]:
-    """The data-management record of a run: its test data, the development data of the system's models (their
-    cards and the system file's ``[model.provenance]``), the disjointness checks and what they show."""
+def data_record(manifest: dict[str, Any], facts: Any = None, calibration_card: Any = None,
+                system: Any = None) -> dict[str, Any]:
+    """The data-management record of a run: its test data (the split it read, in its layout), the development data
+    of the system's models (their cards and the system file's ``[model.provenance]``; ``system``: that file), the
+    disjointness checks and what they show."""
+    from assurance.dataio.layouts import data_source
     from el.segmentation.weights import card_path
 
+    cache: dict[str, Any] = {}
     data = manifest.get("data") or {}
     folder = Path(data["path"]) if data.get("path") else None
-    metas = scene_meta(folder) if folder is not None and folder.is_dir() else []
+    source = data_source(data) if folder is not None else None
+    frames = read_frames(source, cache) if folder is not None and folder.is_dir() else None
+    metas = frame_metas(frames["samples"]) if frames else []
     gens = _generated(metas)
     splits = sorted({str(m.get("split")) for m in metas if m.get("split")})
     provenance, licence = facts.declared_for(folder) if facts is not None else (None, None)
@@ -294,15 +276,14 @@ def data_record(manifest: dict[str, Any], facts: Any = None, calibration_card: A
                 data.get("sha256"), generator=gens or "not recorded (no scene meta)",
                 provenance=f"generated by {gens} (scene meta)" if gens else (
                     f"{provenance} (declared: [data] provenance)" if provenance else NOT_DECLARED),
-                seeds=_seed_text([int(m["seed"]) for m in metas if "seed" in m]) + (
-                    f"; split {', '.join(splits)}" if splits else ""),
+                seeds=_seed_text(seeds_of(metas)) + (f"; split {', '.join(splits)}" if splits else ""),
                 balance=_balance(metas), licence=licence_of(metas, licence), record="manifest.json")
     card, monitors = model_cards(manifest, calibration_card)
     wpath = (manifest.get("weights") or {}).get("path")
     package = {"card": _package(card_path(wpath)) if wpath else False,
                **{name: _package(p) for name, p in monitor_files(manifest, calibration_card).items()}}
-    dev = development_sets(card, monitors, package) + declared_sets(facts)
-    checks = disjointness(metas, str(data.get("sha256") or ""), folder, dev)
+    dev = development_sets(card, monitors, package, facts, cache) + declared_sets(facts, system, cache)
+    checks = disjointness(metas, str(data.get("sha256") or ""), source, dev, cache)
     return {"datasets": [test, *dev], "disjoint": checks, "summary": disjoint_summary(checks)}
 
 

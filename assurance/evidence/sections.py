@@ -53,8 +53,7 @@ def domain(man: Mapping[str, Any], registry: rq.Registry, size: tuple[int, int] 
     pe = registry.parameters["pose_error"]
     need = rq.pose_margin(core, size, pe)[0]["required_beta"] if size is not None else None
     rows = [
-        {"name": "Height", "value": f"{pose['height_m']:g} m (nominal; errors up to {pe['height']:.0%} declared)"},
-        {"name": "Pitch", "value": f"{pose['pitch_deg']:g} degrees below the horizon (errors up to {pe['pitch']:.0%})"},
+        *_pose_rows(pose, pe, facts),
         {"name": "Pose source", "value": facts.pose_source},
         {"name": "Camera", "value": facts.camera},
         {"name": "Images", "value": (f"{size[0]}x{size[1]} px, working resolution width {core['working_width']}"
@@ -77,6 +76,26 @@ def domain(man: Mapping[str, Any], registry: rq.Registry, size: tuple[int, int] 
                                    f"K-means seed {core['kmeans_seed']}"},
     ]
     return rows
+
+
+def _pose_rows(pose: Mapping[str, Any], pe: Mapping[str, float], facts: Any) -> list[dict[str, str]]:
+    """Height and pitch as evaluated: the nominal pose, or the range of the frames' own poses (``facts.own_poses``)
+    with the declared errors around each frame's own pose."""
+    own = getattr(facts, "own_poses", None)
+    if not own:
+        return [{"name": "Height", "value": f"{pose['height_m']:g} m (nominal; errors up to {pe['height']:.0%} "
+                                             "declared)"},
+                {"name": "Pitch", "value": f"{pose['pitch_deg']:g} degrees below the horizon (errors up to "
+                                            f"{pe['pitch']:.0%})"}]
+
+    def span(lo: float, hi: float) -> str:
+        return f"{lo:g}" if lo == hi else f"{lo:g} to {hi:g}"
+
+    src = f"each frame's own pose, from {facts.poses_from}"
+    return [{"name": "Height", "value": f"{span(*own['height_m'])} m ({src}; errors up to {pe['height']:.0%} "
+                                         "declared around each frame's own height)"},
+            {"name": "Pitch", "value": f"{span(*own['pitch_deg'])} degrees below the horizon ({src}; errors up to "
+                                        f"{pe['pitch']:.0%} around each frame's own pitch)"}]
 
 
 def ub_label(conf: float) -> str:
@@ -172,7 +191,9 @@ def limitations(man: Mapping[str, Any], registry: rq.Registry, results: Mapping[
                     if facts.data_provenance else "not declared (no scene meta, no [data] provenance)")
         out.append(f"The provenance of the test data is {declared}; this report cannot tell whether the images "
                    "represent the intended operations.")
-    out.append("Geometry assumes flat ground, a pinhole camera without lens distortion and a known nominal pose; "
+    known = ("a known pose per frame (each frame's own, from "
+             f"{facts.poses_from})" if getattr(facts, "own_poses", None) else "a known nominal pose")
+    out.append(f"Geometry assumes flat ground, a pinhole camera without lens distortion and {known}; "
                "slopes, roofs as landing surfaces, and pose errors beyond the declared box are outside the domain. "
                "The default action's landing area is a proxy: a disc on the ground below the UAV (its nadir point "
                "when the frame shows it, else the nearest ground the frame shows, at the bottom centre).")

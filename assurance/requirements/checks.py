@@ -115,12 +115,17 @@ def check_perturbation_coverage(images: Any, required: Sequence[str], min_images
         rows.append({"perturbation": p, "severities": sev or "-", "images": n, "faulted": faults,
                      "enough": n >= min_images})
     cols = ("perturbation", "severities", "images", "faulted", "enough")
-    short = [r["perturbation"] for r in rows if not r["enough"]]
+    short = [f"{r['perturbation']} {_fewer(r['images'], min_images, 'evaluated images')}" if r["images"]
+             else f"{r['perturbation']} not evaluated" for r in rows if not r["enough"]]
     if short:
-        return Evidence(name, INSUFFICIENT, f"insufficient evidence: {', '.join(short)} missing or with fewer "
-                        f"than {min_images} evaluated images", tuple(rows), cols)
+        return Evidence(name, INSUFFICIENT, f"insufficient evidence: {'; '.join(short)}", tuple(rows), cols)
     return Evidence(name, PASS, f"all {len(required)} perturbations evaluated with >= {min_images} images each",
                     tuple(rows), cols)
+
+
+def _fewer(n: int, needed: int, what: str) -> str:
+    """``8 evaluated images, fewer than the 10 needed`` (a message's count against its minimum)."""
+    return f"with {n} {what}, fewer than the {needed} needed"
 
 
 def _deployed_rows(table: Any, monitor: str) -> Any:
@@ -152,7 +157,9 @@ def check_safety_gain(table: Any, monitor: str, required: Sequence[str], min_ima
         lo = r.g_star_lo95
         if int(r.images) < min_images or not _finite(lo):
             verdict = "insufficient"
-            short.append(f"{r.perturbation} (s{int(r.severity)})")
+            short.append(f"{r.perturbation} (s{int(r.severity)}) " + (
+                _fewer(int(r.images), min_images, "images") if int(r.images) < min_images
+                else "has no G* interval (its bootstrap is undefined)"))
         elif float(lo) > 0:
             verdict = "pass"
         else:
@@ -165,7 +172,7 @@ def check_safety_gain(table: Any, monitor: str, required: Sequence[str], min_ima
     if fails:
         return Evidence(name, FAIL, f"G* 95% lower bound <= 0 under {', '.join(fails)}", tuple(rows), cols)
     if missing or short:
-        what = [f"{p} not evaluated" for p in missing] + [f"{s} has too few images or no interval" for s in short]
+        what = [f"{p} not evaluated" for p in missing] + short
         return Evidence(name, INSUFFICIENT, "insufficient evidence: " + "; ".join(what), tuple(rows), cols)
     return Evidence(name, PASS, f"G* 95% lower bound > 0 in all {len(rows)} scenario(s)", tuple(rows), cols)
 
@@ -285,8 +292,7 @@ def check_unsafe_landing_bound(table: Any, monitor: str, bound: float, required:
                  + "; ".join(shown_above)] if shown_above else [])
         what += ([f"one-sided {level} upper bound > {bound:g} under " + "; ".join(over)
                   + f" (>= {need} images: enough to show the bound)"] if over else [])
-        return Evidence(name, FAIL, "; ".join(what) + " (images_needed: the images at which the observed rate "
-                        "would show the bound)", tuple(rows), cols)
+        return Evidence(name, FAIL, "; ".join(what) + "\n" + IMAGES_NEEDED_LEGEND, tuple(rows), cols)
     if missing or short:
         what = [f"{p} not evaluated" for p in missing]
         if short:
@@ -295,6 +301,10 @@ def check_unsafe_landing_bound(table: Any, monitor: str, bound: float, required:
         return Evidence(name, INSUFFICIENT, "insufficient evidence: " + "; ".join(what), tuple(rows), cols)
     return Evidence(name, PASS, f"one-sided {level} upper bound <= {bound:g} in all {len(rows)} scenario(s)",
                     tuple(rows), cols)
+
+
+IMAGES_NEEDED_LEGEND = "(column images_needed: the images at which the observed rate would show the bound)"
+"""The legend of the bound's ``images_needed`` column: a line of its own after the verdict."""
 
 
 def check_decision_time(images: Any, monitor: str, budget_s: float) -> Evidence:

@@ -1,10 +1,10 @@
 """What the requirement texts and the declared operating domain say about the system assessed.
 
-The registry's texts are written once for every system: where they name the camera, the pose, the ground rule,
-the scenes, the conditions or the forbidden classes they use a placeholder (``{camera}``, ``{pose}``, ``{ground}``,
-``{scenes}``, ``{conditions}``, ``{forbidden}``) filled from these facts. ``facts_of`` derives them from a built system
-(its camera, nominal pose, declared domain and its perturbations, pose policy and label set), so a report about
-another system says nothing of the shipped one;
+The registry's texts are written once for every system: where they name the platform, the camera, the pose, the
+ground rule, the scenes, the conditions or the forbidden classes they use a placeholder (``{platform}``,
+``{camera}``, ``{pose}``, ``{ground}``, ``{scenes}``, ``{conditions}``, ``{forbidden}``) filled from these facts.
+``facts_of`` derives them from a built system (its camera, nominal pose, declared domain and its perturbations,
+pose policy and label set), so a report about another system says nothing of the shipped one;
 ``shipped_facts`` are the embedded default's (what a registry loaded without a system reads).
 
 A fact is literal text, never a template: a camera named ``Cam {A}`` or a class named ``{confidence:pct} x`` is
@@ -19,7 +19,7 @@ import functools
 from collections.abc import Sequence
 from typing import Any
 
-FACT_KEYS = ("camera", "view", "pose", "ground", "scenes", "conditions", "forbidden", "safe", "label_set")
+FACT_KEYS = ("platform", "camera", "view", "pose", "ground", "scenes", "conditions", "forbidden", "safe", "label_set")
 TEMPLATE_FACTS = ("pose",)
 """Facts whose text holds the registry's placeholders (``{pose_error.height:pct}``), rendered with its parameters;
 every other fact is substituted as literal text."""
@@ -51,6 +51,12 @@ def camera_text(intrinsics: Any, pitch_deg: float, *, named: bool = True) -> str
     return (f"{who} ({intrinsics.sensor_width_mm:g} mm sensor width, {intrinsics.focal_mm:.3g} "
             f"mm focal length, {intrinsics.hfov_deg:.1f} degrees horizontal field of view), {view_of(pitch_deg)}")
 
+
+SHIPPED_PLATFORM = "small multirotor UAV with a parachute, over urban areas"
+"""The shipped system's platform and the area it flies over (the paper's urban setting)."""
+PLATFORM = ("small multirotor UAV with a parachute (the default action's descent); the area flown over is not "
+            "declared (the system file has no key for it: see the scenes)")
+"""Another system's platform: the toolkit's assumption only, no area said of it."""
 
 SHIPPED_CONDITIONS = ("daylight; the six perturbations of ICRA22 at severity 3 (brightness, fog, motion blur, "
                       "shifted pixels, pixel trap, none)")
@@ -103,6 +109,7 @@ def facts_of(system: Any) -> dict[str, str]:
     data = "the system's own data sets ([data] of its system file)"
     shipped = bool(system.file.default)
     return {
+        "platform": SHIPPED_PLATFORM if shipped else PLATFORM,
         "camera": camera_text(core.intrinsics, pose.pitch_deg, named=camera_named(system.file)),
         "view": view_of(pose.pitch_deg),
         "pose": pose_text(pose, system.odd, system.poses),
@@ -156,6 +163,7 @@ def shipped_facts() -> dict[str, str]:
 
     pose = Pose()
     return {
+        "platform": SHIPPED_PLATFORM,
         "camera": camera_text(PHANTOM4, pose.pitch_deg),
         "view": view_of(pose.pitch_deg),
         "pose": (f"height {pose.height_m:g} m, pitch {pose.pitch_deg:g} degrees below the horizon (nominal), errors up "
@@ -179,5 +187,6 @@ def check_facts(facts: dict[str, str]) -> dict[str, str]:
     return {k: facts[k] for k in FACT_KEYS}
 
 
-__all__ = ["FACT_KEYS", "SHIPPED_CONDITIONS", "TEMPLATE_FACTS", "camera_text", "check_facts", "conditions_text",
-           "escape", "facts_of", "facts_of_file", "forbidden_text", "pose_text", "shipped_facts", "view_of"]
+__all__ = ["FACT_KEYS", "PLATFORM", "SHIPPED_CONDITIONS", "SHIPPED_PLATFORM", "TEMPLATE_FACTS", "camera_text",
+           "check_facts", "conditions_text", "escape", "facts_of", "facts_of_file", "forbidden_text", "pose_text",
+           "shipped_facts", "view_of"]

@@ -11,6 +11,8 @@ loads it, before any task.
 
 from __future__ import annotations
 
+import os
+from collections.abc import Collection
 from pathlib import Path
 
 from assurance.system import build
@@ -18,8 +20,9 @@ from assurance.system.loader import SystemFile
 from el.userfiles import not_regular
 
 
-def check_system(system: SystemFile) -> None:
-    """Every load-time check; the first problem as ``SystemFileError`` naming the key."""
+def check_system(system: SystemFile, *, writes: Collection[str] = ()) -> None:
+    """Every load-time check; the first problem as ``SystemFileError`` naming the key. ``writes``: keys naming a file
+    the command is about to write (``uav-el fit-gate``: ``monitor.gate``), so nothing at their path is no problem."""
     labels = build.label_set(system)
     check_geometry(system)
     check_model(system, labels.names)
@@ -28,6 +31,8 @@ def check_system(system: SystemFile) -> None:
                       ("waivers.file", "waivers file")):
         p = system.path_of(key)
         why = None if p is None or (key == "monitor.gate" and system.get(key) == "none") else not_regular(p, what=what)
+        if why and key in writes and not os.path.lexists(p):
+            why = None  # not there yet: the command writes it
         if why:  # nothing there, or what is there instead of a regular file (a FIFO is not "no such file")
             raise system.error(key, why)
     templates = system.path_of("report.templates")

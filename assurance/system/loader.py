@@ -10,6 +10,7 @@ from __future__ import annotations
 import copy
 import hashlib
 import json
+import re
 import tomllib
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
@@ -129,11 +130,34 @@ def parse_system(text: str, *, label: str) -> dict[str, Any]:
     try:
         doc = userfiles.parse_bounded(tomllib.loads, text, where=label, max_depth=MAX_DEPTH)
     except tomllib.TOMLDecodeError as exc:
-        raise SystemFileError(f"{label}: not valid TOML: {exc}") from None
+        raise SystemFileError(f"{label}: not valid TOML: {exc}{toml_hint(text, str(exc))}") from None
     except userfiles.UserFileError as exc:
         raise SystemFileError(str(exc)) from None
     validate(doc, label=label)
     return doc
+
+
+_AT_LINE = re.compile(r"\(at line (\d+), column \d+\)")
+_STRING = re.compile(r'"(?:\\.|[^"\\])*"|\'[^\']*\'')  # a basic or literal string on one line
+_HEADER = re.compile(r"^\s*\[\s*([^\[\]]+?)\s*\]\s*(?:#.*)?$")
+
+
+def toml_hint(text: str, message: str) -> str:
+    """A hint for ``tomllib``'s error ``message`` on ``text`` when its line opens an inline table it does not close
+    ("Invalid initial character for a key part" says nothing of why): TOML's ``{ ... }`` must fit on one line.
+    Empty for any other error."""
+    at = _AT_LINE.search(message)
+    lines = text.splitlines()
+    if at is None or not 1 <= int(at.group(1)) <= len(lines):
+        return ""
+    n = int(at.group(1))
+    code = _STRING.sub('""', lines[n - 1]).split("#", 1)[0]
+    if code.count("{") <= code.count("}"):
+        return ""
+    key = code.split("=", 1)[0].strip() if "=" in code else ""
+    header = next((m.group(1) for line in reversed(lines[:n - 1]) if (m := _HEADER.match(line))), "")
+    table = ".".join(part for part in (header, key) if part) or "section.sub"
+    return f": an inline table {{ ... }} must fit on one line; use a [{table}] table instead"
 
 
 def validate(doc: Mapping[str, Any], *, label: str) -> None:
