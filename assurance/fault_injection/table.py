@@ -204,7 +204,7 @@ CASES: tuple[Case, ...] = (
 
 QUICK: tuple[str, ...] = ("H2-altered-shard", "H8-pickled-weights", "B1-unreadable-image", "B4-nan-model",
                           "R1-pixel-header", "R4-yaml-alias-bomb", "S1-fabricated-run", "S3-untrusted-key",
-                          "G6-edited-manifest", "T3-template-claims-passed", "T25-css-hides-cover")
+                          "G6-edited-manifest", "T3-template-claims-passed", "T29-meta-refresh")
 """A representative slice for a first look (``uav-el fault-table --quick``, ``make demo``): one or two of the
 cheapest cases of each family (hostile inputs, bad inputs, bounded resources, signing, the gate, the auditor's
 trust boundary). The report says how many of the cases a table holds; ``make faults`` and CI replay all."""
