@@ -1,9 +1,11 @@
 """The learned monitor's features, computed in one pass per patch and one window per frame (issue 52: the decision
-faster, unchanged), give bit for bit the numbers of the per-feature reference helpers they replace in
-``candidate_features``: every float64 of the vector, for any layout, dtype, patch scale and disc size."""
+faster, unchanged), give bit for bit the numbers of the per-feature reference helpers they replaced in
+``candidate_features`` (kept in tests/feature_reference.py): every float64 of the vector, for any layout, dtype,
+patch scale and disc size."""
 
 from __future__ import annotations
 
+import feature_reference as ref
 import numpy as np
 import pytest
 
@@ -24,13 +26,13 @@ def reference(patch_probs, patch, context, margin):
     frame, cand = context.frame_probs, context.candidate
     width, height = context.frame_size
     scale = frame.shape[2] / width
-    lr = learned.frame_disc(frame, cand, scale)
+    lr = ref.frame_disc(frame, cand, scale)
     hd = take_disc(patch_probs, patch.disc_mask)
-    return np.asarray([*learned.disc_stats(lr, UAVID), *learned.disc_stats(hd, UAVID),
-                       learned.edge_distance(patch_probs, patch, cand, margin, UAVID),
+    return np.asarray([*ref.disc_stats(lr, UAVID), *ref.disc_stats(hd, UAVID),
+                       ref.edge_distance(patch_probs, patch, cand, margin, UAVID),
                        cand.y / height, cand.radius_px / height, float(cand.hazard),
-                       *learned.context_stats(frame, cand, scale, UAVID),
-                       *learned.class_max(hd, UAVID), *learned.class_max(lr, UAVID)], dtype=np.float64)
+                       *ref.context_stats(frame, cand, scale, UAVID),
+                       *ref.class_max(hd, UAVID), *ref.class_max(lr, UAVID)], dtype=np.float64)
 
 
 def softmax(rng, shape, *, forbidden_share, dtype=np.float32, spread=2.0):
@@ -102,7 +104,7 @@ def test_the_nearest_forbidden_pixel_is_the_reference_on_any_mask():
         probs = np.zeros((8, *patch.shape), np.float32)
         probs[UAVID.forbidden_ids[0]] = forbidden
         probs[UAVID.safe_ids[0]] = ~forbidden
-        want = learned.edge_distance(probs, patch, disc, 0.25, UAVID)
+        want = ref.edge_distance(probs, patch, disc, 0.25, UAVID)
         assert learned.nearest_forbidden(forbidden_pixels(probs, UAVID), patch, disc, 0.25) == want
 
 

@@ -259,8 +259,10 @@ def test_card_run_and_monitor_must_rest_on_the_same_learned_model(model_file, sp
 def test_context_windows_give_what_the_whole_frame_gives():
     """The context statistics are read from a window around the candidate: the same numbers, bit for bit,
     as masking the whole frame (discs near the border, and smaller than a working pixel, included)."""
+    from feature_reference import frame_disc_mask
+
     from el.decision import Candidate, Disc
-    from el.monitors.learned import _FORBIDDEN, CONTEXT_SCALES, context_stats, frame_disc_mask
+    from el.monitors.learned import _FORBIDDEN, CONTEXT_SCALES, frame_features
     from el.monitors.lhd import take_disc
 
     rng = np.random.default_rng(3)
@@ -275,7 +277,7 @@ def test_context_windows_give_what_the_whole_frame_gives():
             mask = frame_disc_mask(frame.shape[1:], Disc(cand.x, cand.y, cand.radius_px * k), scale)
             p = take_disc(frame, mask)[_FORBIDDEN].astype(np.float64).sum(axis=0)
             want += [float(p.max()), float(p.mean())]
-        assert context_stats(frame, cand, scale, labels=UAVID) == want
+        assert frame_features(frame, cand, scale, UAVID)[1] == want
 
 
 def test_a_run_recorded_before_monitor_models_is_not_resumed_with_a_learned_monitor(model_file, splits, tmp_path):

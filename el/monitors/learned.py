@@ -42,10 +42,9 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from el.decision import Disc
-from el.discs import disc_window_mask, window_sq_distances
+from el.discs import window_sq_distances
 from el.errors import LearnedModelError
-from el.forbidden import forbidden_pixels, top_scores
+from el.forbidden import top_scores
 from el.labels import UAVID, LabelSet
 from el.monitors.base import CandidateContext, Judgement, PatchSegmenter, validate_scores
 from el.monitors.lhd import LHDMonitor, take_disc
@@ -87,90 +86,15 @@ MCD_FEATURES: tuple[str, ...] = ("mcd_mean_std", "mcd_max_std")
 
 
 # -- features ------------------------------------------------------------------------------------
-def disc_stats(pixel_scores: np.ndarray, labels: LabelSet) -> list[float]:
-    """The four disc statistics (:data:`_DISC_STATS`) of the softmax of the disc's pixels (C, m)."""
-    if pixel_scores.shape[1] == 0:
-        return [1.0, 1.0, 1.0, 1.0]  # nothing seen: as bad as it gets
-    p = pixel_scores.astype(np.float64)
-    forbidden_p = p[np.array(labels.forbidden_ids)].sum(axis=0)
-    top_forbidden, top_safe = top_scores(p, labels)  # forbidden_pixels and argmax_slack, from one pass
-    return [float(forbidden_p.max()), float(forbidden_p.mean()),
-            float(np.count_nonzero(top_forbidden >= top_safe) / p.shape[1]), float((top_forbidden - top_safe).max())]
-
-
-def class_max(pixel_scores: np.ndarray, labels: LabelSet) -> list[float]:
-    """The largest probability of each forbidden class over the disc's pixels (C, m)."""
-    if pixel_scores.shape[1] == 0:
-        return [1.0] * len(labels.forbidden_ids)
-    return [float(v) for v in pixel_scores[np.array(labels.forbidden_ids)].max(axis=1)]
-
-
-def context_stats(frame: np.ndarray, candidate: Any, scale: float, labels: LabelSet) -> list[float]:
-    """Largest and mean forbidden probability of the frame's softmax in discs of :data:`CONTEXT_SCALES`
-    radii centred on the candidate (its safe disc and what lies just beyond it)."""
-    h, w = frame.shape[1:]
-    x0, y0, x1, y1 = frame_window((h, w), candidate, scale, max(CONTEXT_SCALES))  # around the largest disc
-    window = np.ascontiguousarray(frame[np.array(labels.forbidden_ids), y0:y1, x0:x1])  # copied once, for every disc
-    out: list[float] = []
-    for k in CONTEXT_SCALES:
-        mask = frame_disc_mask((h, w), candidate, scale, radii=k, window=(x0, y0, x1, y1))
-        forbidden_p = take_disc(window, mask).astype(np.float64).sum(axis=0)
-        out += [float(forbidden_p.max()), float(forbidden_p.mean())]
-    return out
-
-
 def frame_window(shape: tuple[int, int], candidate: Any, scale: float, radii: float) -> tuple[int, int, int, int]:
     """``(x0, y0, x1, y1)``: a window of the working grid (h, w) holding every pixel of the candidate's disc of
-    ``radii`` radii and the pixel under its centre (what :func:`frame_disc_mask` keeps for a tiny disc)."""
+    ``radii`` radii and the pixel under its centre (what :func:`frame_features` keeps for a tiny disc)."""
     h, w = shape
     cx, cy = candidate.x * scale, candidate.y * scale
     reach = candidate.radius_px * scale * radii + 1.0
     x0, y0 = min(max(int(cx - reach), 0), w - 1), min(max(int(cy - reach), 0), h - 1)
     x1, y1 = max(min(int(cx + reach) + 1, w), x0 + 1), max(min(int(cy + reach) + 1, h), y0 + 1)
     return x0, y0, x1, y1
-
-
-def frame_disc(frame: np.ndarray, candidate: Any, scale: float) -> np.ndarray:
-    """The frame softmax (C, h, w) on the candidate's disc, (C, m): ``take_disc(frame, frame_disc_mask(...))``,
-    the same pixels in the same order, read from a window around the disc rather than the whole frame."""
-    window = frame_window(frame.shape[1:], candidate, scale, 1.0)
-    x0, y0, x1, y1 = window
-    return take_disc(frame[:, y0:y1, x0:x1], frame_disc_mask(frame.shape[1:], candidate, scale, window=window))
-
-
-def frame_disc_mask(shape: tuple[int, int], candidate: Any, scale: float, *, radii: float = 1.0,
-                    window: tuple[int, int, int, int] | None = None) -> np.ndarray:
-    """Pixels of a working-resolution grid (h, w) whose centres lie in the candidate's disc.
-
-    ``scale``: working pixels per full-resolution pixel; ``radii``: the disc's radius in radii of the
-    candidate's; ``window`` ``(x0, y0, x1, y1)``: only that part of the grid (it must hold the pixel
-    under the centre), so the mask is (y1 - y0, x1 - x0). At least the pixel under the centre is kept
-    (a disc smaller than one working pixel).
-    """
-    h, w = shape
-    x0, y0, x1, y1 = window or (0, 0, w, h)
-    cx, cy, r = candidate.x * scale, candidate.y * scale, candidate.radius_px * scale * radii
-    mask = disc_window_mask(Disc(cx, cy, r), x0, y0, x1, y1)  # the one disc rasterisation, on the working grid
-    if not mask.any():
-        mask[min(max(int(cy), 0), h - 1) - y0, min(max(int(cx), 0), w - 1) - x0] = True
-    return mask
-
-
-def edge_distance(patch_probs: np.ndarray, patch: Patch, candidate: Any, margin: float,
-                  labels: LabelSet) -> float:
-    """Distance from the disc's edge to the nearest predicted-forbidden pixel of the HD patch, in radii.
-
-    < 0 when one lies inside the disc (-1 at the centre); the patch's reach ``(1 + margin) sqrt(2) - 1``
-    when the patch holds none. Patch pixel centres are mapped back to full-resolution coordinates.
-    """
-    cap = (1.0 + margin) * math.sqrt(2.0) - 1.0
-    ys, xs = np.nonzero(forbidden_pixels(patch_probs, labels))
-    if ys.size == 0:
-        return cap
-    x = patch.offset[0] + (xs + 0.5) / patch.scale - candidate.x
-    y = patch.offset[1] + (ys + 0.5) / patch.scale - candidate.y
-    d = float(np.sqrt((x * x + y * y).min())) / candidate.radius_px - 1.0
-    return min(max(d, -1.0), cap)
 
 
 def mcd_spread(samples: np.ndarray, disc_mask: np.ndarray, labels: LabelSet) -> list[float]:
@@ -185,9 +109,10 @@ def mcd_spread(samples: np.ndarray, disc_mask: np.ndarray, labels: LabelSet) -> 
 
 def disc_summary(forbidden: list[np.ndarray], top_forbidden: np.ndarray, top_safe: np.ndarray
                  ) -> tuple[list[float], list[float]]:
-    """:func:`disc_stats` and :func:`class_max` of a disc from each forbidden class's scores on its m pixels and the
-    pixels' top forbidden and top safe scores, (m,) each: the same numbers (the classes summed in the same order, in
-    float64), with only the forbidden classes' sum converted to float64."""
+    """A disc's four statistics (largest and mean forbidden probability, share of pixels a forbidden class wins, largest
+    forbidden-over-safe margin) and each forbidden class's largest probability, from each forbidden class's scores on
+    its m pixels and the pixels' top forbidden and top safe scores, (m,) each; the forbidden classes summed class
+    after class in float64."""
     m = top_forbidden.shape[0]
     if m == 0:
         return [1.0, 1.0, 1.0, 1.0], [1.0] * len(forbidden)  # nothing seen: as bad as it gets
@@ -202,9 +127,9 @@ def disc_summary(forbidden: list[np.ndarray], top_forbidden: np.ndarray, top_saf
 
 def patch_stats(patch_probs: np.ndarray, patch: Patch, candidate: Any, margin: float, labels: LabelSet
                 ) -> tuple[list[float], float, list[float]]:
-    """The HD disc's :func:`disc_stats`, the :func:`edge_distance` and the HD disc's :func:`class_max` (of
-    ``take_disc(patch_probs, patch.disc_mask)``): the same numbers, from one pass of the patch's top scores and
-    the forbidden classes alone picked out of the disc."""
+    """The HD disc's statistics (:func:`disc_summary` of the pixels ``take_disc(patch_probs, patch.disc_mask)``
+    picks), the :func:`nearest_forbidden` edge distance and the HD disc's largest forbidden class probabilities, from
+    one pass of the patch's top scores and the forbidden classes alone picked out of the disc."""
     top_forbidden, top_safe = top_scores(patch_probs, labels)
     edge = nearest_forbidden(top_forbidden >= top_safe, patch, candidate, margin)
     idx = np.flatnonzero(patch.disc_mask)  # the disc's pixels in raster order, as take_disc picks them
@@ -214,9 +139,11 @@ def patch_stats(patch_probs: np.ndarray, patch: Patch, candidate: Any, margin: f
 
 
 def nearest_forbidden(forbidden: np.ndarray, patch: Patch, candidate: Any, margin: float) -> float:
-    """:func:`edge_distance` from the patch's forbidden pixels (h, w) bool: the same squared distances, their
-    minimum found row by row (the smallest x^2 of a row's forbidden pixels, plus the row's y^2: rounding is
-    monotonic, so the minimum is the same float)."""
+    """Distance from the disc's edge to the nearest forbidden pixel of the HD patch (``forbidden``, (h, w) bool), in
+    radii: < 0 inside the disc (-1 at the centre), the patch's reach ``(1 + margin) sqrt(2) - 1`` when the patch holds
+    none. Pixel centres are mapped back to full-resolution coordinates; the smallest squared distance is found row by
+    row (the smallest x^2 of a row's forbidden pixels plus the row's y^2: rounding is monotonic, so it is the
+    smallest of all)."""
     cap = (1.0 + margin) * math.sqrt(2.0) - 1.0
     h, w = forbidden.shape
     x = patch.offset[0] + (np.arange(w) + 0.5) / patch.scale - candidate.x
@@ -229,9 +156,12 @@ def nearest_forbidden(forbidden: np.ndarray, patch: Patch, candidate: Any, margi
 
 def frame_features(frame: np.ndarray, candidate: Any, scale: float, labels: LabelSet
                    ) -> tuple[list[float], list[float], list[float]]:
-    """The frame disc's :func:`disc_stats`, the :func:`context_stats` and the frame disc's :func:`class_max` (of
-    :func:`frame_disc`): the same numbers, every disc's pixels picked from one grid of squared distances (as
-    :func:`frame_disc_mask` draws them) and the forbidden probability summed once over the context window."""
+    """The frame disc's statistics (:func:`disc_summary`), the context statistics (largest and mean forbidden
+    probability in discs of :data:`CONTEXT_SCALES` radii: the safe disc and what lies just beyond it) and the frame
+    disc's largest forbidden class probabilities, on the working grid (``scale``: working pixels per full-resolution
+    pixel). Every disc's pixels are picked from one grid of squared distances (``el.discs.window_sq_distances``, as
+    ``disc_window_mask`` draws them; at least the pixel under the centre), the forbidden probability summed once over
+    the context window."""
     h, w = frame.shape[1:]
     x0, y0, x1, y1 = frame_window((h, w), candidate, scale, max(CONTEXT_SCALES))  # holds every disc
     d2 = window_sq_distances(candidate.x * scale, candidate.y * scale, x0, y0, x1, y1)
@@ -250,7 +180,7 @@ def frame_features(frame: np.ndarray, candidate: Any, scale: float, labels: Labe
     first, *rest = labels.forbidden_ids
     window = frame[first, y0:y1, x0:x1].astype(np.float64)
     for c in rest:
-        window += frame[c, y0:y1, x0:x1]  # class after class, as context_stats sums them
+        window += frame[c, y0:y1, x0:x1]  # class after class, in float64
     context: list[float] = []
     for k in CONTEXT_SCALES:
         forbidden_p = window[disc(k)]
