@@ -34,9 +34,8 @@ def spec_of(source: Any) -> dict[str, Any]:
 
 
 def _read_frames(source: Any) -> dict[str, Any]:
-    import hashlib
-
     from assurance.dataio.layouts import iter_samples
+    from assurance.fitting.learned_monitor import split_digest
     from el.errors import DataError
     from el.hashing import sha256_file
 
@@ -44,15 +43,16 @@ def _read_frames(source: Any) -> dict[str, Any]:
         samples = list(iter_samples(source, require_labels=False))
     except (DataError, OSError, ValueError) as exc:
         return {"samples": [], "images": [], "sha256": "", "error": str(exc)}
-    root, h, images = Path(source), hashlib.sha256(), []
+    images = []
     for s in samples:
         try:
-            sha = sha256_file(s.image_path)  # bounded: a FIFO, a device or /proc is refused, never read
+            images.append(sha256_file(s.image_path))  # bounded: a FIFO, a device or /proc is refused, never read
         except (OSError, ValueError):
-            sha = ""
-        images.append(sha)
-        h.update(f"{Path(s.image_path).relative_to(root).as_posix()}:{sha}\n".encode())
-    return {"samples": samples, "images": images, "sha256": h.hexdigest() if samples else "", "error": ""}
+            images.append("")
+    root = Path(source)
+    files = zip((Path(s.image_path).relative_to(root).as_posix() for s in samples), images, strict=True)
+    digest = split_digest(files)
+    return {"samples": samples, "images": images, "sha256": digest if samples else "", "error": ""}
 
 
 def frame_metas(samples: list[Any]) -> list[dict[str, Any]]:

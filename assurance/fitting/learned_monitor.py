@@ -21,7 +21,7 @@ from __future__ import annotations
 import datetime as _dt
 import hashlib
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -57,10 +57,16 @@ class CandidateSet:
 
 def split_sha256(samples: Sequence[Sample], root: str | Path, *, labels: bool = True) -> str:
     """SHA-256 over the relative paths and SHA-256 of every image (and label) file of a split."""
+    return split_digest((Path(f).relative_to(root), sha256_file(f)) for s in samples
+                        for f in ((s.image_path, s.label_path) if labels else (s.image_path,)))
+
+
+def split_digest(files: Iterable[tuple[str | Path, str]]) -> str:
+    """The SHA-256 of a split from its files' relative paths and SHA-256 (:func:`split_sha256`, and the report's data
+    record from hashes it already has)."""
     h = hashlib.sha256()
-    for s in samples:
-        for f in (s.image_path, s.label_path) if labels else (s.image_path,):
-            h.update(f"{Path(f).relative_to(root)}:{sha256_file(f)}\n".encode())
+    for rel, sha in files:
+        h.update(f"{rel}:{sha}\n".encode())
     return h.hexdigest()
 
 
