@@ -63,7 +63,7 @@ faults: setup
 	$(PY) -m assurance fault-table --out $(REPORTS)/faults.csv
 
 ## The release evidence (CI's gate): the 70 test scenes x 6 perturbations x the deployed configuration and the
-## paper's 4 headline ones (about 20 min on 2 cores), its requirement tests and report, and the check that the
+## paper's 4 headline ones (about 12 min on 2 cores), its requirement tests and report, and the check that the
 ## README's headline table is this run's (`uav-el table RUN --readme README.md` rewrites it).
 release-evidence: release-campaign
 	$(MAKE) --no-print-directory evidence RUN=$(RELEASE_RUN)

@@ -371,8 +371,13 @@ def undecidable_here(inp: Inputs) -> list[str]:
     if images_per_perturbation(inp) >= decisive_images(inp):
         return []
     failed = {ev.requirement for ev in inp.checks.values() if ev.status == "fail"}  # shown missed at any size
+    return [rid for rid in _limited_by_size(inp) if rid not in failed]
+
+
+def _limited_by_size(inp: Inputs) -> list[str]:
+    """The registry's ``size_limited`` requirements but those no run size decides here (:func:`not_size_limited`)."""
     other = not_size_limited(inp)
-    return [rid for rid in inp.registry.parameters.get("size_limited") or [] if rid not in failed | set(other)]
+    return [rid for rid in inp.registry.parameters.get("size_limited") or [] if rid not in other]
 
 
 def run_scope(inp: Inputs, states: dict[str, str]) -> dict[str, Any] | None:
@@ -381,8 +386,7 @@ def run_scope(inp: Inputs, states: dict[str, str]) -> dict[str, Any] | None:
     n = images_per_perturbation(inp)
     if n >= decisive_images(inp):
         return None
-    other = not_size_limited(inp)
-    limited = set(inp.registry.parameters.get("size_limited") or []) - set(other)
+    other, limited = not_size_limited(inp), set(_limited_by_size(inp))
     undecided = [rid for rid, st in states.items() if st == rq.NOT_VERIFIED and rid in limited]
     p = inp.registry.parameters
     bound, conf = float(p["unsafe_landing_bound"]), float(p["confidence"])
@@ -403,7 +407,7 @@ def _decide_command(inp: Inputs) -> dict[str, str]:
     from assurance.campaign.perturbation_plan import default_plan, system_plan
 
     if inp.system is None or inp.system.default:
-        return {"command": "make release-evidence", "about": "about 25 minutes on 2 cores"}
+        return {"command": "make release-evidence", "about": "about 12 minutes on 2 cores"}
     need = decisive_images(inp)
     planned = [p.name for p in system_plan(inp.system)]
     missing = [p for p in inp.registry.parameters.get("required_perturbations") or [] if p not in planned]
