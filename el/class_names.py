@@ -7,12 +7,14 @@ another one deviates from the basis. Two spellings a reader cannot tell apart mu
 
 - :func:`class_key` is how names are compared: NFKC, case-folded, every run of separators (``_``, ``-``, any dash,
   any space) one space: ``Paved_Area``, ``paved-area`` and ``PAVED AREA`` are one name, ``paved area``;
-- :func:`skeleton` is what a name looks like, after Unicode TS 39 (a small skeleton: NFKD, combining marks and
-  invisible format characters dropped, the common Cyrillic and Greek look-alikes of Latin letters and the digits
-  ``0``/``1`` read as ``o``/``l``, ``rn`` as ``m``, case-folded): the Cyrillic ``rоad`` and ``road`` share one.
+- :func:`skeleton` is what a name looks like, after Unicode TS 39 with ICU's full confusables data
+  (``el.name_profile.skeleton``): the Cyrillic ``rоad`` and ``road`` share one.
 
-:func:`check_class_names` refuses a set holding a class that looks like a well-known name without being it (its
-category would escape the pin), or two classes that look alike (the reader of a report cannot tell which is which).
+:func:`check_class_names` refuses a set holding a class whose name is outside the restricted identifier profile
+(``el.name_profile``: Latin letters of TS 39's recommended set after NFKC, digits, ``-``, ``_``, spaces; so no
+small capitals ``ʀᴏᴀᴅ``, no Cyrillic, Armenian or Cherokee letter, nothing invisible or blank-looking), a class
+that looks like a well-known name without being it (its category would escape the pin), or two classes that look
+alike (the reader of a report cannot tell which is which).
 This module holds data and pure functions: ``el`` and ``assurance`` both read it.
 """
 
@@ -21,6 +23,9 @@ from __future__ import annotations
 import re
 import unicodedata
 from collections.abc import Iterable, Mapping
+
+from el.name_profile import profile_problem
+from el.name_profile import skeleton as name_skeleton
 
 _BY_CATEGORY: dict[str, tuple[str, ...]] = {
     "road": ("road", "street", "paved area", "highway", "motorway", "freeway", "asphalt", "carriageway",
@@ -46,21 +51,6 @@ PINNED_CATEGORIES: Mapping[str, str] = {
 """Well-known class name (as :func:`class_key` writes it; plurals too) -> the hazard category the basis pins."""
 
 _SEPARATORS = re.compile(r"[\s_\-\u2010-\u2015\u2212\u2043\ufe58\ufe63\uff0d]+")
-_LOOKALIKES = str.maketrans({
-    # Cyrillic
-    "а": "a", "в": "b", "е": "e", "ё": "e", "к": "k", "м": "m", "н": "h", "о": "o", "р": "p", "с": "c", "т": "t",
-    "у": "y", "х": "x", "ѕ": "s", "і": "i", "ї": "i", "ј": "j", "ԁ": "d", "ԛ": "q", "ԝ": "w", "һ": "h", "ӏ": "l",
-    "А": "a", "В": "b", "Е": "e", "К": "k", "М": "m", "Н": "h", "О": "o", "Р": "p", "С": "c", "Т": "t", "У": "y",
-    "Х": "x", "Ѕ": "s", "І": "l", "Ј": "j", "Ԁ": "d", "Ԛ": "q", "Ԝ": "w", "Һ": "h", "Ӏ": "l",
-    # Greek
-    "α": "a", "ο": "o", "ρ": "p", "ν": "v", "ι": "i", "κ": "k", "τ": "t", "υ": "u", "χ": "x", "ϲ": "c", "ϳ": "j",
-    "Α": "a", "Β": "b", "Ε": "e", "Η": "h", "Ι": "l", "Κ": "k", "Μ": "m", "Ν": "n", "Ο": "o", "Ρ": "p", "Τ": "t",
-    "Χ": "x", "Υ": "y", "Ζ": "z", "Ϲ": "c",
-    # Latin look-alikes of other Latin letters and digits (TS 39 reads capital I as l)
-    "I": "l", "0": "o", "1": "l", "ı": "i", "ȷ": "j", "ɡ": "g", "ɑ": "a",
-})
-
-
 def class_key(name: str) -> str:
     """How class names are compared: NFKC, case-folded, separators one space, trimmed (``Paved_Area`` ->
     ``paved area``)."""
@@ -68,13 +58,9 @@ def class_key(name: str) -> str:
 
 
 def skeleton(name: str) -> str:
-    """What a name looks like (a small Unicode TS 39 skeleton): two names with one skeleton are confusable."""
-    text = unicodedata.normalize("NFKD", str(name))
-    text = "".join(ch for ch in text if not unicodedata.combining(ch)
-                   and unicodedata.category(ch) not in ("Cf", "Cc", "Mn", "Me"))
-    text = unicodedata.normalize("NFKC", text.translate(_LOOKALIKES)).casefold().translate(_LOOKALIKES)
-    text = _SEPARATORS.sub(" ", text).strip()
-    return text.replace("rn", "m").replace("vv", "w")
+    """What a name looks like (Unicode TS 39 skeleton, ICU's data: ``el.name_profile.skeleton``): two names with one
+    skeleton are confusable."""
+    return name_skeleton(name)
 
 
 def pinned_category(name: str) -> str | None:
@@ -96,8 +82,9 @@ def shown(name: str) -> str:
 
 
 def check_class_names(set_name: str, names: Iterable[str]) -> None:
-    """ValueError naming the label set and the class when a class looks like a well-known name without being it,
-    or two classes look alike (one :func:`class_key` or one :func:`skeleton`)."""
+    """ValueError naming the label set and the class when a class name is outside the restricted identifier profile
+    (``el.name_profile.profile_problem``), looks like a well-known name without being it, or two classes look alike
+    (one :func:`class_key` or one :func:`skeleton`)."""
     seen: dict[str, str] = {}
     for name in names:
         key, sk = class_key(name), skeleton(name)
@@ -107,6 +94,11 @@ def check_class_names(set_name: str, names: Iterable[str]) -> None:
                              f"{known!r} (Unicode TS 39 skeleton {sk!r}) but is not it: refused (its hazard category "
                              f"would escape the basis's pin, {PINNED_CATEGORIES[known]}); call it {known!r} or give "
                              "it a name of its own")
+        why = profile_problem(name)
+        if why is not None:
+            raise ValueError(f"label set {set_name!r}: class {shown(name)} is outside the class-name profile (Unicode "
+                             "TS 39 restricted: Latin letters, digits, '-', '_' and spaces after NFKC; "
+                             f"el.name_profile): {why}; refused, rename it")
         for other in (seen.get(f"key:{key}"), seen.get(f"skeleton:{sk}")):
             if other is not None and other != name:
                 raise ValueError(f"label set {set_name!r}: classes {shown(other)} and {shown(name)} look alike (one "

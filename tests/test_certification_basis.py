@@ -18,28 +18,64 @@ def _road_safe() -> LabelSet:
 
 
 def test_the_packaged_label_sets_declare_every_category_and_keep_the_basis():
-    must = load_registry().parameters["forbidden_categories"]
+    params = load_registry().parameters
+    must, accepted = params["forbidden_categories"], params["safe_unknown_accepted"]
     assert set(must) == {"road", "vehicle", "building", "water"}
     for labels in (UAVID, load_label_set("uavid"), load_label_set("semantic_drone")):
         assert all(c.category for c in labels.classes), labels.name
-        assert label_deviations(labels, must) == []
+        assert [d.name for d in label_deviations(labels, must, accepted) if not d.accepted] == []
     assert load_label_set("uavid") == UAVID  # categories are data about the classes, not a different set
+
+
+def test_uavids_clutter_is_a_deviation_the_basis_itself_accepts_for_that_set_only():
+    """A safe class of the category unknown is a deviation, even declared ``unknown``; the registry accepts UAVid's
+    clutter by the set's content SHA-256, in the open (page 1 lists it), and nothing else."""
+    params = load_registry().parameters
+    must, accepted = params["forbidden_categories"], params["safe_unknown_accepted"]
+    (clutter,) = label_deviations(UAVID, must, accepted)
+    assert clutter.name == "class:clutter" and clutter.accepted and "safe_unknown_accepted" in clutter.text()
+    assert "declared safe with category unknown" in clutter.text()
+    (bare,) = label_deviations(UAVID, must)  # without the registry's entry: not accepted
+    assert not bare.accepted and "--accept-deviation class:clutter=safe" in bare.text()
+    d = UAVID.to_dict()
+    d["name"] = "uavid-copy"  # another set (another content hash) with a class of the same name: not accepted
+    (copy,) = label_deviations(LabelSet.from_dict(d), must, accepted)
+    assert copy.name == "class:clutter" and not copy.accepted
+    assert [x.name for x in deviations({}, labels=UAVID) if not x.accepted] == []
+
+
+def test_a_safe_class_in_a_well_known_forbidden_colour_is_a_deviation():
+    """A safe 'meadow' painted in road's colour while road keeps an unused one: ``colour:meadow``, accepted only at
+    its colour."""
+    d = UAVID.to_dict()
+    next(c for c in d["classes"] if c["name"] == "road")["rgb"] = [1, 2, 3]
+    d["classes"].append({"id": 8, "name": "meadow", "rgb": [128, 64, 128], "forbidden": False, "hazard_score": 0.0,
+                         "category": "vegetation"})
+    found = {x.name: x for x in deviations({}, labels=LabelSet.from_dict(d))}
+    colour = found["colour:meadow"]
+    assert not colour.accepted and "road (uavid)" in colour.system and "paved-area (semantic_drone)" in colour.system
+    assert "--accept-deviation colour:meadow=128,64,128" in colour.text()
+    again = deviations({}, ["colour:meadow=128,64,128", "class:clutter=safe"], labels=LabelSet.from_dict(d))
+    assert all(x.accepted for x in again)
+    assert not next(x for x in deviations({}, ["colour:meadow=1,2,3"], labels=LabelSet.from_dict(d))
+                    if x.name == "colour:meadow").accepted
 
 
 def test_looser_targets_and_a_road_declared_safe_are_deviations():
     found = deviations({"unsafe_landing_bound": 0.999, "confidence": 0.5, "min_images_per_perturbation": 1,
                         "radius_m": 3.0}, labels=_road_safe())
     names = [d.name for d in found]
-    assert names == ["min_images_per_perturbation", "unsafe_landing_bound", "confidence", "class:road"]
+    assert names == ["min_images_per_perturbation", "unsafe_landing_bound", "confidence", "class:clutter", "class:road"]
     text = {d.name: d.text() for d in found}
     assert "0.999" in text["unsafe_landing_bound"] and "0.05" in text["unsafe_landing_bound"]
     assert "not accepted" in text["class:road"] and "--accept-deviation class:road=safe" in text["class:road"]
-    assert deviations({"unsafe_landing_bound": 0.01, "confidence": 0.99}, labels=UAVID) == []  # stricter: none
+    assert [d.name for d in deviations({"unsafe_landing_bound": 0.01, "confidence": 0.99}, labels=UAVID)
+            if not d.accepted] == []  # stricter: none
 
 
 def test_a_deviation_is_accepted_only_by_its_name_and_value():
     found = deviations({"unsafe_landing_bound": 0.1}, ["unsafe_landing_bound=0.1"], labels=UAVID)
-    assert [(d.name, d.accepted) for d in found] == [("unsafe_landing_bound", True)]
+    assert [(d.name, d.accepted) for d in found] == [("unsafe_landing_bound", True), ("class:clutter", True)]
     with pytest.raises(ValueError, match="does not deviate from the basis on it"):
         deviations({}, ["confidence=0.5"], labels=UAVID)
     with pytest.raises(ValueError, match="NAME=VALUE"):  # a plain name binds no value: refused
@@ -50,7 +86,7 @@ def test_a_safe_class_without_a_category_cannot_be_checked():
     d = UAVID.to_dict()
     d["classes"][5].pop("category", None)
     found = label_deviations(LabelSet.from_dict(d), ["road"])
-    assert [x.name for x in found] == ["class:low_vegetation"] and "without one" in found[0].system
+    assert [x.name for x in found] == ["class:clutter", "class:low_vegetation"] and "without one" in found[1].system
 
 
 def test_an_unknown_category_is_refused():

@@ -215,7 +215,7 @@ the command line on top."""
 EL_LAYERS = (
     ("base", ("(root)", "errors", "rgb", "imageheader", "imageio", "userfiles", "hashing", "records", "safeyaml",
               "torch_extra", "deadline", "decision")),
-    ("labels", ("class_names", "label_tables", "labels")),
+    ("labels", ("name_profile", "class_names", "label_tables", "labels")),
     ("geometry", ("camera", "config", "odd", "discs")),
     ("core", ("regions", "representatives", "forbidden", "ranking", "candidates", "core")),
     ("segmentation", ("segmentation",)),

@@ -12,7 +12,13 @@ The label set is part of the basis too. The basis owns the hazard categories of 
 NFKC-normalised and case-folded, a look-alike of one is refused when the set is read); another class takes the
 category it declares, or ``unknown`` when it declares none. A deviation (``class:NAME``) is a class of a category
 the registry's ``forbidden_categories`` lists (road, vehicle, building, water) declared safe, a safe class of
-category ``unknown`` because it declares none, or a class declaring another category than the one its name pins.
+category ``unknown`` (declared so, or declaring none: what the ground is was never said), or a class declaring
+another category than the one its name pins. The basis itself accepts the safe ``unknown`` classes its registry lists
+in ``safe_unknown_accepted`` (each by its label set's content SHA-256: UAVid's clutter), shown on page 1 as such.
+
+Colours are part of what a reader trusts: a safe class painted in the colour a well-known label set (the packaged
+presets: UAVid, Semantic Drone) gives one of its forbidden classes (``colour:NAME``) is a deviation too: label maps
+drawn in that palette would make its road ground this set's safe class.
 """
 
 from __future__ import annotations
@@ -47,6 +53,7 @@ class Deviation:
     value: Any = None
     given: str | None = None
     relation: str = "is looser than"
+    accepted_by: str | None = None  # the basis's own entry that accepts it (``safe_unknown_accepted``), if any
 
     @property
     def bound(self) -> Any:
@@ -60,7 +67,9 @@ class Deviation:
     def text(self) -> str:
         """One line: the parameter, the system's and the basis's values, and its state (for an accepted one, what
         the auditor accepted; for a value that is not the system's, both)."""
-        if self.accepted:
+        if self.accepted_by is not None and self.given is None:
+            state = f"accepted by the certification basis ({self.accepted_by})"
+        elif self.accepted:
             state = f"accepted by the auditor at this value ({self.name}={self.given})"
         elif self.given is not None:
             state = (f"not accepted: the auditor accepted {self.name}={self.given}, but the system's value is "
@@ -71,7 +80,7 @@ class Deviation:
 
     def to_dict(self) -> dict[str, Any]:
         return {"name": self.name, "basis": self.basis, "system": self.system, "accepted": self.accepted,
-                "value": self.bound, "accepted_value": self.given}
+                "value": self.bound, "accepted_value": self.given, "accepted_by": self.accepted_by}
 
 
 def _show(value: Any) -> str:
@@ -139,19 +148,84 @@ def _class_deviation(c: Any, must: set[str]) -> Deviation | None:
     if state == SAFE and pinned is None and declared is None:
         return Deviation(name, f"forbidden (category {UNKNOWN}: a class the basis does not know that declares no "
                                "hazard category, el.label_tables.CATEGORIES)", "declared safe without one", value=state)
+    if state == SAFE and category == UNKNOWN:
+        return Deviation(name, f"forbidden (category {UNKNOWN}: what the ground is, is not said; the basis knows no "
+                               "unknown ground to be safe)", f"declared safe with category {UNKNOWN}", value=state)
     if redeclared:
         return Deviation(name, f"category {pinned} ({why[2:]})", f"{state}, declared category {declared}",
                          value=state, relation="differs from")
     return None
 
 
-def label_deviations(labels: Any, must_forbid: Iterable[str]) -> list[Deviation]:
+def _rgb_text(rgb: Iterable[int]) -> str:
+    return "RGB(" + ", ".join(str(int(v)) for v in rgb) + ")"
+
+
+def well_known_forbidden_colours() -> dict[tuple[int, int, int], list[str]]:
+    """Colour -> ``"CLASS (SET)"`` of every forbidden class of the well-known label sets: the packaged presets
+    (``el.labels.label_presets``: UAVid, Semantic Drone), read with their own checks."""
+    from el.labels import label_presets, load_label_set
+
+    out: dict[tuple[int, int, int], list[str]] = {}
+    for preset in label_presets():
+        labels = load_label_set(preset)
+        for c in labels.classes:
+            if c.forbidden:
+                out.setdefault(tuple(int(v) for v in c.rgb), []).append(f"{c.name} ({labels.name})")
+    return out
+
+
+def colour_deviations(labels: Any, must_forbid: Iterable[str] = ()) -> list[Deviation]:
+    """The safe classes of ``labels`` painted in a colour a well-known label set gives one of its forbidden classes
+    (:func:`well_known_forbidden_colours`), named ``colour:NAME``; the value an auditor accepts is the colour,
+    ``R,G,B``. A class whose category the basis forbids (``must_forbid``) is left out: declared safe, it is already
+    the deviation ``class:NAME``."""
+    known = well_known_forbidden_colours()
+    must = set(must_forbid)
+    found = []
+    for c in labels.classes:
+        rgb = tuple(int(v) for v in c.rgb)
+        if c.forbidden or rgb not in known or class_category(c)[0] in must:
+            continue
+        found.append(Deviation(f"colour:{c.name}", "no safe class in a colour a well-known label set gives a forbidden "
+                               "class", f"safe, painted {_rgb_text(rgb)}, the colour of {', '.join(known[rgb])}",
+                               value=",".join(map(str, rgb)), relation="departs from"))
+    return found
+
+
+def _basis_accepts(labels: Any, accepted: Iterable[str]) -> dict[str, str]:
+    """``{class:NAME: why}`` of the safe ``unknown`` classes of ``labels`` the basis itself accepts: its registry's
+    ``safe_unknown_accepted`` entries ``SHA256:NAME`` naming this set's content SHA-256."""
+    from assurance.campaign.label_pin import label_set_sha256
+
+    entries = [str(e).partition(":") for e in accepted or ()]
+    if not entries:
+        return {}
+    sha = label_set_sha256(labels)
+    return {f"class:{name}": (f"registry parameter safe_unknown_accepted: class {name!r} of the label set "
+                              f"{labels.name!r}, content SHA-256 {sha[:12]}")
+            for digest, _, name in entries if digest == sha}
+
+
+def label_deviations(labels: Any, must_forbid: Iterable[str], accepted_unknown: Iterable[str] = ()) -> list[Deviation]:
     """The classes of ``labels`` that weaken the basis, named ``class:NAME``: declared safe although their hazard
     category is one the basis forbids (``must_forbid``: the registry's ``forbidden_categories``; a well-known
-    name's category is the pinned one, whatever the set declares), declared safe with no category and a name the
-    basis does not know (category ``unknown``), or declaring another category than their name's pinned one."""
+    name's category is the pinned one, whatever the set declares), declared safe with the category ``unknown``
+    (declared, or no category and a name the basis does not know), or declaring another category than their name's
+    pinned one; then the safe classes in a well-known forbidden class's colour (:func:`colour_deviations`).
+    ``accepted_unknown``: the registry's ``safe_unknown_accepted`` (``SHA256:NAME``): a safe ``unknown`` class it
+    names for this very set is a deviation the basis accepts (``accepted_by`` says where)."""
     must = set(must_forbid)
-    return [d for c in labels.classes if (d := _class_deviation(c, must)) is not None]
+    by_basis = _basis_accepts(labels, accepted_unknown)
+    found = []
+    for c in labels.classes:
+        d = _class_deviation(c, must)
+        if d is None:
+            continue
+        if d.name in by_basis and class_category(c)[0] == UNKNOWN and not c.forbidden:
+            d = replace(d, accepted=True, accepted_by=by_basis[d.name])
+        found.append(d)
+    return found + colour_deviations(labels, must)
 
 
 def _offers(accepted: Iterable[str], found: list[Deviation]) -> dict[str, str]:
@@ -201,11 +275,13 @@ def deviations(targets: Mapping[str, Any] | None, accepted: Iterable[str] = (), 
             continue
         found.append(Deviation(name, ref, given))
     if labels is not None:
-        found += label_deviations(labels, basis.parameters.get("forbidden_categories") or ())
+        found += label_deviations(labels, basis.parameters.get("forbidden_categories") or (),
+                                  basis.parameters.get("safe_unknown_accepted") or ())
     offers = _offers(accepted, found)
     return [d if d.name not in offers else
-            replace(d, given=offers[d.name], accepted=value_matches(d.bound, offers[d.name])) for d in found]
+            replace(d, given=offers[d.name],
+                    accepted=value_matches(d.bound, offers[d.name]) or d.accepted_by is not None) for d in found]
 
 
-__all__ = ["FORBIDDEN", "SAFE", "SYSTEM_CHOICES", "Deviation", "class_category", "deviations", "label_deviations",
-           "value_matches", "value_text"]
+__all__ = ["FORBIDDEN", "SAFE", "SYSTEM_CHOICES", "Deviation", "class_category", "colour_deviations", "deviations",
+           "label_deviations", "value_matches", "value_text", "well_known_forbidden_colours"]

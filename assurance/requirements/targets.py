@@ -94,7 +94,7 @@ REQUIRED_TARGETS: tuple[str, ...] = tuple(k for k in TARGETS if k != "calibratio
 """The targets a registry must set (``calibration_card`` may be absent: no card chosen)."""
 
 
-GATE_POLICY = ("size_limited", "waiver_owners", "waiver_max_days", "forbidden_categories")
+GATE_POLICY = ("size_limited", "waiver_owners", "waiver_max_days", "forbidden_categories", "safe_unknown_accepted")
 """Registry parameters that say what the gate accepts: set in the registry (pinned by hash), never as targets."""
 
 

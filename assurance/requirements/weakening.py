@@ -31,6 +31,7 @@ STRONGER: dict[str, str] = {
     "waiver_owners": SUBSET,
     "waiver_max_days": LOWER,
     "forbidden_categories": SUPERSET,
+    "safe_unknown_accepted": SUBSET,
     "deployed_monitor": EQUAL,
     "calibration_card": EQUAL,
 }
