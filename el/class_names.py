@@ -89,12 +89,12 @@ def check_class_names(set_name: str, names: Iterable[str]) -> None:
     for name in names:
         key, sk = class_key(name), skeleton(name)
         known = _KNOWN_SKELETONS.get(sk)
+        why = profile_problem(name)
         if known is not None and key not in PINNED_CATEGORIES:
             raise ValueError(f"label set {set_name!r}: class {shown(name)} looks like the well-known class name "
                              f"{known!r} (Unicode TS 39 skeleton {sk!r}) but is not it: refused (its hazard category "
                              f"would escape the basis's pin, {PINNED_CATEGORIES[known]}); call it {known!r} or give "
-                             "it a name of its own")
-        why = profile_problem(name)
+                             "it a name of its own" + ("" if why is None else f" (and {why})"))
         if why is not None:
             raise ValueError(f"label set {set_name!r}: class {shown(name)} is outside the class-name profile (Unicode "
                              "TS 39 restricted: Latin letters, digits, '-', '_' and spaces after NFKC; "

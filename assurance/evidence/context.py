@@ -244,6 +244,7 @@ def campaign_context(inp: Inputs) -> dict[str, Any]:
         "frame_gates": frame_gate_view() if _ships_gate(man) else None,
         "gallery": perturbation_gallery(scenes, keys[0] if keys else None, gallery_perts),
         "gallery_key": keys[0] if keys else "",
+        "safe_strips": _safe_strips(inp, scenes, keys),
         "examples": (decision_examples(scenes, images, candidates, pick_examples(images, inp.deployed))
                      if len(ok) else []),
         "unsafe": unsafe, "n_unsafe": n_unsafe, "n_unsafe_pictures": len(unsafe),
@@ -254,6 +255,20 @@ def campaign_context(inp: Inputs) -> dict[str, Any]:
         "deployed": inp.deployed, "bound": pct(params["unsafe_landing_bound"]),
         "confidence": rq.confidence_text(params["confidence"]), "ub_label": ub_label(params["confidence"]),
     }
+
+
+def _safe_strips(inp: Inputs, scenes: Any, keys: list[str]) -> dict[str, Any]:
+    """What each safe class of the system's label set covers in the run's own frames (first page:
+    ``assurance.evidence.safe_strips``)."""
+    from assurance.evidence.safe_strips import safe_class_strips
+
+    if inp.system is None:
+        from el.labels import UAVID as labels
+    else:
+        from assurance.system import build as system_build
+
+        labels = system_build.label_set(inp.system)
+    return safe_class_strips(scenes.samples, keys, labels)
 
 
 VALUE_FLAGS = ("-m", "-p", "--rootdir", "--junitxml", "--uav-el-run", "--uav-el-report", "--uav-el-registry",
@@ -468,6 +483,7 @@ def template_context(inp: Inputs, gate: Gate, campaign: dict[str, Any], base: di
         "sample_size": sample_size(inp.table, reg, n_boot),
         "plots": campaign["plots"],
         "gallery": campaign["gallery"], "gallery_key": campaign["gallery_key"],
+        "safe_strips": campaign["safe_strips"],
         "examples": campaign["examples"], "unsafe": campaign["unsafe"], "n_unsafe": campaign["n_unsafe"],
         "n_unsafe_pictures": campaign["n_unsafe_pictures"],
         "scenes_error": campaign["scenes_error"],
