@@ -29,14 +29,21 @@ from el.name_profile import skeleton as name_skeleton
 
 _BY_CATEGORY: dict[str, tuple[str, ...]] = {
     "road": ("road", "street", "paved area", "highway", "motorway", "freeway", "asphalt", "carriageway",
-             "roadway", "avenue", "parking lot", "driveway"),
+             "roadway", "avenue", "parking lot", "driveway",
+             # synonyms and other languages of the review (issue 57); no list is complete: page 1 shows the pixels
+             "lane", "tarmac", "car park", "parking", "parking area", "parking space", "sidewalk", "pavement",
+             "crosswalk", "junction", "roundabout", "straße", "strasse", "rue", "route", "chaussée", "calle",
+             "carretera", "strada", "weg"),
     "vehicle": ("vehicle", "car", "truck", "lorry", "bus", "van", "motorcycle", "motorbike", "bicycle", "bike",
-                "scooter", "tractor", "train", "tram", "static car", "moving car", "parked car"),
-    "building": ("building", "roof", "rooftop", "house", "wall", "window", "door", "garage", "shed", "tower"),
+                "scooter", "tractor", "train", "tram", "static car", "moving car", "parked car",
+                "automobile", "auto", "suv", "pickup", "trailer", "boat", "voiture", "véhicule", "fahrzeug", "coche",
+                "vehículo", "veicolo", "macchina"),
+    "building": ("building", "roof", "rooftop", "house", "wall", "window", "door", "garage", "shed", "tower",
+                 "construction", "structure", "bâtiment", "gebäude", "dach", "toit", "maison", "edificio", "casa"),
     "person": ("person", "human", "pedestrian", "people", "rider", "cyclist", "crowd"),
     "animal": ("animal", "dog", "cat", "horse", "cow", "sheep", "livestock"),
     "water": ("water", "pool", "swimming pool", "river", "lake", "sea", "pond", "ocean", "canal", "stream",
-              "fountain"),
+              "fountain", "eau", "wasser", "agua", "acqua", "rivière", "fluss", "río", "fiume"),
     "obstacle": ("fence", "fence pole", "pole", "obstacle", "power line"),
 }
 
@@ -45,16 +52,19 @@ def _plural(name: str) -> str:
     return name + ("es" if name.endswith(("s", "sh", "ch", "x")) else "s")
 
 
-PINNED_CATEGORIES: Mapping[str, str] = {
-    form: category for category, names in _BY_CATEGORY.items() for name in names for form in (name, _plural(name))
-}
-"""Well-known class name (as :func:`class_key` writes it; plurals too) -> the hazard category the basis pins."""
-
 _SEPARATORS = re.compile(r"[\s_\-\u2010-\u2015\u2212\u2043\ufe58\ufe63\uff0d]+")
+
 def class_key(name: str) -> str:
     """How class names are compared: NFKC, case-folded, separators one space, trimmed (``Paved_Area`` ->
     ``paved area``)."""
     return _SEPARATORS.sub(" ", unicodedata.normalize("NFKC", str(name)).casefold()).strip()
+
+
+PINNED_CATEGORIES: Mapping[str, str] = {
+    class_key(form): category for category, names in _BY_CATEGORY.items() for name in names
+    for form in (name, _plural(name))
+}
+"""Well-known class name (as :func:`class_key` writes it; plurals too) -> the hazard category the basis pins."""
 
 
 def skeleton(name: str) -> str:

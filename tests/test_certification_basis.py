@@ -20,7 +20,7 @@ def _road_safe() -> LabelSet:
 def test_the_packaged_label_sets_declare_every_category_and_keep_the_basis():
     params = load_registry().parameters
     must, accepted = params["forbidden_categories"], params["safe_unknown_accepted"]
-    assert set(must) == {"road", "vehicle", "building", "water"}
+    assert set(must) == {"road", "vehicle", "building", "water", "obstacle"}
     for labels in (UAVID, load_label_set("uavid"), load_label_set("semantic_drone")):
         assert all(c.category for c in labels.classes), labels.name
         assert [d.name for d in label_deviations(labels, must, accepted) if not d.accepted] == []
@@ -113,3 +113,18 @@ def test_the_registry_texts_are_about_the_system_assessed(tmp_path):
     assert "ground below the UAV" in reg.operating_domain["ground"]
     assert "paved-area" in reg["EL-R01"].text and "road, car" not in reg["EL-R10"].text
     assert reg.parameters == shipped.parameters  # the texts change, the targets do not
+
+
+@pytest.mark.parametrize("name,category", [("tarmac", "road"), ("lane", "road"), ("car_park", "road"),
+                                           ("Stra\u00dfe", "road"), ("voiture", "vehicle"), ("automobile", "vehicle"),
+                                           ("b\u00e2timent", "building"), ("wasser", "water"), ("fence", "obstacle"),
+                                           ("power_lines", "obstacle")])
+def test_synonyms_other_languages_and_obstacles_declared_safe_are_deviations(name, category):
+    """Issue 57: the review's synonyms (25 of 37 once flew as safe) carry their pinned category, and an obstacle is
+    no ground known to be safe; declared safe as vegetation, each is a deviation naming the pinned category."""
+    d = UAVID.to_dict()
+    d["classes"].append({"id": 8, "name": name, "rgb": [1, 2, 3], "forbidden": False, "hazard_score": 0.0,
+                         "category": "vegetation"})
+    found = {x.name: x for x in deviations({}, labels=LabelSet.from_dict(d))}
+    dev = found[f"class:{name}"]
+    assert not dev.accepted and f"category {category}, pinned for the name" in dev.text()

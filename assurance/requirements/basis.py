@@ -11,7 +11,7 @@ The label set is part of the basis too. The basis owns the hazard categories of 
 (``el.class_names.PINNED_CATEGORIES``: road, street, paved area, car, building, person, water, ...; compared once
 NFKC-normalised and case-folded, a look-alike of one is refused when the set is read); another class takes the
 category it declares, or ``unknown`` when it declares none. A deviation (``class:NAME``) is a class of a category
-the registry's ``forbidden_categories`` lists (road, vehicle, building, water) declared safe, a safe class of
+the registry's ``forbidden_categories`` lists (road, vehicle, building, water, obstacle) declared safe, a safe class of
 category ``unknown`` (declared so, or declaring none: what the ground is was never said), or a class declaring
 another category than the one its name pins. The basis itself accepts the safe ``unknown`` classes its registry lists
 in ``safe_unknown_accepted`` (each by its label set's content SHA-256: UAVid's clutter), shown on page 1 as such.
