@@ -16,6 +16,12 @@ Whoever wrote such a file may be hostile (an applicant's evidence package is rea
   folder (a symbolic link out of a template folder, which a tar keeps) is refused naming the link and its target.
   The check is made on the path before it is opened and again on what was opened (``/proc/self/fd``), so a link
   swapped in between is caught;
+- that it is no other file under another name: a hard link has no target to resolve, so a template folder holding
+  a hard link to the auditor's signing key passes every check on where it lies (``tarfile.extractall`` makes one
+  from a ``../`` link entry). A file whose content can reach the report as text is refused when it has more than
+  one link (``hard_links=True`` admits one where only hashed or decoded bytes are used: weights, ONNX files), and
+  no file may be one the auditor protected (:func:`protect`: the signing key), by device and inode of the opened
+  descriptor;
 - that its structure is shallow: :func:`check_depth` bounds the nesting of a parsed document without recursion,
   :func:`parse_bounded` turns a parser's ``RecursionError`` into a refusal, and :func:`toml_nesting` measures a
   TOML text's nesting (brackets, braces, dotted keys) before ``tomllib`` sees it (``tomllib`` recurses on
@@ -68,24 +74,59 @@ _KINDS = {stat.S_IFIFO: "a FIFO (named pipe)", stat.S_IFCHR: "a character device
 
 T = TypeVar("T")
 
+_PROTECTED: dict[tuple[int, int], tuple[str, str]] = {}
+"""(device, inode) -> (path, what it is) of the auditor's own files that no supplied path may open
+(:func:`protect`)."""
+
+
+def protect(path: str | Path, what: str = "the auditor's signing key") -> None:
+    """Mark the file at ``path`` (if there is one) as the auditor's own: from now on this process (and children it
+    forks) refuses to read it through any other name or link, judged by device and inode of the opened file. A
+    path that does not exist is skipped (a link to a file that does not exist yet cannot be made)."""
+    try:
+        info = os.stat(path)
+    except OSError:
+        return
+    if stat.S_ISREG(info.st_mode):
+        _PROTECTED[(info.st_dev, info.st_ino)] = (str(path), what)
+
+
+def _protected(info: os.stat_result) -> str | None:
+    """What the auditor's file ``info`` (an fstat) is, None when it is none: a protected path that no longer is
+    that file (removed; its inode may be reused by another) protects nothing any more."""
+    entry = _PROTECTED.get((info.st_dev, info.st_ino))
+    if entry is None:
+        return None
+    try:
+        now = os.stat(entry[0])
+    except OSError:
+        now = None
+    if now is None or (now.st_dev, now.st_ino) != (info.st_dev, info.st_ino):
+        _PROTECTED.pop((info.st_dev, info.st_ino), None)
+        return None
+    return entry[1]
+
 
 class UserFileError(UavElError, ValueError):
     """A user's file refused before or while it is read: one line naming the file and the problem."""
 
 
-def read_bytes(path: str | Path, *, what: str, max_bytes: int, within: str | Path | None = None) -> bytes:
+def read_bytes(path: str | Path, *, what: str, max_bytes: int, within: str | Path | None = None,
+               hard_links: bool = False, own: bool = False) -> bytes:
     """The bytes of the regular file ``path`` (a ``what``, e.g. "waivers file": how messages name it), at most
     ``max_bytes`` of them.
 
     Refused (``UserFileError``) without blocking and before any read: a path that is missing or cannot be
     opened, anything but a regular file (a FIFO, a device, a socket, a folder; a symbolic link is followed and
     judged by what it points at), a path resolving under ``/proc``, ``/sys`` or ``/dev`` (:data:`KERNEL_ROOTS`),
-    with ``within`` a path resolving outside that folder (:func:`check_path`), a file over ``max_bytes``. A file
-    that grows past the cap while read is refused too: at most ``max_bytes + 1`` bytes are ever read.
+    with ``within`` a path resolving outside that folder (:func:`check_path`), a file over ``max_bytes``, a file
+    with more than one link unless ``hard_links``, a file the auditor protected (:func:`protect`) unless ``own``
+    (the auditor reading their own key). A file that grows past the cap while read is refused too: at most
+    ``max_bytes + 1`` bytes are ever read.
     """
     p = Path(path)
     try:
-        fd = _open_regular(p, what, within)
+        fd = _open_regular(p, what, within, hard_links=hard_links, own=own)
     except OSError as exc:
         raise _os_refusal(p, what, exc) from None
     try:
@@ -104,12 +145,13 @@ def sha256(path: str | Path, *, what: str = "file", max_bytes: int = MAX_HASHED_
            within: str | Path | None = None, chunk: int = 1 << 22) -> str:
     """Hex SHA-256 of the regular file ``path``, read in chunks of ``chunk`` bytes (memory stays constant), refused
     as :func:`read_bytes` refuses (a FIFO, a device, ``/proc``, ``/sys``, ``/dev``, outside ``within``, over
-    ``max_bytes``, also while read). A missing or unopenable file raises the ``OSError`` itself
-    (``FileNotFoundError``: as ``open`` would), so callers that handle those keep working."""
+    ``max_bytes``, also while read, a protected file) but for hard links: only the hash leaves here, so a
+    deduplicated data set or model store is hashed as it is. A missing or unopenable file raises the ``OSError``
+    itself (``FileNotFoundError``: as ``open`` would), so callers that handle those keep working."""
     import hashlib
 
     p = Path(path)
-    fd = _open_regular(p, what, within)
+    fd = _open_regular(p, what, within, hard_links=True)
     try:
         _check_size(p, os.fstat(fd), max_bytes, what)
         h, seen = hashlib.sha256(), 0
@@ -135,16 +177,21 @@ def _os_refusal(p: Path, what: str, exc: OSError) -> UserFileError:
     return UserFileError(f"{p}: cannot read {what}: {exc.strerror or exc}")
 
 
-def _open_regular(p: Path, what: str, within: str | Path | None) -> int:
+def _open_regular(p: Path, what: str, within: str | Path | None, *, hard_links: bool = False,
+                  own: bool = False) -> int:
     """A read-only descriptor of the regular file ``p``, checked before it is opened (``stat``: a device is not
     even opened, as opening one may act on it; where it resolves: :func:`check_path`) and after (``fstat`` and the
-    path of what was opened, if the path changed meanwhile). ``OSError`` as raised; refusals as UserFileError."""
+    path of what was opened, if the path changed meanwhile; its links and identity: :func:`_check_identity`).
+    ``OSError`` as raised; refusals as UserFileError."""
     flags = os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_NOCTTY", 0) | getattr(os, "O_CLOEXEC", 0)
     _check_regular(p, os.stat(p), what)
     check_path(p, what=what, within=within)
     fd = os.open(p, flags)
     try:
-        _check_regular(p, os.fstat(fd), what)  # what was opened, if the path changed since the stat
+        info = os.fstat(fd)
+        _check_regular(p, info, what)  # what was opened, if the path changed since the stat
+        if not own:
+            _check_identity(p, info, what, hard_links)
         opened = _fd_path(fd)
         if opened is not None:  # where what was opened lies (a link swapped in after the check above)
             _check_location(p, Path(opened), what, within)
@@ -152,6 +199,20 @@ def _open_regular(p: Path, what: str, within: str | Path | None) -> int:
         os.close(fd)
         raise
     return fd
+
+
+def _check_identity(p: Path, info: os.stat_result, what: str, hard_links: bool) -> None:
+    """Refuse the opened file ``p`` (``info``: its fstat) when it is one the auditor protected (:func:`protect`),
+    whatever name or link reached it, or, unless ``hard_links``, when it has more than one link: a hard link has no
+    target to resolve, so no check of where a path lies can see that it is another file's second name."""
+    mine = _protected(info)
+    if mine is not None:
+        raise UserFileError(f"{p}: is {mine} under another name (a hard link to it, or its own path): a {what} may "
+                            "never be the auditor's own file")
+    if not hard_links and info.st_nlink > 1:
+        raise UserFileError(f"{p}: a file with {info.st_nlink} links (a hard link): a {what} must have one, as a "
+                            "hard link may be another file's second name (copy it instead: cp FILE NEW && mv NEW "
+                            "FILE)")
 
 
 def _fd_path(fd: int) -> str | None:
@@ -237,7 +298,7 @@ def _read_at_most(fd: int, limit: int) -> bytes:
 def read_text(path: str | Path, *, what: str, max_bytes: int, encoding: str = "utf-8",
               within: str | Path | None = None) -> str:
     """:func:`read_bytes`, decoded (``encoding``; ``utf-8-sig`` drops a byte-order mark); text that does not
-    decode is refused naming the byte."""
+    decode is refused naming the byte. Text reaches the report: a hard link is refused."""
     data = read_bytes(path, what=what, max_bytes=max_bytes, within=within)
     try:
         return data.decode(encoding)

@@ -22,11 +22,11 @@ from cryptography.hazmat.primitives import serialization
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey, Ed25519PublicKey
 
 from assurance.attest.dsse import AttestationError
+from assurance.attest.key_paths import KEY_ENV, default_key_path
 from el import userfiles
 
 log = logging.getLogger(__name__)
 
-KEY_ENV = "UAV_EL_SIGNING_KEY"
 TRUSTED_ENV = "UAV_EL_TRUSTED_KEYS"
 _PEM_BLOCK = re.compile(rb"-----BEGIN PUBLIC KEY-----.+?-----END PUBLIC KEY-----", re.S)
 MAX_KEY_FILE_BYTES = 1024 * 1024
@@ -60,12 +60,6 @@ class SigningKey:
         return fingerprint(self.public)
 
 
-def default_key_path() -> Path:
-    """The user's key file: ``$XDG_CONFIG_HOME/uav-el/signing-key.pem`` (``~/.config`` without it)."""
-    base = os.environ.get("XDG_CONFIG_HOME") or str(Path.home() / ".config")
-    return Path(base) / "uav-el" / "signing-key.pem"
-
-
 def _private_from_pem(data: bytes, where: str) -> Ed25519PrivateKey:
     try:
         key = serialization.load_pem_private_key(data, password=None)
@@ -76,13 +70,14 @@ def _private_from_pem(data: bytes, where: str) -> Ed25519PrivateKey:
     return key
 
 
-def _read_small(path: Path, what: str) -> bytes:
+def _read_small(path: Path, what: str, *, own: bool = False) -> bytes:
     """A key file's bytes through ``el.userfiles`` (a regular file of at most ``MAX_KEY_FILE_BYTES``: a FIFO or a
-    device refused before any read); AttestationError naming the file."""
+    device refused before any read); AttestationError naming the file. ``own``: the auditor's signing key itself
+    (protected against every other reader, and may be a hard link)."""
     if not path.exists() and not path.is_symlink():
         raise AttestationError(f"{path}: {what} not found")
     try:
-        return userfiles.read_bytes(path, what=what, max_bytes=MAX_KEY_FILE_BYTES)
+        return userfiles.read_bytes(path, what=what, max_bytes=MAX_KEY_FILE_BYTES, hard_links=own, own=own)
     except userfiles.UserFileError as exc:
         raise AttestationError(str(exc)) from None
 
@@ -108,6 +103,7 @@ def create_key(path: Path) -> SigningKey:
     fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
     with os.fdopen(fd, "wb") as f:
         f.write(pem)
+    userfiles.protect(path)
     return SigningKey(key, str(path))
 
 
@@ -132,7 +128,8 @@ def load_signing_key(path: str | Path | None = None, *, create: bool = True,
                     "your evidence: uav-el keys --public", p, made.keyid[:16])
         return made
     check_private_mode(p)
-    return SigningKey(_private_from_pem(_read_small(p, "signing key"), str(p)), str(p))
+    userfiles.protect(p)  # no supplied file may read it under another name from now on
+    return SigningKey(_private_from_pem(_read_small(p, "signing key", own=True), str(p)), str(p))
 
 
 def _publics_from_pem(data: bytes, where: str) -> list[Ed25519PublicKey]:

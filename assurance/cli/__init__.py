@@ -22,6 +22,7 @@ import sys
 from collections.abc import Iterator, Sequence
 
 from assurance import __version__
+from assurance.attest.key_paths import protect_signing_keys
 from assurance.errors import CommandError, DamagedRunError
 from el.errors import DataError, LabelColourError
 
@@ -38,6 +39,7 @@ COMMANDS: dict[str, str] = {
     "calibrate": "calibrate",
     "fit-monitor": "fit_monitor",
     "fit-gate": "fit_gate",
+    "fit-verifier": "fit_verifier",
     "table": "table",
     "sweep": "sweep",
     "benchmark": "benchmark",
@@ -60,6 +62,7 @@ SUMMARIES: dict[str, str] = {
     "calibrate": "calibrate a monitor's threshold on held-out scenes with a stated guarantee",
     "fit-monitor": "train the learned candidate monitor on a split, select it on --val",
     "fit-gate": "fit the frame gate on training scenes, threshold it on validation scenes",
+    "fit-verifier": "train the candidate verifier (a CNN on the candidates' pixels) on a split, select it on --val",
     "table": "print and write the results table of a campaign run",
     "sweep": "replay a campaign at every threshold of its monitors (--choose picks one)",
     "benchmark": "compare monitors at each threshold criterion; Friedman test, Nemenyi CD diagram",
@@ -73,8 +76,8 @@ SUMMARIES: dict[str, str] = {
 module, and what it needs, is imported only when that command runs or shows its own help)."""
 
 # Commands that decide, evaluate or report: they take --system FILE (else ./uav-el.toml, else the embedded default).
-SYSTEM_COMMANDS = ("preview", "land", "campaign", "calibrate", "fit-monitor", "fit-gate", "benchmark", "verify",
-                   "evidence", "in-service")
+SYSTEM_COMMANDS = ("preview", "land", "campaign", "calibrate", "fit-monitor", "fit-gate", "fit-verifier", "benchmark",
+                   "verify", "evidence", "in-service")
 WRITES: dict[str, tuple[str, ...]] = {"fit-gate": ("monitor.gate",), "calibrate": ("monitor.calibration",)}
 """System-file keys naming a file the command writes: it need not be there yet (the gate ``uav-el fit-gate`` fits)."""
 SYSTEM_HELP = ("the system under assessment (uav-el.toml: model, camera, poses, labels, safety, monitor, data, "
@@ -249,6 +252,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     configure_logging(args)
 
     try:
+        # before any supplied file is read: none may be the auditor's signing key under another name (a hard link)
+        protect_signing_keys([args.signing_key] if getattr(args, "signing_key", None) else [])
         if args.command in SYSTEM_COMMANDS:
             from assurance.system import find_system
 

@@ -148,8 +148,10 @@ def _render(env: Any, name: str, context: Mapping[str, Any]) -> str:
         where, line = _template_line(exc)
         raise TemplateError(f"{where}:{line if line is not None else '?'}: report template refused: it reaches "
                             f"outside what a template may use ({exc})") from None
-    except (JinjaError, TypeError, ValueError, AttributeError, KeyError, OverflowError) as exc:
-        where, line = _template_line(exc)
+    except (MemoryError, RecursionError):  # the bounded child names the limit
+        raise
+    except (JinjaError, ArithmeticError, LookupError, TypeError, ValueError, AttributeError, RuntimeError) as exc:
+        where, line = _template_line(exc)  # {{ 1 // 0 }}, a missing key, a bad filter argument: the file's fault
         raise TemplateError(f"{where}:{line if line is not None else '?'}: report template fails to render: "
                             f"{type(exc).__name__}: {exc}") from None
 
@@ -179,26 +181,29 @@ def _unused_files(folder: Path) -> list[str]:
     return names
 
 
-def _render_supplied(folder: Path, name: str, context: Mapping[str, Any], seconds: float | None
-                     ) -> tuple[str, dict[str, str]]:
-    """One supplied template rendered in a bounded child (:mod:`assurance.evidence.bounded`): its markup and the
-    files it read (path relative to the folder -> SHA-256)."""
+def _render_supplied(folder: Path, name: str, context: Mapping[str, Any], seconds: float | None,
+                     own_ids: Sequence[str]) -> tuple[str, dict[str, str]]:
+    """One supplied template rendered and cleaned in a bounded child (:mod:`assurance.evidence.bounded`;
+    :func:`assurance.evidence.sanitise.bounded_clean`, ``own_ids`` its sections' anchors): its clean markup and
+    the files it read (path relative to the folder -> SHA-256)."""
     from assurance.evidence import bounded
+    from assurance.evidence.sanitise import bounded_clean
 
     def work() -> tuple[str, dict[str, str]]:
         env = environment(folder)
         try:
             html = _render(env, name, context)
+            # cleaned here, under the same limits: the parent only places markup that is small, shallow and clean
+            clean = bounded_clean(html, own_ids, where=str(folder / name), max_chars=MAX_SECTION_CHARS)
         except MemoryError:
             raise TemplateError(f"{folder / name}: report template refused: it needs more than the memory "
                                 "limit") from None
         except RecursionError:
             raise TemplateError(f"{folder / name}: report template refused: it recurses without end (a template "
                                 "including itself?)") from None
-        if len(html) > MAX_SECTION_CHARS:
-            raise TemplateError(f"{folder / name}: report template refused: it renders {len(html):,} characters, "
-                                f"more than {MAX_SECTION_CHARS:,}")
-        return html, dict(env.loader.reads)
+        except ValueError as exc:
+            raise TemplateError(str(exc)) from None
+        return clean, dict(env.loader.reads)
 
     try:
         return bounded.run_bounded(work, what=f"{folder / name}: report template", seconds=seconds or bounded.SECONDS,
@@ -207,8 +212,9 @@ def _render_supplied(folder: Path, name: str, context: Mapping[str, Any], second
         raise TemplateError(str(exc)) from None
 
 
-MAX_SECTION_CHARS = 64 << 20
-"""A supplied section's rendered markup (the packaged gallery, images inline, is a few MB)."""
+MAX_SECTION_CHARS = 1 << 20
+"""A supplied section's rendered markup: a section of an evidence report is kilobytes of text (1 MiB holds a
+few small images inline; 48 MB of markup took the parent's sanitiser and PDF layout 400 s and 3.3 GB)."""
 
 
 def _folder_digest(reads: Mapping[str, str]) -> str:
@@ -227,8 +233,9 @@ def render_report(context: Mapping[str, Any], templates: str | Path | None = Non
     packaged templates only). The shell (doctype, head, Content-Security-Policy, stylesheet, first page, table of
     contents, section order, script) is the packaged ``report.html.j2``, rendered by the toolkit; a supplied folder
     replaces section templates only (``outline.SECTIONS``), each rendered in a bounded child and cleaned as an HTML
-    fragment (:func:`assurance.evidence.sanitise.clean_fragment`) before it is put in the page (``seconds``: the
-    wall-time limit of each, default ``bounded.SECONDS``). TemplateError
+    fragment in that child (:func:`assurance.evidence.sanitise.bounded_clean`: size, element and depth caps)
+    before it is put in the page (``seconds``: the wall-time limit of each, default ``bounded.SECONDS``).
+    TemplateError
     naming the file (and line) of a broken, unsafe, endless or oversized template."""
     import os
 
@@ -237,7 +244,6 @@ def render_report(context: Mapping[str, Any], templates: str | Path | None = Non
     from assurance.evidence.linking import CSP, SCRIPT, link_ids, script_hash
     from assurance.evidence.navigation import req_anchor
     from assurance.evidence.outline import SECTIONS, outline
-    from assurance.evidence.sanitise import clean_fragment
 
     context = {**outline(context), **context}  # the sections of the registry, unless the caller lists its own
     folder = _supplied_folder(templates)
@@ -248,9 +254,8 @@ def render_report(context: Mapping[str, Any], templates: str | Path | None = Non
         for name in context["section_templates"]:
             if name in SHELL_FILES or not os.path.lexists(folder / name):
                 continue
-            html, read = _render_supplied(folder, name, context, seconds)
-            own = {s.id for s in SECTIONS if s.template == name and s.id in shown}
-            supplied[name] = clean_fragment(html, own)
+            own = sorted(s.id for s in SECTIONS if s.template == name and s.id in shown)
+            supplied[name], read = _render_supplied(folder, name, context, seconds, own)
             reads.update(read)
     about = None
     if folder is not None:
@@ -319,10 +324,18 @@ def _fetcher(served: Sequence[Path]) -> Any:
     return fetcher
 
 
-def write_pdf(html: str, path: Path, attachments: Sequence[Path] = (), served: Sequence[Path] = ()) -> str | None:
+PDF_SECONDS = 300.0
+"""Wall-time limit of the PDF layout of a report holding supplied sections (in a bounded child, with
+``bounded.MEMORY_BYTES`` more memory): the packaged release report lays out in about a minute on 2 cores."""
+
+
+def write_pdf(html: str, path: Path, attachments: Sequence[Path] = (), served: Sequence[Path] = (),
+              bounded: str | None = None) -> str | None:
     """Write the PDF/A-3b of ``html`` (WeasyPrint) with ``attachments`` embedded; returns None, or why no
     PDF was written. The renderer reads nothing but ``data:`` URIs and the ``served`` files:
-    RefusedResourceError (no PDF) naming the first URL the HTML asked for beyond them."""
+    RefusedResourceError (no PDF) naming the first URL the HTML asked for beyond them. ``bounded``: the supplied
+    template folder whose sections the page holds: the layout then runs in a bounded child
+    (:data:`PDF_SECONDS`, ``bounded.MEMORY_BYTES``), and one that exceeds them is a TemplateError naming it."""
     try:
         with warnings.catch_warnings():  # e.g. "HarfBuzz-Subset will be required by future versions"
             warnings.simplefilter("ignore", DeprecationWarning)
@@ -331,22 +344,37 @@ def write_pdf(html: str, path: Path, attachments: Sequence[Path] = (), served: S
         return f"PDF not written: WeasyPrint cannot be loaded ({type(exc).__name__}: {exc}); {PDF_HINT}"
     from weasyprint import Attachment
 
+    from assurance.evidence import bounded as limits
+
     tmp = path.with_name(f".{path.name}.tmp")
-    fetcher = _fetcher(served)
-    try:
+
+    def layout() -> list[str]:
+        fetcher = _fetcher(served)
         files = [Attachment(filename=str(a), name=a.name, description=f"{a.name} of this evidence report",
                             relationship="Data" if a.suffix in (".json", ".csv", ".xml") else "Supplement")
                  for a in attachments if a.is_file()]
         HTML(string=html, base_url=str(path.parent), url_fetcher=fetcher).write_pdf(
             str(tmp), pdf_variant=PDF_VARIANT, attachments=files)
-        if fetcher.refused:
+        return list(fetcher.refused)
+
+    try:
+        if bounded is None:
+            refused = layout()
+        else:
+            try:
+                refused = limits.run_bounded(layout, what=f"{bounded}: the PDF layout of its sections",
+                                             seconds=PDF_SECONDS, memory_bytes=limits.MEMORY_BYTES)
+            except limits.BoundedRenderError as exc:
+                raise TemplateError(f"{exc}; report refused") from None
+        if refused:
             tmp.unlink(missing_ok=True)
-            more = f" (and {len(fetcher.refused) - 1} more)" if len(fetcher.refused) > 1 else ""
+            more = f" (and {len(refused) - 1} more)" if len(refused) > 1 else ""
             raise RefusedResourceError(f"{path}: PDF not written: the report asks the renderer for "
-                                       f"{fetcher.refused[0]}{more}, which it refuses: a report reads only data: "
+                                       f"{refused[0]}{more}, which it refuses: a report reads only data: "
                                        "URIs and its own files")
         tmp.replace(path)
-    except RefusedResourceError:
+    except TemplateError:
+        tmp.unlink(missing_ok=True)
         raise
     except Exception as exc:
         tmp.unlink(missing_ok=True)

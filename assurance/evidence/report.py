@@ -26,7 +26,6 @@ from assurance.evidence.matrix import TRACE_COLUMNS, traceability_rows
 from assurance.evidence.navigation import anchor, req_anchor
 from assurance.evidence.render import (
     FAULTS_CSV,
-    RefusedResourceError,
     TemplateError,
     rel,
     render_report,
@@ -56,32 +55,44 @@ class _Files:
         return (self.html, self.pdf, self.json, self.csv, self.trace, self.junit, self.faults, self.argument,
                 self.issre)
 
+    def written(self) -> tuple[Path, ...]:
+        """The files this command writes (not ``junit.xml`` and ``faults.csv``, which ``verify`` and ``fault-table``
+        leave there): removed together when the report is refused, so none is left that could pass for this run's."""
+        return (self.html, self.pdf, self.json, self.sums, self.csv, self.trace, self.argument, self.issre)
+
     def attachments(self, faults: bool) -> list[Path]:
         """The files the PDF embeds."""
         return [self.json, self.csv, self.trace, self.junit, self.sums, self.argument, self.issre] + (
             [self.faults] if faults else [])
 
 
-def _write_pdf(html: str, files: _Files, faults: bool) -> str | None:
+def _write_pdf(html: str, files: _Files, faults: bool, bounded: str | None = None) -> str | None:
     """The report's PDF (None, or why none was written); one that asks for a resource beyond the report's own
-    files takes the whole report with it (RefusedResourceError)."""
+    files, or (``bounded``: the supplied template folder whose markup it lays out) one whose layout exceeds the
+    limits of supplied content, takes the whole report with it (a ``TemplateError``)."""
     try:
-        return write_pdf(html, files.pdf, files.attachments(faults), served=files.attachments(faults))
-    except RefusedResourceError:
-        for f in (files.html, files.json, files.sums):  # no report whose PDF could not be made as it says
-            f.unlink(missing_ok=True)
+        return write_pdf(html, files.pdf, files.attachments(faults), served=files.attachments(faults),
+                         bounded=bounded)
+    except TemplateError:  # RefusedResourceError, or the bounded layout refused
+        _remove(files)
         raise
+
+
+def _remove(files: _Files) -> None:
+    """Remove every file this command writes (no report whose making was refused is left in --out)."""
+    for f in files.written():
+        f.unlink(missing_ok=True)
 
 
 def _render_page(context: dict[str, Any], templates: Path | None, files: _Files, seconds: float | None
                  ) -> tuple[str, dict[str, Any] | None]:
     """The report's HTML and what supplied templates contributed (``render_report``); a refused template removes
-    any earlier report from the folder (none is left that could pass for this run's) before it is raised."""
+    every file of the report from the folder (this run's tables and any earlier report: none is left that could
+    pass for this run's) before it is raised."""
     try:
         return render_report(context, templates, seconds=seconds)
     except TemplateError:
-        for f in (files.html, files.pdf, files.json, files.sums):
-            f.unlink(missing_ok=True)
+        _remove(files)
         raise
 
 
@@ -269,7 +280,7 @@ def generate(
 
     exit_code = finish(pdf_error)  # the JSON says the PDF will be there; rewritten if it could not be
     if pdf:
-        pdf_error = _write_pdf(html, files, faults)
+        pdf_error = _write_pdf(html, files, faults, bounded=supplied["folder"] if supplied else None)
         exit_code = finish(pdf_error)
     return EvidenceReport(out=out, html=files.html, json=files.json, pdf=None if pdf_error else files.pdf,
                           pdf_error=pdf_error, states=gate.states, exit_code=exit_code, problems=inp.problems,

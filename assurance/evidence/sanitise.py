@@ -87,4 +87,55 @@ def clean_fragment(markup: str, own_ids: Collection[str] = ()) -> str:
                      url_schemes={"data"})
 
 
-__all__ = ["ATTRIBUTES", "CLASSES", "SUPPLIED_ID_PREFIX", "TAGS", "clean_fragment"]
+MAX_ELEMENTS = 20_000
+"""Elements a supplied section may hold (counted as tags opened, before it is cleaned): the packaged traceability
+matrix, the largest section, has a few thousand; 60 000 nested ones took the PDF renderer minutes and a GB."""
+MAX_DEPTH = 48
+"""How deeply the elements of a cleaned supplied section may nest (the packaged sections nest under 12 deep; the
+PDF renderer recurses on nesting)."""
+
+_OPEN_TAG = re.compile(r"<[A-Za-z]")
+_TAG = re.compile(r"<(/?)([a-z][a-z0-9]*)\b[^>]*>")
+VOID = frozenset({"br", "hr", "img", "area", "base", "col", "embed", "input", "link", "meta", "source", "track",
+                  "wbr"})
+
+
+def element_count(markup: str) -> int:
+    """Tags opened in ``markup`` (an upper bound of its elements, counted without parsing it: linear time)."""
+    return sum(1 for _ in _OPEN_TAG.finditer(markup))
+
+
+def nesting_depth(clean: str) -> int:
+    """How deeply the elements of ``clean`` (well-formed markup, as :func:`clean_fragment` writes it) nest; linear
+    time, no recursion."""
+    depth = deepest = 0
+    for m in _TAG.finditer(clean):
+        closing, tag = m.group(1), m.group(2)
+        if tag in VOID:
+            continue
+        depth = max(depth - 1, 0) if closing else depth + 1
+        deepest = max(deepest, depth)
+    return deepest
+
+
+def bounded_clean(markup: str, own_ids: Collection[str] = (), *, where: str, max_chars: int) -> str:
+    """:func:`clean_fragment` of a supplied section's markup within the bounds of one: at most ``max_chars``
+    characters, :data:`MAX_ELEMENTS` elements before cleaning, :data:`MAX_DEPTH` levels after. ``ValueError``
+    naming ``where`` (the template) and the limit it exceeds."""
+    if len(markup) > max_chars:
+        raise ValueError(f"{where}: report template refused: it renders {len(markup):,} characters, more than the "
+                         f"{max_chars:,} a section may hold")
+    n = element_count(markup)
+    if n > MAX_ELEMENTS:
+        raise ValueError(f"{where}: report template refused: it renders {n:,} elements, more than the "
+                         f"{MAX_ELEMENTS:,} a section may hold")
+    clean = clean_fragment(markup, own_ids)
+    depth = nesting_depth(clean)
+    if depth > MAX_DEPTH:
+        raise ValueError(f"{where}: report template refused: its elements nest {depth} deep, more than the "
+                         f"{MAX_DEPTH} levels a section may")
+    return clean
+
+
+__all__ = ["ATTRIBUTES", "CLASSES", "MAX_DEPTH", "MAX_ELEMENTS", "SUPPLIED_ID_PREFIX", "TAGS", "bounded_clean",
+           "clean_fragment", "element_count", "nesting_depth"]

@@ -1,4 +1,4 @@
-"""Fault-injection cases of the report's shell (rows ``T1``..``T4``, ``T25``..``T29``, ``T50``..``T54``): what a
+"""Fault-injection cases of the report's shell (rows ``T1``..``T4``, ``T25``..``T29``, ``T50``..``T59``): what a
 hostile applicant's template folder does to the document the auditor reads.
 
 The shell (head, Content-Security-Policy, stylesheet, first page, section order) is the toolkit's; a supplied folder
@@ -191,6 +191,63 @@ def _system_file_templates(ws: Path) -> list[str]:
     return _evidence(ws, "sysfile", None, "--no-pdf", "--system", str(system))
 
 
+def _key_linked(ws: Path) -> list[str]:
+    """A template folder holding a hard link to the auditor's signing key (the default key file, which signed the
+    workspace's run) as ``notes.txt``, and a section including it: what ``tarfile.extractall`` makes of a ``../``
+    link entry. Where the key lies on another file system, the link is to a copy of it in the workspace."""
+    import os
+    import shutil
+
+    from assurance.attest.key_paths import default_key_path
+
+    folder = _folder(ws, "hardlink", _section('<pre>{% include "notes.txt" %}</pre>'))
+    (folder / "notes.txt").unlink(missing_ok=True)
+    key = default_key_path()
+    try:
+        os.link(key, folder / "notes.txt")
+    except OSError:
+        copy = ws / "auditor-key-copy.pem"
+        shutil.copyfile(key, copy)
+        os.link(copy, folder / "notes.txt")
+    return _evidence(ws, "hardlink", folder, "--no-pdf")
+
+
+def _key_not_shown(ws: Path) -> str | None:
+    """No report, and no line of the key anywhere in --out; the link removed (the key has one link again)."""
+    from assurance.attest.key_paths import default_key_path
+
+    (ws / "templates-hardlink" / "notes.txt").unlink(missing_ok=True)
+    secret = default_key_path().read_text("ascii").splitlines()[1]
+    out = ws / "rep-hardlink"
+    if any(secret in f.read_text("utf-8", "replace") for f in out.glob("*") if f.is_file()):
+        return "the key is in --out"
+    return _no_report("hardlink")(ws)
+
+
+def _markup_bomb(name: str, body: str) -> Callable[[Path], list[str]]:
+    def make(ws: Path) -> list[str]:
+        return _evidence(ws, name, _folder(ws, name, _section(body)))
+
+    return make
+
+
+def _runtime_error(ws: Path) -> list[str]:
+    """A section dividing by zero, an earlier report's tables in --out."""
+    out = ws / "rep-divide"
+    out.mkdir(exist_ok=True)
+    for name in ("results.csv", "issre.csv", "argument.gsn.yaml"):
+        (out / name).write_text("an earlier report's", "utf-8")
+    return _evidence(ws, "divide", _folder(ws, "divide", _section("<p>{{ 1 // 0 }}</p>")), "--no-pdf")
+
+
+def _nothing_left(name: str) -> Callable[[Path], str | None]:
+    def check(ws: Path) -> str | None:
+        left = sorted(f.name for f in (ws / f"rep-{name}").glob("*"))
+        return f"{left[0]} left in --out" if left else None
+
+    return check
+
+
 def _no_templates_used(name: str) -> Callable[[Path], str | None]:
     says = _report_says_gate(name, absent=("Gate: PASSED",))
 
@@ -235,6 +292,19 @@ REPORT_CASES: tuple[Case, ...] = (
          2, "report template refused", check=_no_report("earlier")),
     Case("T54-system-file-templates", "a system file naming [report] templates (comment trick), evidence without "
          "--templates", _system_file_templates, 1, _GATE, "gate:", _no_templates_used("sysfile")),
+    Case("T55-template-hard-link-to-key", "a template folder holding a hard link to the auditor's signing key, "
+         "included by a section", _key_linked, 2, "hard link", check=_key_not_shown),
+    Case("T56-template-50-mb", "a three-line section rendering 50 MB of markup",
+         _markup_bomb("50mb", "{% for i in range(700) %}{% for j in range(1000) %}<b>" + "x" * 64 +
+                      "</b>{% endfor %}{% endfor %}"), 2, "characters, more than", check=_nothing_left("50mb")),
+    Case("T57-template-60000-nested", "a 200-byte section opening 60 000 nested elements",
+         _markup_bomb("nested", "{% for i in range(60000) %}<div>{% endfor %}x"), 2, "elements, more than",
+         check=_nothing_left("nested")),
+    Case("T58-template-nests-deep", "a section nesting 200 elements deep (under the element cap)",
+         _markup_bomb("deep", "{% for i in range(200) %}<div><span>{% endfor %}x"), 2, "deep, more than",
+         check=_nothing_left("deep")),
+    Case("T59-template-runtime-error", "a section computing {{ 1 // 0 }}, an earlier report's tables in --out",
+         _runtime_error, 2, "ZeroDivisionError", check=_nothing_left("divide")),
 )
 """The rows, in table order."""
 

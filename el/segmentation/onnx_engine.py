@@ -96,7 +96,7 @@ def read_onnx(path: str | Path) -> OnnxFile:
     from el import userfiles
 
     try:  # bounded: never under /proc, /sys or /dev, at most MAX_MODEL_BYTES
-        data = userfiles.read_bytes(p, what="ONNX file", max_bytes=userfiles.MAX_MODEL_BYTES)
+        data = userfiles.read_bytes(p, what="ONNX file", max_bytes=userfiles.MAX_MODEL_BYTES, hard_links=True)
     except userfiles.UserFileError as exc:
         raise WeightsError(str(exc)) from None
     digest = sha256_bytes(data)
@@ -206,7 +206,7 @@ def _inline(tensor: Any, model: Path, blobs: dict[str, bytes]) -> None:
 
         try:  # bounded, and confined to the model's folder (``_confined`` checked the name; this what it opens)
             blobs[rel] = userfiles.read_bytes(target, what="external data file", max_bytes=userfiles.MAX_MODEL_BYTES,
-                                              within=model.parent)
+                                              within=model.parent, hard_links=True)
         except userfiles.UserFileError as exc:
             raise WeightsError(f"{model}: external data location {location!r}: cannot read it: {exc}") from None
     blob = blobs[rel]

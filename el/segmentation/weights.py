@@ -71,7 +71,8 @@ def checked_weights(weights_path: str | Path | None = None) -> tuple[Path, bytes
     from el import userfiles
 
     try:  # bounded: a link to /proc/self/pagemap is a "regular file" that reads for hundreds of GB
-        data = userfiles.read_bytes(path, what="weights file", max_bytes=userfiles.MAX_MODEL_BYTES)
+        data = userfiles.read_bytes(path, what="weights file", max_bytes=userfiles.MAX_MODEL_BYTES,
+                                    hard_links=True)  # bytes that are hashed and decoded as tensors, never text
     except userfiles.UserFileError as exc:
         raise WeightsError(str(exc)) from None
     digest = sha256_bytes(data)
