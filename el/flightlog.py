@@ -5,8 +5,15 @@ Opt-in: a flight function given a :class:`FlightLog` (``EmergencyLanding(..., lo
 assumptions can be checked against in service, never the frame itself (its SHA-256 only; a sample of frames on
 request): the time, the frame's hash and size, the pose and its source, the declared domain's verdict, the frame
 gate's score and threshold, the candidate count and each judged candidate's monitor score and verdict, the action,
-reason and default-area basis, the stage timings and the deadline, and the system's identity (network and
-system-file SHA-256). The format is versioned (:data:`FORMAT`) and described by ``el/data/flightlog.schema.json``.
+reason and default-area basis, the stage timings and the deadline, and the system's identity (network,
+system-file and frame-gate SHA-256). The format is versioned (:data:`FORMAT`) and described by
+``el/data/flightlog.schema.json``.
+
+A hash chain: each record carries the SHA-256 of the line before it in the file (``prev_sha256``; null for a log's
+first line) and a sequence number that continues over every opening of the log (``seq``), so that a record removed,
+inserted, reordered or edited after the flight breaks the chain at the line after it (``uav-el in-service`` names
+that line). The chain proves the lines are the ones written in that order; it does not prove that the writer was
+this flight function (an operator can write a whole false log), nor that no record was cut off the log's end.
 
 Append-only and crash-safe: each record is written whole with one ``write``, then flushed and (by default)
 ``fsync``-ed, so a crash loses at most the record being written and leaves at most one damaged last line, which a
@@ -19,6 +26,7 @@ logged once, and the decision stands.
 from __future__ import annotations
 
 import datetime as _dt
+import hashlib
 import json
 import logging
 import math
@@ -33,9 +41,11 @@ from typing import IO, Any
 import numpy as np
 
 from el.decision import Decision, _finite
+from el.hashing import sha256_file
 
-FORMAT = "uav-el-flight-log/1"
-"""The record format: a reader refuses records of another major version."""
+FORMAT = "uav-el-flight-log/2"
+"""The record format: a reader refuses records of another major version (2: the hash chain, ``prev_sha256``;
+``seq`` continued over reopenings; the frame gate's file SHA-256, ``gate_file_sha256``)."""
 MAX_RECORD_BYTES = 16 * 1024
 """The longest record line, in UTF-8 bytes, newline included (a decision with 64 judged candidates takes ~6 kB)."""
 MAX_LOGGED_CANDIDATES = 64
@@ -45,6 +55,9 @@ MAX_TEXT = 240
 TIMING_KEYS = ("read_s", "segmentation_s", "candidates_s", "monitoring_s", "overhead_s", "total_s")
 """The stage timings a record keeps (seconds)."""
 DOMAIN_VERDICTS = ("inside", "outside", "not_declared", "unknown")
+TAIL_BYTES = 4 << 20
+"""How much of a log's end is read when it is reopened, to find the last line (chained to) and the last sequence
+number (continued from); a longer last line, or no record in it, has the whole log read."""
 logger = logging.getLogger(__name__)
 
 Clock = Callable[[], float]
@@ -111,16 +124,19 @@ def _deadline(decision: Decision) -> dict[str, Any]:
 
 
 def flight_record(decision: Decision, *, seq: int, unix_s: float, identity: Mapping[str, Any],
-                  frame_sample: str | None = None) -> dict[str, Any]:
+                  frame_sample: str | None = None, prev_sha256: str | None = None) -> dict[str, Any]:
     """The log record of one decision (see the module docstring and ``el/data/flightlog.schema.json``):
-    ``identity`` holds the system's ``network_sha256`` and ``system_sha256``; ``unix_s`` is the wall-clock time."""
+    ``identity`` holds the system's ``network_sha256``, ``system_sha256`` and, with a gate, ``gate_file_sha256``
+    (the gate file's own SHA-256, the one the evidence report names); ``unix_s`` is the wall-clock time;
+    ``prev_sha256`` the SHA-256 of the log's line before this record (None: the log's first line)."""
     info, pose, area = decision.input, decision.input.get("pose"), decision.default_area
     stamp = _dt.datetime.fromtimestamp(unix_s, _dt.UTC).isoformat(timespec="microseconds").replace("+00:00", "Z")
     gate = info.get("frame_gate") if isinstance(info.get("frame_gate"), Mapping) else {}
     record: dict[str, Any] = {
-        "format": FORMAT, "seq": int(seq), "time": stamp, "unix_s": float(unix_s),
+        "format": FORMAT, "seq": int(seq), "prev_sha256": prev_sha256, "time": stamp, "unix_s": float(unix_s),
         "system": {"network_sha256": identity.get("network_sha256"), "system_sha256": identity.get("system_sha256"),
                    "monitor": _text(decision.config.get("monitor")), "gate_sha256": gate.get("sha256"),
+                   "gate_file_sha256": identity.get("gate_file_sha256") if gate else None,
                    "calibration": _text(decision.config.get("calibration"))},
         "frame": {"sha256": info.get("sha256"), "width": info.get("width"), "height": info.get("height")},
         "pose": None if not isinstance(pose, Mapping) else {
@@ -190,6 +206,9 @@ class FlightLog:
         self.seq, self.written, self.failures, self.sample_failures = 0, 0, 0, 0
         self.fault: str | None = None
         self.last_error: str | None = None
+        self.prev_sha256: str | None = None  # the SHA-256 of the log's last line: the next record chains to it
+        self._gate_files: dict[str, str | None] = {}
+        self._resync = False
         self._lock = threading.Lock()
         self._owned = not hasattr(target, "write")
         self.path = Path(target) if self._owned else None  # type: ignore[arg-type]
@@ -200,21 +219,27 @@ class FlightLog:
             self.fault = f"{target}: cannot open the flight log: {exc}"
             logger.error("%s; decisions go unlogged", self.fault)
 
-    @staticmethod
-    def _open(path: Path) -> IO[str]:
-        """Open ``path`` for appending; a last line left without its newline (a crash) is ended first."""
+    def _open(self, path: Path) -> IO[str]:
+        """Open ``path`` for appending: a last line left without its newline (a crash) is ended first, then the next
+        record chains to the last line and continues its sequence number (:func:`log_tail`)."""
         handle = open(path, "a", encoding="utf-8")  # noqa: SIM115  (kept open for the flight)
         try:
-            if handle.tell() > 0:
-                with open(path, "rb") as raw:
-                    raw.seek(-1, os.SEEK_END)
-                    if raw.read(1) != b"\n":
-                        handle.write("\n")
-                        handle.flush()
+            self._continue(path, handle)
         except BaseException:
             handle.close()
             raise
         return handle
+
+    def _continue(self, path: Path, handle: IO[str]) -> None:
+        """End a cut last line, then take the chain's head and the next sequence number from the file itself."""
+        if handle.tell() > 0:
+            with open(path, "rb") as raw:
+                raw.seek(-1, os.SEEK_END)
+                if raw.read(1) != b"\n":
+                    handle.write("\n")
+                    handle.flush()
+        self.prev_sha256, next_seq = log_tail(path)
+        self.seq = max(self.seq, next_seq)
 
     def write(self, decision: Decision, *, segmenter: Any = None, frame: np.ndarray | None = None) -> bool:
         """Append the record of ``decision``; True when it was written. Never raises: a failure (the disk full, the
@@ -222,22 +247,30 @@ class FlightLog:
         ``segmenter``: the network that decided (its ``weights_sha256`` is the identity when none was given);
         ``frame``: the decided frame, kept as a sample when sampling is on."""
         with self._lock:
+            try:
+                if self._resync and self._owned and self._file is not None and self.path is not None:
+                    self._continue(self.path, self._file)  # after a failed write: the file says where it stands
+                    self._resync = False
+            except Exception:  # noqa: S110  (the write below fails and is counted)
+                pass
             seq = self.seq
-            self.seq += 1
+            self.seq += 1  # a decision whose record fails leaves its number unused: a gap the reader counts
             try:
                 if self._file is None:
                     raise OSError(self.fault or "the flight log is closed")
-                identity = dict(self.identity)
+                identity = dict(self.identity, gate_file_sha256=self._gate_file(decision))
                 if identity["network_sha256"] is None:
                     identity["network_sha256"] = _weights_sha256(segmenter)
                 sample = self._sample_safely(seq, decision, frame)
                 line = record_line(flight_record(decision, seq=seq, unix_s=float(self.clock()), identity=identity,
-                                                 frame_sample=sample))
+                                                 frame_sample=sample, prev_sha256=self.prev_sha256))
                 self._file.write(line)
                 self._file.flush()
+                self.prev_sha256 = hashlib.sha256(line.encode("utf-8")).hexdigest()
                 if self.fsync:
                     os.fsync(self._file.fileno())
             except Exception as exc:  # fail safe: the decision stands, unlogged
+                self._resync = True
                 self.failures += 1
                 self.last_error = f"{type(exc).__name__}: {exc}"
                 if self.failures == 1:
@@ -246,6 +279,21 @@ class FlightLog:
                 return False
             self.written += 1
             return True
+
+    def _gate_file(self, decision: Decision) -> str | None:
+        """The SHA-256 of the frame-gate file the decision's configuration names (``config.gate``), hashed once per
+        path; None without a gate or when it cannot be read (the record's ``gate_sha256``, its body's, still names
+        it)."""
+        path = decision.config.get("gate")
+        if not isinstance(path, str | os.PathLike):
+            return None
+        key = str(path)
+        if key not in self._gate_files:
+            try:
+                self._gate_files[key] = sha256_file(Path(key))
+            except OSError:
+                self._gate_files[key] = None
+        return self._gate_files[key]
 
     def _sample_safely(self, seq: int, decision: Decision, frame: np.ndarray | None) -> str | None:
         """:meth:`_sample`, a failure counted in ``sample_failures`` (the record is still written, without it)."""
@@ -286,6 +334,68 @@ class FlightLog:
         self.close()
 
 
+def _last_lines(data: bytes) -> list[bytes]:
+    """The non-empty lines of ``data``, newline kept, last first."""
+    return [ln for ln in reversed(data.splitlines(keepends=True)) if ln.strip()]
+
+
+def _next_seq(lines: list[bytes]) -> int | None:
+    """One past the sequence number of the latest record among ``lines`` (last first); None when none is one."""
+    for line in lines:
+        try:
+            doc = json.loads(line)
+        except (ValueError, RecursionError):
+            continue
+        seq = doc.get("seq") if isinstance(doc, dict) and doc.get("format") == FORMAT else None
+        if isinstance(seq, int) and not isinstance(seq, bool) and seq >= 0:
+            return seq + 1
+    return None
+
+
+def log_tail(path: str | Path) -> tuple[str | None, int]:
+    """(the SHA-256 of the log's last non-empty line, the sequence number its next record takes) of the log at
+    ``path``: (None, 0) for an empty or new log. Reads the last :data:`TAIL_BYTES`; the whole log, in bounded pieces,
+    when the last line or the last record lies before them."""
+    p = Path(path)
+    if not p.is_file() or p.stat().st_size == 0:
+        return None, 0
+    with open(p, "rb") as f:
+        size = f.seek(0, os.SEEK_END)
+        start = max(0, size - TAIL_BYTES)
+        f.seek(start)
+        data = f.read()
+    if start > 0:  # the block's first piece may be the end of a longer line: dropped
+        cut = data.find(b"\n")
+        data = data[cut + 1:] if cut >= 0 else b""
+    lines = _last_lines(data)
+    seq = _next_seq(lines)
+    if lines and (seq is not None or start == 0):
+        return hashlib.sha256(lines[0]).hexdigest(), seq or 0
+    return _scan(p) if start > 0 else (None, 0)
+
+
+def _scan(path: Path) -> tuple[str | None, int]:
+    """:func:`log_tail` by reading the whole log in pieces of at most 1 MiB (a line is never held whole past
+    :data:`MAX_RECORD_BYTES`)."""
+    last, seq = None, 0
+    digest, kept, blank = hashlib.sha256(), b"", True
+    with open(path, "rb") as f:
+        while piece := f.readline(1 << 20):
+            digest.update(piece)
+            blank = blank and not piece.strip()
+            kept = kept + piece if len(kept) + len(piece) <= MAX_RECORD_BYTES else b"\0"
+            if not piece.endswith(b"\n"):
+                continue
+            if not blank:
+                last = digest.hexdigest()
+                found = _next_seq([kept])
+                seq = found if found is not None else seq
+            digest, kept, blank = hashlib.sha256(), b"", True
+    if not blank:  # a last line without its newline
+        last = digest.hexdigest()
+    return last, seq
+
+
 def _weights_sha256(segmenter: Any) -> str | None:
     value = getattr(segmenter, "weights_sha256", None)
     return value if isinstance(value, str) and value else None
@@ -298,4 +408,4 @@ def flightlog_schema() -> dict[str, Any]:
 
 
 __all__ = ["FORMAT", "MAX_LOGGED_CANDIDATES", "MAX_RECORD_BYTES", "FlightLog", "domain_verdict", "flight_record",
-           "flightlog_schema", "record_line"]
+           "flightlog_schema", "log_tail", "record_line"]

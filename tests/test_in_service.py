@@ -9,6 +9,7 @@ of another system is refused in one line, damaged lines are counted, and a large
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import tracemalloc
@@ -27,6 +28,7 @@ from el.camera import Pose
 from el.config import CoreConfig
 from el.decision import Candidate, Decision, Disc, MonitorVerdict
 from el.flightlog import MAX_RECORD_BYTES, FlightLog, flightlog_schema
+from el.hashing import sha256_file
 
 W, H, WW = 128, 72, 64
 SHA = "7e" * 32
@@ -123,7 +125,12 @@ def test_logs_over_in_domain_scenes_breach_no_spi(world, tmp_path, capsys):
     verdicts = {s["name"]: s["verdict"] for s in doc["spis"]}
     assert verdicts["refusal_rate"] == verdicts["frame_gate_drift"] == spi.PASS
     assert verdicts["overrun_rate"] == spi.UNDECIDED  # 0 of 24 cannot show a rate below 10% at 95%
-    assert "NO BREACH" in (out / "in-service.html").read_text()
+    html = (out / "in-service.html").read_text()
+    assert "NO BREACH" in html
+    gate_file = sha256_file(world["root"] / "gate.json")  # issue 60: the gate named as the evidence report names it
+    assert doc["identity"]["gate_file_sha256"] == gate_file and gate_file in html
+    assert doc["comparison"]["frame_gate"]["file_sha256_in_logs"] == [gate_file]
+    assert doc["identity"]["gate_sha256"] != gate_file and doc["identity"]["gate_sha256"] in html  # labelled apart
 
 
 @pytest.mark.parametrize("shift", ["fog5", "night"])
@@ -169,13 +176,26 @@ def test_a_log_of_another_system_is_refused_in_one_line(world, tmp_path, capsys)
     assert len(err) == 1 and f"{other}:1: a decision of another system (network sha256 abababababab" in err[0]
 
 
+def chained(lines: list[bytes], prev: str | None) -> list[bytes]:
+    """Records re-chained after ``prev`` (the SHA-256 of the line before them), as a writer reopening the log after
+    a crash writes them (``el.flightlog.FlightLog`` chains to the damaged last line)."""
+    out = []
+    for line in lines:
+        rec = json.loads(line)
+        rec["prev_sha256"] = prev
+        out.append((json.dumps(rec, separators=(",", ":"), ensure_ascii=False) + "\n").encode())
+        prev = hashlib.sha256(out[-1]).hexdigest()
+    return out
+
+
 def test_damaged_lines_are_counted_and_named(world, tmp_path, capsys):
     log = tmp_path / "damaged.jsonl"
     good = world["logs"]["in_domain"].read_bytes().splitlines(keepends=True)
-    bad = [b'{"format": "uav-el-flight-log/1", "seq": 3, "syst\n', b"\xff\xfe not text\n",
+    bad = [b'{"format": "uav-el-flight-log/2", "seq": 3, "syst\n', b"\xff\xfe not text\n",
            b'{"format": "uav-el-flight-log/9"}\n', b'{"pad": "' + b"x" * (MAX_RECORD_BYTES + 10) + b'"}\n',
            b"[1, 2]\n"]
-    log.write_bytes(b"".join(good[:10] + bad + good[10:]) + b'{"format": "uav-el-flight-log/1", "se')  # a crash
+    rest = chained(good[10:], hashlib.sha256(bad[-1]).hexdigest())  # the writer reopened after the damage
+    log.write_bytes(b"".join(good[:10] + bad + rest) + b'{"format": "uav-el-flight-log/2", "se')  # a crash
     code, doc, _ = _in_service(world, tmp_path, log)
     assert code == 0, capsys.readouterr().err
     assert doc["records"] == 24 and doc["damaged"] == 6 and doc["logs"][0]["damaged"] == 6
@@ -190,11 +210,15 @@ def test_a_large_log_reads_in_bounded_memory(world, tmp_path):
     of the file, as it would for 1 GB (nothing is kept per record but counters and fixed-size samples)."""
     record = json.loads(world["logs"]["in_domain"].read_text().splitlines()[0])
     record["pad"] = "x" * 3000  # extra fields are allowed: a record of ~4 kB
-    line = (json.dumps(record, separators=(",", ":")) + "\n").encode()
-    big, n = tmp_path / "big.jsonl", (50 << 20) // len(line)
-    with open(big, "wb") as f:
-        for start in range(0, n, 1000):
-            f.write(line * min(1000, n - start))
+    size = len(json.dumps(record, separators=(",", ":"))) + 1
+    big, n = tmp_path / "big.jsonl", (50 << 20) // size
+    prev = None
+    with open(big, "wb") as f:  # one chain of n records, a second apart
+        for seq in range(n):
+            record.update(seq=seq, prev_sha256=prev, unix_s=record["unix_s"] + 1.0)
+            line = (json.dumps(record, separators=(",", ":")) + "\n").encode()
+            prev = hashlib.sha256(line).hexdigest()
+            f.write(line)
     assert big.stat().st_size > 48 << 20
     summary = LogSummary(gate_scores=Reservoir(2000), candidate_scores=Reservoir(2000), times=Reservoir(2000))
     tracemalloc.start()
@@ -286,6 +310,7 @@ def test_the_evidence_report_shows_the_in_service_section(world, tmp_path):
     section = section[:section.index("</section>")]
     assert "BREACH" in section and "the statement verifies" in section
     assert "G-EL-R09" in section and "frame gate refuses at most 0.3" in section
+    assert f"SHA-256 {sha256_file(world['root'] / 'gate.json')[:16]}" in html  # the gate, as in-service names it
     generate(world["run"], tmp_path / "without", **common)
     assert 'id="in-service"' not in (tmp_path / "without" / "evidence.html").read_text()
 
@@ -300,7 +325,8 @@ def test_an_unsigned_run_or_another_configuration_is_refused(world, tmp_path, ca
                      str(tmp_path / "a")])
     assert code == 4 and "campaign.dsse.json: missing" in capsys.readouterr().err
     other = tmp_path / "other_monitor.jsonl"  # the run assessed lhd only
-    other.write_text(world["logs"]["in_domain"].read_text().replace('"monitor":"lhd"', '"monitor":"lhd+ch:tau=0.25"'))
+    edited = world["logs"]["in_domain"].read_bytes().replace(b'"monitor":"lhd"', b'"monitor":"lhd+ch:tau=0.25"')
+    other.write_bytes(b"".join(chained(edited.splitlines(keepends=True), None)))  # a chain as a writer would make
     code, doc, _ = _in_service(world, tmp_path, other)
     assert code == 2 and doc is None and "which the run did not assess" in capsys.readouterr().err
 

@@ -3,7 +3,9 @@
 A thin layer over ``assurance.inservice.assess``: it finds the run's system file (the one given must be the run's),
 the signing and trusted keys, then writes ``OUT/in-service.json``, ``OUT/in-service.html`` and their signed
 statement ``OUT/in-service.dsse.json``. Exit 0: no SPI breached; 1: at least one breached (each named with the claims
-it undermines); 2: bad input, or logs of another system or configuration (one line); 4: a damaged or unattested run.
+it undermines); 2: bad input, logs of another system or configuration, a log whose hash chain is broken, whose
+sequence numbers repeat or go back, with a negative time or a record whose reason disagrees with its fields (one line
+naming the log and the line); 4: a damaged or unattested run.
 """
 
 from __future__ import annotations
@@ -53,6 +55,18 @@ def _keys(args: argparse.Namespace, out: Path) -> tuple[Any, Any]:
         raise CommandError(str(exc)) from None
 
 
+def _print_log_checks(checks: dict[str, Any]) -> None:
+    """What the logs' chains showed that the report states (each chain was verified: a break is refused)."""
+    print("hash chain verified: every record follows the line before it, in order")
+    for count, what, lines in ((checks["unlogged"], "decision(s) not logged (sequence gaps; the rate SPIs judge them "
+                                "both ways)", checks["gaps"]),
+                               (checks["clock_back"], "record(s) whose clock goes back", checks["clock_lines"]),
+                               (checks["duplicates"], "duplicate record(s) (same frame hash and time) counted once",
+                                checks["duplicate_lines"])):
+        if count:
+            print(f"  {count} {what}; first: {lines[0]}")
+
+
 def run(args: argparse.Namespace) -> int:
     from assurance.inservice.assess import assess
 
@@ -68,6 +82,7 @@ def run(args: argparse.Namespace) -> int:
     doc = result.doc
     print(f"{doc['records']} decision(s) from {len(doc['logs'])} log(s), {doc['damaged']} damaged line(s) passed over; "
           f"compared with {run_dir} ({doc['monitor']})")
+    _print_log_checks(doc["log_checks"])
     for spi in doc["spis"]:
         print(f"  {spi['verdict']:>12}  {spi['key']} ({spi['name']}): {spi['evidence']}")
     for claim in doc["undermined"]:

@@ -25,6 +25,7 @@ from assurance.fault_injection.case import Case, CliMain, run_cli, save_tiny_wei
 from assurance.fault_injection.case import campaign_argv as _campaign
 from assurance.fault_injection.case import copy_run as _copy_run
 from assurance.fault_injection.case import first_image as _image
+from assurance.fault_injection.flightlog_cases import FLIGHTLOG_CASES
 from assurance.fault_injection.gate import GATE_CASES
 from assurance.fault_injection.signing import SIGNING_CASES
 
@@ -200,11 +201,13 @@ CASES: tuple[Case, ...] = (
     *SIGNING_CASES,  # forged evidence, the gate's policy
     *GATE_CASES,  # a gate that verifies what it says, models bound to the run
     *APPLICANT_CASES,  # the auditor's trust boundary: supplied templates never execute, read files or contradict
+    *FLIGHTLOG_CASES,  # flight logs in service: a breach hidden in the logs, the hash chain, sequence and times
 )
 
 QUICK: tuple[str, ...] = ("H2-altered-shard", "H8-pickled-weights", "B1-unreadable-image", "B4-nan-model",
                           "R1-pixel-header", "R4-yaml-alias-bomb", "S1-fabricated-run", "S3-untrusted-key",
-                          "G6-edited-manifest", "T3-template-claims-passed", "T29-meta-refresh")
+                          "G6-edited-manifest", "T3-template-claims-passed", "T29-meta-refresh",
+                          "L3-refusal-relabelled")
 """A representative slice for a first look (``uav-el fault-table --quick``, ``make demo``): one or two of the
 cheapest cases of each family (hostile inputs, bad inputs, bounded resources, signing, the gate, the auditor's
 trust boundary). The report says how many of the cases a table holds; ``make faults`` and CI replay all."""

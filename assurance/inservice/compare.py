@@ -6,6 +6,15 @@ its refusals (reason ``out_of_domain``), the candidates the walk examined with t
 the default actions, the deadline overruns, the decision times and the reasons. The service side is the logs'
 :class:`~assurance.inservice.reader.LogSummary`.
 
+Like is compared with like. A campaign judges every candidate of every frame with every configuration (evaluation
+mode) and goes on past a refusal; flight judges only the candidates its walk reaches, and none of a frame it refused.
+So the run's candidate scores and rejections are those of the candidates its walk examined on frames it did not
+refuse (``out_of_domain``, ``outside_odd``), and its decision time is the one flight would have had, as EL-R13 times
+it: segmentation, candidates and the walk's monitoring (``overhead_s``: the seconds of the judgements the walk made),
+the later stages left out where flight stops (a refused frame: segmentation only; a frame outside the declared
+domain: none). The logs' decision time is the same sum of the same stages (:data:`DECISION_STAGES`); their whole
+decision time (reading the frame included) is shown apart, as the service's own.
+
 Each comparison is a plain dict of finished numbers: a two-sample Kolmogorov-Smirnov test of the score
 distributions (``scipy.stats.ks_2samp``: p-value and its statistic D, the effect size: the largest gap between the
 two cumulative distributions, 0 to 1), and each rate with its two-sided exact (Clopper-Pearson) interval in service
@@ -14,6 +23,7 @@ and in the run, with Fisher's exact test of their difference.
 
 from __future__ import annotations
 
+import json
 import math
 from collections import Counter
 from collections.abc import Mapping, Sequence
@@ -26,7 +36,7 @@ from scipy import stats
 
 from assurance.analysis.intervals import clopper_pearson_interval
 from assurance.campaign import readouts
-from assurance.inservice.reader import LogSummary, reason_kind
+from assurance.inservice.reader import DECISION_STAGES, LogSummary, reason_kind
 
 MIN_DRIFT_N = 10
 """Scores needed on each side before a two-sample test is run (fewer: undecided)."""
@@ -40,11 +50,33 @@ class RunMismatchError(ValueError):
 
 def run_identity(manifest: Mapping[str, Any]) -> dict[str, Any]:
     """The identity a run's manifest records (network weights, system file and frame gate SHA-256), as a flight
-    log's records carry it (``el.flightlog``)."""
+    log's records carry it (``el.flightlog``), and the gate file's own SHA-256 (:func:`gate_file_sha256`: the one the
+    evidence report names)."""
     gate = (manifest.get("config") or {}).get("gate") or {}
+    gate = gate if isinstance(gate, Mapping) else {}
     return {"network_sha256": (manifest.get("weights") or {}).get("sha256"),
             "system_sha256": (manifest.get("system") or {}).get("sha256"),
-            "gate_sha256": gate.get("sha256") if isinstance(gate, Mapping) else None}
+            "gate_sha256": gate.get("sha256"), "gate_file_sha256": gate_file_sha256(gate.get("path"),
+                                                                                   gate.get("sha256"))}
+
+
+def gate_file_sha256(path: Any, body_sha256: Any) -> str | None:
+    """The SHA-256 of the gate file at ``path`` when its body is still the one the run recorded (``body_sha256``),
+    as the evidence report names the gate (``assurance.evidence.facts.gate_identity``); None without a gate, or when
+    the file is not readable here or its body differs."""
+    if not path or not body_sha256:
+        return None
+    from el import userfiles
+    from el.hashing import sha256_file
+    from el.records import body_sha256 as digest
+
+    try:
+        doc = json.loads(userfiles.read_text(Path(path), what="frame gate", max_bytes=userfiles.MAX_RECORD_BYTES))
+        body = doc.get("body", doc) if isinstance(doc, dict) else None
+        same = isinstance(body, dict) and digest(body) == body_sha256
+        return sha256_file(Path(path)) if same else None
+    except (OSError, ValueError, TypeError):
+        return None
 
 
 @dataclass
@@ -77,6 +109,20 @@ def flown_monitor(summary: LogSummary, manifest: Mapping[str, Any], run: str | P
     return flown[0]
 
 
+def flight_seconds(rows: Any) -> np.ndarray:
+    """Each run row's decision time as flight would have had it (see the module docstring): segmentation,
+    candidates and the walk's monitoring, without the stages flight does not run past a refusal."""
+    kinds = [reason_kind(str(r)) for r in rows["reason"]]
+
+    def stage(name: str) -> np.ndarray:
+        return np.nan_to_num(rows[name].to_numpy(float), nan=0.0) if name in rows else np.zeros(len(rows))
+
+    seg, rest = stage(DECISION_STAGES[0]), sum(stage(name) for name in DECISION_STAGES[1:])
+    refused = np.array([k == "out_of_domain" for k in kinds], bool)
+    outside = np.array([k == "outside_odd" for k in kinds], bool)
+    return np.where(outside, 0.0, np.where(refused, seg, seg + rest))
+
+
 def certified(run: str | Path, monitor: str, *, budget_s: float | None = None) -> Certified:
     """The run's clean-frame measurements of ``monitor`` (see the module docstring); ``budget_s``: the deadline a
     decision time is judged against (a run's ``timeout`` reasons count as overruns too)."""
@@ -85,11 +131,14 @@ def certified(run: str | Path, monitor: str, *, budget_s: float | None = None) -
     rows = images[(images["perturbation"] == CLEAN) & (images["monitor"] == monitor)]
     rows = rows[rows["fault"].fillna("") == ""]
     kinds = Counter(reason_kind(str(r)) for r in rows["reason"])
-    times = rows["total_s"].to_numpy(float)
-    over = (rows["reason"] == "timeout").to_numpy(bool)
+    times = flight_seconds(rows)
+    over = np.array(rows["reason"] == "timeout", dtype=bool)  # a copy: pandas hands out read-only arrays
     if budget_s is not None:
-        over |= np.nan_to_num(times, nan=0.0) > budget_s
+        over = over | (times > budget_s)
+    stopped = {str(k) for k, r in zip(rows["key"], rows["reason"], strict=True)
+               if reason_kind(str(r)) in ("out_of_domain", "outside_odd")}
     c = cands[(cands["perturbation"] == CLEAN) & (cands["monitor"] == monitor)]
+    c = c[~c["key"].astype(str).isin(stopped)]  # flight judges no candidate of a frame it refused
     if "examined" in c:
         c = c[c["examined"].astype(bool)]
     scores = c["score"].to_numpy(float) if "score" in c else np.zeros(0)
@@ -123,15 +172,18 @@ def _side(k: int, n: int, conf: float) -> dict[str, Any]:
             "ci": [None if math.isnan(lo) else lo, None if math.isnan(hi) else hi]}
 
 
-def rate(k_service: int, n_service: int, k_run: int, n_run: int, conf: float = 0.95) -> dict[str, Any]:
+def rate(k_service: int, n_service: int, k_run: int, n_run: int, conf: float = 0.95, *,
+         unlogged: int = 0) -> dict[str, Any]:
     """A rate in service and in the run, each with its two-sided exact interval at ``conf``, and the p-value of
-    Fisher's exact test that they are the same (None without data on a side)."""
+    Fisher's exact test that they are the same (None without data on a side). ``unlogged``: decisions of the service
+    whose records are missing (sequence gaps), each of which may or may not have been an event (the SPIs judge both
+    ways, ``assurance.inservice.spi``)."""
     p = None
     if n_service and n_run:
         table = [[k_service, n_service - k_service], [k_run, n_run - k_run]]
         p = float(stats.fisher_exact(table).pvalue)
-    return {"service": _side(k_service, n_service, conf), "run": _side(k_run, n_run, conf), "p_value": p,
-            "conf": conf}
+    return {"service": {**_side(k_service, n_service, conf), "unlogged": int(unlogged)},
+            "run": _side(k_run, n_run, conf), "p_value": p, "conf": conf}
 
 
 def _p95(values: Sequence[float]) -> float | None:
@@ -147,23 +199,27 @@ def _poses(summary: LogSummary, odd: Any) -> dict[str, Any]:
 
 def compare(summary: LogSummary, cert: Certified, *, conf: float = 0.95, odd: Any = None) -> dict[str, Any]:
     """Every comparison of the logs with the run (see the module docstring), as finished numbers."""
-    n = summary.records
+    n, gaps = summary.records, summary.findings.unlogged
     kinds = sorted(set(summary.reasons) | set(cert.reasons))
     return {
-        "decisions": {"service": n, "run": cert.frames},
+        "decisions": {"service": n, "run": cert.frames, "unlogged": gaps},
         "frame_gate": {"drift": drift(summary.gate_scores.values, cert.gate_scores),
-                       "refusal": rate(summary.refusals, n, cert.refusals, cert.frames, conf),
-                       "thresholds": sorted(summary.gate_thresholds)},
+                       "refusal": rate(summary.refusals, n, cert.refusals, cert.frames, conf, unlogged=gaps),
+                       "thresholds": sorted(summary.gate_thresholds),
+                       "file_sha256_in_logs": sorted(summary.gate_files)},
         "monitor": {"drift": drift(summary.candidate_scores.values, cert.candidate_scores),
                     "rejection": rate(summary.rejected, summary.judged, cert.rejected, cert.judged, conf)},
-        "default": rate(summary.defaults, n, cert.defaults, cert.frames, conf),
-        "overrun": rate(summary.overruns, n, cert.overruns, cert.frames, conf),
-        "decision_time": {"p95_service_s": _p95(summary.times.values), "p95_run_s": _p95(cert.times),
-                          "n_service": summary.times.seen, "n_run": len(cert.times)},
+        "default": rate(summary.defaults, n, cert.defaults, cert.frames, conf, unlogged=gaps),
+        "overrun": rate(summary.overruns, n, cert.overruns, cert.frames, conf, unlogged=gaps),
+        "decision_time": {"measure": "segmentation + candidates + the walk's monitoring (as EL-R13 times a decision; "
+                                     "reading the frame left out); on the run, the stages flight would have run",
+                          "p95_service_s": _p95(summary.decision_times.values), "p95_run_s": _p95(cert.times),
+                          "n_service": summary.decision_times.seen, "n_run": len(cert.times),
+                          "p95_service_whole_s": _p95(summary.times.values)},
         "reasons": [{"reason": k, "service": summary.reasons.get(k, 0), "run": cert.reasons.get(k, 0)} for k in kinds],
         "poses": _poses(summary, odd),
     }
 
 
-__all__ = ["MIN_DRIFT_N", "Certified", "RunMismatchError", "certified", "compare", "drift", "flown_monitor", "rate",
-           "run_identity"]
+__all__ = ["MIN_DRIFT_N", "Certified", "RunMismatchError", "certified", "compare", "drift", "flight_seconds",
+           "flown_monitor", "gate_file_sha256", "rate", "run_identity"]

@@ -82,7 +82,7 @@ def document(*, run: Mapping[str, Any], identity: Mapping[str, Any], monitor: st
     return {
         "format": FORMAT, "system": system, "run": dict(run), "identity": dict(identity), "monitor": monitor,
         "logs": list(summary.files), "records": summary.records, "damaged": summary.damaged,
-        "damaged_lines": list(summary.damaged_lines),
+        "damaged_lines": list(summary.damaged_lines), "log_checks": summary.findings.to_dict(),
         "period": {"first_s": min(times) if times else None, "last_s": max(times) if times else None},
         "settings": dict(settings), "comparison": dict(comparison), "spis": [r.to_dict() for r in spis],
         "breaches": breached, "undermined": list(undermined), "verdict": "breach" if breached else "no breach",

@@ -110,12 +110,22 @@ def _at(comparison: Mapping[str, Any], path: str) -> Mapping[str, Any]:
 
 
 def _rate(measured: Mapping[str, Any], target: float, conf: float, min_n: int) -> tuple[str, str]:
+    """A rate SPI's verdict and evidence. Decisions whose records are missing (``unlogged``, sequence gaps) are
+    judged both ways: a pass must hold were every one of them an event, a breach were none."""
     side = measured["service"]
-    bound = decide_rate_bound(side["k"], side["n"], target, conf, min_n=min_n)
-    verdict = BREACH if bound.verdict == BOUND_MISSED else PASS if bound.verdict == BOUND_MET else UNDECIDED
+    k, n, gaps = int(side["k"]), int(side["n"]), int(side.get("unlogged", 0))
+    bound = decide_rate_bound(k, n, target, conf, min_n=min_n)
+    if gaps:
+        worst = decide_rate_bound(k + gaps, n + gaps, target, conf, min_n=min_n)
+        best = decide_rate_bound(k, n + gaps, target, conf, min_n=min_n)
+        verdict = BREACH if best.verdict == BOUND_MISSED else PASS if worst.verdict == BOUND_MET else UNDECIDED
+    else:
+        verdict = BREACH if bound.verdict == BOUND_MISSED else PASS if bound.verdict == BOUND_MET else UNDECIDED
     run = measured["run"]
     run_text = f"; the run: {run['k']} of {run['n']}" if run["n"] else ""
-    return verdict, f"{bound.text()}, target {target:g}{run_text}"
+    gap_text = (f"; {gaps} decision(s) not logged, judged both as events and as none (a pass holds either way, a "
+                "breach either way, else undecided)") if gaps else ""
+    return verdict, f"{bound.text()}, target {target:g}{run_text}{gap_text}"
 
 
 def _drift(measured: Mapping[str, Any], alpha: float) -> tuple[str, str]:
