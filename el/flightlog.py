@@ -177,9 +177,12 @@ class FlightLog:
     Parameters
     ----------
     target : path or writable text file
-        A path is opened in append mode (created if missing); a file object is written to as it is (the caller
-        closes it). A path that cannot be opened is kept as ``fault``: every write then fails, counted, and the
-        decisions stand.
+        A path is opened in append mode (created if missing) and the log continued: its next record chains to the
+        file's last line and takes the number after its last record's (:func:`log_tail`). A file object is written
+        to as it is (the caller closes it) and taken as a new log: its first record chains to nothing and is number 0,
+        so give a path to continue an existing log. One writer per log: two appending to one file at once fork the
+        chain, and ``uav-el in-service`` refuses it. A path that cannot be opened is kept as ``fault``: every write
+        then fails, counted, and the decisions stand.
     network_sha256, system_sha256 : str or None
         The system's identity: the network's weights SHA-256 (else taken from the segmenter given to
         :meth:`write`) and the system file's SHA-256 (``uav-el.toml``; None when there is none).

@@ -169,6 +169,9 @@ def _negative(field):
     (_relabelled, True, 2, "the reason 'all_rejected' disagrees with the record's own fields (frame_gate.refused is "
                            "true)"),
     (_unrefused, True, 2, "frame_gate.score 3 is above its threshold 1, yet refused is false"),
+    (lambda r: [r[0], {**r[1], "frame_gate": None}, *r[2:]], True, 2, "frame_gate.refused is absent (no gate)"),
+    (lambda r: [r[0], {**r[1], "frame_gate": {**r[1]["frame_gate"], "score": 0.5}}, *r[2:]], True, 2,
+     "frame_gate.score 0.5 is not above its threshold 1, yet refused is true"),
     (_landed, True, 1, "(the action is 'land')"),
     (_accept_all_rejected, True, 3, "(the action is 'land')"),
     (_no_overrun, True, 1, "deadline.overrun is false with total_s 5.0 and budget_s 1.0"),

@@ -1,11 +1,11 @@
-"""Read flight logs (``el.flightlog``) in one streaming pass and in bounded memory, whatever their size.
+"""Read flight logs (``el.flightlog``) in one streaming pass (two when some records repeat) and in little memory.
 
 Each log is read line by line (a line longer than ``el.flightlog.MAX_RECORD_BYTES`` is passed over without being
 held), hashed as it is read, and folded into a :class:`LogSummary`: counts (decisions, refusals, default actions,
 deadline overruns, reasons, poses outside the declared domain), fixed-size seeded reservoir samples of the frame
 gate's scores, the monitor's candidate scores and the decision times (exact below their capacity), and a timeline of
-at most ``2 * MAX_WINDOWS`` windows. Nothing grows with the log but the counters, so a 1 GB log reads in the memory
-of a small one.
+at most ``2 * MAX_WINDOWS`` windows. Nothing grows with the log but the counters and the records' 8-byte fingerprints
+(the duplicate check, below), so a 1 GB log reads in about the memory of a small one.
 
 A damaged line (not UTF-8, not JSON, not a record of this format, a field of the wrong type, too long) is counted
 and the first few are named (file and line), never fatal. A record of another system (its network, system file or
@@ -212,8 +212,14 @@ def _hash(value: Any, what: str) -> str | None:
 
 def _timings(value: Any) -> dict[str, float]:
     """The record's stage timings (seconds), nulls left out."""
-    timings = _obj(value, "timings")
-    return {str(k)[:40]: t for k, v in timings.items() if (t := _num(v, f"timings.{str(k)[:40]}")) is not None}
+    out: dict[str, float] = {}
+    for k, v in _obj(value, "timings").items():
+        if v is None:
+            continue
+        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+            raise ValueError(f"timings.{str(k)[:40]} is not a number")
+        out[k] = float(v)
+    return out
 
 
 def parse_record(line: bytes) -> dict[str, Any]:
