@@ -121,3 +121,23 @@ def test_the_run_is_measured_as_flight_would_have_decided(tmp_path, monkeypatch)
     assert cert.overruns == 2  # "a" over 0.15 s as flight would have run it, "d" a timeout; not "b" at its 2.5 s
     assert cert.judged == 2 and cert.rejected == 1 and sorted(cert.candidate_scores) == [0.1, 0.9]
     assert cert.refusals == 1 and cert.frames == 4
+
+
+def test_the_flight_log_fault_cases_behave(ws):
+    """Fault-table rows L0-L12 (``assurance.fault_injection.flightlog_cases``), replayed as ``make faults`` and CI
+    replay them: each refused with one line naming the log and the line, or stated by the report."""
+    from assurance.fault_injection import table as fi
+    from assurance.fault_injection.flightlog_cases import COPIES, FLIGHTLOG_CASES
+
+    assert {c.id for c in FLIGHTLOG_CASES} <= {c.id for c in fi.CASES}
+    rows = {r["case"]: r for r in fi.run_cases(ws, FLIGHTLOG_CASES, main=cli.main)}
+    for r in rows.values():
+        assert r["result"] == "pass", r
+        assert str(ws) not in r["outcome"]
+    assert rows["L1-copied-records"]["outcome"].startswith("uav-el in-service: error: WS/fl/copies.jsonl:5: the hash "
+                                                           "chain is broken")
+    assert rows["L2-renumbered-copies"]["outcome"].startswith(f"{COPIES} duplicate record(s)")
+    assert rows["L3-refusal-relabelled"]["outcome"].count("\n") == 0 and "relabelled.jsonl:2:" in \
+        rows["L3-refusal-relabelled"]["outcome"]
+    for case in ("L0-deadline-system", "L2-renumbered-copies", "L12-same-log-twice"):  # the breach still shows
+        assert rows[case]["observed"] == "1"
