@@ -33,6 +33,7 @@ BUILTIN: dict[str, str] = {
     "entropy": "el.monitors.softmax_scores:EntropyMonitor",
     "energy": "el.monitors.softmax_scores:EnergyMonitor",
     "learned": "el.monitors.learned:LearnedMonitor",
+    "verifier": "el.monitors.verifier:VerifierMonitor",
     "odin": "el.monitors.odin:ODINMonitor",
     "doctor": "el.monitors.doctor:DOCTORMonitor",
     "mahalanobis": "el.monitors.mahalanobis:MahalanobisMonitor",

@@ -1,0 +1,83 @@
+"""``uav-el fit-verifier``: train the candidate verifier (a CNN on the candidates' pixels) and write its record.
+
+For any system: the system's network proposes the candidates of its own training and validation data, its label
+set says which ground is forbidden, and the verifier learns that from the pixels (``el.monitors.verifier``). The
+record (``--out``, JSON) and its ONNX network (beside it, ``.onnx``) are what ``verifier:model=FILE`` flies."""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+
+from assurance.cli.arguments import fit_split_options
+from assurance.errors import CommandError
+
+HELP = ("train the candidate verifier (a small CNN of its own on the full-resolution pixels around each candidate; "
+        "diverse from the segmentation network) on the training split, select it on --val, and write its record and "
+        "ONNX network")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    fit_split_options(p)
+    p.add_argument("--steps", type=int, default=2000, help="training steps (default: %(default)s)")
+    p.add_argument("--minutes", type=float, help="stop training after this many minutes (default: no limit)")
+    p.add_argument("--batch", type=int, default=48, help="crops per step (default: %(default)s)")
+    p.add_argument("--size", type=int, default=96, help="crop side in pixels, a multiple of 16 (default: %(default)s)")
+    p.add_argument("--margin", type=float, default=0.5,
+                   help="context around the disc, in radii (default: %(default)s)")
+    p.add_argument("--jitter", type=int, default=3, help="mined discs around each training candidate "
+                                                         "(default: %(default)s)")
+    p.add_argument("--lr", type=float, default=1e-3, help="learning rate of the head (default: %(default)s)")
+    p.add_argument("--eval-every", type=int, default=200, help="held-out AUROC every N steps (default: %(default)s)")
+    p.add_argument("--recall", type=float, default=0.95,
+                   help="threshold: the largest with this recall of unsafe held-out candidates (0.95)")
+    p.add_argument("--fuse-learned", metavar="FILE", nargs="?", const="",
+                   help="also choose the fusion with the learned monitor (FILE; without one, the shipped model)")
+    p.add_argument("--images", type=int, help="use the first N scenes of each split")
+    p.add_argument("--threads", type=int, default=2, help="torch threads (default: %(default)s)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--no-pretrained", action="store_true",
+                   help="start the encoder from random weights, not ImageNet's")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
+def run(args: argparse.Namespace) -> int:
+    from assurance.cli.system_options import assessed, train_val_dirs
+    from assurance.fitting.network_identity import network_record
+    from assurance.fitting.verifier_fit import fit_verifier
+    from assurance.fitting.verifier_train import TrainConfig
+
+    system = assessed(args)
+    train_val_dirs(args, system.file)
+    if not 0.0 < args.recall < 1.0:
+        raise CommandError(f"--recall must lie in (0, 1), got {args.recall}")
+    try:
+        cfg = TrainConfig(size=args.size, margin=args.margin, steps=args.steps, batch=args.batch, lr=args.lr,
+                          eval_every=args.eval_every, minutes=args.minutes, seed=args.seed, threads=args.threads)
+        segmenter = system.segmenter(working_width=system.core.working_width)
+        learned = None
+        if args.fuse_learned is not None:
+            from el.monitors.learned import LearnedMonitor
+
+            learned = LearnedMonitor(labels=system.labels, model=args.fuse_learned or None)
+            learned.check_network(segmenter)
+        doc = fit_verifier(args.data, args.val, segmenter, args.out, cfg=cfg, core=system.core, jitter=args.jitter,
+                           recall=args.recall, images=args.images, learned=learned,
+                           weights=network_record(segmenter, system.model),
+                           command=shlex.join(["uav-el", *sys.argv[1:]]) if sys.argv[1:2] == ["fit-verifier"]
+                           else None, pretrained=not args.no_pretrained,
+                           progress=not (args.no_progress or getattr(args, "quiet", False)))
+    except ValueError as exc:
+        raise CommandError(str(exc)) from None
+    b = doc["body"]
+    h = b["held_out"]
+    print(f"verifier: held-out AUROC {h['auroc']:.3f} on {h['candidates']} candidates ({h['unsafe']} unsafe); "
+          f"threshold {b['threshold']:.4g} (recall {h['recall']:.3f}, safe rejected {h['safe_rejected']:.3f}); "
+          f"step {b['training']['selected_step']} of {b['training']['steps_run']}")
+    if b.get("fusion"):
+        f = b["fusion"]
+        print(f"fused with the learned monitor: weight {f['weight']:g}, held-out AUROC {f['held_out']['auroc']:.3f} "
+              f"(learned alone {f['learned_alone_auroc']:.3f}), threshold {f['threshold']:.4g}")
+    print(f"verifier written to {args.out} and {args.out.with_suffix('.onnx')} (sha256 {doc['sha256'][:12]}...)")
+    return 0

@@ -1,0 +1,134 @@
+"""The verifier's training data: crops of the core model's candidates with the campaign's truth.
+
+For every labelled scene of a split: the network segments the frame, the core model proposes its candidates
+(``el.core.run_core``), and each candidate gives one crop (``el.monitors.verifier_crop.candidate_crop``) labelled
+**unsafe** when its disc holds a forbidden ground-truth pixel (``assurance.campaign.truth.true_hazard`` = 1, the
+definition the campaign judges by), with a dense auxiliary target: the share of forbidden ground-truth pixels
+under each cell of a coarse grid over the crop. Hard look-alikes are mined around the candidates: ``jitter`` more
+discs per candidate, moved from it by up to three radii (the core model found the ground there safe-looking too),
+each with its own truth. Nothing here reads the segmentation network's output besides where the candidates lie: the
+verifier learns from pixels and ground truth.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from assurance.campaign.truth import true_hazard
+from assurance.dataio.layouts import iter_samples, read_sample_labels
+from assurance.dataio.uavid import Sample, read_image
+from el.config import CoreConfig
+from el.core import run_core
+from el.decision import Disc
+from el.labels import LabelSet
+from el.monitors.verifier_crop import candidate_crop, crop_window, padded_window
+from el.segmentation.contract import labels_of
+
+JITTER_RANGES: tuple[tuple[float, float], ...] = ((0.0, 0.5), (0.5, 1.5), (1.5, 3.0))  # in radii
+
+
+@dataclass
+class CropSet:
+    """Crops (n, size, size, 3) uint8, their truth (n,) bool, auxiliary targets (n, g, g) float32, the scene of
+    each, whether each is a core-model candidate (else a mined disc), its hazard rank in its frame (-1 for a
+    mined disc), and the disc (x, y, r) in full-resolution pixels."""
+
+    crops: np.ndarray
+    unsafe: np.ndarray
+    aux: np.ndarray
+    scene: np.ndarray
+    is_candidate: np.ndarray
+    rank: np.ndarray
+    discs: np.ndarray
+
+    def save(self, path: str | Path) -> None:
+        np.savez(path, **self.__dict__)
+
+    @classmethod
+    def load(cls, path: str | Path) -> CropSet:
+        with np.load(path) as z:
+            return cls(**{k: z[k] for k in cls.__dataclass_fields__})
+
+    @classmethod
+    def concat(cls, parts: Sequence[CropSet]) -> CropSet:
+        return cls(**{k: np.concatenate([getattr(p, k) for p in parts]) for k in cls.__dataclass_fields__})
+
+
+def aux_target(forbidden: np.ndarray, disc: Disc, *, margin: float, grid: int) -> np.ndarray:
+    """The share of forbidden ground-truth pixels under each cell of a ``grid`` x ``grid`` grid over the crop
+    (outside the image counts as forbidden): ndarray (grid, grid) float32."""
+    x0, y0, x1, y1 = crop_window(disc, margin)
+    window = padded_window(forbidden, x0, y0, x1, y1, fill=1).astype(np.float32)
+    return cv2.resize(window, (grid, grid), interpolation=cv2.INTER_AREA)
+
+
+def jittered(disc: Disc, rng: np.random.Generator, n: int, width: int, height: int) -> list[Disc]:
+    """``n`` discs of the candidate's radius moved from it by a distance drawn in :data:`JITTER_RANGES` (in turn),
+    their centres inside the image."""
+    out = []
+    for k in range(n):
+        lo, hi = JITTER_RANGES[k % len(JITTER_RANGES)]
+        dist = rng.uniform(lo, hi) * disc.radius_px
+        angle = rng.uniform(0.0, 2.0 * math.pi)
+        x = min(max(disc.x + dist * math.cos(angle), 0.5), width - 0.5)
+        y = min(max(disc.y + dist * math.sin(angle), 0.5), height - 0.5)
+        out.append(Disc(x, y, disc.radius_px * rng.uniform(0.9, 1.1)))
+    return out
+
+
+def scene_crops(rgb: np.ndarray, ids: np.ndarray, segmenter: Any, *, core: CoreConfig, labels: LabelSet,
+                size: int, margin: float, grid: int, jitter: int, rng: np.random.Generator, scene: int,
+                candidates: Sequence[Any] | None = None) -> CropSet:
+    """The crops of one scene's candidates (``candidates``: the core model's, found here when None) and of
+    ``jitter`` mined discs per candidate."""
+    height, width = rgb.shape[:2]
+    if candidates is None:
+        candidates = run_core(segmenter.predict_frame(rgb), (width, height), core, labels=labels).candidates
+    forbidden = labels.forbidden_mask(ids)
+    discs: list[tuple[Disc, bool, int]] = []
+    for k, cand in enumerate(candidates):
+        disc = Disc(float(cand.x), float(cand.y), float(cand.radius_px))
+        discs.append((disc, True, k))
+        discs += [(d, False, -1) for d in jittered(disc, rng, jitter, width, height)]
+    n = len(discs)
+    crops = np.zeros((n, size, size, 3), np.uint8)
+    aux = np.zeros((n, grid, grid), np.float32)
+    unsafe = np.zeros(n, bool)
+    for i, (d, _, _) in enumerate(discs):
+        crops[i] = candidate_crop(rgb, d, size=size, margin=margin)
+        aux[i] = aux_target(forbidden, d, margin=margin, grid=grid)
+        unsafe[i] = true_hazard(ids, d, labels=labels) >= 1.0
+    return CropSet(crops, unsafe, aux, np.full(n, scene, np.int64), np.array([c for _, c, _ in discs], bool),
+                   np.array([k for _, _, k in discs], np.int64),
+                   np.array([(d.x, d.y, d.radius_px) for d, _, _ in discs], np.float64).reshape(-1, 3))
+
+
+def collect_crops(data: str | Path, segmenter: Any, *, core: CoreConfig | None = None, size: int = 96,
+                  margin: float = 0.5, grid: int = 24, jitter: int = 0, seed: int = 0,
+                  samples: Sequence[Sample] | None = None, images: int | None = None,
+                  progress: bool = False, desc: str = "scenes") -> CropSet:
+    """Every candidate crop of the clean scenes of ``data`` (and ``jitter`` mined discs per candidate)."""
+    from assurance.progress import progress as bar
+
+    core = core or CoreConfig()
+    if samples is None:
+        samples = list(iter_samples(data, require_labels=True))[:images]
+    if not samples:
+        raise ValueError(f"{data}: no labelled scenes")
+    labels = labels_of(segmenter)
+    rng = np.random.default_rng(seed)
+    parts = []
+    for i, s in enumerate(bar(samples, total=len(samples), desc=desc, enabled=progress)):
+        rgb, ids = read_image(s.image_path), read_sample_labels(s, labels)
+        if ids.shape != rgb.shape[:2]:
+            raise ValueError(f"{s.label_path}: label size {ids.shape} differs from the image {rgb.shape[:2]}")
+        parts.append(scene_crops(rgb, ids, segmenter, core=core, labels=labels, size=size, margin=margin,
+                                 grid=grid, jitter=jitter, rng=rng, scene=i))
+    return CropSet.concat(parts)

@@ -1,0 +1,182 @@
+"""Fitting the candidate verifier end to end: crops, training, selection, ONNX export, the hash-checked record.
+
+``fit_verifier`` collects the core model's candidates of the training split (with ``jitter`` mined discs each) and
+of the held-out split (candidates only), trains ``VerifierNet`` (``assurance.fitting.verifier_train``), exports the
+selected step to ONNX and checks ONNX Runtime against torch on the held-out crops, then writes the record
+(``el.monitors.verifier``): crop geometry, the threshold (the largest whose recall of held-out unsafe candidates is
+>= ``recall``, as the learned monitor's), the held-out figures, the training data's hash, the command and the
+network whose candidates it learned from. With a learned model (``learned``), the fusion weight ``w`` of
+``sigmoid(w logit(p_v) + (1 - w) logit(p_l))`` is chosen on the held-out candidates by AUROC, and its threshold the
+same way. Nothing is chosen on a test split: the caller gives training and held-out folders only.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import io
+import json
+import warnings
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from assurance.files import atomic_write_bytes
+from assurance.fitting.learned_monitor import recall_threshold, split_sha256
+from assurance.fitting.verifier_data import CropSet, collect_crops
+from assurance.fitting.verifier_net import VerifierNet
+from assurance.fitting.verifier_train import TrainConfig, TrainResult, auroc, predict, to_size, train_verifier
+from el.hashing import sha256_bytes
+from el.monitors.verifier import VERIFIER_FORMAT, fused_score
+from el.records import signed_document
+
+FUSION_WEIGHTS: tuple[float, ...] = (0.25, 0.4, 0.5, 0.6, 0.75, 0.9)
+OPSET = 17
+MAX_DIFF = 1e-3
+
+
+def export_onnx(model: VerifierNet) -> bytes:
+    """The ONNX bytes of the verifier's logit: input ``crops`` (B, 3, S, S) float in [0, 1], output ``logit`` (B,)."""
+    import torch
+
+    class LogitOnly(torch.nn.Module):
+        def __init__(self, net: VerifierNet) -> None:
+            super().__init__()
+            self.net = net
+
+        def forward(self, x: Any) -> Any:
+            return self.net(x)[0]
+
+    model.eval()
+    buf = io.BytesIO()
+    x = torch.rand(2, 3, model.size, model.size)
+    with warnings.catch_warnings():  # the TorchScript exporter's deprecation notices
+        warnings.simplefilter("ignore")
+        torch.onnx.export(LogitOnly(model), (x,), buf, input_names=["crops"], output_names=["logit"],
+                          dynamic_axes={"crops": {0: "batch"}, "logit": {0: "batch"}}, opset_version=OPSET,
+                          dynamo=False)
+    return buf.getvalue()
+
+
+def check_export(data: bytes, model: VerifierNet, crops: np.ndarray) -> float:
+    """The largest difference of P(unsafe) between ONNX Runtime and torch on ``crops``; ValueError above
+    :data:`MAX_DIFF`."""
+    from el.segmentation.onnx_engine import open_session
+
+    session = open_session(data, "verifier export", 1)
+    x = np.ascontiguousarray(crops.transpose(0, 3, 1, 2), np.float32) / np.float32(255.0)
+    z = np.asarray(session.run(["logit"], {"crops": x})[0], np.float64)
+    diff = float(np.abs(1.0 / (1.0 + np.exp(-z)) - predict(model, crops)).max()) if len(crops) else 0.0
+    if diff > MAX_DIFF:
+        raise ValueError(f"verifier export: ONNX Runtime differs from torch by {diff:.2e} (> {MAX_DIFF:g})")
+    return diff
+
+
+def held_out_figures(y: np.ndarray, p: np.ndarray, threshold: float) -> dict[str, Any]:
+    rejected = p > threshold
+    return {"candidates": int(y.size), "unsafe": int(y.sum()), "auroc": auroc(y, p),
+            "recall": float(rejected[y].mean()) if y.any() else None,
+            "safe_rejected": float(rejected[~y].mean()) if (~y).any() else None}
+
+
+def choose_fusion(y: np.ndarray, p_verifier: np.ndarray, p_learned: np.ndarray, *, learned_sha256: str,
+                  recall: float, weights: Sequence[float] = FUSION_WEIGHTS) -> dict[str, Any]:
+    """The fusion weight with the best held-out AUROC, its recall threshold and figures."""
+    trials = [(auroc(y, fused_score(p_verifier, p_learned, w)), w) for w in weights]
+    best_auc, w = max(trials)
+    p = fused_score(p_verifier, p_learned, w)
+    threshold = recall_threshold(p, y, recall)
+    return {"weight": w, "threshold": threshold, "learned_sha256": learned_sha256,
+            "trials": [{"weight": w_, "auroc": a} for a, w_ in trials],
+            "held_out": held_out_figures(y, p, threshold), "learned_alone_auroc": auroc(y, p_learned)}
+
+
+def verifier_body(result: TrainResult, cfg: TrainConfig, train: CropSet, held: CropSet, *, onnx_name: str,
+                  onnx_sha256: str, export_diff: float, p_held: np.ndarray, recall: float,
+                  splits: dict[str, Any], weights: dict[str, Any], command: str | None,
+                  fusion: dict[str, Any] | None, labels: str, provenance: dict[str, Any]) -> dict[str, Any]:
+    """The record's body (``el.monitors.verifier.VerifierModel``)."""
+    y = held.unsafe[held.is_candidate]
+    threshold = recall_threshold(p_held, y, recall)
+    return {
+        "onnx": {"file": onnx_name, "sha256": onnx_sha256, "opset": OPSET, "max_diff_vs_torch": export_diff},
+        "crop": {"size": cfg.size, "margin": cfg.margin}, "threshold": threshold,
+        "criterion": {"name": "tnr-at-recall", "recall": recall, "on": "held-out core-model candidates"},
+        "network": {"name": "VerifierNet", "encoder": "EfficientNet-Lite0 stem + blocks 0-10 (ImageNet start)",
+                    "parameters": int(sum(p.numel() for p in result.model.parameters())),
+                    "imagenet_weights": provenance},
+        "training": {"crops": int(train.unsafe.size), "unsafe": int(train.unsafe.sum()),
+                     "candidates": int(train.is_candidate.sum()),
+                     "mined": int((~train.is_candidate).sum()), "config": dict(cfg.__dict__),
+                     "steps_run": result.steps_run, "selected_step": result.best_step,
+                     "seconds": round(result.seconds, 1), "curve": result.curve, "sha256": splits.get("train_sha256")},
+        "held_out": {**held_out_figures(y, p_held, threshold), "sha256": splits.get("held_out_sha256")},
+        "fusion": fusion, "splits": {k: v for k, v in splits.items() if not k.endswith("sha256")},
+        "weights": weights, "labels": labels, "command": command,
+        "created": _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC"),
+    }
+
+
+def learned_scores(data: str | Path, segmenter: Any, learned: Any, *, core: Any, images: int | None) -> np.ndarray:
+    """The learned monitor's scores of the core model's candidates of ``data``, in the crops' order."""
+    from assurance.dataio.layouts import iter_samples
+    from assurance.dataio.uavid import read_image
+    from el.core import run_core
+    from el.monitors.base import CandidateContext
+    from el.segmentation.contract import labels_of
+
+    out: list[float] = []
+    for s in list(iter_samples(data, require_labels=True))[:images]:
+        rgb = read_image(s.image_path)
+        probs = segmenter.predict_frame(rgb)
+        size = (rgb.shape[1], rgb.shape[0])
+        cands = run_core(probs, size, core, labels=labels_of(segmenter)).candidates
+        ctx = [CandidateContext(c, probs, size) for c in cands]
+        out += [v.score for v in learned.check_many(rgb, cands, segmenter, seeds=list(range(len(cands))),
+                                                    contexts=ctx)]
+    return np.asarray(out, np.float64)
+
+
+def write_verifier(out: Path, body: dict[str, Any], onnx: bytes) -> dict[str, Any]:
+    """Write the ONNX file (``body["onnx"]["file"]``, beside ``out``) and the record; the document."""
+    atomic_write_bytes(out.parent / body["onnx"]["file"], onnx)
+    doc = signed_document(VERIFIER_FORMAT, body)
+    atomic_write_bytes(out, (json.dumps(doc, indent=1, sort_keys=True) + "\n").encode())
+    return doc
+
+
+def fit_verifier(data: str | Path, val: str | Path, segmenter: Any, out: Path, *, cfg: TrainConfig,
+                 core: Any = None, jitter: int = 3, recall: float = 0.95, images: int | None = None,
+                 learned: Any = None, weights: dict[str, Any] | None = None, command: str | None = None,
+                 pretrained: bool = True, progress: bool = False, log: Any = print) -> dict[str, Any]:
+    """Collect, train, select on ``val``, export, write ``out`` (and its ONNX beside it): the document."""
+    from assurance.dataio.layouts import iter_samples
+    from assurance.fitting.network_identity import network_record
+    from el.segmentation.contract import labels_of
+    from el.segmentation.lite import pretrained_provenance
+
+    weights = weights if weights is not None else network_record(segmenter, loaded=False)
+    kw = {"core": core, "size": 128 if cfg.size <= 128 else cfg.size, "margin": cfg.margin, "progress": progress}
+    train = collect_crops(data, segmenter, jitter=jitter, images=images, desc="training scenes", **kw)
+    held = collect_crops(val, segmenter, jitter=0, images=images, desc="held-out scenes", **kw)
+    result = train_verifier(train, held, cfg, pretrained=pretrained, log=log)
+    sel = held.is_candidate
+    crops = to_size(held.crops[sel], cfg.size)
+    p_held = predict(result.model, crops)
+    onnx = export_onnx(result.model)
+    diff = check_export(onnx, result.model, crops[:64])
+    fusion = None
+    if learned is not None:
+        p_learned = learned_scores(val, segmenter, learned, core=core, images=images)
+        fusion = choose_fusion(held.unsafe[sel], p_held, p_learned, learned_sha256=learned.model_sha256,
+                               recall=recall)
+    splits = {"train": str(data), "held_out": str(val),
+              "train_sha256": split_sha256(list(iter_samples(data, require_labels=True))[:images], data),
+              "held_out_sha256": split_sha256(list(iter_samples(val, require_labels=True))[:images], val)}
+    body = verifier_body(result, cfg, train, held, onnx_name=out.with_suffix(".onnx").name,
+                         onnx_sha256=sha256_bytes(onnx), export_diff=diff, p_held=p_held, recall=recall,
+                         splits=splits, weights=weights, command=command, fusion=fusion,
+                         labels=labels_of(segmenter).name,
+                         provenance=pretrained_provenance() if pretrained else {})
+    return write_verifier(out, body, onnx)

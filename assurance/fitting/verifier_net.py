@@ -1,0 +1,104 @@
+"""The candidate verifier's network: a small CNN of its own that scores a candidate's crop "unsafe".
+
+``VerifierNet`` reads the crop of ``el.monitors.verifier_crop`` (RGB in [0, 1], (B, 3, S, S)) and returns two
+outputs: the logit of "the disc holds a forbidden ground-truth pixel" (B,) and a coarse map of forbidden-ground
+logits (B, 1, S/8, S/8), the auxiliary target that teaches it where forbidden ground lies. The encoder is the
+stem and the first eleven inverted-residual blocks of EfficientNet-Lite0 (down to 1/16, 112 channels), started
+from its ImageNet weights (``el.segmentation.lite.load_imagenet_encoder``; nothing of the segmentation network);
+the 1/16 features are upsampled onto the 1/8 ones, fused, and pooled over the disc (largest and mean) and over
+the whole crop (mean) into the logit, beside the largest forbidden logit of the map in the disc. The input is
+standardised per crop (mean and spread of its pixels), so the score reads the crop's contrast and texture rather
+than its absolute brightness. Flight runs the network's ONNX export (``el.monitors.verifier``).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from el.monitors.verifier_crop import crop_disc_mask
+from el.segmentation.lite import Lite0Encoder, load_imagenet_encoder
+
+ENCODER_BLOCKS = 11  # blocks 0..10 of EfficientNet-Lite0: down to 1/16 (112 channels)
+TAP_8 = 4  # the last block at 1/8 (40 channels); the last at 1/16 (112 channels) ends the encoder
+STD_FLOOR = 0.02  # of the [0, 1] pixel range: a flat crop is not blown up into noise
+
+
+def standardise(x: torch.Tensor) -> torch.Tensor:
+    """Each crop (B, 3, S, S) minus its mean per channel, over its spread (all channels, at least
+    :data:`STD_FLOOR`)."""
+    mean = x.mean(dim=(2, 3), keepdim=True)
+    std = x.flatten(1).std(dim=1).clamp_min(STD_FLOOR).view(-1, 1, 1, 1)
+    return (x - mean) / std
+
+
+class VerifierNet(nn.Module):
+    """Crop (B, 3, S, S) in [0, 1] -> (unsafe logit (B,), forbidden-ground logits (B, 1, S/8, S/8)).
+
+    ``size``: the crop side S (a multiple of 16); ``margin``: the crop's margin around the disc, as a fraction of
+    its radius (which pixels of the map lie in the disc); ``width``: channels of the fused map.
+    """
+
+    def __init__(self, *, size: int = 96, margin: float = 0.5, width: int = 64) -> None:
+        super().__init__()
+        if size % 16:
+            raise ValueError(f"size must be a multiple of 16, got {size}")
+        self.size, self.margin, self.width = size, margin, width
+        enc = Lite0Encoder()
+        self.stem = nn.Sequential(enc._conv_stem, enc._bn0)
+        self.blocks = nn.ModuleList(enc._blocks[:ENCODER_BLOCKS])
+        self.lat8 = nn.Conv2d(40, width, 1)
+        self.lat16 = nn.Conv2d(112, width, 1)
+        self.fuse = nn.Sequential(nn.Conv2d(width, width, 3, padding=1, bias=False), nn.BatchNorm2d(width),
+                                  nn.ReLU(inplace=True))
+        self.aux = nn.Conv2d(width, 1, 1)
+        self.cls = nn.Sequential(nn.Dropout(0.2), nn.Linear(3 * width + 1, 1))
+        g = size // 8
+        disc = crop_disc_mask(g, margin)
+        if not disc.any():  # a grid too coarse to hold a cell centre in the disc: the centre cells
+            disc[(g - 1) // 2:g // 2 + 1, (g - 1) // 2:g // 2 + 1] = True
+        mask = torch.from_numpy(disc).float()
+        self.register_buffer("disc", mask.view(1, 1, g, g), persistent=False)
+
+    def encoder_modules(self) -> list[nn.Module]:
+        return [self.stem, *self.blocks]
+
+    def load_imagenet(self, path: Any = None) -> dict[str, str]:
+        """The encoder's ImageNet weights (EfficientNet-Lite0), through the segmentation network's loader."""
+        enc = Lite0Encoder()
+        provenance = load_imagenet_encoder(enc, path)
+        self.stem = nn.Sequential(enc._conv_stem, enc._bn0)
+        self.blocks = nn.ModuleList(enc._blocks[:ENCODER_BLOCKS])
+        return provenance
+
+    def low(self, x: torch.Tensor) -> torch.Tensor:
+        """The frozen part (kept at its ImageNet weights in training): the standardised crop to the 1/8 features."""
+        x = standardise(x)
+        stem_conv, stem_bn = self.stem
+        y = F.relu6(stem_bn(stem_conv(x)))
+        for block in self.blocks[:TAP_8 + 1]:
+            y = block(y)
+        return y
+
+    def high(self, f8: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The trained part: the 1/8 features to the unsafe logit and the forbidden-ground map."""
+        y = f8
+        for block in self.blocks[TAP_8 + 1:]:
+            y = block(y)
+        fused = self.lat8(f8) + F.interpolate(self.lat16(y), size=f8.shape[-2:], mode="nearest")
+        fused = self.fuse(fused)
+        aux = self.aux(fused)
+        disc = self.disc
+        n = disc.sum()
+        masked_max = (fused * disc - (1.0 - disc) * 1e4).amax(dim=(2, 3))
+        masked_mean = (fused * disc).sum(dim=(2, 3)) / n
+        whole = fused.mean(dim=(2, 3))
+        aux_max = (aux * disc - (1.0 - disc) * 1e4).amax(dim=(2, 3))
+        logit = self.cls(torch.cat([masked_max, masked_mean, whole, aux_max], dim=1)).squeeze(1)
+        return logit, aux
+
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        return self.high(self.low(x))

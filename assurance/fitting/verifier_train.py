@@ -1,0 +1,229 @@
+"""Training of the candidate verifier (``assurance.fitting.verifier_net.VerifierNet``) on candidate crops.
+
+The loss is the class-balanced binary cross-entropy of "unsafe" plus the auxiliary forbidden-ground map (a cell is
+forbidden when any ground-truth pixel under it is). The stem and the blocks down to 1/8 keep their ImageNet weights,
+so each training crop goes through them once per view (the first view as it is, the others augmented) and the steps
+train the rest on those features: training fits on 2 CPU cores. Augmentations are none of the evaluation's
+perturbations (no brightness, fog, blur, shifted or dead rows): a horizontal flip, a small zoom and shift, a colour
+balance and saturation change, and light sensor noise. Selection: the step with the best AUROC of the held-out
+split's core-model candidates (never the test split), evaluated every ``eval_every`` steps; training stops at
+``steps`` or after ``minutes``, whichever comes first.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import cv2
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from assurance.fitting.verifier_data import CropSet
+from assurance.fitting.verifier_net import TAP_8, VerifierNet
+
+FROZEN_BLOCKS = TAP_8 + 2  # the stem and blocks 0..4 (down to 1/8) keep their ImageNet weights (of encoder_modules)
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrainConfig:
+    size: int = 96
+    margin: float = 0.5
+    steps: int = 2000
+    batch: int = 48
+    lr: float = 1e-3
+    encoder_lr_scale: float = 0.3
+    weight_decay: float = 1e-4
+    aux_weight: float = 0.5
+    eval_every: int = 200
+    views: int = 3
+    minutes: float | None = None
+    seed: int = 0
+    threads: int = 2
+
+    def __post_init__(self) -> None:
+        for name in ("size", "steps", "batch", "eval_every", "threads", "views"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if self.size % 16:
+            raise ValueError(f"size must be a multiple of 16, got {self.size}")
+
+
+@dataclass
+class TrainResult:
+    model: VerifierNet
+    best_step: int
+    best_auroc: float
+    curve: list[dict[str, float]] = field(default_factory=list)
+    seconds: float = 0.0
+    steps_run: int = 0
+
+
+def to_size(crops: np.ndarray, size: int) -> np.ndarray:
+    """Crops (n, s, s, 3) uint8 resampled to ``size`` (area down, bilinear up); the same array when already so."""
+    if crops.shape[1] == size:
+        return crops
+    interp = cv2.INTER_AREA if crops.shape[1] > size else cv2.INTER_LINEAR
+    return np.stack([cv2.resize(c, (size, size), interpolation=interp) for c in crops]) if len(crops) else \
+        np.zeros((0, size, size, 3), np.uint8)
+
+
+def augment(crops: np.ndarray, aux: np.ndarray, size: int, rng: np.random.Generator
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """A training batch: crops (n, s, s, 3) uint8 and their aux maps (n, g, g) -> float (n, 3, size, size) in
+    [0, 1] and (n, size/8, size/8) aux targets (flip, zoom and shift applied to both alike)."""
+    n, s = crops.shape[:2]
+    g = size // 8
+    out = np.empty((n, size, size, 3), np.float32)
+    tgt = np.empty((n, g, g), np.float32)
+    ga = aux.shape[1]
+    for i in range(n):
+        side = s * rng.uniform(0.93, 1.0)
+        x0, y0 = rng.uniform(0.0, s - side, size=2)
+        m = np.array([[side / size, 0.0, x0], [0.0, side / size, y0]], np.float32)
+        img = cv2.warpAffine(crops[i], m, (size, size), flags=cv2.INTER_AREA | cv2.WARP_INVERSE_MAP,
+                             borderMode=cv2.BORDER_REFLECT)
+        k = ga / s
+        ma = np.array([[side * k / g, 0.0, x0 * k], [0.0, side * k / g, y0 * k]], np.float32)
+        a = cv2.warpAffine(aux[i], ma, (g, g), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                           borderMode=cv2.BORDER_REFLECT)
+        if rng.random() < 0.5:
+            img, a = img[:, ::-1], a[:, ::-1]
+        x = img.astype(np.float32) / 255.0
+        x = x * rng.uniform(0.92, 1.08, size=3).astype(np.float32)  # colour balance
+        grey = x.mean(axis=2, keepdims=True)
+        x = grey + (x - grey) * np.float32(rng.uniform(0.75, 1.25))  # saturation
+        x = x + rng.normal(0.0, rng.uniform(0.0, 0.015), size=x.shape).astype(np.float32)  # sensor noise
+        out[i] = np.clip(x, 0.0, 1.0)
+        tgt[i] = a
+    return out.transpose(0, 3, 1, 2), (tgt > 1e-3).astype(np.float32)
+
+
+def as_input(crops: np.ndarray) -> torch.Tensor:
+    """Crops (n, S, S, 3) uint8 -> (n, 3, S, S) float in [0, 1]."""
+    return torch.from_numpy(np.ascontiguousarray(crops.transpose(0, 3, 1, 2))).float().div_(255.0)
+
+
+@torch.inference_mode()
+def predict(model: VerifierNet, crops: np.ndarray, *, batch: int = 128) -> np.ndarray:
+    """P(unsafe) of crops (n, S, S, 3) uint8 at the model's size: (n,) float64."""
+    model.eval()
+    out = [torch.sigmoid(model(as_input(crops[i:i + batch]))[0]).double().numpy()
+           for i in range(0, len(crops), batch)]
+    return np.concatenate(out) if out else np.zeros(0)
+
+
+def auroc(y: np.ndarray, p: np.ndarray) -> float:
+    from sklearn.metrics import roc_auc_score
+
+    return float(roc_auc_score(y, p)) if 0 < y.sum() < y.size else math.nan
+
+
+@torch.inference_mode()
+def low_features(model: VerifierNet, x: np.ndarray, *, batch: int = 256) -> torch.Tensor:
+    """The frozen part's 1/8 features of float crops (n, 3, S, S) in [0, 1], as float16 (n, 40, S/8, S/8)."""
+    model.eval()
+    return torch.cat([model.low(torch.from_numpy(np.ascontiguousarray(x[i:i + batch]))).half()
+                      for i in range(0, len(x), batch)])
+
+
+def cached_views(model: VerifierNet, crops: CropSet, cfg: TrainConfig, rng: np.random.Generator,
+                 log: Callable[[str], None]) -> tuple[torch.Tensor, torch.Tensor, np.ndarray]:
+    """Every training crop in ``cfg.views`` views (the first as it is, the others augmented), through the frozen part
+    once: their 1/8 features, aux targets and truth. The frozen part never changes, so each view is computed once."""
+    feats, auxes, ys = [], [], []
+    plain = to_size(crops.crops, cfg.size)
+    g = cfg.size // 8
+    for v in range(cfg.views):
+        for i in range(0, len(plain), 512):
+            part = slice(i, i + 512)
+            if v == 0:
+                x = plain[part].transpose(0, 3, 1, 2).astype(np.float32) / 255.0
+                a = np.stack([cv2.resize(t, (g, g), interpolation=cv2.INTER_AREA) for t in crops.aux[part]])
+                a = (a > 1e-3).astype(np.float32)
+            else:
+                x, a = augment(crops.crops[part], crops.aux[part], cfg.size, rng)
+            feats.append(low_features(model, x))
+            auxes.append(torch.from_numpy(a))
+            ys.append(crops.unsafe[part])
+        log(f"view {v + 1} of {cfg.views} through the frozen encoder")
+    return torch.cat(feats), torch.cat(auxes), np.concatenate(ys)
+
+
+def _optimiser(model: VerifierNet, cfg: TrainConfig) -> torch.optim.Optimizer:
+    for mod in model.encoder_modules()[:FROZEN_BLOCKS]:
+        for p in mod.parameters():
+            p.requires_grad_(False)
+    enc = [p for m in model.blocks[TAP_8 + 1:] for p in m.parameters()]
+    skip = {id(p) for p in enc} | {id(p) for m in model.encoder_modules() for p in m.parameters()}
+    head = [p for p in model.parameters() if id(p) not in skip]
+    return torch.optim.AdamW([{"params": enc, "lr": cfg.lr * cfg.encoder_lr_scale}, {"params": head, "lr": cfg.lr}],
+                             weight_decay=cfg.weight_decay)
+
+
+@torch.inference_mode()
+def _held_out_auroc(model: VerifierNet, feats: torch.Tensor, y: np.ndarray) -> float:
+    model.eval()
+    p = torch.cat([torch.sigmoid(model.high(feats[i:i + 512].float())[0]) for i in range(0, len(feats), 512)])
+    return auroc(y, p.double().numpy())
+
+
+def train_verifier(train: CropSet, val: CropSet, cfg: TrainConfig, *, pretrained: bool = True,
+                   log: Callable[[str], None] = print) -> TrainResult:
+    """Train on ``train`` (every crop), select on ``val``'s core-model candidates by AUROC.
+
+    The stem and the blocks down to 1/8 keep their ImageNet weights; each training crop goes through them once per
+    view (:func:`cached_views`), and the steps train the rest (the 1/16 blocks and the head) on those features."""
+    torch.manual_seed(cfg.seed)
+    torch.set_num_threads(cfg.threads)
+    rng = np.random.default_rng(cfg.seed)
+    model = VerifierNet(size=cfg.size, margin=cfg.margin)
+    if pretrained:
+        model.load_imagenet()
+    t0 = time.perf_counter()
+    feats, aux_t, y = cached_views(model, train, cfg, rng, log)
+    vsel = val.is_candidate
+    vfeats = low_features(model, to_size(val.crops[vsel], cfg.size).transpose(0, 3, 1, 2).astype(np.float32) / 255.0)
+    vy = val.unsafe[vsel]
+    opt = _optimiser(model, cfg)
+    base = [g["lr"] for g in opt.param_groups]
+    pos = float(y.mean())
+    pos_weight = torch.tensor((1.0 - pos) / max(pos, 1e-6))
+    yt = torch.from_numpy(y.astype(np.float32))
+    best = TrainResult(copy.deepcopy(model), 0, -1.0)
+    step = 0
+    for step in range(1, cfg.steps + 1):
+        model.train()
+        frac = step / cfg.steps
+        for g, lr in zip(opt.param_groups, base, strict=True):
+            g["lr"] = lr * (min(1.0, step / 50) * 0.5 * (1.0 + math.cos(math.pi * frac)))
+        idx = torch.from_numpy(rng.integers(0, len(y), cfg.batch))
+        logit, aux = model.high(feats[idx].float())
+        loss = F.binary_cross_entropy_with_logits(logit, yt[idx], pos_weight=pos_weight)
+        loss = loss + cfg.aux_weight * F.binary_cross_entropy_with_logits(aux[:, 0], aux_t[idx])
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+        out_of_time = cfg.minutes is not None and time.perf_counter() - t0 > 60.0 * cfg.minutes
+        if step % cfg.eval_every == 0 or step == cfg.steps or out_of_time:
+            score = _held_out_auroc(model, vfeats, vy)
+            best.curve.append({"step": step, "loss": loss.item(), "val_auroc": score,
+                               "seconds": time.perf_counter() - t0})
+            log(f"step {step}: loss {loss.item():.4f}, held-out AUROC {score:.4f} ({time.perf_counter() - t0:.0f} s)")
+            if score > best.best_auroc:
+                best.model, best.best_step, best.best_auroc = copy.deepcopy(model), step, score
+        if out_of_time:
+            break
+    best.seconds, best.steps_run = time.perf_counter() - t0, step
+    best.model.eval()
+    return best
+
+
+def state_summary(model: VerifierNet) -> dict[str, Any]:
+    return {"size": model.size, "margin": model.margin, "width": model.width,
+            "parameters": int(sum(p.numel() for p in model.parameters()))}

@@ -1,0 +1,80 @@
+"""Fitting the candidate verifier: its training data, a few training steps, the record it writes, the command."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from el.decision import Disc
+
+torch = pytest.importorskip("torch")
+pytest.importorskip("onnxruntime")
+
+
+def test_aux_target_and_mined_discs():
+    from assurance.fitting.verifier_data import aux_target, jittered
+
+    forbidden = np.zeros((100, 100), bool)
+    forbidden[:, 50:] = True
+    a = aux_target(forbidden, Disc(50.0, 50.0, 10.0), margin=0.5, grid=6)
+    assert a.shape == (6, 6) and a[:, :3].max() == 0.0 and a[:, 3:].min() == 1.0
+    edge = aux_target(forbidden, Disc(5.0, 50.0, 10.0), margin=0.5, grid=6)
+    assert edge[:, 0].min() > 0.5  # outside the image counts as forbidden
+    rng = np.random.default_rng(0)
+    d = Disc(50.0, 50.0, 10.0)
+    moved = jittered(d, rng, 6, 100, 100)
+    dist = [math.hypot(m.x - d.x, m.y - d.y) / d.radius_px for m in moved]
+    assert dist[0] <= 0.5 and 0.5 <= dist[1] <= 1.5 and all(0.0 <= m.x <= 100 and 0.0 <= m.y <= 100 for m in moved)
+
+
+def _crops(n: int, rng: np.random.Generator):
+    from assurance.fitting.verifier_data import CropSet
+
+    unsafe = np.arange(n) % 3 == 0
+    crops = rng.integers(60, 120, (n, 32, 32, 3), dtype=np.uint8)
+    crops[unsafe, :, 14:18] = 250  # a bright stripe through the disc: "forbidden"
+    aux = np.zeros((n, 8, 8), np.float32)
+    aux[unsafe, :, 3:5] = 1.0
+    return CropSet(crops, unsafe, aux, np.arange(n) // 4, np.ones(n, bool), np.zeros(n, np.int64),
+                   np.zeros((n, 3)))
+
+
+def test_a_few_steps_select_on_held_out_and_write_a_record_that_flies(tmp_path):
+    from assurance.fitting.verifier_fit import check_export, choose_fusion, export_onnx, verifier_body, write_verifier
+    from assurance.fitting.verifier_train import TrainConfig, predict, train_verifier
+    from el.hashing import sha256_bytes
+    from el.labels import UAVID
+    from el.monitors.verifier import VerifierMonitor
+
+    rng = np.random.default_rng(0)
+    train, held = _crops(48, rng), _crops(24, rng)
+    cfg = TrainConfig(size=32, steps=4, batch=8, eval_every=2, threads=1)
+    result = train_verifier(train, held, cfg, pretrained=False, log=lambda s: None)
+    assert result.best_step in (2, 4) and len(result.curve) == 2 and result.steps_run == 4
+    onnx = export_onnx(result.model)
+    assert check_export(onnx, result.model, held.crops[:4]) < 1e-3
+    p = predict(result.model, held.crops)
+    fusion = choose_fusion(held.unsafe, p, np.where(held.unsafe, 0.7, 0.3), learned_sha256="f" * 64, recall=0.95)
+    assert 0.0 <= fusion["weight"] <= 1.0 and fusion["held_out"]["recall"] >= 0.95
+    body = verifier_body(result, cfg, train, held, onnx_name="v.onnx", onnx_sha256=sha256_bytes(onnx),
+                         export_diff=0.0, p_held=p, recall=0.95, splits={"train": "t", "train_sha256": "1" * 64},
+                         weights={"sha256": "abc"}, command="uav-el fit-verifier ...", fusion=fusion,
+                         labels="uavid", provenance={})
+    assert body["held_out"]["recall"] >= 0.95 and body["training"]["sha256"] == "1" * 64
+    write_verifier(tmp_path / "v.json", body, onnx)
+    m = VerifierMonitor(labels=UAVID, model=str(tmp_path / "v.json"))
+    assert m.threshold == pytest.approx(body["threshold"])
+    img = np.random.default_rng(1).integers(0, 256, (64, 64, 3), dtype=np.uint8)
+    v = m.check_many(img, [Disc(32.0, 32.0, 8.0)], None, seeds=[0])
+    assert 0.0 <= v[0].score <= 1.0
+
+
+def test_fit_verifier_command_is_listed_and_checks_its_options(tmp_path, capsys):
+    from assurance.cli import COMMANDS, main
+
+    assert COMMANDS["fit-verifier"] == "fit_verifier"
+    assert main(["fit-verifier", "--data", str(tmp_path / "nope"), "--val", str(tmp_path),
+                 "--out", str(tmp_path / "v.json")]) == 2
+    assert "no such folder" in capsys.readouterr().err
