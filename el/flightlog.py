@@ -293,8 +293,8 @@ class FlightLog:
         key = str(path)
         if key not in self._gate_files:
             try:
-                self._gate_files[key] = sha256_file(Path(key))
-            except OSError:
+                self._gate_files[key] = sha256_file(Path(key), what="frame gate", max_bytes=64 << 20)
+            except (OSError, ValueError):  # missing, or refused by the bounded reader (a FIFO, too large)
                 self._gate_files[key] = None
         return self._gate_files[key]
 
