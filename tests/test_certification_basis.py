@@ -128,3 +128,19 @@ def test_synonyms_other_languages_and_obstacles_declared_safe_are_deviations(nam
     found = {x.name: x for x in deviations({}, labels=LabelSet.from_dict(d))}
     dev = found[f"class:{name}"]
     assert not dev.accepted and f"category {category}, pinned for the name" in dev.text()
+
+
+def test_the_basis_accepted_classes_are_gate_policy_a_registry_may_only_narrow():
+    """``safe_unknown_accepted`` is the registry's (pinned with it): no targets file sets it, and a registry given on
+    the command line that accepts one more class is weaker than the system's."""
+    from assurance.requirements.targets import GATE_POLICY, TargetError, validate_targets
+    from assurance.requirements.weakening import parameter_weakenings
+
+    params = load_registry().parameters
+    assert "safe_unknown_accepted" in GATE_POLICY
+    with pytest.raises(TargetError, match="the gate's policy is the registry's"):
+        validate_targets({"safe_unknown_accepted": ["x:misc"]}, params)
+    wider = {**params, "safe_unknown_accepted": [*params["safe_unknown_accepted"], "0" * 64 + ":misc"]}
+    assert any("safe_unknown_accepted" in w for w in parameter_weakenings(params, wider))
+    assert not any("safe_unknown_accepted" in w for w in parameter_weakenings(params, {**params,
+                                                                                   "safe_unknown_accepted": []}))
