@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from el.class_names import check_class_names
+from el.name_profile import profile_problem
 
 MAX_CLASSES = 256  # class ids travel as uint8
 CLASS_KEYS = ("id", "name", "rgb", "forbidden", "hazard_score", "category")
@@ -166,6 +167,10 @@ def validate_ignore(ignore: Any, classes: Sequence[LabelClass]) -> None:
         raise ValueError(f"ignore.counts_as: must be one of {', '.join(IGNORE_COUNTS_AS)}, got {ignore.counts_as!r}")
     if not isinstance(ignore.name, str) or not ignore.name.strip():
         raise ValueError(f"ignore.name: must be a non-empty string, got {ignore.name!r}")
+    why = profile_problem(ignore.name)
+    if why is not None:  # reports name it beside the classes: held to the class names' profile (el.name_profile)
+        raise ValueError(f"ignore.name: {ignore.name!r} (written {ascii(ignore.name)}) is outside the class-name "
+                         f"profile: {why}")
     rgb = tuple(int(v) for v in ignore.rgb)
     for c in classes:
         if tuple(int(v) for v in c.rgb) == rgb:

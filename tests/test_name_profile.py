@@ -95,3 +95,13 @@ def test_lookalikes_of_each_other_and_of_a_well_known_name_are_refused():
     with pytest.raises(ValueError, match="looks like the well-known class name 'road'"):
         check_class_names("s", ["grass", "r0ad"])
     check_class_names("s", ["grass", "road", "Stra\u00dfe"])  # no error
+
+
+def test_the_ignore_colours_name_is_held_to_the_profile_too():
+    """The "unlabelled" colour's name is shown beside the classes: a Braille blank or a Cyrillic letter there is
+    refused like in a class name."""
+    with pytest.raises(ValueError, match=r"ignore.name: .*BRAILLE PATTERN BLANK"):
+        UAVID.with_ignore((1, 2, 3), name="void\u2800")
+    with pytest.raises(ValueError, match=r"ignore.name: .*Cyrillic"):
+        UAVID.with_ignore((1, 2, 3), name="v\u043eid")
+    assert UAVID.with_ignore((1, 2, 3), name="unlabelled").ignore.name == "unlabelled"

@@ -2,7 +2,7 @@
 folder (rows ``T1``..``T4``, ``T25``..``T29``, ``T50``..``T54``: ``assurance.fault_injection.report_cases``), the
 applicant's files read bounded and checked before work (``T5``..``T17``, ``T21``, ``T30``..``T39``:
 ``assurance.fault_injection.trust``), the certification basis and the pins (``T18``..``T24``, ``T40``..``T44``:
-``assurance.fault_injection.basis_cases``), class names, categories and colours (``T70``..``T78``:
+``assurance.fault_injection.basis_cases``), class names, categories and colours (``T70``..``T79``:
 ``assurance.fault_injection.name_cases``).
 """
 

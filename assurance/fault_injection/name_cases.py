@@ -1,11 +1,12 @@
-"""Fault-injection cases of class names, categories and colours (issue 57; rows ``T70``..``T78``).
+"""Fault-injection cases of class names, categories and colours (issue 57; rows ``T70``..``T79``).
 
 A label set's words are the applicant's: a class name outside the restricted identifier profile (small capitals,
 Armenian or Cherokee letters, a Braille blank, a Hangul filler: ``el.name_profile``) is refused when the set is read
 (exit 2, one line naming the set, the class and the character); a safe class of the category ``unknown`` (declared or
 implied) and a safe class in a colour a well-known label set gives a forbidden class are deviations named on the
-first page, which still states the gate's own verdict and shows each safe class's pixels on the run's frames; two
-classes sharing a colour are refused. UAVid's own clutter is a deviation the basis itself accepts, in the open.
+first page, which still states the gate's own verdict and shows each safe class's pixels on the run's frames; so is
+a synonym or another language's word for road declared safe (``Straße``: its category is pinned); two classes
+sharing a colour are refused. UAVid's own clutter is a deviation the basis itself accepts, in the open.
 """
 
 from __future__ import annotations
@@ -26,10 +27,9 @@ def _labels_evidence(ws: Path, name: str, doc: dict) -> list[str]:
     return _evidence(ws, name, "--system", _system(ws, f"sys-{name}", f'[labels]\nfile = "{labels.name}"\n'))
 
 
-def _road_renamed(ws: Path, name: str, case: str, **more: object) -> list[str]:
-    """UAVid's road renamed ``name`` and declared safe (bare ground, score 0), in road's colour."""
-    return _labels_evidence(ws, case, _uavid_doc(name=name, forbidden=False, hazard_score=0.0, category="bare_ground",
-                                                 **more))
+def _road_renamed(ws: Path, name: str, case: str, category: str = "bare_ground") -> list[str]:
+    """UAVid's road renamed ``name`` and declared safe (``category``, score 0), in road's colour."""
+    return _labels_evidence(ws, case, _uavid_doc(name=name, forbidden=False, hazard_score=0.0, category=category))
 
 
 def _meadow_in_roads_colour(ws: Path) -> list[str]:
@@ -106,6 +106,10 @@ NAME_CASES: tuple[Case, ...] = (
          check=_first_page("shipped-clutter", deviation="class:clutter", strip="clutter", accepted=True)),
     Case("T78-two-classes-one-colour", "low vegetation given road's colour as well", _shared_colour, 2,
          "classes 'road' and 'low_vegetation' share the colour RGB(128, 64, 128)"),
+    Case("T79-synonym-declared-safe", "UAVid's road renamed 'Stra\u00dfe', declared safe as vegetation",
+         lambda ws: _road_renamed(ws, "Stra\u00dfe", "synonym", category="vegetation"), 1,
+         "category road, pinned for the name 'Stra\u00dfe'", pick="class:Stra\u00dfe",
+         check=_first_page("synonym", deviation="class:Stra\u00dfe", strip="Stra\u00dfe")),
 )
 """Class names, categories and colours (module docstring): assembled with the applicant's cases in
 ``assurance.fault_injection.applicant``."""
