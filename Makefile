@@ -46,11 +46,15 @@ requirements: setup
 
 ## The evidence step (also run by CI; `make demo` reports a failed gate of its demo-sized run without failing,
 ## any other error still fails): `uav-el verify` runs the packaged requirement checks and this repository's
-## requirement tests (a failure is reported by the gate; their JUnit XML carries one comma-joined
+## requirement tests (a failed requirement, exit 1, is said in words and left to the gate; their JUnit XML carries one comma-joined
 ## `requirements` property per test), then the report (HTML, PDF/A-3b with the
 ## JSON, CSVs, JUnit XML and SHA256SUMS attached, traceability.csv).
 evidence: setup
-	-$(PY) -m assurance verify $(RUN) --out $(REPORTS) --tests tests $(VERIFY_FLAGS)
+	@rc=0; $(PY) -m assurance verify $(RUN) --out $(REPORTS) --tests tests $(VERIFY_FLAGS) || rc=$$?; \
+	if [ $$rc -eq 1 ]; then \
+		echo "Some requirements failed or are not verified on this run (expected of the demo's 10 scenes): the"; \
+		echo "evidence step below decides what that means for the gate and its report says why."; \
+	elif [ $$rc -ne 0 ]; then exit $$rc; fi
 	$(PY) -m assurance fault-table --out $(REPORTS)/faults.csv $(FAULT_FLAGS)
 	@rc=0; $(PY) -m assurance evidence --run $(RUN) --out $(REPORTS) || rc=$$?; \
 	if [ $$rc -eq 1 ] && [ "$(DEMO_GATE)" = report ]; then \

@@ -12,6 +12,7 @@ import pytest
 from helpers import TINY_ARCH, FakeClock, TappedOracle, write_textured_scenes
 
 from assurance.campaign.run import CampaignConfig, plan, run_task, task_seed
+from assurance.campaign.task import frame_identity
 from assurance.dataio.uavid import read_image
 from assurance.perturbations import perturb
 from el.config import CoreConfig
@@ -108,8 +109,9 @@ def _compare(world, *, budget=BUDGET):
         for task, rows in tasks:
             row = next(r for r in rows["images"] if r["monitor"] == config.monitors[MONITORS.index(monitor)])
             assert not row["fault"], row
-            rng = np.random.default_rng(task_seed(config.seed, task.sample.key, task.perturbation, task.severity))
-            frame = perturb(read_image(task.sample.image_path), task.perturbation, task.severity, rng)
+            rgb = read_image(task.sample.image_path)
+            rng = np.random.default_rng(task_seed(config.seed, frame_identity(rgb), task.perturbation, task.severity))
+            frame = perturb(rgb, task.perturbation, task.severity, rng)
             decision = system.decide(frame)
             flight = (decision.action, -1 if decision.selected is None else decision.selected, decision.reason)
             if (row["action"], row["selected"], row["reason"]) != flight:

@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 
 from assurance.campaign import readouts
-from assurance.campaign.run import task_seed
+from assurance.campaign.task import frame_identity, task_seed
 from assurance.dataio.layouts import iter_samples
 from assurance.dataio.uavid import read_image
 from assurance.perturbations import perturb
@@ -54,7 +54,7 @@ def frame_distances(run: str | Path, data: str | Path, gate_path: str | Path, se
         if key not in cache:
             cache.clear()
             cache[key] = read_image(samples[key].image_path)
-        rng = np.random.default_rng(task_seed(seed, key, pert, int(sev)))
+        rng = np.random.default_rng(task_seed(seed, frame_identity(cache[key]), pert, int(sev)))
         d = gate_score(gate, segmenter, perturb(cache[key], pert, int(sev), rng))
         rows.append({"perturbation": pert, "severity": int(sev), "key": key, "ood_distance": d,
                      "ood_fires": bool(d > gate.threshold)})

@@ -6,6 +6,7 @@ A resumed run must match it, the requirement checks read it, and the evidence re
 from __future__ import annotations
 
 import hashlib
+import os
 import platform
 import sys
 from collections.abc import Mapping, Sequence
@@ -43,8 +44,9 @@ def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *,
     files = sorted({t.sample.image_path for t in tasks} | {t.sample.label_path for t in tasks if t.sample.label_path}
                    | _frame_files(tasks))
     h = hashlib.sha256()
+    root = os.path.normpath(os.fspath(data))  # a [data] path holding ".." is spelled as the files found under it
     for f in files:
-        h.update(f"{Path(f).relative_to(data)}:{sha256_file(f)}\n".encode())
+        h.update(f"{Path(os.path.relpath(os.path.normpath(f), root)).as_posix()}:{sha256_file(f)}\n".encode())
     return {
         "format": readouts.FORMAT_VERSION,
         "config": config.to_dict(),

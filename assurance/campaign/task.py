@@ -149,9 +149,20 @@ class Task:
         return readouts.shard_name(self.perturbation, self.severity, self.sample.key)
 
 
-def task_seed(seed: int, key: str, perturbation: str, severity: int) -> list[int]:
-    """Seed sequence of a task's perturbation: independent of the order and place tasks run."""
-    digest = hashlib.sha256(f"{key}|{perturbation}|{severity}".encode()).digest()
+def frame_identity(rgb: np.ndarray) -> str:
+    """What a frame is, whatever layout, folder or file format it was read from: the SHA-256 (hex) of its decoded
+    pixels and shape. A perturbation's randomness is keyed by it, so the same frames read through two layouts (or
+    converted from JPEG to PNG losslessly) get the same noise."""
+    pixels = np.ascontiguousarray(rgb)
+    h = hashlib.sha256(f"{pixels.dtype.str}{pixels.shape}".encode())
+    h.update(memoryview(pixels).cast("B"))
+    return h.hexdigest()
+
+
+def task_seed(seed: int, frame: str, perturbation: str, severity: int) -> list[int]:
+    """Seed sequence of a task's perturbation: independent of the order and place tasks run, and of the layout the
+    frame was read through (``frame``: its :func:`frame_identity`)."""
+    digest = hashlib.sha256(f"{frame}|{perturbation}|{severity}".encode()).digest()
     return [seed, int.from_bytes(digest[:8], "little")]
 
 
@@ -218,7 +229,7 @@ def _judged_frame(task: Task, config: CampaignConfig, segmenter: Any, clock: Cal
         meta.update(found)  # EXIF orientation
         check_frame_pose(config, s, pose, roll, (rgb.shape[1], rgb.shape[0]))
         truth.append(frame_truth(s, labels, rgb.shape[:2])[1])
-        rng = np.random.default_rng(task_seed(config.seed, s.key, task.perturbation, task.severity))
+        rng = np.random.default_rng(task_seed(config.seed, frame_identity(rgb), task.perturbation, task.severity))
         hd, timings["perturb_s"] = _timed(clock, perturb, rgb, task.perturbation, task.severity, rng)
         return hd
 

@@ -10,7 +10,9 @@ from assurance.errors import CommandError
 
 HELP = ("write the evidence report (HTML, PDF, JSON) of a campaign run; exit 1 when a requirement failed, "
         "when the requirement results are not bound to this run, code and registry or contradict the run, or "
-        "when a waiver expired (with --strict also when one is not verified); exit 4 for a damaged run")
+        "when a waiver expired, or when a requirement is left not verified for want of evidence (one left undecided "
+        "only by the run's size, as the registry's size_limited allows on a small run, fails it with --strict "
+        "only); exit 4 for a damaged run")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -28,7 +30,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "gate; ignored with --strict (default: the system file's [waivers] file; for the shipped system, "
                    "the shipped assurance/waivers.yaml; a system file without [waivers]: none)")
     p.add_argument("--strict", action="store_true",
-                   help="also exit 1 when a requirement is not verified or the PDF cannot be written")
+                   help="also exit 1 when a requirement is left undecided by the run's size alone (size_limited, on a "
+                        "small run), and when the PDF cannot be written; ignores waivers")
     p.add_argument("--no-pdf", action="store_true", help="write the HTML and JSON only")
     p.add_argument("--trusted-keys", metavar="PEM|DIR",
                    help="public keys whose signatures are accepted (a PEM file, or a folder of *.pem/*.pub); default: "

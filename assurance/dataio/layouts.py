@@ -77,7 +77,8 @@ class DataSpec:
     split: str | None = None
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "path", Path(self.path))
+        # normalised once (``sys/../raw`` -> ``raw``), as the label paths found under it are: one path, one spelling
+        object.__setattr__(self, "path", Path(os.path.normpath(self.path)))
         if self.layout is not None and self.layout not in LAYOUTS:
             raise ValueError(f"layout: {self.layout!r} is not a known layout ({', '.join(LAYOUTS)})")
         if self.label_encoding is not None and self.label_encoding not in ENCODINGS:

@@ -46,6 +46,7 @@ class ArgumentInputs:
     hashes: Mapping[str, str]  # 'requirements' / 'results' / 'system' / 'run' -> SHA-256
     amlas: Sequence[Mapping[str, Any]] = ()  # the AMLAS index (assurance.evidence.amlas)
     system: str = "the system assessed"
+    domain_source: str = "the system assessed"  # whose values fill the registry's wording of the domain
 
 
 def _short(sha: str | None) -> str:
@@ -140,7 +141,8 @@ def build_argument(a: ArgumentInputs) -> dict[str, Node]:
                supported_by=["S-HAZ", "S-REQ", "S-ML"], in_context_of=["C-ODD", "C-SYS", "C-HAZ"])
     odd = "; ".join(f"{k.replace('_', ' ')}: {v}" for k, v in list(reg.operating_domain.items())[:3])
     nodes = [top,
-             Node("C-ODD", f"Declared operating domain ({reg.path.name}): {odd}"),
+             Node("C-ODD", f"Declared operating domain ({a.domain_source}, in the wording of {reg.path.name}): "
+                           f"{odd}"),
              Node("C-SYS", f"System assessed: {a.system}; campaign run {_short(a.hashes.get('run'))}; system file "
                            f"{_short(a.hashes.get('system'))}"),
              Node("C-HAZ", f"Hazard log {log.path.name} ({_short(log.sha256)}): {len(log.hazards)} hazards")]

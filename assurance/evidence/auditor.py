@@ -8,6 +8,7 @@ from typing import Any
 
 from assurance.evidence.amlas import amlas_index, entry
 from assurance.evidence.argument import ArgumentInputs, build_argument, check_structure, to_gsn2x, to_yaml
+from assurance.evidence.context import domain_source
 from assurance.evidence.gsn_svg import argument_pages
 from assurance.evidence.hazards import hazard_view, load_hazards
 from assurance.evidence.model_log import model_log
@@ -93,7 +94,8 @@ def auditor_context(inp: Any, gate: Any, identity_rows: list[dict[str, Any]], *,
         hashes={"requirements": _sha(identity_rows, "Requirement test results"),
                 "results": _sha(identity_rows, "Results table"), "run": _sha(identity_rows, "Run readouts"),
                 "system": _sha(identity_rows, "System file")},
-        amlas=index, system=inp.system.name if inp.system is not None else "the embedded default system")
+        amlas=index, system=inp.system.name if inp.system is not None else "the embedded default system",
+        domain_source=domain_source(inp))
     nodes = build_argument(args)
     problems = check_structure(nodes)
     inp.warnings.extend(f"safety argument: {p}" for p in problems)

@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 
 from assurance.campaign.readouts import image_size
-from assurance.campaign.run import task_seed
+from assurance.campaign.task import frame_identity, task_seed
 from assurance.dataio.layouts import DataSpec, iter_samples
 from assurance.dataio.uavid import Sample, read_image
 from assurance.perturbations import perturb
@@ -63,7 +63,7 @@ class Scenes:
             return None
         try:
             rgb = read_image(sample.image_path)
-            rng = np.random.default_rng(task_seed(self.seed, key, perturbation, int(severity)))
+            rng = np.random.default_rng(task_seed(self.seed, frame_identity(rgb), perturbation, int(severity)))
             hd = perturb(rgb, perturbation, int(severity), rng)
         except Exception as exc:
             self.error = f"{sample.image_path}: {exc}"

@@ -155,9 +155,15 @@ def _card_set(name: str, role: str, letter: str, d: dict[str, Any], *, package: 
                   f"{declared} (declared: [data] provenance)" if declared else
                   "the package's synthetic scenes (docs/model-card.md)" if package else NOT_DECLARED)
     shown = d.get("path") if d.get("path") else ""
-    return _row(name, role, letter, shown, d.get(images_key), d.get("sha256"), record=record, provenance=provenance,
+    scenes = d.get("scenes") if isinstance(d.get("scenes"), list) else []
+    images = d.get(images_key)
+    if images_key != "images" and len(scenes) == 2 and isinstance(images, int):  # frames: each image perturbed
+        n = int(scenes[1]) - int(scenes[0])
+        images = n if images == n else f"{n} ({images} frames: each clean and perturbed)"
+    label = set_label({"name": name, "path": "", "spec": spec, "scenes": []})  # names the split list of a table
+    return _row(label, role, letter, shown, images, d.get("sha256"), record=record, provenance=provenance,
                 licence=licence_of(metas, licence, package=package), folder=folder, unread=unread, spec=spec,
-                scenes=d.get("scenes") if isinstance(d.get("scenes"), list) else [], **more)
+                scenes=scenes, **more)
 
 
 def development_sets(card: dict[str, Any] | None, monitors: dict[str, dict[str, Any]],

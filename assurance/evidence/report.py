@@ -14,8 +14,11 @@ from assurance.evidence.auditor import ARGUMENT_FILE, ISSRE_FILE, auditor_contex
 from assurance.evidence.benchmark_section import read_benchmark
 from assurance.evidence.context import (
     Inputs,
+    acceptance_rows,
     campaign_context,
     commands,
+    domain_source,
+    not_size_limited,
     read_inputs,
     template_context,
     undecidable_here,
@@ -205,6 +208,9 @@ def _report_context(inp: Inputs, gate: Gate, campaign: dict[str, Any], base: dic
     context.update({**auditor_context(inp, gate, campaign["identity"], n_boot=n_boot), "label_classes":
                     _label_classes(system), "commands": commands(inp, accepted), "benchmark": bench,
                     "deviations": [{**d.to_dict(), "text": d.text()} for d in basis],
+                    "parameters": acceptance_rows(inp.registry, basis, not_size_limited(inp),
+                                                  shipped=system is None or system.default),
+                    "domain_source": domain_source(inp),
                     "in_service": in_service and in_service.context(inp.check.digest)})  # assurance.inservice.section
     context.update(navigation_context(inp, context, pdf))
     return context

@@ -10,6 +10,7 @@ from __future__ import annotations
 import copy
 import hashlib
 import json
+import os
 import re
 import tomllib
 from collections.abc import Iterator, Mapping
@@ -75,12 +76,13 @@ class SystemFile:
         return _lookup(self.document, key, _UNSET) is not _UNSET
 
     def path_of(self, key: str) -> Path | None:
-        """The setting ``key`` as a path, relative ones resolved against the file's folder; None when unset."""
+        """The setting ``key`` as a path, relative ones resolved against the file's folder, normalised (``sys/../raw``
+        is ``raw``: one spelling, as the files found under it are spelled); None when unset."""
         value = self.get(key)
         if value is None:
             return None
         p = Path(str(value)).expanduser()
-        return p if p.is_absolute() else (self.base / p)
+        return Path(os.path.normpath(p if p.is_absolute() else (self.base / p)))
 
     def error(self, key: str, problem: str) -> SystemFileError:
         """The one-line error about ``key`` of this file."""

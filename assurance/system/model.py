@@ -133,9 +133,11 @@ class NamedChannels:
     def __init__(self, model: Any, labels: Any) -> None:
         self.network, self.labels = model, labels
 
-    def predict_frame(self, rgb: Any) -> Any:
-        """The model's frame probabilities, unchanged."""
-        return self.network.predict_frame(rgb)
+    def predict_frame(self, rgb: Any, **kwargs: Any) -> Any:
+        """The model's frame probabilities, unchanged; ``stats=True`` passed on where the model has the frame
+        statistics capability (``el.segmentation.contract.FRAME_STATS``, which this wrapper forwards): a frame gate
+        needs them."""
+        return self.network.predict_frame(rgb, **kwargs)
 
     def predict_patch(self, rgb_patch: Any, **kwargs: Any) -> Any:
         """The model's patch probabilities, unchanged."""

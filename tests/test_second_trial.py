@@ -1,0 +1,112 @@
+"""Issue 60, a user's own system tried a second time: a ``[data]`` table whose path climbs out of the system file's
+folder (``../raw``, as docs/system-file.md writes it) works for the campaign as for preview; a perturbation's noise is
+keyed by the frame's pixels, not the layout's folder names (the same frames read through two layouts get the same
+noise and the same decisions); a plugin network named by ``[model] classes`` flies with a frame gate (its frame
+statistics asked for through the wrapper)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from helpers import scene_ids
+
+from assurance import cli
+from assurance.campaign import readouts
+from assurance.campaign.task import frame_identity, task_seed
+from assurance.dataio.uavid import write_image
+from el.labels import UAVID, load_label_set
+
+DRONE = load_label_set("semantic_drone")
+TO_DRONE = {"road": "paved-area", "building": "roof", "static_car": "car", "moving_car": "car", "tree": "tree",
+            "low_vegetation": "grass", "human": "person", "clutter": "gravel"}
+
+
+def _frames(root: Path, n: int = 3, images: str = "original_images", labels: str = "label_images_semantic") -> None:
+    """Semantic Drone frames (JPEG, grey ids + 1) of scene_ids, at 256x144."""
+    lut = np.array([DRONE.names.index(TO_DRONE[n]) for n in UAVID.names], np.uint8)
+    for i in range(n):
+        ids = scene_ids(256, 144, seed=i)
+        write_image(root / images / f"{i:03d}.jpg", UAVID.ids_to_colors(ids))
+        (root / labels).mkdir(parents=True, exist_ok=True)
+        assert cv2.imwrite(str(root / labels / f"{i:03d}.png"), lut[ids] + 1)
+
+
+def _system(folder: Path, data: str) -> Path:
+    class_map = ", ".join(f'{k} = "{v}"' for k, v in TO_DRONE.items())
+    unreachable = [n for n in DRONE.names if n not in TO_DRONE.values()]
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / "uav-el.toml"
+    path.write_text(f'format = "uav-el-system/1"\n[labels]\npreset = "semantic_drone"\n'
+                    f'[model]\nclass_map = {{ {class_map} }}\nunreachable = {json.dumps(unreachable)}\n'
+                    f'[monitor]\nspec = "lhd"\n{data}', "utf-8")
+    return path
+
+
+def _decisions(run: Path) -> dict[str, tuple]:
+    images = readouts.load_table(run, "images")
+    return {(r.frame, r.perturbation, r.monitor): (r.action, r.selected, r.reason) for r in images.itertuples()}
+
+
+@pytest.mark.parametrize("spelling", ["climbs", "absolute", "below"])
+def test_a_data_table_path_is_read_alike_by_every_command(spelling, tmp_path, capsys):
+    raw = tmp_path / "raw"
+    _frames(raw)
+    sys_dir = tmp_path / "sys" if spelling != "below" else tmp_path
+    path = {"climbs": "../raw", "absolute": str(raw), "below": "raw"}[spelling]
+    system = _system(sys_dir, f'[data.test]\npath = "{path}"\nlayout = "semantic-drone"\n')
+    assert cli.main(["preview", "--system", str(system), "--out", str(tmp_path / "p.png"), "--width", "64"]) == 0
+    run = tmp_path / "run"
+    code = cli.main(["campaign", "--system", str(system), "--out", str(run), "--perturbations", "none",
+                     "--monitors", "lhd", "--quiet"])
+    assert code == 0, capsys.readouterr().err
+    man = json.loads((run / "manifest.json").read_text())
+    assert man["data"]["images"] == 3 and man["data"]["spec"]["path"] == str(raw.resolve())
+
+
+def test_the_same_frames_through_two_layouts_get_the_same_noise_and_decisions(tmp_path, capsys):
+    a, b = tmp_path / "sdd", tmp_path / "mine"
+    _frames(a)
+    shutil.copytree(a / "original_images", b / "flight-7" / "rgb")  # the same files, other folder names
+    shutil.copytree(a / "label_images_semantic", b / "flight-7" / "ids")
+    tables = {a: 'layout = "semantic-drone"',
+              b: 'images = "flight-7/rgb/*.jpg"\nlabels = "flight-7/ids/{stem}.png"\nlabel_encoding = "ids"\n'
+                 'id_offset = 1'}
+    runs = []
+    for root, table in tables.items():
+        system = _system(tmp_path / f"sys-{root.name}", f'[data.test]\npath = "{root}"\n{table}\n')
+        run = tmp_path / f"run-{root.name}"
+        assert cli.main(["campaign", "--system", str(system), "--out", str(run), "--perturbations", "gaussian_noise",
+                         "--severities", "3", "--monitors", "lhd", "--quiet"]) == 0, capsys.readouterr().err
+        runs.append(run)
+    keys = [sorted(set(readouts.load_table(r, "images")["key"])) for r in runs]
+    assert keys[0] != keys[1]  # two layouts: other keys ...
+    assert _decisions(runs[0]) == _decisions(runs[1])  # ... the same decisions under the same noise
+    rgb = np.zeros((4, 5, 3), np.uint8)
+    assert task_seed(0, frame_identity(rgb), "gaussian_noise", 3) != task_seed(0, frame_identity(rgb + 1),
+                                                                                "gaussian_noise", 3)
+    assert frame_identity(rgb) != frame_identity(rgb.reshape(5, 4, 3))  # the shape is part of what a frame is
+
+
+def test_a_plugin_network_named_by_classes_passes_frame_statistics_on():
+    from assurance.system.model import NamedChannels
+    from el.segmentation.contract import FRAME_STATS, OutputClasses, has_capability, segment_frame
+
+    class WithStats:
+        frame_stats = True
+
+        def predict_frame(self, rgb, stats=False):
+            probs = np.full((3, *rgb.shape[:2]), 1 / 3, np.float32)
+            return (probs, {"energy": 1.5}) if stats else probs
+
+        def predict_patch(self, rgb_patch, **kwargs):
+            return np.full((3, *rgb_patch.shape[:2]), 1 / 3, np.float32)
+
+    named = NamedChannels(WithStats(), OutputClasses("mine", ("a", "b", "c")))
+    assert has_capability(named, FRAME_STATS)
+    found = segment_frame(named, np.zeros((8, 8, 3), np.uint8), stats=True)  # raised TypeError before
+    assert found.stats == {"energy": 1.5} and found.probs.shape == (3, 8, 8)
