@@ -79,3 +79,13 @@ def test_frames_are_spread_over_the_run_and_unreadable_ones_are_passed_over(data
     assert evenly_spaced(["b", "a"], 8) == ["a", "b"]
     out = safe_class_strips({}, ["seq00/missing"], UAVID)
     assert out["frames"] == 0 and "could be read" in out["note"] and all(not s["frames"] for s in out["strips"])
+
+
+def test_a_strip_says_the_category_the_basis_judges_by(data):
+    """A synonym of road declared safe as vegetation: its strip says road, pinned, and what the set declared."""
+    d = UAVID.to_dict()
+    next(c for c in d["classes"] if c["name"] == "road").update(name="Stra\u00dfe", forbidden=False, hazard_score=0.0,
+                                                                 category="vegetation")
+    out = safe_class_strips(data, sorted(data), LabelSet.from_dict(d), per_class=1, width=64)
+    cats = {s["name"]: s["category"] for s in out["strips"]}
+    assert cats["Stra\u00dfe"] == "road, pinned; declared vegetation" and cats["clutter"] == "unknown"

@@ -79,6 +79,17 @@ def _read_frame(sample: Any, labels: Any, width: int) -> _Frame | None:
     return _Frame(sample.key, small, small_ids, counts, int(h * w))
 
 
+def _category(c: Any) -> str:
+    """The category the basis judges a class by, as the strip's caption says it: a well-known name's pinned one (and
+    what the set declared, when it differs), else the declared one, else ``unknown: none declared``."""
+    from assurance.requirements.basis import class_category
+
+    judged, pinned = class_category(c)
+    if pinned is not None:
+        return f"{pinned}, pinned" + (f"; declared {c.category}" if c.category not in (None, pinned) else "")
+    return judged if c.category is not None else f"{judged}: none declared"
+
+
 def safe_class_strips(samples: dict[str, Any], keys: Sequence[str], labels: Any, *,
                       sample_frames: int = SAMPLE_FRAMES, per_class: int = FRAMES_PER_CLASS,
                       width: int = THUMB_WIDTH) -> dict[str, Any]:
@@ -100,7 +111,7 @@ def safe_class_strips(samples: dict[str, Any], keys: Sequence[str], labels: Any,
         ranked = sorted((f for f in frames if f.counts[c.id] > 0), key=lambda f: (-int(f.counts[c.id]), f.key))
         share = sum(int(f.counts[c.id]) for f in frames) / total if total else 0.0
         strips.append({
-            "name": c.name, "category": c.category or "none declared", "hazard": f"{float(c.hazard_score):g}",
+            "name": c.name, "category": _category(c), "hazard": f"{float(c.hazard_score):g}",
             "share": f"{share:.1%}",
             "frames": [{"key": f.key, "share": f"{int(f.counts[c.id]) / f.pixels:.1%}",
                         "uri": jpeg_uri(tint(f.image, f.ids == c.id), width)} for f in ranked[:per_class]],
