@@ -111,3 +111,18 @@ def test_a_template_folder_linking_the_auditors_key_never_prints_it(how, tiny_ca
     assert "notes.txt" in err and ("hard link" in err or "signing key" in err) and secret not in err
     left = sorted(p.name for p in out.iterdir()) if out.exists() else []
     assert left == [], left  # nothing in --out: no report, no results.csv, no argument
+
+
+def test_a_flight_log_may_be_a_hard_link_but_never_the_key(tmp_path):
+    log = tmp_path / "flight.jsonl"
+    log.write_text('{"a": 1}\n', "utf-8")
+    archived = _link(log, tmp_path / "archive.jsonl")  # rsync --link-dest backups link logs
+    with userfiles.open_binary(archived, what="flight log", hard_links=True) as f:
+        assert f.readline() == b'{"a": 1}\n'
+    key = tmp_path / "k.pem"
+    key.write_text("SECRET", "utf-8")
+    userfiles.protect(key)
+    with pytest.raises(userfiles.UserFileError, match="signing key"):
+        userfiles.open_binary(_link(key, tmp_path / "key-log.jsonl"), what="flight log", hard_links=True)
+    with pytest.raises(userfiles.UserFileError, match="not a regular file"):
+        userfiles.open_binary(tmp_path, what="flight log")
