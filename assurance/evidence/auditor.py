@@ -6,9 +6,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from assurance.evidence.acceptance import domain_source
 from assurance.evidence.amlas import amlas_index, entry
 from assurance.evidence.argument import ArgumentInputs, build_argument, check_structure, to_gsn2x, to_yaml
-from assurance.evidence.context import domain_source
 from assurance.evidence.gsn_svg import argument_pages
 from assurance.evidence.hazards import hazard_view, load_hazards
 from assurance.evidence.model_log import model_log

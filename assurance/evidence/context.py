@@ -4,7 +4,7 @@ finished context its templates render."""
 from __future__ import annotations
 
 import shlex
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -336,56 +336,6 @@ def commands(inp: Inputs, accepted: tuple[str, ...] = ()) -> list[str]:
     ]
 
 
-def _parameter_text(v: Any) -> str:
-    """A registry parameter as the report shows it."""
-    if v is None:
-        return "none"
-    if isinstance(v, list):
-        return ", ".join(map(str, v))
-    if isinstance(v, dict):
-        return ", ".join(f"{a} {b:.0%}" for a, b in v.items())
-    return str(v)
-
-
-SYSTEM_OWN = ("calibration_card",)
-"""Parameters that name a file of the system itself: the basis has no value of them for another system."""
-
-
-def acceptance_rows(reg: rq.Registry, deviations: Sequence[Any], decided_by: Mapping[str, str] | None = None,
-                    *, shipped: bool = True) -> list[dict[str, str]]:
-    """The acceptance parameters the requirements were judged on, each with the basis's value (the packaged
-    registry's) beside the system's, where the system's comes from (the registry when the system sets none, else
-    the targets' source) and its mark against the basis (a deviation, accepted or not, from
-    ``assurance.requirements.basis``; a value the system sets that is no looser is marked as differing only;
-    ``decided_by``: the size-limited requirements no run size decides here, :func:`not_size_limited`; ``shipped``:
-    whether the system is the shipped one, whose own files the registry names)."""
-    devs = {d.name: d for d in deviations}
-    rows = []
-    for k, v in reg.parameters.items():
-        base = reg.defaults.get(k)
-        if k in SYSTEM_OWN and not shipped:  # the registry's value is the shipped system's own file
-            base = "the system's own (the registry names the shipped system's)"
-        own = k in reg.targets
-        dev = devs.get(k)
-        mark = ("deviation, accepted" if dev.accepted else "deviation") if dev is not None else \
-            "set by the system, no looser than the basis" if own and v != base else ""
-        if k == "size_limited" and decided_by:  # what no run size decides here is not limited by size
-            mark = "; ".join([mark] * bool(mark) + [f"{rid} not here: {why}" for rid, why in decided_by.items()])
-        rows.append({"name": k.replace("_", " "), "value": _parameter_text(v),
-                     "basis": "not set" if base is None else _parameter_text(base),
-                     "source": (reg.targets_source or "the system's targets") if own else "the registry (basis)",
-                     "mark": mark})
-    return rows
-
-
-def domain_source(inp: Inputs) -> str:
-    """Where the operating domain's values come from, in words: the registry gives the wording only."""
-    sysf = inp.system
-    if sysf is None or sysf.default:
-        return "the embedded default system (the shipped system)"
-    return f"the system file {sysf.label if sysf.path is None else rel(sysf.path)}"
-
-
 def images_per_perturbation(inp: Inputs) -> int:
     """The fewest images evaluated without a fault under any perturbation of the run (0 for none)."""
     ok = inp.images[inp.images["fault"].fillna("") == ""] if inp.images is not None and len(inp.images) else None
@@ -511,7 +461,6 @@ def template_context(inp: Inputs, gate: Gate, campaign: dict[str, Any], base: di
         "domain": campaign["domain"], "odd": campaign["odd"], "frame_gates": campaign["frame_gates"],
         "domain_text": [{"name": k.replace("_", " "), "value": v} for k, v in reg.operating_domain.items()],
         "facts": inp.facts.view(), "frame_gate": inp.facts.frame_gate,
-        "parameters": [{"name": k.replace("_", " "), "value": _parameter_text(v)} for k, v in reg.parameters.items()],
         "matrix": matrix(reg, results, inp.checks, inp.run, inp.csv_path.name),
         "requirements": [{"id": r.id, "title": r.title, "text": r.text, "rationale": r.rationale,
                           "source": "; ".join(r.source), "method": r.verification_method,

@@ -10,14 +10,13 @@ from pathlib import Path
 from typing import Any
 
 from assurance import requirements as rq
+from assurance.evidence.acceptance import acceptance_rows, domain_source
 from assurance.evidence.auditor import ARGUMENT_FILE, ISSRE_FILE, auditor_context, auditor_document
 from assurance.evidence.benchmark_section import read_benchmark
 from assurance.evidence.context import (
     Inputs,
-    acceptance_rows,
     campaign_context,
     commands,
-    domain_source,
     not_size_limited,
     read_inputs,
     template_context,
