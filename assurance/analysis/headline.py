@@ -8,6 +8,8 @@ perturbation, with the hashes of the model and of the calibration card it was ma
 
 from __future__ import annotations
 
+import re
+from dataclasses import dataclass
 from pathlib import Path
 
 import pandas as pd
@@ -23,6 +25,35 @@ END = "<!-- headline-table:end -->"
 
 class HeadlineError(UavElError, ValueError):
     """A README without the markers, or a run without the deployed configuration."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Reproducibility:
+    """How far the headline of a run made on another machine may lie from the README's (docs/results.md,
+    "Reproducibility across machines").
+
+    The network's float32 output and the brightness perturbation's float colour conversion differ in their last bits
+    between CPUs (AVX2 or AVX-512 kernels of ONNX Runtime and OpenCV); such a difference moves a decision now and
+    then to another candidate, one whose true hazard differs. ``decisions``: how many decisions per perturbation
+    may move so; ``rounding``: the table's last printed digit. A moved decision changes a mean gain, and its
+    bootstrap bounds, by at most 1/n of n scenes: the gains (G_CM, G_RM, G* and their 95% bounds) may differ by
+    ``decisions / n + rounding``, recall and FP rate (pooled over the candidates) by ``rate``. The header (the
+    configuration, the hashes, the scene count), the unsafe-landing counts, their rates and one-sided bounds must be
+    equal: the safety claim itself is reproduced exactly or the check fails."""
+
+    decisions: int = 1
+    rounding: float = 0.001
+    rate: float = 0.01
+
+    def gain(self, n: int) -> float:
+        """The tolerance of a gain over ``n`` scenes."""
+        return self.decisions / max(1, n) + self.rounding
+
+
+REPRODUCIBILITY = Reproducibility()
+"""The tolerance the README headline test (``tests/test_readme_headline.py``) and ``uav-el table --check-readme``
+judge a run made on another machine with."""
+_NUMBER = re.compile(r"[+-]?\d+(?:\.\d+)?")
 
 
 def _ci(row: pd.Series, name: str) -> str:
@@ -69,6 +100,39 @@ def _split(text: str, path: Path) -> tuple[str, str, str]:
     head, rest = text.split(BEGIN)
     body, tail = rest.split(END)
     return head, body, tail
+
+
+def headline_differences(expected: str, found: str, tolerance: Reproducibility = REPRODUCIBILITY) -> list[str]:
+    """What keeps the headline block ``found`` (a run's) from reproducing ``expected`` (the README's) within
+    ``tolerance``: one line per differing figure, naming the perturbation, the column and both values (empty: it
+    reproduces). Identical blocks have no differences."""
+    if expected == found:
+        return []
+    a, b = expected.strip("\n").splitlines(), found.strip("\n").splitlines()
+    if len(a) != len(b):
+        return [f"{len(a)} lines against {len(b)}"]
+    out = []
+    for old, new in zip(a, b, strict=True):
+        if not (old.startswith("| ") and new.startswith("| ")) or old.startswith("| perturbation"):
+            if old != new:
+                out.append(f"{old!r} against {new!r}")
+            continue
+        cells_a, cells_b = old.strip("|").split("|"), new.strip("|").split("|")
+        if len(cells_a) != len(cells_b) or len(cells_a) != 8 or cells_a[0] != cells_b[0]:
+            out.append(f"{old!r} against {new!r}")
+            continue
+        pert = cells_a[0].strip()
+        n = int(_NUMBER.findall(cells_a[1])[-1])
+        for col, (x, y) in enumerate(zip(cells_a, cells_b, strict=True)):
+            if col < 4:  # perturbation, the two unsafe counts, the rate and its bound: exact
+                if x != y:
+                    out.append(f"{pert}: column {col + 1} {x.strip()} against {y.strip()} (must be equal)")
+                continue
+            tol = tolerance.gain(n) if col < 7 else tolerance.rate
+            xs, ys = [float(v) for v in _NUMBER.findall(x)], [float(v) for v in _NUMBER.findall(y)]
+            if len(xs) != len(ys) or any(abs(u - v) > tol + 1e-9 for u, v in zip(xs, ys, strict=True)):
+                out.append(f"{pert}: column {col + 1} {x.strip()} against {y.strip()} (tolerance {tol:.4f})")
+    return out
 
 
 def current_block(path: str | Path) -> str:

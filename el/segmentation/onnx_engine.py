@@ -224,23 +224,46 @@ def _inline(tensor: Any, model: Path, blobs: dict[str, bytes]) -> None:
     tensor.data_location = type(tensor).DEFAULT
 
 
-def open_session(data: bytes, where: str | Path, threads: int | None = None) -> Any:
-    """A CPU ``InferenceSession`` on the model bytes (checked before, never re-read from disk).
+SESSION_CONFIG = {
+    # no spin-waiting after a run: a spinning frame-session thread competes with the HD patch workers on 2 cores
+    # (benchmarks/bench_stages.py --no-spinning measured the deployed decision 0.44 -> 0.35 s wall, same decisions)
+    "session.intra_op.allow_spinning": "0",
+}
+"""The session configuration entries every session gets (``SessionOptions.add_session_config_entry``)."""
+GRAPH_OPTIMIZATION = "ORT_ENABLE_ALL"
+"""The graph optimisation level of every session, pinned rather than left to ONNX Runtime's default. Its layout
+optimisation runs convolutions in MLAS's blocked (NCHWc) format, whose block and kernels are chosen per CPU
+(AVX2 or AVX-512): the logits differ in their last bits between such CPUs, and between levels on one CPU (up to
+1.2e-5 on a frame of the shipped network; docs/results.md, "Reproducibility across machines"), and no deployed
+decision changed with them (90 frames: 30 test scenes clean, brightened and fogged, under ``ORT_DISABLE_ALL``). The
+thread count changes no bit (1 and 2 intra-op threads give identical logits), so it is left to the caller."""
 
-    ``threads``: intra-op threads (None: ONNX Runtime's default); graph optimisations on, one inter-op
-    thread, sequential execution, so runs of one session are reproducible."""
+
+def session_options(threads: int | None = None) -> Any:
+    """The ``SessionOptions`` every session is opened with: sequential execution, one inter-op thread, the graph
+    optimisation level :data:`GRAPH_OPTIMIZATION`, the entries of :data:`SESSION_CONFIG`, errors-only logging, and
+    ``threads`` intra-op threads (None: ONNX Runtime's default, one per physical core)."""
     ort = onnxruntime()
     if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
         raise ValueError(f"threads must be a positive integer, got {threads!r}")
     options = ort.SessionOptions()
     options.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
     options.inter_op_num_threads = 1
+    options.graph_optimization_level = getattr(ort.GraphOptimizationLevel, GRAPH_OPTIMIZATION)
     if threads is not None:
         options.intra_op_num_threads = threads
     options.log_severity_level = 3  # errors only: the fault path reports them
-    # no spin-waiting after a run: a spinning frame-session thread competes with the HD patch workers on 2 cores
-    # (benchmarks/bench_stages.py --no-spinning measured the deployed decision 0.44 -> 0.35 s wall, same decisions)
-    options.add_session_config_entry("session.intra_op.allow_spinning", "0")
+    for key, value in SESSION_CONFIG.items():
+        options.add_session_config_entry(key, value)
+    return options
+
+
+def open_session(data: bytes, where: str | Path, threads: int | None = None) -> Any:
+    """A CPU ``InferenceSession`` on the model bytes (checked before, never re-read from disk), opened with
+    :func:`session_options` (``threads``: intra-op threads, None for ONNX Runtime's default), so runs of one
+    session, and sessions with any thread count, give the same numbers on one CPU."""
+    ort = onnxruntime()
+    options = session_options(threads)
     try:
         return ort.InferenceSession(data, options, providers=["CPUExecutionProvider"])
     except Exception as exc:  # onnxruntime raises its own classes for a malformed graph
