@@ -49,6 +49,15 @@ class Reproducibility:
         """The tolerance of a gain over ``n`` scenes."""
         return self.decisions / max(1, n) + self.rounding
 
+    def text(self, n: int) -> str:
+        """What the report's "Reproduce" section says a rerun on another machine gives, for ``n`` scenes per
+        perturbation."""
+        return (f"On another machine these commands must give the same unsafe-landing counts, rates and bounds; a "
+                f"decision may now and then land on another candidate (ONNX Runtime's CPU kernels, chosen per "
+                f"instruction set, differ in their last bits), so the safety gains may differ by up to "
+                f"{self.gain(n):.3f} (one moved decision of {n} per perturbation, plus rounding) and recall and FP "
+                f"rate by up to {self.rate:.2f} (docs/results.md, \"Reproducibility across machines\").")
+
 
 REPRODUCIBILITY = Reproducibility()
 """The tolerance the README headline test (``tests/test_readme_headline.py``) and ``uav-el table --check-readme``

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from assurance import requirements as rq
+from assurance.analysis.headline import REPRODUCIBILITY
 from assurance.evidence.acceptance import acceptance_rows, domain_source
 from assurance.evidence.auditor import ARGUMENT_FILE, ISSRE_FILE, auditor_context, auditor_document
 from assurance.evidence.benchmark_section import read_benchmark
@@ -17,6 +18,7 @@ from assurance.evidence.context import (
     Inputs,
     campaign_context,
     commands,
+    images_per_perturbation,
     not_size_limited,
     read_inputs,
     template_context,
@@ -210,6 +212,7 @@ def _report_context(inp: Inputs, gate: Gate, campaign: dict[str, Any], base: dic
                     "parameters": acceptance_rows(inp.registry, basis, not_size_limited(inp),
                                                   shipped=system is None or system.default),
                     "domain_source": domain_source(inp),
+                    "reproducibility": REPRODUCIBILITY.text(images_per_perturbation(inp)),
                     "in_service": in_service and in_service.context(inp.check.digest)})  # assurance.inservice.section
     context.update(navigation_context(inp, context, pdf))
     return context
