@@ -111,3 +111,18 @@ def test_verifier_refuses_another_network(tiny):
 
     with pytest.raises(LearnedModelError, match="refit"):
         m.check_network(Net())
+
+
+def test_the_shipped_verifier_is_bound_to_the_shipped_network_and_learned_model():
+    from el.monitors.learned import load_learned_model
+    from el.segmentation.weights import DEFAULT_WEIGHTS, read_card
+
+    record = load_verifier()
+    assert record.size == 64 and record.body["weights"]["sha256"] == read_card(DEFAULT_WEIGHTS)["weights_sha256"]
+    assert record.body["held_out"]["candidates"] > 0 and record.body["training"]["sha256"]
+    fused = VerifierMonitor(labels=UAVID, fuse="learned")
+    assert fused.name == "verifier:fuse=learned"
+    assert record.fusion["learned_sha256"] == load_learned_model(None, labels=UAVID).sha256
+    img = np.random.default_rng(3).integers(0, 256, (300, 400, 3), dtype=np.uint8)
+    v = build_monitor("verifier", labels=UAVID).check_many(img, [Disc(200.0, 150.0, 40.0)], None, seeds=[0])
+    assert 0.0 <= v[0].score <= 1.0

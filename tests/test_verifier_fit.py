@@ -71,6 +71,18 @@ def test_a_few_steps_select_on_held_out_and_write_a_record_that_flies(tmp_path):
     assert 0.0 <= v[0].score <= 1.0
 
 
+def test_the_blocks_to_1_16_learn_when_only_the_low_part_is_frozen():
+    from assurance.fitting.verifier_train import TrainConfig, train_verifier
+
+    rng = np.random.default_rng(2)
+    train, held = _crops(32, rng), _crops(16, rng)
+    cfg = TrainConfig(size=32, steps=2, batch=8, eval_every=2, threads=1, views=2, frozen="low")
+    result = train_verifier(train, held, cfg, pretrained=False, log=lambda s: None)
+    assert result.steps_run == 2 and len(result.curve) == 1
+    with pytest.raises(ValueError, match="frozen"):
+        TrainConfig(frozen="none")
+
+
 def test_fit_verifier_command_is_listed_and_checks_its_options(tmp_path, capsys):
     from assurance.cli import COMMANDS, main
 

@@ -20,16 +20,22 @@ HELP = ("train the candidate verifier (a small CNN of its own on the full-resolu
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     fit_split_options(p)
-    p.add_argument("--steps", type=int, default=2000, help="training steps (default: %(default)s)")
+    p.add_argument("--steps", type=int, default=3000, help="training steps (default: %(default)s)")
     p.add_argument("--minutes", type=float, help="stop training after this many minutes (default: no limit)")
-    p.add_argument("--batch", type=int, default=48, help="crops per step (default: %(default)s)")
-    p.add_argument("--size", type=int, default=96, help="crop side in pixels, a multiple of 16 (default: %(default)s)")
+    p.add_argument("--batch", type=int, default=64, help="crops per step (default: %(default)s)")
+    p.add_argument("--size", type=int, default=64, help="crop side in pixels, a multiple of 16 (default: %(default)s)")
     p.add_argument("--margin", type=float, default=0.5,
                    help="context around the disc, in radii (default: %(default)s)")
     p.add_argument("--jitter", type=int, default=3, help="mined discs around each training candidate "
                                                          "(default: %(default)s)")
     p.add_argument("--lr", type=float, default=1e-3, help="learning rate of the head (default: %(default)s)")
-    p.add_argument("--eval-every", type=int, default=200, help="held-out AUROC every N steps (default: %(default)s)")
+    p.add_argument("--eval-every", type=int, default=250, help="held-out AUROC every N steps (default: %(default)s)")
+    p.add_argument("--views", type=int, default=2,
+                   help="views of each training crop through the frozen encoder, the first as it is, the others "
+                        "augmented (default: %(default)s)")
+    p.add_argument("--frozen", choices=("encoder", "low"), default="encoder",
+                   help="encoder: every encoder block keeps its ImageNet weights and the head learns (fast on 2 "
+                        "cores); low: the blocks from 1/8 to 1/16 learn too (default: %(default)s)")
     p.add_argument("--recall", type=float, default=0.95,
                    help="threshold: the largest with this recall of unsafe held-out candidates (0.95)")
     p.add_argument("--fuse-learned", metavar="FILE", nargs="?", const="",
@@ -54,7 +60,8 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(f"--recall must lie in (0, 1), got {args.recall}")
     try:
         cfg = TrainConfig(size=args.size, margin=args.margin, steps=args.steps, batch=args.batch, lr=args.lr,
-                          eval_every=args.eval_every, minutes=args.minutes, seed=args.seed, threads=args.threads)
+                          eval_every=args.eval_every, minutes=args.minutes, seed=args.seed, threads=args.threads,
+                          views=args.views, frozen=args.frozen)
         segmenter = system.segmenter(working_width=system.core.working_width)
         learned = None
         if args.fuse_learned is not None:

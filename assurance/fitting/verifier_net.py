@@ -83,12 +83,16 @@ class VerifierNet(nn.Module):
             y = block(y)
         return y
 
-    def high(self, f8: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """The trained part: the 1/8 features to the unsafe logit and the forbidden-ground map."""
+    def mid(self, f8: torch.Tensor) -> torch.Tensor:
+        """The encoder's blocks from 1/8 to 1/16 (112 channels)."""
         y = f8
         for block in self.blocks[TAP_8 + 1:]:
             y = block(y)
-        fused = self.lat8(f8) + F.interpolate(self.lat16(y), size=f8.shape[-2:], mode="nearest")
+        return y
+
+    def head(self, f8: torch.Tensor, f16: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The 1/8 and 1/16 features to the unsafe logit and the forbidden-ground map."""
+        fused = self.lat8(f8) + F.interpolate(self.lat16(f16), size=f8.shape[-2:], mode="nearest")
         fused = self.fuse(fused)
         aux = self.aux(fused)
         disc = self.disc
@@ -99,6 +103,10 @@ class VerifierNet(nn.Module):
         aux_max = (aux * disc - (1.0 - disc) * 1e4).amax(dim=(2, 3))
         logit = self.cls(torch.cat([masked_max, masked_mean, whole, aux_max], dim=1)).squeeze(1)
         return logit, aux
+
+    def high(self, f8: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The 1/8 features to the unsafe logit and the forbidden-ground map."""
+        return self.head(f8, self.mid(f8))
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         return self.high(self.low(x))

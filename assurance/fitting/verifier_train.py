@@ -32,16 +32,17 @@ FROZEN_BLOCKS = TAP_8 + 2  # the stem and blocks 0..4 (down to 1/8) keep their I
 
 @dataclass(frozen=True, kw_only=True)
 class TrainConfig:
-    size: int = 96
+    size: int = 64
     margin: float = 0.5
-    steps: int = 2000
-    batch: int = 48
+    steps: int = 3000
+    batch: int = 64
     lr: float = 1e-3
     encoder_lr_scale: float = 0.3
     weight_decay: float = 1e-4
     aux_weight: float = 0.5
-    eval_every: int = 200
-    views: int = 3
+    eval_every: int = 250
+    views: int = 2
+    frozen: str = "encoder"  # "encoder": every encoder block keeps its ImageNet weights; "low": down to 1/8 only
     minutes: float | None = None
     seed: int = 0
     threads: int = 2
@@ -52,6 +53,8 @@ class TrainConfig:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
         if self.size % 16:
             raise ValueError(f"size must be a multiple of 16, got {self.size}")
+        if self.frozen not in ("encoder", "low"):
+            raise ValueError(f"frozen must be 'encoder' or 'low', got {self.frozen!r}")
 
 
 @dataclass
@@ -125,18 +128,25 @@ def auroc(y: np.ndarray, p: np.ndarray) -> float:
 
 
 @torch.inference_mode()
-def low_features(model: VerifierNet, x: np.ndarray, *, batch: int = 256) -> torch.Tensor:
-    """The frozen part's 1/8 features of float crops (n, 3, S, S) in [0, 1], as float16 (n, 40, S/8, S/8)."""
+def low_features(model: VerifierNet, x: np.ndarray, *, encoder: bool, batch: int = 256
+                 ) -> tuple[torch.Tensor, torch.Tensor | None]:
+    """The frozen part's features of float crops (n, 3, S, S) in [0, 1], as float16: the 1/8 features
+    (n, 40, S/8, S/8) and, when the whole ``encoder`` is frozen, the 1/16 ones (n, 112, S/16, S/16)."""
     model.eval()
-    return torch.cat([model.low(torch.from_numpy(np.ascontiguousarray(x[i:i + batch]))).half()
-                      for i in range(0, len(x), batch)])
+    f8s, f16s = [], []
+    for i in range(0, len(x), batch):
+        f8 = model.low(torch.from_numpy(np.ascontiguousarray(x[i:i + batch])))
+        f8s.append(f8.half())
+        if encoder:
+            f16s.append(model.mid(f8).half())
+    return torch.cat(f8s), (torch.cat(f16s) if encoder else None)
 
 
 def cached_views(model: VerifierNet, crops: CropSet, cfg: TrainConfig, rng: np.random.Generator,
-                 log: Callable[[str], None]) -> tuple[torch.Tensor, torch.Tensor, np.ndarray]:
+                 log: Callable[[str], None]) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor, np.ndarray]:
     """Every training crop in ``cfg.views`` views (the first as it is, the others augmented), through the frozen part
     once: their 1/8 features, aux targets and truth. The frozen part never changes, so each view is computed once."""
-    feats, auxes, ys = [], [], []
+    feats, mids, auxes, ys = [], [], [], []
     plain = to_size(crops.crops, cfg.size)
     g = cfg.size // 8
     for v in range(cfg.views):
@@ -148,28 +158,37 @@ def cached_views(model: VerifierNet, crops: CropSet, cfg: TrainConfig, rng: np.r
                 a = (a > 1e-3).astype(np.float32)
             else:
                 x, a = augment(crops.crops[part], crops.aux[part], cfg.size, rng)
-            feats.append(low_features(model, x))
+            f8, f16 = low_features(model, x, encoder=cfg.frozen == "encoder")
+            feats.append(f8)
+            mids.append(f16)
             auxes.append(torch.from_numpy(a))
             ys.append(crops.unsafe[part])
         log(f"view {v + 1} of {cfg.views} through the frozen encoder")
-    return torch.cat(feats), torch.cat(auxes), np.concatenate(ys)
+    return (torch.cat(feats), None if mids[0] is None else torch.cat(mids),  # type: ignore[arg-type]
+            torch.cat(auxes), np.concatenate(ys))
 
 
 def _optimiser(model: VerifierNet, cfg: TrainConfig) -> torch.optim.Optimizer:
-    for mod in model.encoder_modules()[:FROZEN_BLOCKS]:
+    frozen = len(model.encoder_modules()) if cfg.frozen == "encoder" else FROZEN_BLOCKS
+    for mod in model.encoder_modules()[:frozen]:
         for p in mod.parameters():
             p.requires_grad_(False)
-    enc = [p for m in model.blocks[TAP_8 + 1:] for p in m.parameters()]
+    enc = [p for m in model.blocks[TAP_8 + 1:] for p in m.parameters() if p.requires_grad]
     skip = {id(p) for p in enc} | {id(p) for m in model.encoder_modules() for p in m.parameters()}
     head = [p for p in model.parameters() if id(p) not in skip]
-    return torch.optim.AdamW([{"params": enc, "lr": cfg.lr * cfg.encoder_lr_scale}, {"params": head, "lr": cfg.lr}],
-                             weight_decay=cfg.weight_decay)
+    groups = [{"params": enc, "lr": cfg.lr * cfg.encoder_lr_scale}, {"params": head, "lr": cfg.lr}]
+    return torch.optim.AdamW([g for g in groups if g["params"]], weight_decay=cfg.weight_decay)
+
+
+def _forward(model: VerifierNet, f8: torch.Tensor, f16: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor]:
+    return model.high(f8.float()) if f16 is None else model.head(f8.float(), f16.float())
 
 
 @torch.inference_mode()
-def _held_out_auroc(model: VerifierNet, feats: torch.Tensor, y: np.ndarray) -> float:
+def _held_out_auroc(model: VerifierNet, f8: torch.Tensor, f16: torch.Tensor | None, y: np.ndarray) -> float:
     model.eval()
-    p = torch.cat([torch.sigmoid(model.high(feats[i:i + 512].float())[0]) for i in range(0, len(feats), 512)])
+    p = torch.cat([torch.sigmoid(_forward(model, f8[i:i + 512], None if f16 is None else f16[i:i + 512])[0])
+                   for i in range(0, len(f8), 512)])
     return auroc(y, p.double().numpy())
 
 
@@ -186,9 +205,10 @@ def train_verifier(train: CropSet, val: CropSet, cfg: TrainConfig, *, pretrained
     if pretrained:
         model.load_imagenet()
     t0 = time.perf_counter()
-    feats, aux_t, y = cached_views(model, train, cfg, rng, log)
+    feats, mids, aux_t, y = cached_views(model, train, cfg, rng, log)
     vsel = val.is_candidate
-    vfeats = low_features(model, to_size(val.crops[vsel], cfg.size).transpose(0, 3, 1, 2).astype(np.float32) / 255.0)
+    vfeats, vmids = low_features(model, to_size(val.crops[vsel], cfg.size).transpose(0, 3, 1, 2).astype(np.float32)
+                                 / 255.0, encoder=cfg.frozen == "encoder")
     vy = val.unsafe[vsel]
     opt = _optimiser(model, cfg)
     base = [g["lr"] for g in opt.param_groups]
@@ -203,7 +223,7 @@ def train_verifier(train: CropSet, val: CropSet, cfg: TrainConfig, *, pretrained
         for g, lr in zip(opt.param_groups, base, strict=True):
             g["lr"] = lr * (min(1.0, step / 50) * 0.5 * (1.0 + math.cos(math.pi * frac)))
         idx = torch.from_numpy(rng.integers(0, len(y), cfg.batch))
-        logit, aux = model.high(feats[idx].float())
+        logit, aux = _forward(model, feats[idx], None if mids is None else mids[idx])
         loss = F.binary_cross_entropy_with_logits(logit, yt[idx], pos_weight=pos_weight)
         loss = loss + cfg.aux_weight * F.binary_cross_entropy_with_logits(aux[:, 0], aux_t[idx])
         opt.zero_grad(set_to_none=True)
@@ -211,7 +231,7 @@ def train_verifier(train: CropSet, val: CropSet, cfg: TrainConfig, *, pretrained
         opt.step()
         out_of_time = cfg.minutes is not None and time.perf_counter() - t0 > 60.0 * cfg.minutes
         if step % cfg.eval_every == 0 or step == cfg.steps or out_of_time:
-            score = _held_out_auroc(model, vfeats, vy)
+            score = _held_out_auroc(model, vfeats, vmids, vy)
             best.curve.append({"step": step, "loss": loss.item(), "val_auroc": score,
                                "seconds": time.perf_counter() - t0})
             log(f"step {step}: loss {loss.item():.4f}, held-out AUROC {score:.4f} ({time.perf_counter() - t0:.0f} s)")
