@@ -168,3 +168,29 @@ def test_the_learned_score_is_plain_sequential_arithmetic(rows, intercept):
         expected.append(1.0 / (1.0 + math.exp(-min(max(z, -500.0), 500.0))))
     assert logistic(terms, intercept).tolist() == expected
     assert float(logistic(terms[0], intercept)) == expected[0]
+
+
+# ---- the softmax of a patch ----------------------------------------------------------------------------------
+def test_the_class_softmax_of_any_patch_size_is_the_same_with_one_or_two_threads():
+    """torch computes a row's partial last vector (and each thread's) with other code: the pixels are padded to a
+    multiple of SOFTMAX_BLOCK, so neither the thread count nor the vector width (AVX2, AVX-512) changes a bit."""
+    torch = pytest.importorskip("torch")
+    from el.segmentation.inference import softmax_classes
+
+    rng = np.random.default_rng(0)
+    before = torch.get_num_threads()
+    try:
+        for h, w in ((300, 301), (517, 389), (61, 67)):
+            x = torch.from_numpy(rng.normal(0, 5, (1, 8, h, w)).astype(np.float32))
+            out = []
+            for threads in (1, 2):
+                torch.set_num_threads(threads)
+                out.append(softmax_classes(x).contiguous().numpy().tobytes())
+            assert out[0] == out[1]
+            torch.set_num_threads(before)
+            plain = torch.softmax(x, dim=1).numpy()
+            assert np.abs(np.frombuffer(out[0], np.float32).reshape(plain.shape) - plain).max() <= 1e-6
+        frame = torch.from_numpy(rng.normal(0, 5, (1, 8, 576, 1024)).astype(np.float32))
+        assert softmax_classes(frame).numpy().tobytes() == torch.softmax(frame, dim=1).numpy().tobytes()
+    finally:
+        torch.set_num_threads(before)

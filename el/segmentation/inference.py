@@ -86,17 +86,34 @@ def _check_window(window: Any, h: int, w: int) -> tuple[int, int, int, int]:
     return y0, y1, x0, x1
 
 
+SOFTMAX_BLOCK = 64
+"""Pixels per row of the class-axis softmax a multiple of this (:func:`softmax_classes`): every vector width torch
+dispatches to (8 lanes with AVX2, 16 with AVX-512) and every split among threads then covers whole vectors."""
+
+
 def softmax_classes(logits: torch.Tensor) -> torch.Tensor:
     """Softmax over the class axis of (B, C, H, W) logits, fast for either memory layout.
 
-    Logits with the class axis innermost (channels-last, what the shipped network returns, cropped or
-    not) are softmaxed along that axis through a permuted view, about twice as fast as
+    Logits with the class axis innermost (channels-last, what the torch build of the shipped network returns,
+    cropped or not) are softmaxed along that axis through a permuted view, about twice as fast as
     ``softmax(dim=1)`` on that layout; the result keeps those strides (same values; numpy sees a
     strided array).
+
+    Class-first logits (ONNX Runtime's) are softmaxed over their pixels flattened and padded to a multiple of
+    :data:`SOFTMAX_BLOCK`: torch computes the last, partial vector of a row (and of each thread's share) with other
+    code than the full ones, so an odd-sized patch got other last bits on an AVX2 CPU than on an AVX-512 one, and with
+    one thread than with two (issue 60: a few values in 10^5; a frame of 1024 x 576 pixels was never padded).
     """
     if logits.ndim == 4 and logits.shape[1] > 1 and logits.stride(1) == 1:  # channels innermost
         return torch.softmax(logits.permute(0, 2, 3, 1), dim=-1).permute(0, 3, 1, 2)
-    return torch.softmax(logits, dim=1)
+    if logits.ndim != 4:
+        return torch.softmax(logits, dim=1)
+    b, c, h, w = logits.shape
+    pad = -(h * w) % SOFTMAX_BLOCK
+    if pad == 0:
+        return torch.softmax(logits, dim=1)
+    flat = torch.nn.functional.pad(logits.reshape(b, c, h * w), (0, pad))
+    return torch.softmax(flat, dim=1)[:, :, : h * w].reshape(b, c, h, w)
 
 
 class Segmenter(FramePasses, PatchPasses):
