@@ -126,3 +126,13 @@ def test_the_shipped_verifier_is_bound_to_the_shipped_network_and_learned_model(
     img = np.random.default_rng(3).integers(0, 256, (300, 400, 3), dtype=np.uint8)
     v = build_monitor("verifier", labels=UAVID).check_many(img, [Disc(200.0, 150.0, 40.0)], None, seeds=[0])
     assert 0.0 <= v[0].score <= 1.0
+
+
+def test_the_shipped_verifier_card_is_calibrated_on_the_shipped_verifier():
+    from el.monitors.calibration import load_calibration
+
+    card_path = Path(load_verifier().path).parent / "verifier_calibration.json"
+    card = load_calibration(card_path)
+    assert card.body["monitor"] == "verifier:walk=score"
+    assert card.body["monitor_model"]["sha256"] == load_verifier().sha256
+    assert card.body["split"]["path"] == "data/val" and card.body["miss_rate"] == 0.8
