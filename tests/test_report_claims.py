@@ -623,6 +623,11 @@ def test_each_fact_says_where_it_comes_from(case):
             assert base == ("not set" if defaults.get(key) is None else parameter_text(defaults[key])), rows[name]
         if params[key] != defaults.get(key):  # the system's own value: never said to be the registry's
             assert source != "the registry (basis)", rows[name]
+        if "[targets]" in source:  # said to be the file's [targets] only where the file sets it there
+            assert system.sets(f"targets.{key}"), rows[name]
+    if system.sets("monitor.spec"):
+        assert rows["deployed monitor"][3].endswith("[monitor] spec"), rows["deployed monitor"]
+        assert "no looser" not in rows["deployed monitor"][4]  # a choice of monitor is no bound
     for d in basis:
         if d["name"] in params:
             assert rows[d["name"].replace("_", " ")][4].startswith("deviation"), d

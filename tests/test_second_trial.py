@@ -110,3 +110,48 @@ def test_a_plugin_network_named_by_classes_passes_frame_statistics_on():
     assert has_capability(named, FRAME_STATS)
     found = segment_frame(named, np.zeros((8, 8, 3), np.uint8), stats=True)  # raised TypeError before
     assert found.stats == {"energy": 1.5} and found.probs.shape == (3, 8, 8)
+
+
+def test_a_capped_perturbation_is_said_at_the_severity_it_ran():
+    """The trial's gaussian_noise = 2 ran at severity 2: the report said 'at severity 3' and 'severities not
+    evaluated: 1, 2, 4, 5'."""
+    from assurance.evidence.sections import perturbations_text, run_scenarios
+
+    cfg = {"perturbations": ["none", "fog", "gaussian_noise"], "severities": [3],
+           "severity_caps": {"gaussian_noise": 2}}
+    assert perturbations_text(cfg) == "none, fog at severity 3; gaussian_noise at severity 2 (its declared maximum)"
+    assert {s for _, s in run_scenarios(cfg)} == {2, 3}
+
+
+def test_evidence_without_system_says_when_the_runs_file_has_changed(tmp_path, monkeypatch, capsys):
+    raw = tmp_path / "raw"
+    _frames(raw, n=2)
+    system = _system(tmp_path / "sys", '[data.test]\npath = "../raw"\nlayout = "semantic-drone"\n')
+    run = tmp_path / "run"
+    assert cli.main(["campaign", "--system", str(system), "--out", str(run), "--perturbations", "none",
+                     "--monitors", "lhd", "--quiet"]) == 0
+    monkeypatch.chdir(tmp_path)  # no uav-el.toml here: the run's own is judged
+    args = ["evidence", "--run", str(run), "--out", str(tmp_path / "r"), "--no-pdf", "--boot", "20"]
+    capsys.readouterr()
+    cli.main(args)
+    assert "has changed since the run" not in capsys.readouterr().out
+    system.write_text(system.read_text("utf-8") + "[targets]\ntime_budget_s = 20\n", "utf-8")
+    cli.main(args)
+    out = capsys.readouterr().out
+    assert "(the run's own)" in out and f"note: {system} has changed since the run" in out, out
+
+
+def test_an_acceptance_names_a_class_as_class_names_are_compared():
+    """--accept-deviation class:strasse=safe accepts the deviation class:Straße (NFKC, case-folded: one name);
+    another class is still no deviation of the system's."""
+    from assurance.requirements.basis import Deviation, _offers
+    from el.class_names import pinned_category
+
+    found = [Deviation("class:Straße", "forbidden", "safe", value="safe"), Deviation("unsafe_landing_bound", 0.05, 0.1)]
+    assert _offers(["class:strasse=safe", "unsafe_landing_bound=0.1"], found) == {
+        "class:Straße": "safe", "unsafe_landing_bound": "0.1"}
+    with pytest.raises(ValueError, match="does not deviate"):
+        _offers(["class:weg=safe"], found)
+    with pytest.raises(ValueError, match="here: --accept-deviation class:Straße=safe"):
+        _offers(["class:STRASSE"], found)
+    assert pinned_category("Haus") == "building" and pinned_category("Mensch") == "person"  # the trial's names

@@ -52,7 +52,26 @@ def run_system(args: argparse.Namespace, run: Path) -> SystemFile:
         _say_judged("the embedded default (the shipped system; the run records no other)")
         return system
     _say_judged(f"{found.label} (the run's own)")
+    changed = _changed_since(found)
+    if changed:
+        print(changed)
     return found
+
+
+def _changed_since(recorded: SystemFile) -> str | None:
+    """A note when the file at the path the run records is no longer the file the run was made with (by SHA-256
+    only, through the bounded reader: nothing of it is read into the report); None when it is, or is gone."""
+    from el import userfiles
+
+    try:
+        now = userfiles.sha256(recorded.path, what="system file", max_bytes=userfiles.MAX_SETTINGS_BYTES)
+    except (OSError, userfiles.UserFileError):
+        return None
+    if not recorded.sha256 or now == recorded.sha256:
+        return None
+    return (f"note: {recorded.path} has changed since the run (SHA-256 {now[:12]} now, {recorded.sha256[:12]} when "
+            "the run was made): the run's own recorded copy is judged; a new campaign with the file as it is now "
+            "makes the evidence of it")
 
 
 def _recorded_system(run: Path) -> SystemFile | None:

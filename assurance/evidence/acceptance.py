@@ -26,14 +26,20 @@ SYSTEM_OWN = ("calibration_card",)
 """Parameters that name a file of the system itself: the basis has no value of them for another system."""
 
 
+UNORDERED = ("deployed_monitor", "calibration_card")
+"""Parameters that are a choice, not a bound: a system's own value is neither looser nor stricter than the basis."""
+
+
 def acceptance_rows(reg: Any, deviations: Sequence[Any], decided_by: Mapping[str, str] | None = None,
-                    *, shipped: bool = True) -> list[dict[str, str]]:
+                    *, shipped: bool = True, origins: Mapping[str, str] | None = None,
+                    label: str = "") -> list[dict[str, str]]:
     """The acceptance parameters the requirements were judged on, each with the basis's value (the packaged
     registry's) beside the system's, where the system's comes from (the registry when the system sets none, else
     the targets' source) and its mark against the basis (a deviation, accepted or not, from
     ``assurance.requirements.basis``; a value the system sets that is no looser is marked as differing only;
     ``decided_by``: the size-limited requirements no run size decides here, :func:`not_size_limited`; ``shipped``:
-    whether the system is the shipped one, whose own files the registry names)."""
+    whether the system is the shipped one, whose own files the registry names; ``origins``: where the system file
+    ``label`` sets each of its own, ``assurance.system.build.target_origins``)."""
     devs = {d.name: d for d in deviations}
     rows = []
     for k, v in reg.parameters.items():
@@ -43,12 +49,14 @@ def acceptance_rows(reg: Any, deviations: Sequence[Any], decided_by: Mapping[str
         own = k in reg.targets
         dev = devs.get(k)
         mark = ("deviation, accepted" if dev.accepted else "deviation") if dev is not None else \
-            "set by the system, no looser than the basis" if own and v != base else ""
+            "" if not own or v == base else "the system's own choice" if k in UNORDERED else \
+            "set by the system, no looser than the basis"
         if k == "size_limited" and decided_by:  # what no run size decides here is not limited by size
             mark = "; ".join([mark] * bool(mark) + [f"{rid} not here: {why}" for rid, why in decided_by.items()])
         rows.append({"name": k.replace("_", " "), "value": parameter_text(v),
                      "basis": "not set" if base is None else parameter_text(base),
-                     "source": (reg.targets_source or "the system's targets") if own else "the registry (basis)",
+                     "source": (f"{label} {origins[k]}".strip() if origins and k in origins else
+                                reg.targets_source or "the system's targets") if own else "the registry (basis)",
                      "mark": mark})
     return rows
 

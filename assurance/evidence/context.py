@@ -30,6 +30,7 @@ from assurance.evidence.sections import (
     unsafe_picks,
 )
 from assurance.evidence.text import STATE_CLASS, pct
+from assurance.system import build as system_build
 
 
 @dataclass
@@ -221,8 +222,9 @@ def campaign_context(inp: Inputs) -> dict[str, Any]:
     from assurance.evidence.gallery import Scenes, decision_examples, perturbation_gallery
 
     man, images, candidates, reg = inp.manifest, inp.images, inp.candidates, inp.registry
+    own = inp.system is not None and not inp.system.default
     identity_rows, ident = identity(inp.run, man, reg, inp.req_path, inp.req_doc, inp.csv_path, TEMPLATES_DIR,
-                                    inp.check)
+                                    inp.check, system_build.target_origins(inp.system) if own else None)
     identity_rows[:0] = [signature_row(inp.attestation), results_signature_row(inp)]
     ident["campaign_signed_by"] = inp.attestation.keyid if inp.attestation is not None else None
     ident["results_signed_by"] = inp.results_signed_by

@@ -40,8 +40,9 @@ def _file_identity(path: str) -> str | None:
 
 def identity(run: Path, man: Mapping[str, Any], registry: rq.Registry, req_path: Path | None,
               req_doc: Mapping[str, Any] | None, csv_path: Path, templates: Path,
-              check: RunCheck) -> tuple[list[dict], dict]:
-    """What was assessed: (the report's identity rows, the same facts for evidence.json)."""
+              check: RunCheck, origins: Mapping[str, str] | None = None) -> tuple[list[dict], dict]:
+    """What was assessed: (the report's identity rows, the same facts for evidence.json); ``origins``: where the
+    system file sets each of its requirement parameters (``assurance.system.build.target_origins``)."""
     from assurance.code_identity import code_identity
 
     weights = man.get("weights") or {}
@@ -80,7 +81,8 @@ def identity(run: Path, man: Mapping[str, Any], registry: rq.Registry, req_path:
          "sha256": cfg_sha, "note": ""},
         {"item": "Requirement registry", "value": str(registry.path), "sha256": registry.sha256, "note": ""},
         {"item": "Requirement targets",
-         "value": (", ".join(f"{k} = {v}" for k, v in registry.targets.items()) + f" (from {registry.targets_source})"
+         "value": (", ".join(f"{k} = {v}" + (f" ({origins[k]})" if origins and k in origins else "")
+                             for k, v in registry.targets.items()) + f" (from {registry.targets_source})"
                    if registry.targets else "the registry's parameters (no override)"),
          "sha256": registry.parameters_sha256,
          "note": "hash of the effective parameters (canonical JSON); the requirement results must carry it"},

@@ -201,6 +201,15 @@ def _label_classes(system: Any) -> list[dict[str, str]]:
             for c in labels.classes]
 
 
+def _origins(system: Any) -> dict[str, Any]:
+    """Where the system file sets each requirement parameter of its own (for the acceptance table)."""
+    from assurance.system import build as system_build  # as _system_settings: the system package on demand
+
+    if system is None or system.default:
+        return {}
+    return {"origins": system_build.target_origins(system), "label": str(system.label)}
+
+
 def _report_context(inp: Inputs, gate: Gate, campaign: dict[str, Any], base: dict[str, Any] | None, created: str,
                     n_boot: int, pdf: bool, *, system: Any, basis: Any, accepted: tuple[str, ...],
                     bench: dict[str, Any] | None, in_service: Any = None) -> dict[str, Any]:
@@ -210,7 +219,8 @@ def _report_context(inp: Inputs, gate: Gate, campaign: dict[str, Any], base: dic
                     _label_classes(system), "commands": commands(inp, accepted), "benchmark": bench,
                     "deviations": [{**d.to_dict(), "text": d.text()} for d in basis],
                     "parameters": acceptance_rows(inp.registry, basis, not_size_limited(inp),
-                                                  shipped=system is None or system.default),
+                                                  shipped=system is None or system.default,
+                                                  **_origins(system)),
                     "domain_source": domain_source(inp),
                     "reproducibility": REPRODUCIBILITY.text(images_per_perturbation(inp)),
                     "in_service": in_service and in_service.context(inp.check.digest)})  # assurance.inservice.section

@@ -10,7 +10,9 @@ from typing import Any
 
 from assurance import requirements as rq
 from assurance.analysis.metrics import clopper_pearson_upper
+from assurance.campaign.task import scenario_pairs
 from assurance.evidence.text import ci, fmt, pct, to_float
+from assurance.perturbations import PERTURBATIONS, SEVERITIES, TRAITS
 
 
 def scene_types(scenes: Any, keys: Sequence[str]) -> tuple[str, bool]:
@@ -67,9 +69,7 @@ def domain(man: Mapping[str, Any], registry: rq.Registry, size: tuple[int, int] 
         {"name": "Landing area", "value": f"{facts.stripes}; candidate discs wholly inside the image; mode "
                                           f"{core['mode']}, N* = {core['n_star']}"},
         {"name": "Scenes", "value": f"{n_images} test images; {scene_text}"},
-        {"name": "Perturbations", "value": ", ".join(cfg["perturbations"]) + " at severit"
-                                           + ("y " if len(cfg["severities"]) == 1 else "ies ")
-                                           + ", ".join(str(s) for s in cfg["severities"])},
+        {"name": "Perturbations", "value": perturbations_text(cfg)},
         {"name": "Monitor configurations", "value": ", ".join(cfg["monitors"]) + "; deployed: "
                                                     + registry.parameters["deployed_monitor"]},
         {"name": "Seeds", "value": f"campaign seed {cfg['seed']} (perturbations per image, MC dropout), "
@@ -176,7 +176,6 @@ def sample_size(table: Any, registry: rq.Registry, n_boot: int) -> list[str]:
 def limitations(man: Mapping[str, Any], registry: rq.Registry, results: Mapping[str, rq.RequirementResult],
                  synthetic: bool, table: Any, facts: Any) -> list[str]:
     """What the evidence does not cover: synthetic scenes, geometry, timings, what was not evaluated or verified."""
-    from assurance.perturbations import PERTURBATIONS, SEVERITIES
     from el.monitors import PAPER_GRID
 
     cfg = man["config"]
@@ -202,7 +201,8 @@ def limitations(man: Mapping[str, Any], registry: rq.Registry, results: Mapping[
     missing_p = [p for p in PERTURBATIONS if p not in cfg["perturbations"]]
     if missing_p:
         out.append("Perturbations not evaluated: " + ", ".join(missing_p) + ".")
-    missing_s = [str(s) for s in SEVERITIES if s not in cfg["severities"]]
+    run = {sev for _, sev in run_scenarios(cfg)}
+    missing_s = [str(s) for s in SEVERITIES if s not in run]
     if missing_s:
         out.append("Severities not evaluated: " + ", ".join(missing_s) + ".")
     missing_m = [m for m in PAPER_GRID if m not in cfg["monitors"]]
@@ -255,3 +255,25 @@ def unsafe_picks(images: Any) -> tuple[list[tuple[Any, str]], dict[tuple, list[s
         first.setdefault(key, r)
     picks = [(first[k], "") for k in groups]
     return picks, groups, len(ok)
+
+
+def run_scenarios(cfg: Mapping[str, Any]) -> list[tuple[str, int]]:
+    """The (perturbation, severity) pairs a run's configuration (the manifest's ``config``) evaluated: its severities,
+    a perturbation declared with a lower maximum (``severity_caps``) at those up to it."""
+    return scenario_pairs(cfg["perturbations"], cfg["severities"], cfg.get("severity_caps"))
+
+
+def _severity_text(sevs: Sequence[int]) -> str:
+    return ("severity " if len(sevs) == 1 else "severities ") + ", ".join(str(s) for s in sevs)
+
+
+def perturbations_text(cfg: Mapping[str, Any]) -> str:
+    """The perturbations a run evaluated and at which severities, each as it ran (a capped one at its own)."""
+    by: dict[str, list[int]] = {}
+    for name, sev in run_scenarios(cfg):
+        by.setdefault(name, []).append(sev)
+    common = [int(x) for x in cfg["severities"]]
+    alike = [n for n, sevs in by.items() if sevs == common or not TRAITS[n].graded]
+    other = [f"{n} at {_severity_text(sevs)} (its declared maximum)" for n, sevs in by.items() if n not in alike]
+    return "; ".join(([f"{', '.join(alike)} at {_severity_text(common)}"] if alike else []) + other)
+

@@ -29,7 +29,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, replace
 from typing import Any
 
-from el.class_names import pinned_category
+from el.class_names import class_key, pinned_category
 
 SYSTEM_CHOICES = ("deployed_monitor", "calibration_card", "forbidden_categories")
 """Parameters that name parts of the system assessed rather than a target: not compared with the basis."""
@@ -228,16 +228,25 @@ def label_deviations(labels: Any, must_forbid: Iterable[str], accepted_unknown: 
     return found + colour_deviations(labels, must)
 
 
+def _name_key(name: str) -> str:
+    """How an acceptance's NAME is compared with a deviation's: a class's (``class:``, ``colour:``) as class names are
+    compared everywhere (``el.class_names.class_key``: ``class:strasse`` is ``class:Straße``), a target's as written."""
+    kind, sep, rest = name.partition(":")
+    return f"{kind}:{class_key(rest)}" if sep and kind in ("class", "colour") else name
+
+
 def _offers(accepted: Iterable[str], found: list[Deviation]) -> dict[str, str]:
     """``{name: VALUE}`` of the auditor's ``NAME=VALUE`` acceptances; ValueError for a plain NAME (one line giving
     the form), a name given twice, or a name the system does not deviate on."""
     by_name = {d.name: d for d in found}
-    names = sorted(by_name, key=len, reverse=True)  # the longest name first: class:a=b before class:a
+    by_key = {_name_key(n): n for n in by_name}  # a class named as the rest of the toolkit compares class names
     out: dict[str, str] = {}
     unknown = []
     for item in map(str, accepted):
-        name = next((n for n in names if item.startswith(f"{n}=")), None)
-        if item in by_name or "=" not in item:
+        given, _, _ = item.partition("=")
+        name = by_key.get(_name_key(given)) if "=" in item else None
+        if _name_key(item) in by_key or "=" not in item:
+            item = by_key.get(_name_key(item), item)
             hint = f" (here: {by_name[item].acceptance()})" if item in by_name else ""
             raise ValueError(f"--accept-deviation {item}: give the value you accept, --accept-deviation NAME=VALUE"
                              f"{hint}; a deviation is accepted only at the value the system sets")
@@ -246,7 +255,7 @@ def _offers(accepted: Iterable[str], found: list[Deviation]) -> dict[str, str]:
             continue
         if name in out:
             raise ValueError(f"--accept-deviation {name}: given twice ({name}={out[name]}, {item}); give it once")
-        out[name] = item[len(name) + 1:]
+        out[name] = item[len(given) + 1:]
     if unknown:
         raise ValueError(f"--accept-deviation {', '.join(unknown)}: the system does not deviate from the basis on "
                          f"{'it' if len(unknown) == 1 else 'them'}"

@@ -313,6 +313,23 @@ def targets(system: SystemFile) -> dict[str, Any]:
     return out
 
 
+TARGET_ORIGINS = {"radius_m": "[safety] radius_m", "beta": "[safety] beta", "deployed_monitor": "[monitor] spec",
+                  "calibration_card": "[monitor] calibration"}
+"""Where a system file sets each requirement parameter that is not under ``[targets]``."""
+
+
+def target_origins(system: SystemFile) -> dict[str, str]:
+    """Where in the file each parameter of :func:`targets` is set: its section and key (a calibration card unset
+    because the file names a monitor of its own says so)."""
+    out = {}
+    for key in targets(system):
+        if key == "calibration_card" and not system.sets("monitor.calibration"):
+            out[key] = "[monitor] spec (a monitor of its own: the shipped card does not calibrate it)"
+        else:
+            out[key] = TARGET_ORIGINS.get(key, f"[targets] {key}")
+    return out
+
+
 def shipped_waivers() -> Path:
     """The waivers of the shipped system (``assurance/waivers.yaml``, package data: found by an installed wheel)."""
     from importlib import resources

@@ -90,7 +90,7 @@ class SystemFile:
 
     def values(self) -> list[tuple[str, str]]:
         """Every value the file sets, as (dotted key, JSON text), in file order: what the report shows."""
-        return [(k, json.dumps(v, sort_keys=True)) for k, v in _flatten(self.document)]
+        return [(k, json.dumps(v, sort_keys=True, ensure_ascii=False)) for k, v in _flatten(self.document)]
 
     def record(self) -> dict[str, Any]:
         """The JSON record of this system file (manifests, requirement results, the report)."""
