@@ -155,3 +155,23 @@ def test_an_acceptance_names_a_class_as_class_names_are_compared():
     with pytest.raises(ValueError, match="here: --accept-deviation class:Straße=safe"):
         _offers(["class:STRASSE"], found)
     assert pinned_category("Haus") == "building" and pinned_category("Mensch") == "person"  # the trial's names
+
+
+def test_preview_checks_the_poses_file_as_the_campaign_does(tmp_path, capsys):
+    raw = tmp_path / "raw"
+    _frames(raw, n=2)
+    (raw / "poses.csv").write_text("frame,height_m,pitch_deg\n000,20,90\n099,20,90\n", "utf-8")
+    system = _system(tmp_path / "sys", '[data.test]\npath = "../raw"\nlayout = "semantic-drone"\nposes = "poses.csv"\n')
+    assert cli.main(["preview", "--system", str(system), "--out", str(tmp_path / "p.png"), "--width", "64"]) == 2
+    err = capsys.readouterr().err
+    assert "poses.csv: frame '099' has no image" in err and err.count("\n") == 1, err
+
+
+def test_land_to_a_log_in_no_folder_is_one_line(tmp_path, capsys):
+    raw = tmp_path / "raw"
+    _frames(raw, n=1)
+    system = _system(tmp_path / "sys", "")
+    code = cli.main(["land", str(raw / "original_images" / "000.jpg"), "--system", str(system), "--height", "20",
+                     "--pitch", "90", "--log", str(tmp_path / "no" / "such" / "flight.jsonl")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "no folder" in err, err

@@ -224,6 +224,8 @@ def _flight_log(args: argparse.Namespace, system: Any) -> Any:
         return None
     from el.flightlog import FlightLog
 
+    if not args.log.parent.is_dir():  # said here in one line; the flight function would log it as well
+        raise CommandError(f"{args.log}: cannot open the flight log: no folder {args.log.parent}")
     log = FlightLog(args.log, system_sha256=system.file.sha256)
     if log.fault:
         raise CommandError(log.fault)

@@ -34,7 +34,7 @@ def run(args: argparse.Namespace) -> int:
     if not 64 <= args.width <= 4096:
         raise CommandError(f"--width must lie in [64, 4096], got {args.width}")
     args.data = data_root(system_of(args), "test", args.data)  # --data, else [data] test
-    samples = list(iter_samples(args.data))
+    samples = list(iter_samples(args.data, poses=True))  # the poses file checked as the campaign checks it
     if args.count is not None:
         if args.count < 1:
             raise CommandError(f"--count must be at least 1, got {args.count}")
