@@ -38,6 +38,14 @@ def _file_identity(path: str) -> str | None:
         return None
 
 
+def _targets_text(registry: rq.Registry, origins: Mapping[str, str] | None) -> str:
+    """The parameters the system sets, each with where the file sets it, and the source of them all."""
+    if not registry.targets:
+        return "the registry's parameters (no override)"
+    return (", ".join(f"{k} = {v}" + (f" ({origins[k]})" if origins and k in origins else "")
+                      for k, v in registry.targets.items()) + f" (from {registry.targets_source})")
+
+
 def identity(run: Path, man: Mapping[str, Any], registry: rq.Registry, req_path: Path | None,
               req_doc: Mapping[str, Any] | None, csv_path: Path, templates: Path,
               check: RunCheck, origins: Mapping[str, str] | None = None) -> tuple[list[dict], dict]:
@@ -80,10 +88,7 @@ def identity(run: Path, man: Mapping[str, Any], registry: rq.Registry, req_path:
         {"item": "Configuration", "value": "campaign configuration (manifest.json 'config', canonical JSON)",
          "sha256": cfg_sha, "note": ""},
         {"item": "Requirement registry", "value": str(registry.path), "sha256": registry.sha256, "note": ""},
-        {"item": "Requirement targets",
-         "value": (", ".join(f"{k} = {v}" + (f" ({origins[k]})" if origins and k in origins else "")
-                             for k, v in registry.targets.items()) + f" (from {registry.targets_source})"
-                   if registry.targets else "the registry's parameters (no override)"),
+        {"item": "Requirement targets", "value": _targets_text(registry, origins),
          "sha256": registry.parameters_sha256,
          "note": "hash of the effective parameters (canonical JSON); the requirement results must carry it"},
         {"item": "Requirement test results", "value": str(req_path) if req_path else "not given",
