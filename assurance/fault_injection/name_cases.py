@@ -11,13 +11,12 @@ sharing a colour are refused. UAVid's own clutter is a deviation the basis itsel
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 from pathlib import Path
 
 from assurance.fault_injection.basis_cases import _uavid_doc, _write_labels
 from assurance.fault_injection.case import Case
-from assurance.fault_injection.report_cases import _states_alone
+from assurance.fault_injection.report_cases import _states_alone, read_report
 from assurance.fault_injection.trust import _evidence, _system
 
 
@@ -61,12 +60,10 @@ def _first_page(name: str, *, deviation: str, strip: str, accepted: bool = False
     the basis with ``accepted``, else not accepted) and shows a strip of the safe class ``strip``."""
 
     def check(ws: Path) -> str | None:
-        out = ws / f"rep-{name}"
-        try:
-            html = (out / "evidence.html").read_text("utf-8")
-            verdict = json.loads((out / "evidence.json").read_text("utf-8"))["gate"]["result"]
-        except (OSError, ValueError, KeyError) as exc:
-            return f"no report to read: {exc}"
+        found = read_report(ws / f"rep-{name}")
+        if isinstance(found, str):
+            return found
+        html, verdict = found
         cover = html.split('<header class="toc">', 1)[0]
         if not _states_alone(cover, verdict):
             return f"the first page does not state the gate's verdict {verdict} alone"

@@ -41,6 +41,16 @@ def first_page(html: str) -> str:
     return html[start:end] if 0 <= start < end else ""
 
 
+def read_report(out: Path) -> tuple[str, str] | str:
+    """(the HTML, the gate's verdict) of the report in ``out``, or why there is none to check."""
+    try:
+        html = (out / "evidence.html").read_text("utf-8")
+        verdict = json.loads((out / "evidence.json").read_text("utf-8"))["gate"]["result"]
+    except (OSError, ValueError, KeyError) as exc:
+        return f"no report to check ({type(exc).__name__})"
+    return html, verdict
+
+
 def _states_alone(page: str, verdict: str) -> bool:
     """Whether ``page`` says "Gate: VERDICT" and no other gate verdict."""
     return f"Gate: {verdict}" in page and not any(f"Gate: {v}" in page for v in ("PASSED", "FAILED") if v != verdict)
@@ -52,11 +62,10 @@ def _report_says_gate(name: str, *, pdf: bool = False, absent: tuple[str, ...] =
 
     def check(ws: Path) -> str | None:
         out = ws / f"rep-{name}"
-        try:
-            html = (out / "evidence.html").read_text("utf-8")
-            verdict = json.loads((out / "evidence.json").read_text("utf-8"))["gate"]["result"]
-        except (OSError, ValueError, KeyError) as exc:
-            return f"no report to check ({type(exc).__name__})"
+        found = read_report(out)
+        if isinstance(found, str):
+            return found
+        html, verdict = found
         if not _states_alone(first_page(html), verdict):
             return f"first page does not state the gate's verdict {verdict} alone"
         found = [a for a in absent if a in html]
@@ -312,4 +321,4 @@ PDF_CASE_IDS = ("T2-template-file-attachment", "T4-template-network-fetch", "T25
                 "T26-cover-in-comment")
 """Rows whose check reads the PDF (left out where WeasyPrint does not load)."""
 
-__all__ = ["PDF_CASE_IDS", "REPORT_CASES", "first_page"]
+__all__ = ["PDF_CASE_IDS", "REPORT_CASES", "first_page", "read_report"]
