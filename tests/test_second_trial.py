@@ -175,3 +175,12 @@ def test_land_to_a_log_in_no_folder_is_one_line(tmp_path, capsys):
                      "--pitch", "90", "--log", str(tmp_path / "no" / "such" / "flight.jsonl")])
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and "no folder" in err, err
+
+
+def test_fit_gate_warns_when_its_quantile_is_the_validation_maximum():
+    """The trial's gate: the 0.997 quantile of 8 validation frames is their maximum and refused 4 of 12 clean
+    frames in the campaign: fit-gate says so."""
+    from assurance.cli.fit_gate import too_few_frames
+
+    assert "at least 334 frames" in too_few_frames(0.997, 8)
+    assert too_few_frames(0.997, 334) is None and too_few_frames(0.9, 10) is None

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import math
+import sys
 
 from assurance.cli.arguments import fit_split_options
 from assurance.cli.fit_monitor import write_json
@@ -64,7 +66,22 @@ def run(args: argparse.Namespace) -> int:
           f"threshold {b['threshold']:.4g} = {b['quantile']:g} quantile of {b['validation']['frames']} validation "
           f"frames; fitted on {b['training']['frames']} training frames")
     print(f"gate written to {args.out}")
+    few = too_few_frames(b["quantile"], int(b["validation"]["frames"]))
+    if few:
+        print(f"warning: {few}", file=sys.stderr)
     return 0
+
+
+def too_few_frames(quantile: float, frames: int) -> str | None:
+    """Why ``frames`` validation frames cannot place a ``quantile`` threshold (fewer than 1 / (1 - quantile): the
+    quantile is then their maximum, or beyond it, and the gate refuses in-domain frames at a rate no sample showed),
+    None when they can."""
+    needed = math.ceil(round(1 / (1 - quantile), 9)) if quantile < 1 else None  # 1 / (1 - 0.9) is 10.000...02
+    if needed is None or frames >= needed:
+        return None
+    return (f"the {quantile:g} quantile of {frames} validation frames is their maximum, not a measured rate: at least "
+            f"{needed} frames place it; expect the gate to refuse in-domain frames more often than "
+            f"{1 - quantile:.1%} (more validation scenes, or a lower --quantile)")
 
 
 def _shown(tap: str) -> str:
