@@ -77,7 +77,7 @@ def _read_small(path: Path, what: str, *, own: bool = False) -> bytes:
     if not path.exists() and not path.is_symlink():
         raise AttestationError(f"{path}: {what} not found")
     try:
-        return userfiles.read_bytes(path, what=what, max_bytes=MAX_KEY_FILE_BYTES, hard_links=own, own=own)
+        return userfiles.read_bytes(path, what=what, max_bytes=MAX_KEY_FILE_BYTES, own=own)
     except userfiles.UserFileError as exc:
         raise AttestationError(str(exc)) from None
 

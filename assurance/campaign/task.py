@@ -229,7 +229,8 @@ def _judged_frame(task: Task, config: CampaignConfig, segmenter: Any, clock: Cal
         meta.update(found)  # EXIF orientation
         check_frame_pose(config, s, pose, roll, (rgb.shape[1], rgb.shape[0]))
         truth.append(frame_truth(s, labels, rgb.shape[:2])[1])
-        rng = np.random.default_rng(task_seed(config.seed, frame_identity(rgb), task.perturbation, task.severity))
+        identity = cached("frame identity", file_key(s.image_path), lambda: frame_identity(rgb))  # once per scene
+        rng = np.random.default_rng(task_seed(config.seed, identity, task.perturbation, task.severity))
         hd, timings["perturb_s"] = _timed(clock, perturb, rgb, task.perturbation, task.severity, rng)
         return hd
 

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from assurance.system import SystemFile, default_system
 from assurance.system.system import System
+from el import userfiles
 
 
 def train_val_dirs(args: argparse.Namespace, system: SystemFile) -> None:
@@ -61,8 +62,6 @@ def run_system(args: argparse.Namespace, run: Path) -> SystemFile:
 def _changed_since(recorded: SystemFile) -> str | None:
     """A note when the file at the path the run records is no longer the file the run was made with (by SHA-256
     only, through the bounded reader: nothing of it is read into the report); None when it is, or is gone."""
-    from el import userfiles
-
     try:
         now = userfiles.sha256(recorded.path, what="system file", max_bytes=userfiles.MAX_SETTINGS_BYTES)
     except (OSError, userfiles.UserFileError):

@@ -267,8 +267,6 @@ def _safe_strips(inp: Inputs, scenes: Any, keys: list[str]) -> dict[str, Any]:
     if inp.system is None:
         from el.labels import UAVID as labels
     else:
-        from assurance.system import build as system_build
-
         labels = system_build.label_set(inp.system)
     return safe_class_strips(scenes.samples, keys, labels)
 
@@ -301,10 +299,8 @@ def _data_option(inp: Inputs) -> str:
     if not spec:
         return f" --data {data['path']}"
     if inp.system is not None and not inp.system.default:
-        from assurance.system.build import data_root
-
         try:
-            now = data_root(inp.system, "test")
+            now = system_build.data_root(inp.system, "test")
         except ValueError:  # SystemFileError: [data] test unset, a bad table or a missing folder
             now = None
         if now is not None and hasattr(now, "to_dict") and {**now.to_dict(), "path": str(Path(now).resolve())} == spec:

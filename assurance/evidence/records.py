@@ -13,6 +13,7 @@ development data it declares); else they are "not declared". The facts about the
 from __future__ import annotations
 
 import json
+import os
 from collections import Counter
 from collections.abc import Mapping
 from pathlib import Path
@@ -32,6 +33,7 @@ from assurance.evidence.disjoint import (
 from assurance.evidence.facts import NOT_DECLARED
 from assurance.evidence.render import ROOT, rel
 from assurance.scenes.generate import SPLIT_BASE
+from assurance.system.build import data_root
 
 GENERATOR = "assurance.scenes"
 """The ``generator`` this toolkit's scene generator writes into each scene's meta JSON."""
@@ -235,17 +237,20 @@ def provenance_data(system: Any) -> list[tuple[str, str, Any, str]]:
     return out
 
 
+OWN_FOLDERS = "the system file's folder and the folders its [data] names"
+"""Where a declared development set is read (a set elsewhere is listed, not read)."""
+
+
 def _data_roots(system: Any) -> list[Path]:
     """The folders a system file's ``[data]`` splits name (a table's ``path``), resolved (none without a file)."""
     roots: list[Path] = []
     if system is None or getattr(system, "default", False):
         return roots
     for split in ("train", "val", "test"):
-        value = system.get(f"data.{split}")
-        key = f"data.{split}.path" if isinstance(value, Mapping) else f"data.{split}"
-        path = system.path_of(key) if value is not None else None
-        if path is not None:
-            roots.append(Path(path).resolve())
+        try:
+            roots.append(Path(os.fspath(data_root(system, split))).resolve())
+        except ValueError:  # SystemFileError: the split unset, a bad table or a missing folder
+            continue
     return roots
 
 
@@ -263,13 +268,13 @@ def declared_sets(facts: Any, system: Any = None, cache: dict[str, Any] | None =
         # inside the file's folder, or one of the folders its [data] names (read by every command anyway)
         inside = any(root.resolve().is_relative_to(r) for r in (Path(system.base).resolve(), *own))
         spec = {k: v for k, v in spec_of(source).items() if k != "path"}
-        unread = problem or ("" if inside else f"{root} lies outside the system file's folder: not read")
+        unread = problem or ("" if inside else f"{root} lies outside {OWN_FOLDERS}: not read")
         frames = read_frames(source, cache) if not unread else None
         ok = frames is not None and not frames["error"]
         metas = frame_metas(frames["samples"]) if ok else []
         gens = _generated(metas)
         shown = set_label({"path": str(root), "spec": spec})
-        rows.append(_row(f"{role}: {shown}" + ("" if inside else " (outside the system file's folder: not read)"),
+        rows.append(_row(f"{role}: {shown}" + ("" if inside else f" (outside {OWN_FOLDERS}: not read)"),
                          role, letter, root, len(frames["samples"]) if ok else "not read",
                          frames["sha256"] if ok else "",
                          record=facts.system, folder=root.resolve() if inside else "", unread=unread, spec=spec,

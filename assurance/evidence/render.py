@@ -193,15 +193,15 @@ def _render_supplied(folder: Path, name: str, context: Mapping[str, Any], second
         env = environment(folder)
         try:
             html = _render(env, name, context)
-            # cleaned here, under the same limits: the parent only places markup that is small, shallow and clean
-            clean = bounded_clean(html, own_ids, where=str(folder / name), max_chars=MAX_SECTION_CHARS)
         except MemoryError:
             raise TemplateError(f"{folder / name}: report template refused: it needs more than the memory "
                                 "limit") from None
         except RecursionError:
             raise TemplateError(f"{folder / name}: report template refused: it recurses without end (a template "
                                 "including itself?)") from None
-        except ValueError as exc:
+        try:  # cleaned here, under the same limits: the parent only places markup that is small, shallow and clean
+            clean = bounded_clean(html, own_ids, where=str(folder / name), max_chars=MAX_SECTION_CHARS)
+        except ValueError as exc:  # a bound exceeded: the message names the template and the limit
             raise TemplateError(str(exc)) from None
         return clean, dict(env.loader.reads)
 

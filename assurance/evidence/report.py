@@ -39,6 +39,7 @@ from assurance.evidence.render import (
 )
 from assurance.evidence.signatures import check_results_signature
 from assurance.evidence.text import jsonable
+from assurance.system import build as system_build
 from el.hashing import sha256_file
 
 EVIDENCE_FORMAT = "uav-el-evidence/1"
@@ -168,8 +169,6 @@ def _system_settings(system: Any, waivers: Any, templates: Any, targets: Any, ta
 
     if system is None:
         return waivers, templates, targets, targets_source, deviations({}, accepted) if accepted else []
-    from assurance.system import build as system_build
-
     waivers = system_build.waivers(system, str(waivers) if waivers else None)
     if system_templates and not templates:
         templates = system_build.report_settings(system)["templates"]
@@ -186,8 +185,6 @@ def _label_classes(system: Any) -> list[dict[str, str]]:
     if system is None:
         labels = UAVID
     else:
-        from assurance.system import build as system_build
-
         labels = system_build.label_set(system)
     from assurance.requirements.basis import class_category
 
@@ -203,8 +200,6 @@ def _label_classes(system: Any) -> list[dict[str, str]]:
 
 def _origins(system: Any) -> dict[str, Any]:
     """Where the system file sets each requirement parameter of its own (for the acceptance table)."""
-    from assurance.system import build as system_build  # as _system_settings: the system package on demand
-
     if system is None or system.default:
         return {}
     return {"origins": system_build.target_origins(system), "label": str(system.label)}
