@@ -18,7 +18,7 @@ from importlib import metadata, util
 from pathlib import Path
 from typing import Any
 
-from el.hashing import sha256_file
+from el.base.hashing import sha256_file
 
 log = logging.getLogger(__name__)
 

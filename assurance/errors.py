@@ -1,4 +1,4 @@
-"""The harness's own exceptions, on the project's one root (``el.errors.UavElError``).
+"""The harness's own exceptions, on the project's one root (``el.base.errors.UavElError``).
 
 The command line catches these without importing any command (``RunError``/``DamagedRunError`` are re-exported by
 ``assurance.campaign.readouts``). The harness's other expected failures derive from the same root where they are
@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from el.errors import UavElError
+from el.base.errors import UavElError
 
 
 class CommandError(UavElError):

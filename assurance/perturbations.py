@@ -58,7 +58,7 @@ from typing import TypeVar
 import cv2
 import numpy as np
 
-from el.rgb import check_rgb
+from el.base.rgb import check_rgb
 
 __all__ = [
     "PAPER_PERTURBATIONS",

@@ -20,7 +20,7 @@ import threading
 import time
 from pathlib import Path
 
-from el.pipeline import EmergencyLanding, PipelineConfig
+from el.flight.pipeline import EmergencyLanding, PipelineConfig
 
 MONITORS = {"deployed": None, "mcd n=30": "lhd+ch+mcd:tau=0.25,n=30,rho=0.5"}
 

@@ -20,11 +20,11 @@ import time
 import cv2
 import numpy as np
 
-from el import candidates as cand
-from el import regions as reg
-from el.config import CoreConfig
-from el.core import probs_from_labels, reachable_working_row, run_core
-from el.labels import CLASS_IDS, NUM_CLASSES, UAVID
+from el.classes.labels import CLASS_IDS, NUM_CLASSES, UAVID
+from el.geometry.config import CoreConfig
+from el.landing import candidates as cand
+from el.landing import regions as reg
+from el.landing.core import probs_from_labels, reachable_working_row, run_core
 
 W_FULL, H_FULL = 3840, 2160
 

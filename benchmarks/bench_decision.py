@@ -1,7 +1,7 @@
 """Decision latency end to end on 3840x2160 PNG frames, per monitor configuration.
 
 For each configuration: read the PNG, segment, find and rank candidates, walk them with the monitor
-(``el.pipeline.EmergencyLanding.decide`` on the file path, the call a flight computer makes).
+(``el.flight.pipeline.EmergencyLanding.decide`` on the file path, the call a flight computer makes).
 Prints median and p95 latency, the monitoring overhead, and the peak RSS growth, and the number of
 scenes on which MC dropout changes the decision compared with LHD alone. Target on the 2-core CPU:
 CM + LHD decision on a 3840x2160 PNG < 1.5 s median.
@@ -20,7 +20,7 @@ import time
 import numpy as np
 
 from assurance.dataio.uavid import iter_samples
-from el.pipeline import DEPLOYED_MONITOR, EmergencyLanding, PipelineConfig
+from el.flight.pipeline import DEPLOYED_MONITOR, EmergencyLanding, PipelineConfig
 from el.segmentation.factory import load_model
 
 CONFIGS = ("none", "lhd", "lhd+ch:tau=0.25", "lhd+mcd:n=10,rho=0.9", "lhd+mcd:n=30,rho=0.9",

@@ -60,8 +60,8 @@ def run(args: argparse.Namespace) -> None:
     import cv2
 
     from assurance.perturbations import perturb
-    from el.imageio import read_image
-    from el.pipeline import EmergencyLanding, PipelineConfig
+    from el.base.imageio import read_image
+    from el.flight.pipeline import EmergencyLanding, PipelineConfig
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -88,10 +88,10 @@ def run(args: argparse.Namespace) -> None:
 
 
 def _valid(probs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    from el import candidates as cand
-    from el.config import CoreConfig
-    from el.core import _sized_unreachable_rows, reachable_working_row
-    from el.labels import UAVID
+    from el.classes.labels import UAVID
+    from el.geometry.config import CoreConfig
+    from el.landing import candidates as cand
+    from el.landing.core import _sized_unreachable_rows, reachable_working_row
 
     config = CoreConfig()
     _, h, w = probs.shape

@@ -1,7 +1,7 @@
 """Decision latency of the shipped network under torch and under ONNX Runtime, on the same 3840x2160 PNGs.
 
 For each engine (``UAV_EL_ENGINE=torch`` / ``onnx``, chosen by :func:`el.segmentation.onnx_engine.engine_for`)
-and each configuration, ``el.pipeline.EmergencyLanding.decide`` on the file path (read, segment, candidates,
+and each configuration, ``el.flight.pipeline.EmergencyLanding.decide`` on the file path (read, segment, candidates,
 monitor walk), median and p95 over the frames; the engines are interleaved frame by frame (and the whole
 measure repeated ``--rounds`` times) so that other load on the shared CPU hits both alike. Also counts the
 frames whose decision (action, selected candidate, candidate positions) differs between the engines.
@@ -29,13 +29,13 @@ from typing import Any
 import numpy as np
 
 from assurance.dataio.uavid import iter_samples
-from el.imageio import read_image_hashed
+from el.base.imageio import read_image_hashed
+from el.base.rgb import check_rgb
+from el.flight.pipeline import DEPLOYED_MONITOR, MIN_FRAME_SIZE, EmergencyLanding, PipelineConfig
 from el.monitors.patch_judge import batch_judge
-from el.pipeline import DEPLOYED_MONITOR, MIN_FRAME_SIZE, EmergencyLanding, PipelineConfig
-from el.rgb import check_rgb
+from el.monitors.walk import SCORE
 from el.segmentation.factory import load_model
 from el.segmentation.onnx_engine import ENGINE_ENV
-from el.walk import SCORE
 
 # name -> (monitor spec, batched judge, table label)
 CONFIGS: dict[str, tuple[str, bool, str]] = {
@@ -51,7 +51,7 @@ TARGET_S = 0.35
 class BatchedLanding(EmergencyLanding):
     """The flight loop whose score walk judges every candidate of the frame in one ``monitor.check_many`` call
     (``el.monitors.patch_judge.batch_judge``), and which hashes a frame file from the bytes it decodes
-    (``el.imageio.read_image_hashed``, no second read): the wiring ``EmergencyLanding._judge`` and ``_read``
+    (``el.base.imageio.read_image_hashed``, no second read): the wiring ``EmergencyLanding._judge`` and ``_read``
     would take."""
 
     def _read(self, image: Any, info: dict[str, Any]) -> Any:

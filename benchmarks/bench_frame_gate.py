@@ -4,7 +4,8 @@ Two systems with the deployed monitor, each on its own copy of the shipped netwo
 ``PipelineConfig(gate=GATE.json)`` (the frame pass returns its statistics with its probabilities,
 ``predict_frame(rgb, stats=True)``; the gate scores them, ``el.monitors.frame_gate``), one without. Each frame is
 decided by both, interleaved (A/B), by ``EmergencyLanding.decide`` on the image array; median and mean over the
-frames. By default: the deployed gate (``el.pipeline.DEPLOYED_GATE``) on synthetic validation scenes at the camera's
+frames. By default: the deployed gate (``el.flight.pipeline.DEPLOYED_GATE``) on synthetic validation scenes at the
+camera's
 3840x2160, made in a temporary folder.
 
     .venv/bin/python benchmarks/bench_frame_gate.py [--gate GATE.json] [--data data/gate4k/val] [--frames 10]
@@ -20,7 +21,7 @@ import time
 from pathlib import Path
 
 from assurance.dataio.uavid import iter_samples, read_image
-from el.pipeline import DEPLOYED_GATE, EmergencyLanding, PipelineConfig
+from el.flight.pipeline import DEPLOYED_GATE, EmergencyLanding, PipelineConfig
 from el.segmentation.factory import load_model
 
 SHIPPED_GATE = Path(__file__).resolve().parents[1] / "el" / "monitors" / "data" / "frame_gate.json"

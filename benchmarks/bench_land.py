@@ -30,7 +30,8 @@ STAGES = ("imports", "system file", "model load", "monitor build", "gate load", 
 CHILD = r'''
 import json, sys, time
 t0 = time.perf_counter()
-import assurance.cli, assurance.cli.land, assurance.system.system, el.pipeline, el.imageio, el.monitors.frame_gate
+import assurance.cli, assurance.cli.land, assurance.system.system, el.flight.pipeline, el.base.imageio
+import el.monitors.frame_gate
 spent, counts, stack = {"imports": time.perf_counter() - t0}, {}, []
 
 
@@ -55,12 +56,12 @@ def timed(owner, name, stage, count=True):
     setattr(owner, name, classmethod(wrapper) if isinstance(raw, classmethod) else wrapper)
 
 
-pipeline, System = el.pipeline, assurance.system.system.System
+pipeline, System = el.flight.pipeline, assurance.system.system.System
 FrameFile = getattr(pipeline, "FrameFile", pipeline)
 for owner, name, stage, *count in ((System, "build", "system file"), (System, "segmenter", "model load"),
                            (pipeline, "build_monitor", "monitor build"), (pipeline, "load_frame_gate", "gate load"),
                            (el.monitors.frame_gate, "load_frame_gate", "gate load"),
-                           (el.imageio, "_decode_frame", "decode"), (FrameFile, "read", "decode", False),
+                           (el.base.imageio, "_decode_frame", "decode"), (FrameFile, "read", "decode", False),
                            (pipeline.EmergencyLanding, "__init__", "flight checks"),
                            (pipeline.EmergencyLanding, "decide", "decision")):
     timed(owner, name, stage, *count)

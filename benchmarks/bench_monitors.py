@@ -28,8 +28,8 @@ from typing import Any
 
 import numpy as np
 
-from el.decision import Candidate
-from el.labels import UAVID
+from el.base.decision import Candidate
+from el.classes.labels import UAVID
 from el.monitors import CandidateContext, build_monitor, extract_patch
 from el.monitors.learned import DEFAULT_MODEL, base_features
 

@@ -59,7 +59,7 @@ def _setup(weights: str | None, threads: int):
     import torch
 
     from assurance.fitting.network.training import init_untrained
-    from el.labels import UAVID
+    from el.classes.labels import UAVID
     from el.segmentation.inference import Segmenter
 
     torch.set_num_threads(threads)  # the shipped architecture, untrained: UAVid's classes

@@ -1,7 +1,8 @@
 """Where the deployed decision's time goes, stage by stage, on 3840x2160 frames in memory and from PNG files.
 
 The shipped system (``assurance.system``'s embedded default: the shipped network, the deployed monitor at its card's
-threshold, the deployed frame gate, the time budget) decides on each frame with ``el.pipeline.EmergencyLanding.decide``,
+threshold, the deployed frame gate, the time budget) decides on each frame with
+``el.flight.pipeline.EmergencyLanding.decide``,
 unchanged: its stages are timed from outside (functions wrapped, nothing in the decision changes). Each row is a
 stage's exclusive time per frame (median over frames and rounds): the wall-clock seconds of the decision's own thread
 and the CPU seconds of every thread (the HD patches are segmented on worker threads side by side: their CPU adds up,
@@ -33,35 +34,35 @@ import numpy as np
 from assurance.dataio.uavid import iter_samples
 from assurance.system.loader import default_system
 from assurance.system.system import System
-from el.imageio import read_image
-from el.pipeline import EmergencyLanding
+from el.base.imageio import read_image
+from el.flight.pipeline import EmergencyLanding
 
 TARGET_S = 0.35
 PNG_HASH = "PNG hash (own thread, beside the decode)"
 POOL = "patches (pool)"  # its sub-stages run on the pool's threads side by side: their CPU is each thread's own
 # (module, attribute path, stage label): wrapped where the decision looks them up; nested calls are sub-stages
 STAGES: tuple[tuple[str, str, str], ...] = (
-    ("el.pipeline", "EmergencyLanding._read", "read"),
-    ("el.pipeline", "FrameFile.read", "PNG read + decode + hash"),
-    ("el.imageio", "_read_checked", "file bytes + header"),
-    ("el.imageio", "_decode_frame", "decode"),
-    ("el.pipeline", "sha256_bytes", "hash (in-memory array)"),
-    ("el.pipeline", "check_rgb", "RGB check"),
-    ("el.kernel", "segment_frame", "segmentation (frame)"),
+    ("el.flight.pipeline", "EmergencyLanding._read", "read"),
+    ("el.flight.pipeline", "FrameFile.read", "PNG read + decode + hash"),
+    ("el.base.imageio", "_read_checked", "file bytes + header"),
+    ("el.base.imageio", "_decode_frame", "decode"),
+    ("el.flight.pipeline", "sha256_bytes", "hash (in-memory array)"),
+    ("el.flight.pipeline", "check_rgb", "RGB check"),
+    ("el.flight.kernel", "segment_frame", "segmentation (frame)"),
     ("el.segmentation.inference", "unit_nchw", "to float NCHW"),
     ("el.segmentation.onnx_engine", "run_session", "network"),
     ("el.segmentation.inference", "softmax_classes", "softmax"),
     ("el.segmentation.inference", "_check_finite", "finite check"),
     ("el.segmentation.inference", "frame_tap", "gate statistics"),
-    ("el.kernel", "judge_frame", "frame gate"),
-    ("el.kernel", "run_core", "candidates"),
-    ("el.core", "check_probs", "probability check"),
-    ("el.candidates", "forbidden_from_probs", "forbidden pixels"),
-    ("el.candidates", "valid_pixels", "valid pixels (EDT)"),
-    ("el.regions", "regions_fast", "regions"),
-    ("el.representatives", "representatives", "representatives (K-means)"),
-    ("el.core", "_ranked_candidates", "ranking + pruning"),
-    ("el.pipeline", "conclude", "walk + decision"),
+    ("el.flight.kernel", "judge_frame", "frame gate"),
+    ("el.flight.kernel", "run_core", "candidates"),
+    ("el.landing.core", "check_probs", "probability check"),
+    ("el.landing.candidates", "forbidden_from_probs", "forbidden pixels"),
+    ("el.landing.candidates", "valid_pixels", "valid pixels (EDT)"),
+    ("el.landing.regions", "regions_fast", "regions"),
+    ("el.landing.representatives", "representatives", "representatives (K-means)"),
+    ("el.landing.core", "_ranked_candidates", "ranking + pruning"),
+    ("el.flight.pipeline", "conclude", "walk + decision"),
     ("el.monitors.base", "check_batched", "monitor"),
     ("el.monitors.base", "PatchMonitor.patch", "crop patches"),
     ("el.monitors.patch_batch", "checked_contexts", "frame softmax check"),
@@ -139,8 +140,9 @@ def install(rec: Recorder) -> list[str]:
 
 
 def install_png_hash(rec: Recorder) -> None:
-    """Time the PNG bytes' SHA-256, computed on its own thread beside the decode (``el.imageio.read_image_hashed``)."""
-    imageio = importlib.import_module("el.imageio")
+    """Time the PNG bytes' SHA-256, computed on its own thread beside the decode
+    (``el.base.imageio.read_image_hashed``)."""
+    imageio = importlib.import_module("el.base.imageio")
 
     class Hashlib:
         sha256 = staticmethod(rec.wrap(hashlib.sha256, PNG_HASH, own_thread=True))

@@ -14,7 +14,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))  # tests/helpers.py for
 # Imported once here: the run verification in pytest_configure needs them, and pytester's in-process
 # sessions would otherwise import pandas inside a session and drop it afterwards (two copies of its types).
 import assurance.campaign.integrity  # noqa: E402, F401
-from el.labels import UAVID
+from el.classes.labels import UAVID
 
 _THREAD_COUNTS: list[tuple[int, int]] = []  # torch's and OpenCV's thread counts when the session started
 
@@ -89,8 +89,8 @@ def tiny_campaign(tmp_path_factory):
     from assurance.dataio.uavid import write_sample
     from assurance.fitting.network.weights_io import save_weights
     from assurance.perturbations import PAPER_PERTURBATIONS
-    from el.config import CoreConfig
-    from el.labels import ids_to_colors
+    from el.classes.labels import ids_to_colors
+    from el.geometry.config import CoreConfig
     from el.segmentation.architectures import build_model
     from el.segmentation.model import ArchConfig
 
@@ -145,7 +145,7 @@ def tiny_run_without(tiny_campaign, tmp_path_factory):
 def monitor_runs(tiny_campaign, tmp_path_factory):
     """Two small runs whose monitor rejects every candidate on grass: 'good' (the real decision loop)
     and 'broken' (a pipeline variant that ignores the monitor and lands on rank 0 regardless)."""
-    import el.kernel as kernel
+    import el.flight.kernel as kernel
     from assurance.campaign import task as campaign
     from assurance.campaign.run import CampaignConfig, run_campaign
 
@@ -154,7 +154,7 @@ def monitor_runs(tiny_campaign, tmp_path_factory):
                             core=tiny_campaign["config"].core, weights=tiny_campaign["config"].weights)
     seg = GrassIsRoadOracle(TINY_WW)
     run_campaign(tiny_campaign["data"], root / "good", config, progress=False, segmenter=seg)
-    from el.walk import WalkOutcome
+    from el.monitors.walk import WalkOutcome
 
     real_walk = campaign.walk_candidates
 

@@ -9,10 +9,10 @@ from typing import Any
 
 import numpy as np
 
-from el.decision import Disc
-from el.discs import disc_window_mask
-from el.forbidden import forbidden_pixels, top_scores
-from el.labels import LabelSet
+from el.base.decision import Disc
+from el.classes.labels import LabelSet
+from el.geometry.discs import disc_window_mask
+from el.landing.forbidden import forbidden_pixels, top_scores
 from el.monitors.learned import CONTEXT_SCALES, frame_window
 from el.monitors.lhd import take_disc
 from el.monitors.patches import Patch

@@ -8,9 +8,9 @@ from pathlib import Path
 
 import numpy as np
 
-from el.camera import working_size
-from el.core import probs_from_labels
-from el.labels import NUM_CLASSES, PALETTE, UAVID, ids_to_colors
+from el.classes.labels import NUM_CLASSES, PALETTE, UAVID, ids_to_colors
+from el.geometry.camera import working_size
+from el.landing.core import probs_from_labels
 from el.segmentation.model import ArchConfig
 
 TINY_ARCH = ArchConfig(widths=(8, 8, 16), ms_channels=8, decoder_channels=8)

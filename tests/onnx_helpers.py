@@ -11,7 +11,7 @@ import onnx
 import torch
 from torch import nn
 
-from el.labels import PALETTE
+from el.classes.labels import PALETTE
 
 SHARPNESS = 40.0
 
@@ -90,7 +90,7 @@ def export_raw(module: nn.Module, path, *, nhwc: bool = False, static: tuple[int
 
 def noisy_colours(ids: np.ndarray, seed: int = 0) -> np.ndarray:
     """A label-coloured frame with a little noise (uint8)."""
-    from el.labels import ids_to_colors
+    from el.classes.labels import ids_to_colors
 
     rng = np.random.default_rng(seed)
     img = ids_to_colors(ids).astype(np.int16) + rng.integers(-12, 12, (*ids.shape, 3))

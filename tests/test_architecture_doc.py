@@ -141,9 +141,9 @@ def test_links_and_anchors_resolve(doc: str) -> None:
 def test_the_checks_catch_a_wrong_name(doc: str) -> None:
     """Each check fails on a renamed path, module, attribute, sub-command or image."""
     assert missing_paths("see `el/no_such_module.py` and `el/monitors/`") == ["el/no_such_module.py"]
-    assert missing_paths("`el/walk.py/`") == ["el/walk.py/"]  # a file named as a folder
-    assert unresolved_names("`el.walk.walk_candidates` and `el.walk.no_such_function`")[0].startswith(
-        "el.walk.no_such_function: AttributeError")
+    assert missing_paths("`el/monitors/walk.py/`") == ["el/monitors/walk.py/"]  # a file named as a folder
+    assert unresolved_names("`el.monitors.walk.walk_candidates` and `el.monitors.walk.no_such_function`")[0].startswith(
+        "el.monitors.walk.no_such_function: AttributeError")
     assert unresolved_names("`el.no_such_module.thing`")[0].startswith("el.no_such_module.thing: AttributeError")
     assert unresolved_names("`assurance.cli.COMMANDS`") == []
     assert named_commands("`uav-el land` and `uav-el lnad`") - set(COMMANDS) == {"lnad"}

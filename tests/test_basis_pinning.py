@@ -21,8 +21,8 @@ from helpers import OracleSegmenter
 
 from assurance.campaign import label_pin
 from assurance.requirements.basis import deviations, label_deviations, value_matches
-from el.class_names import class_key, pinned_category, skeleton
-from el.labels import UAVID, LabelSet, load_label_set
+from el.classes.class_names import class_key, pinned_category, skeleton
+from el.classes.labels import UAVID, LabelSet, load_label_set
 
 MUST = ("road", "vehicle", "building", "water")
 
@@ -176,7 +176,7 @@ def pinned_run(tmp_path_factory):
     from assurance.dataio.uavid import write_sample
     from assurance.system import build as system_build
     from assurance.system import load_system
-    from el.labels import ids_to_colors
+    from el.classes.labels import ids_to_colors
 
     root = tmp_path_factory.mktemp("pinned")
     for i in range(2):

@@ -11,22 +11,22 @@ import numpy as np
 import pytest
 from helpers import TINY_ARCH, OracleSegmenter, scene_ids, scene_image
 
-from el.config import CoreConfig
-from el.decision import Candidate
-from el.errors import DataError
-from el.hashing import sha256_file
-from el.imageio import read_image, read_image_hashed
-from el.labels import UAVID
+from el.base.decision import Candidate
+from el.base.errors import DataError
+from el.base.hashing import sha256_file
+from el.base.imageio import read_image, read_image_hashed
+from el.classes.labels import UAVID
+from el.flight.pipeline import DEPLOYED_MONITOR, EmergencyLanding, PipelineConfig
+from el.geometry.config import CoreConfig
 from el.monitors import CandidateContext, build_monitor
 from el.monitors.learned import LearnedMonitor, load_learned_model
 from el.monitors.lhd import LHDMonitor
 from el.monitors.patch_judge import batch_judge
-from el.pipeline import DEPLOYED_MONITOR, EmergencyLanding, PipelineConfig
+from el.monitors.walk import SCORE
 from el.segmentation.architectures import build_model
 from el.segmentation.batching import group_by_padded_size, pad_edge, padded_size, padding_multiple
 from el.segmentation.inference import Segmenter
 from el.segmentation.patch_pool import PatchPool
-from el.walk import SCORE
 
 WW = 64
 NET = load_learned_model(labels=UAVID).network_sha256  # the network the shipped learned model was fitted on
@@ -44,7 +44,7 @@ def segmenters(tmp_path_factory):
     import torch
 
     from assurance.fitting.network.onnx_export import export_onnx
-    from el.hashing import sha256_file
+    from el.base.hashing import sha256_file
     from el.segmentation.onnx_engine import OnnxEngine
 
     torch.manual_seed(0)

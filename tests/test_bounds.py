@@ -23,16 +23,16 @@ from assurance.dataio.uavid import image_size, write_image
 from assurance.evidence.waivers import load_waivers
 from assurance.fault_injection.bounds import YAML_BOMB, _png
 from assurance.workers import bounded_jobs, usable_cores
-from el import deadline as dl
-from el import safeyaml
-from el.config import SEED_LIMIT, CoreConfig, check_seed
-from el.core import run_core
-from el.errors import BudgetExceeded, DataError
-from el.imageheader import read_header
-from el.imageio import MAX_PIXELS, read_image, read_image_meta
-from el.labels import UAVID
+from el.base import deadline as dl
+from el.base import safeyaml
+from el.base.errors import BudgetExceeded, DataError
+from el.base.imageheader import read_header
+from el.base.imageio import MAX_PIXELS, read_image, read_image_meta
+from el.classes.labels import UAVID
+from el.flight.pipeline import EmergencyLanding, PipelineConfig
+from el.geometry.config import SEED_LIMIT, CoreConfig, check_seed
+from el.landing.core import run_core
 from el.monitors import build_monitor
-from el.pipeline import EmergencyLanding, PipelineConfig
 
 WW = 128
 
@@ -158,7 +158,7 @@ def test_thresholds_inside_the_range_and_the_paper_grid_are_unchanged():
 # -- the decision's deadline -----------------------------------------------------------------------
 def test_checkpoints_inside_the_core_model_stop_an_expired_decision():
     ids = scene_ids()
-    from el.core import probs_from_labels
+    from el.landing.core import probs_from_labels
 
     probs = probs_from_labels(ids, (WW, WW * 144 // 256), labels=UAVID)
     clock = FakeClock()
@@ -224,7 +224,7 @@ def test_fault_classification():
 @pytest.fixture(scope="module")
 def small_run(tmp_path_factory):
     from assurance.dataio.uavid import write_sample
-    from el.labels import ids_to_colors
+    from el.classes.labels import ids_to_colors
 
     root = tmp_path_factory.mktemp("bounds_run")
     for i, frame in enumerate(("a b", "a_b", "000002")):
@@ -312,7 +312,7 @@ def test_a_campaign_records_the_exif_orientation_it_applied(tmp_path):
     from PIL import Image
 
     from assurance.dataio.uavid import write_labels
-    from el.labels import ids_to_colors
+    from el.classes.labels import ids_to_colors
 
     ids = scene_ids()
     seq = tmp_path / "data" / "seq00"

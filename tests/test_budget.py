@@ -8,10 +8,10 @@ import pytest
 import torch
 from helpers import TINY_ARCH, FakeClock, OracleSegmenter, scene_ids, scene_image
 
-from el.config import CoreConfig
-from el.labels import UAVID
+from el.classes.labels import UAVID
+from el.flight.pipeline import EmergencyLanding, PipelineConfig
+from el.geometry.config import CoreConfig
 from el.monitors.mc_chunks import MC_CHUNK, mc_samples
-from el.pipeline import EmergencyLanding, PipelineConfig
 from el.segmentation import Segmenter
 from el.segmentation.architectures import build_model
 

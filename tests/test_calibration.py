@@ -14,7 +14,7 @@ from scipy import stats
 
 from assurance.dataio.uavid import write_sample
 from assurance.fitting.calibration import CalibrationError, calibrate_threshold, min_unsafe_needed
-from el.labels import CLASS_IDS, UAVID, ids_to_colors
+from el.classes.labels import CLASS_IDS, UAVID, ids_to_colors
 
 DISTS = {
     "normal": (lambda rng, size: rng.normal(0.3, 0.2, size), lambda t: stats.norm.cdf(t, 0.3, 0.2)),
@@ -112,7 +112,7 @@ def test_calibrate_writes_a_card_that_records_what_it_rests_on(card, capsys):
 
 def test_pipeline_and_land_use_the_card_and_refuse_an_altered_one(card, val, tmp_path, capsys):
     from assurance import cli
-    from el.pipeline import EmergencyLanding, PipelineConfig
+    from el.flight.pipeline import EmergencyLanding, PipelineConfig
 
     doc = json.loads(card.read_text())
     t = doc["body"]["threshold"]
@@ -139,7 +139,7 @@ def test_campaign_with_the_card_and_the_el_r16_check(card, val, tmp_path):
     from assurance.campaign import readouts
     from assurance.campaign.run import CampaignConfig, run_campaign
     from assurance.requirements.calibration_check import check_calibrated_miss_rate
-    from el.config import CoreConfig
+    from el.geometry.config import CoreConfig
     from el.monitors.calibration import load_calibration
 
     c = load_calibration(card)

@@ -5,7 +5,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from el.camera import CameraGeometry, Intrinsics, Pose, SafetyParams, required_beta, working_size
+from el.geometry.camera import CameraGeometry, Intrinsics, Pose, SafetyParams, required_beta, working_size
 
 REFERENCE = [  # row, dep (deg), across, along, delta, R_px
     (0, 22.2, 0.1789, 0.4372, 0.1789, 19.0),

@@ -12,7 +12,8 @@ from hypothesis import strategies as st
 from test_core_properties import assert_candidates_safe_at_full_resolution, label_maps
 
 from assurance.campaign.gt_pipeline import decide_from_labels
-from el.camera import (
+from el.classes.labels import CLASS_IDS, UAVID
+from el.geometry.camera import (
     MAX_ROLL_DEG,
     CameraGeometry,
     Intrinsics,
@@ -20,8 +21,7 @@ from el.camera import (
     check_geometry,
     geometry_problem,
 )
-from el.config import CoreConfig, make_intrinsics
-from el.labels import CLASS_IDS, UAVID
+from el.geometry.config import CoreConfig, make_intrinsics
 
 SMALL = [(256, 144, 128), (192, 108, 96)]
 LONG_REACH_M = 10_000.0

@@ -18,9 +18,9 @@ from assurance.campaign.stages import stage_table, wall_seconds
 from assurance.cli import main
 from assurance.dataio.uavid import read_image, write_sample
 from assurance.fitting.network.weights_io import save_weights, write_card
-from el.config import CoreConfig
-from el.labels import UAVID, ids_to_colors
-from el.pipeline import EmergencyLanding, PipelineConfig
+from el.classes.labels import UAVID, ids_to_colors
+from el.flight.pipeline import EmergencyLanding, PipelineConfig
+from el.geometry.config import CoreConfig
 from el.segmentation.architectures import build_model
 from el.segmentation.model import ArchConfig
 from el.segmentation.weights import read_card

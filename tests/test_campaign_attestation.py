@@ -134,7 +134,7 @@ def test_signing_hashes_each_file_once_and_covers_the_files_as_they_are(signed, 
     from assurance.attest.statement import subjects
     from assurance.campaign import readouts
     from assurance.campaign.integrity import verify_run
-    from el import hashing
+    from el.base import hashing
 
     run, key, _ = signed
     assert attestation.run_subjects(run, verify_run(run).sums) == attestation.run_subjects(run)

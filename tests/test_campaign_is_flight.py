@@ -1,5 +1,5 @@
 """What a campaign assesses is what flies: one campaign task and ``EmergencyLanding.decide`` run the same kernel
-(``el.kernel``), so on the same frames (the frame gate firing on some, frames outside the declared domain, a
+(``el.flight.kernel``), so on the same frames (the frame gate firing on some, frames outside the declared domain, a
 timeout) the campaign's decision of each configuration is flight's: the same action, selected candidate and
 reason."""
 
@@ -15,11 +15,11 @@ from assurance.campaign.run import CampaignConfig, plan, run_task, task_seed
 from assurance.campaign.task import frame_identity
 from assurance.dataio.uavid import read_image
 from assurance.perturbations import perturb
-from el.config import CoreConfig
-from el.labels import UAVID
+from el.classes.labels import UAVID
+from el.flight.pipeline import EmergencyLanding, PipelineConfig
+from el.geometry.config import CoreConfig
+from el.geometry.odd import OperatingDomain
 from el.monitors.frame_gate import frame_gate_document, load_frame_gate
-from el.odd import OperatingDomain
-from el.pipeline import EmergencyLanding, PipelineConfig
 
 W, H, WW = 128, 72, 64
 SHA = "7e" * 32
@@ -167,7 +167,8 @@ def test_monitor_coverage_holds_where_the_gate_and_the_domain_refuse_frames(worl
 
 
 def test_one_place_builds_the_kernel_s_parts():
-    """Flight, the campaign task and the ground truth get their ``Parts`` from ``el.kernel.build_parts`` (the label
+    """Flight, the campaign task and the ground truth get their ``Parts`` from ``el.flight.kernel.build_parts`` (the
+    label
     set from the network, the gate bound to it): no other module constructs them."""
     import re
     from pathlib import Path
@@ -175,6 +176,6 @@ def test_one_place_builds_the_kernel_s_parts():
     root = Path(__file__).resolve().parents[1]
     makers = {str(p.relative_to(root)) for folder in ("el", "assurance") for p in (root / folder).rglob("*.py")
               if re.search(r"(?<![\w.])Parts\(", p.read_text("utf-8"))}
-    assert makers == {"el/kernel.py"}, makers
-    users = {"el/pipeline.py", "assurance/campaign/task.py", "assurance/campaign/gt_pipeline.py"}
+    assert makers == {"el/flight/kernel.py"}, makers
+    users = {"el/flight/pipeline.py", "assurance/campaign/task.py", "assurance/campaign/gt_pipeline.py"}
     assert all("build_parts(" in (root / u).read_text("utf-8") for u in users)

@@ -9,14 +9,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from el import candidates as cand
-from el import ranking
-from el import regions as reg
-from el import representatives as reps
-from el.camera import CameraGeometry, Pose, SafetyParams
-from el.config import CoreConfig
-from el.core import check_probs, default_area, probs_from_labels, run_core
-from el.labels import CLASS_IDS, NUM_CLASSES, UAVID
+from el.classes.labels import CLASS_IDS, NUM_CLASSES, UAVID
+from el.geometry.camera import CameraGeometry, Pose, SafetyParams
+from el.geometry.config import CoreConfig
+from el.landing import candidates as cand
+from el.landing import ranking
+from el.landing import regions as reg
+from el.landing import representatives as reps
+from el.landing.core import check_probs, default_area, probs_from_labels, run_core
 
 ROAD = CLASS_IDS["road"]
 BUILDING = CLASS_IDS["building"]

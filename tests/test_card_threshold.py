@@ -9,12 +9,12 @@ import json
 import pytest
 from helpers import OracleSegmenter, scene_ids, scene_image
 
-import el.pipeline
+import el.flight.pipeline
 from assurance.cli import main
-from el.config import CoreConfig
-from el.errors import CalibrationError
+from el.base.errors import CalibrationError
+from el.flight.pipeline import DEPLOYED_CALIBRATION, DEPLOYED_MONITOR, EmergencyLanding, PipelineConfig
+from el.geometry.config import CoreConfig
 from el.monitors.calibration import card_document, check_card_spec, load_calibration
-from el.pipeline import DEPLOYED_CALIBRATION, DEPLOYED_MONITOR, EmergencyLanding, PipelineConfig
 from el.segmentation.weights import DEFAULT_WEIGHTS, read_card
 
 WW = 128
@@ -63,7 +63,7 @@ def test_in_flight_a_spec_off_its_card_s_threshold_is_the_default_action(tmp_pat
     assert d.action == "default" and d.reason.startswith("fault: monitor: CalibrationError")
     assert "has threshold 0.5" in d.reason and repr(SHIPPED_T) in d.reason
     # the deployed spec with its card swapped for one re-hashed at another threshold
-    monkeypatch.setattr(el.pipeline, "DEPLOYED_CALIBRATION", _resealed_card(tmp_path / "card.json", 0.9))
+    monkeypatch.setattr(el.flight.pipeline, "DEPLOYED_CALIBRATION", _resealed_card(tmp_path / "card.json", 0.9))
     d = _decide()
     assert d.action == "default" and d.reason.startswith("fault: monitor: CalibrationError")
     assert f"has threshold {SHIPPED_T!r}" in d.reason and "card has threshold 0.9" in d.reason
@@ -82,7 +82,7 @@ def test_the_command_line_refuses_a_deployed_spec_off_its_card_s_threshold(tmp_p
     system = _system(tmp_path, DEPLOYED_MONITOR, card)
     image = tmp_path / "frame.png"
     from assurance.dataio.uavid import write_image
-    from el.labels import ids_to_colors
+    from el.classes.labels import ids_to_colors
 
     write_image(image, ids_to_colors(scene_ids()))
     for argv in (["land", str(image), "--system", system],

@@ -7,7 +7,7 @@ import pytest
 from assurance.requirements.basis import deviations, label_deviations
 from assurance.requirements.registry import load_registry
 from assurance.requirements.system_facts import facts_of, shipped_facts
-from el.labels import UAVID, LabelSet, load_label_set
+from el.classes.labels import UAVID, LabelSet, load_label_set
 
 
 def _road_safe() -> LabelSet:

@@ -37,7 +37,7 @@ def walkthrough(tmp_path_factory):
 
 
 def test_the_campaign_assessed_the_users_network_poses_and_palette(walkthrough):
-    from el.hashing import sha256_file
+    from el.base.hashing import sha256_file
 
     man = json.loads((walkthrough["run"] / "manifest.json").read_text())
     assert man["weights"]["sha256"] == sha256_file(walkthrough["onnx"])
@@ -52,7 +52,7 @@ def test_the_campaign_assessed_the_users_network_poses_and_palette(walkthrough):
 
 
 def test_the_evidence_pdf_names_the_network_and_the_system_file(walkthrough, tmp_path):
-    from el.hashing import sha256_file
+    from el.base.hashing import sha256_file
 
     out = tmp_path / "report"
     code = cli.main(["evidence", "--system", str(walkthrough["system"]), "--run", str(walkthrough["run"]),
@@ -77,7 +77,7 @@ def test_the_evidence_pdf_names_the_network_and_the_system_file(walkthrough, tmp
 
 
 def test_evidence_uses_the_runs_system_file_and_refuses_another(walkthrough, tmp_path, capsys):
-    from el.hashing import sha256_file
+    from el.base.hashing import sha256_file
 
     out = tmp_path / "own"
     cli.main(["evidence", "--run", str(walkthrough["run"]), "--out", str(out), "--no-pdf", "--boot", "20"])
@@ -93,7 +93,7 @@ def test_evidence_uses_the_runs_system_file_and_refuses_another(walkthrough, tmp
 
 
 def test_verify_judges_the_run_with_its_system_file_and_refuses_another(walkthrough, tmp_path, capsys):
-    from el.hashing import sha256_file
+    from el.base.hashing import sha256_file
 
     out = tmp_path / "verify"
     cli.main(["verify", str(walkthrough["run"]), "--out", str(out), "--system", str(walkthrough["system"]),

@@ -9,7 +9,7 @@ import pytest
 import torch
 from helpers import TINY_ARCH, OracleSegmenter, scene_ids
 
-from el.labels import UAVID, LabelSet, ids_to_colors
+from el.classes.labels import UAVID, LabelSet, ids_to_colors
 from el.monitors.patches import accepts_keyword
 from el.segmentation.architectures import build_model
 from el.segmentation.class_map import MappedModel, check_class_map, map_probabilities

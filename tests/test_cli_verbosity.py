@@ -33,10 +33,10 @@ def test_a_logged_fault_is_one_line_unless_verbose():
     try:
         raise RuntimeError("boom")
     except RuntimeError:
-        record = logging.LogRecord("el.pipeline", logging.ERROR, __file__, 1, "fault in stage %s", ("x",),
+        record = logging.LogRecord("el.flight.pipeline", logging.ERROR, __file__, 1, "fault in stage %s", ("x",),
                                    sys.exc_info())
     brief = cli._OneLine(tracebacks=False).format(record)
-    assert brief == "ERROR el.pipeline: fault in stage x"
+    assert brief == "ERROR el.flight.pipeline: fault in stage x"
     assert "Traceback" in cli._OneLine(tracebacks=True).format(record)
 
 

@@ -17,13 +17,13 @@ from hypothesis import strategies as st
 from scipy.spatial import cKDTree
 
 from assurance.campaign.gt_pipeline import decide_from_labels, decision_schema
-from el import candidates as cand
-from el import regions as reg
-from el.camera import CameraGeometry, working_size
-from el.config import CoreConfig
-from el.core import probs_from_labels, reachable_working_row, run_core
-from el.decision import Candidate, Decision, Disc, MonitorVerdict
-from el.labels import CLASS_IDS, UAVID, forbidden_mask
+from el.base.decision import Candidate, Decision, Disc, MonitorVerdict
+from el.classes.labels import CLASS_IDS, UAVID, forbidden_mask
+from el.geometry.camera import CameraGeometry, working_size
+from el.geometry.config import CoreConfig
+from el.landing import candidates as cand
+from el.landing import regions as reg
+from el.landing.core import probs_from_labels, reachable_working_row, run_core
 
 SETTINGS = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 # (full width, full height, working width): scale 2, scale 2, and a non-integer scale
@@ -291,9 +291,9 @@ def test_a_fault_inside_the_cm_gives_the_default_action_with_its_reason(monkeypa
     def broken(*args, **kwargs):
         raise RuntimeError("injected")
 
-    import el.kernel
+    import el.flight.kernel
 
-    monkeypatch.setattr(el.kernel, "run_core", broken)
+    monkeypatch.setattr(el.flight.kernel, "run_core", broken)
     ids = np.full((144, 256), CLASS_IDS["low_vegetation"], dtype=np.uint8)
     decision = gt.decide_from_labels(ids, config=CoreConfig(working_width=128), labels=UAVID)
     assert decision.action == "default" and decision.reason == "fault: candidates: RuntimeError: injected"

@@ -15,8 +15,8 @@ from scipy import ndimage, stats
 from threadpoolctl import threadpool_limits
 
 from assurance.analysis.metrics import bootstrap_ci, clopper_pearson_interval, clopper_pearson_upper
-from el.candidates import DIST_CAP, _exact_edt
-from el.representatives import _kmeans_pp, kmeans
+from el.landing.candidates import DIST_CAP, _exact_edt
+from el.landing.representatives import _kmeans_pp, kmeans
 
 # (k, n) pairs: the edges (0 and n events), the demo and paper sample sizes, small and large n.
 BINOMIAL_CASES = [(0, 1), (1, 1), (0, 10), (3, 10), (10, 10), (0, 70), (1, 70), (14, 70), (69, 70),

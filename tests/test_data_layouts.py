@@ -24,8 +24,8 @@ from assurance.dataio.layouts import (
     write_label_file,
 )
 from assurance.dataio.uavid import write_image, write_sample
-from el.errors import DataError
-from el.labels import UAVID, load_label_set
+from el.base.errors import DataError
+from el.classes.labels import UAVID, load_label_set
 
 W, H = 32, 24
 DRONE = load_label_set("semantic_drone")  # 23 classes, unlabeled = ignore id 255

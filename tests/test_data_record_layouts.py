@@ -16,7 +16,7 @@ import pytest
 
 from assurance import cli
 from assurance.dataio.uavid import write_image
-from el.labels import UAVID, load_label_set
+from el.classes.labels import UAVID, load_label_set
 
 DRONE = load_label_set("semantic_drone")
 TO_DRONE = {"road": "paved-area", "building": "roof", "static_car": "car", "moving_car": "car", "tree": "tree",

@@ -17,11 +17,11 @@ import pytest
 import torch
 from helpers import FakeClock, OracleSegmenter, scene_ids, scene_image
 
-import el.deadline as dl
-from el.config import CoreConfig
-from el.errors import BudgetExceeded
-from el.labels import UAVID
-from el.pipeline import EmergencyLanding, PipelineConfig
+import el.base.deadline as dl
+from el.base.errors import BudgetExceeded
+from el.classes.labels import UAVID
+from el.flight.pipeline import EmergencyLanding, PipelineConfig
+from el.geometry.config import CoreConfig
 
 pytest.importorskip("onnxruntime")
 pytest.importorskip("onnx")

@@ -135,7 +135,7 @@ def test_fit_gate_frames_use_the_declared_perturbations(tmp_path):
 @pytest.fixture(scope="module")
 def tiny_data(tmp_path_factory):
     from assurance.dataio.uavid import write_sample
-    from el.labels import UAVID, ids_to_colors
+    from el.classes.labels import UAVID, ids_to_colors
 
     root = tmp_path_factory.mktemp("declared") / "data"
     for i in range(2):
@@ -201,8 +201,8 @@ def test_calibration_scores_the_declared_perturbations_too(tiny_data):
     from helpers import nearest_class
 
     from assurance.fitting.calibration import calibrate_on_data
-    from el.config import CoreConfig
-    from el.labels import ids_to_colors
+    from el.classes.labels import ids_to_colors
+    from el.geometry.config import CoreConfig
 
     class RoadBlindFrame(OracleSegmenter):
         """Frames: road seen as low vegetation (candidates land on the road); patches: perfect."""

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 from assurance.requirements import card_path, load_registry
-from el.hashing import sha256_file
-from el.labels import UAVID
+from el.base.hashing import sha256_file
+from el.base.records import read_signed
+from el.classes.labels import UAVID
+from el.flight.pipeline import DEPLOYED_CALIBRATION, DEPLOYED_MONITOR, PipelineConfig
 from el.monitors import build_monitor, parse_monitor_spec
 from el.monitors.calibration import load_calibration
 from el.monitors.learned import DEFAULT_MODEL
-from el.pipeline import DEPLOYED_CALIBRATION, DEPLOYED_MONITOR, PipelineConfig
-from el.records import read_signed
 from el.segmentation.weights import DEFAULT_WEIGHTS
 
 

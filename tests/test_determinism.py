@@ -13,7 +13,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from el import ranking
+from el.landing import ranking
 
 GAP = 2.0**-20  # hazards of distinct candidates: no two of 953 test candidates lay closer than 1e-7
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from assurance.campaign.truth import disc_pixels
-from el.decision import Disc
-from el.discs import disc_bounds, disc_window_mask
+from el.base.decision import Disc
+from el.geometry.discs import disc_bounds, disc_window_mask
 from el.monitors.patches import extract_patch
 
 

@@ -8,9 +8,9 @@ import numpy as np
 from helpers import OracleSegmenter, scene_ids, scene_image
 
 from assurance.campaign.gt_pipeline import decide_from_labels
-from el.config import CoreConfig
-from el.labels import UAVID
-from el.pipeline import EmergencyLanding, PipelineConfig
+from el.classes.labels import UAVID
+from el.flight.pipeline import EmergencyLanding, PipelineConfig
+from el.geometry.config import CoreConfig
 
 WW = 128
 
@@ -27,33 +27,33 @@ def _records(caplog, name: str) -> list[logging.LogRecord]:
 def test_segmentation_fault_is_logged_with_traceback(caplog) -> None:
     system = EmergencyLanding(PipelineConfig(core=CoreConfig(working_width=WW), monitor="lhd"),
                               segmenter=_Exploding(WW))
-    with caplog.at_level(logging.ERROR, logger="el.kernel"):
+    with caplog.at_level(logging.ERROR, logger="el.flight.kernel"):
         d = system.decide(scene_image(scene_ids()))
     assert d.action == "default"
     assert d.reason == "fault: segmentation: RuntimeError: GPU fell off"  # the reason itself is unchanged
-    (rec,) = _records(caplog, "el.kernel")  # the one decision kernel logs every fault
+    (rec,) = _records(caplog, "el.flight.kernel")  # the one decision kernel logs every fault
     assert "segmentation" in rec.getMessage()
     assert rec.exc_info is not None and rec.exc_info[0] is RuntimeError  # the traceback is kept
 
 
 def test_missing_weights_are_logged_once_at_construction(tmp_path, caplog) -> None:
-    with caplog.at_level(logging.ERROR, logger="el.pipeline"):
+    with caplog.at_level(logging.ERROR, logger="el.flight.pipeline"):
         system = EmergencyLanding(PipelineConfig(core=CoreConfig(working_width=WW)), weights=tmp_path / "none.pt")
-    assert len(_records(caplog, "el.pipeline")) == 1
+    assert len(_records(caplog, "el.flight.pipeline")) == 1
     assert system.decide(scene_image(scene_ids())).reason.startswith("fault: model")
 
 
 def test_ground_truth_pipeline_fault_is_logged(caplog, monkeypatch) -> None:
-    import el.kernel
+    import el.flight.kernel
 
     def broken_core(*args, **kwargs):
         raise ValueError("no candidates today")
 
-    monkeypatch.setattr(el.kernel, "run_core", broken_core)
-    with caplog.at_level(logging.ERROR, logger="el.kernel"):
+    monkeypatch.setattr(el.flight.kernel, "run_core", broken_core)
+    with caplog.at_level(logging.ERROR, logger="el.flight.kernel"):
         d = decide_from_labels(scene_ids(), config=CoreConfig(working_width=WW), labels=UAVID)
     assert d.action == "default" and d.reason == "fault: candidates: ValueError: no candidates today"
-    (rec,) = _records(caplog, "el.kernel")  # the ground-truth pipeline is the flight kernel
+    (rec,) = _records(caplog, "el.flight.kernel")  # the ground-truth pipeline is the flight kernel
     assert rec.exc_info is not None and rec.exc_info[0] is ValueError
 
 

@@ -9,10 +9,10 @@ import feature_reference as ref
 import numpy as np
 import pytest
 
-from el.decision import Candidate, Disc
-from el.discs import disc_window_mask, window_sq_distances
-from el.forbidden import forbidden_pixels
-from el.labels import UAVID
+from el.base.decision import Candidate, Disc
+from el.classes.labels import UAVID
+from el.geometry.discs import disc_window_mask, window_sq_distances
+from el.landing.forbidden import forbidden_pixels
 from el.monitors import learned
 from el.monitors.base import CandidateContext
 from el.monitors.lhd import take_disc

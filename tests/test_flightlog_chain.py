@@ -1,4 +1,5 @@
-"""The flight log as a hash chain (``el.flightlog``) and what ``assurance.inservice.reader`` checks before it counts a
+"""The flight log as a hash chain (``el.flight.flightlog``) and what ``assurance.inservice.reader`` checks before it
+counts a
 record (issue 57): the chain and the sequence numbers, duplicates counted once, a refusal taken from the gate's own
 fields, a reason that disagrees with them and a negative time refused. No campaign: records of hand-made decisions.
 """
@@ -15,9 +16,9 @@ from assurance.inservice import spi
 from assurance.inservice.checks import LogRefusedError
 from assurance.inservice.compare import rate
 from assurance.inservice.reader import read_logs
-from el import flightlog
-from el.decision import Candidate, Decision, Disc, MonitorVerdict
-from el.flightlog import FlightLog, log_tail
+from el.base.decision import Candidate, Decision, Disc, MonitorVerdict
+from el.flight import flightlog
+from el.flight.flightlog import FlightLog, log_tail
 
 SHA = "7e" * 32
 GATE = {"kind": "mahalanobis", "score": 0.5, "threshold": 1.0, "sha256": "ab" * 32}

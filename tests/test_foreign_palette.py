@@ -14,9 +14,9 @@ from assurance.campaign.run import CampaignConfig, run_campaign
 from assurance.dataio.uavid import iter_samples, read_labels, write_sample
 from assurance.fitting.network.weights_io import save_weights
 from assurance.scenes.recolour import class_lut, recolour_dataset
-from el.config import CoreConfig
-from el.errors import DataError, LabelColourError
-from el.labels import UAVID, ids_to_colors, load_label_set
+from el.base.errors import DataError, LabelColourError
+from el.classes.labels import UAVID, ids_to_colors, load_label_set
+from el.geometry.config import CoreConfig
 from el.segmentation.architectures import build_model
 from el.segmentation.class_map import MappedModel
 from el.segmentation.factory import load_model
@@ -161,7 +161,7 @@ def test_campaign_readouts_equal_the_originals_with_the_network(tmp_path, render
     assert (a["images"]["fault"] == "").all() and len(a["candidates"]) > 0
     assert np.isfinite(a["candidates"]["clearance_m"]).any()
     # Bit for bit but sums over classes, which another id order rounds differently: the semantic hazard
-    # (el.ranking.semantic_hazard sums the weighted class planes in id order, float32; measured up to 3.7e-9)
+    # (el.landing.ranking.semantic_hazard sums the weighted class planes in id order, float32; measured up to 3.7e-9)
     # and the entropy score (measured 2.2e-16). Decisions, ranks, positions, truth, clearance, acceptances and
     # every other monitor score are identical.
     differ = _assert_same_readouts(a, b, float_rtol=1e-6)

@@ -31,7 +31,7 @@ def export_network(path: Path, data: Path) -> None:
     import torch
     from PIL import Image
 
-    from el.labels import load_label_set
+    from el.classes.labels import load_label_set
 
     drone = load_label_set("semantic_drone")
     lut = np.zeros(256, dtype=np.int64)  # system class id -> network class (unmapped ones: ground)
@@ -61,7 +61,7 @@ def export_network(path: Path, data: Path) -> None:
 
 
 def system_text(gate: str | None = None) -> str:
-    from el.labels import load_label_set
+    from el.classes.labels import load_label_set
 
     drone = load_label_set("semantic_drone")
     unreachable = [n for n in drone.names if n not in CLASS_MAP.values()]
@@ -140,7 +140,7 @@ def test_monitor_tools_campaign_and_report_are_about_this_system(foreign, tmp_pa
     report = tmp_path / "report"
     main(["verify", str(run), "--out", str(report), "--system", str(system), "-k", "not rerun"])
     main(["evidence", "--system", str(system), "--run", str(run), "--out", str(report), "--no-pdf", "--boot", "50"])
-    from el.hashing import sha256_file
+    from el.base.hashing import sha256_file
 
     html = (report / "evidence.html").read_text()
     assert sha256_file(root / "net.onnx") in html

@@ -8,7 +8,7 @@ import pytest
 
 from assurance.campaign import frame_cache
 from assurance.dataio.uavid import write_image
-from el.imageio import read_image
+from el.base.imageio import read_image
 
 
 def test_a_kept_frame_is_read_only_and_a_replaced_file_is_read_again(tmp_path):

@@ -15,10 +15,10 @@ from helpers import TINY_ARCH, bench_system, scene_ids, write_textured_scenes
 
 from assurance.dataio.uavid import read_image, write_sample
 from assurance.perturbations import perturb
-from el.config import CoreConfig
-from el.decision import decision_schema
-from el.labels import UAVID
-from el.pipeline import EmergencyLanding, PipelineConfig
+from el.base.decision import decision_schema
+from el.classes.labels import UAVID
+from el.flight.pipeline import EmergencyLanding, PipelineConfig
+from el.geometry.config import CoreConfig
 
 W, H, WW = 128, 72, 64
 SHA = "7e" * 32
@@ -248,12 +248,12 @@ def test_campaign_readouts_record_the_gate_and_refuse_as_the_flight_code(setup, 
 def test_which_gate_a_command_deploys(tmp_path, monkeypatch):
     import argparse
 
-    import el.pipeline
+    import el.flight.pipeline
     from assurance.cli.system_options import assessed
     from assurance.system.find import load_system
 
     shipped = tmp_path / "shipped.json"
-    monkeypatch.setattr(el.pipeline, "DEPLOYED_GATE", shipped)
+    monkeypatch.setattr(el.flight.pipeline, "DEPLOYED_GATE", shipped)
 
     def args(**kw):
         return argparse.Namespace(**{"gate": None, "weights": None, "system_file": None, **kw})
@@ -267,16 +267,17 @@ def test_which_gate_a_command_deploys(tmp_path, monkeypatch):
     toml = tmp_path / "uav-el.toml"
     toml.write_text('format = "uav-el-system/1"\n[monitor]\ngate = "none"\n')
     assert frame_gate_path(args(system_file=load_system(toml))) is None
-    monkeypatch.setattr(el.pipeline, "DEPLOYED_GATE", None)
+    monkeypatch.setattr(el.flight.pipeline, "DEPLOYED_GATE", None)
     assert frame_gate_path(args()) is None
 
 
 def test_the_shipped_gate_is_bound_to_the_shipped_network_and_deployed():
-    import el.pipeline
+    import el.flight.pipeline
     from el.monitors.frame_gate import load_frame_gate
 
-    shipped = Path(el.pipeline.__file__).parent / "monitors" / "data" / "frame_gate.json"
-    assert el.pipeline.DEPLOYED_GATE == shipped.resolve()  # fitted on 3840x2160 frames, the camera's (docs/results.md)
+    shipped = Path(el.flight.pipeline.__file__).parent / "monitors" / "data" / "frame_gate.json"
+    # fitted on 3840x2160 frames, the camera's (docs/results.md)
+    assert el.flight.pipeline.DEPLOYED_GATE == shipped.resolve()
     gate = load_frame_gate(shipped)
     card = json.loads((shipped.parents[2] / "segmentation" / "weights" / "model.json").read_text())
     assert gate.network_sha256 == card["weights_sha256"] and gate.kind == "mahalanobis"
@@ -303,12 +304,13 @@ def test_sweep_replays_a_frame_gate_and_gate_check_scores_other_scenes(setup):
 
 
 def test_the_kernel_parts_bind_the_gate_to_their_network(setup):
-    """``el.kernel.build_parts``, the one maker of the kernel's parts (flight, campaign, ground truth), binds a gate
+    """``el.flight.kernel.build_parts``, the one maker of the kernel's parts (flight, campaign, ground truth), binds a
+    gate
     to the network: kept for the network it was fitted on, refused for another."""
     from helpers import OracleSegmenter
 
-    from el.errors import FrameGateError
-    from el.kernel import build_parts
+    from el.base.errors import FrameGateError
+    from el.flight.kernel import build_parts
     from el.monitors.frame_gate import load_frame_gate
 
     gate = load_frame_gate(setup["gate"])

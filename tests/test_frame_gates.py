@@ -9,7 +9,7 @@ import torch
 from conftest import tiny_scene
 
 from assurance.perturbations import perturb
-from el.labels import UAVID, ids_to_colors
+from el.classes.labels import UAVID, ids_to_colors
 from el.monitors.gates import GATES
 from el.segmentation.architectures import build_model
 from el.segmentation.inference import Segmenter

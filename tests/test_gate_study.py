@@ -28,7 +28,7 @@ def test_the_tap_cache_is_saved_per_set_and_a_rerun_taps_only_what_it_lacks(tmp_
 
     import torch
 
-    from el.labels import UAVID
+    from el.classes.labels import UAVID
     from el.segmentation.architectures import build_model
     from el.segmentation.inference import Segmenter
 

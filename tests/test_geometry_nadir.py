@@ -8,10 +8,10 @@ import jsonschema
 import numpy as np
 import pytest
 
-from el.camera import NUM_STRIPES, REACH_M, UNREACHABLE_STRIPES, CameraGeometry, Pose, geometry_problem
-from el.config import CoreConfig
-from el.core import default_area, reachable_working_row
-from el.decision import DEFAULT_AREA_BASES, Decision, Disc, decision_schema
+from el.base.decision import DEFAULT_AREA_BASES, Decision, Disc, decision_schema
+from el.geometry.camera import NUM_STRIPES, REACH_M, UNREACHABLE_STRIPES, CameraGeometry, Pose, geometry_problem
+from el.geometry.config import CoreConfig
+from el.landing.core import default_area, reachable_working_row
 
 W, H = 3840, 2160
 
@@ -121,7 +121,7 @@ def test_the_decision_records_the_basis_and_stays_valid_json():
 def test_the_overlay_shades_the_stripes_of_the_decisions_own_pose():
     from assurance.campaign.gt_pipeline import decide_from_labels
     from assurance.evidence.overlay import _first_reachable_row
-    from el.labels import CLASS_IDS, UAVID
+    from el.classes.labels import CLASS_IDS, UAVID
 
     ids = np.full((216, 384), CLASS_IDS["low_vegetation"], np.uint8)
     cfg = CoreConfig(working_width=192)

@@ -13,8 +13,8 @@ import pytest
 
 from assurance import cli
 from assurance.attest.key_paths import default_key_path
-from el import userfiles
-from el.hashing import sha256_file
+from el.base import userfiles
+from el.base.hashing import sha256_file
 
 
 def _link(src: Path, dst: Path) -> Path:

@@ -7,8 +7,8 @@ import pytest
 from assurance.analysis.headline import BEGIN, END, HeadlineError, current_block, headline_markdown, write_block
 from assurance.analysis.table import results_table
 from assurance.campaign.presets import preset_config, resolve_monitors
+from el.flight.pipeline import PipelineConfig
 from el.monitors import DEMO_GRID
-from el.pipeline import PipelineConfig
 
 
 def test_release_and_demo_presets_evaluate_the_deployed_configuration_first():

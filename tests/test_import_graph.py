@@ -213,20 +213,20 @@ the command line on top."""
 
 
 EL_LAYERS = (
-    ("base", ("(root)", "errors", "rgb", "imageheader", "imageio", "userfiles", "hashing", "records", "safeyaml",
-              "torch_extra", "deadline", "decision")),
-    ("labels", ("name_profile", "class_names", "label_tables", "labels")),
-    ("geometry", ("camera", "config", "odd", "discs")),
-    ("core", ("regions", "representatives", "forbidden", "ranking", "candidates", "core")),
+    ("base", ("base",)),
+    ("classes", ("classes",)),
+    ("geometry", ("geometry",)),
+    ("landing", ("landing",)),
     ("segmentation", ("segmentation",)),
-    ("monitors", ("walk", "monitors")),
-    ("flight", ("kernel", "pipeline", "flightlog")),
+    ("monitors", ("monitors",)),
+    ("flight", ("flight", "(root)")),
 )
 """The flight code's layers, bottom first, under the same rule: the base (errors, bounded file reading, hashing,
 the deadline, the decision record) below the label sets; the camera geometry, declared domain and discs above them;
 the core model (candidates, regions, ranking) above the geometry; the network seam above both; the monitors (and the
 walk that asks them) above the network whose patches they segment; the kernel, the pipeline and its flight log on
-top."""
+top, with the package's public face (``el/__init__``, which loads them on first use). Each layer is one folder of
+``el`` (docs/architecture.md section 1.1): the layout is the contract."""
 
 PACKAGE_LAYERS = {"assurance": LAYERS, "el": EL_LAYERS}
 
@@ -276,4 +276,5 @@ def test_a_layer_violation_is_reported(tmp_path: Path) -> None:
     graph = import_graph(tmp_path)
     assert "assurance.cli" in graph["assurance.dataio.io"]
     assert layer_of("assurance.dataio.io") < layer_of("assurance.cli")
-    assert layer_of("el.camera") < layer_of("el.core") < layer_of("el.monitors.lhd") < layer_of("el.pipeline")
+    assert layer_of("el.geometry.camera") < layer_of("el.landing.core") < layer_of("el.monitors.lhd") \
+        < layer_of("el.flight.pipeline")

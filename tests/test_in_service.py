@@ -1,4 +1,5 @@
-"""In-service evidence (issue 53): flight logs written by the flight function (``el.flightlog``) compared with the
+"""In-service evidence (issue 53): flight logs written by the flight function (``el.flight.flightlog``) compared with
+the
 certification run of their system (``uav-el in-service``, ``assurance.inservice``).
 
 The demonstration: a tiny network carrying a fitted frame gate, a campaign on small in-domain test scenes, then
@@ -24,11 +25,11 @@ from assurance.inservice import spi
 from assurance.inservice.reader import MAX_WINDOWS, LogSummary, Reservoir, read_logs
 from assurance.inservice.report import check_attestation
 from assurance.perturbations import perturb
-from el.camera import Pose
-from el.config import CoreConfig
-from el.decision import Candidate, Decision, Disc, MonitorVerdict
-from el.flightlog import MAX_RECORD_BYTES, FlightLog, flightlog_schema
-from el.hashing import sha256_file
+from el.base.decision import Candidate, Decision, Disc, MonitorVerdict
+from el.base.hashing import sha256_file
+from el.flight.flightlog import MAX_RECORD_BYTES, FlightLog, flightlog_schema
+from el.geometry.camera import Pose
+from el.geometry.config import CoreConfig
 
 W, H, WW = 128, 72, 64
 SHA = "7e" * 32
@@ -69,9 +70,9 @@ def world(tmp_path_factory, one_torch_thread):
     from assurance.fitting.frame_gate_fit import fit_gate
     from assurance.system import build as system_build
     from assurance.system import load_system
-    from el.labels import UAVID
+    from el.classes.labels import UAVID
+    from el.flight.pipeline import EmergencyLanding, PipelineConfig
     from el.monitors.frame_gate import load_frame_gate
-    from el.pipeline import EmergencyLanding, PipelineConfig
     from el.segmentation.architectures import build_model
     from el.segmentation.inference import Segmenter
 
@@ -178,7 +179,7 @@ def test_a_log_of_another_system_is_refused_in_one_line(world, tmp_path, capsys)
 
 def chained(lines: list[bytes], prev: str | None) -> list[bytes]:
     """Records re-chained after ``prev`` (the SHA-256 of the line before them), as a writer reopening the log after
-    a crash writes them (``el.flightlog.FlightLog`` chains to the damaged last line)."""
+    a crash writes them (``el.flight.flightlog.FlightLog`` chains to the damaged last line)."""
     out = []
     for line in lines:
         rec = json.loads(line)

@@ -1,4 +1,4 @@
-"""Label sets (el.labels.LabelSet): the UAVid default, a user's own set, and the flight code driven by one."""
+"""Label sets (el.classes.labels.LabelSet): the UAVid default, a user's own set, and the flight code driven by one."""
 
 from __future__ import annotations
 
@@ -11,16 +11,16 @@ import pytest
 import torch
 from torch import nn
 
-import el.labels as lab
+import el.classes.labels as lab
 from assurance.campaign.gt_pipeline import decide_from_labels
 from assurance.campaign.truth import disc_pixels, true_hazard
 from assurance.dataio.uavid import read_labels, write_labels
-from el.config import CoreConfig
-from el.core import probs_from_labels, run_core
-from el.decision import Disc
-from el.errors import LabelColourError, WeightsError
-from el.forbidden import forbidden_pixels
-from el.labels import UAVID, LabelClass, LabelSet, UavidClass, load_label_set
+from el.base.decision import Disc
+from el.base.errors import LabelColourError, WeightsError
+from el.classes.labels import UAVID, LabelClass, LabelSet, UavidClass, load_label_set
+from el.geometry.config import CoreConfig
+from el.landing.core import probs_from_labels, run_core
+from el.landing.forbidden import forbidden_pixels
 from el.monitors import CHMonitor, LHDMonitor, MCDMonitor, build_monitor, default_hierarchy
 from el.monitors.base import validate_samples, validate_scores
 from el.segmentation.inference import Segmenter

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from el.labels import (
+from el.classes.labels import (
     CLASSES,
     FORBIDDEN_IDS,
     HAZARD_SCORES,

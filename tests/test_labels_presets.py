@@ -8,8 +8,8 @@ import pytest
 
 from assurance.campaign.truth import true_hazard
 from assurance.dataio.uavid import read_labels, write_image, write_labels
-from el.decision import Disc
-from el.labels import PRESET_DIR, UAVID, LabelSet, label_presets, load_label_set
+from el.base.decision import Disc
+from el.classes.labels import PRESET_DIR, UAVID, LabelSet, label_presets, load_label_set
 
 SD_FORBIDDEN = {"paved-area", "water", "pool", "roof", "wall", "window", "door", "fence", "fence-pole", "person",
                 "dog", "car", "bicycle", "obstacle", "conflicting"}
@@ -141,7 +141,7 @@ def test_planning_on_labels_with_unknown_ground_keeps_clear_of_it():
     """What the ground-truth pipeline needs: ignored pixels planned on as forbidden (``planning_ids``)."""
     from assurance.campaign.gt_pipeline import decide_from_labels
     from assurance.campaign.truth import disc_pixels
-    from el.config import CoreConfig
+    from el.geometry.config import CoreConfig
 
     sd = load_label_set("semantic_drone")
     ids = np.full((144, 256), sd.ids["grass"], np.uint8)

@@ -11,8 +11,8 @@ from helpers import bench_system
 from assurance import cli
 from assurance.dataio.uavid import read_image, write_image, write_labels
 from assurance.evidence.overlay import STATUS_COLOURS, draw_decision
-from el.decision import Candidate, Decision, Disc, MonitorVerdict, decision_schema
-from el.labels import CLASS_IDS, UAVID
+from el.base.decision import Candidate, Decision, Disc, MonitorVerdict, decision_schema
+from el.classes.labels import CLASS_IDS, UAVID
 
 W, H = 256, 144
 
@@ -262,8 +262,8 @@ def test_land_builds_each_part_and_decodes_the_frame_once(main, scene, tmp_path,
     pose typed on the command line is recorded as such."""
     import collections
 
-    import el.imageio
-    import el.pipeline
+    import el.base.imageio
+    import el.flight.pipeline
     from assurance.system.system import System
 
     calls: collections.Counter = collections.Counter()
@@ -273,9 +273,9 @@ def test_land_builds_each_part_and_decodes_the_frame_once(main, scene, tmp_path,
         monkeypatch.setattr(owner, name, lambda *a, **k: calls.update([key]) or fn(*a, **k))
 
     count(System, "segmenter", "model")
-    count(el.pipeline, "build_monitor", "monitor")
-    count(el.pipeline, "load_frame_gate", "gate")
-    count(el.imageio, "_decode_frame", "decode")
+    count(el.flight.pipeline, "build_monitor", "monitor")
+    count(el.flight.pipeline, "load_frame_gate", "gate")
+    count(el.base.imageio, "_decode_frame", "decode")
     _, image = scene
     out, ov = tmp_path / "d.json", tmp_path / "ov.png"
     assert main(["land", str(image), "--json", str(out), "--overlay", str(ov), "--height", "48"]) == 0

@@ -10,8 +10,8 @@ import pytest
 from helpers import OracleSegmenter, nearest_class, scene_ids
 
 from assurance.dataio.uavid import write_sample
-from el.config import CoreConfig
-from el.labels import CLASS_IDS, UAVID, ids_to_colors
+from el.classes.labels import CLASS_IDS, UAVID, ids_to_colors
+from el.geometry.config import CoreConfig
 
 WW = 256
 CORE = CoreConfig(working_width=WW)
@@ -91,7 +91,7 @@ def test_tampered_missing_or_foreign_model_files_are_refused(model_file, tmp_pat
 
 
 def test_features_are_what_the_frame_and_patch_show():
-    from el.decision import Candidate
+    from el.base.decision import Candidate
     from el.monitors.base import CandidateContext
     from el.monitors.learned import BASE_FEATURES, candidate_features
     from el.monitors.patches import extract_patch
@@ -145,7 +145,7 @@ def test_a_model_on_a_subset_of_the_features_still_loads_and_unknown_ones_are_re
 
 
 def test_pipeline_uses_it_by_name_and_a_bad_file_is_the_default_action(model_file, splits, tmp_path):
-    from el.pipeline import EmergencyLanding, PipelineConfig
+    from el.flight.pipeline import EmergencyLanding, PipelineConfig
 
     _, val = splits
     image = next(val.glob("**/Images/*.png"))
@@ -208,9 +208,9 @@ def test_card_run_and_monitor_must_rest_on_the_same_learned_model(model_file, sp
     from assurance.campaign.run import CampaignConfig, plan, run_campaign, run_task
     from assurance.fitting.calibration import calibrate_on_data
     from assurance.requirements.calibration_check import check_calibrated_miss_rate
+    from el.flight.pipeline import EmergencyLanding, PipelineConfig
     from el.monitors.calibration import load_calibration
     from el.monitors.learned import load_learned_model, model_document
-    from el.pipeline import EmergencyLanding, PipelineConfig
 
     _, val = splits
     spec = f"learned:model={model_file}"
@@ -261,7 +261,7 @@ def test_context_windows_give_what_the_whole_frame_gives():
     as masking the whole frame (discs near the border, and smaller than a working pixel, included)."""
     from feature_reference import frame_disc_mask
 
-    from el.decision import Candidate, Disc
+    from el.base.decision import Candidate, Disc
     from el.monitors.learned import _FORBIDDEN, CONTEXT_SCALES, frame_features
     from el.monitors.lhd import take_disc
 
@@ -300,8 +300,8 @@ def test_the_deployed_default_is_checked_against_the_deployed_card(splits, tmp_p
     """Without --calibration, the deployed spec runs the deployed card's threshold: a swapped model file
     under the default path makes every decision the default action, with the reason."""
     import el.monitors.learned as learned
+    from el.flight.pipeline import EmergencyLanding, PipelineConfig
     from el.monitors.learned import DEFAULT_MODEL, model_document
-    from el.pipeline import EmergencyLanding, PipelineConfig
 
     _, val = splits
     image = next(val.glob("**/Images/*.png"))
@@ -321,8 +321,8 @@ def test_the_deployed_default_is_checked_against_the_deployed_card(splits, tmp_p
 
 
 def test_a_card_with_a_malformed_model_record_is_refused(tmp_path):
+    from el.flight.pipeline import DEPLOYED_CALIBRATION
     from el.monitors.calibration import CalibrationError, card_document, load_calibration
-    from el.pipeline import DEPLOYED_CALIBRATION
 
     body = json.loads(DEPLOYED_CALIBRATION.read_text())["body"]
     for bad in ("ead9566c", {"sha256": "XYZ"}, {"sha256": 5}):

@@ -46,7 +46,7 @@ def frame(tmp_path_factory):
 
 DECIDE = '''
     import json, sys
-    from el.pipeline import DEPLOYED_GATE, EmergencyLanding, PipelineConfig
+    from el.flight.pipeline import DEPLOYED_GATE, EmergencyLanding, PipelineConfig
 
     el = EmergencyLanding(PipelineConfig(gate=str(DEPLOYED_GATE), time_budget_s=None))
     d = el.decide(sys.argv[1])
@@ -60,7 +60,7 @@ def _summary(d: dict) -> tuple:
 
 
 def test_without_torch_the_shipped_network_decides_as_the_full_install(frame):
-    from el.pipeline import DEPLOYED_GATE, EmergencyLanding, PipelineConfig
+    from el.flight.pipeline import DEPLOYED_GATE, EmergencyLanding, PipelineConfig
 
     done = _without_torch(DECIDE, str(frame))
     assert done.returncode == 0, done.stderr[-2000:]
@@ -89,7 +89,7 @@ def test_the_onnx_segmenter_gives_the_segmenter_s_scores(frame, monkeypatch):
 
     full = load_model(None, threads=1)
     assert isinstance(full, Segmenter) and full.engine_name == "onnx"  # the full install runs the same export
-    monkeypatch.setattr("el.torch_extra.have_torch", lambda: False)
+    monkeypatch.setattr("el.base.torch_extra.have_torch", lambda: False)
     light = load_model(None, threads=1)
     assert isinstance(light, OnnxSegmenter) and light.weights_sha256 == full.weights_sha256
     assert light.labels == full.labels and light.card == full.card
@@ -135,7 +135,7 @@ def test_the_manifest_records_torch_as_not_installed(monkeypatch):
     from assurance.campaign.manifest import NOT_INSTALLED, torch_version
 
     assert torch_version() not in ("", NOT_INSTALLED)
-    monkeypatch.setattr("el.torch_extra.have_torch", lambda: False)
+    monkeypatch.setattr("el.base.torch_extra.have_torch", lambda: False)
     assert torch_version() == NOT_INSTALLED
 
 

@@ -12,7 +12,7 @@ import torch
 
 from assurance.fitting.network.losses import segmentation_loss
 from assurance.fitting.network.weights_io import save_weights
-from el.labels import NUM_CLASSES, UAVID
+from el.classes.labels import NUM_CLASSES, UAVID
 from el.segmentation.architectures import arch_from_dict, build_model
 from el.segmentation.inference import Segmenter
 from el.segmentation.lite import (

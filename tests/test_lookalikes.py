@@ -12,7 +12,7 @@ from assurance.scenes.rand import Rand
 from assurance.scenes.styles import STYLES
 from assurance.scenes.view import coverage_domain
 from assurance.scenes.world import Look, Sun, World
-from el.labels import CLASS_IDS
+from el.classes.labels import CLASS_IDS
 
 SIZE = (480, 270)
 GROUND_MATERIALS = {"roof_green", "roof_gravel", "roof_concrete", "grass"}

@@ -11,9 +11,9 @@ import pytest
 from helpers import bench_system, install_distribution, scene_ids, scene_image
 
 from assurance.dataio.uavid import write_image
-from el.config import CoreConfig
-from el.errors import WeightsError
-from el.pipeline import EmergencyLanding, PipelineConfig
+from el.base.errors import WeightsError
+from el.flight.pipeline import EmergencyLanding, PipelineConfig
+from el.geometry.config import CoreConfig
 from el.segmentation import SegmentationModel, Segmenter, load_model
 from el.segmentation.contract import MC_DROPOUT, PATCH_TRUNK, check_model, has_capability, labels_of
 from el.segmentation.factory import ENTRY_POINT_GROUP

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from test_learned_monitor import CORE, WW, RoadBlindFrame, splits  # noqa: F401  (the module-scoped fixture)
 
-from el.labels import UAVID
+from el.classes.labels import UAVID
 from el.monitors import build_monitor, monitor_names
 from el.monitors.capabilities import MonitorSupportError
 
@@ -162,7 +162,7 @@ def test_a_campaign_scores_every_family_and_the_benchmark_ranks_them(records, sp
 
 
 def test_the_flight_pipeline_runs_a_fitted_detector_by_name(records, splits):  # noqa: F811
-    from el.pipeline import EmergencyLanding, PipelineConfig
+    from el.flight.pipeline import EmergencyLanding, PipelineConfig
 
     _, val = splits
     image = next(val.glob("**/Images/*.png"))

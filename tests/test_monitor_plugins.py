@@ -12,7 +12,7 @@ import pytest
 from helpers import OracleSegmenter, bench_system, install_distribution, scene_ids
 
 from assurance.dataio.uavid import write_image, write_sample
-from el.labels import UAVID, ids_to_colors
+from el.classes.labels import UAVID, ids_to_colors
 from el.monitors import build_monitor, monitor_names, parse_monitor_spec, registry
 
 PLUGIN = Path(__file__).parent / "plugins" / "toy_uav_monitor.py"
@@ -77,7 +77,7 @@ def test_land_and_campaign_run_the_plugin_monitor_by_name(toy_installed, tmp_pat
     from assurance.campaign.readouts import load_table
     from assurance.campaign.run import CampaignConfig, run_campaign
     from assurance.fitting.network.weights_io import save_weights
-    from el.config import CoreConfig
+    from el.geometry.config import CoreConfig
     from el.segmentation.architectures import build_model
     from el.segmentation.model import ArchConfig
 

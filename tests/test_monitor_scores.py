@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 from paper_cases import disc_mask, paper_cases
 
-from el.labels import UAVID
+from el.classes.labels import UAVID
 from el.monitors import PAPER_GRID, build_monitor
 
 FROZEN = json.loads((Path(__file__).parent / "data" / "paper_verdicts.json").read_text())["verdicts"]
@@ -78,7 +78,7 @@ def test_campaign_sharing_gives_the_same_scores_as_each_monitor_alone(cases):
     import numpy as np
 
     from assurance.campaign.judging import judge_candidates
-    from el.decision import Disc
+    from el.base.decision import Disc
 
     class Fixed:  # serves the frozen cases by patch: case i sits at column 20 i of a one-row image
         def predict_patch(self, rgb):

@@ -18,8 +18,8 @@ from helpers import TINY_ARCH, OracleSegmenter, nearest_class, scene_ids
 
 from assurance import cli
 from assurance.dataio.uavid import write_sample
-from el.config import CoreConfig
-from el.labels import CLASS_IDS, UAVID, ids_to_colors, load_label_set
+from el.classes.labels import CLASS_IDS, UAVID, ids_to_colors, load_label_set
+from el.geometry.config import CoreConfig
 
 EXAMPLE_LABELS = Path(__file__).resolve().parents[1] / "examples" / "my-drone" / "labels.yaml"
 TO_CITY_SURVEY = {"road": "asphalt", "low_vegetation": "lawn", "building": "house", "moving_car": "driving_vehicle",
@@ -98,7 +98,7 @@ def gated(user):
 def test_fit_gate_fits_on_a_class_mapped_onnx_networks_output(gated):
     from assurance.system import load_system
     from assurance.system.system import System
-    from el.hashing import sha256_file
+    from el.base.hashing import sha256_file
     from el.monitors.frame_gate import load_frame_gate
 
     gate = load_frame_gate(gated["gate"])
@@ -116,7 +116,7 @@ def test_the_fitted_gate_runs_in_flight_and_in_the_campaign(gated, tmp_path, cap
     from assurance.dataio.uavid import read_image
     from assurance.system import load_system
     from assurance.system.system import System
-    from el.pipeline import EmergencyLanding
+    from el.flight.pipeline import EmergencyLanding
 
     system = System.build(load_system(gated["gated"]))
     assert system.gate == gated["gate"]
@@ -173,7 +173,7 @@ def test_a_system_naming_only_a_card_deploys_the_cards_monitor_with_its_gate(gat
     user's network) and the frame gate, from the system file alone."""
     from assurance.campaign import readouts
     from assurance.fitting.calibration import calibration_body
-    from el.hashing import sha256_file
+    from el.base.hashing import sha256_file
     from el.monitors.calibration import card_document
 
     network = {"path": "unet.onnx", "sha256": sha256_file(gated["root"] / "unet.onnx"), "segmenter": "weights"}
@@ -218,8 +218,8 @@ def test_campaign_monitors_check_each_configuration_once():
     with pytest.raises(MonitorSupportError, match="'lhd\\+mcd:n=10,rho=0.9'"):  # the deployed one is never dropped
         campaign_monitors("demo", deployed="lhd+mcd:n=10,rho=0.9", model=model)
     # the shipped system's presets are unchanged: the deployed configuration first, then the headline grid
+    from el.flight.pipeline import PipelineConfig
     from el.monitors import DEMO_GRID
-    from el.pipeline import PipelineConfig
 
     assert campaign_monitors("release").monitors == (PipelineConfig().monitor_name, *DEMO_GRID)
 
@@ -346,7 +346,7 @@ def test_fit_monitor_refuses_mcd_features_on_a_network_without_dropout(user, tmp
 def test_a_class_mapped_torch_network_keeps_its_trunk_statistics(one_torch_thread):
     import torch
 
-    from el.errors import FrameGateError
+    from el.base.errors import FrameGateError
     from el.monitors.frame_gate import check_frame_stats
     from el.segmentation.architectures import build_model
     from el.segmentation.class_map import MappedModel

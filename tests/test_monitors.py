@@ -15,8 +15,8 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 import el.monitors as mon
-from el.decision import Candidate, Disc, MonitorVerdict
-from el.labels import CLASS_IDS, CLASS_NAMES, FORBIDDEN_LUT, NUM_CLASSES, UAVID, colors_to_ids, ids_to_colors
+from el.base.decision import Candidate, Disc, MonitorVerdict
+from el.classes.labels import CLASS_IDS, CLASS_NAMES, FORBIDDEN_LUT, NUM_CLASSES, UAVID, colors_to_ids, ids_to_colors
 from el.monitors import (
     DEMO_GRID,
     PAPER_GRID,

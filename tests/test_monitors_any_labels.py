@@ -10,8 +10,8 @@ import pytest
 import torch
 from torch import nn
 
-from el.decision import Candidate
-from el.labels import UAVID, LabelClass, LabelSet, load_label_set
+from el.base.decision import Candidate
+from el.classes.labels import UAVID, LabelClass, LabelSet, load_label_set
 from el.monitors import build_monitor
 from el.monitors.base import CandidateContext
 from el.monitors.capabilities import MonitorSupportError, model_kind

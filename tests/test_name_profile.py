@@ -7,9 +7,9 @@ from __future__ import annotations
 
 import pytest
 
-from el.class_names import check_class_names, class_key, pinned_category
-from el.labels import UAVID, LabelSet
-from el.name_profile import profile_problem, script_of, skeleton
+from el.classes.class_names import check_class_names, class_key, pinned_category
+from el.classes.labels import UAVID, LabelSet
+from el.classes.name_profile import profile_problem, script_of, skeleton
 
 # (name, what the refusal names): look-alikes of road that passed the old hand-made check, and variants
 LOOKALIKES = [

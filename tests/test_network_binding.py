@@ -10,14 +10,14 @@ import pytest
 from helpers import OracleSegmenter, scene_ids, scene_image
 
 from assurance.cli import main
-from el.config import CoreConfig
-from el.errors import CalibrationError, FrameGateError, LearnedModelError
-from el.labels import UAVID
+from el.base.errors import CalibrationError, FrameGateError, LearnedModelError
+from el.classes.labels import UAVID
+from el.flight.pipeline import DEPLOYED_CALIBRATION, DEPLOYED_MONITOR, EmergencyLanding, PipelineConfig
+from el.geometry.config import CoreConfig
 from el.monitors import build_monitor
 from el.monitors.calibration import card_document, load_calibration
 from el.monitors.frame_gate import load_frame_gate
 from el.monitors.learned import DEFAULT_MODEL, load_learned_model
-from el.pipeline import DEPLOYED_CALIBRATION, DEPLOYED_MONITOR, EmergencyLanding, PipelineConfig
 from el.segmentation.weights import DEFAULT_WEIGHTS, read_card
 
 WW = 128

@@ -14,10 +14,10 @@ from assurance.campaign.run import CampaignConfig, plan, run_task
 from assurance.requirements.domain_checks import check_outside_domain
 from assurance.system import default_system
 from assurance.system.build import odd as system_odd
-from el.camera import Pose
-from el.config import CoreConfig
-from el.odd import OperatingDomain
-from el.pipeline import EmergencyLanding, PipelineConfig
+from el.flight.pipeline import EmergencyLanding, PipelineConfig
+from el.geometry.camera import Pose
+from el.geometry.config import CoreConfig
+from el.geometry.odd import OperatingDomain
 
 WW = 128
 DOMAIN = OperatingDomain(height_m=(40, 60), pitch_deg=(36, 54), image_width=(64, 7680), image_height=(36, 4320),
@@ -54,7 +54,7 @@ def test_a_frame_size_or_aspect_outside_is_refused():
 def test_the_decision_schema_takes_the_reason():
     import jsonschema
 
-    from el.decision import decision_schema
+    from el.base.decision import decision_schema
 
     d = _decide(Pose(height_m=120.0))
     jsonschema.validate(json.loads(d.to_json()), decision_schema())
@@ -143,7 +143,7 @@ def test_uav_el_land_outside_the_domain_is_a_decision_exit_0(tmp_path, capsys):
 def test_uav_el_land_labels_checks_the_declared_domain_too(tmp_path, capsys, monkeypatch):
     from assurance.cli import main
     from assurance.dataio.uavid import write_image
-    from el.labels import ids_to_colors
+    from el.classes.labels import ids_to_colors
 
     labels, out = tmp_path / "labels.png", tmp_path / "d.json"
     write_image(labels, ids_to_colors(scene_ids()))

@@ -20,12 +20,12 @@ from assurance.campaign import readouts  # noqa: E402
 from assurance.campaign.run import CampaignConfig, run_campaign  # noqa: E402
 from assurance.dataio.uavid import write_sample  # noqa: E402
 from assurance.fitting.network.onnx_export import export_onnx  # noqa: E402
-from el.config import CoreConfig  # noqa: E402
-from el.hashing import sha256_file  # noqa: E402
-from el.labels import UAVID
+from el.base.hashing import sha256_file  # noqa: E402
+from el.classes.labels import UAVID
+from el.flight.pipeline import EmergencyLanding, PipelineConfig  # noqa: E402
+from el.geometry.config import CoreConfig  # noqa: E402
 from el.monitors import build_monitor  # noqa: E402
 from el.monitors.capabilities import check_monitor_capabilities, required_capabilities  # noqa: E402
-from el.pipeline import EmergencyLanding, PipelineConfig  # noqa: E402
 from el.segmentation.contract import MC_DROPOUT  # noqa: E402
 from el.segmentation.inference import Segmenter  # noqa: E402
 from el.segmentation.onnx_model import load_onnx_model  # noqa: E402

@@ -17,8 +17,8 @@ from helpers import TINY_ARCH  # noqa: E402
 
 from assurance.fitting.network.onnx_export import check_frame, export_onnx  # noqa: E402
 from assurance.fitting.network.weights_io import save_weights  # noqa: E402
-from el.errors import WeightsError  # noqa: E402
-from el.hashing import sha256_file  # noqa: E402
+from el.base.errors import WeightsError  # noqa: E402
+from el.base.hashing import sha256_file  # noqa: E402
 from el.segmentation.architectures import build_model  # noqa: E402
 from el.segmentation.inference import Segmenter  # noqa: E402
 from el.segmentation.onnx_engine import ENGINE_ENV, RECORD_FORMAT, record_path  # noqa: E402

@@ -21,9 +21,9 @@ torch = pytest.importorskip("torch")
 
 from assurance.system import SystemFileError, load_system  # noqa: E402
 from assurance.system.system import System  # noqa: E402
-from el.errors import WeightsError  # noqa: E402
-from el.hashing import sha256_file  # noqa: E402
-from el.labels import load_label_set  # noqa: E402
+from el.base.errors import WeightsError  # noqa: E402
+from el.base.hashing import sha256_file  # noqa: E402
+from el.classes.labels import load_label_set  # noqa: E402
 from el.segmentation.contract import OutputClasses, labels_of  # noqa: E402
 from el.segmentation.onnx_engine import external_identity, file_identity, read_onnx  # noqa: E402
 from el.segmentation.onnx_model import META_CONTRACT, load_onnx_model  # noqa: E402
@@ -106,7 +106,7 @@ def test_the_classes_key_names_the_channels_too(tmp_path):
 
 
 def test_working_width_is_honoured_and_decisions_do_not_fault(tmp_path):
-    from el.pipeline import EmergencyLanding
+    from el.flight.pipeline import EmergencyLanding
 
     export(tmp_path / "unet.onnx")
     system = system_of(system_file(tmp_path, model="working_width = 160\n"))

@@ -15,9 +15,9 @@ from onnx_helpers import MEAN, STD, ColourNet, Variant, export_raw, noisy_colour
 
 from assurance.cli import main  # noqa: E402
 from assurance.fitting.network.onnx_export import export_onnx  # noqa: E402
-from el.errors import WeightsError  # noqa: E402
-from el.hashing import sha256_file  # noqa: E402
-from el.labels import UAVID  # noqa: E402
+from el.base.errors import WeightsError  # noqa: E402
+from el.base.hashing import sha256_file  # noqa: E402
+from el.classes.labels import UAVID  # noqa: E402
 from el.segmentation.factory import load_model  # noqa: E402
 from el.segmentation.inference import Segmenter  # noqa: E402
 from el.segmentation.onnx_model import META_CONTRACT, OnnxContract, OnnxModel, load_onnx_model  # noqa: E402

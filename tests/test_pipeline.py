@@ -12,9 +12,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from assurance.dataio.uavid import write_image
-from el.config import CoreConfig
-from el.decision import decision_schema
-from el.pipeline import EmergencyLanding, PipelineConfig
+from el.base.decision import decision_schema
+from el.flight.pipeline import EmergencyLanding, PipelineConfig
+from el.geometry.config import CoreConfig
 
 W, H, WW = 256, 144, 128
 
@@ -164,9 +164,9 @@ def test_bad_monitor_spec_fails_at_configuration():
 def test_a_frame_decoded_once_is_recorded_as_its_file(tmp_path):
     """``decide(FrameFile.read(path))``: the caller keeps the decoded pixels and the decision is the one the path
     gives, recorded as that file (path, SHA-256, size); a pose passed with its source is recorded with it."""
-    from el.camera import Pose
-    from el.hashing import sha256_file
-    from el.pipeline import FrameFile
+    from el.base.hashing import sha256_file
+    from el.flight.pipeline import FrameFile
+    from el.geometry.camera import Pose
 
     path = tmp_path / "frame.png"
     write_image(path, scene_image(scene_ids()))
@@ -189,7 +189,7 @@ def test_a_frame_decoded_before_the_call_counts_against_the_budget(tmp_path):
     the frame's ``read_s`` and against the time budget."""
     from dataclasses import replace
 
-    from el.pipeline import FrameFile
+    from el.flight.pipeline import FrameFile
 
     path = tmp_path / "frame.png"
     write_image(path, scene_image(scene_ids()))
@@ -203,16 +203,17 @@ def test_a_frame_decoded_before_the_call_counts_against_the_budget(tmp_path):
 
 
 def test_the_pose_sources_are_the_decision_schema_s():
-    from el.kernel import POSE_SOURCES
+    from el.flight.kernel import POSE_SOURCES
 
     schema = decision_schema()["properties"]["input"]["properties"]["pose"]["properties"]["source"]
     assert tuple(schema["enum"]) == POSE_SOURCES
 
 
 def test_the_flight_system_builds_its_parts_once_and_keeps_what_failed(tmp_path):
-    """``EmergencyLanding`` builds its ``parts`` once (``el.kernel.build_parts``); a part that cannot fly is kept in
+    """``EmergencyLanding`` builds its ``parts`` once (``el.flight.kernel.build_parts``); a part that cannot fly is
+    kept in
     ``errors`` with its exception and the first is every decision's fault."""
-    from el.kernel import Parts
+    from el.flight.kernel import Parts
 
     system = make()
     assert isinstance(system.parts, Parts) and system.parts is system.parts and system.errors == {}

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from el import imageio
+from el.base import imageio
 
 
 def _frames(tmp_path):

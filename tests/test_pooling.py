@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from el.labels import NUM_CLASSES, UAVID
+from el.classes.labels import NUM_CLASSES, UAVID
 from el.monitors.lhd import forbidden_pixels
 from el.segmentation.pooling import downsample_probs
 

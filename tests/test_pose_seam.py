@@ -5,10 +5,10 @@ from __future__ import annotations
 import jsonschema
 from helpers import OracleSegmenter, scene_ids, scene_image
 
-from el.camera import Pose
-from el.config import CoreConfig
-from el.decision import decision_schema
-from el.pipeline import EmergencyLanding, PipelineConfig
+from el.base.decision import decision_schema
+from el.flight.pipeline import EmergencyLanding, PipelineConfig
+from el.geometry.camera import Pose
+from el.geometry.config import CoreConfig
 
 WW = 128
 
@@ -35,7 +35,8 @@ def test_the_frame_pose_sets_the_safety_radius_and_is_recorded():
 
 def test_a_malformed_pose_ends_in_the_default_action():
     d = _landing().decide(scene_image(scene_ids()), pose={"height_m": 30})
-    assert d.action == "default" and d.reason.startswith("fault: pose: ValueError: pose must be an el.camera.Pose")
+    assert d.action == "default"
+    assert d.reason.startswith("fault: pose: ValueError: pose must be an el.geometry.camera.Pose")
 
 
 def test_a_pose_is_checked_and_recorded_as_plain_numbers():

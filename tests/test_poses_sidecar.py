@@ -17,11 +17,11 @@ from assurance.dataio.poses import FramePose, frame_pose, read_poses, write_pose
 from assurance.dataio.uavid import iter_samples, read_labels, write_labels
 from assurance.scenes import World
 from assurance.scenes.generate import ViewPlan, generate_scene, write_dataset
-from el.camera import CameraGeometry, Intrinsics, Pose
-from el.config import CoreConfig
-from el.core import probs_from_labels, run_core
-from el.errors import DataError
-from el.labels import CLASS_IDS, UAVID
+from el.base.errors import DataError
+from el.classes.labels import CLASS_IDS, UAVID
+from el.geometry.camera import CameraGeometry, Intrinsics, Pose
+from el.geometry.config import CoreConfig
+from el.landing.core import probs_from_labels, run_core
 
 SIZE = (192, 108)
 CAMERA = Intrinsics.from_fov(70.0, name="wide70")

@@ -1,4 +1,4 @@
-"""One reader for every applicant file (issue 50): ``el.userfiles`` confines a file to its folder (``within=``: a
+"""One reader for every applicant file (issue 50): ``el.base.userfiles`` confines a file to its folder (``within=``: a
 symbolic link out of it is refused naming the link and its target), never reads under ``/proc``, ``/sys`` or
 ``/dev``, hashes in chunks under a cap; scene meta, recorded model files and readout tables go through it (a FIFO
 or ``/dev/zero`` there never hangs, a table is refused by its row count before it is loaded); ``python -m
@@ -18,8 +18,8 @@ from pathlib import Path
 import pytest
 from helpers import within_seconds
 
-from el import userfiles
-from el.hashing import sha256_file
+from el.base import userfiles
+from el.base.hashing import sha256_file
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "mkfifo") or not Path("/proc/self").exists(),
                                 reason="needs FIFOs and /proc (Linux)")
@@ -239,7 +239,7 @@ def test_a_table_that_is_a_link_out_of_the_run_or_a_fifo_is_refused(tmp_path):
 
 # -- the hierarchy a label set names ---------------------------------------------------------------
 def test_a_hierarchy_file_out_of_the_label_sets_folder_or_a_fifo_is_refused(tmp_path):
-    from el.labels import UAVID, load_label_set
+    from el.classes.labels import UAVID, load_label_set
     from el.monitors.hierarchy import ClassHierarchy
 
     (tmp_path / "tree.yaml").write_text("root: any\nchildren:\n  any: [safe, unsafe]\n"

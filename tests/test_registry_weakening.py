@@ -11,7 +11,7 @@ import pytest
 from assurance import requirements as rq
 from assurance.campaign.model_files import changed_model_files, model_files
 from assurance.requirements.weakening import parameter_weakenings, registry_weakenings
-from el.labels import UAVID
+from el.classes.labels import UAVID
 
 pytestmark = pytest.mark.requirements("EL-R12")
 

@@ -47,7 +47,7 @@ def test_harness_errors_share_the_project_root():
     from assurance.campaign.readouts import DamagedRunError, RunError
     from assurance.errors import CommandError
     from assurance.requirements import RegistryError
-    from el.errors import UavElError
+    from el.base.errors import UavElError
 
     for cls in (CommandError, HeadlineError, RunError, DamagedRunError, RegistryError, SweepError):
         assert issubclass(cls, UavElError), cls

@@ -22,7 +22,7 @@ from assurance import cli
 from assurance.dataio.uavid import write_sample
 from assurance.evidence import generate
 from assurance.system import default_system, load_system
-from el.labels import UAVID, ids_to_colors, load_label_set
+from el.classes.labels import UAVID, ids_to_colors, load_label_set
 
 pytest.importorskip("onnxruntime")
 pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
@@ -104,7 +104,7 @@ def read_page(html: Path) -> Page:
 
 
 def unreachable(system, size: tuple[int, int]) -> int:
-    """The system's unreachable stripes at its nominal pose (el.camera.CameraGeometry)."""
+    """The system's unreachable stripes at its nominal pose (el.geometry.camera.CameraGeometry)."""
     from assurance.system.system import System
 
     return System.build(system).core.geometry(*size).unreachable_stripes
@@ -456,8 +456,8 @@ def test_reproduce_keeps_the_data_table(case):
 def test_frame_gate_shows_the_files_sha256(tmp_path):
     """One hash per file: the gate file's SHA-256 (as the AMLAS index shows it), or the record's body hash said so."""
     from assurance.evidence.facts import frame_gate_text
-    from el.hashing import sha256_file
-    from el.records import body_sha256
+    from el.base.hashing import sha256_file
+    from el.base.records import body_sha256
 
     body = {"kind": "mahalanobis", "features": {"tap": "output"}}
     path = tmp_path / "gate.json"

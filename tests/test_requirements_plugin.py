@@ -59,7 +59,7 @@ def _report(pytester: pytest.Pytester, *args: str) -> tuple[pytest.RunResult, di
 # The registry
 # ------------------------------------------------------------------------------------------------
 def test_shipped_registry_is_complete_and_consistent():
-    from el.pipeline import DEFAULT_TIME_BUDGET_S, PipelineConfig
+    from el.flight.pipeline import DEFAULT_TIME_BUDGET_S, PipelineConfig
 
     reg = rq.load_registry()
     assert reg.ids == tuple(f"EL-R{i:02d}" for i in range(1, 18))

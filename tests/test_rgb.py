@@ -1,11 +1,11 @@
-"""The one RGB check (el.rgb) and its callers: monitors' patches, the segmenter, the perturbations."""
+"""The one RGB check (el.base.rgb) and its callers: monitors' patches, the segmenter, the perturbations."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from el.rgb import check_rgb
+from el.base.rgb import check_rgb
 
 
 def test_accepts_rgb_uint8_and_returns_it() -> None:
@@ -51,7 +51,7 @@ def test_callers_share_it() -> None:
 def test_the_flight_path_and_the_writers_use_it_too(tmp_path) -> None:
     from assurance.dataio.uavid import write_image
     from assurance.fitting.network.baseline import pixel_features
-    from el.pipeline import EmergencyLanding
+    from el.flight.pipeline import EmergencyLanding
 
     bad = np.zeros((20, 20, 3), np.float32)
     with pytest.raises(ValueError, match="^image must be uint8, got float32$"):

@@ -13,7 +13,7 @@ from conftest import tiny_scene
 from assurance.dataio.layouts import iter_samples
 from assurance.dataio.uavid import write_sample
 from assurance.evidence.safe_strips import TINT, evenly_spaced, safe_class_strips, tint
-from el.labels import UAVID, LabelSet
+from el.classes.labels import UAVID, LabelSet
 
 
 def _meadow_over_road() -> LabelSet:

@@ -14,8 +14,8 @@ from assurance.analysis.scores import auroc, auroc_table, roc_curve
 from assurance.campaign import readouts
 from assurance.campaign.run import CampaignConfig, run_campaign
 from assurance.dataio.uavid import write_sample
-from el.config import CoreConfig
-from el.labels import UAVID, ids_to_colors
+from el.classes.labels import UAVID, ids_to_colors
+from el.geometry.config import CoreConfig
 
 MONITORS = ("lhd", "lhd+ch:tau=0.25", "lhd+mcd:n=10,rho=0.9", "msp", "entropy:threshold=0.5")
 

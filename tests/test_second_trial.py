@@ -19,7 +19,7 @@ from assurance import cli
 from assurance.campaign import readouts
 from assurance.campaign.task import frame_identity, task_seed
 from assurance.dataio.uavid import write_image
-from el.labels import UAVID, load_label_set
+from el.classes.labels import UAVID, load_label_set
 
 DRONE = load_label_set("semantic_drone")
 TO_DRONE = {"road": "paved-area", "building": "roof", "static_car": "car", "moving_car": "car", "tree": "tree",
@@ -145,7 +145,7 @@ def test_an_acceptance_names_a_class_as_class_names_are_compared():
     """--accept-deviation class:strasse=safe accepts the deviation class:Straße (NFKC, case-folded: one name);
     another class is still no deviation of the system's."""
     from assurance.requirements.basis import Deviation, _offers
-    from el.class_names import pinned_category
+    from el.classes.class_names import pinned_category
 
     found = [Deviation("class:Straße", "forbidden", "safe", value="safe"), Deviation("unsafe_landing_bound", 0.05, 0.1)]
     assert _offers(["class:strasse=safe", "unsafe_landing_bound=0.1"], found) == {

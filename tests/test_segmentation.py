@@ -14,7 +14,7 @@ from torch import nn
 
 import el.segmentation.inference as inference_module
 from assurance.fitting.network.weights_io import save_weights, state_dict_bytes
-from el.labels import NUM_CLASSES, UAVID
+from el.classes.labels import NUM_CLASSES, UAVID
 from el.segmentation import (
     ArchConfig,
     Segmenter,

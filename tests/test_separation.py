@@ -9,8 +9,8 @@ from hypothesis import strategies as st
 from sklearn.metrics import roc_auc_score
 
 from assurance.fitting.separation import SCORES, auroc, disc_scores, separation
-from el.decision import Disc
-from el.labels import UAVID
+from el.base.decision import Disc
+from el.classes.labels import UAVID
 from el.monitors.lhd import lhd_rule
 from el.monitors.patches import extract_patch
 

@@ -10,8 +10,8 @@ import pytest
 
 from assurance.system import load_system as load_system_file
 from assurance.system.system import System
+from el.base.records import network_identities
 from el.monitors.frame_gate import bind_frame_gate
-from el.records import network_identities
 from el.segmentation.onnx_engine import SHIPPED_DIR, have_onnxruntime, shipped_export_source
 
 pytestmark = pytest.mark.skipif(not have_onnxruntime(), reason="needs ONNX Runtime (the onnx extra)")
@@ -38,7 +38,7 @@ def test_only_the_packaged_export_is_vouched_for():
 
 
 def test_the_export_as_a_system_model_carries_the_shipped_gate(tmp_path):
-    from el.pipeline import DEPLOYED_GATE
+    from el.flight.pipeline import DEPLOYED_GATE
 
     assert _system(tmp_path, f'[model]\npath = "{EXPORT}"\n').gate == DEPLOYED_GATE
     copy = tmp_path / "net.onnx"  # the same bytes elsewhere are the same network
@@ -54,13 +54,13 @@ def test_a_changed_export_or_a_class_map_gets_no_shipped_gate(tmp_path):
     data[-1] ^= 0x01  # one bit: another file, whatever its metadata says of its source
     changed.write_bytes(bytes(data))
     assert _system(tmp_path, '[model]\npath = "changed.onnx"\n').gate is None
-    assert shipped_export_source(__import__("el.hashing", fromlist=["x"]).sha256_file(changed)) is None
+    assert shipped_export_source(__import__("el.base.hashing", fromlist=["x"]).sha256_file(changed)) is None
 
 
 def test_the_gate_binds_to_the_export_and_not_to_another_network(tmp_path):
-    from el.errors import FrameGateError
-    from el.labels import UAVID
-    from el.pipeline import DEPLOYED_GATE
+    from el.base.errors import FrameGateError
+    from el.classes.labels import UAVID
+    from el.flight.pipeline import DEPLOYED_GATE
     from el.segmentation.onnx_model import load_onnx_model
 
     model = load_onnx_model(EXPORT, labels=UAVID)

@@ -24,8 +24,8 @@ from assurance.scenes.generate import write_scene
 from assurance.scenes.geom import PolygonSet, rect
 from assurance.scenes.styles import HELD_OUT_STYLES, STYLES, choose_style
 from assurance.scenes.world import Block, Crown, Look, Sun
-from el.camera import CameraGeometry, Pose
-from el.labels import CLASS_IDS, NUM_CLASSES, PALETTE, UAVID
+from el.classes.labels import CLASS_IDS, NUM_CLASSES, PALETTE, UAVID
+from el.geometry.camera import CameraGeometry, Pose
 
 SIZE = (480, 270)
 BATCH = [(0, "downtown"), (1, "residential"), (2, "park"), (3, "campus"), (4, "industrial"), (5, "downtown")]

@@ -12,9 +12,9 @@ from assurance import cli
 from assurance.dataio.uavid import write_image, write_labels
 from assurance.system import SystemFileError, default_system, find_system, load_system, schema
 from assurance.system import build as system_build
-from el.camera import PHANTOM3_PRO, SafetyParams, geometry_problem
-from el.config import CoreConfig
-from el.labels import CLASS_IDS, UAVID
+from el.classes.labels import CLASS_IDS, UAVID
+from el.geometry.camera import PHANTOM3_PRO, SafetyParams, geometry_problem
+from el.geometry.config import CoreConfig
 
 W, H = 256, 144
 
@@ -186,7 +186,7 @@ def test_missing_system_file(land, scene, tmp_path, capsys):
 
 
 def test_land_on_semantic_drone_labels_keeps_clear_of_unlabelled_ground(land, tmp_path):
-    from el.labels import load_label_set
+    from el.classes.labels import load_label_set
 
     sdd = load_label_set("semantic_drone")
     ids = np.full((H, W), sdd.ids["grass"], dtype=np.uint8)

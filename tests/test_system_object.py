@@ -12,8 +12,8 @@ from assurance.cli.system_options import assessed
 from assurance.system import default_system
 from assurance.system.find import load_system
 from assurance.system.system import System
-from el.labels import UAVID
-from el.pipeline import DEPLOYED_GATE, DEPLOYED_MONITOR
+from el.classes.labels import UAVID
+from el.flight.pipeline import DEPLOYED_GATE, DEPLOYED_MONITOR
 
 
 def test_the_embedded_default_is_the_shipped_system():
@@ -32,7 +32,7 @@ def test_a_gate_given_or_none_wins_and_another_network_gets_no_shipped_gate(tmp_
 
 
 def test_a_file_naming_only_a_card_deploys_the_cards_monitor(tmp_path: Path):
-    from el.pipeline import DEPLOYED_CALIBRATION
+    from el.flight.pipeline import DEPLOYED_CALIBRATION
 
     f = tmp_path / "uav-el.toml"
     f.write_text(f'format = "uav-el-system/1"\n[monitor]\ncalibration = "{DEPLOYED_CALIBRATION}"\n', "utf-8")

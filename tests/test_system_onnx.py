@@ -12,8 +12,8 @@ from onnx_helpers import MEAN, STD, ColourNet, Variant, export_raw, noisy_colour
 
 from assurance import cli  # noqa: E402
 from assurance.dataio.uavid import write_sample  # noqa: E402
-from el.hashing import sha256_file  # noqa: E402
-from el.labels import UAVID  # noqa: E402
+from el.base.hashing import sha256_file  # noqa: E402
+from el.classes.labels import UAVID  # noqa: E402
 
 CLASSES = json.dumps(list(UAVID.names))
 

@@ -227,9 +227,9 @@ def test_results_and_gate_are_bound_to_the_targets(tmp_path):
 
 
 def test_shipped_targets_are_the_flight_codes_safety_params():
-    """The registry's default R and beta are what the flight code plans with (el.camera.SafetyParams())."""
-    from el.camera import SafetyParams
-    from el.config import CoreConfig
+    """The registry's default R and beta are what the flight code plans with (el.geometry.camera.SafetyParams())."""
+    from el.geometry.camera import SafetyParams
+    from el.geometry.config import CoreConfig
 
     p = rq.load_registry().parameters
     assert (p["radius_m"], p["beta"]) == (SafetyParams().radius_m, SafetyParams().beta)

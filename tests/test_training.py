@@ -19,7 +19,7 @@ from assurance.fitting.network.checkpoint import checkpoint_path, load_checkpoin
 from assurance.fitting.network.evaluation import compare_figures, confusion, summarise
 from assurance.fitting.network.train_config import TrainConfig, steps_for_epochs
 from assurance.fitting.network.training import prefetched, resolve_device, sample_batch, train, training_loss
-from el.labels import NUM_CLASSES, PALETTE, UAVID
+from el.classes.labels import NUM_CLASSES, PALETTE, UAVID
 from el.segmentation.architectures import build_model
 from el.segmentation.inference import Segmenter
 from el.segmentation.model import ArchConfig

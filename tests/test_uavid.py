@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from assurance.dataio.uavid import DataError, iter_samples, read_image, read_labels, write_image, write_sample
-from el.labels import UAVID
+from el.classes.labels import UAVID
 
 
 def _rgb(h=12, w=16, seed=0):

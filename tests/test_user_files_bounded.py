@@ -1,4 +1,4 @@
-"""The trust boundary: every file a user hands the toolkit is read bounded (``el.userfiles``), and what
+"""The trust boundary: every file a user hands the toolkit is read bounded (``el.base.userfiles``), and what
 it says is checked before any work starts.
 
 A FIFO, a device or a folder is refused before a read that could block; a file over its kind's cap is refused
@@ -21,7 +21,7 @@ import pytest
 from helpers import within_seconds as within
 
 from assurance.cli import main
-from el import userfiles
+from el.base import userfiles
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="needs FIFOs (POSIX)")
 
@@ -71,8 +71,8 @@ def test_fifos_and_dev_zero_as_labels_waivers_targets_registry_and_poses_are_ref
     from assurance.dataio.poses import read_poses
     from assurance.evidence.waivers import load_waivers
     from assurance.requirements import RegistryError, TargetError, load_registry, read_targets_file
-    from el.errors import DataError
-    from el.labels import load_label_set
+    from el.base.errors import DataError
+    from el.classes.labels import load_label_set
 
     zero = tmp_path / "labels.yaml"
     zero.symlink_to("/dev/zero")
@@ -104,7 +104,7 @@ def test_fifos_and_dev_zero_as_labels_waivers_targets_registry_and_poses_are_ref
 
 def test_oversized_files_are_refused_before_they_are_read(tmp_path, capsys):
     from assurance.dataio.poses import read_poses
-    from el.errors import DataError
+    from el.base.errors import DataError
 
     poses = tmp_path / "poses.csv"
     with open(poses, "wb") as f:
@@ -152,8 +152,8 @@ def test_toml_nesting_skips_strings_and_comments():
 
 def test_deep_json_and_yaml_are_refused_without_a_recursion_error(tmp_path):
     from assurance.requirements import TargetError, read_targets_file
-    from el import safeyaml
-    from el.labels import load_label_set
+    from el.base import safeyaml
+    from el.classes.labels import load_label_set
 
     (tmp_path / "t.json").write_text("[" * 100_000 + "]" * 100_000)
     with pytest.raises(TargetError, match="t.json: nested too deeply"):
@@ -238,7 +238,7 @@ def test_tasks_the_manifest_names_without_readouts_are_named(tmp_path):
 
 # -- fitted files ----------------------------------------------------------------------------------
 def _resealed(src: Path, dst: Path, **body) -> Path:
-    from el.records import body_sha256
+    from el.base.records import body_sha256
 
     doc = json.loads(src.read_text(encoding="utf-8"))
     doc["body"].update(body)
@@ -248,7 +248,7 @@ def _resealed(src: Path, dst: Path, **body) -> Path:
 
 
 def test_a_resealed_gate_or_card_threshold_outside_its_fit_is_refused_at_load(tmp_path, capsys):
-    from el.pipeline import DEPLOYED_CALIBRATION, DEPLOYED_GATE
+    from el.flight.pipeline import DEPLOYED_CALIBRATION, DEPLOYED_GATE
 
     gate = _resealed(Path(DEPLOYED_GATE), tmp_path / "gate.json", threshold=1e300)
     path = system_file(tmp_path, f'[monitor]\ngate = "{gate.name}"\n', "gate.toml")
@@ -269,7 +269,7 @@ def test_a_resealed_gate_given_on_the_command_line_is_refused_when_the_system_is
                                                                                       capsys):
     from assurance.system import SystemFileError, default_system
     from assurance.system.system import System
-    from el.pipeline import DEPLOYED_GATE
+    from el.flight.pipeline import DEPLOYED_GATE
 
     gate = _resealed(Path(DEPLOYED_GATE), tmp_path / "gate-1e300.json", threshold=1e300)
     with pytest.raises(SystemFileError, match=f"--gate {gate}: threshold 1e\\+300 lies above the highest score"):

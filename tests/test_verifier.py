@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from el.decision import Disc
-from el.errors import LearnedModelError
-from el.labels import UAVID
+from el.base.decision import Disc
+from el.base.errors import LearnedModelError
+from el.classes.labels import UAVID
 from el.monitors import build_monitor, monitor_names
 from el.monitors.verifier import VerifierMonitor, fused_score, load_verifier, logit
 from el.monitors.verifier_crop import candidate_crop, crop_disc_mask, crop_window
@@ -49,7 +49,7 @@ def tiny(tmp_path_factory) -> tuple[Path, object]:
     """A tiny verifier network (random weights), exported and recorded as fit-verifier records one."""
     from assurance.fitting.verifier_fit import export_onnx, write_verifier
     from assurance.fitting.verifier_net import VerifierNet
-    from el.hashing import sha256_bytes
+    from el.base.hashing import sha256_bytes
 
     torch.manual_seed(0)
     net = VerifierNet(size=32, margin=0.5, width=8).eval()

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from el.decision import Disc
+from el.base.decision import Disc
 
 torch = pytest.importorskip("torch")
 pytest.importorskip("onnxruntime")
@@ -44,8 +44,8 @@ def _crops(n: int, rng: np.random.Generator):
 def test_a_few_steps_select_on_held_out_and_write_a_record_that_flies(tmp_path):
     from assurance.fitting.verifier_fit import check_export, choose_fusion, export_onnx, verifier_body, write_verifier
     from assurance.fitting.verifier_train import TrainConfig, predict, train_verifier
-    from el.hashing import sha256_bytes
-    from el.labels import UAVID
+    from el.base.hashing import sha256_bytes
+    from el.classes.labels import UAVID
     from el.monitors.verifier import VerifierMonitor
 
     rng = np.random.default_rng(0)

@@ -1,4 +1,4 @@
-"""The one decision walk (el.walk): hazard rank (the paper's) or ascending monitor score, for every caller."""
+"""The one decision walk (el.monitors.walk): hazard rank (the paper's) or ascending monitor score, for every caller."""
 
 from __future__ import annotations
 
@@ -7,12 +7,12 @@ from helpers import OracleSegmenter, scene_ids, scene_image
 from hypothesis import given
 from hypothesis import strategies as st
 
-from el.config import CoreConfig
-from el.decision import MonitorVerdict
+from el.base.decision import MonitorVerdict
+from el.flight.pipeline import EmergencyLanding, PipelineConfig
+from el.geometry.config import CoreConfig
 from el.monitors import parse_monitor_spec
 from el.monitors.spec import walk_of
-from el.pipeline import EmergencyLanding, PipelineConfig
-from el.walk import ALL_REJECTED, NO_CANDIDATE, select, walk_candidates, walk_order
+from el.monitors.walk import ALL_REJECTED, NO_CANDIDATE, select, walk_candidates, walk_order
 
 WW = 128
 

@@ -16,8 +16,8 @@ import pandas as pd
 
 from assurance.campaign import readouts
 from assurance.files import atomic_write_bytes
-from el.errors import UavElError
-from el.hashing import sha256_file
+from el.base.errors import UavElError
+from el.base.hashing import sha256_file
 
 BEGIN = "<!-- headline-table:begin (written by `uav-el table RUN --readme README.md`; do not edit by hand) -->"
 END = "<!-- headline-table:end -->"

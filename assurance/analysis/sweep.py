@@ -16,9 +16,9 @@ import numpy as np
 import pandas as pd
 
 from assurance.campaign.readouts import core_hazard
-from el.errors import UavElError
+from el.base.errors import UavElError
 from el.monitors.spec import walk_of
-from el.walk import HAZARD, check_walk
+from el.monitors.walk import HAZARD, check_walk
 
 IMAGE_KEYS = ["perturbation", "severity", "key"]
 
@@ -42,7 +42,7 @@ def monitor_rows(images: pd.DataFrame, candidates: pd.DataFrame, monitor: str) -
 
 def replay(images: pd.DataFrame, candidates: pd.DataFrame, threshold: float, walk: str = HAZARD) -> pd.DataFrame:
     """Per image: the true hazard of the decision at ``threshold`` (one configuration's readouts) when
-    the decision loop walks the candidates by ``walk`` (``el.walk``).
+    the decision loop walks the candidates by ``walk`` (``el.monitors.walk``).
 
     An image with a fault keeps the default action, as the decision loop does.
     """

@@ -17,7 +17,7 @@ from pathlib import Path
 from cryptography.exceptions import InvalidSignature
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey, Ed25519PublicKey
 
-from el.errors import UavElError
+from el.base.errors import UavElError
 
 INTOTO_PAYLOAD_TYPE = "application/vnd.in-toto+json"
 MAX_ENVELOPE_BYTES = 64 * 1024 * 1024
@@ -94,7 +94,7 @@ def write_envelope(path: str | Path, envelope: Mapping) -> None:
 
 def read_envelope(path: str | Path) -> dict:
     """Read an envelope file; ``AttestationError`` naming the file when it is missing, too large or not JSON."""
-    from el import userfiles
+    from el.base import userfiles
 
     p = Path(path)
     if not p.is_file():

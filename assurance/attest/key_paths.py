@@ -2,7 +2,7 @@
 
 Kept apart from :mod:`assurance.attest.keys` (which imports ``cryptography``) so that the command line can protect
 the key at start-up without paying for the crypto library: a supplied template, label set or data file that is a
-hard link to the key (same device and inode) is then refused by ``el.userfiles`` however it is named.
+hard link to the key (same device and inode) is then refused by ``el.base.userfiles`` however it is named.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import os
 from collections.abc import Iterable
 from pathlib import Path
 
-from el import userfiles
+from el.base import userfiles
 
 KEY_ENV = "UAV_EL_SIGNING_KEY"
 
@@ -34,6 +34,6 @@ def signing_key_paths(explicit: Iterable[str | Path] = ()) -> list[Path]:
 
 
 def protect_signing_keys(explicit: Iterable[str | Path] = ()) -> None:
-    """Mark each existing file of :func:`signing_key_paths` as the auditor's own (:func:`el.userfiles.protect`)."""
+    """Mark each existing file of :func:`signing_key_paths` as the auditor's own (:func:`el.base.userfiles.protect`)."""
     for path in signing_key_paths(explicit):
         userfiles.protect(path)

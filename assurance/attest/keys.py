@@ -23,7 +23,7 @@ from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey,
 
 from assurance.attest.dsse import AttestationError
 from assurance.attest.key_paths import KEY_ENV, default_key_path
-from el import userfiles
+from el.base import userfiles
 
 log = logging.getLogger(__name__)
 
@@ -71,7 +71,7 @@ def _private_from_pem(data: bytes, where: str) -> Ed25519PrivateKey:
 
 
 def _read_small(path: Path, what: str, *, own: bool = False) -> bytes:
-    """A key file's bytes through ``el.userfiles`` (a regular file of at most ``MAX_KEY_FILE_BYTES``: a FIFO or a
+    """A key file's bytes through ``el.base.userfiles`` (a regular file of at most ``MAX_KEY_FILE_BYTES``: a FIFO or a
     device refused before any read); AttestationError naming the file. ``own``: the auditor's signing key itself
     (protected against every other reader, and may be a hard link)."""
     if not path.exists() and not path.is_symlink():

@@ -20,7 +20,7 @@ from assurance.attest.keys import SigningKey
 from assurance.attest.statement import make_statement, open_statement, sign_statement, subject_problems
 from assurance.campaign import readouts
 from assurance.campaign.label_pin import predicate_fields
-from el.hashing import sha256_file
+from el.base.hashing import sha256_file
 
 if TYPE_CHECKING:
     from assurance.campaign.integrity import RunCheck

@@ -14,14 +14,14 @@ import numpy as np
 from assurance.dataio.poses import read_meta
 from assurance.dataio.uavid import Sample
 from assurance.scenes.world import World, pixel_clearance_m
-from el.camera import CameraGeometry, Intrinsics, Pose
+from el.geometry.camera import CameraGeometry, Intrinsics, Pose
 
 _CACHE: dict[str, tuple[World, dict]] = {}
 
 
 def load_meta(path: str | Path) -> dict:
     """A scene's meta JSON; ValueError naming the file when missing or malformed."""
-    from el.userfiles import UserFileError
+    from el.base.userfiles import UserFileError
 
     path = Path(path)
     try:  # read bounded (a FIFO or /dev/zero there is refused, naming it)

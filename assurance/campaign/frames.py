@@ -1,4 +1,5 @@
-"""What a campaign task adds around the flight kernel (``el.kernel``) for one frame: its pose under the campaign's pose
+"""What a campaign task adds around the flight kernel (``el.flight.kernel``) for one frame: its pose under the
+campaign's pose
 policy (the frame's own pose is its data's fault when unplannable), its ground truth, the frame gate read once per
 worker, and the gate's readout columns (``frame_gate_score``, ``frame_gate_threshold``; NaN: no gate). The declared
 domain and the gate decide the frame inside the kernel, as in flight."""
@@ -16,11 +17,11 @@ from assurance.campaign.frame_cache import cached, file_key
 from assurance.dataio.layouts import read_sample_labels
 from assurance.dataio.poses import NOMINAL, frame_pose
 from assurance.dataio.uavid import Sample
-from el.camera import Pose, check_geometry
-from el.decision import Candidate
-from el.errors import DataError
+from el.base.decision import Candidate
+from el.base.errors import DataError
+from el.geometry.camera import Pose, check_geometry
+from el.geometry.odd import OperatingDomain
 from el.monitors.frame_gate import FrameGate, load_frame_gate
-from el.odd import OperatingDomain
 
 _GATES: dict[tuple[str, str], FrameGate] = {}  # per worker: each gate file read once
 
@@ -36,7 +37,7 @@ def frame_pose_of(config: Any, sample: Sample) -> tuple[Pose | None, float, dict
 
 def check_frame_pose(config: Any, sample: Sample, pose: Pose | None, roll: float, size: tuple[int, int]) -> None:
     """Refuse a frame whose camera, pose and size are outside what the flat-ground model handles
-    (``el.camera.check_geometry``): the frame's own pose is its data's fault (DataError), the nominal pose the
+    (``el.geometry.camera.check_geometry``): the frame's own pose is its data's fault (DataError), the nominal pose the
     configuration's (ValueError)."""
     cfg = config.core if pose is None else replace(config.core, pose=pose)
     try:
@@ -66,7 +67,8 @@ def outside_odd(odd: dict[str, Any] | None, pose: Pose, size: tuple[int, int]) -
 
 def frame_gate(gate: dict[str, str] | None, segmenter: Any) -> FrameGate | None:
     """The campaign's frame gate (read once per worker), refused (ValueError, a fault of the task) when its file
-    changed since the run recorded it or it was fitted on another network (``el.kernel.build_parts`` binds it)."""
+    changed since the run recorded it or it was fitted on another network (``el.flight.kernel.build_parts`` binds
+    it)."""
     if not gate:
         return None
     key = (gate["path"], gate["sha256"])

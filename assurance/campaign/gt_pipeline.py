@@ -2,8 +2,8 @@
 
 It answers "what would the EL system decide if the segmentation were perfect?": the structural
 check of EL-R01 on whole scenes, and the reference for the model pipeline. It is the flight kernel
-(``el.kernel``) with a label-map segmenter: the full-resolution label map is pooled conservatively to the
-working resolution (``el.core.probs_from_labels``), the CM ranks the candidates, and the decision is to land on
+(``el.flight.kernel``) with a label-map segmenter: the full-resolution label map is pooled conservatively to the
+working resolution (``el.landing.core.probs_from_labels``), the CM ranks the candidates, and the decision is to land on
 rank 0 (no runtime monitor: every candidate's ``monitor`` is None), or the default action when there is no
 candidate. A fault inside the CM ends in the default action with reason ``"fault: ..."`` (EL-R06).
 """
@@ -21,14 +21,14 @@ import numpy as np
 from assurance.dataio.layouts import read_label_file, read_sample_labels
 from assurance.dataio.poses import NOMINAL, frame_pose
 from assurance.dataio.uavid import DataError, Sample, check_same_size
-from el.camera import Pose, working_size
-from el.config import CoreConfig
-from el.core import default_area, probs_from_labels
-from el.decision import Decision, decision_schema  # noqa: F401  (re-exported)
-from el.hashing import sha256_file
-from el.kernel import build_parts, decide_frame
-from el.labels import LabelSet
-from el.odd import OperatingDomain
+from el.base.decision import Decision, decision_schema  # noqa: F401  (re-exported)
+from el.base.hashing import sha256_file
+from el.classes.labels import LabelSet
+from el.flight.kernel import build_parts, decide_frame
+from el.geometry.camera import Pose, working_size
+from el.geometry.config import CoreConfig
+from el.geometry.odd import OperatingDomain
+from el.landing.core import default_area, probs_from_labels
 
 PIPELINE = "ground_truth"
 logger = logging.getLogger(__name__)  # faults with their tracebacks; the decision keeps only the reason
@@ -48,7 +48,7 @@ def _check_ids(ids: np.ndarray, labels: LabelSet) -> tuple[int, int]:
 
 class LabelMapSegmenter:
     """A perfect segmentation: the frame's class ids pooled conservatively to the working resolution
-    (``el.core.probs_from_labels``), whatever array the kernel hands it (the ids themselves)."""
+    (``el.landing.core.probs_from_labels``), whatever array the kernel hands it (the ids themselves)."""
 
     def __init__(self, ids: np.ndarray, labels: LabelSet, working_width: int) -> None:
         self.ids, self.labels, self.working_width = ids, labels, working_width
@@ -72,13 +72,13 @@ def decide_from_labels(
     odd: OperatingDomain | None = None,
 ) -> Decision:
     """The decision for a full-resolution class-id map (H, W) under a perfect segmentation: the flight kernel
-    (``el.kernel``) with a label-map segmenter and no monitor.
+    (``el.flight.kernel``) with a label-map segmenter and no monitor.
 
     ``input_info`` goes to the decision's ``"input"`` (path, sha256; width and height are filled
     in). ``read_s`` is the time already spent reading the input. ``labels``: the label set of the
-    ids (the system's). ``pose`` (and ``roll_deg``): the frame's pose, as ``el.pipeline``'s; None is
-    ``config.pose``; ``pose_source``: where it came from (``el.kernel.POSE_SOURCES``). ValueError for a
-    malformed map; a pose the flat-ground model cannot plan with (``el.camera.check_geometry``) gives the
+    ids (the system's). ``pose`` (and ``roll_deg``): the frame's pose, as ``el.flight.pipeline``'s; None is
+    ``config.pose``; ``pose_source``: where it came from (``el.flight.kernel.POSE_SOURCES``). ValueError for a
+    malformed map; a pose the flat-ground model cannot plan with (``el.geometry.camera.check_geometry``) gives the
     default action with reason ``"fault: pose: <error>"``, a failure inside the CM
     ``"fault: candidates: <error>"``. ``odd``: the declared operating domain; a pose or
     size outside it is the default action with reason ``outside_odd: ...``, as the flight pipeline decides it.

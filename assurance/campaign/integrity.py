@@ -16,7 +16,7 @@ from pathlib import Path
 
 from assurance.campaign import readouts
 from assurance.code_identity import code_sha256, tree_sha256
-from el.hashing import sha256_file
+from el.base.hashing import sha256_file
 
 __all__ = ["RunCheck", "code_sha256", "tree_sha256", "verify_run"]
 

@@ -20,10 +20,10 @@ from typing import Any
 
 import numpy as np
 
-from el.decision import Candidate, MonitorVerdict
+from el.base.decision import Candidate, MonitorVerdict
 from el.monitors import CandidateContext, Monitor, PatchMonitor
+from el.monitors.walk import check_verdict
 from el.segmentation.contract import PATCH_TRUNK, has_capability
-from el.walk import check_verdict
 
 
 def _timed(clock: Callable[[], float], fn: Callable[..., Any], *args: Any, **kwargs: Any) -> tuple[Any, float]:

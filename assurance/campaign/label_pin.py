@@ -5,7 +5,7 @@ CH monitor's class hierarchy. A system file names its label set by path or prese
 after the run (flown with road declared safe, the honest file put back under the same name) would leave the
 evidence judged on one set and reported on another. The manifest (a subject of the campaign's signed statement,
 ``assurance.campaign.attestation``) therefore records their content SHA-256 (:func:`label_record`): of the
-canonical JSON (``el.records.body_sha256``) of the set as flown (``LabelSet.to_dict``: classes, colours, states,
+canonical JSON (``el.base.records.body_sha256``) of the set as flown (``LabelSet.to_dict``: classes, colours, states,
 hazard scores, categories, ignore colour, declared tree) and of the tree the CH monitor used
 (``el.monitors.hierarchy.default_hierarchy``: nodes and parents), the built-in and packaged sets included.
 ``uav-el evidence`` recomputes both from the system it judges (:func:`label_problems`): a difference is a gate
@@ -18,7 +18,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from el.records import body_sha256
+from el.base.records import body_sha256
 
 PREDICATE_KEYS = ("label_set_sha256", "hierarchy_sha256")
 """What a campaign statement signed by this toolkit carries of the label pin (present, even null, in every statement
@@ -43,7 +43,7 @@ def hierarchy_sha256(labels: Any) -> str:
 
 def _declared_tree_file(label_file: Path) -> Path | None:
     """The hierarchy file a label set file names (``hierarchy: FILE``, relative to it), if any."""
-    from el import safeyaml
+    from el.base import safeyaml
 
     try:
         doc = safeyaml.load_file(label_file, what="label set file")
@@ -57,7 +57,7 @@ def label_sources(labels: Any, system: Any = None) -> tuple[str, str]:
     """How messages name where ``labels`` and its class tree come from (for the system file ``system``): the label
     set file, the packaged preset's file or the built-in set; the tree's file, or the set that declares or implies
     it."""
-    from el.labels import PRESET_DIR
+    from el.classes.labels import PRESET_DIR
     from el.monitors.hierarchy import SHIPPED_TREES
 
     file = system.path_of("labels.file") if system is not None else None
@@ -67,7 +67,7 @@ def label_sources(labels: Any, system: Any = None) -> tuple[str, str]:
     elif preset not in (None, "uavid"):
         where = f"label set preset {preset} ({PRESET_DIR / f'{preset}.yaml'})"
     else:
-        where = f"built-in label set {labels.name} (el/labels.py)"
+        where = f"built-in label set {labels.name} (el/classes/labels.py)"
     if labels in SHIPPED_TREES:
         tree = f"class hierarchy el/monitors/{SHIPPED_TREES[labels]}"
     elif labels.hierarchy is not None:
@@ -91,7 +91,7 @@ def flown_labels(system_file: Any, network: Any) -> dict[str, Any] | None:
     """The ``labels`` record of a campaign: the system file's label set when the network judges with it (equal in
     every class, state, score and colour: its categories are the system's), else the network's own label set (a
     model handed in through the API); None for a network that names only its output classes."""
-    from el.labels import LabelSet
+    from el.classes.labels import LabelSet
     from el.segmentation.contract import labels_of
 
     judged = labels_of(network)

@@ -18,7 +18,7 @@ import numpy as np
 from assurance.campaign import readouts
 from assurance.campaign.model_files import model_files
 from assurance.code_identity import code_identity
-from el.labels import LabelSet
+from el.classes.labels import LabelSet
 from el.segmentation.contract import labels_of
 
 NOT_INSTALLED = "not installed"
@@ -38,7 +38,7 @@ def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *,
     record of the system file the campaign assesses (``SystemFile.record()``). ``labels``: the content hashes of the
     label set and class hierarchy the readouts are judged with (``assurance.campaign.label_pin.flown_labels``).
     """
-    from el.hashing import sha256_file
+    from el.base.hashing import sha256_file
 
     weights_record = _weights_record(config.weights, model)
     files = sorted({t.sample.image_path for t in tasks} | {t.sample.label_path for t in tasks if t.sample.label_path}
@@ -88,7 +88,7 @@ def _data_spec(data: Any) -> dict[str, Any]:
 
 def torch_version() -> str:
     """torch's version, or ``not installed`` (a base install runs the shipped network on ONNX Runtime)."""
-    from el.torch_extra import have_torch
+    from el.base.torch_extra import have_torch
 
     if not have_torch():
         return NOT_INSTALLED

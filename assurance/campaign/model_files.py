@@ -5,7 +5,7 @@ network, the learned monitor, the calibration card, the out-of-domain gate). Eac
 was not damaged; re-hashing one after an edit (a monitor made to accept everything) hides the edit from the file
 itself, not from the run's signed record: ``changed_model_files`` names every file that differs now.
 
-Every file is hashed through the bounded reader (``el.userfiles``, at most ``MAX_MODEL_BYTES``, in chunks): a
+Every file is hashed through the bounded reader (``el.base.userfiles``, at most ``MAX_MODEL_BYTES``, in chunks): a
 manifest entry the applicant wrote (and re-signed) naming ``/proc/self/pagemap``, a FIFO or a device is a problem
 naming it, never a read that does not end.
 """
@@ -17,9 +17,9 @@ from pathlib import Path
 from typing import Any
 
 from assurance.code_identity import install_root
-from el.hashing import sha256_file
-from el.labels import LabelSet
-from el.userfiles import MAX_MODEL_BYTES, UserFileError
+from el.base.hashing import sha256_file
+from el.base.userfiles import MAX_MODEL_BYTES, UserFileError
+from el.classes.labels import LabelSet
 
 PACKAGED = ("el/monitors/data", "el/segmentation/weights")
 """Folders (under the install root) of the packaged models and their cards."""
@@ -54,7 +54,7 @@ def _external_data(path: Path) -> list[Path]:
     """An ONNX file's external data files (each is recorded and re-checked like the file itself)."""
     if path.suffix.lower() != ".onnx" or not path.is_file():
         return []
-    from el.errors import WeightsError
+    from el.base.errors import WeightsError
     from el.segmentation.onnx_engine import external_files
 
     try:

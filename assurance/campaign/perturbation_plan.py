@@ -18,7 +18,7 @@ from functools import cache
 from typing import Any
 
 from assurance.perturbations import PAPER_PERTURBATIONS, PERTURBATIONS, TRAITS
-from el.odd import OperatingDomain
+from el.geometry.odd import OperatingDomain
 
 NONE = "none"
 DECLARED = "declared"

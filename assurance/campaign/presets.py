@@ -21,7 +21,7 @@ from typing import Any
 
 from assurance.campaign.perturbation_plan import Planned, default_plan, expand, severity_caps
 from assurance.campaign.run import CampaignConfig
-from el import safeyaml
+from el.base import safeyaml
 from el.monitors import DEMO_GRID, PAPER_GRID
 
 GRIDS = {"paper-grid": PAPER_GRID, "demo-grid": DEMO_GRID}
@@ -41,8 +41,8 @@ def load_presets() -> dict[str, dict[str, Any]]:
 
 def _deployed_name(deployed: str | None) -> str:
     """The deployed configuration's canonical name: the system's (``deployed``), else the flight code's default."""
+    from el.flight.pipeline import PipelineConfig
     from el.monitors import monitor_name
-    from el.pipeline import PipelineConfig
 
     return monitor_name(deployed) if deployed else PipelineConfig().monitor_name
 
@@ -50,7 +50,7 @@ def _deployed_name(deployed: str | None) -> str:
 def preset_items(value: str | Sequence[str], deployed: str | None = None) -> list[tuple[str, bool]]:
     """A preset's monitor list as (configuration, required) with its keywords expanded: a grid name (``paper-grid``,
     ``demo-grid``: not required) and ``deployed`` (required): the system file's monitor (``deployed``), else the
-    configuration the flight code ships with (``el.pipeline.PipelineConfig``); a named configuration is not
+    configuration the flight code ships with (``el.flight.pipeline.PipelineConfig``); a named configuration is not
     required (a preset's choice, not the user's). A system deploying no monitor (``none``) adds nothing."""
     out: list[tuple[str, bool]] = []
     for item in [value] if isinstance(value, str) else value:

@@ -39,7 +39,7 @@ import pandas as pd
 
 from assurance.errors import DamagedRunError, RunError  # noqa: F401  (re-exported)
 from assurance.files import atomic_write_bytes, public_mode
-from el.hashing import sha256_file
+from el.base.hashing import sha256_file
 
 FORMAT_VERSION = "uav-el-readouts/2"
 """2: shard names carry a digest of the task key (``a b`` and ``a_b`` no longer share one) and the data hash
@@ -52,7 +52,7 @@ without a valid SHA256SUMS is damaged, not a legacy shard."""
 SHARDS = "shards"
 SUMS = "SHA256SUMS"
 INDEX = "shards.json"
-MAX_RUN_JSON_BYTES = 64 << 20  # a manifest or shard index of ~250 000 tasks; read bounded (el.userfiles)
+MAX_RUN_JSON_BYTES = 64 << 20  # a manifest or shard index of ~250 000 tasks; read bounded (el.base.userfiles)
 TABLES = ("images", "candidates")
 COLUMNS: dict[str, tuple[str, ...]] = {
     "images": ("key", "sequence", "frame", "perturbation", "severity", "monitor", "fault", "candidates", "action",
@@ -150,7 +150,7 @@ def shard_files() -> tuple[str, ...]:
 
 def read_sums(shard_dir: Path) -> dict[str, str] | None:
     """A shard's SHA256SUMS as {file: sha256}; None when it is missing or malformed."""
-    from el import userfiles
+    from el.base import userfiles
 
     try:  # a regular file of a few lines (a FIFO or a device in a run is refused, never read)
         lines = userfiles.read_text(shard_dir / SUMS, what="shard's SHA256SUMS", max_bytes=1 << 16).splitlines()
@@ -177,7 +177,7 @@ def check_shard(run_dir: str | Path, name: str, expected: Mapping[str, str] | No
     sums = read_sums(folder)
     if sums is None:
         return f"{SUMS} missing or malformed"
-    from el.userfiles import UserFileError
+    from el.base.userfiles import UserFileError
 
     for f in shard_files():
         path = folder / f
@@ -253,7 +253,7 @@ def read_index(run_dir: str | Path) -> dict[str, dict[str, str]]:
     path = Path(run_dir) / INDEX
     if not path.is_file():
         return {}
-    from el import userfiles
+    from el.base import userfiles
 
     try:
         doc = json.loads(userfiles.read_text(path, what="shard index", max_bytes=MAX_RUN_JSON_BYTES))
@@ -295,7 +295,7 @@ def record_shards(run_dir: str | Path, hashes: Mapping[str, Mapping[str, str] | 
 
 
 def read_manifest(run_dir: str | Path) -> dict[str, Any]:
-    from el import userfiles
+    from el.base import userfiles
 
     path = Path(run_dir) / "manifest.json"
     if not path.is_file():
@@ -325,7 +325,7 @@ def table_caps(manifest: Mapping[str, Any]) -> tuple[int, int]:
 
 def read_table_file(path: str | Path, *, max_rows: int, within: str | Path | None = None,
                     max_decoded: int = MAX_TABLE_DECODED_BYTES) -> pd.DataFrame:
-    """One shard's Parquet table, read bounded: the file through ``el.userfiles`` (a regular file, inside
+    """One shard's Parquet table, read bounded: the file through ``el.base.userfiles`` (a regular file, inside
     ``within`` when given, at most ``MAX_TABLE_FILE_BYTES``), then refused (``RunError`` naming it) before any row
     is decoded when its footer declares more than ``max_rows`` rows, ``MAX_TABLE_COLUMNS`` columns or
     ``max_decoded`` bytes uncompressed."""
@@ -340,7 +340,7 @@ def _checked_table(path: Path, *, max_rows: int, within: str | Path | None, max_
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    from el import userfiles
+    from el.base import userfiles
 
     try:
         data = userfiles.read_bytes(path, what="readouts table", max_bytes=MAX_TABLE_FILE_BYTES, within=within)

@@ -49,7 +49,7 @@ MAX_LOG_BYTES = 16 << 20
 
 def wall_seconds(run_dir: str | Path) -> float | None:
     """Sum of the wall times of the run's campaign invocations (resumes included), None if unlogged."""
-    from el import userfiles
+    from el.base import userfiles
 
     path = Path(run_dir) / "log.jsonl"
     if not path.is_file():

@@ -1,9 +1,11 @@
 """A campaign's configuration and one task of it: a (perturbation, severity, image) through the flight kernel.
 
-The task reads and perturbs its frame (seeded per image), runs the kernel's stages (``el.kernel.prepare``: the pose
+The task reads and perturbs its frame (seeded per image), runs the kernel's stages (``el.flight.kernel.prepare``: the
+pose
 and the declared domain, segmentation, the frame gate, the CM's candidates) **once**, judges every candidate with
 every monitor configuration in one pass, sharing work between them (``judging``), and concludes each
-configuration's decision with the kernel (``el.kernel.conclude``), so that what a campaign measures is what flies.
+configuration's decision with the kernel (``el.flight.kernel.conclude``), so that what a campaign measures is what
+flies.
 
 A fault of the frame (reading, pose, segmentation, the gate, the candidates) is the task's: one row records it. A
 fault of one configuration (building its monitor, a model fitted on another network, judging a candidate) is that
@@ -37,16 +39,16 @@ from assurance.campaign.truth import true_hazard
 from assurance.dataio.poses import check_policy
 from assurance.dataio.uavid import Sample
 from assurance.perturbations import PERTURBATIONS, TRAITS, perturb, severities_of
-from el.config import CoreConfig, check_seed
-from el.core import default_area
-from el.deadline import Deadline
-from el.imageio import read_image_meta
-from el.kernel import Frame, Parts, build_parts, conclude, prepare
+from el.base.deadline import Deadline
+from el.base.imageio import read_image_meta
+from el.flight.kernel import Frame, Parts, build_parts, conclude, prepare
+from el.geometry.config import CoreConfig, check_seed
+from el.geometry.odd import OperatingDomain
+from el.landing.core import default_area
 from el.monitors import DEMO_GRID, build_monitor, parse_monitor_spec
 from el.monitors.spec import walk_of
-from el.odd import OperatingDomain
+from el.monitors.walk import walk_candidates
 from el.segmentation.contract import labels_of
-from el.walk import walk_candidates
 
 
 # ------------------------------------------------------------------------------------------------
@@ -80,7 +82,8 @@ class CampaignConfig:
     weights: str | dict[str, Any] | None = None  # None: the shipped weights; a dict: a system file's model
     core: CoreConfig = field(default_factory=CoreConfig)
     poses: str = "nominal"  # which pose plans each frame: assurance.dataio.poses.POLICIES
-    odd: dict[str, Any] | None = None  # the declared operating domain (el.odd.OperatingDomain.to_dict()); None: none
+    # the declared operating domain (el.geometry.odd.OperatingDomain.to_dict()); None: none
+    odd: dict[str, Any] | None = None
     gate: dict[str, str] | None = None  # the frame gate {"path", "sha256"} (el.monitors.frame_gate); None: none
     time_budget_s: float | None = None  # the flight's deadline (with the task's clock); None: none, so that the
     # readouts do not depend on the machine's speed
@@ -167,7 +170,7 @@ def task_seed(seed: int, frame: str, perturbation: str, severity: int) -> list[i
 
 
 def task_parts(config: CampaignConfig, segmenter: Any, labels: Any) -> Parts:
-    """The flight kernel's parts for a campaign's frames (``el.kernel.build_parts``, as flight builds them): its
+    """The flight kernel's parts for a campaign's frames (``el.flight.kernel.build_parts``, as flight builds them): its
     network, label set, CM configuration, declared domain and frame gate (read once per worker, refused when its file
     changed, it was fitted on another network or the network returns no frame statistics)."""
     odd = None if config.odd is None else OperatingDomain.from_dict(config.odd)
@@ -177,7 +180,8 @@ def task_parts(config: CampaignConfig, segmenter: Any, labels: Any) -> Parts:
 def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Callable[[], float] = time.perf_counter,
              world_clearance: Callable[..., Any] | None = None,
              expected_models: dict[str, str] | None = None) -> dict[str, list[dict[str, Any]]]:
-    """Evaluate one task: the flight kernel (``el.kernel``) on the perturbed frame, every configuration's verdicts
+    """Evaluate one task: the flight kernel (``el.flight.kernel``) on the perturbed frame, every configuration's
+    verdicts
     from one judging pass (``judging``), each configuration's decision concluded by the kernel, and the readout rows
     of its images and candidates tables. A frame the kernel refuses (declared domain, frame gate) is decided as in
     flight while every monitor's verdicts on its candidates stay in the readouts; a monitor model other than

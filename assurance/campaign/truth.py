@@ -15,9 +15,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from el.decision import Disc
-from el.discs import disc_bounds, disc_window_mask
-from el.labels import LabelSet
+from el.base.decision import Disc
+from el.classes.labels import LabelSet
+from el.geometry.discs import disc_bounds, disc_window_mask
 
 KAPPA = 0.5
 

@@ -24,7 +24,7 @@ from collections.abc import Iterator, Sequence
 from assurance import __version__
 from assurance.attest.key_paths import protect_signing_keys
 from assurance.errors import CommandError, DamagedRunError
-from el.errors import DataError, LabelColourError
+from el.base.errors import DataError, LabelColourError
 
 # Sub-command name -> module under assurance.cli. Order is the order of `uav-el --help`.
 COMMANDS: dict[str, str] = {

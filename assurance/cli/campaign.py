@@ -36,7 +36,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                                               "release preset's 70; the command says when scenes are left out)")
     p.add_argument("--gate", metavar="GATE.json",
                    help="frame gate (uav-el fit-gate; 'none': no gate; default: the system file's [monitor] gate, "
-                        "else el.pipeline.DEPLOYED_GATE on the shipped network): every image row "
+                        "else el.flight.pipeline.DEPLOYED_GATE on the shipped network): every image row "
                         "records its score and threshold; a frame above it is decided as the default action")
     model_option(p)
     p.add_argument("--seed", type=int, help="campaign seed (perturbations, MC dropout)")

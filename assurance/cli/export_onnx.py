@@ -41,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
             raise CommandError(f"{args.out}: with --beside, --out must be {weights.with_suffix('.onnx')}")
     frame = None
     if args.frame:
-        from el.imageio import read_image
+        from el.base.imageio import read_image
 
         frame = read_image(args.frame)
     result = export_onnx(args.model or None, args.out, opset=args.opset or DEFAULT_OPSET, frame=frame,

@@ -16,14 +16,16 @@ from typing import Any
 
 from assurance.errors import CommandError
 
-HELP = ("compare flight logs (uav-el land --log, el.flightlog) with the certification run of their system: drift of "
+HELP = ("compare flight logs (uav-el land --log, el.flight.flightlog) with the certification run of their system: "
+        "drift of "
         "the frame gate's and the monitor's scores, refusal, default and overrun rates, decision times, poses; judge "
         "the system file's [in_service] SPIs; write OUT/in-service.html and a signed OUT/in-service.json; exit 1 on "
         "a breach")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("logs", nargs="+", metavar="LOG", help="flight logs (JSON lines, el.flightlog), read in order")
+    p.add_argument("logs", nargs="+", metavar="LOG",
+                   help="flight logs (JSON lines, el.flight.flightlog), read in order")
     p.add_argument("--run", required=True, metavar="RUN", help="the certification campaign run (uav-el campaign --out)")
     p.add_argument("--out", default="reports/in-service", help="output folder (default: reports/in-service/)")
     p.add_argument("--signing-key", metavar="PEM", help="Ed25519 key that signs the report (default: "

@@ -4,7 +4,7 @@ Two pipelines (docs/architecture.md section 3.7):
 - ground truth: ``uav-el land --labels LABELS.png [--image IMAGE.png]`` runs the CM on the label
   map (a perfect segmentation), without a monitor; the image is only for drawing;
 - model: ``uav-el land IMAGE.png [--monitor SPEC]`` segments the image with the shipped CNN (or
-  ``--weights``), ranks the candidates and walks them with the runtime monitor (el.pipeline).
+  ``--weights``), ranks the candidates and walks them with the runtime monitor (el.flight.pipeline).
 
 Exit codes: 0 a decision was made (land or default action); 2 bad input or options (one line naming
 the file and the problem); 3 the flight path hit a fault (e.g. missing weights) and took the
@@ -22,12 +22,12 @@ from typing import Any
 from assurance.dataio.uavid import image_size, read_image, write_image
 from assurance.errors import CommandError
 from assurance.files import atomic_write_bytes
-from el.camera import CAMERAS, MAX_ROLL_DEG, Pose, geometry_problem
-from el.config import MODES, CoreConfig, make_intrinsics
-from el.decision import Decision
-from el.imageio import MAX_PIXELS, check_max_pixels
-from el.kernel import frame_core
-from el.pipeline import DEFAULT_TIME_BUDGET_S
+from el.base.decision import Decision
+from el.base.imageio import MAX_PIXELS, check_max_pixels
+from el.flight.kernel import frame_core
+from el.flight.pipeline import DEFAULT_TIME_BUDGET_S
+from el.geometry.camera import CAMERAS, MAX_ROLL_DEG, Pose, geometry_problem
+from el.geometry.config import MODES, CoreConfig, make_intrinsics
 
 HELP = "decide where to land for one frame (model pipeline, or the ground-truth pipeline with --labels)"
 
@@ -42,7 +42,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", type=Path, metavar="OUT.json", help="write the decision as JSON")
     parser.add_argument("--overlay", type=Path, metavar="OUT.png", help="draw the decision into a PNG")
     parser.add_argument("--log", type=Path, metavar="FILE", help="append the decision's record to this flight log "
-                        "(el.flightlog, JSON lines; model pipeline; uav-el in-service reads it)")
+                        "(el.flight.flightlog, JSON lines; model pipeline; uav-el in-service reads it)")
     parser.add_argument("--height", type=float, default=None, metavar="M",
                         help=f"flight height above the ground in metres (default: the system file's, else "
                              f"{Pose().height_m})")
@@ -72,13 +72,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--monitor", default=None, metavar="SPEC",
                         help="runtime monitor: none, lhd, 'lhd+ch:tau=0.25', 'lhd+mcd:n=10,rho=0.9', "
                              "'lhd+ch+mcd:tau=0.125,n=30,rho=0.5', a registered monitor such as msp "
-                             "(default: the deployed monitor, el.pipeline.DEPLOYED_MONITOR, or the "
+                             "(default: the deployed monitor, el.flight.pipeline.DEPLOYED_MONITOR, or the "
                              "--calibration card's monitor; model pipeline)")
     parser.add_argument("--calibration", type=Path, metavar="CALIB.json",
                         help="calibration card (uav-el calibrate): run the monitor at its calibrated threshold")
     parser.add_argument("--gate", type=Path, metavar="GATE.json",
                         help="frame gate (uav-el fit-gate; 'none': no gate; default: the system file's [monitor] "
-                             "gate, else el.pipeline.DEPLOYED_GATE on the shipped network): a frame "
+                             "gate, else el.flight.pipeline.DEPLOYED_GATE on the shipped network): a frame "
                              "above its threshold takes the default action (out_of_domain); its score is in the "
                              "decision JSON")
     parser.add_argument("--weights", "--model", dest="weights", metavar="MODEL",
@@ -185,10 +185,11 @@ def run(args: argparse.Namespace) -> int:
 
 
 def run_model(args: argparse.Namespace) -> int:
-    """The model pipeline (el.pipeline): the system's network, monitor and frame gate built once, the frame decoded
+    """The model pipeline (el.flight.pipeline): the system's network, monitor and frame gate built once, the frame
+    decoded
     once, then segmentation -> frame gate -> candidates -> monitored walk."""
     from assurance.cli.system_options import assessed
-    from el.pipeline import EmergencyLanding, FrameFile
+    from el.flight.pipeline import EmergencyLanding, FrameFile
 
     if args.image is not None:
         raise CommandError("--image is for the ground-truth pipeline; give the image as IMAGE")
@@ -222,7 +223,7 @@ def _flight_log(args: argparse.Namespace, system: Any) -> Any:
     """The flight log ``--log`` names (appended to), the system file's SHA-256 its identity; None without it."""
     if args.log is None:
         return None
-    from el.flightlog import FlightLog
+    from el.flight.flightlog import FlightLog
 
     if not args.log.parent.is_dir():  # said here in one line; the flight function would log it as well
         raise CommandError(f"{args.log}: cannot open the flight log: no folder {args.log.parent}")
@@ -237,7 +238,7 @@ def _monitor_of(args: argparse.Namespace, system: Any) -> tuple[str | None, Path
     pair (a card given without a spec deploys the card's own monitor)."""
     if args.monitor is None and args.calibration is None:
         return system.deployed()
-    from el.pipeline import PipelineConfig
+    from el.flight.pipeline import PipelineConfig
 
     monitor, calibration = args.monitor or system.monitor or PipelineConfig().monitor, \
         args.calibration or system.calibration

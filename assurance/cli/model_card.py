@@ -50,7 +50,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _print_card(card: dict[str, Any], path: Path) -> None:
-    from el.labels import CLASS_NAMES
+    from el.classes.labels import CLASS_NAMES
 
     print(f"weights:      {path}")
     print(f"sha256:       {card['weights_sha256']}")

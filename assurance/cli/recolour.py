@@ -27,7 +27,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from assurance.scenes.recolour import recolour_dataset
-    from el.labels import load_label_set
+    from el.classes.labels import load_label_set
 
     if not args.data.is_dir():
         raise CommandError(f"--data {args.data}: no such folder")

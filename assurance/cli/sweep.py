@@ -18,7 +18,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--monitors", nargs="+", metavar="NAME",
                    help="configurations to sweep, as named in the run (default: every one with scores)")
     p.add_argument("--walks", nargs="+", choices=("hazard", "score"),
-                   help="walk orders to replay (el.walk; default: each configuration's own)")
+                   help="walk orders to replay (el.monitors.walk; default: each configuration's own)")
     p.add_argument("--out", type=Path, help="folder for sweep.csv, sweep.md and sweep.png (default: the run folder)")
     p.add_argument("--gate", metavar="GATE.json", help="also replay a frame gate (uav-el fit-gate): the run's frames "
                                                         "are re-perturbed with its seeds and scored; needs --data")

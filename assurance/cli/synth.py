@@ -9,8 +9,8 @@ from pathlib import Path
 
 from assurance.errors import CommandError
 from assurance.scenes.generate import ViewPlan
-from el.camera import CAMERAS, Pose
-from el.config import make_intrinsics
+from el.geometry.camera import CAMERAS, Pose
+from el.geometry.config import make_intrinsics
 
 HELP = "Generate synthetic oblique urban scenes (UAVid layout: Images, Labels, meta) with a progress bar."
 

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from assurance.system import SystemFile, default_system
 from assurance.system.system import System
-from el import userfiles
+from el.base import userfiles
 
 
 def train_val_dirs(args: argparse.Namespace, system: SystemFile) -> None:

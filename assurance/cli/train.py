@@ -116,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(f"--threads must be >= 1, got {args.threads}")
     if args.prefetch is not None and args.prefetch < 0:
         raise CommandError(f"--prefetch must be >= 0, got {args.prefetch}")
-    from el.config import check_seed
+    from el.geometry.config import check_seed
 
     check_seed(args.seed, "--seed")
     from assurance.fitting.network.training import resolve_device

@@ -23,9 +23,9 @@ import numpy as np
 from assurance.dataio import uavid
 from assurance.dataio.poses import POSES_FILE, read_poses
 from assurance.dataio.uavid import META_DIR, Sample, check_same_size
-from el import userfiles
-from el.errors import DataError
-from el.labels import LabelSet
+from el.base import userfiles
+from el.base.errors import DataError
+from el.classes.labels import LabelSet
 
 LAYOUTS = ("uavid", "semantic-drone", "aeroscapes", "pairs")
 ENCODINGS = ("rgb", "ids")
@@ -349,7 +349,7 @@ def _grey_values(path: Path) -> np.ndarray:
     file whose three channels agree is read as grey. Size refused above the pixel limit before decoding."""
     from PIL import Image, UnidentifiedImageError
 
-    from el.imageio import image_size
+    from el.base.imageio import image_size
 
     image_size(path)  # DataError: missing, or above the pixel limit (from the header)
     try:

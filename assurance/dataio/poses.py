@@ -21,9 +21,9 @@ from pathlib import Path
 from typing import Any
 
 from assurance.files import atomic_write_bytes
-from el import userfiles
-from el.camera import HEIGHT_M, MAX_ROLL_DEG, PITCH_DEG, Pose
-from el.errors import DataError
+from el.base import userfiles
+from el.base.errors import DataError
+from el.geometry.camera import HEIGHT_M, MAX_ROLL_DEG, PITCH_DEG, Pose
 
 POSES_FILE = "poses.csv"
 POLICIES = ("nominal", "sidecar", "required")
@@ -51,7 +51,7 @@ def read_poses(path: str | Path) -> dict[str, FramePose]:
     """Read a poses sidecar: {frame: FramePose}. DataError naming file, line, column and value for any problem
     (unknown or missing header columns, a value that is not a number or out of range, a duplicate frame).
 
-    The file is read through ``el.userfiles`` (a regular file of at most ``MAX_POSES_BYTES``: a FIFO or a device
+    The file is read through ``el.base.userfiles`` (a regular file of at most ``MAX_POSES_BYTES``: a FIFO or a device
     is refused before any read) and its rows are parsed one at a time, so memory stays a small multiple of the
     file's size (a 200 MB sidecar read whole into a list of rows took 3.5 GB)."""
     path = Path(path)
@@ -126,11 +126,11 @@ def sequence_poses(seq_dir: Path, frames: set[str]) -> dict[str, FramePose]:
 
 def read_meta(path: str | Path) -> dict[str, Any]:
     """A scene's meta JSON (``meta/*.json``: pose, seed, split, style, world model), read through the bounded
-    reader (``el.userfiles``: a regular file of at most ``MAX_META_BYTES``, never under ``/proc``, ``/sys`` or
+    reader (``el.base.userfiles``: a regular file of at most ``MAX_META_BYTES``, never under ``/proc``, ``/sys`` or
     ``/dev``): data folders are not signed, so one may be a FIFO or a link to ``/dev/zero``. ``FileNotFoundError``
     when there is none; ``ValueError`` (``UserFileError``) naming the file when it is refused, not JSON or not an
     object."""
-    from el import userfiles
+    from el.base import userfiles
 
     p = Path(path)
     if not p.exists() and not p.is_symlink():

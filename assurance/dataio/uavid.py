@@ -1,4 +1,4 @@
-"""Images and label maps in the UAVid layout, ``ROOT/seqNN/{Images,Labels}/NNNNNN.png`` (a frame: ``el.imageio``).
+"""Images and label maps in the UAVid layout, ``ROOT/seqNN/{Images,Labels}/NNNNNN.png`` (a frame: ``el.base.imageio``).
 
 Images cross the API as RGB uint8 arrays (H, W, 3); OpenCV's BGR order stays inside this module.
 Every error names the file and the problem, so a command line can print it as one line.
@@ -16,12 +16,12 @@ import numpy as np
 
 from assurance.dataio.poses import POSES_FILE, sequence_poses
 from assurance.files import atomic_write_bytes, public_mode  # noqa: F401  (re-exported)
-from el.camera import Pose
-from el.errors import DataError
-from el.imageio import image_size as header_image_size
-from el.imageio import read_image
-from el.labels import LabelSet
-from el.rgb import check_rgb
+from el.base.errors import DataError
+from el.base.imageio import image_size as header_image_size
+from el.base.imageio import read_image
+from el.base.rgb import check_rgb
+from el.classes.labels import LabelSet
+from el.geometry.camera import Pose
 
 IMAGE_DIR = "Images"
 LABEL_DIR = "Labels"
@@ -131,7 +131,7 @@ def iter_samples(root: str | Path, *, require_labels: bool = True, check_sizes: 
 
 def image_size(path: str | Path) -> tuple[int, int]:
     """(width, height) of an image as read (EXIF orientation applied), from its header without decoding it when
-    it has one (PNG, JPEG); DataError above the pixel limit (``el.imageio.image_size``)."""
+    it has one (PNG, JPEG); DataError above the pixel limit (``el.base.imageio.image_size``)."""
     return header_image_size(path)
 
 

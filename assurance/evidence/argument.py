@@ -265,7 +265,7 @@ def to_yaml(nodes: Mapping[str, Node]) -> str:
 
 def from_yaml(text: str) -> dict[str, Node]:
     """Read a gsn2x YAML argument back (ValueError for one that is not a mapping of elements with a text)."""
-    from el.safeyaml import safe_load
+    from el.base.safeyaml import safe_load
 
     doc = safe_load(text)
     if not isinstance(doc, dict):

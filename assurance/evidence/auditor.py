@@ -43,7 +43,7 @@ def issre_view(inp: Any, n_boot: int) -> tuple[list[dict[str, Any]], list[dict[s
 
 def package_entries(inp: Any, record: dict[str, Any]) -> list[dict[str, Any]]:
     """AMLAS index entries of the data and model records, the model and monitor cards and the report's files."""
-    from el.hashing import sha256_file
+    from el.base.hashing import sha256_file
     from el.segmentation.weights import card_path
 
     def sha(path: Path) -> str:

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from el.userfiles import MAX_RECORD_BYTES, UserFileError, read_bytes
+from el.base.userfiles import MAX_RECORD_BYTES, UserFileError, read_bytes
 
 TABLE_COLUMNS = ("monitor", "criterion", "threshold", "perturbation", "auroc", "images", "miss_rate", "fp_rate",
                  "unsafe_landings", "g_star")

@@ -164,8 +164,8 @@ def system_view(inp: Inputs) -> dict[str, Any] | None:
 
 def _ships_gate(man: Mapping[str, Any]) -> bool:
     """Whether the run deployed the shipped frame gate (whose validation study the package carries)."""
-    from el.hashing import sha256_file
-    from el.pipeline import DEPLOYED_GATE
+    from el.base.hashing import sha256_file
+    from el.flight.pipeline import DEPLOYED_GATE
 
     gate = (man.get("config") or {}).get("gate") or {}
     return bool(gate) and DEPLOYED_GATE.is_file() and gate.get("sha256") == sha256_file(DEPLOYED_GATE)
@@ -265,7 +265,7 @@ def _safe_strips(inp: Inputs, scenes: Any, keys: list[str]) -> dict[str, Any]:
     from assurance.evidence.safe_strips import safe_class_strips
 
     if inp.system is None:
-        from el.labels import UAVID as labels
+        from el.classes.labels import UAVID as labels
     else:
         labels = system_build.label_set(inp.system)
     return safe_class_strips(scenes.samples, keys, labels)

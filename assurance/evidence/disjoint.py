@@ -36,8 +36,8 @@ def spec_of(source: Any) -> dict[str, Any]:
 def _read_frames(source: Any) -> dict[str, Any]:
     from assurance.dataio.layouts import iter_samples
     from assurance.fitting.learned_monitor import split_digest
-    from el.errors import DataError
-    from el.hashing import sha256_file
+    from el.base.errors import DataError
+    from el.base.hashing import sha256_file
 
     try:
         samples = list(iter_samples(source, require_labels=False))

@@ -1,4 +1,4 @@
-"""The report's declared operating domain (the run's ``[odd]``, ``el.odd``): per dimension the declaration and
+"""The report's declared operating domain (the run's ``[odd]``, ``el.geometry.odd``): per dimension the declaration and
 the evidence that covers it (campaign frames, the pose margin of beta, the perturbations and severities
 evaluated), and per perturbation the frames that ended outside the domain."""
 
@@ -7,7 +7,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from el.odd import OUTSIDE_ODD, OperatingDomain
+from el.geometry.odd import OUTSIDE_ODD, OperatingDomain
 
 
 def _span(values: Any, unit: str) -> str:

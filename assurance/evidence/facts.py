@@ -101,10 +101,11 @@ def camera_row(core: Mapping[str, Any], named: bool) -> str:
 
 
 def stripes_text(core: Mapping[str, Any], frames: Any, size: tuple[int, int] | None) -> str:
-    """Which image stripes may hold a landing (``el.camera.CameraGeometry.unreachable_stripes``) at the poses and
+    """Which image stripes may hold a landing (``el.geometry.camera.CameraGeometry.unreachable_stripes``) at the poses
+    and
     sizes of the evaluated frames (else the nominal pose at ``size``)."""
-    from el.camera import MIN_DEPRESSION_DEG, NUM_STRIPES, Pose
-    from el.config import CoreConfig
+    from el.geometry.camera import MIN_DEPRESSION_DEG, NUM_STRIPES, Pose
+    from el.geometry.config import CoreConfig
 
     try:
         cfg = CoreConfig.from_dict(dict(core))
@@ -120,7 +121,7 @@ def stripes_text(core: Mapping[str, Any], frames: Any, size: tuple[int, int] | N
     if not counts:
         return "not computed (no evaluated frame)"
     poses = "at the nominal pose" if len(cases) == 1 else f"over the {len(cases)} poses and sizes of the frames"
-    why = (f"(el.camera.CameraGeometry {poses}: a stripe is a landing target when its top row looks at least "
+    why = (f"(el.geometry.camera.CameraGeometry {poses}: a stripe is a landing target when its top row looks at least "
            f"{MIN_DEPRESSION_DEG:g} degrees below the horizon and sees ground within {cfg.reach_m:g} m)")
     if counts == [0]:
         return f"all {NUM_STRIPES} image stripes reachable, none excluded {why}"
@@ -188,7 +189,7 @@ def _record(path: Path) -> dict[str, Any] | None:
     """A fitted record's body, read bounded (a run's manifest names the file; None when unreadable)."""
     import json
 
-    from el.userfiles import MAX_RECORD_BYTES, read_text
+    from el.base.userfiles import MAX_RECORD_BYTES, read_text
 
     try:
         doc = json.loads(read_text(path, what="record", max_bytes=MAX_RECORD_BYTES))
@@ -213,8 +214,8 @@ def frame_gate_text(config: Mapping[str, Any]) -> str:
 def gate_identity(path: str | None, recorded: Any, body: Mapping[str, Any] | None) -> str:
     """The gate file's SHA-256 (the one the AMLAS index shows) when its body is still the one the run recorded
     (``recorded``: the record's body hash); else the recorded body hash, labelled as such."""
-    from el.hashing import sha256_file
-    from el.records import body_sha256
+    from el.base.hashing import sha256_file
+    from el.base.records import body_sha256
 
     body_hash = f"record body SHA-256 {str(recorded)[:16]}, as the run recorded it"
     if not path or body is None or not Path(path).is_file():

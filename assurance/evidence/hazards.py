@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from assurance import requirements as rq
-from el.errors import DataError
+from el.base.errors import DataError
 
 SEVERITIES = ("catastrophic", "hazardous", "major", "minor")
 
@@ -59,8 +59,8 @@ def load_hazards(path: str | Path | None, registry: rq.Registry) -> HazardLog:
     unique hazard ids); HazardLogError naming the file and the first problem."""
     import jsonschema
 
-    from el.hashing import sha256_file
-    from el.safeyaml import load_file
+    from el.base.hashing import sha256_file
+    from el.base.safeyaml import load_file
 
     path = Path(path) if path else default_hazards_path()
     try:

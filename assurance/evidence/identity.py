@@ -18,7 +18,7 @@ from assurance.analysis.table import results_table
 from assurance.campaign import readouts
 from assurance.campaign.integrity import RunCheck, tree_sha256
 from assurance.evidence.text import STATE_CLASS, fmt, to_float
-from el.hashing import sha256_file
+from el.base.hashing import sha256_file
 
 HIGHER_IS_BETTER = {"g_cm": True, "g_rm": True, "g_star": True, "mcc": True, "f1": True, "precision": True,
                     "recall": True, "fp_rate": False, "overhead_s": False, "unsafe_landing_rate": False,
@@ -29,7 +29,7 @@ HIGHER_IS_BETTER = {"g_cm": True, "g_rm": True, "g_star": True, "mcc": True, "f1
 
 def _file_identity(path: str) -> str | None:
     """A weights file's identity now: an ONNX file's external data included (None: it cannot be read)."""
-    from el.errors import WeightsError
+    from el.base.errors import WeightsError
     from el.segmentation.onnx_engine import file_identity
 
     try:

@@ -61,7 +61,7 @@ def _function_lines(path: Path, cache: dict[Path, dict[str, int]]) -> dict[str, 
     """``name`` / ``Class::name`` -> line of each test function of a Python file (empty when unreadable)."""
     if path in cache:
         return cache[path]
-    from el.userfiles import UserFileError, read_text
+    from el.base.userfiles import UserFileError, read_text
 
     lines: dict[str, int] = {}
     try:

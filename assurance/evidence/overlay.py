@@ -13,10 +13,10 @@ from typing import Any
 import cv2
 import numpy as np
 
-from el.camera import CameraGeometry, Pose
-from el.config import CoreConfig
-from el.decision import Decision
-from el.labels import ids_to_colors
+from el.base.decision import Decision
+from el.classes.labels import ids_to_colors
+from el.geometry.camera import CameraGeometry, Pose
+from el.geometry.config import CoreConfig
 
 # RGB colours of the candidate statuses (the legend uses the same table).
 STATUS_COLOURS: dict[str, tuple[int, int, int]] = {
@@ -39,7 +39,7 @@ def candidate_status(candidate: dict[str, Any], any_monitored: bool) -> str:
 
 def _first_reachable_row(d: dict[str, Any], W: int, H: int) -> int:
     """The first reachable row of the camera, pose and reach the decision records (they set the unreachable
-    stripes, el.camera.CameraGeometry.unreachable_stripes); the nominal ones where it records none."""
+    stripes, el.geometry.camera.CameraGeometry.unreachable_stripes); the nominal ones where it records none."""
     if W < 8 or H < 8:
         return 0
     try:

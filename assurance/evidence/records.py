@@ -45,7 +45,7 @@ PACKAGE = ROOT / "el"
 
 def _json(path: Path) -> dict[str, Any] | None:
     """A card or record (its body), read bounded: the run's manifest names these paths; None when unreadable."""
-    from el.userfiles import MAX_RECORD_BYTES, read_text
+    from el.base.userfiles import MAX_RECORD_BYTES, read_text
 
     try:
         doc = json.loads(read_text(path, what="record", max_bytes=MAX_RECORD_BYTES))
@@ -83,7 +83,7 @@ def _balance(metas: list[dict[str, Any]]) -> str:
 def _card_balance(freqs: Any, package: bool) -> str:
     """The training class frequencies of a model card: named by the UAVid classes for the package's own card (its
     network's), else by channel (a card records no class names)."""
-    from el.labels import UAVID
+    from el.classes.labels import UAVID
 
     if not freqs:
         return ""

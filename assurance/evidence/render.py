@@ -69,7 +69,7 @@ MAX_TEMPLATE_BYTES = 1 << 20
 
 def bounded_loader(supplied: Sequence[Path], packaged: Path = TEMPLATES_DIR) -> Any:
     """A Jinja2 loader of the templates in the ``supplied`` folders, then the ``packaged`` one (the first folder
-    holding a name wins). A supplied folder is the applicant's: each file of it is read through ``el.userfiles``,
+    holding a name wins). A supplied folder is the applicant's: each file of it is read through ``el.base.userfiles``,
     confined to its folder (a symbolic link out of it, a FIFO, a device, a folder or a file over
     :data:`MAX_TEMPLATE_BYTES` is refused, ``UserFileError`` naming it, before a read that could block, never end
     or disclose the auditor's files), and recorded in ``.reads`` (relative path -> SHA-256)."""
@@ -79,7 +79,7 @@ def bounded_loader(supplied: Sequence[Path], packaged: Path = TEMPLATES_DIR) -> 
     from jinja2 import BaseLoader, TemplateNotFound
     from jinja2.loaders import split_template_path
 
-    from el.userfiles import read_text
+    from el.base.userfiles import read_text
 
     class BoundedLoader(BaseLoader):
         reads: dict[str, str]
@@ -135,7 +135,7 @@ def _render(env: Any, name: str, context: Mapping[str, Any]) -> str:
     from jinja2 import TemplateSyntaxError
     from jinja2.exceptions import SecurityError
 
-    from el.userfiles import UserFileError
+    from el.base.userfiles import UserFileError
 
     try:
         return env.get_template(name).render(**context)

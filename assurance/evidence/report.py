@@ -40,7 +40,7 @@ from assurance.evidence.render import (
 from assurance.evidence.signatures import check_results_signature
 from assurance.evidence.text import jsonable
 from assurance.system import build as system_build
-from el.hashing import sha256_file
+from el.base.hashing import sha256_file
 
 EVIDENCE_FORMAT = "uav-el-evidence/1"
 log = logging.getLogger(__name__)
@@ -180,7 +180,7 @@ def _system_settings(system: Any, waivers: Any, templates: Any, targets: Any, ta
 
 def _label_classes(system: Any) -> list[dict[str, str]]:
     """The label set's classes as the first page lists them: name, forbidden or safe, hazard category."""
-    from el.labels import UAVID
+    from el.classes.labels import UAVID
 
     if system is None:
         labels = UAVID

@@ -1,7 +1,8 @@
 """What each safe class covers, shown rather than named: one strip of the run's own frames per safe class.
 
 A class's name and its declared hazard category are words the applicant chose; the certification basis can pin the
-category of well-known names (``el.class_names``), but no word list recognises every synonym or language (``lane``,
+category of well-known names (``el.classes.class_names``), but no word list recognises every synonym or language
+(``lane``,
 ``tarmac``, ``Straße``, ``voiture``) or a class called ``meadow`` painted over asphalt. The report's first page
 therefore shows the auditor, for each safe class, a few frames of the run's own test data with that class's pixels
 tinted and every other pixel greyed: asphalt, cars or roofs under a "safe" tint are seen at a glance.

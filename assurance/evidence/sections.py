@@ -63,7 +63,7 @@ def domain(man: Mapping[str, Any], registry: rq.Registry, size: tuple[int, int] 
         {"name": "Safety radius", "value": f"R = {safety['radius_m']:g} m, beta = {safety['beta']:g}"},
         {"name": "Required beta",
          "value": (f"{need:.3f} for height and pitch each off by up to {pe['height']:.0%} / {pe['pitch']:.0%} "
-                   f"(el.camera.required_beta, worst case over the reachable rows): "
+                   f"(el.geometry.camera.required_beta, worst case over the reachable rows): "
                    f"{'covered' if need <= safety['beta'] else 'NOT covered'} by beta = {safety['beta']:g}")
          if need is not None else "n/a (no evaluated image)"},
         {"name": "Landing area", "value": f"{facts.stripes}; candidate discs wholly inside the image; mode "

@@ -28,7 +28,7 @@ def load_waivers(path: str | Path) -> dict[str, dict[str, str]]:
     """
     import yaml
 
-    from el import safeyaml
+    from el.base import safeyaml
 
     path = Path(path)
     try:  # a regular file of at most 1 MiB (a FIFO or a device refused before any read), no aliases, dates as text
@@ -62,7 +62,7 @@ def _version_tuple(text: str) -> tuple[int, ...]:
 def _text_dates_loader() -> type:
     """The bounded YAML loader keeping dates as written (``2026-02-30`` would fail inside the YAML parser, naming
     neither the file nor the waiver; :func:`_expiry` reads the text)."""
-    from el import safeyaml
+    from el.base import safeyaml
 
     class TextDates(safeyaml.BoundedSafeLoader):
         pass

@@ -23,7 +23,7 @@ def _road_safe(ws: Path) -> list[str]:
     """A label set declaring UAVid's road safe (hazard score 0): flown, it would land on roads."""
     import yaml
 
-    from el.labels import UAVID
+    from el.classes.labels import UAVID
 
     doc = UAVID.to_dict()
     road = next(c for c in doc["classes"] if c["name"] == "road")
@@ -49,7 +49,7 @@ def _external_net(ws: Path, name: str, location: str = "weights.bin") -> Path:
     import onnx
     import torch
 
-    from el.labels import UAVID
+    from el.classes.labels import UAVID
 
     folder = ws / name
     folder.mkdir(exist_ok=True)
@@ -67,7 +67,7 @@ def _external_net(ws: Path, name: str, location: str = "weights.bin") -> Path:
 
 
 def _onnx_system(ws: Path, name: str, path: Path, pin: str | None) -> Path:
-    from el.labels import UAVID
+    from el.classes.labels import UAVID
 
     names = ", ".join(f'"{n}"' for n in UAVID.names)
     sha = f'sha256 = "{pin}"\n' if pin else ""
@@ -133,7 +133,7 @@ def _shipped_export_on_photo(ws: Path) -> list[str]:
 
 def _uavid_doc(**road: object) -> dict:
     """UAVid's label set as a document, its road updated with ``road``."""
-    from el.labels import UAVID
+    from el.classes.labels import UAVID
 
     doc = UAVID.to_dict()
     next(c for c in doc["classes"] if c["name"] == "road").update(road)
@@ -151,7 +151,7 @@ def _label_set_swapped_back(ws: Path) -> list[str]:
     """A campaign flown with a label set file declaring road safe (the tiny network's classes mapped onto it one to
     one), the honest file put back under the same name after the run: the readouts were judged with road safe."""
     from assurance.fault_injection.case import prepare
-    from el.labels import UAVID
+    from el.classes.labels import UAVID
 
     labels = ws / "labels-pinned.yaml"
     names = ", ".join(f'{n} = "{n}"' for n in UAVID.names)

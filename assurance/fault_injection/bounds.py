@@ -185,8 +185,8 @@ def _seed(ws: Path) -> list[str]:
 
 def _card_threshold(ws: Path) -> list[str]:
     """A system deploying the shipped spec on the shipped card re-hashed at another threshold (0.9)."""
+    from el.flight.pipeline import DEPLOYED_CALIBRATION, DEPLOYED_MONITOR
     from el.monitors.calibration import card_document
-    from el.pipeline import DEPLOYED_CALIBRATION, DEPLOYED_MONITOR
 
     body = dict(json.loads(DEPLOYED_CALIBRATION.read_text())["body"])
     body.update(threshold=0.9, spec="learned:walk=score,threshold=0.9")

@@ -92,7 +92,7 @@ def reseal_shard(run: Path, name: str) -> None:
     """Re-hash an edited shard in its own SHA256SUMS and the run's index, as a forger (or a test that needs odd
     readouts that still verify) would: only a signed statement over the files still tells the edit."""
     from assurance.campaign import readouts
-    from el.hashing import sha256_file
+    from el.base.hashing import sha256_file
 
     folder = Path(run) / readouts.SHARDS / name
     sums = {f: sha256_file(folder / f) for f in readouts.shard_files()}

@@ -125,7 +125,7 @@ def _changed_weights(ws: Path) -> list[str]:
 
 def _training_split(ws: Path) -> list[str]:
     """EL-R16 asked of two training-split scenes, with the deployed monitor and its calibration card."""
-    from el.pipeline import PipelineConfig
+    from el.flight.pipeline import PipelineConfig
 
     data, run = ws / "data-train", ws / "run-train"
     prepare(["synth", "--out", data, "--split", "train", "--scenes", "2", "--size", "320x180", "--no-progress"])

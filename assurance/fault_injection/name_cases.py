@@ -1,7 +1,8 @@
 """Fault-injection cases of class names, categories and colours (issue 57; rows ``T70``..``T79``).
 
 A label set's words are the applicant's: a class name outside the restricted identifier profile (small capitals,
-Armenian or Cherokee letters, a Braille blank, a Hangul filler: ``el.name_profile``) is refused when the set is read
+Armenian or Cherokee letters, a Braille blank, a Hangul filler: ``el.classes.name_profile``) is refused when the set is
+read
 (exit 2, one line naming the set, the class and the character); a safe class of the category ``unknown`` (declared or
 implied) and a safe class in a colour a well-known label set gives a forbidden class are deviations named on the
 first page, which still states the gate's own verdict and shows each safe class's pixels on the run's frames; so is

@@ -130,7 +130,7 @@ def _missing_tasks(ws: Path) -> list[str]:
 
 
 def _resealed(src: Path, dst: Path, **body: object) -> Path:
-    from el.records import body_sha256
+    from el.base.records import body_sha256
 
     doc = json.loads(src.read_text(encoding="utf-8"))
     doc["body"].update(body)
@@ -141,7 +141,7 @@ def _resealed(src: Path, dst: Path, **body: object) -> Path:
 
 def _gate_1e300(ws: Path) -> list[str]:
     """The shipped frame gate re-hashed at threshold 1e300 (it passes every frame), named by a system file."""
-    from el.pipeline import DEPLOYED_GATE
+    from el.flight.pipeline import DEPLOYED_GATE
 
     gate = _resealed(Path(DEPLOYED_GATE), ws / "gate-1e300.json", threshold=1e300)
     return _land(ws, _system(ws, "sys-gate", f'[monitor]\ngate = "{gate.name}"\n'))
@@ -149,7 +149,7 @@ def _gate_1e300(ws: Path) -> list[str]:
 
 def _card_1e300(ws: Path) -> list[str]:
     """The shipped calibration card re-hashed at threshold 1e300 (it accepts every candidate)."""
-    from el.pipeline import DEPLOYED_CALIBRATION
+    from el.flight.pipeline import DEPLOYED_CALIBRATION
 
     card = _resealed(Path(DEPLOYED_CALIBRATION), ws / "card-1e300.json", threshold=1e300,
                      spec="learned:walk=score,threshold=1e+300")
@@ -299,7 +299,7 @@ def _feb30_waiver(ws: Path) -> list[str]:
 
 def _hierarchy_link_outside(ws: Path) -> list[str]:
     """A label set (UAVid's, copied) naming ``hierarchy: tree.yaml``, a symbolic link to a file outside its folder."""
-    from el.labels import PRESET_DIR
+    from el.classes.labels import PRESET_DIR
 
     folder = ws / "labels-link"
     folder.mkdir(exist_ok=True)

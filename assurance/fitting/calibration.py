@@ -134,8 +134,8 @@ def calibrate_on_data(data: str | Path, monitor: str, *, miss_rate: float, confi
     """
     from assurance.campaign.run import CampaignConfig, Task, plan, run_task
     from assurance.fitting.network_identity import network_record
-    from el.config import CoreConfig
-    from el.hashing import sha256_file
+    from el.base.hashing import sha256_file
+    from el.geometry.config import CoreConfig
 
     _check_rates(miss_rate, confidence)
     base = parse_monitor_spec(monitor)

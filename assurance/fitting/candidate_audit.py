@@ -20,9 +20,9 @@ from assurance.campaign.truth import disc_pixels
 from assurance.dataio.layouts import iter_samples, read_sample_labels
 from assurance.dataio.uavid import read_image
 from assurance.fitting.separation import disc_scores, separation
-from el.config import CoreConfig
-from el.core import run_core
-from el.labels import LabelSet
+from el.classes.labels import LabelSet
+from el.geometry.config import CoreConfig
+from el.landing.core import run_core
 from el.segmentation.contract import labels_of
 
 Progress = Callable[..., Iterable]

@@ -17,7 +17,7 @@ import numpy as np
 
 from assurance.analysis.criteria import candidate_threshold
 from assurance.fitting.learned_monitor import CandidateSet
-from el.labels import LabelSet
+from el.classes.labels import LabelSet
 from el.monitors.fitted import DetectorRecord
 from el.monitors.gmm import gmm_score
 from el.monitors.learned import base_features

@@ -37,7 +37,7 @@ def domain_refused(root: Path, name: str, count: int) -> np.ndarray:
     from assurance.dataio.poses import read_meta
     from assurance.system import default_system
     from assurance.system.build import odd
-    from el.camera import Pose
+    from el.geometry.camera import Pose
 
     domain = odd(default_system())
     out = []

@@ -32,10 +32,10 @@ from assurance.campaign.truth import true_hazard
 from assurance.dataio.layouts import iter_samples, read_sample_labels
 from assurance.dataio.uavid import Sample, read_image
 from assurance.paths import shown_path
-from el.config import CoreConfig
-from el.core import run_core
-from el.hashing import sha256_file
-from el.labels import LabelSet
+from el.base.hashing import sha256_file
+from el.classes.labels import LabelSet
+from el.geometry.config import CoreConfig
+from el.landing.core import run_core
 from el.monitors.base import CandidateContext
 from el.monitors.learned import MCD_FEATURES, base_features, candidate_features, model_document
 from el.monitors.patches import extract_patch

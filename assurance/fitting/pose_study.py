@@ -28,9 +28,9 @@ from assurance.campaign.gt_pipeline import decide_from_labels
 from assurance.scenes.generate import default_geometry, generate_world, scene_seed
 from assurance.scenes.renderer import render
 from assurance.scenes.world import World, pixel_clearance_m
-from el.camera import Pose, SafetyParams
-from el.config import CoreConfig
-from el.labels import FORBIDDEN_LUT, UAVID
+from el.classes.labels import FORBIDDEN_LUT, UAVID
+from el.geometry.camera import Pose, SafetyParams
+from el.geometry.config import CoreConfig
 
 POSE_ERRORS = (-0.2, 0.0, 0.2)
 

@@ -24,7 +24,7 @@ import numpy as np
 from assurance.analysis.intervals import BOOTSTRAP_METHOD
 from assurance.analysis.scores import auroc as scores_auroc
 from assurance.analysis.scores import grouped_auroc_ci
-from el.forbidden import top_scores
+from el.landing.forbidden import top_scores
 from el.monitors.lhd import disc_pixels
 from el.monitors.patches import extract_patch
 from el.segmentation.contract import labels_of

@@ -1,7 +1,8 @@
 """The verifier's training data: crops of the core model's candidates with the campaign's truth.
 
 For every labelled scene of a split: the network segments the frame, the core model proposes its candidates
-(``el.core.run_core``), and each candidate gives one crop (``el.monitors.verifier_crop.candidate_crop``) labelled
+(``el.landing.core.run_core``), and each candidate gives one crop (``el.monitors.verifier_crop.candidate_crop``)
+labelled
 **unsafe** when its disc holds a forbidden ground-truth pixel (``assurance.campaign.truth.true_hazard`` = 1, the
 definition the campaign judges by), with a dense auxiliary target: the share of forbidden ground-truth pixels
 under each cell of a coarse grid over the crop. Hard look-alikes are mined around the candidates: ``jitter`` more
@@ -24,10 +25,10 @@ import numpy as np
 from assurance.campaign.truth import true_hazard
 from assurance.dataio.layouts import iter_samples, read_sample_labels
 from assurance.dataio.uavid import Sample, read_image
-from el.config import CoreConfig
-from el.core import run_core
-from el.decision import Disc
-from el.labels import LabelSet
+from el.base.decision import Disc
+from el.classes.labels import LabelSet
+from el.geometry.config import CoreConfig
+from el.landing.core import run_core
 from el.monitors.verifier_crop import candidate_crop, crop_window, padded_window
 from el.segmentation.contract import labels_of
 

@@ -27,9 +27,9 @@ from assurance.fitting.learned_monitor import recall_threshold, split_sha256
 from assurance.fitting.verifier_data import CropSet, collect_crops
 from assurance.fitting.verifier_net import VerifierNet
 from assurance.fitting.verifier_train import TrainConfig, TrainResult, auroc, predict, to_size, train_verifier
-from el.hashing import sha256_bytes
+from el.base.hashing import sha256_bytes
+from el.base.records import signed_document
 from el.monitors.verifier import VERIFIER_FORMAT, fused_score
-from el.records import signed_document
 
 FUSION_WEIGHTS: tuple[float, ...] = (0.25, 0.4, 0.5, 0.6, 0.75, 0.9)
 OPSET = 17
@@ -122,7 +122,7 @@ def learned_scores(data: str | Path, segmenter: Any, learned: Any, *, core: Any,
     """The learned monitor's scores of the core model's candidates of ``data``, in the crops' order."""
     from assurance.dataio.layouts import iter_samples
     from assurance.dataio.uavid import read_image
-    from el.core import run_core
+    from el.landing.core import run_core
     from el.monitors.base import CandidateContext
     from el.segmentation.contract import labels_of
 

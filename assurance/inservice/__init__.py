@@ -1,4 +1,4 @@
-"""In-service evidence: flight logs (``el.flightlog``) compared with the certification run of their system.
+"""In-service evidence: flight logs (``el.flight.flightlog``) compared with the certification run of their system.
 
 ``reader`` folds logs of any size in one bounded pass; ``compare`` measures the run's clean test frames and sets the
 two side by side (drift tests, rates with intervals); ``spi`` judges the system file's ``[in_service]`` indicators and

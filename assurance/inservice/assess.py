@@ -78,7 +78,7 @@ def assess(logs: Sequence[str | Path], run: str | Path, out: str | Path, *, syst
     cert = cmp.certified(run, monitor, budget_s=system.get("targets.time_budget_s"))
     comparison = cmp.compare(summary, cert, conf=float(settings["confidence"]), odd=odd)
     results = spi.judge(comparison, settings)
-    from el.hashing import sha256_file
+    from el.base.hashing import sha256_file
 
     envelope = run / "campaign.dsse.json"
     run_info = {"path": str(run.resolve()), "digest": check.digest, "signed_by": attested.keyid,

@@ -8,7 +8,7 @@ with the decision time and the budget, the declared domain's verdict with an ``o
 reason and fields disagree (a refusal relabelled ``all_rejected``, say) is refused, as is a negative time: neither
 is something the flight function writes, and counting either would let a relabelled log pass.
 
-Each log is then read as a chain (:class:`Chain`, ``el.flightlog``): every record carries the SHA-256 of the line
+Each log is then read as a chain (:class:`Chain`, ``el.flight.flightlog``): every record carries the SHA-256 of the line
 before it, and a sequence number one past the record before it. A record whose ``prev_sha256`` is not the SHA-256 of
 the line before it (a record removed, inserted, reordered or edited after the flight), or whose sequence number
 repeats or goes back, stops the read with :class:`LogRefusedError`, one line naming the log and the line. A sequence

@@ -50,7 +50,8 @@ class RunMismatchError(ValueError):
 
 def run_identity(manifest: Mapping[str, Any]) -> dict[str, Any]:
     """The identity a run's manifest records (network weights, system file and frame gate SHA-256), as a flight
-    log's records carry it (``el.flightlog``), and the gate file's own SHA-256 (:func:`gate_file_sha256`: the one the
+    log's records carry it (``el.flight.flightlog``), and the gate file's own SHA-256 (:func:`gate_file_sha256`: the
+    one the
     evidence report names)."""
     gate = (manifest.get("config") or {}).get("gate") or {}
     gate = gate if isinstance(gate, Mapping) else {}
@@ -66,9 +67,9 @@ def gate_file_sha256(path: Any, body_sha256: Any) -> str | None:
     the file is not readable here or its body differs."""
     if not path or not body_sha256:
         return None
-    from el import userfiles
-    from el.hashing import sha256_file
-    from el.records import body_sha256 as digest
+    from el.base import userfiles
+    from el.base.hashing import sha256_file
+    from el.base.records import body_sha256 as digest
 
     try:
         doc = json.loads(userfiles.read_text(Path(path), what="frame gate", max_bytes=userfiles.MAX_RECORD_BYTES))

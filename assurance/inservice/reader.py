@@ -1,6 +1,6 @@
-"""Read flight logs (``el.flightlog``) in one streaming pass (two when some records repeat) and in little memory.
+"""Read flight logs (``el.flight.flightlog``) in one streaming pass (two when some records repeat) and in little memory.
 
-Each log is read line by line (a line longer than ``el.flightlog.MAX_RECORD_BYTES`` is passed over without being
+Each log is read line by line (a line longer than ``el.flight.flightlog.MAX_RECORD_BYTES`` is passed over without being
 held), hashed as it is read, and folded into a :class:`LogSummary`: counts (decisions, refusals, default actions,
 deadline overruns, reasons, poses outside the declared domain), fixed-size seeded reservoir samples of the frame
 gate's scores, the monitor's candidate scores and the decision times (exact below their capacity), and a timeline of
@@ -34,10 +34,10 @@ from pathlib import Path
 from typing import Any
 
 from assurance.inservice.checks import Chain, Findings, LogRefusedError, check_record
-from el import userfiles
-from el.camera import Pose
-from el.flightlog import DOMAIN_VERDICTS, FORMAT, MAX_RECORD_BYTES, MAX_TEXT
-from el.odd import OperatingDomain
+from el.base import userfiles
+from el.flight.flightlog import DOMAIN_VERDICTS, FORMAT, MAX_RECORD_BYTES, MAX_TEXT
+from el.geometry.camera import Pose
+from el.geometry.odd import OperatingDomain
 
 RESERVOIR = 200_000
 """Values kept per sample (frame-gate scores, candidate scores, decision times): exact below it, a uniform seeded

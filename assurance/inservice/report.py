@@ -26,7 +26,7 @@ from assurance.attest.dsse import read_envelope, write_envelope
 from assurance.attest.statement import make_statement, open_statement, sign_statement, subject_problems
 from assurance.files import atomic_write_text
 from assurance.inservice.reader import LogSummary, Window
-from el.hashing import sha256_file
+from el.base.hashing import sha256_file
 
 FORMAT = "uav-el-in-service/1"
 JSON_NAME, HTML_NAME, ATTESTATION = "in-service.json", "in-service.html", "in-service.dsse.json"

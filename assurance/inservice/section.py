@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from assurance.inservice.report import FORMAT, JSON_NAME, MAX_DOCUMENT_BYTES, check_attestation
-from el import userfiles
+from el.base import userfiles
 
 
 class InServiceFolderError(ValueError):

@@ -17,7 +17,7 @@ from assurance.attest import AttestationError
 from assurance.attest.dsse import read_envelope, write_envelope
 from assurance.attest.keys import SigningKey
 from assurance.attest.statement import make_statement, open_statement, sign_statement, subject_problems
-from el.hashing import sha256_file
+from el.base.hashing import sha256_file
 
 KIND = "requirements"
 ATTESTATION = "requirements.dsse.json"
@@ -50,7 +50,7 @@ def sign_session_results(run: str | Path, out: str | Path, key: SigningKey, *, w
     run, out = Path(run), Path(out)
     results = out / "requirements.json"
     from assurance.campaign.readouts import MAX_RUN_JSON_BYTES, read_manifest
-    from el import userfiles
+    from el.base import userfiles
 
     doc = json.loads(userfiles.read_text(results, what="requirement results", max_bytes=MAX_RUN_JSON_BYTES))
     ctx, reg = doc.get("context") or {}, doc.get("registry") or {}

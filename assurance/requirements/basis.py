@@ -8,7 +8,8 @@ values, and failing the gate unless the auditor accepts it at its value
 nothing). The deployed monitor and its card describe the system, not the basis: never deviations.
 
 The label set is part of the basis too. The basis owns the hazard categories of the well-known class names
-(``el.class_names.PINNED_CATEGORIES``: road, street, paved area, car, building, person, water, ...; compared once
+(``el.classes.class_names.PINNED_CATEGORIES``: road, street, paved area, car, building, person, water, ...; compared
+once
 NFKC-normalised and case-folded, a look-alike of one is refused when the set is read); another class takes the
 category it declares, or ``unknown`` when it declares none. A deviation (``class:NAME``) is a class of a category
 the registry's ``forbidden_categories`` lists (road, vehicle, building, water, obstacle) declared safe, a safe class of
@@ -29,7 +30,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, replace
 from typing import Any
 
-from el.class_names import class_key, pinned_category
+from el.classes.class_names import class_key, pinned_category
 
 SYSTEM_CHOICES = ("deployed_monitor", "calibration_card", "forbidden_categories")
 """Parameters that name parts of the system assessed rather than a target: not compared with the basis."""
@@ -147,7 +148,8 @@ def _class_deviation(c: Any, must: set[str]) -> Deviation | None:
                          "declared safe" + (f" with category {declared}" if redeclared else ""), value=state)
     if state == SAFE and pinned is None and declared is None:
         return Deviation(name, f"forbidden (category {UNKNOWN}: a class the basis does not know that declares no "
-                               "hazard category, el.label_tables.CATEGORIES)", "declared safe without one", value=state)
+                               "hazard category, el.classes.label_tables.CATEGORIES)", "declared safe without one",
+                         value=state)
     if state == SAFE and category == UNKNOWN:
         return Deviation(name, f"forbidden (category {UNKNOWN}: what the ground is, is not said; the basis knows no "
                                "unknown ground to be safe)", f"declared safe with category {UNKNOWN}", value=state)
@@ -163,8 +165,8 @@ def _rgb_text(rgb: Iterable[int]) -> str:
 
 def well_known_forbidden_colours() -> dict[tuple[int, int, int], list[str]]:
     """Colour -> ``"CLASS (SET)"`` of every forbidden class of the well-known label sets: the packaged presets
-    (``el.labels.label_presets``: UAVid, Semantic Drone), read with their own checks."""
-    from el.labels import label_presets, load_label_set
+    (``el.classes.labels.label_presets``: UAVid, Semantic Drone), read with their own checks."""
+    from el.classes.labels import label_presets, load_label_set
 
     out: dict[tuple[int, int, int], list[str]] = {}
     for preset in label_presets():
@@ -230,7 +232,8 @@ def label_deviations(labels: Any, must_forbid: Iterable[str], accepted_unknown: 
 
 def _name_key(name: str) -> str:
     """How an acceptance's NAME is compared with a deviation's: a class's (``class:``, ``colour:``) as class names are
-    compared everywhere (``el.class_names.class_key``: ``class:strasse`` is ``class:Straße``), a target's as written."""
+    compared everywhere (``el.classes.class_names.class_key``: ``class:strasse`` is ``class:Straße``), a target's as
+    written."""
     kind, sep, rest = name.partition(":")
     return f"{kind}:{class_key(rest)}" if sep and kind in ("class", "colour") else name
 

@@ -17,9 +17,9 @@ from typing import Any
 import numpy as np
 
 from assurance.requirements.records import FAIL, INSUFFICIENT, PASS, Evidence
-from el.kernel import REFUSALS
+from el.flight.kernel import REFUSALS
 from el.monitors.spec import walk_of
-from el.walk import walk_order
+from el.monitors.walk import walk_order
 
 
 def _ok_images(images: Any) -> Any:
@@ -39,9 +39,9 @@ def _num(v: Any) -> float | None:
 
 def check_monitor_coverage(images: Any, candidates: Any) -> Evidence:
     """EL-R04 on campaign readouts: every 'land' decision is on an accepted candidate, every candidate
-    walked before it (in the configuration's walk order, ``el.walk``) was rejected, and the two
+    walked before it (in the configuration's walk order, ``el.monitors.walk``) was rejected, and the two
     readout tables agree on the decision. A frame the kernel refuses before the walk (outside the declared domain,
-    or above the frame gate's threshold: ``el.kernel.REFUSALS``) is the default action by design, not a breach.
+    or above the frame gate's threshold: ``el.flight.kernel.REFUSALS``) is the default action by design, not a breach.
 
     ``images`` / ``candidates``: the run's tables (``assurance.campaign.readouts.load_table``).
     """
@@ -338,8 +338,8 @@ def pose_margin(core: Any, size: tuple[int, int], pose_error: Mapping[str, float
 
     ``core``: a CoreConfig or its dict (``CoreConfig.to_dict``); ``size``: the input image (W, H).
     """
-    from el.camera import required_beta, working_size
-    from el.config import CoreConfig
+    from el.geometry.camera import required_beta, working_size
+    from el.geometry.config import CoreConfig
 
     cfg = core if isinstance(core, CoreConfig) else CoreConfig.from_dict(dict(core))
     w, h = working_size(int(size[0]), int(size[1]), cfg.working_width)

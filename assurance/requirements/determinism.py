@@ -75,7 +75,7 @@ def check_table_recomputation(run: str | Path, *, n_boot: int = 500) -> Evidence
 def _campaign_config(man: Mapping[str, Any]) -> Any:
     """The CampaignConfig a run's manifest records."""
     from assurance.campaign.run import CampaignConfig
-    from el.config import CoreConfig
+    from el.geometry.config import CoreConfig
 
     cfg_d = dict(man["config"])
     cfg_d["core"] = CoreConfig.from_dict(cfg_d["core"])
@@ -87,7 +87,7 @@ def _campaign_config(man: Mapping[str, Any]) -> Any:
 def _run_labels(source: Any) -> Any:
     """The label set of a run's network: a system file's model records it; the shipped network and a weights file
     of the project's own architecture segment into UAVid's classes."""
-    from el.labels import UAVID, LabelSet
+    from el.classes.labels import UAVID, LabelSet
 
     if isinstance(source, Mapping) and source.get("labels"):
         return LabelSet.from_dict(source["labels"])

@@ -1,4 +1,4 @@
-"""EL-R17 on campaign readouts: a frame outside the declared operating domain (``el.odd``) never ends in a
+"""EL-R17 on campaign readouts: a frame outside the declared operating domain (``el.geometry.odd``) never ends in a
 landing; and, per perturbation, how many frames ended outside the domain (the release evidence's count)."""
 
 from __future__ import annotations
@@ -7,8 +7,8 @@ from collections.abc import Mapping
 from typing import Any
 
 from assurance.requirements.records import FAIL, INSUFFICIENT, PASS, Evidence
-from el.camera import Pose
-from el.odd import OUTSIDE_ODD, OperatingDomain
+from el.geometry.camera import Pose
+from el.geometry.odd import OUTSIDE_ODD, OperatingDomain
 
 COLUMNS = ("perturbation", "severity", "declared", "frames", "outside", "landings_outside")
 VIOLATION_COLUMNS = ("perturbation", "severity", "monitor", "image", "problem")

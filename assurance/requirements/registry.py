@@ -26,8 +26,8 @@ from assurance.requirements.targets import (
     targets_sha256,
     validate_targets,
 )
-from el import safeyaml, userfiles
-from el.errors import UavElError
+from el.base import safeyaml, userfiles
+from el.base.errors import UavElError
 
 REGISTRY_FORMAT = "uav-el-requirements/1"
 KNOWN_SOURCES: tuple[str, ...] = ("SORA", "SSIV21", "ICRA22", "PROJECT")

@@ -139,7 +139,7 @@ def load_results(path: str | Path, registry: Registry) -> tuple[dict[str, Requir
     Requirements of the registry absent from the file are "not verified" ("not in the test results");
     ids in the file that the registry lacks are ignored (listed in ``doc['ignored_ids']``).
     """
-    from el import userfiles
+    from el.base import userfiles
 
     path = Path(path)
     if not path.exists() and not path.is_symlink():

@@ -134,8 +134,8 @@ def ground_text(system: Any) -> str:
 
 
 def _ground(width: int, height: int, core: Any) -> str:
-    from el.core import default_area
-    from el.decision import DEFAULT_AREA_BASES
+    from el.base.decision import DEFAULT_AREA_BASES
+    from el.landing.core import default_area
 
     area = default_area(width, height, core)
     where = DEFAULT_AREA_BASES.get(getattr(area, "basis", None) or "", "the bottom centre of the frame")
@@ -157,9 +157,9 @@ def facts_of_file(file: Any) -> dict[str, str]:
 def shipped_facts() -> dict[str, str]:
     """The embedded default system's facts (the shipped camera, pose and UAVid classes), without building it;
     computed once (every registry load renders its texts from them). Callers copy before changing them."""
-    from el.camera import PHANTOM4, Pose
-    from el.config import CoreConfig
-    from el.labels import UAVID
+    from el.classes.labels import UAVID
+    from el.geometry.camera import PHANTOM4, Pose
+    from el.geometry.config import CoreConfig
 
     pose = Pose()
     return {

@@ -19,7 +19,7 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
-from el.errors import UavElError
+from el.base.errors import UavElError
 
 
 class TargetError(UavElError, ValueError):
@@ -145,7 +145,7 @@ def _same_kind(value: Any, default: Any) -> bool:
 
 def read_targets_file(path: str | Path) -> dict[str, Any]:
     """A JSON object of target overrides (``--uav-el-targets FILE.json``); TargetError naming the file otherwise."""
-    from el import userfiles
+    from el.base import userfiles
 
     path = Path(path)
     try:  # a regular file of at most 1 MiB (a FIFO or a device refused before any read), nested at most 32 deep

@@ -44,7 +44,7 @@ _WORD = {LOWER: "higher (looser)", HIGHER: "lower (looser)", SUPERSET: "missing"
 def _card_identity(value: Any) -> Any:
     """A calibration card compared by content (its SHA-256), wherever its path points; None for none."""
     from assurance.paths import card_path
-    from el.hashing import sha256_file
+    from el.base.hashing import sha256_file
 
     path = card_path(value)
     if path is None:

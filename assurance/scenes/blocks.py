@@ -29,7 +29,7 @@ from assurance.scenes.houses import houses
 from assurance.scenes.lookalikes import add_ground_lookalikes, add_object_lookalikes
 from assurance.scenes.styles import pick
 from assurance.scenes.world import Look
-from el.labels import CLASS_IDS
+from el.classes.labels import CLASS_IDS
 
 CLUTTER = CLASS_IDS["clutter"]
 LOW_VEG = CLASS_IDS["low_vegetation"]

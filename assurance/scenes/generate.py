@@ -27,8 +27,8 @@ from assurance.scenes.renderer import render
 from assurance.scenes.styles import ALL_STYLES, HELD_OUT_STYLES, LIGHTINGS, Style, choose_style, get_style
 from assurance.scenes.view import coverage_domain, visible_ground
 from assurance.scenes.world import Sun, World
-from el.camera import HEIGHT_M, PITCH_DEG, CameraGeometry, Intrinsics, Pose, check_geometry
-from el.labels import CLASS_NAMES, NUM_CLASSES, PALETTE
+from el.classes.labels import CLASS_NAMES, NUM_CLASSES, PALETTE
+from el.geometry.camera import HEIGHT_M, PITCH_DEG, CameraGeometry, Intrinsics, Pose, check_geometry
 
 GENERATOR_VERSION = "1.1"  # 1.1: look-alike hazards (tracks, shared streets, low sheds, stray and verge cars)
 SPLIT_BASE: dict[str, int] = {"train": 0, "val": 1_000_000, "test": 2_000_000}

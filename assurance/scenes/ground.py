@@ -13,7 +13,7 @@ from assurance.scenes.builder import L_BLOCK, L_DETAIL, L_LOT_PAINT, Builder
 from assurance.scenes.geom import ellipse
 from assurance.scenes.styles import pick
 from assurance.scenes.world import Look
-from el.labels import CLASS_IDS
+from el.classes.labels import CLASS_IDS
 
 CLUTTER = CLASS_IDS["clutter"]
 

@@ -15,7 +15,7 @@ from assurance.scenes.builder import L_DETAIL, L_DETAIL2, Builder
 from assurance.scenes.ground import blob_region, ground_region, lawn_look, paved_look, scatter_bushes
 from assurance.scenes.styles import pick
 from assurance.scenes.world import Look
-from el.labels import CLASS_IDS
+from el.classes.labels import CLASS_IDS
 
 CLUTTER = CLASS_IDS["clutter"]
 LOW_VEG = CLASS_IDS["low_vegetation"]

@@ -19,7 +19,7 @@ from assurance.scenes.builder import L_BASE, L_CURB, L_MARKING, L_PATCH, L_ROAD,
 from assurance.scenes.geom import ellipse
 from assurance.scenes.styles import pick
 from assurance.scenes.world import Look
-from el.labels import CLASS_IDS
+from el.classes.labels import CLASS_IDS
 
 ROAD = CLASS_IDS["road"]
 CLUTTER = CLASS_IDS["clutter"]

@@ -19,7 +19,7 @@ from assurance.scenes.builder import L_LOT_PAINT, Builder
 from assurance.scenes.materials import MATERIALS
 from assurance.scenes.styles import pick
 from assurance.scenes.world import Look
-from el.labels import CLASS_IDS
+from el.classes.labels import CLASS_IDS
 
 ROAD = CLASS_IDS["road"]
 L_TRACK = L_LOT_PAINT  # over paths, patches and planters

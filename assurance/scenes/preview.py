@@ -5,7 +5,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from el.labels import LabelSet
+from el.classes.labels import LabelSet
 
 
 def _legend(width: int, labels: LabelSet) -> np.ndarray:

@@ -13,7 +13,7 @@ import numpy as np
 from assurance.scenes.builder import Builder
 from assurance.scenes.styles import pick
 from assurance.scenes.world import Block, Crown, Look
-from el.labels import CLASS_IDS
+from el.classes.labels import CLASS_IDS
 
 BUILDING = CLASS_IDS["building"]
 ROAD = CLASS_IDS["road"]

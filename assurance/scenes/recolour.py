@@ -20,8 +20,8 @@ import numpy as np
 
 from assurance.dataio.layouts import iter_samples, read_sample_labels, write_label_file
 from assurance.dataio.uavid import LABEL_DIR
-from el.errors import DataError
-from el.labels import MAX_CLASSES, LabelSet
+from el.base.errors import DataError
+from el.classes.labels import MAX_CLASSES, LabelSet
 
 
 def class_lut(source_labels: LabelSet, target_labels: LabelSet, mapping: Mapping[str, str] | None = None, *,

@@ -24,8 +24,8 @@ from assurance.scenes.shade import ShadeInputs, shade
 from assurance.scenes.shadows import Casters, project_to_plane, unit_sphere
 from assurance.scenes.view import visible_ground
 from assurance.scenes.world import World
-from el.camera import CameraGeometry
-from el.labels import CLASS_IDS
+from el.classes.labels import CLASS_IDS
+from el.geometry.camera import CameraGeometry
 
 SHIFT = 4  # fixed-point bits for OpenCV polygon filling
 ONE = 1 << SHIFT

@@ -19,7 +19,7 @@ from assurance.scenes.materials import OCTAVE_SCALES_M
 from assurance.scenes.styles import LIGHTINGS
 from assurance.scenes.textures import COARSE_SCALE_M, FINE_SCALE_M, TILE, grain_field, octave_tiles, sample
 from assurance.scenes.world import World
-from el.camera import CameraGeometry
+from el.geometry.camera import CameraGeometry
 
 BAND_ROWS = 270
 

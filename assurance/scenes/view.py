@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from assurance.scenes.geom import convex_hull
-from el.camera import CameraGeometry, Pose
+from el.geometry.camera import CameraGeometry, Pose
 
 MAX_RANGE_M = 1500.0  # rays above the horizon are cut here
 

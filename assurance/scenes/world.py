@@ -1,6 +1,6 @@
 """The metric world model of a synthetic scene: ground regions, solids, tree crowns, sun, footprints.
 
-World frame of ``el.camera``: metres, x right, y forward, z up, the camera above the origin.
+World frame of ``el.geometry.camera``: metres, x right, y forward, z up, the camera above the origin.
 The world does not depend on the camera pose: ``assurance.scenes.renderer.render(world, geometry)`` draws it
 from any pose. The forbidden ground footprints (roads, cars, buildings) are kept as polygons so
 that the true metric clearance of any ground point can be computed, from the world or from the
@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from assurance.scenes.geom import PolygonSet, clip_to_box, rect
-from el.labels import CLASS_IDS
+from el.classes.labels import CLASS_IDS
 
 RGB = tuple[float, float, float]
 FOOTPRINT_CLASSES: tuple[str, ...] = ("road", "building", "static_car", "moving_car")

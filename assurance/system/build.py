@@ -13,10 +13,10 @@ from pathlib import Path
 from typing import Any
 
 from assurance.system.loader import SystemFile
-from el.camera import CAMERAS, Intrinsics, Pose, SafetyParams
-from el.config import CoreConfig
-from el.labels import UAVID, LabelSet
-from el.odd import OperatingDomain
+from el.classes.labels import UAVID, LabelSet
+from el.geometry.camera import CAMERAS, Intrinsics, Pose, SafetyParams
+from el.geometry.config import CoreConfig
+from el.geometry.odd import OperatingDomain
 
 DEFAULT_IMAGE_SIZE = (3840, 2160)
 MODEL_KINDS = ("builtin", "pt", "onnx", "plugin")
@@ -26,7 +26,7 @@ def label_set(system: SystemFile) -> LabelSet:
     """The system's label set: ``[labels] preset`` or ``file`` (with ``ignore_rgb`` when given)."""
     if "labels" in system._cache:
         return system._cache["labels"]
-    from el.labels import load_label_set
+    from el.classes.labels import load_label_set
 
     preset, file = system.get("labels.preset"), system.path_of("labels.file")
     if preset is not None and file is not None:
@@ -242,7 +242,7 @@ def model_source(system: SystemFile) -> dict[str, Any]:
 
 def monitor_spec(system: SystemFile) -> str | None:
     """The deployed monitor's spec (``[monitor] spec``; the shipped one by default)."""
-    from el.pipeline import DEPLOYED_MONITOR
+    from el.flight.pipeline import DEPLOYED_MONITOR
 
     return str(system.get("monitor.spec", DEPLOYED_MONITOR))
 
@@ -251,7 +251,7 @@ def deployed_card(system: SystemFile) -> Path | None:
     """The calibration card of the deployed monitor: ``[monitor] calibration`` when the file also names the
     monitor, the shipped card when it names neither (the shipped pair), else None (a system naming only a card
     deploys the card's own spec; one naming only a monitor has no card, as in :func:`targets`)."""
-    from el.pipeline import DEPLOYED_CALIBRATION
+    from el.flight.pipeline import DEPLOYED_CALIBRATION
 
     if not system.sets("monitor.spec"):
         return None if system.sets("monitor.calibration") else DEPLOYED_CALIBRATION

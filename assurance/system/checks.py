@@ -17,7 +17,7 @@ from pathlib import Path
 
 from assurance.system import build
 from assurance.system.loader import SystemFile
-from el.userfiles import not_regular
+from el.base.userfiles import not_regular
 
 
 def check_system(system: SystemFile, *, writes: Collection[str] = ()) -> None:
@@ -56,7 +56,7 @@ def check_geometry(system: SystemFile) -> None:
     """The camera, nominal pose and image size must give a geometry the flat-ground model handles: every
     reachable row sees the ground at a finite footprint, and some stripe is within reach (``reach_m``): a
     nominal pose with none could never land (every decision the default action)."""
-    from el.camera import CameraGeometry, check_geometry
+    from el.geometry.camera import CameraGeometry, check_geometry
 
     intr, pose, width_height = build.intrinsics(system), build.nominal_pose(system), build.image_size(system)
     build.safety(system)
@@ -77,7 +77,7 @@ def check_geometry(system: SystemFile) -> None:
 def check_model(system: SystemFile, names: tuple[str, ...]) -> None:
     """The model section: a consistent kind, an existing file with the stated SHA-256, a class map onto the
     system's classes."""
-    from el.hashing import sha256_file
+    from el.base.hashing import sha256_file
 
     kind = build.model_kind(system)
     path = system.path_of("model.path")
@@ -112,7 +112,7 @@ def check_model(system: SystemFile, names: tuple[str, ...]) -> None:
 
 def _identity(system: SystemFile, kind: str, path: Path) -> str:
     """An ONNX file's identity: its SHA-256, its external data files' included (``el.segmentation.onnx_engine``)."""
-    from el.errors import WeightsError
+    from el.base.errors import WeightsError
     from el.segmentation.onnx_engine import read_onnx
 
     try:

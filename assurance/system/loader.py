@@ -20,8 +20,8 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from el import userfiles
-from el.errors import UavElError
+from el.base import userfiles
+from el.base.errors import UavElError
 
 SYSTEM_FILE = "uav-el.toml"
 FORMAT = "uav-el-system/1"
@@ -123,7 +123,7 @@ def _flatten(doc: Mapping[str, Any], prefix: str = "") -> Iterator[tuple[str, An
 def parse_system(text: str, *, label: str) -> dict[str, Any]:
     """The validated document of a system file's text; ``SystemFileError`` naming ``label`` and the key.
 
-    Its nesting is measured before ``tomllib`` reads it (``el.userfiles.toml_nesting``: ``tomllib`` recurses on
+    Its nesting is measured before ``tomllib`` reads it (``el.base.userfiles.toml_nesting``: ``tomllib`` recurses on
     brackets, 60 000 deep is a RecursionError, and takes quadratic time on a long dotted key)."""
     depth = userfiles.toml_nesting(text, limit=MAX_DEPTH)
     if depth > MAX_DEPTH:

@@ -12,8 +12,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from el.errors import WeightsError
-from el.labels import LabelSet
+from el.base.errors import WeightsError
+from el.classes.labels import LabelSet
 
 
 def build_model(source: Mapping[str, Any], *, threads: int | None = None, device: str = "cpu",

@@ -1,7 +1,7 @@
 """Fitted files checked for sense when the system is built: a frame gate's and a calibration card's threshold must
 lie where the scores they were fitted on lie.
 
-A fitted file is hash-checked (``el.records``), but its hash covers only what it says about itself: anyone may edit
+A fitted file is hash-checked (``el.base.records``), but its hash covers only what it says about itself: anyone may edit
 a threshold and compute the hash again. What such a file records about its own fit still bounds the threshold:
 
 - a frame gate (``uav-el fit-gate``) is thresholded at the ``quantile`` of its validation frames' scores and
@@ -24,7 +24,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from el.labels import LabelSet
+from el.classes.labels import LabelSet
 
 
 def _number(value: Any) -> float | None:
@@ -60,7 +60,7 @@ def gate_problem(path: Path) -> str | None:
 def gate_refusal(path: Path) -> str | None:
     """:func:`gate_problem`, with a gate that cannot be used at all (unreadable, a FIFO, altered, inconsistent) its
     loader's line: why the gate at ``path`` is refused, None when it is not."""
-    from el.errors import FrameGateError
+    from el.base.errors import FrameGateError
 
     try:
         return gate_problem(path)
@@ -129,7 +129,7 @@ def check_fitted(system: Any, labels: LabelSet, *, gate: Path | None = None) -> 
     """Refuse a system whose frame gate (``[monitor] gate``, or ``gate`` given on the command line) or calibration
     card (``[monitor] calibration``) makes no sense: ``SystemFileError`` naming the system file, the key and the
     fitted file. A file that cannot be read at all is the same error (its loader's line)."""
-    from el.errors import CalibrationError, FrameGateError
+    from el.base.errors import CalibrationError, FrameGateError
 
     gate_key = "monitor.gate"
     if gate is None and system.get(gate_key) is not None and str(system.get(gate_key)) != "none":

@@ -18,9 +18,9 @@ from typing import Any
 
 from assurance.system import build
 from assurance.system.loader import SystemFile, SystemFileError
-from el.config import CoreConfig
-from el.labels import UAVID, LabelSet
-from el.odd import OperatingDomain
+from el.classes.labels import UAVID, LabelSet
+from el.geometry.config import CoreConfig
+from el.geometry.odd import OperatingDomain
 
 NO_GATE = "none"
 
@@ -32,7 +32,7 @@ class System:
     ``model``: the network as data (None: the shipped network on the shipped classes; else a model source,
     ``assurance.system.build.model_source``, or a ``--model`` given on the command line). ``monitor``: the
     deployed monitor's spec; ``calibration``: the card the file names (None: none; the shipped monitor is then held to
-    the shipped card, ``el.pipeline.check_monitor_bindings``). ``gate``: the frame gate file (None: no gate).
+    the shipped card, ``el.flight.pipeline.check_monitor_bindings``). ``gate``: the frame gate file (None: no gate).
     """
 
     file: SystemFile
@@ -56,7 +56,7 @@ class System:
         Every section is read and checked here (``SystemFileError`` naming the file and the key); the calibration
         card is read when the deployed pair is (:meth:`deployed`): ``uav-el calibrate`` may be about to write it. The
         frame gate it ends up with is checked for sense (``assurance.system.sense``), a ``--gate`` as a file's is."""
-        from el.pipeline import DEFAULT_TIME_BUDGET_S
+        from el.flight.pipeline import DEFAULT_TIME_BUDGET_S
 
         labels = build.label_set(file)
         shipped = model is None and build.model_kind(file) == "builtin" and not file.get("model.class_map") \
@@ -104,9 +104,10 @@ class System:
         return self.monitor, self.calibration
 
     def flight_config(self, **overrides: Any) -> Any:
-        """The flight configuration of the deployed system (``el.pipeline.PipelineConfig``): its CM configuration,
+        """The flight configuration of the deployed system (``el.flight.pipeline.PipelineConfig``): its CM
+        configuration,
         monitor at its card's threshold, frame gate, declared domain and time budget; ``overrides`` win."""
-        from el.pipeline import PipelineConfig
+        from el.flight.pipeline import PipelineConfig
 
         monitor, card = self.deployed()
         values: dict[str, Any] = {"core": self.core, "monitor": monitor or None,
@@ -119,9 +120,9 @@ class System:
 
 def _gate(file: SystemFile, given: str | Path | None, *, shipped: bool) -> Path | None:
     """The frame gate: ``given`` (a command line's ``--gate``), else ``[monitor] gate`` (``none``: no gate), else
-    the shipped gate (``el.pipeline.DEPLOYED_GATE``) on the shipped network: a gate is bound to its network, so
+    the shipped gate (``el.flight.pipeline.DEPLOYED_GATE``) on the shipped network: a gate is bound to its network, so
     another network needs its own (``uav-el fit-gate``)."""
-    from el.pipeline import DEPLOYED_GATE
+    from el.flight.pipeline import DEPLOYED_GATE
 
     if given is not None:
         return None if str(given) == NO_GATE else Path(given)
@@ -135,7 +136,7 @@ def _shipped_export(model: Any) -> bool:
     """Whether a system file's model is the shipped network's packaged ONNX export (the very file, by its SHA-256,
     as the package's engine record names it) with no class map: on the shipped classes it carries the shipped frame
     gate."""
-    from el.hashing import sha256_file
+    from el.base.hashing import sha256_file
     from el.segmentation.onnx_engine import shipped_export_source
 
     if not isinstance(model, dict) or model.get("kind") != "onnx" or model.get("class_map") or model.get("classes"):

@@ -18,7 +18,7 @@ is above its threshold (``verdict.score``, ``verdict.threshold``). Monitors beyo
 the registry (``el.monitors.registry``: built-ins and the ``uav_el.monitors`` entry points).
 """
 
-from el.forbidden import forbidden_pixels
+from el.landing.forbidden import forbidden_pixels
 from el.monitors.base import CandidateContext, Judgement, Monitor, PatchMonitor, PatchSegmenter
 from el.monitors.build import build_monitor
 from el.monitors.ch import CHMonitor, ch_rule, rejected_label_counts

@@ -24,9 +24,9 @@ from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
-from el.deadline import checkpoint
-from el.decision import Candidate, Disc, MonitorVerdict
-from el.labels import LabelSet
+from el.base.deadline import checkpoint
+from el.base.decision import Candidate, Disc, MonitorVerdict
+from el.classes.labels import LabelSet
 from el.monitors.patch_batch import check_batched
 from el.monitors.patches import Patch, extract_patch, validate_patch_params
 
@@ -378,7 +378,8 @@ class PatchMonitor(Monitor):
         wrong shape or non-finite scores.
         """
         t0 = self.clock()
-        checkpoint("monitoring")  # the decision's deadline (el.deadline), before and after the patch's segmentation
+        # the decision's deadline (el.base.deadline), before and after the patch's segmentation
+        checkpoint("monitoring")
         patch = self.patch(hd_image, candidate)
         features, mask = self.patch_features(patch, segmenter, seed=seed, context=context)
         checkpoint("monitoring")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import time
 from typing import Any
 
-from el.labels import UAVID, LabelSet
+from el.classes.labels import UAVID, LabelSet
 from el.monitors.base import Clock, Monitor
 from el.monitors.capabilities import MonitorSupportError, check_monitor_capabilities, mapped_network_classes
 from el.monitors.ch import CHMonitor

@@ -16,9 +16,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 
-from el.errors import CalibrationError
+from el.base.errors import CalibrationError
+from el.base.records import HashedRecord, short
 from el.monitors.spec import monitor_name, parse_monitor_spec
-from el.records import HashedRecord, short
 
 CARD_FORMAT = "uav-el-calibration/1"
 

@@ -6,7 +6,7 @@ would fail on every candidate; a campaign would lose every configuration of ever
 configuration. :func:`check_monitor_capabilities` refuses such a system when it is put together:
 ``el.monitors.build_monitor(..., model=)`` when it builds the monitor, the campaign
 (``assurance.campaign.manifest.check_monitor_networks``, before the run folder exists) and the pipeline
-(``el.pipeline.check_monitor_bindings``) where they check the monitor's network. The refusal is a
+(``el.flight.pipeline.check_monitor_bindings``) where they check the monitor's network. The refusal is a
 :class:`MonitorSupportError` naming the monitor's spec and, in user terms, what the model is.
 """
 
@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from el.errors import UavElError
+from el.base.errors import UavElError
 from el.segmentation.contract import MC_DROPOUT, TRUNK_FEATURES, has_capability
 
 WHAT = {MC_DROPOUT: "MC dropout samples (mc_dropout)", TRUNK_FEATURES: "the network's trunk features (model.trunk)"}

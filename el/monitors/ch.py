@@ -13,8 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from el.forbidden import forbidden_pixels
-from el.labels import LabelSet
+from el.classes.labels import LabelSet
+from el.landing.forbidden import forbidden_pixels
 from el.monitors.base import format_counts
 from el.monitors.hierarchy import ClassHierarchy, default_hierarchy
 from el.monitors.lhd import EMPTY_DISC, LHDMonitor, forbidden_counts, lhd_reason

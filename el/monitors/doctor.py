@@ -28,7 +28,7 @@ class DOCTORMonitor(SoftmaxScoreMonitor):
     Examples
     --------
     >>> import numpy as np
-    >>> from el.labels import UAVID
+    >>> from el.classes.labels import UAVID
     >>> p = np.array([[0.5], [0.5]])                         # g = 0.5: (1 - g) / g = 1 = C - 1 for C = 2
     >>> float(DOCTORMonitor(labels=UAVID, network_classes=2).uncertainty(p)[0])
     1.0

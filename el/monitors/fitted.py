@@ -9,8 +9,8 @@ already computed: no second network pass, no torch, and it exists for every netw
 the segmentation seam exposes no per-candidate trunk activations for an ONNX network, so this repository fits them
 on the candidate features every network yields; see docs/monitor-benchmark.md.)
 
-A fitted record is plain JSON, hashed like the learned monitor's model (:class:`el.records.HashedRecord`, read
-through the bounded reader ``el.userfiles``; no pickle): ``{"format", "body", "sha256"}`` whose body holds the
+A fitted record is plain JSON, hashed like the learned monitor's model (:class:`el.base.records.HashedRecord`, read
+through the bounded reader ``el.base.userfiles``; no pickle): ``{"format", "body", "sha256"}`` whose body holds the
 family, the feature names, the standardisation (``mean``, ``scale``), the family's parameters (``params``), the
 default threshold and how it was chosen (``criterion``), and the network it was fitted on (``weights``).
 ``assurance.fitting.detectors`` writes it (``uav-el benchmark --fit``). Inference is numpy only.
@@ -26,14 +26,14 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from el.errors import UavElError
-from el.labels import LabelSet
+from el.base.errors import UavElError
+from el.base.records import HashedRecord
+from el.classes.labels import LabelSet
 from el.monitors.base import CandidateContext, Judgement, PatchSegmenter
 from el.monitors.learned import base_features, candidate_features, feature_columns
 from el.monitors.lhd import LHDMonitor
 from el.monitors.patches import Patch
 from el.monitors.spec import GenericSpec
-from el.records import HashedRecord
 
 DETECTOR_FORMAT = "uav-el-candidate-detector/1"
 

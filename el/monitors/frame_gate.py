@@ -21,9 +21,9 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from el.errors import FrameGateError
+from el.base.errors import FrameGateError
+from el.base.records import HashedRecord
 from el.monitors.gates import GATES
-from el.records import HashedRecord
 from el.segmentation.contract import FRAME_STATS, has_capability
 
 FRAME_GATE_FORMAT = "uav-el-frame-gate/1"

@@ -8,7 +8,7 @@ a table look-up (docs/architecture.md section 3.6). A larger label set (the 23 c
 "classes above tau" pattern of the pixels (few in a disc): the deepest node holding all of its classes.
 Both ways give the same node.
 
-Node ids: the leaves keep their class ids (0..C-1, el/labels.py); inner nodes follow (C, C+1, ...).
+Node ids: the leaves keep their class ids (0..C-1, el/classes/labels.py); inner nodes follow (C, C+1, ...).
 
 A hierarchy belongs to a label set (``labels``): its classes are the leaves. :func:`default_hierarchy`
 gives the set's own tree: the shipped file for UAVid, the tree the set declares, else one derived from
@@ -25,8 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
-from el import safeyaml
-from el.labels import UAVID, LabelSet
+from el.base import safeyaml
+from el.classes.labels import UAVID, LabelSet
 
 HIERARCHY_FILE = "hierarchy.yaml"
 SHIPPED_TREES = {UAVID: HIERARCHY_FILE}
@@ -154,8 +154,8 @@ class ClassHierarchy:
     @classmethod
     def from_yaml(cls, path: str | Path, *, labels: LabelSet) -> ClassHierarchy:
         """Load a hierarchy file: ``root: NAME`` and ``children: {parent: [children]}``, read through the bounded
-        reader (``el.userfiles``: a regular file of at most 1 MiB; a FIFO or a device refused before any read)."""
-        from el import userfiles
+        reader (``el.base.userfiles``: a regular file of at most 1 MiB; a FIFO or a device refused before any read)."""
+        from el.base import userfiles
 
         text = userfiles.read_text(path, what="hierarchy file", max_bytes=safeyaml.MAX_YAML_BYTES)
         return cls._from_text(text, str(path), labels=labels)

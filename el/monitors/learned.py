@@ -42,15 +42,15 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from el.discs import window_sq_distances
-from el.errors import LearnedModelError
-from el.forbidden import top_scores
-from el.labels import UAVID, LabelSet
+from el.base.errors import LearnedModelError
+from el.base.records import HashedRecord
+from el.classes.labels import UAVID, LabelSet
+from el.geometry.discs import window_sq_distances
+from el.landing.forbidden import top_scores
 from el.monitors.base import CandidateContext, Judgement, PatchSegmenter, validate_scores
 from el.monitors.lhd import LHDMonitor, take_disc
 from el.monitors.patches import Patch
 from el.monitors.spec import GenericSpec
-from el.records import HashedRecord
 
 MODEL_FORMAT = "uav-el-learned-monitor/1"
 DEFAULT_MODEL = Path(__file__).resolve().parent / "data" / "learned.json"
@@ -159,7 +159,8 @@ def frame_features(frame: np.ndarray, candidate: Any, scale: float, labels: Labe
     """The frame disc's statistics (:func:`disc_summary`), the context statistics (largest and mean forbidden
     probability in discs of :data:`CONTEXT_SCALES` radii: the safe disc and what lies just beyond it) and the frame
     disc's largest forbidden class probabilities, on the working grid (``scale``: working pixels per full-resolution
-    pixel). Every disc's pixels are picked from one grid of squared distances (``el.discs.window_sq_distances``, as
+    pixel). Every disc's pixels are picked from one grid of squared distances
+    (``el.geometry.discs.window_sq_distances``, as
     ``disc_window_mask`` draws them; at least the pixel under the centre), the forbidden probability summed once over
     the context window."""
     h, w = frame.shape[1:]

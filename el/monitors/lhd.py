@@ -8,8 +8,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from el.forbidden import argmax_slack, forbidden_pixels
-from el.labels import LabelSet
+from el.classes.labels import LabelSet
+from el.landing.forbidden import argmax_slack, forbidden_pixels
 from el.monitors.base import (
     CandidateContext,
     Judgement,
@@ -101,7 +101,7 @@ class LHDMonitor(PatchMonitor):
     Examples
     --------
     >>> import numpy as np
-    >>> from el.labels import UAVID
+    >>> from el.classes.labels import UAVID
     >>> scores = np.zeros((8, 3, 3), np.float32); scores[5] = 1.0   # low vegetation everywhere
     >>> scores[2, 1, 1] = 2.0                                       # one road pixel
     >>> LHDMonitor(labels=UAVID).decide(scores, np.ones((3, 3), bool))

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from el.deadline import checkpoint
+from el.base.deadline import checkpoint
 
 MC_CHUNK = 32
 """Samples per batch: above the shipped configurations' n (10, 30), so their samples are unchanged."""

@@ -33,7 +33,7 @@ class ODINMonitor(SoftmaxScoreMonitor):
     Examples
     --------
     >>> import numpy as np
-    >>> from el.labels import UAVID
+    >>> from el.classes.labels import UAVID
     >>> p = np.array([[0.5], [0.5]])                       # two classes, an even split: most uncertain
     >>> float(ODINMonitor(labels=UAVID, network_classes=2, temperature=1.0).uncertainty(p)[0])
     1.0

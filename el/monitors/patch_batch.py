@@ -20,8 +20,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from el.deadline import checkpoint
-from el.decision import Candidate, Disc, MonitorVerdict
+from el.base.deadline import checkpoint
+from el.base.decision import Candidate, Disc, MonitorVerdict
 from el.monitors.patches import Patch, accepts_keyword
 
 if TYPE_CHECKING:  # el.monitors.base calls this module: no import back at run time

@@ -1,4 +1,4 @@
-"""The score walk's judge over one batched judgement of the frame: what the flight loop plugs into ``el.walk``.
+"""The score walk's judge over one batched judgement of the frame: what the flight loop plugs into ``el.monitors.walk``.
 
 A score walk (``learned:walk=score``, the deployed monitor) judges every candidate of the frame before it picks
 one, so nothing is lost by judging them together: :func:`batch_judge` returns a judge that, at its first call,
@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from el.decision import Candidate, MonitorVerdict
+from el.base.decision import Candidate, MonitorVerdict
 from el.monitors.base import CandidateContext, Monitor
 
 Judge = Callable[[int], MonitorVerdict]

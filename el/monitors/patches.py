@@ -1,6 +1,6 @@
 """HD patch geometry: the square crop around a candidate's safe disc, and the disc's pixel mask.
 
-Coordinates are continuous full-resolution image coordinates, as in ``el.core`` and the decision
+Coordinates are continuous full-resolution image coordinates, as in ``el.landing.core`` and the decision
 JSON: pixel (row r, column c) covers [c, c+1) x [r, r+1), so its centre is ``(c + 0.5, r + 0.5)``
 and the image spans [0, W] x [0, H]. A pixel belongs to the disc when its centre lies within
 ``radius_px`` of the disc centre.
@@ -15,9 +15,9 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from el.decision import Candidate, Disc
-from el.discs import disc_window_mask
-from el.rgb import check_rgb
+from el.base.decision import Candidate, Disc
+from el.base.rgb import check_rgb
+from el.geometry.discs import disc_window_mask
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,7 +60,7 @@ def _as_disc(disc: object) -> Disc:
 
 
 def validate_rgb(image: object, what: str = "image") -> np.ndarray:
-    """Check an RGB image: ndarray of shape (H, W, 3), uint8, non-empty (``el.rgb.check_rgb``)."""
+    """Check an RGB image: ndarray of shape (H, W, 3), uint8, non-empty (``el.base.rgb.check_rgb``)."""
     return check_rgb(image, what)
 
 
@@ -121,7 +121,7 @@ def extract_patch(
     Examples
     --------
     >>> import numpy as np
-    >>> from el.decision import Candidate, Disc
+    >>> from el.base.decision import Candidate, Disc
     >>> p = extract_patch(np.zeros((100, 200, 3), np.uint8), Disc(50.5, 40.5, 8.0), margin=0.25)
     >>> p.rgb.shape, p.offset, int(p.disc_mask.sum())
     ((21, 21, 3), (40, 30), 197)

@@ -38,8 +38,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from el.forbidden import forbidden_pixels
-from el.labels import LabelSet
+from el.classes.labels import LabelSet
+from el.landing.forbidden import forbidden_pixels
 from el.monitors.base import Judgement
 from el.monitors.lhd import LHDMonitor
 from el.monitors.spec import GenericSpec

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from itertools import product
 from typing import Any
 
-from el.walk import HAZARD, check_walk
+from el.monitors.walk import HAZARD, check_walk
 
 NONE = "none"
 PAPER_TAUS: tuple[float, ...] = (0.25, 0.125)
@@ -32,7 +32,7 @@ VALID_FORMS = (
     "their registry name (el.monitors.registry)"
 )
 THRESHOLD = "threshold"
-WALK = "walk"  # el.walk: the order of the decision loop's walk (registered monitors only)
+WALK = "walk"  # el.monitors.walk: the order of the decision loop's walk (registered monitors only)
 
 
 def validate_tau(tau: object) -> float:
@@ -187,7 +187,7 @@ class GenericSpec:
 
     @property
     def walk(self) -> str:
-        """The decision loop's walk order (``el.walk``): ``hazard`` unless ``walk=score``."""
+        """The decision loop's walk order (``el.monitors.walk``): ``hazard`` unless ``walk=score``."""
         return str(dict(self.params).get(WALK, HAZARD))
 
     @property
@@ -218,7 +218,7 @@ def parse_monitor_spec(text: str | AnySpec | None) -> AnySpec | None:
     the parameters too, but every parameter of the kind is required. Any other name is looked up in
     the monitor registry (built-ins and the ``uav_el.monitors`` entry points) and gives a
     :class:`GenericSpec`; its values keep their case (file paths). Every monitor takes
-    ``threshold=X``; a registered one also ``walk=score`` (``el.walk``).
+    ``threshold=X``; a registered one also ``walk=score`` (``el.monitors.walk``).
 
     Raises
     ------

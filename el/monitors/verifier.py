@@ -10,7 +10,7 @@ pixel), the definition the campaign judges by. Rejected iff score > threshold.
 ``sigmoid(w logit(p_verifier) + (1 - w) logit(p_learned))``, ``w`` chosen on validation and recorded in the
 verifier's file (``fusion``), which also names the learned model it was chosen with (its SHA-256 is checked).
 
-The file is a hash-checked record (``el.records.HashedRecord``, format :data:`VERIFIER_FORMAT`) beside its ONNX
+The file is a hash-checked record (``el.base.records.HashedRecord``, format :data:`VERIFIER_FORMAT`) beside its ONNX
 network: the record holds the ONNX file's name and SHA-256 (checked before ONNX Runtime sees a byte), the crop
 size and margin, the threshold, the training data's hash, the command, the validation figures and the segmentation
 network whose candidates it was trained on. Inference is ONNX Runtime (the light install's engine; no torch), one
@@ -28,14 +28,14 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from el.deadline import checkpoint
-from el.decision import Candidate, Disc, MonitorVerdict
-from el.errors import LearnedModelError
-from el.labels import LabelSet
+from el.base.deadline import checkpoint
+from el.base.decision import Candidate, Disc, MonitorVerdict
+from el.base.errors import LearnedModelError
+from el.base.records import HashedRecord
+from el.classes.labels import LabelSet
 from el.monitors.base import CandidateContext, Clock, Monitor, batch_arguments
 from el.monitors.spec import GenericSpec
 from el.monitors.verifier_crop import candidate_crop
-from el.records import HashedRecord
 
 VERIFIER_FORMAT = "uav-el-verifier/1"
 DEFAULT_VERIFIER = Path(__file__).resolve().parent / "data" / "verifier.json"

@@ -1,7 +1,7 @@
 """The verifier's view of a candidate: the full-resolution pixels of its disc and a margin, at a fixed size.
 
 A candidate's disc has the same radius on the ground wherever it lies in the frame (``beta * R``, 3.4 m for the
-shipped safety parameters; its radius in pixels follows the row, ``el.camera``), so a square of half-side
+shipped safety parameters; its radius in pixels follows the row, ``el.geometry.camera``), so a square of half-side
 ``radius_px * (1 + margin)`` around the disc's centre, resampled to ``size`` x ``size`` pixels, is a fixed ground
 size in metres at a fixed resolution: the disc is always the same circle of the crop
 (:func:`crop_disc_mask`). Pixels outside the frame are black (the image border counts as forbidden). Training
@@ -15,7 +15,7 @@ import math
 import cv2
 import numpy as np
 
-from el.decision import Candidate, Disc
+from el.base.decision import Candidate, Disc
 from el.monitors.patches import _as_disc, validate_rgb
 
 

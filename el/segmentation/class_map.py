@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from el.labels import LabelSet
+from el.classes.labels import LabelSet
 from el.segmentation.contract import (
     FRAME_STATS,
     MC_DROPOUT,
@@ -119,7 +119,7 @@ class MappedModel:
 
     Examples
     --------
-    >>> from el.labels import UAVID
+    >>> from el.classes.labels import UAVID
     >>> m = MappedModel(network, {n: n for n in UAVID.names}, UAVID)  # doctest: +SKIP
     """
 

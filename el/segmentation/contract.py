@@ -16,8 +16,8 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from el.labels import UAVID, LabelSet
-from el.records import weights_sha256_of  # noqa: F401  (re-exported: part of the seam)
+from el.base.records import weights_sha256_of  # noqa: F401  (re-exported: part of the seam)
+from el.classes.labels import UAVID, LabelSet
 from el.segmentation.frame_tap import FramePass
 
 MC_DROPOUT = "mc_dropout"
@@ -43,7 +43,7 @@ class SegmentationModel(Protocol):
     ``predict_frame(rgb)``: (H, W, 3) uint8 frame -> (C, h, w) float32 probabilities at the working
     resolution ``(w, h) = working_size(W, H)``. ``predict_patch(rgb_patch)``: (h, w, 3) uint8 -> (C, h, w)
     at the patch's resolution, deterministic. Optional attributes, read with :func:`labels_of` and
-    :func:`weights_sha256_of`: ``labels`` (a :class:`el.labels.LabelSet`; UAVid when absent) and
+    :func:`weights_sha256_of`: ``labels`` (a :class:`el.classes.labels.LabelSet`; UAVid when absent) and
     ``weights_sha256`` (the identity cards and fitted monitors are bound to; None when absent). A model offering
     :data:`FRAME_STATS` also takes ``predict_frame(rgb, stats=True)`` and returns ``(probs, stats)``.
     """

@@ -28,7 +28,7 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-from el.errors import WeightsError
+from el.base.errors import WeightsError
 from el.segmentation.contract import OutputClasses, check_model
 
 ENTRY_POINT_GROUP = "uav_el.models"
@@ -117,12 +117,12 @@ def load_model(spec: str | Path | None = None, *, threads: int | None = None, de
 def _segmenter(path: str | Path | None, threads: int | None, device: str, working_width: int | None) -> Any:
     """The ``Segmenter`` of a weights file (None: the shipped one); without torch (the optional heavy dependency, the
     ``train`` extra) its checked ONNX export under ONNX Runtime (``el.segmentation.onnx_segmenter``), same decisions."""
-    from el.torch_extra import have_torch
+    from el.base.torch_extra import have_torch
 
     width = {} if working_width is None else {"working_width": working_width}
     if not have_torch():
+        from el.base.torch_extra import TorchMissing, missing_line
         from el.segmentation.onnx_segmenter import OnnxSegmenter
-        from el.torch_extra import TorchMissing, missing_line
 
         if device != "cpu":
             raise TorchMissing(missing_line(f"device {device!r}"))

@@ -1,6 +1,7 @@
 """A frame's softmax at the working resolution, from a network's passes: what :class:`Segmenter` and the torch-free
 :class:`~el.segmentation.onnx_segmenter.OnnxSegmenter` share (a mixin, no torch), so the shipped network segments a
-frame by the same steps whichever runs it: resized (``cv2.INTER_AREA``) to :func:`el.camera.working_size`, each of
+frame by the same steps whichever runs it: resized (``cv2.INTER_AREA``) to :func:`el.geometry.camera.working_size`,
+each of
 ``frame_scales`` (mean), each with its mirror image when ``frame_flip``, brought back by ``frame_pooling``. Asked
 for ``stats``, it returns the statistics of its first pass with the probabilities (``el.segmentation.frame_tap``).
 """
@@ -12,9 +13,9 @@ from typing import TYPE_CHECKING, Any
 import cv2
 import numpy as np
 
-from el.camera import working_size
-from el.deadline import checkpoint
-from el.rgb import check_rgb
+from el.base.deadline import checkpoint
+from el.base.rgb import check_rgb
+from el.geometry.camera import working_size
 from el.segmentation.frame_tap import FramePass, FrameTap
 from el.segmentation.pooling import downsample_probs
 

@@ -4,7 +4,7 @@ The one class here, :class:`Segmenter`, wraps any segmentation network and gives
 and the runtime monitors what they need (docs/architecture.md sections 3.2 and 3.6):
 
 - :meth:`Segmenter.predict_frame`: the HD frame resized (``cv2.INTER_AREA``) to the working
-  resolution of :func:`el.camera.working_size` -> softmax (8, h, w); with ``frame_flip`` the mean
+  resolution of :func:`el.geometry.camera.working_size` -> softmax (8, h, w); with ``frame_flip`` the mean
   of the softmax of the frame and of its mirror image (one batch of two; the oblique view is
   left-right symmetric in distribution, and training flips too); with ``frame_scales`` the mean
   over the working-resolution frame fed to the network at several sizes (an upsampled view gives
@@ -45,9 +45,9 @@ import numpy as np
 import torch
 from torch import nn
 
-from el.deadline import checkpoint
-from el.errors import WeightsError
-from el.labels import UAVID, LabelSet
+from el.base.deadline import checkpoint
+from el.base.errors import WeightsError
+from el.classes.labels import UAVID, LabelSet
 from el.segmentation.batching import unit_nchw
 from el.segmentation.frame_passes import MIN_SIZE, FramePasses, check_finite, check_frame_rgb
 from el.segmentation.frame_tap import FrameTap, frame_tap
@@ -64,7 +64,7 @@ _check_finite = check_finite
 
 
 def _checked(model: nn.Module, x: torch.Tensor, where: str) -> torch.Tensor:
-    """``model(x)`` after a checkpoint of the decision's deadline (``el.deadline``)."""
+    """``model(x)`` after a checkpoint of the decision's deadline (``el.base.deadline``)."""
     checkpoint(where)
     return model(x)
 
@@ -155,7 +155,7 @@ class Segmenter(FramePasses, PatchPasses):
     >>> import numpy as np
     >>> from el.segmentation.architectures import build_model
     >>> from el.segmentation.model import ArchConfig
-    >>> from el.labels import UAVID
+    >>> from el.classes.labels import UAVID
     >>> seg = Segmenter(build_model(ArchConfig(widths=(8, 8, 8))), working_width=64, labels=UAVID)
     >>> seg.predict_frame(np.zeros((72, 128, 3), np.uint8)).shape
     (8, 36, 64)
@@ -202,7 +202,7 @@ class Segmenter(FramePasses, PatchPasses):
         a missing or altered file raises :class:`el.segmentation.weights.WeightsError`. Frames are
         segmented as the card's evaluation protocol says (``frame_flip``, ``frame_scales``; a card
         without them: the frame alone). The label set is the card's ``labels`` entry
-        (:meth:`el.labels.LabelSet.from_dict`) when it has one, else UAVid.
+        (:meth:`el.classes.labels.LabelSet.from_dict`) when it has one, else UAVid.
         """
         from el.segmentation.onnx_engine import engine_for
 

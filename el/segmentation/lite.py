@@ -28,7 +28,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from el.labels import NUM_CLASSES
+from el.classes.labels import NUM_CLASSES
 from el.segmentation.model import MCDropout, MCSpec, TrunkHeadNet
 
 # EfficientNet-Lite was trained on (x - 127) / 128 of 8-bit RGB: in [0, 1] units, mean 127/255, std 128/255.
@@ -125,7 +125,7 @@ def pretrained_provenance(path: str | Path | None = None) -> dict[str, str]:
     """What the model card records of the encoder's ImageNet weights: package, version, file, SHA-256."""
     from importlib.metadata import PackageNotFoundError, version
 
-    from el.hashing import sha256_file
+    from el.base.hashing import sha256_file
 
     path = Path(path) if path is not None else pretrained_weights_path()
     try:

@@ -42,7 +42,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from el.labels import NUM_CLASSES
+from el.classes.labels import NUM_CLASSES
 
 # ImageNet statistics: a fixed, documented normalisation (the input is RGB in [0, 1]).
 RGB_MEAN = (0.485, 0.456, 0.406)

@@ -29,9 +29,9 @@ from typing import Any
 
 import numpy as np
 
-from el.deadline import stop_at_deadline
-from el.errors import BudgetExceeded, WeightsError
-from el.hashing import sha256_bytes
+from el.base.deadline import stop_at_deadline
+from el.base.errors import BudgetExceeded, WeightsError
+from el.base.hashing import sha256_bytes
 
 ENGINE_ENV = "UAV_EL_ENGINE"
 ENGINES = ("auto", "torch", "onnx")
@@ -93,7 +93,7 @@ def read_onnx(path: str | Path) -> OnnxFile:
     p = Path(path)
     if not p.is_file():
         raise WeightsError(f"{p}: ONNX file not found")
-    from el import userfiles
+    from el.base import userfiles
 
     try:  # bounded: never under /proc, /sys or /dev, at most MAX_MODEL_BYTES
         data = userfiles.read_bytes(p, what="ONNX file", max_bytes=userfiles.MAX_MODEL_BYTES, hard_links=True)
@@ -130,7 +130,7 @@ def file_identity(path: str | Path) -> str:
     external data included), the plain SHA-256 otherwise; ``WeightsError`` for an ONNX file that cannot be read."""
     if str(path).lower().endswith(".onnx"):
         return read_onnx(path).sha256
-    from el.hashing import sha256_file
+    from el.base.hashing import sha256_file
 
     return sha256_file(path)
 
@@ -202,7 +202,7 @@ def _inline(tensor: Any, model: Path, blobs: dict[str, bytes]) -> None:
     location = info.get("location", "")
     target, rel = _confined(model, location)
     if rel not in blobs:
-        from el import userfiles
+        from el.base import userfiles
 
         try:  # bounded, and confined to the model's folder (``_confined`` checked the name; this what it opens)
             blobs[rel] = userfiles.read_bytes(target, what="external data file", max_bytes=userfiles.MAX_MODEL_BYTES,
@@ -274,8 +274,8 @@ def open_session(data: bytes, where: str | Path, threads: int | None = None) -> 
 def run_session(session: Any, names: list[str], feeds: dict[str, Any], where: str) -> list[Any]:
     """``session.run(names, feeds)``, cancelled at the decision's deadline (no work goes on after the answer).
 
-    Inside a decision (an active ``el.deadline`` deadline) the run gets its own ``RunOptions``, whose ``terminate``
-    the deadline sets from another thread when it passes or is cancelled (:func:`el.deadline.stop_at_deadline`):
+    Inside a decision (an active ``el.base.deadline`` deadline) the run gets its own ``RunOptions``, whose ``terminate``
+    the deadline sets from another thread when it passes or is cancelled (:func:`el.base.deadline.stop_at_deadline`):
     ONNX Runtime then abandons the run at its next operator and this raises ``BudgetExceeded`` (the decision is
     ``timeout``), instead of computing on for a decision already returned. A run that ends before the deadline is
     the plain run (options change no number); outside a decision (campaigns, probes) nothing is armed."""
@@ -427,7 +427,7 @@ def engine_for(weights_path: str | Path, weights_sha256: str | None, threads: in
 def _checked_engine(weights_path: str | Path, weights_sha256: str | None, threads: int | None) -> OnnxEngine:
     rec_path = record_path(weights_path)
     onnx_path = Path(weights_path).with_suffix(".onnx")
-    from el import userfiles
+    from el.base import userfiles
 
     try:  # bounded (a UserFileError is a ValueError: named below)
         record = json.loads(userfiles.read_text(rec_path, what="ONNX engine record",

@@ -41,11 +41,11 @@ from typing import Any, ClassVar
 import cv2
 import numpy as np
 
-from el.camera import working_size
-from el.deadline import checkpoint
-from el.errors import WeightsError
-from el.labels import LabelSet
-from el.rgb import check_rgb
+from el.base.deadline import checkpoint
+from el.base.errors import WeightsError
+from el.base.rgb import check_rgb
+from el.classes.labels import LabelSet
+from el.geometry.camera import working_size
 from el.segmentation.contract import OutputClasses
 from el.segmentation.frame_tap import FramePass, FrameTap, frame_tap
 from el.segmentation.onnx_engine import metadata, open_session, read_checked, run_session, shipped_export_source

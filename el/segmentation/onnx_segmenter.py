@@ -21,8 +21,9 @@ from typing import Any
 
 import numpy as np
 
-from el.errors import WeightsError
-from el.labels import UAVID, LabelSet
+from el.base.errors import WeightsError
+from el.base.torch_extra import TorchMissing, missing_line
+from el.classes.labels import UAVID, LabelSet
 from el.segmentation.batching import unit_nchw
 from el.segmentation.frame_passes import FramePasses, check_finite, check_frame_rgb
 from el.segmentation.frame_tap import FrameTap, frame_tap
@@ -30,7 +31,6 @@ from el.segmentation.patch_passes import PatchPasses
 from el.segmentation.pooling import check_pooling
 from el.segmentation.protocol import card_protocol, check_frame_scales
 from el.segmentation.weights import DEFAULT_WEIGHTS, card_path, checked_weights
-from el.torch_extra import TorchMissing, missing_line
 
 INPUT_MULTIPLE = {"lite0": 32, "msdlite": 8}
 """What each shipped architecture edge-pads its input to (its ``stride``; ``el.segmentation.batching``): patches of

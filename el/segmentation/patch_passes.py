@@ -15,8 +15,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from el.deadline import checkpoint
-from el.rgb import check_rgb
+from el.base.deadline import checkpoint
+from el.base.rgb import check_rgb
 from el.segmentation.batching import group_by_padded_size, padded_batch, padding_multiple, unit_nchw
 from el.segmentation.onnx_engine import OnnxEngine
 from el.segmentation.patch_pool import PatchPool

@@ -7,7 +7,7 @@ independent: here each worker thread owns a session of one intra-op thread and t
 first, until none is left. A session computes the same numbers whatever its thread count (ONNX Runtime's CPU
 kernels split the outputs among threads, never an output's sum), so each patch gets the scores of a lone pass.
 
-Workers run in copies of the caller's context, so the decision's deadline (``el.deadline``) reaches them; the
+Workers run in copies of the caller's context, so the decision's deadline (``el.base.deadline``) reaches them; the
 first error of any worker is raised once every worker has stopped (the others stop at their next patch).
 """
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from el.labels import LabelSet
+from el.classes.labels import LabelSet
 
 POOLINGS = ("area", "conservative")
 
@@ -49,7 +49,7 @@ def downsample_probs(probs: np.ndarray, size: tuple[int, int], pooling: str = "a
     if c != labels.num_classes:
         raise ValueError(f"conservative pooling needs the {labels.num_classes} classes, got {c}")
     # torch: the optional heavy dependency (the train extra), imported only for conservative pooling
-    from el.torch_extra import require_torch
+    from el.base.torch_extra import require_torch
 
     torch = require_torch("conservative frame pooling")
     F = torch.nn.functional

@@ -9,7 +9,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from el.labels import PALETTE
+from el.classes.labels import PALETTE
 
 
 class ColourModel:

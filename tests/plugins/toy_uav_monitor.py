@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from el.labels import FORBIDDEN_IDS
+from el.classes.labels import FORBIDDEN_IDS
 from el.monitors.base import Judgement
 from el.monitors.lhd import LHDMonitor
 

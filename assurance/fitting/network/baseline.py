@@ -19,8 +19,8 @@ from sklearn.pipeline import make_pipeline
 from sklearn.preprocessing import StandardScaler
 
 from assurance.fitting.network.evaluation import confusion, summarise
-from el.labels import NUM_CLASSES
-from el.rgb import check_rgb
+from el.base.rgb import check_rgb
+from el.classes.labels import NUM_CLASSES
 
 BOX_SIZES = (5, 15)
 FEATURE_NAMES: tuple[str, ...] = (

@@ -35,9 +35,9 @@ import numpy as np
 from assurance.dataio.layouts import iter_samples, read_sample_labels
 from assurance.dataio.uavid import DataError, Sample, read_image
 from assurance.files import atomic_write_bytes
-from el.camera import NUM_STRIPES, UNREACHABLE_STRIPES, working_size
-from el.hashing import sha256_file
-from el.labels import NUM_CLASSES, UAVID
+from el.base.hashing import sha256_file
+from el.classes.labels import NUM_CLASSES, UAVID
+from el.geometry.camera import NUM_STRIPES, UNREACHABLE_STRIPES, working_size
 
 CACHE_VERSION = 1
 

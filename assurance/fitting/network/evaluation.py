@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from assurance.fitting.network.data import Prepared
-from el.labels import CLASS_NAMES, NUM_CLASSES
+from el.classes.labels import CLASS_NAMES, NUM_CLASSES
 
 
 def confusion(truth: np.ndarray, pred: np.ndarray, num_classes: int = NUM_CLASSES) -> np.ndarray:

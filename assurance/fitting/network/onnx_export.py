@@ -126,7 +126,7 @@ def check_frame(frame: np.ndarray | None, working_width: int) -> np.ndarray:
     """The check frame at the working resolution: the one given, or a rendered synthetic scene (seed 1)."""
     import cv2
 
-    from el.camera import working_size
+    from el.geometry.camera import working_size
 
     if frame is None:
         from assurance.scenes.generate import generate_scene
@@ -164,7 +164,7 @@ def export_onnx(model: Any, out_path: str | Path, *, opset: int = DEFAULT_OPSET,
             raise ValueError(f"ONNX export differs from torch on a {c['size'][0]}x{c['size'][1]} input: "
                              f"{c['argmax_differ_not_tie']} pixels with another class, largest logit "
                              f"difference {c['max_logit_diff']:.3g} (nothing written)")
-    from el.hashing import sha256_bytes
+    from el.base.hashing import sha256_bytes
 
     digest = sha256_bytes(data)
     atomic_write_bytes(out_path, data)

@@ -10,7 +10,7 @@ from typing import Any
 import torch
 
 from assurance.files import atomic_write_bytes
-from el.hashing import sha256_bytes
+from el.base.hashing import sha256_bytes
 from el.segmentation.model import count_parameters
 from el.segmentation.weights import CARD_FORMAT, card_path
 

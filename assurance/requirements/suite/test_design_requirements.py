@@ -8,17 +8,17 @@ import numpy as np
 import pytest
 
 from assurance import requirements as rq
-from el.config import CoreConfig
-from el.errors import WeightsError
-from el.pipeline import EmergencyLanding, PipelineConfig
+from el.base.errors import WeightsError
+from el.base.torch_extra import have_torch
+from el.flight.pipeline import EmergencyLanding, PipelineConfig
+from el.geometry.config import CoreConfig
 from el.segmentation.factory import load_model
-from el.torch_extra import have_torch
 
 
 @pytest.mark.requirements("EL-R14")
 @pytest.mark.parametrize("size", [(3840, 2160), (4096, 2160)])
 def test_declared_beta_covers_the_declared_pose_error_box(size, requirement_registry):
-    from el.camera import SafetyParams
+    from el.geometry.camera import SafetyParams
 
     p = requirement_registry.parameters  # the targets: R, beta and the pose-error box
     core = CoreConfig(safety=SafetyParams(radius_m=p["radius_m"], beta=p["beta"]))
@@ -29,7 +29,7 @@ def test_declared_beta_covers_the_declared_pose_error_box(size, requirement_regi
 
 @pytest.mark.requirements("EL-R14")
 def test_a_too_small_beta_is_caught():
-    from el.camera import SafetyParams
+    from el.geometry.camera import SafetyParams
 
     ev = rq.check_pose_margin(CoreConfig(safety=SafetyParams(beta=1.2)), (3840, 2160), {"height": 0.2, "pitch": 0.2})
     assert ev.status == rq.FAIL and "1.2 <" in ev.summary
@@ -37,7 +37,7 @@ def test_a_too_small_beta_is_caught():
 
 @pytest.mark.requirements("EL-R14")
 def test_a_run_planned_with_other_safety_params_does_not_judge_the_targets():
-    from el.camera import SafetyParams
+    from el.geometry.camera import SafetyParams
 
     core = CoreConfig(safety=SafetyParams(radius_m=2.0, beta=1.7))
     ev = rq.check_pose_margin(core, (3840, 2160), {"height": 0.2, "pitch": 0.2}, {"radius_m": 2.5, "beta": 1.7})
@@ -49,7 +49,7 @@ def test_a_run_planned_with_other_safety_params_does_not_judge_the_targets():
 def _scene() -> np.ndarray:
     """A small colour-coded label image (low vegetation, a road, a building): any frame will do, the model
     fails before it is used."""
-    from el.labels import ids_to_colors
+    from el.classes.labels import ids_to_colors
 
     ids = np.full((144, 256), 5, np.uint8)
     ids[:, 80:86] = 2

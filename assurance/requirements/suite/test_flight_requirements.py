@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 
 from assurance.campaign.gt_pipeline import decide_from_labels
-from el.camera import CameraGeometry, working_size
-from el.config import CoreConfig
-from el.core import probs_from_labels
-from el.labels import CLASS_IDS, PALETTE, UAVID, forbidden_mask, ids_to_colors
-from el.pipeline import EmergencyLanding, PipelineConfig
+from el.classes.labels import CLASS_IDS, PALETTE, UAVID, forbidden_mask, ids_to_colors
+from el.flight.pipeline import EmergencyLanding, PipelineConfig
+from el.geometry.camera import CameraGeometry, working_size
+from el.geometry.config import CoreConfig
+from el.landing.core import probs_from_labels
 
 W, H, WW = 256, 144, 128
 

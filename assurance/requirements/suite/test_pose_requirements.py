@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 from assurance.fitting.pose_study import PoseCase, candidate_clearances, summarise
-from el.camera import SafetyParams
+from el.geometry.camera import SafetyParams
 
 
 @pytest.mark.requirements("EL-R02")

@@ -13,7 +13,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from el.camera import Pose
+from el.geometry.camera import Pose
 
 Range = tuple[float, float]
 

@@ -40,8 +40,8 @@ from typing import IO, Any
 
 import numpy as np
 
-from el.decision import Decision, _finite
-from el.hashing import sha256_file
+from el.base.decision import Decision, _finite
+from el.base.hashing import sha256_file
 
 FORMAT = "uav-el-flight-log/2"
 """The record format: a reader refuses records of another major version (2: the hash chain, ``prev_sha256``;
@@ -79,8 +79,8 @@ def domain_verdict(decision: Decision) -> dict[str, Any]:
     """Whether the decision's frame was inside the declared domain its configuration records (``config.odd``):
     ``outside`` (the flight's own ``outside_odd`` reason, or its pose and size found outside here), ``inside``,
     ``not_declared`` (no domain configured) or ``unknown`` (no pose or size recorded: a frame never read)."""
-    from el.camera import Pose
-    from el.odd import OUTSIDE_ODD, OperatingDomain
+    from el.geometry.camera import Pose
+    from el.geometry.odd import OUTSIDE_ODD, OperatingDomain
 
     reason = decision.reason
     if reason.startswith(OUTSIDE_ODD):

@@ -41,7 +41,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, BinaryIO, TypeVar
 
-from el.errors import UavElError
+from el.base.errors import UavElError
 
 MAX_SETTINGS_BYTES = 1 << 20
 """A settings file (system file, label set, hierarchy, waivers, targets, registry, template): a page, not data."""
@@ -54,7 +54,7 @@ MAX_META_BYTES = 1 << 20
 """A scene's ``meta/*.json`` (pose, seed, style, class shares: about 2 kB), read by the evidence and the campaign:
 data folders are not signed, so one may be a FIFO or ``/dev/zero``."""
 MAX_RECORD_BYTES = 64 << 20
-"""A fitted record (``el.records``: frame gate, calibration card, learned monitor). The largest kind is a knn frame
+"""A fitted record (``el.base.records``: frame gate, calibration card, learned monitor). The largest kind is a knn frame
 gate, which keeps its training frames' features (frames x dims numbers, ~20 bytes each: the shipped Mahalanobis
 gate is 0.65 MB); 64 MiB is ~3 million numbers."""
 MAX_MODEL_BYTES = 8 << 30
@@ -62,7 +62,7 @@ MAX_MODEL_BYTES = 8 << 30
 memory stays constant; the cap bounds the time (8 GiB: a network of 2 billion float32 parameters; the shipped
 network is 8 MB)."""
 MAX_HASHED_BYTES = MAX_MODEL_BYTES
-"""The default cap of :func:`sha256` (and ``el.hashing.sha256_file``): the largest file the toolkit hashes is a
+"""The default cap of :func:`sha256` (and ``el.base.hashing.sha256_file``): the largest file the toolkit hashes is a
 model."""
 KERNEL_ROOTS = ("/proc", "/sys", "/dev")
 """File systems that are the kernel's interface, not files: never a user's file, whatever ``stat`` says."""

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 
-from el.userfiles import MAX_RECORD_BYTES, UserFileError, parse_bounded, read_text
+from el.base.userfiles import MAX_RECORD_BYTES, UserFileError, parse_bounded, read_text
 
 
 def body_sha256(body: dict[str, Any]) -> str:
@@ -35,7 +35,7 @@ def read_signed(path: Path, fmt: str, what: str, error: type[ValueError], *, a: 
     in messages, ``a`` is its article, ``hint`` follows an unreadable file's message). Raises ``error``.
 
     A record may be an applicant's (``--gate``, ``[monitor] calibration``), so it is read through the bounded
-    reader (``el.userfiles``): a FIFO, a device or a file over ``MAX_RECORD_BYTES`` is refused before it is read,
+    reader (``el.base.userfiles``): a FIFO, a device or a file over ``MAX_RECORD_BYTES`` is refused before it is read,
     and JSON nested too deeply to parse is refused, never a ``RecursionError``."""
     try:
         doc = parse_bounded(json.loads, read_text(path, what=what, max_bytes=MAX_RECORD_BYTES), where=str(path))

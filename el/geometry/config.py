@@ -11,7 +11,7 @@ import math
 from dataclasses import dataclass, field, fields
 from typing import Any
 
-from el.camera import (
+from el.geometry.camera import (
     CAMERAS,
     FOV_SENSOR_WIDTH_MM,
     REACH_BOUNDS_M,

@@ -22,32 +22,32 @@ from typing import Any
 
 import numpy as np
 
-from el.camera import Pose
-from el.config import CoreConfig, check_seed
-from el.deadline import Deadline, active, run_with_deadline
-from el.decision import Decision, Disc, MonitorVerdict
-from el.errors import BudgetExceeded
-from el.hashing import sha256_bytes
-from el.imageio import MAX_PIXELS, check_max_pixels, read_image_hashed
-from el.kernel import Frame, Parts, build_parts, conclude, default, frame_core, prepare
-from el.labels import UAVID
+from el.base.deadline import Deadline, active, run_with_deadline
+from el.base.decision import Decision, Disc, MonitorVerdict
+from el.base.errors import BudgetExceeded
+from el.base.hashing import sha256_bytes
+from el.base.imageio import MAX_PIXELS, check_max_pixels, read_image_hashed
+from el.base.rgb import check_rgb
+from el.classes.labels import UAVID
+from el.flight.kernel import Frame, Parts, build_parts, conclude, default, frame_core, prepare
+from el.geometry.camera import Pose
+from el.geometry.config import CoreConfig, check_seed
+from el.geometry.odd import OperatingDomain
 from el.monitors import CandidateContext, Monitor, build_monitor, monitor_name, parse_monitor_spec
 from el.monitors.capabilities import check_monitor_capabilities
 from el.monitors.frame_gate import load_frame_gate
 from el.monitors.patch_judge import batch_judge
-from el.odd import OperatingDomain
-from el.rgb import check_rgb
+from el.monitors.walk import HAZARD, SCORE, Judge, Step
 from el.segmentation.contract import check_model, labels_of
-from el.walk import HAZARD, SCORE, Judge, Step
 
 Clock = Callable[[], float]
 DEFAULT_TIME_BUDGET_S = 10.0
 DEPLOYED_MONITOR = "learned:walk=score,threshold=0.8563253044730293"
 """The shipped runtime monitor, chosen on the validation split (docs/results.md, docs/monitors.md): the learned
-candidate monitor (``el/monitors/data/learned.json``), candidates walked by its score (``el.walk``),
+candidate monitor (``el/monitors/data/learned.json``), candidates walked by its score (``el.monitors.walk``),
 at the threshold of its calibration card :data:`DEPLOYED_CALIBRATION` (a test checks they agree)."""
-DEPLOYED_CALIBRATION = Path(__file__).resolve().parent / "monitors" / "data" / "calibration.json"
-DEPLOYED_GATE: Path | None = Path(__file__).resolve().parent / "monitors" / "data" / "frame_gate.json"
+DEPLOYED_CALIBRATION = Path(__file__).resolve().parents[1] / "monitors" / "data" / "calibration.json"
+DEPLOYED_GATE: Path | None = Path(__file__).resolve().parents[1] / "monitors" / "data" / "frame_gate.json"
 """The frame gate the command line deploys when it runs the shipped network (None: none): a Mahalanobis gate on the
 frame pass's trunk statistics, fitted and thresholded on 3840x2160 training and validation frames under the
 in-domain perturbations (docs/results.md). ``PipelineConfig.gate`` is what the flight code deploys; the
@@ -72,7 +72,7 @@ class FrameFile:
 
     @classmethod
     def read(cls, path: str | Path, *, max_pixels: int = MAX_PIXELS) -> FrameFile:
-        """Read and decode ``path`` (``el.imageio.read_image_hashed``; its one-line error for a bad file);
+        """Read and decode ``path`` (``el.base.imageio.read_image_hashed``; its one-line error for a bad file);
         ``read_s``: the seconds it took, which a decision on it counts against its budget as if it had read it."""
         t = time.perf_counter()
         rgb, meta, digest = read_image_hashed(path, max_pixels=max_pixels)
@@ -115,18 +115,18 @@ class PipelineConfig:
         With a budget and the real clock (``time.perf_counter``), the decision runs in a worker thread and
         ``decide`` returns the default action ("timeout") at the deadline even while a stage that has no
         checkpoint (a forward pass, a decode) is still running; the stopped decision ends at its next
-        checkpoint (``el.deadline``), an ONNX Runtime run in flight at once (cancelled: ``RunOptions.terminate``).
+        checkpoint (``el.base.deadline``), an ONNX Runtime run in flight at once (cancelled: ``RunOptions.terminate``).
         False: the cooperative checks, and with the real clock ONNX Runtime runs cancelled at the deadline (a timer);
         an injected clock: the cooperative checks alone.
     max_pixels : int
-        Largest frame accepted, in pixels (:data:`el.imageio.MAX_PIXELS`, 8K plus a quarter by default): a file
+        Largest frame accepted, in pixels (:data:`el.base.imageio.MAX_PIXELS`, 8K plus a quarter by default): a file
         whose header claims more is refused before decoding (default action, the reason naming the file).
     gate : path or None
         A frame gate (``uav-el fit-gate``, ``el.monitors.frame_gate``) scoring the frame pass's own statistics: a
         frame above its threshold ends in the default action (``out_of_domain: frame gate ...``); its score and
         threshold are in every decision's ``input.frame_gate`` (null: no gate). A bad gate file is a fault.
     odd : OperatingDomain or None
-        The declared operating domain (``el.odd``): a frame whose pose or size is outside it ends in the
+        The declared operating domain (``el.geometry.odd``): a frame whose pose or size is outside it ends in the
         default action with reason ``outside_odd: <dimension> ...`` (a decision, not a fault). None: no
         declaration is checked.
     """
@@ -152,7 +152,7 @@ class PipelineConfig:
             raise ValueError(f"time_budget_s must be a positive number of seconds or None, got {self.time_budget_s!r}")
         check_seed(self.seed)
         if self.odd is not None and not isinstance(self.odd, OperatingDomain):
-            raise ValueError(f"odd must be an el.odd.OperatingDomain or None, got {type(self.odd).__name__}")
+            raise ValueError(f"odd must be an el.geometry.odd.OperatingDomain or None, got {type(self.odd).__name__}")
 
     @property
     def monitor_name(self) -> str:
@@ -204,7 +204,8 @@ class EmergencyLanding:
     ) -> None:
         self.config = config or PipelineConfig()
         self.clock = clock
-        self.log = log  # an el.flightlog.FlightLog: each decision appended to it (opt-in; its write never raises)
+        # an el.flight.flightlog.FlightLog: each decision appended to it (opt-in; its write never raises)
+        self.log = log
         self._lock = threading.Lock()
         self.fault: str | None = None
         self.errors: dict[str, Exception] = {}
@@ -249,7 +250,7 @@ class EmergencyLanding:
         logger.exception("%s; every decision will be the default action", _NOT_BUILT[part].format(self.config.monitor))
 
     def _parts(self, gate: Any) -> Parts:
-        """The deployed parts the kernel decides with (``el.kernel.build_parts``, built once); a gate the network
+        """The deployed parts the kernel decides with (``el.flight.kernel.build_parts``, built once); a gate the network
         cannot carry (fitted on another, or no frame statistics) is a fault and left out."""
         cfg = self.config
 
@@ -267,7 +268,7 @@ class EmergencyLanding:
     def decide(self, image: np.ndarray | str | Path | FrameFile, pose: Pose | None = None, *,
                pose_source: str = "frame") -> Decision:
         """Decide where to land for one frame (:meth:`decide_now`) and append the decision to the flight log when
-        one was given (``log``, ``el.flightlog``); never raises."""
+        one was given (``log``, ``el.flight.flightlog``); never raises."""
         decision = self.decide_now(image, pose, pose_source=pose_source)
         if self.log is not None:
             self.log.write(decision, segmenter=self.segmenter, frame=getattr(image, "rgb", image))
@@ -280,8 +281,9 @@ class EmergencyLanding:
 
         ``pose``: the camera's height and pitch when the frame was taken (from the flight log); None is the
         configured nominal pose (``config.core.pose``). It sets the safety radius in pixels and is recorded in the
-        decision's ``input.pose`` with ``pose_source`` (``el.kernel.POSE_SOURCES``: ``frame``, or ``command_line``
-        for a pose typed by hand). The decision is the kernel's (``el.kernel``), with this system's parts and its
+        decision's ``input.pose`` with ``pose_source`` (``el.flight.kernel.POSE_SOURCES``: ``frame``, or
+        ``command_line``
+        for a pose typed by hand). The decision is the kernel's (``el.flight.kernel``), with this system's parts and its
         monitor judging candidates lazily under the deadline.
         """
         cfg = self.config

@@ -1,7 +1,7 @@
 """The plain-data tables of a label set and their checks (docs/architecture.md 2.1): classes, ignore colour, forms.
 
-:class:`el.labels.LabelSet` is built from these records; this module holds what does not need the
-set itself, so that ``el/labels.py`` stays one object. Two file forms are read here: the *class list*
+:class:`el.classes.labels.LabelSet` is built from these records; this module holds what does not need the
+set itself, so that ``el/classes/labels.py`` stays one object. Two file forms are read here: the *class list*
 (``classes: [{id, name, rgb, forbidden, hazard_score}]``, as ``LabelSet.to_dict`` writes it) and the
 compact *palette* form a system file uses (``palette: {name: [r, g, b]}`` in id order, ``forbidden:
 [names]``, ``hazard_scores: {name: score}``). Every problem is a ValueError naming the key and the value.
@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from el.class_names import check_class_names
-from el.name_profile import profile_problem
+from el.classes.class_names import check_class_names
+from el.classes.name_profile import profile_problem
 
 MAX_CLASSES = 256  # class ids travel as uint8
 CLASS_KEYS = ("id", "name", "rgb", "forbidden", "hazard_score", "category")
@@ -25,7 +25,7 @@ CATEGORIES = ("road", "vehicle", "building", "person", "animal", "water", "obsta
               "tree", "marker", "unknown")
 """Hazard categories a class may declare (``category``): what the ground is, whatever the label set calls it. The
 certification basis (``assurance.requirements.basis``) says which must be forbidden, and pins the category of the
-well-known class names (``el.class_names.PINNED_CATEGORIES``: a set cannot redeclare road's); road, vehicle and
+well-known class names (``el.classes.class_names.PINNED_CATEGORIES``: a set cannot redeclare road's); road, vehicle and
 building are the paper's hazards (avoid roads at all costs; do not land on cars or buildings), water the ground a
 parachute cannot be recovered from; person and animal are listed so that a set's choice about them is visible."""
 IGNORE_KEYS = ("rgb", "id", "counts_as", "name")
@@ -54,7 +54,7 @@ class IgnoreLabel:
     """The "unlabelled" colour: pixels no class was given to, read as id ``id`` (outside the class ids).
 
     ``counts_as`` (:data:`IGNORE_COUNTS_AS`) says how the ground truth treats them; ``name`` is what
-    reports call them. Checked against the classes by :class:`el.labels.LabelSet`.
+    reports call them. Checked against the classes by :class:`el.classes.labels.LabelSet`.
     """
 
     rgb: tuple[int, int, int]
@@ -168,7 +168,8 @@ def validate_ignore(ignore: Any, classes: Sequence[LabelClass]) -> None:
     if not isinstance(ignore.name, str) or not ignore.name.strip():
         raise ValueError(f"ignore.name: must be a non-empty string, got {ignore.name!r}")
     why = profile_problem(ignore.name)
-    if why is not None:  # reports name it beside the classes: held to the class names' profile (el.name_profile)
+    # reports name it beside the classes: held to the class names' profile (el.classes.name_profile)
+    if why is not None:
         raise ValueError(f"ignore.name: {ignore.name!r} (written {ascii(ignore.name)}) is outside the class-name "
                          f"profile: {why}")
     rgb = tuple(int(v) for v in ignore.rgb)
@@ -217,7 +218,7 @@ def classes_from_palette(d: Mapping[str, Any]) -> list[LabelClass]:
 
 
 def validate_classes(set_name: str, classes: tuple[LabelClass, ...]) -> None:
-    """ValueError naming the first problem of a class table (see :class:`el.labels.LabelSet`)."""
+    """ValueError naming the first problem of a class table (see :class:`el.classes.labels.LabelSet`)."""
     if not classes:
         raise ValueError(f"label set {set_name!r} has no classes")
     if len(classes) > MAX_CLASSES:

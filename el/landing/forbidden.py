@@ -1,17 +1,17 @@
 """The one forbidden-pixel rule: a forbidden class wins the argmax, and a tie counts as forbidden.
 
-The core model reads the working-resolution softmax by it (``el.candidates.forbidden_from_probs``),
+The core model reads the working-resolution softmax by it (``el.landing.candidates.forbidden_from_probs``),
 the monitors read their HD patch scores by it (``el.monitors.lhd``) and the harness's evidence scores
 use it too (``assurance.fitting.separation``): one definition, so that "forbidden" means the same pixels
 everywhere (docs/architecture.md sections 3.3 and 3.6). Which classes are forbidden is the label set's
-word (``labels``, default :data:`el.labels.UAVID`).
+word (``labels``, default :data:`el.classes.labels.UAVID`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from el.labels import LabelSet
+from el.classes.labels import LabelSet
 
 
 def top_scores(scores: np.ndarray, labels: LabelSet) -> tuple[np.ndarray, np.ndarray]:

@@ -1,6 +1,6 @@
 """The decision walk (docs/architecture.md section 3.7): which candidate the drone lands on, and why.
 
-One function, :func:`walk_candidates`, that the decision loop (``el.pipeline``), the ground-truth
+One function, :func:`walk_candidates`, that the decision loop (``el.flight.pipeline``), the ground-truth
 pipeline and a campaign's judging all call, so the three cannot disagree on a decision:
 
 - ``hazard`` (the paper's walk): best hazard rank first; the drone lands on the first candidate the
@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from el.decision import MonitorVerdict
+from el.base.decision import MonitorVerdict
 
 HAZARD, SCORE = "hazard", "score"
 WALKS = (HAZARD, SCORE)

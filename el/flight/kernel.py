@@ -1,7 +1,7 @@
 """The one decision kernel: a frame -> its pose and the declared domain -> segmentation -> the frame gate ->
 the CM's candidates -> the judge -> the walk -> a ``Decision``.
 
-Every user of the flight function runs this code: the flight loop (``el.pipeline.EmergencyLanding``, a lazy judge
+Every user of the flight function runs this code: the flight loop (``el.flight.pipeline.EmergencyLanding``, a lazy judge
 under the deadline), a campaign task (``assurance.campaign.task``: every configuration's verdicts from one
 judging pass, each concluded here) and the ground-truth pipeline (a label-map segmenter and no monitor). What differs
 between them is plugged in: how the frame is read, the segmenter, and the judge. :func:`build_parts` is the one place
@@ -24,17 +24,17 @@ from typing import Any
 
 import numpy as np
 
-from el.camera import Pose, check_geometry
-from el.config import CoreConfig
-from el.core import default_area, run_core
-from el.deadline import Deadline
-from el.decision import Candidate, Decision
-from el.errors import BudgetExceeded
-from el.labels import LabelSet
+from el.base.deadline import Deadline
+from el.base.decision import Candidate, Decision
+from el.base.errors import BudgetExceeded
+from el.classes.labels import LabelSet
+from el.geometry.camera import Pose, check_geometry
+from el.geometry.config import CoreConfig
+from el.geometry.odd import OperatingDomain
+from el.landing.core import default_area, run_core
 from el.monitors.frame_gate import FrameGate, bind_frame_gate, judge_frame
-from el.odd import OperatingDomain
+from el.monitors.walk import HAZARD, Judge, Step, WalkOutcome, walk_candidates
 from el.segmentation.contract import labels_of, segment_frame
-from el.walk import HAZARD, Judge, Step, WalkOutcome, walk_candidates
 
 REFUSALS = ("outside_odd", "out_of_domain")
 """How the reasons of the kernel's refusals begin: a frame outside the declared domain, or one the frame gate refuses,
@@ -103,7 +103,7 @@ def frame_core(core: CoreConfig, pose: Pose | None) -> CoreConfig:
     if pose is None:
         return core
     if not isinstance(pose, Pose):
-        raise ValueError(f"pose must be an el.camera.Pose, got {type(pose).__name__}")
+        raise ValueError(f"pose must be an el.geometry.camera.Pose, got {type(pose).__name__}")
     values = {f.name: getattr(pose, f.name) for f in fields(pose)}
     for name, value in values.items():
         if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from el.decision import Disc
+from el.base.decision import Disc
 
 
 def disc_bounds(disc: Disc, width: int, height: int) -> tuple[int, int, int, int]:

@@ -5,7 +5,7 @@ a disc of radius R around pixel (i, j) holds the pixels whose centres lie within
 
 - ``H_s = sum_l m_l s_l / max_l s_l`` with ``m_l`` the mean probability of class l over the disc
   and ``s_l`` the hazard score of class l (the label set's ``hazard_scores``, default
-  ``el.labels.UAVID``; 0 for forbidden classes).
+  ``el.classes.labels.UAVID``; 0 for forbidden classes).
 - ``H_d = (d - d_max) / (R - d_max)`` if ``d < d_max`` else 0, ``d_max = d_max_factor * R``,
   with ``d`` the clearance (px) from the centre to the nearest forbidden pixel.
 
@@ -19,7 +19,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from el.labels import LabelSet
+from el.classes.labels import LabelSet
 
 
 @lru_cache(maxsize=256)

@@ -1,6 +1,6 @@
 """Class names the certification basis knows, compared as a reader sees them (docs/architecture.md 2.1).
 
-A label set names its own classes, and declares for each a hazard category (``el.label_tables.CATEGORIES``). For
+A label set names its own classes, and declares for each a hazard category (``el.classes.label_tables.CATEGORIES``). For
 the well-known names of :data:`PINNED_CATEGORIES` (road, street, car, building, person, water, ...) the category is
 not the set's to choose: the certification basis (``assurance.requirements.basis``) pins it, and a set declaring
 another one deviates from the basis. Two spellings a reader cannot tell apart must not be two classes:
@@ -8,10 +8,10 @@ another one deviates from the basis. Two spellings a reader cannot tell apart mu
 - :func:`class_key` is how names are compared: NFKC, case-folded, every run of separators (``_``, ``-``, any dash,
   any space) one space: ``Paved_Area``, ``paved-area`` and ``PAVED AREA`` are one name, ``paved area``;
 - :func:`skeleton` is what a name looks like, after Unicode TS 39 with ICU's full confusables data
-  (``el.name_profile.skeleton``): the Cyrillic ``rоad`` and ``road`` share one.
+  (``el.classes.name_profile.skeleton``): the Cyrillic ``rоad`` and ``road`` share one.
 
 :func:`check_class_names` refuses a set holding a class whose name is outside the restricted identifier profile
-(``el.name_profile``: Latin letters of TS 39's recommended set after NFKC, digits, ``-``, ``_``, spaces; so no
+(``el.classes.name_profile``: Latin letters of TS 39's recommended set after NFKC, digits, ``-``, ``_``, spaces; so no
 small capitals ``ʀᴏᴀᴅ``, no Cyrillic, Armenian or Cherokee letter, nothing invisible or blank-looking), a class
 that looks like a well-known name without being it (its category would escape the pin), or two classes that look
 alike (the reader of a report cannot tell which is which).
@@ -24,8 +24,8 @@ import re
 import unicodedata
 from collections.abc import Iterable, Mapping
 
-from el.name_profile import profile_problem
-from el.name_profile import skeleton as name_skeleton
+from el.classes.name_profile import profile_problem
+from el.classes.name_profile import skeleton as name_skeleton
 
 _BY_CATEGORY: dict[str, tuple[str, ...]] = {
     "road": ("road", "street", "paved area", "highway", "motorway", "freeway", "asphalt", "carriageway",
@@ -70,7 +70,8 @@ PINNED_CATEGORIES: Mapping[str, str] = {
 
 
 def skeleton(name: str) -> str:
-    """What a name looks like (Unicode TS 39 skeleton, ICU's data: ``el.name_profile.skeleton``): two names with one
+    """What a name looks like (Unicode TS 39 skeleton, ICU's data: ``el.classes.name_profile.skeleton``): two names
+    with one
     skeleton are confusable."""
     return name_skeleton(name)
 
@@ -95,7 +96,8 @@ def shown(name: str) -> str:
 
 def check_class_names(set_name: str, names: Iterable[str]) -> None:
     """ValueError naming the label set and the class when a class name is outside the restricted identifier profile
-    (``el.name_profile.profile_problem``), looks like a well-known name without being it, or two classes look alike
+    (``el.classes.name_profile.profile_problem``), looks like a well-known name without being it, or two classes look
+    alike
     (one :func:`class_key` or one :func:`skeleton`)."""
     seen: dict[str, str] = {}
     for name in names:
@@ -110,7 +112,7 @@ def check_class_names(set_name: str, names: Iterable[str]) -> None:
         if why is not None:
             raise ValueError(f"label set {set_name!r}: class {shown(name)} is outside the class-name profile (Unicode "
                              "TS 39 restricted: Latin letters, digits, '-', '_' and spaces after NFKC; "
-                             f"el.name_profile): {why}; refused, rename it")
+                             f"el.classes.name_profile): {why}; refused, rename it")
         for other in (seen.get(f"key:{key}"), seen.get(f"skeleton:{sk}")):
             if other is not None and other != name:
                 raise ValueError(f"label set {set_name!r}: classes {shown(other)} and {shown(name)} look alike (one "

@@ -3,7 +3,7 @@
 ``run_core`` takes the softmax of the segmentation at working resolution, (8, h, w) float, and
 returns the candidates in **full-resolution** pixel coordinates of the input image, ranked by
 increasing hazard (docs/architecture.md sections 3.3-3.5). The classes, which of them are forbidden
-and their hazard scores are a label set's (``labels``, default :data:`el.labels.UAVID`, 8 classes).
+and their hazard scores are a label set's (``labels``, default :data:`el.classes.labels.UAVID`, 8 classes).
 
 Coordinates: continuous image coordinates; the full-resolution pixel at (row r, col c) covers
 [c, c+1) x [r, r+1), so its centre is (c + 0.5, r + 0.5) and the image spans [0, W] x [0, H].
@@ -25,15 +25,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from el import candidates as cand
-from el import ranking
-from el import regions as reg
-from el import representatives as reps
-from el.camera import working_size
-from el.config import CoreConfig
-from el.deadline import checkpoint
-from el.decision import Candidate, Disc
-from el.labels import LabelSet
+from el.base.deadline import checkpoint
+from el.base.decision import Candidate, Disc
+from el.classes.labels import LabelSet
+from el.geometry.camera import working_size
+from el.geometry.config import CoreConfig
+from el.landing import candidates as cand
+from el.landing import ranking
+from el.landing import regions as reg
+from el.landing import representatives as reps
 
 PROB_TOLERANCE = 1e-3  # how far a probability may stray from [0, 1], and a pixel's sum from 1
 
@@ -141,7 +141,7 @@ def run_core(
     ----------
     probs : ndarray of shape (8, h, w), float
         Per-pixel class probabilities (softmax) at working resolution; (w, h) must keep the aspect
-        ratio of the input (``el.camera.working_size``) and w must equal ``config.working_width``.
+        ratio of the input (``el.geometry.camera.working_size``) and w must equal ``config.working_width``.
     input_size : (W, H)
         Size of the full-resolution input image, in pixels.
     config : CoreConfig
@@ -150,7 +150,7 @@ def run_core(
         Time source for the stage timings (injectable for tests).
     labels : LabelSet
         The classes of ``probs`` (its first axis), which are forbidden and their hazard scores;
-        defaults to UAVid (``el.labels.UAVID``).
+        defaults to UAVid (``el.classes.labels.UAVID``).
 
     Returns
     -------
@@ -174,7 +174,7 @@ def run_core(
     forbidden = cand.forbidden_from_probs(probs, labels=labels)
     vp = cand.valid_pixels(forbidden, radii, mode=config.mode, min_row=min_row)
     t1 = clock()
-    checkpoint("candidates (regions)")  # the decision's deadline between the CM's stages (el.deadline)
+    checkpoint("candidates (regions)")  # the decision's deadline between the CM's stages (el.base.deadline)
 
     region_fn = reg.regions_fast if config.region_method == "fast" else reg.regions_dbscan
     regions = region_fn(vp.valid, eps=config.dbscan_eps, min_samples=config.dbscan_min_samples)

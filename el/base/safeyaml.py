@@ -3,8 +3,8 @@
 ``yaml.safe_load`` builds no objects but still expands aliases: a 600-byte file of nested ``*refs`` (an
 "alias bomb") becomes a structure whose text is gigabytes once printed. Here aliases are refused outright
 (none of the project's files needs one), a document is refused above :data:`MAX_YAML_BYTES` or nested deeper than
-``el.userfiles.MAX_DEPTH`` (PyYAML composes recursively: ``[[[[...`` thousands deep exhausts the stack), and a file
-is read through ``el.userfiles`` (a regular file only, its size capped before and while it is read).
+``el.base.userfiles.MAX_DEPTH`` (PyYAML composes recursively: ``[[[[...`` thousands deep exhausts the stack), and a file
+is read through ``el.base.userfiles`` (a regular file only, its size capped before and while it is read).
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from typing import Any
 
 import yaml
 
-from el import userfiles
+from el.base import userfiles
 
 MAX_YAML_BYTES = userfiles.MAX_SETTINGS_BYTES  # 1 MiB: the largest shipped YAML file is a few tens of kB
 
@@ -38,7 +38,7 @@ class BoundedSafeLoader(yaml.SafeLoader):
 def safe_load(text: str | bytes, *, max_bytes: int = MAX_YAML_BYTES,
               loader: type[BoundedSafeLoader] | None = None) -> Any:
     """Parse one YAML document like ``yaml.safe_load``, refusing aliases, documents over ``max_bytes`` and
-    documents nested deeper than ``el.userfiles.MAX_DEPTH``; ``loader``: a subclass of :class:`BoundedSafeLoader`
+    documents nested deeper than ``el.base.userfiles.MAX_DEPTH``; ``loader``: a subclass of :class:`BoundedSafeLoader`
     (default: it)."""
     size = len(text.encode("utf-8")) if isinstance(text, str) else len(text)
     if size > max_bytes:
@@ -59,7 +59,7 @@ def safe_load(text: str | bytes, *, max_bytes: int = MAX_YAML_BYTES,
 
 def load_file(path: str | Path, *, max_bytes: int = MAX_YAML_BYTES, what: str = "YAML file",
               within: str | Path | None = None, loader: type[BoundedSafeLoader] = BoundedSafeLoader) -> Any:
-    """``safe_load`` of a file read through ``el.userfiles.read_text`` (a regular file, at most ``max_bytes``,
+    """``safe_load`` of a file read through ``el.base.userfiles.read_text`` (a regular file, at most ``max_bytes``,
     inside ``within`` when given): ``YamlLimitError`` naming the file when it cannot be read or is outside the
     limits, ``YAMLError`` when it does not parse. ``loader``: a subclass of :class:`BoundedSafeLoader` (e.g. one
     that keeps dates as text)."""

@@ -1,7 +1,8 @@
 """The restricted identifier profile a class name is held to, and its confusable skeleton (Unicode TS 39, by ICU).
 
 A class name is what the report's first page shows an auditor, and what the certification basis reads to pin a
-hazard category (``el.class_names``). A name an auditor cannot read as written must not reach either, so a name is
+hazard category (``el.classes.class_names``). A name an auditor cannot read as written must not reach either, so a name
+is
 held to a profile after Unicode Technical Standard #39 (Unicode Security Mechanisms), with ICU's data (its spoof
 checker: ``icu.SpoofChecker``, ICU 77, Unicode 16), not a hand list of look-alikes:
 
@@ -16,7 +17,7 @@ checker: ``icu.SpoofChecker``, ICU 77, Unicode 16), not a hand list of look-alik
 
 :func:`skeleton` is TS 39's confusable skeleton from ICU's full ``confusables.txt`` data (``rоad`` with a Cyrillic
 ``о`` and ``road`` share one; so do ``rn`` and ``m``, ``0`` and ``O``), then case-folded, with the combining marks
-dropped (``róad`` reads as ``road``) and the separators one space. ``el.class_names`` compares names by it.
+dropped (``róad`` reads as ``road``) and the separators one space. ``el.classes.class_names`` compares names by it.
 
 Data and pure functions: ``el`` and ``assurance`` both read it.
 """

@@ -1,7 +1,7 @@
 """What an image file says about itself before it is decoded: its size (PNG IHDR, JPEG SOF) and EXIF orientation.
 
 Read from the first bytes only, so a file claiming a frame too large to hold is refused before a decoder
-allocates it (``el.imageio.read_image``). Other formats are sized by Pillow's lazy open when it is
+allocates it (``el.base.imageio.read_image``). Other formats are sized by Pillow's lazy open when it is
 installed, else left to the decoder's own limit.
 """
 

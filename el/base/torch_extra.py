@@ -11,7 +11,7 @@ import importlib.util
 import sys
 from typing import Any
 
-from el.errors import WeightsError
+from el.base.errors import WeightsError
 
 TRAIN_EXTRA = "pip install 'uav-el-assurance[train]'"
 

@@ -6,18 +6,18 @@ Pipeline (all at working resolution, pixel indices (row, col); pixel (i, j) cove
 1. ``forbidden_from_probs``: building, road, static car, moving car win the argmax.
 2. ``valid_pixels``: a pixel is valid when its disc of radius R_px(row) holds no forbidden pixel,
    lies wholly inside the image and its row is reachable.
-3. ``el.regions.regions_fast`` (default) / ``regions_dbscan`` (reference): group valid pixels as
+3. ``el.landing.regions.regions_fast`` (default) / ``regions_dbscan`` (reference): group valid pixels as
    DBSCAN does.
-4. ``el.representatives.representatives``: N_k* = max(1, round(N* N_k / N)) K-means centroids per
+4. ``el.landing.representatives.representatives``: N_k* = max(1, round(N* N_k / N)) K-means centroids per
    region, each snapped to the nearest pixel of its region.
-5. ``prune_overlaps``: after ranking (``el.ranking``), drop a candidate whose disc overlaps an
+5. ``prune_overlaps``: after ranking (``el.landing.ranking``), drop a candidate whose disc overlaps an
    already kept one by more than ``overlap_max`` of its area.
 
 Conservative pooling (``pool_label_counts``, ``pool_forbidden``) brings full-resolution label
 maps or forbidden masks down to working resolution: a working pixel is forbidden if **any**
 source pixel overlapping it is forbidden, so thin roads and small cars survive.
 
-Which classes are forbidden is the label set's word (``labels``, default :data:`el.labels.UAVID`).
+Which classes are forbidden is the label set's word (``labels``, default :data:`el.classes.labels.UAVID`).
 
 Why a margin of sqrt(2)/2 px in the clearance: the requirement holds at full resolution. Every
 full-resolution forbidden pixel lies inside the square of a forbidden working pixel (conservative
@@ -34,9 +34,9 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from el.camera import NUM_STRIPES, CameraGeometry, SafetyParams
-from el.forbidden import forbidden_pixels
-from el.labels import LabelSet
+from el.classes.labels import LabelSet
+from el.geometry.camera import NUM_STRIPES, CameraGeometry, SafetyParams
+from el.landing.forbidden import forbidden_pixels
 
 # Distance from a pixel centre to the farthest point of its square, plus a float32 guard.
 CELL_MARGIN = math.sqrt(2.0) / 2.0 + 1e-4
@@ -53,7 +53,7 @@ def forbidden_from_probs(probs: np.ndarray, *, labels: LabelSet) -> np.ndarray:
     """(H, W) bool: True where a forbidden class has the highest probability.
 
     A tie between a forbidden and a safe class counts as forbidden (the conservative side): the one
-    rule, :func:`el.forbidden.forbidden_pixels`, here for a whole frame.
+    rule, :func:`el.landing.forbidden.forbidden_pixels`, here for a whole frame.
     """
     n = labels.num_classes
     if probs.ndim != 3 or probs.shape[0] != n:

@@ -11,8 +11,8 @@ import math
 
 import numpy as np
 
-from el.deadline import checkpoint
-from el.regions import Regions
+from el.base.deadline import checkpoint
+from el.landing.regions import Regions
 
 
 def kmeans(points: np.ndarray, k: int, *, seed: int = 0, n_init: int = 1, max_iter: int = 100,

@@ -1,12 +1,12 @@
 """The decision's time budget as one object the long loops consult (cooperative checks), a hard stop, and the
 cancellation of a step in flight.
 
-``Deadline`` reads the injectable clock; ``check`` raises :class:`el.errors.BudgetExceeded` once the budget
+``Deadline`` reads the injectable clock; ``check`` raises :class:`el.base.errors.BudgetExceeded` once the budget
 is spent or the deadline was cancelled. While a decision runs, its deadline is the *active* one
 (``active``, a context variable), so the loops that can run long call :func:`checkpoint` without a
 parameter threaded through every signature: the segmenter's frame scales and patch batches, MC dropout's
 chunks, the CM's stages and its per-region k-means, the monitor walk. A step between two checkpoints is
-not interrupted by them (a network's forward pass, a PNG decode); ``el.pipeline`` adds the hard stop that returns
+not interrupted by them (a network's forward pass, a PNG decode); ``el.flight.pipeline`` adds the hard stop that returns
 the default action at the deadline whatever is running (``run_with_deadline``).
 
 So that the stopped work does not go on computing after that answer, a step whose engine can be
@@ -29,7 +29,7 @@ import time
 from collections.abc import Callable, Iterator
 from typing import Any
 
-from el.errors import BudgetExceeded
+from el.base.errors import BudgetExceeded
 
 Clock = Callable[[], float]
 _ACTIVE: contextvars.ContextVar[Deadline | None] = contextvars.ContextVar("uav_el_deadline", default=None)

@@ -32,8 +32,8 @@ from typing import Any
 
 import numpy as np
 
-from el.errors import LabelColourError
-from el.label_tables import (  # noqa: F401  (LabelClass, IgnoreLabel, MAX_CLASSES re-exported: part of the seam)
+from el.base.errors import LabelColourError
+from el.classes.label_tables import (  # noqa: F401  (LabelClass, IgnoreLabel, MAX_CLASSES re-exported: part of the seam)
     IGNORE_COUNTS_AS,
     MAX_CLASSES,
     IgnoreLabel,
@@ -50,7 +50,7 @@ from el.label_tables import (  # noqa: F401  (LabelClass, IgnoreLabel, MAX_CLASS
 
 UavidClass = LabelClass  # the name of the record when the UAVid classes were the only ones
 _SET_KEYS = ("name", "classes", "palette", "forbidden", "hazard_scores", "categories", "ignore", "hierarchy")
-PRESET_DIR = Path(__file__).parent / "data" / "labels"
+PRESET_DIR = Path(__file__).resolve().parents[1] / "data" / "labels"
 """The packaged label sets (``NAME.yaml``), loaded by name with :func:`load_label_set`."""
 
 
@@ -240,7 +240,7 @@ class LabelSet:
         return np.zeros(ids.shape, bool) if self.ignore is None else ids == self.ignore.id
 
     def planning_ids(self, ids: np.ndarray) -> np.ndarray:
-        """Class ids 0..n-1 for code that plans on labels (``el.core.probs_from_labels``): an ignored pixel
+        """Class ids 0..n-1 for code that plans on labels (``el.landing.core.probs_from_labels``): an ignored pixel
         becomes the first forbidden class, whatever ``counts_as`` says, since unknown ground is never a
         landing site. The ids themselves when nothing is ignored."""
         ids = self._check_ids(ids)
@@ -334,7 +334,7 @@ def load_label_set(source: str | Path) -> LabelSet:
     """
     import yaml
 
-    from el import safeyaml, userfiles
+    from el.base import safeyaml, userfiles
 
     p = Path(source)
     if p.suffix.lower() not in (".yaml", ".yml", ".json"):

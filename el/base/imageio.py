@@ -16,8 +16,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from el.errors import DataError
-from el.imageheader import PNG_SIGNATURE, Header, pil_size, read_header
+from el.base.errors import DataError
+from el.base.imageheader import PNG_SIGNATURE, Header, pil_size, read_header
 
 MAX_PIXELS = 7680 * 4320 * 5 // 4
 """Default pixel limit of a frame: an 8K frame (7680 x 4320, 33.2 Mpx) plus a quarter (41.5 Mpx, ~125 MB as
@@ -176,7 +176,7 @@ def _decode_png_rgb8(path: Path, data: np.ndarray) -> np.ndarray:
 def _png_rgb8(data: np.ndarray) -> bool:
     """Whether ``data`` is a PNG of 8-bit truecolour pixels without alpha (IHDR bit depth 8, colour type 2): the
     pixels ``IMREAD_UNCHANGED`` gives, channels reversed, are exactly those ``IMREAD_COLOR_RGB`` gives (a PNG
-    carries no EXIF orientation here: :func:`el.imageheader.read_header` reads none)."""
+    carries no EXIF orientation here: :func:`el.base.imageheader.read_header` reads none)."""
     return (data.size > 26 and bytes(data[:8]) == PNG_SIGNATURE and bytes(data[12:16]) == b"IHDR"
             and int(data[24]) == 8 and int(data[25]) == 2)
 

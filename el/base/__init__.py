@@ -1,0 +1,1 @@
+"""The flight code's base layer (docs/architecture.md section 1.1)."""
