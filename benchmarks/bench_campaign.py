@@ -16,14 +16,14 @@ import time
 from pathlib import Path
 
 from assurance.campaign.presets import preset_config
-from assurance.campaign.run import run_campaign
+from assurance.campaign.run import Execution, run_campaign
 from el.monitors import DEMO_GRID
 
 
 def timed_run(data: str, cfg, **kw) -> float:
     with tempfile.TemporaryDirectory() as tmp:
         t = time.perf_counter()
-        run_campaign(data, Path(tmp) / "run", cfg, progress=False, **kw)
+        run_campaign(data, Path(tmp) / "run", cfg, **kw, execution=Execution(progress=False))
         return time.perf_counter() - t
 
 

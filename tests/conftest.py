@@ -14,6 +14,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))  # tests/helpers.py for
 # Imported once here: the run verification in pytest_configure needs them, and pytester's in-process
 # sessions would otherwise import pandas inside a session and drop it afterwards (two copies of its types).
 import assurance.campaign.integrity  # noqa: E402, F401
+from assurance.campaign.run import Execution  # noqa: E402
 from el.classes.labels import UAVID
 
 _THREAD_COUNTS: list[tuple[int, int]] = []  # torch's and OpenCV's thread counts when the session started
@@ -85,7 +86,7 @@ def tiny_campaign(tmp_path_factory):
     import torch
     from helpers import OracleSegmenter
 
-    from assurance.campaign.run import CampaignConfig, run_campaign
+    from assurance.campaign.run import CampaignConfig, Execution, run_campaign
     from assurance.dataio.uavid import write_sample
     from assurance.fitting.network.weights_io import save_weights
     from assurance.perturbations import PAPER_PERTURBATIONS
@@ -103,7 +104,8 @@ def tiny_campaign(tmp_path_factory):
     save_weights(build_model(ArchConfig(widths=(8, 8, 8), decoder_channels=8)), weights)
     config = CampaignConfig(perturbations=PAPER_PERTURBATIONS, monitors=("lhd", "lhd+ch:tau=0.25"),
                             core=CoreConfig(n_star=6, working_width=TINY_WW), weights=str(weights))
-    summary = run_campaign(root / "data", root / "run", config, progress=False, segmenter=OracleSegmenter(TINY_WW))
+    summary = run_campaign(root / "data", root / "run", config, segmenter=OracleSegmenter(TINY_WW),
+                           execution=Execution(progress=False))
     assert summary["faults"] == []
     return {"data": root / "data", "weights": weights, "run": root / "run", "config": config}
 
@@ -153,7 +155,7 @@ def monitor_runs(tiny_campaign, tmp_path_factory):
     config = CampaignConfig(perturbations=("none",), monitors=("lhd",), images=3,
                             core=tiny_campaign["config"].core, weights=tiny_campaign["config"].weights)
     seg = GrassIsRoadOracle(TINY_WW)
-    run_campaign(tiny_campaign["data"], root / "good", config, progress=False, segmenter=seg)
+    run_campaign(tiny_campaign["data"], root / "good", config, segmenter=seg, execution=Execution(progress=False))
     from el.monitors.walk import WalkOutcome
 
     real_walk = campaign.walk_candidates
@@ -165,7 +167,7 @@ def monitor_runs(tiny_campaign, tmp_path_factory):
 
     campaign.walk_candidates = kernel.walk_candidates = lands_on_top  # the task's readouts and its decisions
     try:
-        run_campaign(tiny_campaign["data"], root / "broken", config, progress=False, segmenter=seg)
+        run_campaign(tiny_campaign["data"], root / "broken", config, segmenter=seg, execution=Execution(progress=False))
     finally:
         campaign.walk_candidates = kernel.walk_candidates = real_walk
     return {"good": root / "good", "broken": root / "broken"}

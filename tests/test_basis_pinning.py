@@ -20,6 +20,7 @@ from conftest import TINY_WW, tiny_scene
 from helpers import OracleSegmenter
 
 from assurance.campaign import label_pin
+from assurance.campaign.run import Execution
 from assurance.requirements.basis import deviations, label_deviations, value_matches
 from el.classes.class_names import class_key, pinned_category, skeleton
 from el.classes.labels import UAVID, LabelSet, load_label_set
@@ -172,7 +173,7 @@ def _write_set(path, d: dict) -> None:
 def pinned_run(tmp_path_factory):
     """A 2-image campaign flown with a label set file declaring road safe (``labels.json``, beside its system file),
     and the honest file to put back."""
-    from assurance.campaign.run import CampaignConfig, run_campaign
+    from assurance.campaign.run import CampaignConfig, Execution, run_campaign
     from assurance.dataio.uavid import write_sample
     from assurance.system import build as system_build
     from assurance.system import load_system
@@ -188,8 +189,9 @@ def pinned_run(tmp_path_factory):
     system = load_system(root / "uav-el.toml")
     config = CampaignConfig(perturbations=("none",), monitors=("lhd",), images=2,
                             core=system_build.core_config(system, n_star=6, working_width=TINY_WW))
-    summary = run_campaign(root / "data", root / "run", config, progress=False,
-                           segmenter=_LabelledOracle(LabelSet.from_dict(evil)), system=system)
+    summary = run_campaign(root / "data", root / "run", config,
+                           segmenter=_LabelledOracle(LabelSet.from_dict(evil)), system=system,
+                           execution=Execution(progress=False))
     assert summary["faults"] == []
     return {"root": root, "run": root / "run", "config": config, "evil": evil}
 
@@ -274,7 +276,7 @@ def test_a_run_is_not_resumed_with_another_label_set(pinned_run):
     honest = _system_with(pinned_run["root"], UAVID.to_dict())
     try:
         with pytest.raises(RunError, match="judged with another label set"):
-            run_campaign(pinned_run["root"] / "data", pinned_run["run"], pinned_run["config"], progress=False,
-                         segmenter=OracleSegmenter(TINY_WW), system=honest)
+            run_campaign(pinned_run["root"] / "data", pinned_run["run"], pinned_run["config"],
+                         segmenter=OracleSegmenter(TINY_WW), system=honest, execution=Execution(progress=False))
     finally:
         _write_set(pinned_run["root"] / "labels.json", pinned_run["evil"])

@@ -17,7 +17,7 @@ from helpers import FakeClock, OracleSegmenter, scene_ids, scene_image
 
 from assurance.campaign import faults, readouts
 from assurance.campaign.integrity import verify_run
-from assurance.campaign.run import CampaignConfig, run_campaign
+from assurance.campaign.run import CampaignConfig, Execution, run_campaign
 from assurance.cli import main
 from assurance.dataio.uavid import image_size, write_image
 from assurance.evidence.waivers import load_waivers
@@ -233,7 +233,8 @@ def small_run(tmp_path_factory):
     (root / "data" / "seq00" / "meta").mkdir()
     (root / "data" / "seq00" / "meta" / "000002.json").write_text(json.dumps({"note": "meta"}))
     config = CampaignConfig(perturbations=("none",), monitors=("lhd",), core=CoreConfig(working_width=WW))
-    summary = run_campaign(root / "data", root / "run", config, progress=False, segmenter=OracleSegmenter(WW))
+    summary = run_campaign(root / "data", root / "run", config, segmenter=OracleSegmenter(WW),
+                           execution=Execution(progress=False))
     return {"root": root, "config": config, "summary": summary}
 
 
@@ -254,10 +255,11 @@ def test_meta_files_are_in_the_data_hash(small_run, tmp_path):
     man["data"]["path"] = str(data.resolve())
     (run / "manifest.json").write_text(json.dumps(man))
     seg = OracleSegmenter(WW)
-    assert run_campaign(data, run, small_run["config"], progress=False, segmenter=seg)["skipped"] == 3  # control
+    assert run_campaign(data, run, small_run["config"], segmenter=seg,
+                        execution=Execution(progress=False))["skipped"] == 3  # control
     (data / "seq00" / "meta" / "000002.json").write_text(json.dumps({"note": "edited"}))
     with pytest.raises(readouts.RunError, match="differs in 'data'"):
-        run_campaign(data, run, small_run["config"], progress=False, segmenter=seg)
+        run_campaign(data, run, small_run["config"], segmenter=seg, execution=Execution(progress=False))
 
 
 def test_a_corrupt_index_is_repaired_by_the_advised_rerun(small_run, tmp_path):
@@ -266,8 +268,8 @@ def test_a_corrupt_index_is_repaired_by_the_advised_rerun(small_run, tmp_path):
     (run / readouts.INDEX).write_text("{ not json")
     with pytest.raises(readouts.DamagedRunError, match="re-run the same `uav-el campaign` command"):
         verify_run(run)
-    s = run_campaign(small_run["root"] / "data", run, small_run["config"], progress=False,
-                     segmenter=OracleSegmenter(WW))
+    s = run_campaign(small_run["root"] / "data", run, small_run["config"],
+                     segmenter=OracleSegmenter(WW), execution=Execution(progress=False))
     assert s["skipped"] == 3 and len(s["repaired"]) == 1 and "set aside as damaged/shards.json.0" in s["repaired"][0]
     check = verify_run(run)
     assert check.ok and check.shards == 3 and (run / "damaged" / "shards.json.0").is_file()
@@ -282,8 +284,8 @@ def test_a_run_of_the_old_format_reads_but_is_not_resumed(small_run, tmp_path):
     (run / "manifest.json").write_text(json.dumps(man))
     assert len(readouts.load_table(run, "images")) == 3 and verify_run(run).ok
     with pytest.raises(readouts.RunError, match="readouts format uav-el-readouts/1 .*new --out folder"):
-        run_campaign(small_run["root"] / "data", run, small_run["config"], progress=False,
-                     segmenter=OracleSegmenter(WW))
+        run_campaign(small_run["root"] / "data", run, small_run["config"],
+                     segmenter=OracleSegmenter(WW), execution=Execution(progress=False))
 
 
 def test_a_campaign_whose_tasks_fault_for_a_configuration_reason_exits_2(small_run, tmp_path, capsys):
@@ -323,7 +325,8 @@ def test_a_campaign_records_the_exif_orientation_it_applied(tmp_path):
                                                        exif=exif.tobytes())
     write_labels(seq / "Labels" / "000000.png", ids, labels=UAVID)
     config = CampaignConfig(perturbations=("none",), monitors=("lhd",), core=CoreConfig(working_width=WW))
-    s = run_campaign(tmp_path / "data", tmp_path / "run", config, progress=False, segmenter=OracleSegmenter(WW))
+    s = run_campaign(tmp_path / "data", tmp_path / "run", config, segmenter=OracleSegmenter(WW),
+                     execution=Execution(progress=False))
     assert s["faults"] == []
     images = readouts.load_table(tmp_path / "run", "images")
     assert images["exif_orientation"].tolist() == [3] and images["candidates"].iloc[0] > 0

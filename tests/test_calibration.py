@@ -137,14 +137,14 @@ def test_pipeline_and_land_use_the_card_and_refuse_an_altered_one(card, val, tmp
 
 def test_campaign_with_the_card_and_the_el_r16_check(card, val, tmp_path):
     from assurance.campaign import readouts
-    from assurance.campaign.run import CampaignConfig, run_campaign
+    from assurance.campaign.run import CampaignConfig, Execution, run_campaign
     from assurance.requirements.calibration_check import check_calibrated_miss_rate
     from el.geometry.config import CoreConfig
     from el.monitors.calibration import load_calibration
 
     c = load_calibration(card)
     config = CampaignConfig(perturbations=("none",), monitors=("lhd", c.spec), core=CoreConfig())
-    run_campaign(val, tmp_path / "run", config, progress=False, segmenter=RoadBlindFrame(1024))
+    run_campaign(val, tmp_path / "run", config, segmenter=RoadBlindFrame(1024), execution=Execution(progress=False))
     cands = readouts.load_table(tmp_path / "run", "candidates")
     ev = check_calibrated_miss_rate(cands, c)
     assert ev.status == "pass" and "with its own verdicts" in ev.summary  # same scenes: at most k - 1 accepted

@@ -13,7 +13,7 @@ from helpers import OracleSegmenter, scene_ids
 
 from assurance.analysis.table import results_table
 from assurance.campaign import readouts
-from assurance.campaign.run import CampaignConfig, plan, run_campaign
+from assurance.campaign.run import CampaignConfig, Execution, plan, run_campaign
 from assurance.campaign.stages import stage_table, wall_seconds
 from assurance.cli import main
 from assurance.dataio.uavid import read_image, write_sample
@@ -62,7 +62,7 @@ def config(weights, **kw):
 
 def test_campaign_writes_one_shard_per_task_and_a_table(tmp_path, data, weights):
     cfg = config(weights)
-    summary = run_campaign(data, tmp_path / "run", cfg, progress=False, segmenter=ORACLE)
+    summary = run_campaign(data, tmp_path / "run", cfg, segmenter=ORACLE, execution=Execution(progress=False))
     assert summary["done"] == 6 and summary["faults"] == [] and summary["missing"] == []
     df = results_table(tmp_path / "run", n_boot=200)
     assert len(df) == 2 * len(MONITORS)
@@ -77,7 +77,7 @@ def test_campaign_writes_one_shard_per_task_and_a_table(tmp_path, data, weights)
 def test_interrupted_run_resumes_to_the_same_table(tmp_path, data, weights):
     cfg = config(weights)
     full = tmp_path / "full"
-    run_campaign(data, full, cfg, progress=False, segmenter=ORACLE)
+    run_campaign(data, full, cfg, segmenter=ORACLE, execution=Execution(progress=False))
 
     part = tmp_path / "part"
     seen = []
@@ -88,10 +88,10 @@ def test_interrupted_run_resumes_to_the_same_table(tmp_path, data, weights):
             raise KeyboardInterrupt
 
     with pytest.raises(KeyboardInterrupt):
-        run_campaign(data, part, cfg, progress=False, on_result=stop_after_two, segmenter=ORACLE)
+        run_campaign(data, part, cfg, segmenter=ORACLE, execution=Execution(progress=False, on_result=stop_after_two))
     shards = [p for p in (part / readouts.SHARDS).iterdir() if not p.name.startswith(".")]
     assert len(shards) == 2
-    again = run_campaign(data, part, cfg, progress=False, segmenter=ORACLE)
+    again = run_campaign(data, part, cfg, segmenter=ORACLE, execution=Execution(progress=False))
     assert again["skipped"] == 2 and again["done"] == 4
     a, b = results_table(full, n_boot=200), results_table(part, n_boot=200)
     cols = [c for c in a.columns if c not in TIMING]
@@ -105,41 +105,42 @@ def test_bad_image_is_a_recorded_fault(tmp_path, data, weights):
     shutil.copytree(data, bad)
     img = bad / "seq00" / "Images" / "000001.png"
     img.write_bytes(img.read_bytes()[:500])
-    summary = run_campaign(bad, tmp_path / "run", config(weights, perturbations=("none",)), progress=False,
-                           segmenter=ORACLE)
+    summary = run_campaign(bad, tmp_path / "run", config(weights, perturbations=("none",)),
+                           segmenter=ORACLE, execution=Execution(progress=False))
     assert len(summary["faults"]) == 1 and "000001" in summary["faults"][0]
     df = results_table(tmp_path / "run", n_boot=100)
     assert (df["images"] == 2).all() and (df["faults"] == 1).all()
 
 
 def test_other_campaign_in_same_folder_is_refused(tmp_path, data, weights):
-    run_campaign(data, tmp_path / "run", config(weights, perturbations=("none",)), progress=False, segmenter=ORACLE)
+    run_campaign(data, tmp_path / "run", config(weights, perturbations=("none",)), segmenter=ORACLE,
+                 execution=Execution(progress=False))
     with pytest.raises(readouts.RunError, match="another campaign"):
-        run_campaign(data, tmp_path / "run", config(weights, perturbations=("fog",)), progress=False,
-                     segmenter=ORACLE)
+        run_campaign(data, tmp_path / "run", config(weights, perturbations=("fog",)),
+                     segmenter=ORACLE, execution=Execution(progress=False))
     # the same campaign with the weights' card switched to frame + mirror image: other readouts, refused
     flipped = tmp_path / "flipped.pt"
     shutil.copy(weights, flipped)
     card = read_card(weights)
     card["evaluation"] = {"protocol": {"frame_flip": True}}
     write_card(flipped, card)
-    run_campaign(data, tmp_path / "run2", config(str(flipped), perturbations=("none",)), progress=False,
-                 segmenter=ORACLE)
+    run_campaign(data, tmp_path / "run2", config(str(flipped), perturbations=("none",)),
+                 segmenter=ORACLE, execution=Execution(progress=False))
     assert json.loads((tmp_path / "run2" / "manifest.json").read_text())["weights"]["frame_flip"] is True
     card["evaluation"] = {"protocol": {"frame_flip": False}}
     write_card(flipped, card)
     with pytest.raises(readouts.RunError, match=r"other weights \(weights.frame_flip: True recorded, False now\)"):
-        run_campaign(data, tmp_path / "run2", config(str(flipped), perturbations=("none",)), progress=False,
-                     segmenter=ORACLE)
+        run_campaign(data, tmp_path / "run2", config(str(flipped), perturbations=("none",)),
+                     segmenter=ORACLE, execution=Execution(progress=False))
     card["evaluation"] = {"protocol": {"frame_flip": True, "frame_scales": [1.25]}}
     write_card(flipped, card)
     with pytest.raises(readouts.RunError, match=r"weights.frame_scales: \[1.0\] recorded, \[1.25\] now"):
-        run_campaign(data, tmp_path / "run2", config(str(flipped), perturbations=("none",)), progress=False,
-                     segmenter=ORACLE)
+        run_campaign(data, tmp_path / "run2", config(str(flipped), perturbations=("none",)),
+                     segmenter=ORACLE, execution=Execution(progress=False))
     (tmp_path / "run" / "manifest.json").unlink()  # a half-deleted run: shards whose campaign is unknown
     with pytest.raises(readouts.RunError, match="no manifest"):
-        run_campaign(data, tmp_path / "run", config(weights, perturbations=("none",)), progress=False,
-                     segmenter=ORACLE)
+        run_campaign(data, tmp_path / "run", config(weights, perturbations=("none",)),
+                     segmenter=ORACLE, execution=Execution(progress=False))
 
 
 def test_runs_recorded_before_the_frame_keys_resume(tmp_path):
@@ -164,7 +165,7 @@ def test_shared_grid_equals_single_configuration_runs(tmp_path, data, weights):
     """Work sharing changes nothing but timings: verdicts equal the monitored pipeline's, config by config."""
     cfg = config(weights, perturbations=("none",))
     seg = ORACLE
-    run_campaign(data, tmp_path / "run", cfg, progress=False, segmenter=seg)
+    run_campaign(data, tmp_path / "run", cfg, segmenter=seg, execution=Execution(progress=False))
     cands = readouts.load_table(tmp_path / "run", "candidates")
     sample = plan(data, cfg)[0].sample
     rgb = read_image(sample.image_path)
@@ -202,8 +203,8 @@ def test_dask_local_cluster_gives_the_same_readouts(tmp_path, data, weights):
     """The same tasks on a real dask.distributed LocalCluster: same readouts as the in-process run."""
     pytest.importorskip("dask.distributed")
     cfg = config(weights, perturbations=("none",), monitors=("lhd",), core=CoreConfig(n_star=6))
-    run_campaign(data, tmp_path / "local", cfg, progress=False)
-    summary = run_campaign(data, tmp_path / "dask", cfg, progress=False, jobs=2, backend="dask")
+    run_campaign(data, tmp_path / "local", cfg, execution=Execution(progress=False))
+    summary = run_campaign(data, tmp_path / "dask", cfg, execution=Execution(progress=False, jobs=2, backend="dask"))
     assert summary["done"] == 3 and not summary["faults"]
     a = readouts.load_table(tmp_path / "local", "images").sort_values("key").reset_index(drop=True)
     b = readouts.load_table(tmp_path / "dask", "images").sort_values("key").reset_index(drop=True)
@@ -226,10 +227,10 @@ def test_a_task_that_left_no_shard_is_reported_and_rerun(tmp_path, data, weights
 
     monkeypatch.setattr(readouts, "write_shard", lose_one)
     cfg = config(weights, perturbations=("none",))
-    summary = run_campaign(data, tmp_path / "run", cfg, progress=False, segmenter=ORACLE)
+    summary = run_campaign(data, tmp_path / "run", cfg, segmenter=ORACLE, execution=Execution(progress=False))
     assert summary["missing"] == lost and "left no shard" in C.describe(summary)
     monkeypatch.setattr(readouts, "write_shard", write)
-    again = run_campaign(data, tmp_path / "run", cfg, progress=False, segmenter=ORACLE)
+    again = run_campaign(data, tmp_path / "run", cfg, segmenter=ORACLE, execution=Execution(progress=False))
     assert again["done"] == 1 and again["skipped"] == 2 and again["missing"] == []
 
 

@@ -146,14 +146,14 @@ def tiny_data(tmp_path_factory):
 
 
 def _campaign(system: System, data, out, **overrides):
-    from assurance.campaign.run import run_campaign
+    from assurance.campaign.run import Execution, run_campaign
     from assurance.system import build as system_build
 
     core = system_build.core_config(system.file, n_star=6, working_width=TINY_WW)
     config = preset_config("demo", plan=system_plan(system), monitors=("lhd",), core=core,
                            odd=system.odd.to_dict(), **overrides)
-    summary = run_campaign(data, out, config, progress=False, segmenter=OracleSegmenter(TINY_WW),
-                           system=system.file, signing_key=False)
+    summary = run_campaign(data, out, config, segmenter=OracleSegmenter(TINY_WW),
+                           system=system.file, signing_key=False, execution=Execution(progress=False))
     assert summary["faults"] == []
     return config
 

@@ -338,7 +338,7 @@ def test_hostile_2_altered_shard_is_named_and_gets_no_report(tiny_campaign, tmp_
     from conftest import TINY_WW
     from helpers import OracleSegmenter
 
-    from assurance.campaign.run import describe, run_campaign
+    from assurance.campaign.run import Execution, describe, run_campaign
 
     run = tmp_path / "run"
     shutil.copytree(tiny_campaign["run"], run)
@@ -356,8 +356,8 @@ def test_hostile_2_altered_shard_is_named_and_gets_no_report(tiny_campaign, tmp_
     assert not (tmp_path / "r" / "evidence.html").exists()
     assert cli.main(["table", str(run), "--boot", "50"]) == 4
     assert shard.name in capsys.readouterr().err
-    summary = run_campaign(tiny_campaign["data"], run, tiny_campaign["config"], progress=False,
-                           segmenter=OracleSegmenter(TINY_WW))
+    summary = run_campaign(tiny_campaign["data"], run, tiny_campaign["config"],
+                           segmenter=OracleSegmenter(TINY_WW), execution=Execution(progress=False))
     assert summary["done"] == 1 and summary["repaired"] == [
         f"{shard.name}: candidates.parquet differs from its SHA256SUMS (altered or truncated)"]
     assert "1 damaged shard(s) failed verification and were run again" in describe(summary)

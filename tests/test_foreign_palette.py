@@ -10,7 +10,7 @@ import torch
 from helpers import TINY_ARCH, OracleSegmenter, scene_ids
 
 from assurance.campaign import readouts
-from assurance.campaign.run import CampaignConfig, run_campaign
+from assurance.campaign.run import CampaignConfig, Execution, run_campaign
 from assurance.dataio.uavid import iter_samples, read_labels, write_sample
 from assurance.fitting.network.weights_io import save_weights
 from assurance.scenes.recolour import class_lut, recolour_dataset
@@ -134,9 +134,9 @@ def test_campaign_readouts_equal_the_originals_with_the_oracle(tmp_path, scenes,
     src, dst = scenes
     oracle = OracleSegmenter(256)
     cfg = CampaignConfig(perturbations=("none", "fog"), monitors=MONITORS, core=CoreConfig(n_star=6, working_width=256))
-    run_campaign(src, tmp_path / "a", cfg, progress=False, segmenter=oracle)
+    run_campaign(src, tmp_path / "a", cfg, segmenter=oracle, execution=Execution(progress=False))
     mapped = MappedModel(oracle, TO_FOREIGN, foreign)
-    run_campaign(dst, tmp_path / "b", cfg, progress=False, segmenter=mapped)
+    run_campaign(dst, tmp_path / "b", cfg, segmenter=mapped, execution=Execution(progress=False))
     a, b = _tables(tmp_path / "a"), _in_uavid_names(_tables(tmp_path / "b"))
     assert (a["images"]["fault"] == "").all()
     assert a["candidates"]["true_unsafe"].any() and not a["candidates"]["true_unsafe"].all()
@@ -155,8 +155,9 @@ def test_campaign_readouts_equal_the_originals_with_the_network(tmp_path, render
     save_weights(model, path)
     seg = load_model(str(path), threads=1, working_width=160)
     cfg = CampaignConfig(perturbations=("none",), monitors=MONITORS, core=CoreConfig(n_star=4, working_width=160))
-    run_campaign(src, tmp_path / "a", cfg, progress=False, segmenter=seg)
-    run_campaign(dst, tmp_path / "b", cfg, progress=False, segmenter=MappedModel(seg, TO_FOREIGN, foreign))
+    run_campaign(src, tmp_path / "a", cfg, segmenter=seg, execution=Execution(progress=False))
+    run_campaign(dst, tmp_path / "b", cfg, segmenter=MappedModel(seg, TO_FOREIGN, foreign),
+                 execution=Execution(progress=False))
     a, b = _tables(tmp_path / "a"), _in_uavid_names(_tables(tmp_path / "b"))
     assert (a["images"]["fault"] == "").all() and len(a["candidates"]) > 0
     assert np.isfinite(a["candidates"]["clearance_m"]).any()

@@ -68,7 +68,7 @@ def test_case_5_negative_seed_is_refused_and_faulted_runs_read(small, tmp_path, 
     assert code == EXIT_BAD_INPUT and "seed must be an integer >= 0, got -1" in err
     assert not run.exists()
     # a run whose every task faulted: table and evidence read it (no KeyError), evidence says nothing verified
-    from assurance.campaign.run import CampaignConfig, run_campaign
+    from assurance.campaign.run import CampaignConfig, Execution, run_campaign
 
     class Broken:
         def predict_frame(self, rgb):
@@ -78,7 +78,8 @@ def test_case_5_negative_seed_is_refused_and_faulted_runs_read(small, tmp_path, 
 
     faulted = tmp_path / "faulted"
     summary = run_campaign(small["data"], faulted, CampaignConfig(perturbations=("none", "fog"), monitors=("lhd",),
-                                                                  images=2), progress=False, segmenter=Broken())
+                                                                  images=2), segmenter=Broken(),
+                           execution=Execution(progress=False))
     assert len(summary["faults"]) == 4
     code, _, err = cli(capsys, "table", faulted, "--boot", 20)
     assert code == 0 and "faulted task(s) are left out" in err

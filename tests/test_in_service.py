@@ -66,7 +66,7 @@ def world(tmp_path_factory, one_torch_thread):
     """The certification run (signed, its system file declaring the SPIs) and one flight log per shift."""
     import torch
 
-    from assurance.campaign.run import CampaignConfig, run_campaign
+    from assurance.campaign.run import CampaignConfig, Execution, run_campaign
     from assurance.fitting.frame_gate_fit import fit_gate
     from assurance.system import build as system_build
     from assurance.system import load_system
@@ -91,8 +91,8 @@ def world(tmp_path_factory, one_torch_thread):
     odd, tapped = system_build.odd(system), TappedOracle(seg, WW, SHA)
     config = CampaignConfig(perturbations=("none",), monitors=("lhd",), core=CoreConfig(working_width=WW),
                             gate={"path": str(root / "gate.json"), "sha256": gate.sha256}, odd=odd.to_dict())
-    assert run_campaign(root / "test", root / "run", config, progress=False, segmenter=tapped,
-                        system=system)["faults"] == []
+    assert run_campaign(root / "test", root / "run", config, segmenter=tapped,
+                        system=system, execution=Execution(progress=False))["faults"] == []
     landing = EmergencyLanding(PipelineConfig(core=config.core, monitor="lhd", gate=str(root / "gate.json"), odd=odd,
                                               time_budget_s=None), segmenter=tapped)
     assert landing.fault is None

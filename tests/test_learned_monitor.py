@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from helpers import OracleSegmenter, nearest_class, scene_ids
 
+from assurance.campaign.run import Execution
 from assurance.dataio.uavid import write_sample
 from el.classes.labels import CLASS_IDS, UAVID, ids_to_colors
 from el.geometry.config import CoreConfig
@@ -186,13 +187,14 @@ def test_cli_fit_monitor_and_land_fail_loud(splits, tmp_path, capsys, monkeypatc
 
 def test_campaign_and_calibration_by_name(model_file, splits, tmp_path):
     from assurance.campaign import readouts
-    from assurance.campaign.run import CampaignConfig, run_campaign
+    from assurance.campaign.run import CampaignConfig, Execution, run_campaign
     from assurance.fitting.calibration import calibrate_on_data
 
     _, val = splits
     spec = f"learned:model={model_file}"
     config = CampaignConfig(perturbations=("none",), monitors=("lhd", spec), core=CORE)
-    summary = run_campaign(val, tmp_path / "run", config, progress=False, segmenter=RoadBlindFrame(WW))
+    summary = run_campaign(val, tmp_path / "run", config, segmenter=RoadBlindFrame(WW),
+                           execution=Execution(progress=False))
     assert summary["faults"] == []
     cands = readouts.load_table(tmp_path / "run", "candidates")
     mine = cands[cands["monitor"] == spec]
@@ -221,7 +223,8 @@ def test_card_run_and_monitor_must_rest_on_the_same_learned_model(model_file, sp
     assert card.body["monitor_model"]["sha256"] == load_learned_model(model_file, labels=UAVID).sha256
     run = tmp_path / "run"
     config = CampaignConfig(perturbations=("none",), monitors=(spec,), core=CORE)
-    assert run_campaign(val, run, config, progress=False, segmenter=RoadBlindFrame(WW))["faults"] == []
+    assert run_campaign(val, run, config, segmenter=RoadBlindFrame(WW),
+                        execution=Execution(progress=False))["faults"] == []
     assert readouts.read_manifest(run)["monitor_models"] == {spec: card.body["monitor_model"]["sha256"]}
     cands = readouts.load_table(run, "candidates")
     models = readouts.read_manifest(run)["monitor_models"]
@@ -244,7 +247,7 @@ def test_card_run_and_monitor_must_rest_on_the_same_learned_model(model_file, sp
                              segmenter=RoadBlindFrame(WW)).decide(image)
         assert d.action == "default" and "recalibrate" in d.reason, d.reason
         with pytest.raises(readouts.RunError, match="monitor_models"):
-            run_campaign(val, run, config, progress=False, segmenter=RoadBlindFrame(WW))
+            run_campaign(val, run, config, segmenter=RoadBlindFrame(WW), execution=Execution(progress=False))
         # A model file that changes while a run goes on: the task is a fault, not a mix of two models.
         task = plan(val, config)[0]
         rows = run_task(task, config, RoadBlindFrame(WW), expected_models=models)
@@ -288,12 +291,12 @@ def test_a_run_recorded_before_monitor_models_is_not_resumed_with_a_learned_moni
     config = CampaignConfig(perturbations=("none",), monitors=(f"learned:model={model_file}",), core=CORE,
                             images=1)
     run = tmp_path / "run"
-    run_campaign(val, run, config, progress=False, segmenter=RoadBlindFrame(WW))
+    run_campaign(val, run, config, segmenter=RoadBlindFrame(WW), execution=Execution(progress=False))
     man = json.loads((run / "manifest.json").read_text())
     del man["monitor_models"]  # as a run of an earlier version recorded it
     (run / "manifest.json").write_text(json.dumps(man))
     with pytest.raises(readouts.RunError, match="not recorded"):
-        run_campaign(val, run, config, progress=False, segmenter=RoadBlindFrame(WW))
+        run_campaign(val, run, config, segmenter=RoadBlindFrame(WW), execution=Execution(progress=False))
 
 
 def test_the_deployed_default_is_checked_against_the_deployed_card(splits, tmp_path, monkeypatch):

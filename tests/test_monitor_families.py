@@ -136,12 +136,13 @@ def test_altered_foreign_or_wrong_family_records_are_refused(records, tmp_path):
 def test_a_campaign_scores_every_family_and_the_benchmark_ranks_them(records, splits, tmp_path, capsys):  # noqa: F811
     from assurance import cli
     from assurance.campaign import readouts
-    from assurance.campaign.run import CampaignConfig, run_campaign
+    from assurance.campaign.run import CampaignConfig, Execution, run_campaign
 
     _, val = splits
     specs = ("lhd", "msp", "odin", "doctor", *(f"{f}:model={p}" for f, p in records.items()))
     config = CampaignConfig(perturbations=("none", "brightness"), monitors=specs, core=CORE)
-    summary = run_campaign(val, tmp_path / "run", config, progress=False, segmenter=RoadBlindFrame(WW))
+    summary = run_campaign(val, tmp_path / "run", config, segmenter=RoadBlindFrame(WW),
+                           execution=Execution(progress=False))
     assert summary["faults"] == []
     cands = readouts.load_table(tmp_path / "run", "candidates")
     assert set(cands["monitor"]) >= set(specs) and np.isfinite(cands["score"]).all()

@@ -75,7 +75,7 @@ def test_land_and_campaign_run_the_plugin_monitor_by_name(toy_installed, tmp_pat
 
     from assurance import cli
     from assurance.campaign.readouts import load_table
-    from assurance.campaign.run import CampaignConfig, run_campaign
+    from assurance.campaign.run import CampaignConfig, Execution, run_campaign
     from assurance.fitting.network.weights_io import save_weights
     from el.geometry.config import CoreConfig
     from el.segmentation.architectures import build_model
@@ -105,7 +105,8 @@ def test_land_and_campaign_run_the_plugin_monitor_by_name(toy_installed, tmp_pat
         write_sample(data, "seq00", f"{i:06d}", ids_to_colors(s), s, labels=UAVID)
     config = CampaignConfig(perturbations=("none",), monitors=("lhd", "toy:q=0.9,threshold=0.1"),
                             core=CoreConfig(n_star=6, working_width=128), weights=str(weights))
-    summary = run_campaign(data, tmp_path / "run", config, progress=False, segmenter=OracleSegmenter(128))
+    summary = run_campaign(data, tmp_path / "run", config, segmenter=OracleSegmenter(128),
+                           execution=Execution(progress=False))
     assert summary["faults"] == []
     cands = load_table(tmp_path / "run", "candidates")
     toy = cands[cands["monitor"] == "toy:q=0.9,threshold=0.1"]

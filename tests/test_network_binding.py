@@ -123,10 +123,11 @@ def test_el_r16_fails_on_a_run_made_with_another_network():
 
 
 def test_a_campaign_refuses_a_monitor_bound_to_another_network(tiny_campaign, tmp_path):
-    from assurance.campaign.run import CampaignConfig, run_campaign
+    from assurance.campaign.run import CampaignConfig, Execution, run_campaign
 
     config = CampaignConfig(perturbations=("none",), monitors=(DEPLOYED_MONITOR,), images=1,
                             core=tiny_campaign["config"].core)
     with pytest.raises(LearnedModelError, match="fitted on network 0d3dab88c2b0"):
-        run_campaign(tiny_campaign["data"], tmp_path / "run", config, progress=False, segmenter=Network(OTHER))
+        run_campaign(tiny_campaign["data"], tmp_path / "run", config, segmenter=Network(OTHER),
+                     execution=Execution(progress=False))
     assert not (tmp_path / "run").exists()

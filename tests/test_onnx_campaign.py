@@ -17,7 +17,7 @@ from helpers import scene_ids  # noqa: E402
 from onnx_helpers import ColourNet, noisy_colours  # noqa: E402
 
 from assurance.campaign import readouts  # noqa: E402
-from assurance.campaign.run import CampaignConfig, run_campaign  # noqa: E402
+from assurance.campaign.run import CampaignConfig, Execution, run_campaign  # noqa: E402
 from assurance.dataio.uavid import write_sample  # noqa: E402
 from assurance.fitting.network.onnx_export import export_onnx  # noqa: E402
 from el.base.hashing import sha256_file  # noqa: E402
@@ -65,8 +65,9 @@ def config(weights=None, monitors=MONITORS):
 @pytest.fixture(scope="module")
 def runs(data, native, onnx_file, tmp_path_factory):
     root = tmp_path_factory.mktemp("runs")
-    a = run_campaign(data, root / "native", config(), progress=False, segmenter=native)
-    b = run_campaign(data, root / "onnx", config(str(onnx_file)), progress=False)  # loaded by the campaign
+    a = run_campaign(data, root / "native", config(), segmenter=native, execution=Execution(progress=False))
+    b = run_campaign(data, root / "onnx", config(str(onnx_file)),
+                     execution=Execution(progress=False))  # loaded by the campaign
     assert a["faults"] == [] and b["faults"] == [] and a["done"] == b["done"] == 4
     return root / "native", root / "onnx"
 
@@ -110,7 +111,8 @@ def test_mc_dropout_configuration_is_refused_before_the_run(data, onnx_file, tmp
         check_monitor_capabilities(build_monitor(MCD, labels=UAVID), model)
     assert "\n" not in str(err.value) and "colour.onnx" in str(err.value)
     with pytest.raises(ValueError, match="needs MC dropout"):
-        run_campaign(data, tmp_path / "run", config(str(onnx_file), (*MONITORS, MCD)), progress=False)
+        run_campaign(data, tmp_path / "run", config(str(onnx_file), (*MONITORS, MCD)),
+                     execution=Execution(progress=False))
     assert not (tmp_path / "run").exists()  # refused before the run folder, never a fault per task
 
 

@@ -12,7 +12,7 @@ from helpers import OracleSegmenter
 from assurance import cli
 from assurance.campaign import readouts
 from assurance.campaign.gt_pipeline import decide_sample
-from assurance.campaign.run import CampaignConfig, plan, run_campaign
+from assurance.campaign.run import CampaignConfig, Execution, plan, run_campaign
 from assurance.dataio.poses import FramePose, frame_pose, read_poses, write_poses
 from assurance.dataio.uavid import iter_samples, read_labels, write_labels
 from assurance.scenes import World
@@ -131,7 +131,8 @@ def test_a_campaign_requiring_poses_plans_each_frame_at_its_own(posed, tmp_path)
     config = CampaignConfig(perturbations=("none",), monitors=("lhd",), core=core, poses="required")
     assert config.to_dict()["poses"] == "required"
     assert "poses" not in CampaignConfig(perturbations=("none",)).to_dict()  # nominal records as before
-    summary = run_campaign(data, tmp_path / "run", config, progress=False, segmenter=OracleSegmenter(96))
+    summary = run_campaign(data, tmp_path / "run", config, segmenter=OracleSegmenter(96),
+                           execution=Execution(progress=False))
     assert summary["faults"] == []
     images = readouts.load_table(tmp_path / "run", "images").set_index("frame")
     for frame, fp in sidecar.items():
@@ -140,7 +141,8 @@ def test_a_campaign_requiring_poses_plans_each_frame_at_its_own(posed, tmp_path)
         assert images.loc[frame, "pose_source"] == "frame"
     # the discs are the frame's: the same frame planned at the nominal pose gets other radii
     nominal = CampaignConfig(perturbations=("none",), monitors=("lhd",), core=core)
-    run_campaign(data, tmp_path / "nominal", nominal, progress=False, segmenter=OracleSegmenter(96))
+    run_campaign(data, tmp_path / "nominal", nominal, segmenter=OracleSegmenter(96),
+                 execution=Execution(progress=False))
     nom = readouts.load_table(tmp_path / "nominal", "images").set_index("frame")
     assert (nom["pose_source"] == "nominal").all() and (nom["height_m"] == 50.0).all()
     assert not np.allclose(nom["default_r"].to_numpy(), images.loc[nom.index, "default_r"].to_numpy())
@@ -148,12 +150,13 @@ def test_a_campaign_requiring_poses_plans_each_frame_at_its_own(posed, tmp_path)
     # a frame missing from the sidecar: a recorded fault of its task under "required", nominal under "sidecar"
     lines = (data / "seq00" / "poses.csv").read_text().splitlines()
     (data / "seq00" / "poses.csv").write_text("\n".join(lines[:2] + lines[3:]) + "\n")  # drop frame 000001
-    summary = run_campaign(data, tmp_path / "missing", config, progress=False, segmenter=OracleSegmenter(96))
+    summary = run_campaign(data, tmp_path / "missing", config, segmenter=OracleSegmenter(96),
+                           execution=Execution(progress=False))
     assert len(summary["faults"]) == 1 and "no pose for frame '000001'" in summary["faults"][0]
     faulted = readouts.load_table(tmp_path / "missing", "images").set_index("frame")
     assert faulted.loc["000001", "fault"].startswith("DataError")
     loose = CampaignConfig(perturbations=("none",), monitors=("lhd",), core=core, poses="sidecar")
-    run_campaign(data, tmp_path / "loose", loose, progress=False, segmenter=OracleSegmenter(96))
+    run_campaign(data, tmp_path / "loose", loose, segmenter=OracleSegmenter(96), execution=Execution(progress=False))
     got = readouts.load_table(tmp_path / "loose", "images").set_index("frame")
     assert got.loc["000001", "pose_source"] == "nominal" and got.loc["000000", "pose_source"] == "frame"
 

@@ -12,7 +12,7 @@ from helpers import OracleSegmenter, scene_ids
 
 from assurance.analysis.scores import auroc, auroc_table, roc_curve
 from assurance.campaign import readouts
-from assurance.campaign.run import CampaignConfig, run_campaign
+from assurance.campaign.run import CampaignConfig, Execution, run_campaign
 from assurance.dataio.uavid import write_sample
 from el.classes.labels import UAVID, ids_to_colors
 from el.geometry.config import CoreConfig
@@ -44,7 +44,8 @@ def run(tmp_path_factory):
         write_sample(root / "data", "seq00", f"{i:06d}", img.astype(np.uint8), ids, labels=UAVID)
     config = CampaignConfig(perturbations=("none", "fog"), monitors=MONITORS,
                             core=CoreConfig(n_star=8, working_width=128))
-    summary = run_campaign(root / "data", root / "run", config, progress=False, segmenter=OracleSegmenter(128))
+    summary = run_campaign(root / "data", root / "run", config, segmenter=OracleSegmenter(128),
+                           execution=Execution(progress=False))
     assert summary["faults"] == []
     return root / "run"
 

@@ -7,7 +7,7 @@ import pytest
 from conftest import TINY_WW
 from helpers import OracleSegmenter
 
-from assurance.campaign.run import CampaignConfig, run_campaign
+from assurance.campaign.run import CampaignConfig, Execution, run_campaign
 from assurance.evidence import generate
 from assurance.system import build as system_build
 from assurance.system import default_system, load_system
@@ -21,8 +21,8 @@ def system_run(tiny_campaign, tmp_path_factory):
     system = load_system(path)
     core = system_build.core_config(system, n_star=6, working_width=TINY_WW)
     config = CampaignConfig(perturbations=("none",), monitors=("lhd",), images=3, core=core)
-    summary = run_campaign(tiny_campaign["data"], root / "run", config, progress=False,
-                           segmenter=OracleSegmenter(TINY_WW), system=system)
+    summary = run_campaign(tiny_campaign["data"], root / "run", config,
+                           segmenter=OracleSegmenter(TINY_WW), system=system, execution=Execution(progress=False))
     assert summary["faults"] == []
     return {"run": root / "run", "system": system, "root": root}
 

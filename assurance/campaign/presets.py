@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import cache
 from importlib import resources
 from typing import Any
 
@@ -34,9 +35,13 @@ class MonitorSupportError(ValueError):
 
 
 def load_presets() -> dict[str, dict[str, Any]]:
-    """The campaign presets (``assurance/presets.yaml``)."""
-    text = resources.files("assurance").joinpath("presets.yaml").read_text(encoding="utf-8")
-    return safeyaml.safe_load(text)
+    """The campaign presets (``assurance/presets.yaml``; the packaged file read once, each caller its own copy)."""
+    return safeyaml.safe_load(_presets_text())
+
+
+@cache
+def _presets_text() -> str:
+    return resources.files("assurance").joinpath("presets.yaml").read_text(encoding="utf-8")
 
 
 def _deployed_name(deployed: str | None) -> str:

@@ -16,6 +16,7 @@ import os
 import time
 import warnings
 from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -82,16 +83,25 @@ def plan(data: str | Path, config: CampaignConfig) -> list[Task]:
     return [Task(p, s, sample) for sample in samples for p, s in config.scenarios()]
 
 
+@dataclass(frozen=True)
+class Execution:
+    """How a campaign's tasks are run (none of it changes a readout): ``jobs`` worker processes (bounded by the
+    cores), the ``backend`` (``loky`` or ``dask`` with its ``scheduler``), a progress bar, and ``on_result`` called
+    with each finished task's summary."""
+
+    jobs: int = 1
+    backend: str = "loky"
+    scheduler: str | None = None
+    progress: bool = True
+    on_result: Callable[[dict[str, Any]], None] | None = None
+
+
 def run_campaign(
     data: str | Path,
     run_dir: str | Path,
     config: CampaignConfig,
     *,
-    jobs: int = 1,
-    backend: str = "loky",
-    scheduler: str | None = None,
-    progress: bool = True,
-    on_result: Callable[[dict[str, Any]], None] | None = None,
+    execution: Execution = Execution(),
     segmenter: Any = None,
     records: Sequence[Any] = (),
     system: Any = None,
@@ -123,19 +133,21 @@ def run_campaign(
     tasks = plan(data, config)
     if not tasks:
         raise ValueError(f"{data}: no images to evaluate")
-    model = None
-    if segmenter is None:  # bad weights or an unknown model name are refused before the run folder exists
-        from assurance.system.model import load_model_spec
+    run = execution
+    jobs = run.jobs if run.backend == "dask" and run.scheduler else bounded_jobs(run.jobs)  # local: at most the cores
+    threads = max(1, (os.cpu_count() or 1) // max(1, jobs))
+    network = segmenter
+    if network is None:  # bad weights or an unknown model name are refused before the run folder exists
+        if run.backend == "loky" and jobs <= 1:  # the tasks run in this process: the network they use, loaded once
+            network = _worker_segmenter(config.weights, threads, config.core.working_width)
+        else:
+            from assurance.system.model import load_model_spec
 
-        model = load_model_spec(config.weights, working_width=config.core.working_width)
-    network = segmenter if segmenter is not None else model
+            network = load_model_spec(config.weights, working_width=config.core.working_width)
     signing_key = _signing_key(signing_key, run_dir)  # refused (no key, or one inside the run) before anything runs
     check_monitor_networks(config.monitors, network)
     for record in records:
         record.check_network(network)
-    if not (backend == "dask" and scheduler):  # local workers: no more than the cores (a warning says so)
-        jobs = bounded_jobs(jobs)
-    threads = max(1, (os.cpu_count() or 1) // max(1, jobs))
     if system is None:
         from assurance.system import default_system
 
@@ -149,14 +161,13 @@ def run_campaign(
     todo = [t for t in tasks if not readouts.shard_done(run_dir, t.shard_name)]
     t0 = time.perf_counter()
     results: list[dict[str, Any]] = []
-    for res in _dispatch(todo, config, run_dir, jobs=jobs, backend=backend, scheduler=scheduler,
-                         threads=threads, progress=progress, segmenter=segmenter,
+    for res in _dispatch(todo, config, run_dir, replace(run, jobs=jobs), threads=threads, segmenter=segmenter,
                          expected_models=man["monitor_models"]):
         results.append(res)
         if res.get("hashes"):
             readouts.record_shards(run_dir, {res["shard"]: res["hashes"]})
-        if on_result:
-            on_result(res)
+        if run.on_result:
+            run.on_result(res)
     summary = _summary(run_dir, tasks, todo, results, repaired, time.perf_counter() - t0)
     readouts.append_log(run_dir, summary)
     if signing_key:
@@ -216,11 +227,11 @@ def _set_aside_damaged(run_dir: Path, tasks: Sequence[Task]) -> list[str]:
     return out
 
 
-def _dispatch(todo: list[Task], config: CampaignConfig, run_dir: Path, *, jobs: int, backend: str,
-              scheduler: str | None, threads: int, progress: bool, segmenter: Any,
-              expected_models: dict[str, str] | None = None) -> Iterator[dict[str, Any]]:
+def _dispatch(todo: list[Task], config: CampaignConfig, run_dir: Path, run: Execution, *, threads: int,
+              segmenter: Any, expected_models: dict[str, str] | None = None) -> Iterator[dict[str, Any]]:
     from assurance.progress import progress as bar
 
+    jobs, backend, scheduler, progress = run.jobs, run.backend, run.scheduler, run.progress
     if not todo:
         return
     if backend == "dask":

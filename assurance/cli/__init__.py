@@ -24,6 +24,7 @@ from collections.abc import Iterator, Sequence
 from assurance import __version__
 from assurance.attest.key_paths import protect_signing_keys
 from assurance.errors import CommandError, DamagedRunError
+from el.base import userfiles
 from el.base.errors import DataError, LabelColourError
 
 # Sub-command name -> module under assurance.cli. Order is the order of `uav-el --help`.
@@ -243,6 +244,18 @@ def _quieted(quiet: bool) -> Iterator[None]:
             os.environ[PROGRESS_ENV] = before
 
 
+def _run_command(args: argparse.Namespace) -> int:
+    """The chosen command, its system file found first."""
+    # before any supplied file is read: none may be the auditor's signing key under another name (a hard link)
+    protect_signing_keys([args.signing_key] if getattr(args, "signing_key", None) else [])
+    if args.command in SYSTEM_COMMANDS:
+        from assurance.system import find_system
+
+        args.system_file = find_system(args.system, writes=WRITES.get(args.command, ()))
+    with _quieted(bool(getattr(args, "quiet", False)) and args.command not in KEEPS_STDOUT_WHEN_QUIET):
+        return int(args._run(args) or 0)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``uav-el``; returns the exit code."""
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -252,14 +265,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     configure_logging(args)
 
     try:
-        # before any supplied file is read: none may be the auditor's signing key under another name (a hard link)
-        protect_signing_keys([args.signing_key] if getattr(args, "signing_key", None) else [])
-        if args.command in SYSTEM_COMMANDS:
-            from assurance.system import find_system
-
-            args.system_file = find_system(args.system, writes=WRITES.get(args.command, ()))
-        with _quieted(bool(getattr(args, "quiet", False)) and args.command not in KEEPS_STDOUT_WHEN_QUIET):
-            return int(args._run(args) or 0)
+        # one snapshot of each file a command reads: the system file and what it names (gate, card, network), a
+        # run's manifest and tables are opened once (el.base.userfiles.read_once)
+        with userfiles.read_once():
+            return _run_command(args)
     except DamagedRunError as exc:
         print(f"uav-el {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_DAMAGED_RUN

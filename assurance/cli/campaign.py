@@ -9,7 +9,7 @@ from typing import Any
 from assurance.campaign.faults import config_fault_line
 from assurance.campaign.perturbation_plan import domain_record, outside_lines, system_plan
 from assurance.campaign.presets import load_presets, preset_config
-from assurance.campaign.run import describe, run_campaign
+from assurance.campaign.run import Execution, describe, run_campaign
 from assurance.cli.arguments import model_option
 from assurance.dataio.poses import POLICIES
 from assurance.errors import CommandError
@@ -93,8 +93,8 @@ def run(args: argparse.Namespace) -> int:
         key = load_signing_key(args.signing_key, outside=args.out)
     except AttestationError as exc:
         raise CommandError(str(exc)) from None
-    summary = run_campaign(data, args.out, config, jobs=args.jobs, backend=args.backend,
-                           scheduler=args.scheduler, progress=not args.quiet, records=cards, system=system.file,
+    execution = Execution(jobs=args.jobs, backend=args.backend, scheduler=args.scheduler, progress=not args.quiet)
+    summary = run_campaign(data, args.out, config, execution=execution, records=cards, system=system.file,
                            signing_key=key)
     head, *problems = describe(summary).splitlines()
     print(head)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import hashlib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from functools import cache
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -145,6 +146,7 @@ def _requirement(where: str, entry: dict[str, Any], sources: Mapping[str, str],
     )
 
 
+@cache
 def _schema() -> Any:
     import json
 

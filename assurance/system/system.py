@@ -136,15 +136,19 @@ def _shipped_export(model: Any) -> bool:
     """Whether a system file's model is the shipped network's packaged ONNX export (the very file, by its SHA-256,
     as the package's engine record names it) with no class map: on the shipped classes it carries the shipped frame
     gate."""
-    from el.base.hashing import sha256_file
-    from el.segmentation.onnx_engine import shipped_export_source
+    from el.base.errors import WeightsError
+    from el.segmentation.onnx_engine import read_onnx, shipped_export_source
 
     if not isinstance(model, dict) or model.get("kind") != "onnx" or model.get("class_map") or model.get("classes"):
         return False
     path = model.get("path")
     if not path or not os.path.isfile(path):
         return False  # a FIFO or a device is not hashed here: its loader names the problem
-    return shipped_export_source(sha256_file(path)) is not None
+    try:
+        found = read_onnx(path)  # read once: the network's loader takes these very bytes
+    except WeightsError:
+        return False  # its loader names the problem
+    return not found.external and shipped_export_source(found.sha256) is not None
 
 
 def _checked_gate(file: SystemFile, given: str | Path | None, gate: Path | None) -> Path | None:

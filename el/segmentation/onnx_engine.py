@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from el.base import userfiles
 from el.base.deadline import stop_at_deadline
 from el.base.errors import BudgetExceeded, WeightsError
 from el.base.hashing import sha256_bytes
@@ -93,7 +94,6 @@ def read_onnx(path: str | Path) -> OnnxFile:
     p = Path(path)
     if not p.is_file():
         raise WeightsError(f"{p}: ONNX file not found")
-    from el.base import userfiles
 
     try:  # bounded: never under /proc, /sys or /dev, at most MAX_MODEL_BYTES
         data = userfiles.read_bytes(p, what="ONNX file", max_bytes=userfiles.MAX_MODEL_BYTES, hard_links=True)
@@ -375,11 +375,14 @@ class OnnxEngine:
     """The logits of a project network under ONNX Runtime: float32 NCHW RGB in [0, 1] -> (B, C, H, W), and the
     trunk outputs an export of a trunk/head network carries (:attr:`trunk_names`).
 
-    Picklable (worker processes): the session is opened again from the checked file's bytes."""
+    Picklable (worker processes): the session is opened again from the checked file's bytes. ``data``: those bytes
+    already read and checked (:meth:`sibling`), so a second session of the same network does not read it again."""
 
-    def __init__(self, path: str | Path, sha256: str, threads: int | None = None) -> None:
+    def __init__(self, path: str | Path, sha256: str, threads: int | None = None, *, data: bytes | None = None) -> None:
         self.path, self.sha256, self.threads = str(path), sha256, threads
-        data, _ = read_checked(path, sha256)
+        if data is None:
+            data, _ = read_checked(path, sha256)
+        self._data = data
         self._session = open_session(data, path, threads)
         self._input = self._session.get_inputs()[0].name
         outputs = [o.name for o in self._session.get_outputs()]
@@ -391,6 +394,10 @@ class OnnxEngine:
         out = run_session(self._session, [self._logits, *self.trunk_names],
                           {self._input: np.ascontiguousarray(batch, np.float32)}, "segmentation")
         return out[0], out[1:]
+
+    def sibling(self, threads: int | None = None) -> OnnxEngine:
+        """Another session of the same network, from the bytes this one was built from (not read again)."""
+        return OnnxEngine(self.path, self.sha256, threads, data=self._data)
 
     def __getstate__(self) -> dict[str, Any]:
         return {"path": self.path, "sha256": self.sha256, "threads": self.threads}
@@ -427,7 +434,6 @@ def engine_for(weights_path: str | Path, weights_sha256: str | None, threads: in
 def _checked_engine(weights_path: str | Path, weights_sha256: str | None, threads: int | None) -> OnnxEngine:
     rec_path = record_path(weights_path)
     onnx_path = Path(weights_path).with_suffix(".onnx")
-    from el.base import userfiles
 
     try:  # bounded (a UserFileError is a ValueError: named below)
         record = json.loads(userfiles.read_text(rec_path, what="ONNX engine record",

@@ -18,7 +18,6 @@ import numpy as np
 from el.base.deadline import checkpoint
 from el.base.rgb import check_rgb
 from el.segmentation.batching import group_by_padded_size, padded_batch, padding_multiple, unit_nchw
-from el.segmentation.onnx_engine import OnnxEngine
 from el.segmentation.patch_pool import PatchPool
 
 MIN_SIZE = 16  # as el.segmentation.inference.MIN_SIZE
@@ -96,7 +95,7 @@ class PatchPasses:
         with self._lock:
             pool = self.__dict__.get("_pool")
             if pool is None or len(pool.engines) != workers:
-                pool = self._pool = PatchPool(lambda: OnnxEngine(engine.path, engine.sha256, 1), workers)
+                pool = self._pool = PatchPool(lambda: engine.sibling(1), workers)
         return pool
 
     def _patch_then(self, rgb_patch: np.ndarray, k: int, then: Then, engine: Any) -> Any:
