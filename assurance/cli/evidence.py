@@ -85,6 +85,7 @@ def run(args: argparse.Namespace) -> int:
     from assurance.campaign.readouts import DamagedRunError, RunError
     from assurance.cli.system_options import run_system
     from assurance.evidence import generate
+    from assurance.evidence.context import ReportOptions
     from assurance.requirements import RegistryError, read_targets_file
 
     if args.baseline_requirements and not args.baseline:
@@ -112,14 +113,15 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(f"{exc}; an auditor gives the signer's public key with --trusted-keys") from None
     try:
         targets = read_targets_file(args.targets) if args.targets else None
-        report = generate(args.run, args.out, requirements=args.requirements, baseline=args.baseline,
-                          baseline_requirements=args.baseline_requirements, registry=args.registry,
-                          targets=targets, targets_source=str(Path(args.targets).resolve()) if args.targets else None,
-                          strict=args.strict, pdf=not args.no_pdf, n_boot=args.boot, waivers=args.waivers,
-                          templates=args.templates, system=run_system(args, Path(args.run)), trusted=trusted,
-                          accepted_deviations=tuple(args.accept_deviation), benchmark=args.benchmark,
-                          in_service=args.in_service,
-                          system_templates=args.system_templates, template_seconds=args.template_seconds)
+        options = ReportOptions(
+            requirements=args.requirements, baseline=args.baseline, baseline_requirements=args.baseline_requirements,
+            registry=args.registry, targets=targets,
+            targets_source=str(Path(args.targets).resolve()) if args.targets else None, strict=args.strict,
+            pdf=not args.no_pdf, n_boot=args.boot, waivers=args.waivers, templates=args.templates,
+            system=run_system(args, Path(args.run)), trusted=trusted, accepted_deviations=tuple(args.accept_deviation),
+            benchmark=args.benchmark, in_service=args.in_service, system_templates=args.system_templates,
+            template_seconds=args.template_seconds)
+        report = generate(args.run, args.out, options)
     except DamagedRunError:
         raise  # exit 4: the run's readouts fail verification
     except (RegistryError, RunError, ValueError) as exc:

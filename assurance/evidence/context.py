@@ -33,6 +33,31 @@ from assurance.evidence.text import STATE_CLASS, pct
 from assurance.system import build as system_build
 
 
+@dataclass(frozen=True, kw_only=True)
+class ReportOptions:
+    """What the auditor asks of one evidence report besides the run and the output folder
+    (``assurance.evidence.report.generate`` says what each means; ``uav-el evidence --help`` gives the options)."""
+
+    requirements: str | Path | None = None
+    baseline: str | Path | None = None
+    baseline_requirements: str | Path | None = None
+    registry: str | Path | rq.Registry | None = None
+    targets: Mapping[str, Any] | None = None
+    targets_source: str | None = None
+    strict: bool = False
+    waivers: str | Path | None = None
+    pdf: bool = True
+    n_boot: int = 2000
+    templates: str | Path | None = None
+    system: Any = None
+    trusted: Mapping[str, Any] | None = None
+    accepted_deviations: tuple[str, ...] = ()
+    benchmark: str | Path | None = None
+    system_templates: bool = False
+    template_seconds: float | None = None
+    in_service: str | Path | None = None
+
+
 @dataclass
 class Inputs:
     """What the report reads: the run and its tables, the registry, the requirement results, its own checks."""
@@ -64,16 +89,16 @@ class Inputs:
         return self.registry.parameters["deployed_monitor"]
 
 
-def read_inputs(run: Path, out: Path, *, requirements: str | Path | None, baseline: str | Path | None,
-                registry: str | Path | rq.Registry | None, n_boot: int, templates: str | Path | None,
-                system: Any = None, targets: Mapping[str, Any] | None = None,
-                targets_source: str | None = None, trusted: Mapping[str, Any] | None = None,
-                waivers: str | Path | None = None) -> Inputs:
+def read_inputs(run: Path, out: Path, options: ReportOptions) -> Inputs:
     """Read and verify the run (and the baseline's shards), write ``results.csv``, read the requirement results
     and run the report's checks; a damaged run raises ``readouts.DamagedRunError``. With ``trusted`` keys, the
     run's signed statement must verify against one of them and match the files
     (``UnattestedRunError`` naming what does not). The report's facts about the system (``facts``) are built here,
-    once, from the system file, the run's manifest and its readouts (and the ``waivers`` file the gate reads)."""
+    once, from the system file, the run's manifest and its readouts (and the ``waivers`` file the gate reads).
+    ``options``: the report's, with the system file's waivers, templates and targets already resolved."""
+    o = options
+    requirements, baseline, registry, n_boot, templates = o.requirements, o.baseline, o.registry, o.n_boot, o.templates
+    system, targets, targets_source, trusted, waivers = o.system, o.targets, o.targets_source, o.trusted, o.waivers
     templates = Path(templates) if templates else TEMPLATES_DIR
     if not templates.is_dir():
         raise FileNotFoundError(f"{templates}: report template folder not found")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import datetime as _dt
 import json
 import logging
-from collections.abc import Mapping
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -16,6 +16,7 @@ from assurance.evidence.auditor import ARGUMENT_FILE, ISSRE_FILE, auditor_contex
 from assurance.evidence.benchmark_section import read_benchmark
 from assurance.evidence.context import (
     Inputs,
+    ReportOptions,
     campaign_context,
     commands,
     images_per_perturbation,
@@ -101,12 +102,28 @@ def _render_page(context: dict[str, Any], templates: Path | None, files: _Files,
         raise
 
 
-def evidence_document(inp: Inputs, gate: Gate, ident: dict[str, Any], base: dict[str, Any] | None, *,
-                      created: str, strict: bool, files: _Files, faults: bool, n_unsafe: int,
-                      pdf_error: str | None, exit_code: int, basis: list[Any] | None = None,
-                      templates: dict[str, Any] | None = None) -> dict[str, Any]:
+@dataclass(frozen=True)
+class Outcome:
+    """What one writing of the report came to, for ``evidence.json`` (:func:`evidence_document`)."""
+
+    created: str
+    strict: bool
+    files: _Files
+    faults: bool
+    n_unsafe: int
+    pdf_error: str | None
+    exit_code: int
+    basis: list[Any] | None = None
+    templates: dict[str, Any] | None = None
+
+
+def evidence_document(inp: Inputs, gate: Gate, ident: dict[str, Any], base: dict[str, Any] | None,
+                      outcome: Outcome) -> dict[str, Any]:
     """``evidence.json``: identity, gate, requirement states, the report's checks and the results table."""
     reg, results = inp.registry, inp.results
+    created, strict, files, faults, n_unsafe = outcome.created, outcome.strict, outcome.files, outcome.faults, \
+        outcome.n_unsafe
+    pdf_error, exit_code, basis, templates = outcome.pdf_error, outcome.exit_code, outcome.basis, outcome.templates
     return {
         "format": EVIDENCE_FORMAT, "created": created, "run": rel(inp.run), "strict": strict,
         "gate": {"result": gate.result, "exit_code": exit_code, "counts": rq.summary_counts(gate.states.values()),
@@ -205,10 +222,13 @@ def _origins(system: Any) -> dict[str, Any]:
     return {"origins": system_build.target_origins(system), "label": str(system.label)}
 
 
-def _report_context(inp: Inputs, gate: Gate, campaign: dict[str, Any], base: dict[str, Any] | None, created: str,
-                    n_boot: int, pdf: bool, *, system: Any, basis: Any, accepted: tuple[str, ...],
-                    bench: dict[str, Any] | None, in_service: Any = None) -> dict[str, Any]:
-    """What the templates render: the report's sections, the auditor's, the basis, the benchmark, the links."""
+def _report_context(inp: Inputs, gate: Gate, made: tuple[dict[str, Any], dict[str, Any] | None, str],
+                    options: ReportOptions, *, basis: Any, bench: dict[str, Any] | None,
+                    in_service: Any = None) -> dict[str, Any]:
+    """What the templates render: the report's sections, the auditor's, the basis, the benchmark, the links.
+    ``made``: the campaign's context, the baseline's view and the report's time."""
+    campaign, base, created = made
+    n_boot, pdf, system, accepted = options.n_boot, options.pdf, options.system, tuple(options.accepted_deviations)
     context = template_context(inp, gate, campaign, base, created, n_boot)
     context.update({**auditor_context(inp, gate, campaign["identity"], n_boot=n_boot), "label_classes":
                     _label_classes(system), "commands": commands(inp, accepted), "benchmark": bench,
@@ -223,19 +243,11 @@ def _report_context(inp: Inputs, gate: Gate, campaign: dict[str, Any], base: dic
     return context
 
 
-def generate(
-    run: str | Path,
-    out: str | Path,
-    *,
-    requirements: str | Path | None = None, baseline: str | Path | None = None,
-    baseline_requirements: str | Path | None = None, registry: str | Path | rq.Registry | None = None,
-    targets: Mapping[str, Any] | None = None, targets_source: str | None = None,
-    strict: bool = False, waivers: str | Path | None = None, pdf: bool = True, n_boot: int = 2000,
-    templates: str | Path | None = None, system: Any = None, trusted: Mapping[str, Any] | None = None,
-    accepted_deviations: tuple[str, ...] = (), benchmark: str | Path | None = None,
-    system_templates: bool = False, template_seconds: float | None = None, in_service: str | Path | None = None,
-) -> EvidenceReport:
+def generate(run: str | Path, out: str | Path, options: ReportOptions | None = None, **given: Any) -> EvidenceReport:
     """Write the evidence report of ``run`` into ``out`` and return what the gate says.
+
+    ``options`` (``assurance.evidence.context.ReportOptions``), with any of its fields ``given`` by name over it
+    (``generate(run, out, strict=True)``; an unknown name is a ``TypeError``):
 
     ``requirements``: the plugin's results JSON (default ``out/requirements.json``; without, all "not verified").
     ``baseline``, ``baseline_requirements``: an earlier run and its results JSON to compare with. ``system``: the system
@@ -251,16 +263,21 @@ def generate(
     ``benchmark``: a ``uav-el benchmark --out`` folder, shown as a section that never moves the gate.
     ``templates``, ``system_templates``, ``template_seconds``: supplied section templates (``render_report``).
     """
+    o = replace(options or ReportOptions(), **given)
+    baseline, baseline_requirements = o.baseline, o.baseline_requirements
+    targets, targets_source, strict, waivers, pdf, n_boot = o.targets, o.targets_source, o.strict, o.waivers, o.pdf, \
+        o.n_boot
+    templates, system, trusted, accepted_deviations, benchmark = o.templates, o.system, o.trusted, \
+        o.accepted_deviations, o.benchmark
     run, out = Path(run), Path(out)
     bench = read_benchmark(benchmark) if benchmark else None  # read first: a bad folder stops before any work
     from assurance.inservice.section import read_in_service  # ``in_service``: an uav-el in-service --out folder
 
-    service = read_in_service(in_service, trusted) if in_service else None
+    service = read_in_service(o.in_service, trusted) if o.in_service else None
     waivers, templates, targets, targets_source, basis = _system_settings(
-        system, waivers, templates, targets, targets_source, accepted_deviations, system_templates)
-    inp = read_inputs(run, out, requirements=requirements, baseline=baseline, registry=registry, n_boot=n_boot,
-                      templates=templates, system=system, targets=targets, targets_source=targets_source,
-                      trusted=trusted, waivers=waivers)
+        system, waivers, templates, targets, targets_source, accepted_deviations, o.system_templates)
+    inp = read_inputs(run, out, replace(o, waivers=waivers, templates=templates, targets=targets,
+                                        targets_source=targets_source))
     inp.problems.extend(f"{DEVIATION}: {d.text()}" for d in basis if not d.accepted)
     if trusted is not None:
         check_results_signature(inp, waivers, trusted)
@@ -272,10 +289,9 @@ def generate(
                           Path(baseline_requirements) if baseline_requirements else None, n_boot)
             if baseline else None)
     created = _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
-    context = _report_context(inp, gate, campaign, base, created, n_boot, pdf, system=system, basis=basis,
-                              accepted=tuple(accepted_deviations), bench=bench, in_service=service)
+    context = _report_context(inp, gate, (campaign, base, created), o, basis=basis, bench=bench, in_service=service)
     files = _Files(out, inp.csv_path)
-    html, supplied = _render_page(context, inp.templates, files, template_seconds)
+    html, supplied = _render_page(context, inp.templates, files, o.template_seconds)
     write_text(files.html, html)
     write_csv_rows(files.trace, traceability_rows(inp.registry, inp.results, run, inp.csv_path), TRACE_COLUMNS)
     files.pdf.unlink(missing_ok=True)  # never leave a PDF of an earlier report beside this one
@@ -284,11 +300,10 @@ def generate(
 
     def finish(pdf_error: str | None) -> int:
         exit_code = gate.exit_code(strict, pdf_error)
-        _finish(files, {**evidence_document(inp, gate, campaign["ident"], base, created=created, strict=strict,
-                                            files=files, faults=faults, n_unsafe=campaign["n_unsafe"],
-                                            pdf_error=pdf_error, exit_code=exit_code, basis=basis,
-                                            templates=supplied),
-                          **auditor_document(context)})
+        outcome = Outcome(created=created, strict=strict, files=files, faults=faults, n_unsafe=campaign["n_unsafe"],
+                          pdf_error=pdf_error, exit_code=exit_code, basis=basis, templates=supplied)
+        _finish(files, {**evidence_document(inp, gate, campaign["ident"], base, outcome),
+                        **auditor_document(context)})
         return exit_code
 
     exit_code = finish(pdf_error)  # the JSON says the PDF will be there; rewritten if it could not be
