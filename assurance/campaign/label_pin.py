@@ -60,8 +60,8 @@ def label_sources(labels: Any, system: Any = None) -> tuple[str, str]:
     from el.classes.labels import PRESET_DIR
     from el.monitors.hierarchy import SHIPPED_TREES
 
-    file = system.path_of("labels.file") if system is not None else None
-    preset = system.get("labels.preset") if system is not None else None
+    file = system.labels_file if system is not None else None
+    preset = system.labels_preset if system is not None else None
     if file is not None:
         where = f"label set file {file}"
     elif preset not in (None, "uavid"):
@@ -98,9 +98,8 @@ def flown_labels(system_file: Any, network: Any) -> dict[str, Any] | None:
     if not isinstance(judged, LabelSet):
         return None
     if system_file is not None:
-        from assurance.system import build
 
-        own = build.label_set(system_file)
+        own = system_file.labels()
         if own == judged:
             return label_record(own, system_file)
     return label_record(judged)
@@ -130,9 +129,8 @@ def label_problems(system: Any, man: Mapping[str, Any], predicate: Mapping[str, 
                 "the classes it was judged with cannot be shown to be the system's")
         signed_new = predicate is not None and all(k in predicate for k in PREDICATE_KEYS)
         return ([text], []) if signed_new else ([], [text + " (a run made before they were pinned)"])
-    from assurance.system import build
 
-    labels = build.label_set(system)
+    labels = system.labels()
     where, tree = label_sources(labels, system)
     problems = []
     for kind, what, was, then, now in (

@@ -68,13 +68,13 @@ def perturbation_plan(odd: OperatingDomain, required: Sequence[str] | None = Non
 def system_plan(system: Any = None, *, severity: int = PRESET_SEVERITY) -> tuple[Planned, ...]:
     """The plan of a system (an ``assurance.system.System`` or a ``SystemFile``; None: the embedded default):
     its ``[odd] perturbations`` and ``[targets] required_perturbations`` (the registry's when the file sets none)."""
-    from assurance.system import build, default_system
+    from assurance.system import default_system
 
     if system is None:
         return default_plan() if severity == PRESET_SEVERITY else system_plan(default_system(), severity=severity)
     file = getattr(system, "file", system)
-    odd = system.odd if isinstance(getattr(system, "odd", None), OperatingDomain) else build.odd(file)
-    required = file.get("targets.required_perturbations")
+    odd = system.odd if isinstance(getattr(system, "odd", None), OperatingDomain) else file.odd()
+    required = file.required_perturbations
     return perturbation_plan(odd, None if required is None else list(required), severity=severity)
 
 
@@ -115,7 +115,7 @@ def fit_levels(system: Any) -> tuple[tuple[str, int], ...] | None:
     ``[odd] perturbations``; None (each command's own: the paper's six for the gate, clean frames for a card) for
     the embedded default and a file inheriting its declaration, so the shipped fits are reproduced as they were."""
     file = getattr(system, "file", system)
-    if file is None or file.default or not file.sets("odd.perturbations"):
+    if file is None or file.default or not file.declares_perturbations:
         return None
     return tuple((p.name, p.severity) for p in system_plan(system) if p.inside)
 

@@ -35,20 +35,22 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from assurance.campaign.perturbation_plan import fit_levels
     from assurance.cli.system_options import assessed
-    from assurance.fitting.calibration import calibrate_on_data
+    from assurance.fitting.calibration import CalibrationScenes, ThresholdRule, calibrate_on_data
 
     system = assessed(args)
     data = system.data("val", args.data)
     if not Path(data).is_dir():
         raise CommandError(f"{data}: no such folder")
-    monitor = args.monitor or (system.monitor if system.file.sets("monitor.spec") else None)
+    monitor = args.monitor or (system.monitor if system.file.names_monitor else None)
     if monitor is None:
         raise CommandError("give the monitor to calibrate with --monitor SPEC (or [monitor] spec in the system file)")
     try:
-        doc = calibrate_on_data(data, monitor, miss_rate=args.miss_rate, confidence=args.confidence,
-                                weights=system.model, images=args.images, core=system.core,
-                                progress=not args.quiet, criterion=args.criterion, recall=args.recall,
-                                perturbations=fit_levels(system))  # its own [odd] perturbations; None: clean
+        rule = ThresholdRule(miss_rate=args.miss_rate, confidence=args.confidence, criterion=args.criterion,
+                             recall=args.recall)
+        scenes = CalibrationScenes(images=args.images, core=system.core,
+                                   perturbations=fit_levels(system))  # its own [odd] perturbations; None: clean
+        doc = calibrate_on_data(data, monitor, rule=rule, scenes=scenes, weights=system.model,
+                                progress=not args.quiet)
     except ValueError as exc:  # CalibrationError, WeightsError, a bad spec: one line
         raise CommandError(str(exc)) from None
     write_json(args.out, doc, indent=2)

@@ -38,12 +38,12 @@ def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     from assurance.cli.system_options import assessed
-    from assurance.fitting.learned_monitor import fit_learned_monitor
+    from assurance.fitting.learned_monitor import FeatureSettings, Selection, fit_learned_monitor
     from assurance.fitting.network_identity import network_record
 
     system = assessed(args)
     args.data = system.data("train", args.data)
-    if args.val is None and system.file.get("data.val") is not None:
+    if args.val is None and system.file.declares_data("val"):
         args.val = system.data("val")
     for d in (args.data, args.val):
         if d is not None and not Path(d).is_dir():
@@ -56,9 +56,10 @@ def run(args: argparse.Namespace) -> int:
     try:
         segmenter = system.segmenter(working_width=core.working_width)
         _check_mcd(args.mcd, segmenter, system.label)
-        doc = fit_learned_monitor(args.data, segmenter, val=args.val, core=core, mcd_n=args.mcd, recall=args.recall,
-                                  images=args.images, weights=network_record(segmenter, system.model),
-                                  progress=not args.quiet)
+        doc = fit_learned_monitor(args.data, segmenter, val=args.val,
+                                  features=FeatureSettings(core=core, mcd_n=args.mcd),
+                                  selection=Selection(recall=args.recall), images=args.images,
+                                  weights=network_record(segmenter, system.model), progress=not args.quiet)
     except ValueError as exc:
         raise CommandError(str(exc)) from None
     write_json(args.out, doc)

@@ -24,7 +24,7 @@ from assurance.errors import CommandError
 from assurance.files import atomic_write_bytes
 from el.base.decision import Decision
 from el.base.imageio import MAX_PIXELS, check_max_pixels
-from el.flight.kernel import frame_core
+from el.flight.kernel import FramePose, frame_core
 from el.flight.pipeline import DEFAULT_TIME_BUDGET_S
 from el.geometry.camera import CAMERAS, MAX_ROLL_DEG, Pose, geometry_problem
 from el.geometry.config import MODES, CoreConfig, make_intrinsics
@@ -167,16 +167,14 @@ def run(args: argparse.Namespace) -> int:
         image_path = Path(args.image_arg)
 
     from assurance.cli.system_options import system_of
-    from assurance.system import build as system_build
-
     system = system_of(args)
-    config, pose = config_from_args(args, system_build.core_config(system), system_build.poses_policy(system),
+    config, pose = config_from_args(args, system.core(), system.poses(),
                                     system.label)
     if args.labels.is_file():  # a missing file is the reader's one-line error
         check_frame_geometry(frame_core(config, pose), args.labels, args.roll)
-    decision, ids = decide_from_label_file(args.labels, image_path=image_path, config=config, pose=pose,
-                                           pose_source="command_line", roll_deg=args.roll,
-                                           labels=system_build.label_set(system), odd=system_build.odd(system))
+    decision, ids = decide_from_label_file(args.labels, image_path=image_path, config=config,
+                                           pose=FramePose(pose, "command_line", args.roll),
+                                           labels=system.labels(), odd=system.odd())
     image = read_image(image_path) if image_path is not None else None  # a bad image is an error too
 
     _write_outputs(args, decision, image=image, labels=ids)
@@ -243,7 +241,7 @@ def _monitor_of(args: argparse.Namespace, system: Any) -> tuple[str | None, Path
     monitor, calibration = args.monitor or system.monitor or PipelineConfig().monitor, \
         args.calibration or system.calibration
     if calibration is not None and not args.monitor:
-        own = args.calibration is None and system.file.sets("monitor.spec")  # the system's pair: its spec on its card
+        own = args.calibration is None and system.file.names_monitor  # the system's pair: its spec on its card
         if not own:
             from el.monitors.calibration import load_calibration
 
@@ -270,9 +268,8 @@ def _write_outputs(args: argparse.Namespace, decision: Decision, *, image, label
         if args.overlay is not None:
             from assurance.cli.system_options import system_of
             from assurance.evidence.overlay import draw_decision
-            from assurance.system import build as system_build
 
-            palette = system_build.label_set(system_of(args))  # the label map's own palette
+            palette = system_of(args).labels()  # the label map's own palette
             write_image(args.overlay, draw_decision(decision, image=image, labels=labels, label_set=palette))
             print(f"overlay written to {args.overlay}")
     except OSError as exc:

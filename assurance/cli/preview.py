@@ -25,15 +25,14 @@ def run(args: argparse.Namespace) -> int:
     from assurance.dataio.layouts import iter_samples, read_sample_labels
     from assurance.dataio.uavid import read_image, write_image
     from assurance.scenes.preview import make_preview
-    from assurance.system.build import data_root, label_set
 
-    labels = label_set(system_of(args))  # the system's classes: its palette and its legend
+    labels = system_of(args).labels()  # the system's classes: its palette and its legend
 
     if args.out.suffix.lower() != ".png":
         raise CommandError(f"--out must be a .png file, got {args.out}")
     if not 64 <= args.width <= 4096:
         raise CommandError(f"--width must lie in [64, 4096], got {args.width}")
-    args.data = data_root(system_of(args), "test", args.data)  # --data, else [data] test
+    args.data = system_of(args).data("test", args.data)  # --data, else [data] test
     samples = list(iter_samples(args.data, poses=True))  # the poses file checked as the campaign checks it
     if args.count is not None:
         if args.count < 1:

@@ -14,10 +14,9 @@ def train_val_dirs(args: argparse.Namespace, system: SystemFile) -> None:
     """Resolve ``args.data`` and ``args.val`` (the options, else the system file's ``[data]`` train and val) and
     refuse a folder that is not there (one line naming it)."""
     from assurance.errors import CommandError
-    from assurance.system import build as system_build
 
-    args.data = system_build.data_root(system, "train", args.data)
-    args.val = system_build.data_root(system, "val", args.val)
+    args.data = system.data("train", args.data)
+    args.val = system.data("val", args.val)
     for d in (args.data, args.val):
         if not Path(d).is_dir():
             raise CommandError(f"{d}: no such folder")

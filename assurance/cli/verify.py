@@ -92,12 +92,11 @@ def _warn_weaker(args: argparse.Namespace) -> None:
         return
     from assurance.evidence.gate import weakening_problems
     from assurance.requirements import RegistryError, load_registry, read_targets_file
-    from assurance.system import build as system_build
     from assurance.system import default_system
 
     system = getattr(args, "system_file", None) or default_system()
     try:
-        targets = read_targets_file(args.targets) if args.targets else system_build.targets(system)
+        targets = read_targets_file(args.targets) if args.targets else system.targets()
         reg = load_registry(args.registry, targets=targets, targets_source=args.targets or system.label)
     except (RegistryError, ValueError) as exc:
         raise CommandError(str(exc)) from None
@@ -161,12 +160,11 @@ def _signer_and_campaign(args: argparse.Namespace, run: Path) -> tuple[Any, Any]
 def _sign(args: argparse.Namespace, run: Path, out: Path, key: Any, campaign: Any) -> Path:
     """Sign the results with what they were judged on (the pins the evidence step compares)."""
     from assurance.requirements.attestation import sign_session_results
-    from assurance.system import build as system_build
     from assurance.system import default_system
 
     if not (out / "requirements.json").is_file():
         raise CommandError(f"{out / 'requirements.json'}: the test session wrote no results")
     system = getattr(args, "system_file", None) or default_system()
-    return sign_session_results(run, out, key, waivers=system_build.waivers(system, args.waivers),
+    return sign_session_results(run, out, key, waivers=system.waivers(args.waivers),
                                 extra={"campaign_signed_by": campaign.keyid, "keyword": args.keyword,
                                        "tests": [str(t) for t in args.tests]})

@@ -30,7 +30,6 @@ from assurance.evidence.sections import (
     unsafe_picks,
 )
 from assurance.evidence.text import STATE_CLASS, pct
-from assurance.system import build as system_build
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -248,8 +247,8 @@ def campaign_context(inp: Inputs) -> dict[str, Any]:
 
     man, images, candidates, reg = inp.manifest, inp.images, inp.candidates, inp.registry
     own = inp.system is not None and not inp.system.default
-    identity_rows, ident = identity(inp.run, man, reg, inp.req_path, inp.req_doc, inp.csv_path, TEMPLATES_DIR,
-                                    inp.check, system_build.target_origins(inp.system) if own else None)
+    identity_rows, ident = identity(inp, templates=TEMPLATES_DIR,
+                                    origins=inp.system.target_origins() if own else None)
     identity_rows[:0] = [signature_row(inp.attestation), results_signature_row(inp)]
     ident["campaign_signed_by"] = inp.attestation.keyid if inp.attestation is not None else None
     ident["results_signed_by"] = inp.results_signed_by
@@ -292,7 +291,7 @@ def _safe_strips(inp: Inputs, scenes: Any, keys: list[str]) -> dict[str, Any]:
     if inp.system is None:
         from el.classes.labels import UAVID as labels
     else:
-        labels = system_build.label_set(inp.system)
+        labels = inp.system.labels()
     return safe_class_strips(scenes.samples, keys, labels)
 
 
@@ -325,7 +324,7 @@ def _data_option(inp: Inputs) -> str:
         return f" --data {data['path']}"
     if inp.system is not None and not inp.system.default:
         try:
-            now = system_build.data_root(inp.system, "test")
+            now = inp.system.data("test")
         except ValueError:  # SystemFileError: [data] test unset, a bad table or a missing folder
             now = None
         if now is not None and hasattr(now, "to_dict") and {**now.to_dict(), "path": str(Path(now).resolve())} == spec:

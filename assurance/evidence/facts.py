@@ -244,7 +244,7 @@ def report_facts(system: Any, manifest: Mapping[str, Any], images: Any = None, *
     """The report's facts of ``system`` (an ``assurance.system.SystemFile``; None: the embedded default) and the
     run (its signed ``manifest`` and ``images`` readouts; ``size``: the evaluated frames' size)."""
     from assurance.requirements.system_facts import facts_of_file
-    from assurance.system import build, default_system
+    from assurance.system import default_system
 
     file = system if system is not None else default_system()
     shipped = bool(file.default)
@@ -259,12 +259,12 @@ def report_facts(system: Any, manifest: Mapping[str, Any], images: Any = None, *
         release = preset_config("release").images
     return ReportFacts(
         shipped=shipped, system=file.label, texts=facts_of_file(file),
-        camera=camera_row(core, build.camera_named(file)), stripes=stripes_text(core, frames, size),
+        camera=camera_row(core, file.camera_named()), stripes=stripes_text(core, frames, size),
         pose_source=pose_source_text(cfg, frames, manifest.get("data")), frame_gate=frame_gate_text(cfg),
         waivers=waivers_text(waivers, shipped), release_images=release,
-        data_provenance=file.get("data.provenance"), data_licence=file.get("data.licence"),
-        data_folders=_data_folders(file), trained_by=file.get("model.provenance.trained_by"),
-        model_licence=file.get("model.provenance.licence"),
+        data_provenance=file.data_note("provenance"), data_licence=file.data_note("licence"),
+        data_folders=_data_folders(file), trained_by=file.provenance("trained_by"),
+        model_licence=file.provenance("licence"),
         own_poses=own,
         poses_from=poses_file(manifest.get("data")) if own else "")
 

@@ -109,11 +109,10 @@ def weakening_problems(registry: rq.Registry, system: Any = None) -> list[str]:
     """How ``registry`` (with its targets) is weaker than the system's: the packaged registry with the system
     file's ``[targets]`` (the shipped system when None). Each line fails the gate and names the parameter."""
     from assurance.requirements.weakening import registry_weakenings
-    from assurance.system import build as system_build
     from assurance.system import default_system
 
     system = system or default_system()
-    reference = rq.load_registry(None).with_targets(system_build.targets(system), source=f"{system.label} [targets]")
+    reference = rq.load_registry(None).with_targets(system.targets(), source=f"{system.label} [targets]")
     return [f"weaker than the system's requirements: {w}" for w in registry_weakenings(reference, registry)]
 
 

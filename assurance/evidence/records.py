@@ -16,6 +16,7 @@ import json
 import os
 from collections import Counter
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -33,7 +34,6 @@ from assurance.evidence.disjoint import (
 from assurance.evidence.facts import NOT_DECLARED
 from assurance.evidence.render import ROOT, rel
 from assurance.scenes.generate import SPLIT_BASE
-from assurance.system.build import data_root
 
 GENERATOR = "assurance.scenes"
 """The ``generator`` this toolkit's scene generator writes into each scene's meta JSON."""
@@ -142,12 +142,22 @@ def _card_folder(d: dict[str, Any], package: bool) -> tuple[Path | None, dict[st
                       "not that folder (made again with this version of uav-el, it records where the data are)")
 
 
-def _card_set(name: str, role: str, letter: str, d: dict[str, Any], *, package: bool, record: str,
-              images_key: str = "images", facts: Any = None, cache: dict[str, Any] | None = None,
-              **more: Any) -> dict[str, Any]:
-    """A row of a development set a card records: its folder resolved (:func:`_card_folder`), its provenance and
+@dataclass(frozen=True)
+class _Card:
+    """The card that records a development set: its name in the data record (``record``), whether it is the
+    package's own (``package``), and the key of the set's image count in it (``images_key``)."""
+
+    record: str
+    package: bool
+    images_key: str = "images"
+
+
+def _card_set(name: str, role: str, letter: str, d: dict[str, Any], *, card: _Card, facts: Any = None,
+              cache: dict[str, Any] | None = None, **more: Any) -> dict[str, Any]:
+    """A row of a development set ``card`` records: its folder resolved (:func:`_card_folder`), its provenance and
     licence from its scene meta when it is here, else the system file's ``[data]`` declaration for that folder,
     else the package's."""
+    package, record, images_key = card.package, card.record, card.images_key
     folder, spec, unread = _card_folder(d, package)
     frames = read_frames(source_of(folder, spec), cache) if folder is not None and folder.is_dir() else None
     metas = frame_metas(used(frames["samples"], d.get("scenes"))) if frames else []
@@ -183,7 +193,7 @@ def development_sets(card: dict[str, Any] | None, monitors: dict[str, dict[str, 
     for split, role, letter in (("train", "network training", "N"), ("val", "network validation and selection", "O")):
         d = train.get(split) or {}
         if d:
-            rows.append(_card_set(f"{split} ({d.get('path')})", role, letter, d, package=ours, record="model card",
+            rows.append(_card_set(f"{split} ({d.get('path')})", role, letter, d, card=_Card("model card", ours),
                                   **common, seeds=f"the {split} seed range of uav-el synth (from {SPLIT_BASE[split]})"
                                   if ours else "", balance=_card_balance(freqs, ours) if split == "train" else ""))
     learned = monitors.get("learned.json") or {}
@@ -194,19 +204,19 @@ def development_sets(card: dict[str, Any] | None, monitors: dict[str, dict[str, 
         if d:
             where = splits.get("train" if key == "training" else "held_out")
             rows.append(_card_set(f"{where or '?'}", role, letter, {**d, "path": where},
-                                  package=package.get("learned.json", False), record="learned.json", **common,
+                                  card=_Card("learned.json", package.get("learned.json", False)), **common,
                                   balance=f"{d.get('unsafe')} unsafe of {d.get('candidates')} candidates"))
     split = (monitors.get("calibration.json") or {}).get("split") or {}
     if split:
         rows.append(_card_set(str(split.get("path")), "monitor calibration (threshold)", "O", split,
-                              package=package.get("calibration.json", False), record="calibration.json", **common))
+                              card=_Card("calibration.json", package.get("calibration.json", False)), **common))
     gate = monitors.get("frame_gate.json") or {}
     for key, role in (("training", "frame gate fit"), ("validation", "frame gate threshold")):
         d = gate.get(key) or {}
         if d:
             rows.append(_card_set(str(d.get("path")), role, "N" if key == "training" else "O", d,
-                                  package=package.get("frame_gate.json", False), record="frame_gate.json",
-                                  images_key="frames", **common))
+                                  card=_Card("frame_gate.json", package.get("frame_gate.json", False), "frames"),
+                                  **common))
     return rows
 
 
@@ -248,7 +258,7 @@ def _data_roots(system: Any) -> list[Path]:
         return roots
     for split in ("train", "val", "test"):
         try:
-            roots.append(Path(os.fspath(data_root(system, split))).resolve())
+            roots.append(Path(os.fspath(system.data(split))).resolve())
         except ValueError:  # SystemFileError: the split unset, a bad table or a missing folder
             continue
     return roots

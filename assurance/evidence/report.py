@@ -40,7 +40,6 @@ from assurance.evidence.render import (
 )
 from assurance.evidence.signatures import check_results_signature
 from assurance.evidence.text import jsonable
-from assurance.system import build as system_build
 from el.base.hashing import sha256_file
 
 EVIDENCE_FORMAT = "uav-el-evidence/1"
@@ -186,13 +185,13 @@ def _system_settings(system: Any, waivers: Any, templates: Any, targets: Any, ta
 
     if system is None:
         return waivers, templates, targets, targets_source, deviations({}, accepted) if accepted else []
-    waivers = system_build.waivers(system, str(waivers) if waivers else None)
+    waivers = system.waivers(str(waivers) if waivers else None)
     if system_templates and not templates:
-        templates = system_build.report_settings(system)["templates"]
+        templates = system.report_settings()["templates"]
     if targets is None:  # the system file's [targets] (and R, beta, deployed monitor) judge the requirements
-        targets, targets_source = system_build.targets(system), targets_source or f"{system.label} [targets]"
-    return waivers, templates, targets, targets_source, deviations(system_build.targets(system), accepted,
-                                                                   system_build.label_set(system))
+        targets, targets_source = system.targets(), targets_source or f"{system.label} [targets]"
+    return waivers, templates, targets, targets_source, deviations(system.targets(), accepted,
+                                                                   system.labels())
 
 
 def _label_classes(system: Any) -> list[dict[str, str]]:
@@ -202,7 +201,7 @@ def _label_classes(system: Any) -> list[dict[str, str]]:
     if system is None:
         labels = UAVID
     else:
-        labels = system_build.label_set(system)
+        labels = system.labels()
     from assurance.requirements.basis import class_category
 
     def category(c: Any) -> str:  # the category the basis judges it by: a well-known name's is pinned
@@ -219,7 +218,7 @@ def _origins(system: Any) -> dict[str, Any]:
     """Where the system file sets each requirement parameter of its own (for the acceptance table)."""
     if system is None or system.default:
         return {}
-    return {"origins": system_build.target_origins(system), "label": str(system.label)}
+    return {"origins": system.target_origins(), "label": str(system.label)}
 
 
 def _report_context(inp: Inputs, gate: Gate, made: tuple[dict[str, Any], dict[str, Any] | None, str],

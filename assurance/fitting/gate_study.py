@@ -20,8 +20,12 @@ from typing import Any
 
 import numpy as np
 
+from assurance.dataio.poses import read_meta
 from assurance.fitting.gate_frames import collect, load, scene_images
+from assurance.system import default_system
+from el.geometry.camera import Pose
 from el.monitors.gates import GATES
+from el.segmentation.factory import load_model
 
 QUANTILE = 0.997  # the smallest of QUANTILES meeting the policy in both folds (quantile_choice)
 QUANTILES = (0.99, 0.995, 0.997, 0.998, 0.999)
@@ -34,12 +38,7 @@ FOLDS = {"A->B": (lambda sc: sc < SPLIT, lambda sc: sc >= SPLIT),
 def domain_refused(root: Path, name: str, count: int) -> np.ndarray:
     """Per frame of the synthetic set ``name``: whether the embedded default's declared domain refuses its pose
     (from the scene's meta, as its telemetry would give it) or its size."""
-    from assurance.dataio.poses import read_meta
-    from assurance.system import default_system
-    from assurance.system.build import odd
-    from el.geometry.camera import Pose
-
-    domain = odd(default_system())
+    domain = default_system().odd()
     out = []
     for path in scene_images(root / name)[:count]:
         meta = read_meta(path.parent.parent / "meta" / f"{path.stem}.json")
@@ -185,8 +184,6 @@ def plot(path: Path, keys: list[tuple[str, str]], cols: list[tuple[str, str, str
 
 
 def main(argv: list[str] | None = None) -> int:
-    from el.segmentation.factory import load_model
-
     root, out = (Path(a) for a in (argv or sys.argv[1:])[:2])
     cache_path = out / "taps.npz"
     collect(root, load_model(None), cache_path)  # resumes: taps only the sets the cache lacks

@@ -59,7 +59,6 @@ def assess(logs: Sequence[str | Path], run: str | Path, out: str | Path, *, syst
     ``RunMismatchError`` (one line, exit 2) for logs of another system or configuration."""
     from assurance.campaign.attestation import UnattestedRunError, check_run_attestation
     from assurance.campaign.integrity import verify_run
-    from assurance.system import build as system_build
 
     run = Path(run)
     check = verify_run(run).raise_if_damaged()
@@ -68,14 +67,14 @@ def assess(logs: Sequence[str | Path], run: str | Path, out: str | Path, *, syst
         raise UnattestedRunError(run, attested.problems)
     manifest = readouts.read_manifest(run)
     identity = cmp.run_identity(manifest)
-    odd = system_build.odd(system)
+    odd = system.odd()
     summary = read_logs(logs, expected=identity, odd=odd)
     if not summary.records:
         raise ValueError(f"{', '.join(map(str, logs))}: no readable decision in the flight log(s) "
                          f"({summary.damaged} damaged line(s))")
     monitor = cmp.flown_monitor(summary, manifest, run)
-    settings = spi.settings_of(system_build.in_service(system), system_build.targets(system))
-    cert = cmp.certified(run, monitor, budget_s=system.get("targets.time_budget_s"))
+    settings = spi.settings_of(system.in_service(), system.targets())
+    cert = cmp.certified(run, monitor, budget_s=system.time_budget_s)
     comparison = cmp.compare(summary, cert, conf=float(settings["confidence"]), odd=odd)
     results = spi.judge(comparison, settings)
     from el.base.hashing import sha256_file
@@ -83,9 +82,10 @@ def assess(logs: Sequence[str | Path], run: str | Path, out: str | Path, *, syst
     envelope = run / "campaign.dsse.json"
     run_info = {"path": str(run.resolve()), "digest": check.digest, "signed_by": attested.keyid,
                 "campaign_attestation_sha256": sha256_file(envelope) if envelope.is_file() else None}
-    doc = report.document(run=run_info, identity=identity, monitor=monitor, summary=summary, comparison=comparison,
-                          spis=results, settings=settings, system=system.label,
-                          undermined=spi.undermined(results, _titles()))
+    judgement = report.Judgement(comparison=comparison, spis=results, settings=settings,
+                                 undermined=spi.undermined(results, _titles()))
+    doc = report.document(run=run_info, identity=identity, monitor=monitor, system=system.label, summary=summary,
+                          judgement=judgement)
     figures = report.plots(doc, summary, cert.gate_scores, cert.candidate_scores,
                            candidate_threshold=_candidate_threshold(cert, run))
     json_path, html_path = report.write_report(out, doc, figures)

@@ -15,6 +15,10 @@ import os
 from pathlib import Path
 from typing import Any
 
+from assurance.campaign.integrity import verify_run
+from assurance.campaign.readouts import RunError, read_manifest
+from assurance.system.loader import system_from_record
+
 log = logging.getLogger(__name__)
 
 RUN_ENV = "UAV_EL_RUN"
@@ -40,8 +44,6 @@ def run_facts(run: Path) -> dict[str, Any]:
     facts: dict[str, Any] = {"run": str(run), "run_exists": (run / "manifest.json").is_file()}
     if not facts["run_exists"]:
         return facts
-    from assurance.campaign.integrity import verify_run
-    from assurance.campaign.readouts import RunError
 
     try:
         check = verify_run(run)
@@ -58,18 +60,13 @@ def run_facts(run: Path) -> dict[str, Any]:
 def system_of_run(run: Path) -> dict[str, Any]:
     """The run's system file as the requirement results record it: its hash, and the targets of a system file
     that is not the embedded default (``_targets``, ``_targets_source``: applied by the plugin, not recorded)."""
-    from assurance.campaign.readouts import read_manifest
-
     try:  # bounded: the applicant's run folder
         record = read_manifest(run).get("system") or {}
     except (OSError, ValueError, AttributeError):
         return {"system_sha256": None}
     out: dict[str, Any] = {"system_sha256": record.get("sha256")}
     if record and not record.get("default"):
-        from assurance.system import build as system_build
-        from assurance.system.loader import system_from_record
-
         system = system_from_record(record)
-        out["_targets"] = system_build.targets(system)
+        out["_targets"] = system.targets()
         out["_targets_source"] = f"{system.label} [targets]"
     return out

@@ -19,6 +19,13 @@ import functools
 from collections.abc import Sequence
 from typing import Any
 
+from assurance.system.system import System
+from el.base.decision import DEFAULT_AREA_BASES
+from el.classes.labels import UAVID
+from el.geometry.camera import PHANTOM4, Pose
+from el.geometry.config import CoreConfig
+from el.landing.core import default_area
+
 FACT_KEYS = ("platform", "camera", "view", "pose", "ground", "scenes", "conditions", "forbidden", "safe", "label_set")
 TEMPLATE_FACTS = ("pose",)
 """Facts whose text holds the registry's placeholders (``{pose_error.height:pct}``), rendered with its parameters;
@@ -69,7 +76,7 @@ def conditions_text(file: Any, odd: Any) -> str:
     and the unperturbed frames."""
     levels = {n: s for n, s in dict(getattr(odd, "perturbations", None) or {}).items() if s > 0}
     listed = ", ".join(f"{n.replace('_', ' ')} up to severity {s}" for n, s in levels.items())
-    source = ("as declared in [odd] perturbations of its system file" if file.sets("odd.perturbations") else
+    source = ("as declared in [odd] perturbations of its system file" if file.declares_perturbations else
               "its system file declares none: the embedded default's [odd] perturbations")
     return f"the unperturbed frames and {listed} ({source})" if listed else f"the unperturbed frames only ({source})"
 
@@ -101,8 +108,6 @@ def forbidden_text(labels: Any) -> str:
 
 def facts_of(system: Any) -> dict[str, str]:
     """The facts of a built ``assurance.system.System`` (its camera, pose, declared domain, label set)."""
-    from assurance.system.build import camera_named
-
     core, labels = system.core, system.labels
     pose = core.pose
     name = getattr(system.file, "name", None) or system.label
@@ -110,7 +115,7 @@ def facts_of(system: Any) -> dict[str, str]:
     shipped = bool(system.file.default)
     return {
         "platform": SHIPPED_PLATFORM if shipped else PLATFORM,
-        "camera": camera_text(core.intrinsics, pose.pitch_deg, named=camera_named(system.file)),
+        "camera": camera_text(core.intrinsics, pose.pitch_deg, named=system.file.camera_named()),
         "view": view_of(pose.pitch_deg),
         "pose": pose_text(pose, system.odd, system.poses),
         "ground": ground_text(system),
@@ -128,15 +133,10 @@ SHIPPED_SCENES = ("urban scenes with roads, buildings, parked and moving cars, t
 
 def ground_text(system: Any) -> str:
     """The ground model and where the default action lands at the system's nominal pose and image size."""
-    from assurance.system.build import image_size
-
-    return _ground(*image_size(system.file), system.core)
+    return _ground(*system.file.image_size(), system.core)
 
 
 def _ground(width: int, height: int, core: Any) -> str:
-    from el.base.decision import DEFAULT_AREA_BASES
-    from el.landing.core import default_area
-
     area = default_area(width, height, core)
     where = DEFAULT_AREA_BASES.get(getattr(area, "basis", None) or "", "the bottom centre of the frame")
     at = f"at ({area.x:.0f}, {area.y:.0f}) px of a {width}x{height} frame at the nominal pose"
@@ -148,7 +148,6 @@ def facts_of_file(file: Any) -> dict[str, str]:
     the embedded default's are :func:`shipped_facts`."""
     if file is None or getattr(file, "default", False):
         return dict(shipped_facts())
-    from assurance.system.system import System
 
     return facts_of(System.build(file))
 
@@ -157,10 +156,6 @@ def facts_of_file(file: Any) -> dict[str, str]:
 def shipped_facts() -> dict[str, str]:
     """The embedded default system's facts (the shipped camera, pose and UAVid classes), without building it;
     computed once (every registry load renders its texts from them). Callers copy before changing them."""
-    from el.classes.labels import UAVID
-    from el.geometry.camera import PHANTOM4, Pose
-    from el.geometry.config import CoreConfig
-
     pose = Pose()
     return {
         "platform": SHIPPED_PLATFORM,

@@ -92,6 +92,103 @@ class SystemFile:
         """Every value the file sets, as (dotted key, JSON text), in file order: what the report shows."""
         return [(k, json.dumps(v, sort_keys=True, ensure_ascii=False)) for k, v in _flatten(self.document)]
 
+    # -- what the file declares, typed (assurance.system.build reads each section; nothing outside the system package
+    # reads a section itself) ------------------------------------------------------------------------------------
+    def labels(self) -> Any:
+        """The label set (``[labels]``; ``el.classes.labels.LabelSet``)."""
+        return _build().label_set(self)
+
+    def core(self, **overrides: Any) -> Any:
+        """The core model's configuration: camera, nominal pose, safety (``el.geometry.config.CoreConfig``)."""
+        return _build().core_config(self, **overrides)
+
+    def odd(self) -> Any:
+        """The declared operating domain (``[odd]``; ``el.geometry.odd.OperatingDomain``)."""
+        return _build().odd(self)
+
+    def poses(self) -> str:
+        """The pose policy (``camera.poses``)."""
+        return _build().poses_policy(self)
+
+    def camera_named(self) -> bool:
+        """Whether the camera's name is declared (``assurance.system.build.camera_named``)."""
+        return _build().camera_named(self)
+
+    def image_size(self) -> tuple[int, int]:
+        """The camera's image size (width, height)."""
+        return _build().image_size(self)
+
+    def data(self, split: str, given: str | Path | None = None) -> Any:
+        """The data of ``split``: ``given``, else ``[data] <split>`` (``assurance.system.build.data_root``)."""
+        return _build().data_root(self, split, given)
+
+    def declares_data(self, split: str) -> bool:
+        """Whether ``[data]`` names a ``split``."""
+        return self.get(f"data.{split}") is not None
+
+    def targets(self) -> dict[str, Any]:
+        """The requirement targets the file sets (``[targets]``)."""
+        return _build().targets(self)
+
+    def target_origins(self) -> dict[str, str]:
+        """Where the file sets each requirement parameter of its own."""
+        return _build().target_origins(self)
+
+    def waivers(self, given: str | None = None) -> str | None:
+        """The waivers file: ``given``, else the file's, else the shipped one."""
+        return _build().waivers(self, given)
+
+    def report_settings(self) -> dict[str, Any]:
+        """``[report]``: title, organisation, templates."""
+        return _build().report_settings(self)
+
+    def in_service(self) -> dict[str, Any]:
+        """``[in_service]``: the safety performance indicators."""
+        return _build().in_service(self)
+
+    @property
+    def declares_perturbations(self) -> bool:
+        """Whether the file itself declares ``[odd] perturbations`` (not the default's)."""
+        return self.sets("odd.perturbations")
+
+    @property
+    def names_monitor(self) -> bool:
+        """Whether the file itself names its monitor (``[monitor] spec``)."""
+        return self.sets("monitor.spec")
+
+    @property
+    def labels_preset(self) -> str | None:
+        """The packaged label set the file names (``[labels] preset``), None for a file of its own or none."""
+        value = self.get("labels.preset")
+        return None if value is None else str(value)
+
+    @property
+    def labels_file(self) -> Path | None:
+        """The label set file the file names (``[labels] file``), resolved."""
+        return self.path_of("labels.file")
+
+    def provenance(self, key: str) -> Any:
+        """A ``[model.provenance]`` entry (``trained_by``, ``training_data``, ...), None when unset."""
+        return self.get(f"model.provenance.{key}")
+
+    def data_note(self, key: str) -> Any:
+        """What ``[data]`` says of the data besides its splits (``provenance``, ``licence``), None when unset."""
+        return self.get(f"data.{key}")
+
+    @property
+    def required_perturbations(self) -> Any:
+        """``[targets] required_perturbations`` as set (None: unset)."""
+        return self.get("targets.required_perturbations")
+
+    @property
+    def time_budget_s(self) -> Any:
+        """``[targets] time_budget_s`` in effect (None: no deadline)."""
+        return self.get("targets.time_budget_s")
+
+    def report_text(self, key: str, default: str) -> str:
+        """A text of ``[report]`` (``title``, ``organisation``), else ``default``."""
+        return str(self.get(f"report.{key}", default))
+
     def record(self) -> dict[str, Any]:
         """The JSON record of this system file (manifests, requirement results, the report)."""
         return {"path": None if self.path is None else str(self.path.resolve()), "sha256": self.sha256,
@@ -99,6 +196,13 @@ class SystemFile:
 
 
 _UNSET = object()
+
+
+def _build() -> Any:
+    """``assurance.system.build``, the section readers."""
+    from assurance.system import build  # deferred: breaks the cycle loader <-> build (build takes a SystemFile)
+
+    return build
 
 
 def _lookup(doc: Mapping[str, Any], key: str, default: Any) -> Any:
