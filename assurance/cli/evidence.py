@@ -85,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
     from assurance.campaign.readouts import DamagedRunError, RunError
     from assurance.cli.system_options import run_system
     from assurance.evidence import generate
-    from assurance.evidence.context import ReportOptions
+    from assurance.evidence.options import ReportOptions
     from assurance.requirements import RegistryError, read_targets_file
 
     if args.baseline_requirements and not args.baseline:

@@ -18,6 +18,7 @@ from assurance.campaign.model_files import changed_model_files
 from assurance.evidence.gate import GATE_CLASS, Gate, requirement_results, weakening_problems
 from assurance.evidence.identity import identity
 from assurance.evidence.matrix import check_problems, check_view, matrix, run_checks
+from assurance.evidence.options import ReportOptions
 from assurance.evidence.render import TEMPLATES_DIR, fault_case_count, faults_table, rel
 from assurance.evidence.sections import (
     domain,
@@ -30,31 +31,6 @@ from assurance.evidence.sections import (
     unsafe_picks,
 )
 from assurance.evidence.text import STATE_CLASS, pct
-
-
-@dataclass(frozen=True, kw_only=True)
-class ReportOptions:
-    """What the auditor asks of one evidence report besides the run and the output folder
-    (``assurance.evidence.report.generate`` says what each means; ``uav-el evidence --help`` gives the options)."""
-
-    requirements: str | Path | None = None
-    baseline: str | Path | None = None
-    baseline_requirements: str | Path | None = None
-    registry: str | Path | rq.Registry | None = None
-    targets: Mapping[str, Any] | None = None
-    targets_source: str | None = None
-    strict: bool = False
-    waivers: str | Path | None = None
-    pdf: bool = True
-    n_boot: int = 2000
-    templates: str | Path | None = None
-    system: Any = None
-    trusted: Mapping[str, Any] | None = None
-    accepted_deviations: tuple[str, ...] = ()
-    benchmark: str | Path | None = None
-    system_templates: bool = False
-    template_seconds: float | None = None
-    in_service: str | Path | None = None
 
 
 @dataclass

@@ -18,6 +18,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from el.base.records import record_body
+
 NOT_DECLARED = "not declared"
 POLICIES = {"nominal": "the nominal pose for every frame", "sidecar": "each frame's own pose where it has one, else "
             "the nominal pose", "required": "each frame's own pose (a frame without one is a fault of its task)"}
@@ -185,19 +187,6 @@ def gate_features(doc: Mapping[str, Any] | None) -> str:
     return f"{doc.get('kind', '?')} on {what}"
 
 
-def _record(path: Path) -> dict[str, Any] | None:
-    """A fitted record's body, read bounded (a run's manifest names the file; None when unreadable)."""
-    import json
-
-    from el.base.userfiles import MAX_RECORD_BYTES, read_text
-
-    try:
-        doc = json.loads(read_text(path, what="record", max_bytes=MAX_RECORD_BYTES))
-    except (OSError, ValueError):  # UserFileError is a ValueError
-        return None
-    return doc.get("body", doc) if isinstance(doc, dict) else None
-
-
 def frame_gate_text(config: Mapping[str, Any]) -> str:
     """What guards the declared operating domain in the run: the frame gate it ran (as its file says), or telemetry
     alone."""
@@ -206,7 +195,7 @@ def frame_gate_text(config: Mapping[str, Any]) -> str:
         return ("none: the operating domain is guarded by telemetry only (the declared pose and image size); "
                 "a frame unlike the training data is not detected")
     path = gate.get("path")
-    doc = _record(Path(path)) if path else None
+    doc = record_body(Path(path)) if path else None
     what = gate_features(doc) if doc else "its file is not readable here"
     return f"{path} ({gate_identity(path, gate.get('sha256'), doc)}): {what}"
 

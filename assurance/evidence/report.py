@@ -245,7 +245,7 @@ def _report_context(inp: Inputs, gate: Gate, made: tuple[dict[str, Any], dict[st
 def generate(run: str | Path, out: str | Path, options: ReportOptions | None = None, **given: Any) -> EvidenceReport:
     """Write the evidence report of ``run`` into ``out`` and return what the gate says.
 
-    ``options`` (``assurance.evidence.context.ReportOptions``), with any of its fields ``given`` by name over it
+    ``options`` (``assurance.evidence.options.ReportOptions``), with any of its fields ``given`` by name over it
     (``generate(run, out, strict=True)``; an unknown name is a ``TypeError``):
 
     ``requirements``: the plugin's results JSON (default ``out/requirements.json``; without, all "not verified").

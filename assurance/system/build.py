@@ -10,13 +10,15 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from assurance.system.loader import SystemFile
 from el.classes.labels import UAVID, LabelSet
 from el.geometry.camera import CAMERAS, Intrinsics, Pose, SafetyParams
 from el.geometry.config import CoreConfig
 from el.geometry.odd import OperatingDomain
+
+if TYPE_CHECKING:  # only named in annotations: loader's SystemFile reads its sections through this module
+    from assurance.system.loader import SystemFile
 
 DEFAULT_IMAGE_SIZE = (3840, 2160)
 MODEL_KINDS = ("builtin", "pt", "onnx", "plugin")

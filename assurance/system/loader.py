@@ -20,6 +20,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from assurance.system import build
 from el.base import userfiles
 from el.base.errors import UavElError
 
@@ -96,31 +97,31 @@ class SystemFile:
     # reads a section itself) ------------------------------------------------------------------------------------
     def labels(self) -> Any:
         """The label set (``[labels]``; ``el.classes.labels.LabelSet``)."""
-        return _build().label_set(self)
+        return build.label_set(self)
 
     def core(self, **overrides: Any) -> Any:
         """The core model's configuration: camera, nominal pose, safety (``el.geometry.config.CoreConfig``)."""
-        return _build().core_config(self, **overrides)
+        return build.core_config(self, **overrides)
 
     def odd(self) -> Any:
         """The declared operating domain (``[odd]``; ``el.geometry.odd.OperatingDomain``)."""
-        return _build().odd(self)
+        return build.odd(self)
 
     def poses(self) -> str:
         """The pose policy (``camera.poses``)."""
-        return _build().poses_policy(self)
+        return build.poses_policy(self)
 
     def camera_named(self) -> bool:
         """Whether the camera's name is declared (``assurance.system.build.camera_named``)."""
-        return _build().camera_named(self)
+        return build.camera_named(self)
 
     def image_size(self) -> tuple[int, int]:
         """The camera's image size (width, height)."""
-        return _build().image_size(self)
+        return build.image_size(self)
 
     def data(self, split: str, given: str | Path | None = None) -> Any:
         """The data of ``split``: ``given``, else ``[data] <split>`` (``assurance.system.build.data_root``)."""
-        return _build().data_root(self, split, given)
+        return build.data_root(self, split, given)
 
     def declares_data(self, split: str) -> bool:
         """Whether ``[data]`` names a ``split``."""
@@ -128,23 +129,23 @@ class SystemFile:
 
     def targets(self) -> dict[str, Any]:
         """The requirement targets the file sets (``[targets]``)."""
-        return _build().targets(self)
+        return build.targets(self)
 
     def target_origins(self) -> dict[str, str]:
         """Where the file sets each requirement parameter of its own."""
-        return _build().target_origins(self)
+        return build.target_origins(self)
 
     def waivers(self, given: str | None = None) -> str | None:
         """The waivers file: ``given``, else the file's, else the shipped one."""
-        return _build().waivers(self, given)
+        return build.waivers(self, given)
 
     def report_settings(self) -> dict[str, Any]:
         """``[report]``: title, organisation, templates."""
-        return _build().report_settings(self)
+        return build.report_settings(self)
 
     def in_service(self) -> dict[str, Any]:
         """``[in_service]``: the safety performance indicators."""
-        return _build().in_service(self)
+        return build.in_service(self)
 
     @property
     def declares_perturbations(self) -> bool:
@@ -196,13 +197,6 @@ class SystemFile:
 
 
 _UNSET = object()
-
-
-def _build() -> Any:
-    """``assurance.system.build``, the section readers."""
-    from assurance.system import build  # deferred: breaks the cycle loader <-> build (build takes a SystemFile)
-
-    return build
 
 
 def _lookup(doc: Mapping[str, Any], key: str, default: Any) -> Any:

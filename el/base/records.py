@@ -56,6 +56,17 @@ def read_signed(path: Path, fmt: str, what: str, error: type[ValueError], *, a: 
     return body, digest
 
 
+def record_body(path: str | Path) -> dict[str, Any] | None:
+    """A card's or record's body as the file says (its ``body``, or the whole document when it has none), read
+    bounded and NOT checked (format and hash: :func:`read_signed` checks); None when unreadable. For reports that
+    describe a record a run's manifest names, whatever state it is in."""
+    try:
+        doc = json.loads(read_text(path, what="record", max_bytes=MAX_RECORD_BYTES))
+    except (OSError, ValueError):  # UserFileError is a ValueError
+        return None
+    return doc.get("body", doc) if isinstance(doc, dict) else None
+
+
 def weights_sha256_of(model: Any) -> str | None:
     """The identity a segmentation model reports for its weights (``weights_sha256``; None when it has none)."""
     value = getattr(model, "weights_sha256", None)

@@ -33,20 +33,18 @@ file and the problem. ``el`` reads through here itself (label sets); ``assurance
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
 import math
 import os
 import re
 import stat
-import threading
-import time
-from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, BinaryIO, TypeVar
 
 from el.base.errors import UavElError
+from el.base.kept import MAX_KEPT_FILE_BYTES, Kept, current
+from el.base.kept import read_once as read_once  # the command line's scope (docs/architecture.md section 1.7)
 
 MAX_SETTINGS_BYTES = 1 << 20
 """A settings file (system file, label set, hierarchy, waivers, targets, registry, template): a page, not data."""
@@ -116,20 +114,6 @@ class UserFileError(UavElError, ValueError):
     """A user's file refused before or while it is read: one line naming the file and the problem."""
 
 
-def file_key(path: str | Path, *extra: Any) -> tuple[Any, ...] | None:
-    """Where and what the regular file at ``path`` is now (real path, device, inode, size, modification time,
-    links; ``stat`` only, nothing is opened), with ``extra``: the key under which a reader keeps what it read and
-    checked once per process (a changed file has another key). None for anything but a regular file, or when it
-    cannot be said: such a path is read (and refused) every time."""
-    try:
-        info = os.stat(path)
-    except (OSError, ValueError):
-        return None
-    if not stat.S_ISREG(info.st_mode):
-        return None
-    return (os.path.realpath(path), *extra, info.st_dev, info.st_ino, info.st_size, info.st_mtime_ns, info.st_nlink)
-
-
 def read_bytes(path: str | Path, *, what: str, max_bytes: int, within: str | Path | None = None,
                hard_links: bool = False, own: bool = False) -> bytes:
     """The bytes of the regular file ``path`` (a ``what``, e.g. "waivers file": how messages name it), at most
@@ -147,7 +131,8 @@ def read_bytes(path: str | Path, *, what: str, max_bytes: int, within: str | Pat
     kept = _kept(p, what, within, max_bytes, hard_links=hard_links, own=own)
     if kept is not None:
         return kept.data
-    key = _ONCE.key(p, within) if _ONCE is not None else None
+    once = current()
+    key = once.key(p, within) if once is not None else None
     try:
         fd = _open_regular(p, what, within, hard_links=hard_links, own=own)
     except OSError as exc:
@@ -161,8 +146,8 @@ def read_bytes(path: str | Path, *, what: str, max_bytes: int, within: str | Pat
         os.close(fd)
     if len(data) > max_bytes:
         raise UserFileError(f"{p}: grew past the limit of {max_bytes} bytes for a {what} while read")
-    if key is not None and _ONCE is not None:
-        _ONCE.keep(key, data)
+    if key is not None and once is not None:
+        once.keep(key, data)
     return data
 
 
@@ -177,7 +162,8 @@ def sha256(path: str | Path, *, what: str = "file", max_bytes: int = MAX_HASHED_
     kept = _kept(p, what, within, max_bytes, hard_links=True, own=False)
     if kept is not None:
         return kept.sha256()
-    key = _ONCE.key(p, within) if _ONCE is not None else None
+    once = current()
+    key = once.key(p, within) if once is not None else None
     fd = _open_regular(p, what, within, hard_links=True)
     try:
         size = os.fstat(fd).st_size
@@ -193,84 +179,16 @@ def sha256(path: str | Path, *, what: str = "file", max_bytes: int = MAX_HASHED_
                 blocks.append(block)
     finally:
         os.close(fd)
-    if key is not None and keep and _ONCE is not None:
-        _ONCE.keep(key, b"".join(blocks), h.hexdigest())
+    if key is not None and keep and once is not None:
+        once.keep(key, b"".join(blocks), h.hexdigest())
     return h.hexdigest()
 
 
-MAX_KEPT_FILE_BYTES = 64 << 20
-"""The largest file a command keeps the bytes of (:func:`read_once`): a network, a record, a run's manifest or
-table; a data set's frames and larger models are read again when asked again."""
-MAX_KEPT_BYTES = 512 << 20
-"""All the bytes a command keeps at once (:func:`read_once`)."""
-SETTLED_S = 2.0
-"""A file changed less than this long ago is not kept (:meth:`_Once.key`)."""
-
-
-@dataclass
-class _Kept:
-    """A file's bytes as one command read them, and their SHA-256 once asked."""
-
-    data: bytes
-    digest: str | None = None
-
-    def sha256(self) -> str:
-        if self.digest is None:
-            self.digest = hashlib.sha256(self.data).hexdigest()
-        return self.digest
-
-
-@dataclass
-class _Once:
-    """What :func:`read_once` keeps: each file's bytes by its identity (:func:`file_key`) and the folder it was
-    confined to; a changed file has another identity and is read again."""
-
-    files: dict[tuple[Any, ...], _Kept] = field(default_factory=dict)
-    held: int = 0
-    lock: threading.Lock = field(default_factory=threading.Lock)
-
-    @staticmethod
-    def key(p: Path, within: str | Path | None) -> tuple[Any, ...] | None:
-        """The file's identity (:func:`file_key`) and its confining folder; None for a file changed in the last
-        :data:`SETTLED_S` seconds (a further change may fall within the same tick of the file system's clock, so its
-        identity could not tell the two apart): such a file is read each time."""
-        key = file_key(p, None if within is None else os.path.realpath(within))
-        if key is None or time.time_ns() - key[-2] < SETTLED_S * 1e9:
-            return None
-        return key
-
-    def keep(self, key: tuple[Any, ...], data: bytes, digest: str | None = None) -> None:
-        with self.lock:
-            if len(data) <= MAX_KEPT_FILE_BYTES and self.held + len(data) <= MAX_KEPT_BYTES:
-                self.files[key] = _Kept(data, digest)
-                self.held += len(data)
-
-
-_ONCE: _Once | None = None
-
-
-@contextlib.contextmanager
-def read_once() -> Iterator[None]:
-    """Within: a file read or hashed again, unchanged, is not opened again; its bytes as first read are given, after
-    the same checks on where it lies, its links, its size and whether the auditor protected it (``stat`` only).
-    The command line runs each command inside (one command reads one snapshot of each file: the system file's
-    gate, card and network, a run's manifest and tables are opened once); a library call outside reads each time.
-    Nested scopes share the outermost."""
-    global _ONCE
-    outer = _ONCE
-    if outer is None:
-        _ONCE = _Once()
-    try:
-        yield
-    finally:
-        _ONCE = outer
-
-
 def _kept(p: Path, what: str, within: str | Path | None, max_bytes: int, *, hard_links: bool,
-          own: bool) -> _Kept | None:
+          own: bool) -> Kept | None:
     """The bytes this command already read of ``p`` (:func:`read_once`), after the checks a read makes, by ``stat``
     (where it resolves, regular, its links and identity, its size); None when not kept (or outside a scope)."""
-    once = _ONCE
+    once = current()
     if once is None:
         return None
     key = once.key(p, within)
