@@ -20,8 +20,10 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from assurance.attest.keys import load_signing_key
 from assurance.campaign import frame_cache, readouts
 from assurance.campaign.attestation import sign_run
+from assurance.campaign.clearance import sample_clearance_m
 from assurance.campaign.faults import config_faults
 from assurance.campaign.label_pin import check_resumed_labels, flown_labels
 from assurance.campaign.manifest import (  # noqa: F401  (re-exported)
@@ -37,6 +39,9 @@ from assurance.campaign.task import (  # noqa: F401  (re-exported)
     task_seed,
 )
 from assurance.dataio.layouts import iter_samples
+from assurance.progress import progress as bar
+from assurance.system import default_system
+from assurance.system.model import load_model_spec
 from assurance.workers import bounded_jobs, dask_map, die_with_parent
 
 # ------------------------------------------------------------------------------------------------
@@ -45,15 +50,19 @@ from assurance.workers import bounded_jobs, dask_map, die_with_parent
 _WORKER_STATE: dict[str, Any] = {}
 
 
-def _worker_segmenter(weights: str | dict[str, Any] | None, threads: int, working_width: int | None = None) -> Any:
-    """One segmenter per worker process (loaded once, cached), at the campaign's working width."""
+def campaign_network(weights: str | dict[str, Any] | None, threads: int, working_width: int | None = None) -> Any:
+    """The campaign's network in this process, loaded once and kept (a worker's, or the sequential run's, whose
+    checks and tasks share it), at the campaign's working width and ``threads`` (:func:`network_threads`)."""
     key = f"{weights}|{threads}|{working_width}"
     if _WORKER_STATE.get("key") != key:
-        from assurance.system.model import load_model_spec
-
         _WORKER_STATE["segmenter"] = load_model_spec(weights, threads=threads, working_width=working_width)
         _WORKER_STATE["key"] = key
     return _WORKER_STATE["segmenter"]
+
+
+def network_threads(jobs: int) -> int:
+    """The threads each of ``jobs`` workers gives its network: the cores shared out."""
+    return max(1, (os.cpu_count() or 1) // max(1, jobs))
 
 
 def execute(task: Task, config: CampaignConfig, run_dir: str, threads: int, segmenter: Any = None,
@@ -62,10 +71,8 @@ def execute(task: Task, config: CampaignConfig, run_dir: str, threads: int, segm
     campaign's process, in a loky worker: the worker dies with it (``workers.die_with_parent``)."""
     die_with_parent(parent_pid)
     if segmenter is None:
-        segmenter = _worker_segmenter(config.weights, threads, config.core.working_width)
+        segmenter = campaign_network(config.weights, threads, config.core.working_width)
     t = time.perf_counter()
-    from assurance.campaign.clearance import sample_clearance_m
-
     rows = run_task(task, config, segmenter, world_clearance=sample_clearance_m, expected_models=expected_models)
     hashes = readouts.write_shard(Path(run_dir), task.shard_name, rows)
     faults = [r["fault"] for r in rows["images"] if r.get("fault")]
@@ -135,22 +142,16 @@ def run_campaign(
         raise ValueError(f"{data}: no images to evaluate")
     run = execution
     jobs = run.jobs if run.backend == "dask" and run.scheduler else bounded_jobs(run.jobs)  # local: at most the cores
-    threads = max(1, (os.cpu_count() or 1) // max(1, jobs))
-    network = segmenter
-    if network is None:  # bad weights or an unknown model name are refused before the run folder exists
-        if run.backend == "loky" and jobs <= 1:  # the tasks run in this process: the network they use, loaded once
-            network = _worker_segmenter(config.weights, threads, config.core.working_width)
-        else:
-            from assurance.system.model import load_model_spec
-
-            network = load_model_spec(config.weights, working_width=config.core.working_width)
+    threads = network_threads(jobs)
+    # bad weights or an unknown model name are refused before the run folder exists; a sequential run's tasks use
+    # this very network (and the command line's checks did)
+    network = segmenter if segmenter is not None else campaign_network(config.weights, threads,
+                                                                        config.core.working_width)
     signing_key = _signing_key(signing_key, run_dir)  # refused (no key, or one inside the run) before anything runs
     check_monitor_networks(config.monitors, network)
     for record in records:
         record.check_network(network)
     if system is None:
-        from assurance.system import default_system
-
         system = default_system()
     man = manifest(data, config, tasks, threads=threads,
                    segmenter="weights" if segmenter is None else type(segmenter).__name__, model=network,
@@ -188,8 +189,6 @@ def _signing_key(given: Any, run_dir: Path) -> Any:
     """The key that signs the run: ``given``, or the user's (created on first use); False: none."""
     if given is not None:
         return given
-    from assurance.attest.keys import load_signing_key
-
     return load_signing_key(outside=run_dir)
 
 
@@ -229,8 +228,6 @@ def _set_aside_damaged(run_dir: Path, tasks: Sequence[Task]) -> list[str]:
 
 def _dispatch(todo: list[Task], config: CampaignConfig, run_dir: Path, run: Execution, *, threads: int,
               segmenter: Any, expected_models: dict[str, str] | None = None) -> Iterator[dict[str, Any]]:
-    from assurance.progress import progress as bar
-
     jobs, backend, scheduler, progress = run.jobs, run.backend, run.scheduler, run.progress
     if not todo:
         return

@@ -6,14 +6,21 @@ import argparse
 import sys
 from typing import Any
 
+from assurance.attest import AttestationError
+from assurance.attest.keys import load_signing_key
 from assurance.campaign.faults import config_fault_line
 from assurance.campaign.perturbation_plan import domain_record, outside_lines, system_plan
-from assurance.campaign.presets import load_presets, preset_config
-from assurance.campaign.run import Execution, describe, run_campaign
+from assurance.campaign.presets import MonitorSupportError, campaign_monitors, load_presets, preset_config
+from assurance.campaign.run import Execution, campaign_network, describe, network_threads, run_campaign
 from assurance.cli.arguments import model_option
+from assurance.cli.system_options import assessed
+from assurance.dataio.layouts import iter_samples
 from assurance.dataio.poses import POLICIES
 from assurance.errors import CommandError
 from assurance.workers import bounded_jobs
+from el.monitors import build_monitor
+from el.monitors.calibration import check_card_monitor, load_calibration
+from el.monitors.frame_gate import load_frame_gate
 
 HELP = "run or resume an evaluation campaign (perturbations x test images x monitor configurations)"
 
@@ -61,16 +68,12 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError("--scheduler needs --backend dask")
     if not args.scheduler:  # local workers: clamped to the cores, one warning line says so
         args.jobs = bounded_jobs(args.jobs, warn=lambda m: print(f"uav-el campaign: warning: {m}", file=sys.stderr))
-    from assurance.cli.system_options import assessed
-
     system = assessed(args)  # the system under assessment, with --model and --gate: what the campaign runs
     data = system.data("test", args.data)
     deployed, cards = _deployed(args, system)
     monitors = _monitors(args, system, deployed, cards)
     gate = None
     if system.gate is not None:  # a bad gate file: one line, exit 2, before any task
-        from el.monitors.frame_gate import load_frame_gate
-
         gate = load_frame_gate(system.gate)
         cards.append(gate)  # checked against the campaign's network with the cards
     plan = system_plan(system)  # the system's perturbations: what the preset's `declared` stands for
@@ -87,8 +90,6 @@ def run(args: argparse.Namespace) -> int:
                               system.label):
         print(f"uav-el campaign: {line}", file=sys.stderr)
     _say_scenes(data, config.images, args)
-    from assurance.attest import AttestationError
-    from assurance.attest.keys import load_signing_key
     try:
         key = load_signing_key(args.signing_key, outside=args.out)
     except AttestationError as exc:
@@ -111,9 +112,6 @@ def _deployed(args: argparse.Namespace, system: Any) -> tuple[str | None, list[A
     """The system's deployed configuration as it flies (its spec at its card's threshold, or a card's own spec)
     and the calibration cards the campaign evaluates (``--calibration``, else the system file's), each checked
     against its monitor. Exit 2 for a deployed spec off its card's threshold."""
-    from el.monitors import build_monitor
-    from el.monitors.calibration import check_card_monitor, load_calibration
-
     spec, card = system.deployed()  # a deployed spec off its card's threshold: exit 2
     deployed = load_calibration(card).spec if card is not None else spec
     card_paths = args.calibration or ([str(system.calibration)] if system.calibration is not None else [])
@@ -128,9 +126,9 @@ def _monitors(args: argparse.Namespace, system: Any, deployed: str | None, cards
     (``assurance.campaign.presets.campaign_monitors``): one the preset brought in that the network cannot run is
     left out with a printed line; the deployed one, or one asked for (``--monitors``, a card), refuses the
     campaign (exit 2, one line naming it and the system file)."""
-    from assurance.campaign.presets import MonitorSupportError, campaign_monitors
-
-    model = system.segmenter(working_width=system.core.working_width)  # a model that cannot load: exit 2
+    # the campaign's own network (assurance.campaign.run keeps it for its checks and a sequential run's tasks); a
+    # model that cannot load: exit 2
+    model = campaign_network(system.model, network_threads(args.jobs), system.core.working_width)
     try:
         choice = campaign_monitors(args.preset, deployed=deployed, given=args.monitors,
                                    extra=[c.spec for c in cards], model=model, where=system.label)
@@ -148,8 +146,6 @@ def _monitors(args: argparse.Namespace, system: Any, deployed: str | None, cards
 def _say_scenes(data: Any, images: int | None, args: argparse.Namespace) -> None:
     """One line when the campaign evaluates fewer scenes than the data holds: how many, of how many, and why
     (``--images``, or the preset's stated size)."""
-    from assurance.dataio.layouts import iter_samples
-
     if images is None:
         return
     total = sum(1 for _ in iter_samples(data, require_labels=True))
