@@ -18,6 +18,7 @@ from importlib import metadata, util
 from pathlib import Path
 from typing import Any
 
+from assurance import __version__
 from el.base.hashing import sha256_file
 
 log = logging.getLogger(__name__)
@@ -69,8 +70,6 @@ def version() -> str:
     try:
         return metadata.version(PROJECT)
     except metadata.PackageNotFoundError:
-        from assurance import __version__
-
         return __version__
 
 

@@ -11,7 +11,7 @@ from helpers import TINY_ARCH, FakeClock, OracleSegmenter, scene_ids, scene_imag
 from el.classes.labels import UAVID
 from el.flight.pipeline import EmergencyLanding, PipelineConfig
 from el.geometry.config import CoreConfig
-from el.monitors.mc_chunks import MC_CHUNK, mc_samples
+from el.monitors.mc_chunks import MC_CHUNK, Chunking, mc_samples
 from el.segmentation import Segmenter
 from el.segmentation.architectures import build_model
 
@@ -36,11 +36,12 @@ def test_chunks_of_one_draw_are_the_draw(seg):
     window = (3, 37, 5, 50)
     whole = seg.mc_dropout(patch, 45, 0.5, 7, window=window)
     for chunk in (1, 7, 16, 44):
-        parts = mc_samples(seg, patch, 45, 0.5, 7, window=window, chunk=chunk)
+        parts = mc_samples(seg, patch, 45, 0.5, 7, window=window, chunking=Chunking(chunk=chunk))
         np.testing.assert_allclose(parts, whole, rtol=0, atol=1e-6)
     # prefix-consistent: the first 20 of a chunked 45 are the chunked 20
-    np.testing.assert_allclose(mc_samples(seg, patch, 45, 0.5, 7, window=window, chunk=8)[:20],
-                               mc_samples(seg, patch, 20, 0.5, 7, window=window, chunk=8), rtol=0, atol=1e-6)
+    by8 = Chunking(chunk=8)
+    np.testing.assert_allclose(mc_samples(seg, patch, 45, 0.5, 7, window=window, chunking=by8)[:20],
+                               mc_samples(seg, patch, 20, 0.5, 7, window=window, chunking=by8), rtol=0, atol=1e-6)
     small = mc_samples(seg, patch, MC_CHUNK, 0.5, 7, window=window)
     assert np.array_equal(small, seg.mc_dropout(patch, MC_CHUNK, 0.5, 7, window=window))
     assert not np.allclose(mc_samples(seg, patch, 45, 0.5, 8, window=window), whole)  # the seed matters

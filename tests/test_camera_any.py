@@ -13,6 +13,7 @@ from test_core_properties import assert_candidates_safe_at_full_resolution, labe
 
 from assurance.campaign.gt_pipeline import decide_from_labels
 from el.classes.labels import CLASS_IDS, UAVID
+from el.flight.kernel import FramePose
 from el.geometry.camera import (
     MAX_ROLL_DEG,
     CameraGeometry,
@@ -130,18 +131,18 @@ def test_the_ground_truth_pipeline_plans_with_the_frame_pose_and_faults_on_an_in
     ids = np.full((144, 256), CLASS_IDS["low_vegetation"], np.uint8)
     ids[:, 100:110] = CLASS_IDS["road"]
     base = decide_from_labels(ids, config=CoreConfig(working_width=128), labels=UAVID)
-    low = decide_from_labels(ids, config=CoreConfig(working_width=128), pose=Pose(height_m=25.0, pitch_deg=45.0),
-                             labels=UAVID)
+    low = decide_from_labels(ids, config=CoreConfig(working_width=128),
+                             pose=FramePose(Pose(height_m=25.0, pitch_deg=45.0)), labels=UAVID)
     assert low.input["pose"] == {"height_m": 25.0, "pitch_deg": 45.0, "source": "frame"}
     assert base.input["pose"]["source"] == "nominal"
     assert low.default_area.radius_px > base.default_area.radius_px  # closer: a larger disc
-    bad = decide_from_labels(ids, config=CoreConfig(working_width=128, reach_m=10_000.0), roll_deg=5.0,
-                             pose=Pose(height_m=50.0, pitch_deg=8.0), labels=UAVID)
+    bad = decide_from_labels(ids, config=CoreConfig(working_width=128, reach_m=10_000.0),
+                             pose=FramePose(Pose(height_m=50.0, pitch_deg=8.0), roll_deg=5.0), labels=UAVID)
     assert bad.action == "default" and bad.reason.startswith("fault: pose: ValueError: pose height_m 50")
-    beyond = decide_from_labels(ids, config=CoreConfig(working_width=128), pose=Pose(height_m=50.0, pitch_deg=8.0),
-                                labels=UAVID)  # all ground in view beyond reach: no candidate
+    beyond = decide_from_labels(ids, config=CoreConfig(working_width=128),  # all ground in view beyond reach
+                                pose=FramePose(Pose(height_m=50.0, pitch_deg=8.0)), labels=UAVID)  # no candidate
     assert (beyond.action, beyond.reason, beyond.candidates) == ("default", "no_candidate", [])
-    rolled = decide_from_labels(ids, config=CoreConfig(working_width=128), roll_deg=9.0, labels=UAVID)
+    rolled = decide_from_labels(ids, config=CoreConfig(working_width=128), pose=FramePose(roll_deg=9.0), labels=UAVID)
     assert rolled.reason.startswith("fault: pose: ValueError: roll_deg must lie in")
 
 
@@ -167,7 +168,7 @@ def test_no_candidate_disc_touches_a_forbidden_pixel_at_any_pose_and_camera(case
     geo = CameraGeometry(width=W, height=H, intrinsics=intr, pose=pose, reach_m=LONG_REACH_M)
     assert geometry_problem(geo) is None
     decision = decide_from_labels(ids, config=CoreConfig(working_width=ww, intrinsics=intr, reach_m=LONG_REACH_M),
-                                  pose=pose, labels=UAVID)
+                                  pose=FramePose(pose), labels=UAVID)
     assert not decision.reason.startswith("fault"), decision.reason
     assert decision.input["pose"]["height_m"] == pose.height_m
     assert_candidates_safe_at_full_resolution(ids, decision.candidates, geo)

@@ -50,7 +50,7 @@ class SlowOn:
 def world(tmp_path_factory, one_torch_thread):
     import torch
 
-    from assurance.fitting.frame_gate_fit import fit_gate
+    from assurance.fitting.frame_gate_fit import GateSettings, fit_gate
     from el.segmentation.architectures import build_model
     from el.segmentation.inference import Segmenter
 
@@ -60,7 +60,7 @@ def world(tmp_path_factory, one_torch_thread):
     write_textured_scenes(root / "data", range(200, 204), 96, 54, sequence="seq01")  # outside the frame size
     torch.manual_seed(0)
     seg = Segmenter(build_model(TINY_ARCH), working_width=WW, card={"weights_sha256": SHA}, labels=UAVID)
-    doc = fit_gate(train, val, seg, kind="mahalanobis", quantile=0.99, val_scenes="0:6",
+    doc = fit_gate(train, val, seg, settings=GateSettings(kind="mahalanobis", quantile=0.99), val_scenes="0:6",
                    weights={"path": None, "sha256": SHA, "segmenter": "weights"})
     gate = load_frame_gate(_write(root / "fitted.json", doc))
     # a threshold inside the campaign frames' scores, so that the gate refuses some of them and passes others

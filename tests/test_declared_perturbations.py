@@ -200,7 +200,7 @@ def test_an_asked_perturbation_outside_the_domain_runs_and_is_marked(tiny_data, 
 def test_calibration_scores_the_declared_perturbations_too(tiny_data):
     from helpers import nearest_class
 
-    from assurance.fitting.calibration import calibrate_on_data
+    from assurance.fitting.calibration import CalibrationScenes, ThresholdRule, calibrate_on_data
     from el.classes.labels import ids_to_colors
     from el.geometry.config import CoreConfig
 
@@ -213,8 +213,9 @@ def test_calibration_scores_the_declared_perturbations_too(tiny_data):
             return super().predict_frame(ids_to_colors(ids))
 
     def card(perturbations):
-        return calibrate_on_data(tiny_data, "lhd", miss_rate=0.5, confidence=0.5, segmenter=RoadBlindFrame(TINY_WW),
-                                 core=CoreConfig(n_star=6, working_width=TINY_WW), perturbations=perturbations)["body"]
+        scenes = CalibrationScenes(core=CoreConfig(n_star=6, working_width=TINY_WW), perturbations=perturbations)
+        return calibrate_on_data(tiny_data, "lhd", rule=ThresholdRule(miss_rate=0.5, confidence=0.5), scenes=scenes,
+                                 segmenter=RoadBlindFrame(TINY_WW))["body"]
 
     clean, declared = card(None), card((("none", 3), ("gaussian_noise", 2)))
     assert clean["split"]["perturbation"] == "none"  # the shipped card's record, as before

@@ -122,11 +122,12 @@ def test_the_overlay_shades_the_stripes_of_the_decisions_own_pose():
     from assurance.campaign.gt_pipeline import decide_from_labels
     from assurance.evidence.overlay import _first_reachable_row
     from el.classes.labels import CLASS_IDS, UAVID
+    from el.flight.kernel import FramePose
 
     ids = np.full((216, 384), CLASS_IDS["low_vegetation"], np.uint8)
     cfg = CoreConfig(working_width=192)
     nominal = decide_from_labels(ids, config=cfg, labels=UAVID)
-    nadir = decide_from_labels(ids, config=cfg, pose=Pose(height_m=60.0, pitch_deg=90.0), labels=UAVID)
+    nadir = decide_from_labels(ids, config=cfg, pose=FramePose(Pose(height_m=60.0, pitch_deg=90.0)), labels=UAVID)
     assert _first_reachable_row(nominal.to_dict(), 384, 216) == 43
     assert _first_reachable_row(nadir.to_dict(), 384, 216) == 0
     assert (nominal.default_area.basis, nadir.default_area.basis) == ("nearest_ground", "nadir")

@@ -67,7 +67,7 @@ def world(tmp_path_factory, one_torch_thread):
     import torch
 
     from assurance.campaign.run import CampaignConfig, Execution, run_campaign
-    from assurance.fitting.frame_gate_fit import fit_gate
+    from assurance.fitting.frame_gate_fit import GateSettings, fit_gate
     from assurance.system import build as system_build
     from assurance.system import load_system
     from el.classes.labels import UAVID
@@ -82,7 +82,7 @@ def world(tmp_path_factory, one_torch_thread):
     write_textured_scenes(root / "service", range(300, 324))  # flown: other scenes of the same domain
     torch.manual_seed(0)
     seg = Segmenter(build_model(TINY_ARCH), working_width=WW, card={"weights_sha256": SHA}, labels=UAVID)
-    doc = fit_gate(train, val, seg, kind="mahalanobis", quantile=0.99, val_scenes="0:6",
+    doc = fit_gate(train, val, seg, settings=GateSettings(kind="mahalanobis", quantile=0.99), val_scenes="0:6",
                    weights={"path": None, "sha256": SHA, "segmenter": "weights"})
     (root / "gate.json").write_text(json.dumps(doc), "utf-8")
     gate = load_frame_gate(root / "gate.json")

@@ -43,10 +43,11 @@ def splits(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def model_file(splits, tmp_path_factory):
-    from assurance.fitting.learned_monitor import fit_learned_monitor
+    from assurance.fitting.learned_monitor import FeatureSettings, fit_learned_monitor
 
     train, val = splits
-    doc = fit_learned_monitor(train, RoadBlindFrame(WW), val=val, core=CORE)  # bound to the network it reports
+    # bound to the network it reports
+    doc = fit_learned_monitor(train, RoadBlindFrame(WW), val=val, features=FeatureSettings(core=CORE))
     out = tmp_path_factory.mktemp("model") / "learned.json"
     out.write_text(json.dumps(doc))
     return out
@@ -188,7 +189,7 @@ def test_cli_fit_monitor_and_land_fail_loud(splits, tmp_path, capsys, monkeypatc
 def test_campaign_and_calibration_by_name(model_file, splits, tmp_path):
     from assurance.campaign import readouts
     from assurance.campaign.run import CampaignConfig, Execution, run_campaign
-    from assurance.fitting.calibration import calibrate_on_data
+    from assurance.fitting.calibration import CalibrationScenes, ThresholdRule, calibrate_on_data
 
     _, val = splits
     spec = f"learned:model={model_file}"
@@ -199,7 +200,8 @@ def test_campaign_and_calibration_by_name(model_file, splits, tmp_path):
     cands = readouts.load_table(tmp_path / "run", "candidates")
     mine = cands[cands["monitor"] == spec]
     assert len(mine) and mine["score"].between(0, 1).all()
-    doc = calibrate_on_data(val, spec, miss_rate=0.3, confidence=0.7, segmenter=RoadBlindFrame(WW), core=CORE)
+    doc = calibrate_on_data(val, spec, rule=ThresholdRule(miss_rate=0.3, confidence=0.7),
+                            scenes=CalibrationScenes(core=CORE), segmenter=RoadBlindFrame(WW))
     assert doc["body"]["monitor"] == spec and doc["body"]["spec"].startswith(spec + ",threshold=")
 
 
@@ -208,7 +210,7 @@ def test_card_run_and_monitor_must_rest_on_the_same_learned_model(model_file, sp
     campaign (resuming with another model), and by EL-R16 (the run scored with another model)."""
     from assurance.campaign import readouts
     from assurance.campaign.run import CampaignConfig, plan, run_campaign, run_task
-    from assurance.fitting.calibration import calibrate_on_data
+    from assurance.fitting.calibration import CalibrationScenes, ThresholdRule, calibrate_on_data
     from assurance.requirements.calibration_check import check_calibrated_miss_rate
     from el.flight.pipeline import EmergencyLanding, PipelineConfig
     from el.monitors.calibration import load_calibration
@@ -217,8 +219,9 @@ def test_card_run_and_monitor_must_rest_on_the_same_learned_model(model_file, sp
     _, val = splits
     spec = f"learned:model={model_file}"
     card_path = tmp_path / "card.json"
-    card_path.write_text(json.dumps(calibrate_on_data(val, spec, miss_rate=0.3, confidence=0.7,
-                                                      segmenter=RoadBlindFrame(WW), core=CORE)))
+    card_path.write_text(json.dumps(calibrate_on_data(val, spec, rule=ThresholdRule(miss_rate=0.3, confidence=0.7),
+                                                      scenes=CalibrationScenes(core=CORE),
+                                                      segmenter=RoadBlindFrame(WW))))
     card = load_calibration(card_path)
     assert card.body["monitor_model"]["sha256"] == load_learned_model(model_file, labels=UAVID).sha256
     run = tmp_path / "run"

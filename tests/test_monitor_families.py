@@ -87,11 +87,12 @@ def test_feature_space_scores_by_hand():
 def records(splits, tmp_path_factory):  # noqa: F811
     from assurance.fitting.detectors import FAMILIES as FITTED
     from assurance.fitting.detectors import detector_document, fit_detector_body
-    from assurance.fitting.learned_monitor import collect_candidates
+    from assurance.fitting.learned_monitor import FeatureSettings, collect_candidates
 
     train, val = splits
     seg = RoadBlindFrame(WW)
-    tr, he = collect_candidates(train, seg, core=CORE), collect_candidates(val, seg, core=CORE)
+    on_core = FeatureSettings(core=CORE)
+    tr, he = collect_candidates(train, seg, features=on_core), collect_candidates(val, seg, features=on_core)
     out = tmp_path_factory.mktemp("detectors")
     paths = {}
     for family in FITTED:

@@ -172,13 +172,14 @@ def test_a_system_naming_only_a_card_deploys_the_cards_monitor_with_its_gate(gat
     """The deployed parts of a user's system reach the campaign: the card's calibrated monitor (first, bound to the
     user's network) and the frame gate, from the system file alone."""
     from assurance.campaign import readouts
-    from assurance.fitting.calibration import calibration_body
+    from assurance.fitting.calibration import ThresholdRule, calibration_body
     from el.base.hashing import sha256_file
     from el.monitors.calibration import card_document
 
     network = {"path": "unet.onnx", "sha256": sha256_file(gated["root"] / "unet.onnx"), "segmenter": "weights"}
     rng = np.random.default_rng(0)
-    body = calibration_body(rng.random(300), rng.random(300) < 0.5, monitor="lhd", miss_rate=0.5, confidence=0.5,
+    body = calibration_body(rng.random(300), rng.random(300) < 0.5, monitor="lhd",
+                            rule=ThresholdRule(miss_rate=0.5, confidence=0.5),
                             split={"path": "val", "images": 3, "sha256": "0" * 64, "perturbation": "none"},
                             weights=network)
     (gated["root"] / "card.json").write_text(json.dumps(card_document(body)))
@@ -308,7 +309,7 @@ def _learned_split(root: Path, n: int, offset: int, labels) -> Path:
 
 
 def test_fit_monitor_reads_the_truth_in_the_systems_palette(tmp_path):
-    from assurance.fitting.learned_monitor import collect_candidates, fit_learned_monitor
+    from assurance.fitting.learned_monitor import FeatureSettings, collect_candidates, fit_learned_monitor
     from el.monitors import build_monitor
     from el.monitors.learned import base_features, load_learned_model
     from el.segmentation.class_map import MappedModel
@@ -317,8 +318,8 @@ def test_fit_monitor_reads_the_truth_in_the_systems_palette(tmp_path):
     core = CoreConfig(working_width=256)
     net = RoadBlindFrame(256)
     mapped = MappedModel(net, TO_CITY_SURVEY, city)
-    uavid = collect_candidates(_learned_split(tmp_path / "u", 4, 0, UAVID), net, core=core)
-    mine = collect_candidates(_learned_split(tmp_path / "c", 4, 0, city), mapped, core=core)
+    uavid = collect_candidates(_learned_split(tmp_path / "u", 4, 0, UAVID), net, features=FeatureSettings(core=core))
+    mine = collect_candidates(_learned_split(tmp_path / "c", 4, 0, city), mapped, features=FeatureSettings(core=core))
     assert uavid.y.sum() > 0 and (uavid.y == mine.y).all()  # the same candidates are truly unsafe
     names_u, names_c = base_features(UAVID), base_features(city)
     assert "hd_max_p_asphalt" in names_c and "hd_max_p_road" not in names_c
@@ -326,7 +327,7 @@ def test_fit_monitor_reads_the_truth_in_the_systems_palette(tmp_path):
     columns = [names_c.index(rename.get(n, n)) for n in names_u]
     np.testing.assert_allclose(mine.x[:, columns], uavid.x, atol=1e-6)  # each class's feature, renamed
     doc = fit_learned_monitor(tmp_path / "c" / "", mapped, val=_learned_split(tmp_path / "cv", 4, 100, city),
-                              core=core)
+                              features=FeatureSettings(core=core))
     assert doc["body"]["labels"] == "city_survey" and doc["body"]["features"] == list(names_c)
     path = tmp_path / "learned.json"
     path.write_text(json.dumps(doc))

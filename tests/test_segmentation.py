@@ -23,6 +23,7 @@ from el.segmentation import (
     load_weights,
 )
 from el.segmentation.model import MCSpec, count_parameters
+from el.segmentation.protocol import FrameOptions
 from el.segmentation.weights import card_path, read_card, sha256_file
 
 
@@ -120,7 +121,7 @@ def test_predict_frame_at_working_size_equals_patch(seg: Segmenter) -> None:
 
 
 def test_frame_flip_averages_the_frame_and_its_mirror(model: nn.Module, seg: Segmenter) -> None:
-    flip = Segmenter(model, working_width=64, frame_flip=True, labels=UAVID)
+    flip = Segmenter(model, working_width=64, frames=FrameOptions(frame_flip=True), labels=UAVID)
     rgb = _rgb(36, 64, seed=5)
     mirror = np.ascontiguousarray(rgb[:, ::-1])
     expected = 0.5 * (seg.predict_frame(rgb) + seg.predict_frame(mirror)[:, :, ::-1])
@@ -132,12 +133,12 @@ def test_frame_flip_averages_the_frame_and_its_mirror(model: nn.Module, seg: Seg
     np.testing.assert_allclose(flip.predict_frame(mirror)[:, :, ::-1], got, atol=1e-6)
     np.testing.assert_array_equal(flip.predict_patch(rgb), seg.predict_patch(rgb))  # patches: unaffected
     with pytest.raises(ValueError, match="frame_flip"):
-        Segmenter(model, frame_flip="yes", labels=UAVID)
+        Segmenter(model, frames=FrameOptions(frame_flip="yes"), labels=UAVID)
 
 
 def test_frame_scales_feed_the_working_frame_resized_and_average(model: nn.Module, seg: Segmenter) -> None:
     rgb = _rgb(36, 64, seed=6)
-    up = Segmenter(model, working_width=64, frame_scales=(1.5,), labels=UAVID)
+    up = Segmenter(model, working_width=64, frames=FrameOptions(frame_scales=(1.5,)), labels=UAVID)
     big = seg.predict_patch(cv2.resize(rgb, (96, 54), interpolation=cv2.INTER_LINEAR))  # the network at x1.5
     expected = np.stack([cv2.resize(c, (64, 36), interpolation=cv2.INTER_AREA) for c in big])
     got = up.predict_frame(rgb)
@@ -145,11 +146,12 @@ def test_frame_scales_feed_the_working_frame_resized_and_average(model: nn.Modul
     np.testing.assert_allclose(got, expected, atol=1e-6)
     np.testing.assert_allclose(got.sum(0), 1.0, atol=1e-5)  # still a softmax at the working resolution
     assert np.abs(got - seg.predict_frame(rgb)).max() > 1e-4
-    both = Segmenter(model, working_width=64, frame_scales=[1, 1.5], labels=UAVID)
+    both = Segmenter(model, working_width=64, frames=FrameOptions(frame_scales=[1, 1.5]), labels=UAVID)
     assert both.frame_scales == (1.0, 1.5)
     np.testing.assert_allclose(both.predict_frame(rgb), 0.5 * (seg.predict_frame(rgb) + got), atol=1e-6)
     # with the mirror image too: each size's pair is averaged
-    flip_up = Segmenter(model, working_width=64, frame_scales=(1.5,), frame_flip=True, labels=UAVID)
+    flip_up = Segmenter(model, working_width=64, frames=FrameOptions(frame_scales=(1.5,), frame_flip=True),
+                        labels=UAVID)
     mirror = np.ascontiguousarray(rgb[:, ::-1])
     np.testing.assert_allclose(flip_up.predict_frame(rgb), 0.5 * (got + up.predict_frame(mirror)[:, :, ::-1]),
                                atol=1e-6)
@@ -157,7 +159,7 @@ def test_frame_scales_feed_the_working_frame_resized_and_average(model: nn.Modul
     for bad in ((), (1.0, 1.0), (3.0,), (0.75,), (float("nan"),), "1.25", 1.25, (1, 1.1, 1.2, 1.3, 1.4), ("1.25",),
                 (True,), None):
         with pytest.raises(ValueError, match="frame_scales"):
-            Segmenter(model, frame_scales=bad, labels=UAVID)
+            Segmenter(model, frames=FrameOptions(frame_scales=bad), labels=UAVID)
 
 
 def test_conservative_frame_pooling_keeps_what_a_source_pixel_shows(model: nn.Module, seg: Segmenter) -> None:
@@ -165,15 +167,16 @@ def test_conservative_frame_pooling_keeps_what_a_source_pixel_shows(model: nn.Mo
     from el.segmentation.pooling import downsample_probs
 
     rgb = _rgb(36, 64, seed=7)
-    cons = Segmenter(model, working_width=64, frame_scales=(1.5,), frame_pooling="conservative", labels=UAVID)
+    cons = Segmenter(model, working_width=64, frames=FrameOptions(frame_scales=(1.5,), frame_pooling="conservative"),
+                     labels=UAVID)
     big = seg.predict_patch(cv2.resize(rgb, (96, 54), interpolation=cv2.INTER_LINEAR))
     got = cons.predict_frame(rgb)
     np.testing.assert_allclose(got, downsample_probs(big, (64, 36), "conservative", labels=UAVID), atol=1e-6)
-    area = Segmenter(model, working_width=64, frame_scales=(1.5,), labels=UAVID).predict_frame(rgb)
+    area = Segmenter(model, working_width=64, frames=FrameOptions(frame_scales=(1.5,)), labels=UAVID).predict_frame(rgb)
     assert forbidden_pixels(got, labels=UAVID).sum() >= forbidden_pixels(area, labels=UAVID).sum()
     assert (forbidden_pixels(got, labels=UAVID) | ~forbidden_pixels(area, labels=UAVID)).all()  # stay forbidden
     with pytest.raises(ValueError, match="frame_pooling"):
-        Segmenter(model, frame_pooling="max", labels=UAVID)
+        Segmenter(model, frames=FrameOptions(frame_pooling="max"), labels=UAVID)
 
 
 def test_load_follows_the_cards_way_of_segmenting_frames(tmp_path, model: nn.Module) -> None:

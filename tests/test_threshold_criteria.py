@@ -66,14 +66,14 @@ def test_ranking_needs_three_monitors_and_two_complete_blocks_and_draws_a_diagra
 
 
 def test_a_card_records_its_criterion_and_claims_no_guarantee_for_a_benchmark_one():
-    from assurance.fitting.calibration import calibration_body
+    from assurance.fitting.calibration import ThresholdRule, calibration_body
 
-    kw = {"monitor": "msp", "miss_rate": 0.1, "confidence": 0.9, "split": {}, "weights": {}}
+    kw = {"monitor": "msp", "split": {}, "weights": {}}
     rng = np.random.default_rng(1)
     s, y = rng.random(200), rng.random(200) < 0.5
-    b = calibration_body(s, y, **kw)
+    b = calibration_body(s, y, **kw, rule=ThresholdRule(miss_rate=0.1, confidence=0.9))
     assert b["criterion"]["name"] == "guarantee" and b["bound"] <= 0.1
-    f = calibration_body(s, y, **kw, criterion="f1")
+    f = calibration_body(s, y, **kw, rule=ThresholdRule(miss_rate=0.1, confidence=0.9, criterion="f1"))
     assert f["criterion"]["name"] == "f1" and f["bound"] is None and f["guarantee"].startswith("none")
     assert f["spec"] == f"msp:threshold={f['threshold']!r}"
     assert f["counts"]["unsafe"] + f["counts"]["safe"] == 200
@@ -100,13 +100,14 @@ def test_sweep_and_calibrate_take_the_criterion_by_name(capsys):
 
 def test_el_r16_on_a_card_without_a_guarantee_is_insufficient_not_a_crash():
     """A card a benchmark criterion chose carries no miss rate: EL-R16 says so instead of judging None."""
-    from assurance.fitting.calibration import calibration_body
+    from assurance.fitting.calibration import ThresholdRule, calibration_body
     from assurance.requirements.calibration_check import check_calibrated_miss_rate
     from el.monitors.calibration import CalibrationCard
 
     rng = np.random.default_rng(2)
     s, y = rng.random(100), rng.random(100) < 0.5
-    body = calibration_body(s, y, monitor="msp", miss_rate=0.1, confidence=0.9, split={}, weights={}, criterion="f1")
+    body = calibration_body(s, y, monitor="msp", rule=ThresholdRule(miss_rate=0.1, confidence=0.9, criterion="f1"),
+                            split={}, weights={})
     card = CalibrationCard("card.json", "0" * 64, body)
     ev = check_calibrated_miss_rate(pd.DataFrame({"perturbation": ["none"]}), card)
     assert ev.status == "insufficient" and "'f1'" in ev.summary and "--criterion guarantee" in ev.summary

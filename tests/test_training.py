@@ -18,13 +18,22 @@ from assurance.fitting.network.card import verify_card
 from assurance.fitting.network.checkpoint import checkpoint_path, load_checkpoint
 from assurance.fitting.network.evaluation import compare_figures, confusion, summarise
 from assurance.fitting.network.train_config import TrainConfig, steps_for_epochs
-from assurance.fitting.network.training import prefetched, resolve_device, sample_batch, train, training_loss
+from assurance.fitting.network.training import (
+    RunOptions,
+    prefetched,
+    resolve_device,
+    sample_batch,
+    train,
+    training_loss,
+)
 from el.classes.labels import NUM_CLASSES, PALETTE, UAVID
 from el.segmentation.architectures import build_model
 from el.segmentation.inference import Segmenter
 from el.segmentation.model import ArchConfig
 from el.segmentation.protocol import EvalProtocol
 from el.segmentation.weights import card_path, read_card
+
+RESUME = RunOptions(resume=True)
 
 
 @pytest.fixture(autouse=True, scope="module")
@@ -206,9 +215,9 @@ def test_resume_continues_and_matches_an_uninterrupted_run(datasets, tmp_path) -
     with pytest.raises(ValueError, match="checkpoint exists"):
         train(train_dir, part, val_dir=val_dir, config=config)
     with pytest.raises(ValueError, match="another configuration"):
-        train(train_dir, part, val_dir=val_dir, config=tiny_config(baseline_pixels=0, lr=1e-3), resume=True)
+        train(train_dir, part, val_dir=val_dir, config=tiny_config(baseline_pixels=0, lr=1e-3), options=RESUME)
     messages: list[str] = []
-    card_part = train(train_dir, part, val_dir=val_dir, config=config, resume=True, log=messages.append)
+    card_part = train(train_dir, part, val_dir=val_dir, config=config, options=RESUME, log=messages.append)
     assert any(m.startswith("resuming from step") for m in messages)
     assert load_checkpoint(checkpoint_path(part))["step"] == config.steps
 
@@ -226,15 +235,16 @@ def test_stop_at_cuts_a_run_short_on_the_same_schedule(datasets, tmp_path) -> No
     full = tmp_path / "full" / "model.pt"
     train(train_dir, full, val_dir=val_dir, config=config)
     cut = tmp_path / "cut" / "model.pt"
-    card = train(train_dir, cut, val_dir=val_dir, config=config, stop_at=4)
+    card = train(train_dir, cut, val_dir=val_dir, config=config, options=RunOptions(stop_at=4))
     assert card["training"]["stopped_at"] == 4 and card["training"]["history"][-1]["step"] == 4
     assert load_checkpoint(checkpoint_path(cut))["step"] == 4
     full_ckpt = load_checkpoint(checkpoint_path(full))  # the first 4 steps are those of the full run
     cut_losses = [h["loss"] for h in card["training"]["history"]]
     assert [h["loss"] for h in full_ckpt["history"][:2]] == pytest.approx(cut_losses)
     with pytest.raises(ValueError, match="stop_at"):
-        train(train_dir, tmp_path / "bad" / "model.pt", val_dir=val_dir, config=config, stop_at=config.steps + 1)
-    card = train(train_dir, cut, val_dir=val_dir, config=config, resume=True)  # and then to the end
+        train(train_dir, tmp_path / "bad" / "model.pt", val_dir=val_dir, config=config,
+              options=RunOptions(stop_at=config.steps + 1))
+    card = train(train_dir, cut, val_dir=val_dir, config=config, options=RESUME)  # and then to the end
     assert card["training"]["stopped_at"] is None and load_checkpoint(checkpoint_path(cut))["step"] == config.steps
 
 
@@ -245,7 +255,8 @@ def test_prefetched_batches_arrive_in_step_order_and_do_not_change_training(data
     train_dir, val_dir = datasets
     config = tiny_config(baseline_pixels=0)
     plain = train(train_dir, tmp_path / "a" / "model.pt", val_dir=val_dir, config=config)
-    ahead = train(train_dir, tmp_path / "b" / "model.pt", val_dir=val_dir, config=config, prefetch=3)
+    ahead = train(train_dir, tmp_path / "b" / "model.pt", val_dir=val_dir, config=config,
+                  options=RunOptions(prefetch=3))
     assert ahead["weights_sha256"] == plain["weights_sha256"]
     assert ahead["training"]["device"] == "cpu"
 
@@ -277,7 +288,7 @@ def test_lovasz_fine_tuning_is_recorded_and_old_checkpoints_still_resume(dataset
     state = load_checkpoint(ckpt)
     del state["config"]["loss"]
     torch.save(state, ckpt)
-    done = train(train_dir, part, config=tiny_config(baseline_pixels=0), resume=True)
+    done = train(train_dir, part, config=tiny_config(baseline_pixels=0), options=RESUME)
     assert done["training"]["config"]["loss"] == "ce"
 
 
@@ -291,21 +302,21 @@ def test_a_checkpoint_without_frame_options_resumes_and_the_card_records_them(da
     del state["config"]["eval_protocol"]["frame_flip"]  # written before the options existed
     del state["config"]["eval_protocol"]["frame_scales"]
     torch.save(state, ckpt)
-    done = train(train_dir, part, val_dir=val_dir, config=tiny_config(baseline_pixels=0), resume=True)
+    done = train(train_dir, part, val_dir=val_dir, config=tiny_config(baseline_pixels=0), options=RESUME)
     assert done["evaluation"]["protocol"]["frame_flip"] is False
     assert done["evaluation"]["protocol"]["frame_scales"] == [1.0]
     flipped = tiny_config(baseline_pixels=0, eval_protocol=replace(tiny_config().eval_protocol, frame_flip=True))
     with pytest.raises(ValueError, match="frame_flip"):  # a changed protocol is not resumed silently
-        train(train_dir, part, val_dir=val_dir, config=flipped, resume=True)
+        train(train_dir, part, val_dir=val_dir, config=flipped, options=RESUME)
     scaled = tiny_config(baseline_pixels=0, eval_protocol=replace(tiny_config().eval_protocol, frame_scales=(1.5,)))
     with pytest.raises(ValueError, match="frame_scales"):
-        train(train_dir, part, val_dir=val_dir, config=scaled, resume=True)
+        train(train_dir, part, val_dir=val_dir, config=scaled, options=RESUME)
 
 
 def test_resume_without_checkpoint_is_an_error(datasets, tmp_path) -> None:
     train_dir, _ = datasets
     with pytest.raises(ValueError, match="no checkpoint"):
-        train(train_dir, tmp_path / "model.pt", config=tiny_config(), resume=True)
+        train(train_dir, tmp_path / "model.pt", config=tiny_config(), options=RESUME)
 
 
 # -- the command line ----------------------------------------------------------------------------------
@@ -450,7 +461,7 @@ def test_warm_start_begins_from_the_parent_weights(datasets, tmp_path) -> None:
     # Zero steps' worth of learning rate: the child starts exactly where the parent ended.
     child = tmp_path / "child" / "model.pt"
     card = train(train_dir, child, config=tiny_config(baseline_pixels=0, steps=1, lr=1e-12, init_sha256=sha),
-                 init_weights=parent)
+                 options=RunOptions(init_weights=parent))
     assert card["training"]["init"]["weights_sha256"] == sha
     assert card["training"]["total_steps"] == 1 + parent_card["training"]["steps"]
     parent_state = torch.load(parent, weights_only=True)
@@ -461,11 +472,11 @@ def test_warm_start_begins_from_the_parent_weights(datasets, tmp_path) -> None:
 
     with pytest.raises(ValueError, match="not the configured init_sha256"):
         train(train_dir, tmp_path / "c2" / "m.pt", config=tiny_config(steps=1, init_sha256="0" * 64),
-              init_weights=parent)
+              options=RunOptions(init_weights=parent))
     other = ArchConfig(widths=(8, 8, 8), ms_channels=8, decoder_channels=8)
     with pytest.raises(ValueError, match="architecture"):
         train(train_dir, tmp_path / "c3" / "m.pt", config=tiny_config(steps=1, arch=other, init_sha256=sha),
-              init_weights=parent)
+              options=RunOptions(init_weights=parent))
 
 
 def test_train_cli_warm_start_takes_the_parents_architecture(datasets, tmp_path, uav_el, capsys) -> None:

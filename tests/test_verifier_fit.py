@@ -42,6 +42,7 @@ def _crops(n: int, rng: np.random.Generator):
 
 
 def test_a_few_steps_select_on_held_out_and_write_a_record_that_flies(tmp_path):
+    from assurance.fitting import verifier_fit as vf
     from assurance.fitting.verifier_fit import check_export, choose_fusion, export_onnx, verifier_body, write_verifier
     from assurance.fitting.verifier_train import TrainConfig, predict, train_verifier
     from el.base.hashing import sha256_bytes
@@ -58,10 +59,11 @@ def test_a_few_steps_select_on_held_out_and_write_a_record_that_flies(tmp_path):
     p = predict(result.model, held.crops)
     fusion = choose_fusion(held.unsafe, p, np.where(held.unsafe, 0.7, 0.3), learned_sha256="f" * 64, recall=0.95)
     assert 0.0 <= fusion["weight"] <= 1.0 and fusion["held_out"]["recall"] >= 0.95
-    body = verifier_body(result, cfg, train, held, onnx_name="v.onnx", onnx_sha256=sha256_bytes(onnx),
-                         export_diff=0.0, p_held=p, recall=0.95, splits={"train": "t", "train_sha256": "1" * 64},
-                         weights={"sha256": "abc"}, command="uav-el fit-verifier ...", fusion=fusion,
-                         labels="uavid", provenance={})
+    body = verifier_body(result, cfg, train, held, export=vf.OnnxExport("v.onnx", sha256_bytes(onnx), 0.0),
+                         choice=vf.HeldOutChoice(p=p, recall=0.95, fusion=fusion),
+                         sources=vf.VerifierSources(splits={"train": "t", "train_sha256": "1" * 64},
+                                                    weights={"sha256": "abc"}, command="uav-el fit-verifier ...",
+                                                    labels="uavid", imagenet={}))
     assert body["held_out"]["recall"] >= 0.95 and body["training"]["sha256"] == "1" * 64
     write_verifier(tmp_path / "v.json", body, onnx)
     m = VerifierMonitor(labels=UAVID, model=str(tmp_path / "v.json"))

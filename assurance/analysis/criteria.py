@@ -22,6 +22,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from assurance.analysis.guarantee import calibrate_threshold
+from assurance.analysis.sweep import Choice, SweepError, default_thresholds, monitor_rows, sweep, totals
+from assurance.analysis.sweep_report import scored_monitors, sweep_run
+
 SYSTEM = ("fewest-unsafe", "g-star")
 CANDIDATE = ("guarantee", "f1", "g-mean", "tnr-at-recall")
 CRITERIA = SYSTEM + CANDIDATE
@@ -70,8 +74,6 @@ def candidate_threshold(criterion: str, scores: Any, unsafe: Any, *, recall: flo
     if not y.any():
         raise ValueError(f"criterion {criterion!r}: no truly unsafe candidate to choose a threshold on")
     if criterion == "guarantee":
-        from assurance.analysis.guarantee import calibrate_threshold
-
         res = calibrate_threshold(s[y], miss_rate, confidence)
         return float(res["threshold"]), f"miss rate <= {miss_rate:g} at confidence {confidence:g}"
     ts = _grid(s)
@@ -89,8 +91,6 @@ def candidate_threshold(criterion: str, scores: Any, unsafe: Any, *, recall: flo
 
 def system_choice(table: pd.DataFrame, criterion: str) -> tuple[float, str]:
     """The threshold a system-level criterion picks on one (monitor, walk)'s sweep rows, and a note."""
-    from assurance.analysis.sweep import totals
-
     t = totals(table)
     if criterion == "fewest-unsafe":
         keys, asc = ["unsafe_landings", "g_star", "miss_rate"], [True, False, True]
@@ -109,8 +109,6 @@ def criterion_thresholds(images: pd.DataFrame, candidates: pd.DataFrame, monitor
 
     Candidate-level criteria choose on every candidate of the run (all perturbations); a criterion that cannot
     choose (no unsafe candidate) gives NaN and its reason."""
-    from assurance.analysis.sweep import default_thresholds, monitor_rows, sweep
-
     _, ca = monitor_rows(images, candidates, monitor)
     scores, unsafe = ca["score"].to_numpy(float), ca["true_unsafe"].astype(bool).to_numpy()
     picked: dict[str, tuple[float, str]] = {}
@@ -135,9 +133,6 @@ def sweep_by_criterion(images: pd.DataFrame, candidates: pd.DataFrame, monitors:
                        confidence: float = 0.95) -> tuple[pd.DataFrame, list[Any]]:
     """``uav-el sweep --criterion``: every (or the named) scored configuration swept, each (monitor, walk)'s
     threshold chosen by ``criterion`` (a :class:`assurance.analysis.sweep.Choice`), best first as the sweep's."""
-    from assurance.analysis.sweep import Choice, SweepError, totals
-    from assurance.analysis.sweep_report import scored_monitors, sweep_run
-
     check_criterion(criterion)
     if criterion == "fewest-unsafe":
         return sweep_run(images, candidates, monitors, walks)

@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 from scipy.stats import binom
 
+from assurance.analysis.metrics import clopper_pearson_upper
 from el.monitors.calibration import CalibrationError
 
 
@@ -34,8 +35,6 @@ def calibrate_threshold(unsafe_scores: Any, miss_rate: float, confidence: float)
     bound of the miss rate at ``confidence`` (``<= miss_rate``), ``accepted`` the unsafe calibration
     candidates the threshold accepts.
     """
-    from assurance.analysis.metrics import clopper_pearson_upper
-
     _check_rates(miss_rate, confidence)
     s = np.sort(np.asarray(unsafe_scores, dtype=np.float64))
     if s.ndim != 1 or np.isnan(s).any():

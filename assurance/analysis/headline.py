@@ -16,6 +16,7 @@ import pandas as pd
 
 from assurance.campaign import readouts
 from assurance.files import atomic_write_bytes
+from assurance.paths import card_path
 from el.base.errors import UavElError
 from el.base.hashing import sha256_file
 
@@ -81,8 +82,6 @@ def headline_markdown(run: str | Path, table: pd.DataFrame, deployed: str,
     man = readouts.read_manifest(run)
     card = ""
     if calibration_card:
-        from assurance.paths import card_path
-
         path = card_path(calibration_card)
         card = f", calibration card `{path.name}` (sha256 `{sha256_file(path)[:12]}`)"
     lines = [

@@ -16,7 +16,7 @@ import pandas as pd
 
 from assurance.analysis.confusion import confusion
 from assurance.analysis.intervals import image_bootstrap
-from assurance.analysis.table import image_readouts
+from assurance.analysis.table import _scenario_order, image_readouts
 from assurance.campaign import readouts
 
 LABELLINGS = ("model error", "runtime threat")
@@ -50,8 +50,6 @@ def _row(scen: tuple[str, int, str], labelling: str, counts: np.ndarray, n_boot:
 
 def issre_table(run: str | Path, *, n_boot: int = 2000, seed: int = 0) -> pd.DataFrame:
     """One row per (perturbation, severity, monitor, labelling), columns ``COLUMNS``, in the campaign's order."""
-    from assurance.analysis.table import _scenario_order
-
     cfg = readouts.read_manifest(run)["config"]
     order = [(p, s, m) for p, s in _scenario_order(cfg) for m in cfg["monitors"]]
     images = readouts.load_table(run, "images")

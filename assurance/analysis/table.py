@@ -16,7 +16,10 @@ import numpy as np
 import pandas as pd
 
 from assurance.analysis.metrics import RESULT_COLUMNS, ImageReadout, ScenarioMetrics, rows_to_frame
+from assurance.analysis.reference import load_reference
 from assurance.campaign import readouts
+from assurance.campaign.task import scenario_pairs
+from assurance.files import atomic_write_bytes
 
 PAPER_FIGURES = ("g_cm", "mcc", "f1", "precision", "recall", "fp_rate", "g_rm", "overhead_s", "g_star")
 HEADERS = {"g_cm": "G_CM", "mcc": "MCC", "f1": "F1", "precision": "Precision", "recall": "Recall",
@@ -78,14 +81,10 @@ def results_table(run_dir: str | Path, *, n_boot: int = 2000, seed: int = 0, ima
 
 
 def _scenario_order(cfg: dict[str, Any]) -> list[tuple[str, int]]:
-    from assurance.campaign.task import scenario_pairs
-
     return scenario_pairs(cfg["perturbations"], cfg["severities"], cfg.get("severity_caps"))
 
 
 def write_csv(df: pd.DataFrame, path: str | Path) -> None:
-    from assurance.files import atomic_write_bytes
-
     atomic_write_bytes(path, df.to_csv(index=False, float_format="%.6g").encode())
 
 
@@ -123,8 +122,6 @@ def to_markdown(df: pd.DataFrame, *, intervals: bool = True) -> str:
 
 def compare(df: pd.DataFrame) -> pd.DataFrame:
     """Our figures beside the paper's (Guerin et al., ICRA 2022) for the same perturbation and monitor."""
-    from assurance.analysis.reference import load_reference
-
     ref = load_reference()[["perturbation", "monitor", *PAPER_FIGURES]]
     ours = df[["perturbation", "severity", "monitor", *PAPER_FIGURES]]
     merged = ours.merge(ref, on=["perturbation", "monitor"], how="left", suffixes=("", "_paper"))

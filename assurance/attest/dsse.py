@@ -17,6 +17,8 @@ from pathlib import Path
 from cryptography.exceptions import InvalidSignature
 from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey, Ed25519PublicKey
 
+from assurance.files import atomic_write_text
+from el.base import userfiles
 from el.base.errors import UavElError
 
 INTOTO_PAYLOAD_TYPE = "application/vnd.in-toto+json"
@@ -87,15 +89,11 @@ def verify_envelope(envelope: Mapping, trusted: Mapping[str, Ed25519PublicKey], 
 
 def write_envelope(path: str | Path, envelope: Mapping) -> None:
     """Write an envelope as JSON, atomically."""
-    from assurance.files import atomic_write_text
-
     atomic_write_text(path, json.dumps(envelope, indent=1) + "\n")
 
 
 def read_envelope(path: str | Path) -> dict:
     """Read an envelope file; ``AttestationError`` naming the file when it is missing, too large or not JSON."""
-    from el.base import userfiles
-
     p = Path(path)
     if not p.is_file():
         raise AttestationError(f"{p}: missing (no signed attestation)")

@@ -19,6 +19,7 @@ from assurance.attest.dsse import read_envelope, write_envelope
 from assurance.attest.keys import SigningKey
 from assurance.attest.statement import make_statement, open_statement, sign_statement, subject_problems
 from assurance.campaign import readouts
+from assurance.campaign.integrity import verify_run
 from assurance.campaign.label_pin import predicate_fields
 from el.base.hashing import sha256_file
 
@@ -66,8 +67,6 @@ def _predicate(run: Path, man: Mapping[str, Any], summary: Mapping[str, Any] | N
 def sign_run(run_dir: str | Path, key: SigningKey, summary: Mapping[str, Any] | None = None) -> Path:
     """Sign the run as it stands (see the module docstring); returns the attestation's path. Each shard file is
     hashed once: the run's verification hashes the data files, and the statement takes those hashes."""
-    from assurance.campaign.integrity import verify_run
-
     run = Path(run_dir)
     man = readouts.read_manifest(run)
     check = verify_run(run)

@@ -14,6 +14,7 @@ import numpy as np
 from assurance.dataio.poses import read_meta
 from assurance.dataio.uavid import Sample
 from assurance.scenes.world import World, pixel_clearance_m
+from el.base.userfiles import UserFileError
 from el.geometry.camera import CameraGeometry, Intrinsics, Pose
 
 _CACHE: dict[str, tuple[World, dict]] = {}
@@ -21,8 +22,6 @@ _CACHE: dict[str, tuple[World, dict]] = {}
 
 def load_meta(path: str | Path) -> dict:
     """A scene's meta JSON; ValueError naming the file when missing or malformed."""
-    from el.base.userfiles import UserFileError
-
     path = Path(path)
     try:  # read bounded (a FIFO or /dev/zero there is refused, naming it)
         return read_meta(path)

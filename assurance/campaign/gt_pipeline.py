@@ -24,8 +24,8 @@ from assurance.dataio.uavid import DataError, Sample, check_same_size
 from el.base.decision import Decision, decision_schema  # noqa: F401  (re-exported)
 from el.base.hashing import sha256_file
 from el.classes.labels import LabelSet
-from el.flight.kernel import build_parts, decide_frame
-from el.geometry.camera import Pose, working_size
+from el.flight.kernel import FramePose, build_parts, decide_frame
+from el.geometry.camera import working_size
 from el.geometry.config import CoreConfig
 from el.geometry.odd import OperatingDomain
 from el.landing.core import default_area, probs_from_labels
@@ -66,9 +66,7 @@ def decide_from_labels(
     read_s: float = 0.0,
     clock: Callable[[], float] = time.perf_counter,
     labels: LabelSet,
-    pose: Pose | None = None,
-    pose_source: str = "frame",
-    roll_deg: float = 0.0,
+    pose: FramePose | None = None,
     odd: OperatingDomain | None = None,
 ) -> Decision:
     """The decision for a full-resolution class-id map (H, W) under a perfect segmentation: the flight kernel
@@ -76,8 +74,8 @@ def decide_from_labels(
 
     ``input_info`` goes to the decision's ``"input"`` (path, sha256; width and height are filled
     in). ``read_s`` is the time already spent reading the input. ``labels``: the label set of the
-    ids (the system's). ``pose`` (and ``roll_deg``): the frame's pose, as ``el.flight.pipeline``'s; None is
-    ``config.pose``; ``pose_source``: where it came from (``el.flight.kernel.POSE_SOURCES``). ValueError for a
+    ids (the system's). ``pose``: the frame's pose, where it came from and its roll
+    (``el.flight.kernel.FramePose``), as ``el.flight.pipeline``'s; None is ``config.pose``. ValueError for a
     malformed map; a pose the flat-ground model cannot plan with (``el.geometry.camera.check_geometry``) gives the
     default action with reason ``"fault: pose: <error>"``, a failure inside the CM
     ``"fault: candidates: <error>"``. ``odd``: the declared operating domain; a pose or
@@ -97,7 +95,7 @@ def decide_from_labels(
         del info["frame_gate"]  # no frame gate on a label map
         return ids
 
-    decision = decide_frame(read, parts, None, pose=pose, pose_source=pose_source, roll_deg=roll_deg, clock=clock)
+    decision = decide_frame(read, parts, None, pose=pose, clock=clock)
     decision.timings["read_s"] = float(read_s)
     decision.timings["total_s"] += float(read_s)
     return decision
@@ -109,9 +107,7 @@ def decide_from_label_file(
     image_path: str | Path | None = None,
     config: CoreConfig | None = None,
     labels: LabelSet,
-    pose: Pose | None = None,
-    pose_source: str = "frame",
-    roll_deg: float = 0.0,
+    pose: FramePose | None = None,
     odd: OperatingDomain | None = None,
     encoding: str = "rgb",
     id_offset: int = 0,
@@ -119,7 +115,7 @@ def decide_from_label_file(
     """Read a colour label PNG (``labels``' palette) and decide; returns (decision, class ids).
 
     The optional image is only checked for size (it is for drawing) and identified in
-    ``input["image"]``; ``pose``, ``pose_source`` and ``odd`` as :func:`decide_from_labels`; ``encoding`` and
+    ``input["image"]``; ``pose`` and ``odd`` as :func:`decide_from_labels`; ``encoding`` and
     ``id_offset`` how the file codes classes (``assurance.dataio.layouts.read_label_file``). DataError (from
     ``assurance.dataio.uavid``) for a
     missing, unreadable or inconsistent file.
@@ -136,7 +132,7 @@ def decide_from_label_file(
         info["image"] = {"path": str(image_path), "sha256": sha256_file(image_path)}
     read_s = time.perf_counter() - t0
     return decide_from_labels(ids, config=config, input_info=info, read_s=read_s, labels=labels, pose=pose,
-                              pose_source=pose_source, roll_deg=roll_deg, odd=odd), ids
+                              odd=odd), ids
 
 
 def decide_sample(sample: Sample, *, labels: LabelSet, config: CoreConfig | None = None,
@@ -157,7 +153,7 @@ def decide_sample(sample: Sample, *, labels: LabelSet, config: CoreConfig | None
                         candidates=[], default_area=default_area(W, H, config), timings={}, input=info,
                         config={"pipeline": PIPELINE, "monitor": None, "core": config.to_dict()})
     decision, _ = decide_from_label_file(sample.label_path, config=config, labels=labels,
-                                         pose=None if source == NOMINAL else pose, roll_deg=roll,
+                                         pose=FramePose(None if source == NOMINAL else pose, roll_deg=roll),
                                          encoding=sample.label_encoding, id_offset=sample.id_offset)
     return decision
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Hashable, Iterator, Sequence
 from contextlib import contextmanager
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -73,7 +74,7 @@ def judge_candidates(
         raise ValueError("monitors of one campaign must share the patch margin and max_side")
     index = {id(m): i for i, m in enumerate(monitors) if m is not None}  # None: a configuration already faulted
     owners = feature_owners(shared)  # of every configuration: one that faulted changes no other's draw
-    has_trunk = has_capability(segmenter, PATCH_TRUNK)
+    frame_pass = _FramePass(segmenter, has_capability(segmenter, PATCH_TRUNK), clock)
     size = (hd.shape[1], hd.shape[0])
     out: list[list[MonitorVerdict | None]] = []
     for k, cand in enumerate(candidates):
@@ -83,8 +84,8 @@ def judge_candidates(
         live = [m for m in shared if index[id(m)] not in faults]
         if live:
             needed = {key: owners[key] for key in dict.fromkeys(m.feature_key for m in live)}
-            row.update(_judge_shared(hd, cand, live, needed, segmenter, seed=seed + k, clock=clock, context=context,
-                                     has_trunk=has_trunk, failed=failed if isolate else None))
+            row.update(_judge_shared(hd, cand, live, needed, frame_pass, seed=seed + k, context=context,
+                                     failed=failed if isolate else None))
         for i, m in enumerate(monitors):
             if not isinstance(m, PatchMonitor) and i not in faults:
                 with _isolated(failed if isolate else None, id(m)):
@@ -111,12 +112,22 @@ def _isolated(failed: dict[int, str] | None, key: int) -> Iterator[None]:
         failed.setdefault(key, f"{type(exc).__name__}: {exc}")
 
 
+@dataclass(frozen=True)
+class _FramePass:
+    """What every candidate of a frame is judged with: the segmenter, whether it shares a patch's trunk
+    (``PATCH_TRUNK``), and the clock that times each step."""
+
+    segmenter: Any
+    has_trunk: bool
+    clock: Callable[[], float]
+
+
 def _judge_shared(hd: np.ndarray, cand: Candidate, monitors: Sequence[PatchMonitor],
-                  owners: dict[Hashable, PatchMonitor], segmenter: Any, *, seed: int, clock: Callable[[], float],
-                  context: CandidateContext | None, has_trunk: bool,
-                  failed: dict[int, str] | None = None) -> dict[int, MonitorVerdict]:
+                  owners: dict[Hashable, PatchMonitor], frame_pass: _FramePass, *, seed: int,
+                  context: CandidateContext | None, failed: dict[int, str] | None = None) -> dict[int, MonitorVerdict]:
     """The patch monitors' verdicts on one candidate, each step computed once for all of them; with ``failed``, a
     step's failure is recorded for every monitor that needs it (by ``id``) instead of raised."""
+    segmenter, has_trunk, clock = frame_pass.segmenter, frame_pass.has_trunk, frame_pass.clock
     try:
         patch, t_patch = _timed(clock, monitors[0].patch, hd, cand)
         trunk, t_trunk = _timed(clock, segmenter.patch_trunk, patch.rgb) if has_trunk else (None, 0.0)

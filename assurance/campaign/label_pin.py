@@ -18,7 +18,12 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from assurance.campaign import readouts
+from el.base import safeyaml
 from el.base.records import body_sha256
+from el.classes.labels import PRESET_DIR, LabelSet
+from el.monitors.hierarchy import SHIPPED_TREES, default_hierarchy
+from el.segmentation.contract import labels_of
 
 PREDICATE_KEYS = ("label_set_sha256", "hierarchy_sha256")
 """What a campaign statement signed by this toolkit carries of the label pin (present, even null, in every statement
@@ -32,8 +37,6 @@ def label_set_sha256(labels: Any) -> str:
 
 def hierarchy_sha256(labels: Any) -> str:
     """SHA-256 of the class tree the CH monitor uses with ``labels`` (its nodes and their parents)."""
-    from el.monitors.hierarchy import default_hierarchy
-
     try:
         tree = default_hierarchy(labels)
     except ValueError:  # a declared tree the CH monitor refuses (a campaign without CH flies): pinned as declared
@@ -43,8 +46,6 @@ def hierarchy_sha256(labels: Any) -> str:
 
 def _declared_tree_file(label_file: Path) -> Path | None:
     """The hierarchy file a label set file names (``hierarchy: FILE``, relative to it), if any."""
-    from el.base import safeyaml
-
     try:
         doc = safeyaml.load_file(label_file, what="label set file")
     except Exception:  # noqa: BLE001  (unreadable now: the set itself is named, and loading it says why)
@@ -57,9 +58,6 @@ def label_sources(labels: Any, system: Any = None) -> tuple[str, str]:
     """How messages name where ``labels`` and its class tree come from (for the system file ``system``): the label
     set file, the packaged preset's file or the built-in set; the tree's file, or the set that declares or implies
     it."""
-    from el.classes.labels import PRESET_DIR
-    from el.monitors.hierarchy import SHIPPED_TREES
-
     file = system.labels_file if system is not None else None
     preset = system.labels_preset if system is not None else None
     if file is not None:
@@ -91,9 +89,6 @@ def flown_labels(system_file: Any, network: Any) -> dict[str, Any] | None:
     """The ``labels`` record of a campaign: the system file's label set when the network judges with it (equal in
     every class, state, score and colour: its categories are the system's), else the network's own label set (a
     model handed in through the API); None for a network that names only its output classes."""
-    from el.classes.labels import LabelSet
-    from el.segmentation.contract import labels_of
-
     judged = labels_of(network)
     if not isinstance(judged, LabelSet):
         return None
@@ -152,8 +147,6 @@ def label_problems(system: Any, man: Mapping[str, Any], predicate: Mapping[str, 
 def check_resumed_labels(run_dir: Path, man: Mapping[str, Any]) -> None:
     """Refuse to resume a run whose manifest pins another label set or class tree than this campaign's
     (``readouts.RunError`` naming both): its earlier shards were judged with other classes."""
-    from assurance.campaign import readouts
-
     if not (Path(run_dir) / "manifest.json").is_file():
         return
     was, now = readouts.read_manifest(run_dir).get("labels") or {}, man.get("labels") or {}

@@ -17,9 +17,19 @@ import numpy as np
 
 from assurance.campaign import readouts
 from assurance.campaign.model_files import model_files
+from assurance.campaign.perturbation_plan import domain_record
 from assurance.code_identity import code_identity
+from assurance.dataio.poses import read_meta
+from el.base import torch_extra
+from el.base.hashing import sha256_file
 from el.classes.labels import LabelSet
-from el.segmentation.contract import labels_of
+from el.monitors import build_monitor
+from el.monitors.capabilities import check_monitor_capabilities
+from el.segmentation.contract import labels_of, weights_sha256_of
+from el.segmentation.factory import FILE, PLUGIN, is_onnx_file, model_kind
+from el.segmentation.onnx_engine import file_identity
+from el.segmentation.protocol import FRAME_OPTIONS, card_protocol
+from el.segmentation.weights import DEFAULT_WEIGHTS, read_card
 
 NOT_INSTALLED = "not installed"
 
@@ -38,8 +48,6 @@ def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *,
     record of the system file the campaign assesses (``SystemFile.record()``). ``labels``: the content hashes of the
     label set and class hierarchy the readouts are judged with (``assurance.campaign.label_pin.flown_labels``).
     """
-    from el.base.hashing import sha256_file
-
     weights_record = _weights_record(config.weights, model)
     files = sorted({t.sample.image_path for t in tasks} | {t.sample.label_path for t in tasks if t.sample.label_path}
                    | _frame_files(tasks))
@@ -73,8 +81,6 @@ def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *,
 def _perturbation_domain(config: CampaignConfig) -> dict[str, Any]:
     """``perturbation_domain``: whether each perturbation ran inside the declared domain
     (``assurance.campaign.perturbation_plan.domain_record``); nothing for a run that declares none."""
-    from assurance.campaign.perturbation_plan import domain_record
-
     record = domain_record(config.perturbations, config.scenarios(), config.odd)
     return {} if record is None else {"perturbation_domain": record}
 
@@ -88,9 +94,7 @@ def _data_spec(data: Any) -> dict[str, Any]:
 
 def torch_version() -> str:
     """torch's version, or ``not installed`` (a base install runs the shipped network on ONNX Runtime)."""
-    from el.base.torch_extra import have_torch
-
-    if not have_torch():
+    if not torch_extra.have_torch():
         return NOT_INSTALLED
     import torch  # installed: the version the campaign ran with (it imported torch already)
 
@@ -109,8 +113,6 @@ def _dist_version(name: str) -> str:
 def scene_splits(tasks: Sequence[Task]) -> dict[str, int]:
     """Frames per split their scene's ``meta/*.json`` declares (synthetic scenes; none for data without meta):
     EL-R16 judges a calibration card on the test split only."""
-    from assurance.dataio.poses import read_meta
-
     out: dict[str, int] = {}
     for sample in {t.sample.key: t.sample for t in tasks}.values():
         path = sample.meta_path()
@@ -138,10 +140,6 @@ def check_monitor_networks(specs: Sequence[str], segmenter: Any) -> None:
     """Refuse, before any task, a configuration whose monitor was fitted on another network than the
     campaign's (the monitor's error: one line naming the file and both networks), or needs a capability the
     network lacks (``el.monitors.capabilities``: MC dropout on an ONNX file)."""
-    from el.monitors import build_monitor
-    from el.monitors.capabilities import check_monitor_capabilities
-    from el.segmentation.contract import labels_of
-
     for spec in specs:
         monitor = build_monitor(spec, labels=labels_of(segmenter))
         if monitor is not None:
@@ -154,8 +152,6 @@ def monitor_models(specs: Sequence[str], labels: LabelSet) -> dict[str, str]:
 
     Recorded in the manifest: a resumed run must score with the same models, and a calibration card
     is checked against the model the run used (EL-R16)."""
-    from el.monitors import build_monitor
-
     out: dict[str, str] = {}
     for spec in specs:
         digest = getattr(build_monitor(spec, labels=labels), "model_sha256", None)
@@ -168,11 +164,6 @@ def _weights_record(spec: str | dict[str, Any] | None, model: Any) -> dict[str, 
     """The manifest's ``weights``: path, SHA-256 and frame options of a weights file (the shipped one for
     None) and the engine that ran its full passes (``torch`` or ``onnx``); for an ONNX file, its path, its
     SHA-256 and its input contract; for a model registered by name, the name and the hash the model reports."""
-    from el.segmentation.contract import weights_sha256_of
-    from el.segmentation.factory import FILE, PLUGIN, is_onnx_file, model_kind
-    from el.segmentation.protocol import FRAME_OPTIONS
-    from el.segmentation.weights import DEFAULT_WEIGHTS, sha256_file
-
     if spec is None and model is not None and not _is_shipped(model):  # a model object given through the API
         return {"path": None, "model": type(model).__name__, "sha256": weights_sha256_of(model),
                 **dict.fromkeys(FRAME_OPTIONS)}
@@ -183,8 +174,6 @@ def _weights_record(spec: str | dict[str, Any] | None, model: Any) -> dict[str, 
         return {"path": None, "model": spec, "sha256": weights_sha256_of(model), **dict.fromkeys(FRAME_OPTIONS)}
     if is_onnx_file(spec):
         contract = getattr(model, "contract", None)
-        from el.segmentation.onnx_engine import file_identity  # its external data included
-
         return {"path": str(spec), "sha256": file_identity(spec) if Path(spec).is_file() else None, "format": "onnx",
                 "engine": "onnx", "contract": contract.to_dict() if contract is not None else None,
                 **dict.fromkeys(FRAME_OPTIONS)}
@@ -198,17 +187,11 @@ def _weights_record(spec: str | dict[str, Any] | None, model: Any) -> dict[str, 
 
 def _is_shipped(model: Any) -> bool:
     """Whether a model reports the shipped weights' hash (so the shipped file's record describes it)."""
-    from el.segmentation.contract import weights_sha256_of
-    from el.segmentation.weights import DEFAULT_WEIGHTS, sha256_file
-
     return DEFAULT_WEIGHTS.is_file() and weights_sha256_of(model) == sha256_file(DEFAULT_WEIGHTS)
 
 
 def _frame_protocol(weights: Path) -> dict[str, Any]:
     """How the weights' card has frames segmented (``frame_flip``, ``frame_scales``); None without a card."""
-    from el.segmentation.protocol import FRAME_OPTIONS, card_protocol
-    from el.segmentation.weights import read_card
-
     try:
         return card_protocol(read_card(weights)).frame_options()
     except (OSError, ValueError):  # WeightsError is a ValueError

@@ -17,9 +17,12 @@ from pathlib import Path
 from typing import Any
 
 from assurance.code_identity import install_root
+from el.base.errors import WeightsError
 from el.base.hashing import sha256_file
 from el.base.userfiles import MAX_MODEL_BYTES, UserFileError
 from el.classes.labels import LabelSet
+from el.monitors import build_monitor
+from el.segmentation.onnx_engine import external_files
 
 PACKAGED = ("el/monitors/data", "el/segmentation/weights")
 """Folders (under the install root) of the packaged models and their cards."""
@@ -41,8 +44,6 @@ def _resolve(label: str) -> Path:
 
 
 def _monitor_files(specs: Sequence[str], labels: LabelSet) -> Iterable[Path]:
-    from el.monitors import build_monitor
-
     for spec in specs:
         model = getattr(build_monitor(spec, labels=labels), "model", None)
         path = getattr(model, "path", None)
@@ -54,9 +55,6 @@ def _external_data(path: Path) -> list[Path]:
     """An ONNX file's external data files (each is recorded and re-checked like the file itself)."""
     if path.suffix.lower() != ".onnx" or not path.is_file():
         return []
-    from el.base.errors import WeightsError
-    from el.segmentation.onnx_engine import external_files
-
     try:
         return external_files(path)
     except WeightsError:  # unreadable external data: the model did not load, nothing ran on it

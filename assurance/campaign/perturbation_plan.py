@@ -17,7 +17,9 @@ from dataclasses import dataclass
 from functools import cache
 from typing import Any
 
+from assurance.campaign.task import scenario_pairs
 from assurance.perturbations import PAPER_PERTURBATIONS, PERTURBATIONS, TRAITS
+from assurance.system import default_system
 from el.geometry.odd import OperatingDomain
 
 NONE = "none"
@@ -68,8 +70,6 @@ def perturbation_plan(odd: OperatingDomain, required: Sequence[str] | None = Non
 def system_plan(system: Any = None, *, severity: int = PRESET_SEVERITY) -> tuple[Planned, ...]:
     """The plan of a system (an ``assurance.system.System`` or a ``SystemFile``; None: the embedded default):
     its ``[odd] perturbations`` and ``[targets] required_perturbations`` (the registry's when the file sets none)."""
-    from assurance.system import default_system
-
     if system is None:
         return default_plan() if severity == PRESET_SEVERITY else system_plan(default_system(), severity=severity)
     file = getattr(system, "file", system)
@@ -81,8 +81,6 @@ def system_plan(system: Any = None, *, severity: int = PRESET_SEVERITY) -> tuple
 @cache
 def default_plan() -> tuple[Planned, ...]:
     """The embedded default system's plan: the paper's six at severity 3."""
-    from assurance.system import default_system
-
     return system_plan(default_system())
 
 
@@ -159,8 +157,6 @@ def outside_scenarios(manifest: Mapping[str, Any]) -> set[tuple[str, int]]:
     if cfg.get("odd") is None:
         return set()
     domain = OperatingDomain.from_dict(cfg["odd"])
-    from assurance.campaign.task import scenario_pairs
-
     pairs = scenario_pairs(cfg.get("perturbations") or (), cfg.get("severities") or (3,), cfg.get("severity_caps"))
     return {(p, int(s)) for p, s in pairs if not domain.covers(p, int(s))}
 

@@ -23,8 +23,10 @@ from typing import Any
 from assurance.campaign.perturbation_plan import Planned, default_plan, expand, severity_caps
 from assurance.campaign.run import CampaignConfig
 from el.base import safeyaml
-from el.monitors import DEMO_GRID, PAPER_GRID
-from el.monitors.capabilities import MonitorSupportError  # the one class (re-exported for the command line)
+from el.flight.pipeline import PipelineConfig
+from el.monitors import DEMO_GRID, PAPER_GRID, build_monitor, monitor_name
+from el.monitors.capabilities import MonitorSupportError, check_monitor_capabilities  # MonitorSupportError: re-exported
+from el.segmentation.contract import labels_of
 
 GRIDS = {"paper-grid": PAPER_GRID, "demo-grid": DEMO_GRID}
 DEPLOYED = "deployed"
@@ -42,9 +44,6 @@ def _presets_text() -> str:
 
 def _deployed_name(deployed: str | None) -> str:
     """The deployed configuration's canonical name: the system's (``deployed``), else the flight code's default."""
-    from el.flight.pipeline import PipelineConfig
-    from el.monitors import monitor_name
-
     return monitor_name(deployed) if deployed else PipelineConfig().monitor_name
 
 
@@ -76,10 +75,6 @@ def monitor_support(spec: str, model: Any) -> str | None:
     model's label set (a label set it cannot read, a missing or unreadable model file), then its required
     capabilities (MC dropout on a network without dropout) and the network its fitted model was made on are
     checked. Nothing is judged."""
-    from el.monitors import build_monitor
-    from el.monitors.capabilities import check_monitor_capabilities
-    from el.segmentation.contract import labels_of
-
     try:
         monitor = build_monitor(spec, labels=labels_of(model), network_classes=getattr(model, "network_classes", None))
         if monitor is not None:
@@ -106,8 +101,6 @@ def campaign_monitors(preset: str, *, deployed: str | None = None, given: Sequen
     name. With ``model``, each is checked once (:func:`monitor_support`): one not required that the model cannot
     run is left out (``left_out``: its name and why); one required raises :class:`MonitorSupportError` naming it,
     why and ``where`` (the system file)."""
-    from el.monitors import monitor_name
-
     presets = load_presets()
     if preset not in presets:
         raise ValueError(f"unknown preset {preset!r}; valid: {', '.join(presets)}")

@@ -39,6 +39,7 @@ import pandas as pd
 
 from assurance.errors import DamagedRunError, RunError  # noqa: F401  (re-exported)
 from assurance.files import atomic_write_bytes, public_mode
+from el.base import userfiles
 from el.base.hashing import sha256_file
 
 FORMAT_VERSION = "uav-el-readouts/2"
@@ -150,8 +151,6 @@ def shard_files() -> tuple[str, ...]:
 
 def read_sums(shard_dir: Path) -> dict[str, str] | None:
     """A shard's SHA256SUMS as {file: sha256}; None when it is missing or malformed."""
-    from el.base import userfiles
-
     try:  # a regular file of a few lines (a FIFO or a device in a run is refused, never read)
         lines = userfiles.read_text(shard_dir / SUMS, what="shard's SHA256SUMS", max_bytes=1 << 16).splitlines()
     except userfiles.UserFileError:
@@ -177,15 +176,13 @@ def check_shard(run_dir: str | Path, name: str, expected: Mapping[str, str] | No
     sums = read_sums(folder)
     if sums is None:
         return f"{SUMS} missing or malformed"
-    from el.base.userfiles import UserFileError
-
     for f in shard_files():
         path = folder / f
         if not path.is_file():
             return f"{f} missing"
         try:  # a regular file inside the run, never /proc or a device through a link
             digest = sha256_file(path, what="readouts table", max_bytes=MAX_TABLE_FILE_BYTES, within=run_dir)
-        except (OSError, UserFileError) as exc:
+        except (OSError, userfiles.UserFileError) as exc:
             return f"{f} unreadable ({exc})"
         if digest != sums[f]:
             return f"{f} differs from its {SUMS} (altered or truncated)"
@@ -253,8 +250,6 @@ def read_index(run_dir: str | Path) -> dict[str, dict[str, str]]:
     path = Path(run_dir) / INDEX
     if not path.is_file():
         return {}
-    from el.base import userfiles
-
     try:
         doc = json.loads(userfiles.read_text(path, what="shard index", max_bytes=MAX_RUN_JSON_BYTES))
         shards = doc["shards"]
@@ -295,8 +290,6 @@ def record_shards(run_dir: str | Path, hashes: Mapping[str, Mapping[str, str] | 
 
 
 def read_manifest(run_dir: str | Path) -> dict[str, Any]:
-    from el.base import userfiles
-
     path = Path(run_dir) / "manifest.json"
     if not path.is_file():
         raise RunError(f"{run_dir}: not a campaign run (no manifest.json)")
@@ -339,8 +332,6 @@ def _checked_table(path: Path, *, max_rows: int, within: str | Path | None, max_
     says; nothing decoded yet."""
     import pyarrow as pa
     import pyarrow.parquet as pq
-
-    from el.base import userfiles
 
     try:
         data = userfiles.read_bytes(path, what="readouts table", max_bytes=MAX_TABLE_FILE_BYTES, within=within)

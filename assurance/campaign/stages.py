@@ -14,6 +14,7 @@ from pathlib import Path
 import pandas as pd
 
 from assurance.campaign import readouts
+from el.base import userfiles
 
 STAGES = ("read_s", "perturb_s", "segmentation_s", "candidates_s", "monitoring_s")
 STAGE_NAMES = {"read_s": "read image", "perturb_s": "perturb", "segmentation_s": "segment frame",
@@ -49,8 +50,6 @@ MAX_LOG_BYTES = 16 << 20
 
 def wall_seconds(run_dir: str | Path) -> float | None:
     """Sum of the wall times of the run's campaign invocations (resumes included), None if unlogged."""
-    from el.base import userfiles
-
     path = Path(run_dir) / "log.jsonl"
     if not path.is_file():
         return None

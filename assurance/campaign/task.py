@@ -41,7 +41,7 @@ from assurance.dataio.uavid import Sample
 from assurance.perturbations import PERTURBATIONS, TRAITS, perturb, severities_of
 from el.base.deadline import Deadline
 from el.base.imageio import read_image_meta
-from el.flight.kernel import Frame, Parts, build_parts, conclude, prepare
+from el.flight.kernel import DecisionRecords, Frame, FramePose, Parts, WalkPlan, build_parts, conclude, prepare
 from el.geometry.config import CoreConfig, check_seed
 from el.geometry.odd import OperatingDomain
 from el.landing.core import default_area
@@ -238,8 +238,8 @@ def _judged_frame(task: Task, config: CampaignConfig, segmenter: Any, clock: Cal
         hd, timings["perturb_s"] = _timed(clock, perturb, rgb, task.perturbation, task.severity, rng)
         return hd
 
-    frame = prepare(read, parts, pose=pose, roll_deg=roll, budget=budget, clock=clock, evaluate=True,
-                    raise_faults=True, timings=timings)
+    frame = prepare(read, parts, pose=FramePose(pose, roll_deg=roll), budget=budget, clock=clock, evaluate=True,
+                    raise_faults=True, records=DecisionRecords(timings=timings))
     timings["read_s"] -= timings.get("perturb_s", 0.0)
     if frame.stop == "timeout":  # decided at the deadline, as in flight: no candidate is judged
         frame.candidates = []
@@ -293,8 +293,8 @@ def _readout_rows(j: _Judged, config: CampaignConfig, base: dict[str, Any], cloc
                                "traceback": j.tracebacks.get(m, "")})
             continue
         column = [j.verdicts[k][m] for k in range(len(cands))]
-        decision, outcome = conclude(frame, j.parts, column.__getitem__, walk=walk_of(name), budget=budget,
-                                     clock=clock, evaluate_all=True)
+        decision, outcome = conclude(frame, j.parts, column.__getitem__,
+                                     walk=WalkPlan(walk=walk_of(name), evaluate_all=True), budget=budget, clock=clock)
         if outcome is None:  # a refused frame: its walk is still read out (overhead, candidates examined)
             outcome = walk_candidates(len(cands), column.__getitem__, walk_of(name), evaluate_all=True)
         sel = decision.selected

@@ -210,7 +210,7 @@ def build_parser(commands: Sequence[str] | None = None) -> argparse.ArgumentPars
         if name not in wanted:
             sub.add_parser(name, help=SUMMARIES.get(name, ""))
             continue
-        module = importlib.import_module(f"assurance.cli.{module_name}")
+        module = importlib.import_module(f"assurance.cli.{module_name}")  # deferred: the lazy command line
         p = sub.add_parser(name, help=SUMMARIES.get(name, module.HELP), description=module.HELP, epilog=EPILOG)
         module.add_arguments(p)
         _add_verbosity(p)
@@ -249,7 +249,7 @@ def _run_command(args: argparse.Namespace) -> int:
     # before any supplied file is read: none may be the auditor's signing key under another name (a hard link)
     protect_signing_keys([args.signing_key] if getattr(args, "signing_key", None) else [])
     if args.command in SYSTEM_COMMANDS:
-        from assurance.system import find_system
+        from assurance.system import find_system  # deferred: pulls in numpy, cv2; keeps uav-el --help, --version light
 
         args.system_file = find_system(args.system, writes=WRITES.get(args.command, ()))
     with _quieted(bool(getattr(args, "quiet", False)) and args.command not in KEEPS_STDOUT_WHEN_QUIET):

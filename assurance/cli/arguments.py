@@ -5,11 +5,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from el.segmentation.protocol import check_frame_scales
+
 
 def frame_scales(text: str) -> tuple[float, ...]:
     """``--frame-scales 1,1.25``: the sizes the working-resolution frame is fed to the network at."""
-    from el.segmentation.protocol import check_frame_scales
-
     try:
         values = [float(v) for v in text.split(",")]
     except ValueError:

@@ -13,7 +13,14 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from assurance.errors import CommandError
+from assurance.cli.fit_monitor import write_json
+from assurance.cli.system_options import assessed
+from assurance.dataio.layouts import iter_samples
+from assurance.errors import CommandError, RunError
+from assurance.fitting.network_identity import network_record
+from el.monitors import monitor_name
+from el.monitors.calibration import load_calibration
+from el.segmentation.contract import labels_of
 
 CRITERIA = ("fewest-unsafe", "g-star", "guarantee", "f1", "g-mean", "tnr-at-recall")
 HELP = ("compare monitors on validation scenes (never the test split): per perturbation AUROC, miss and false-alarm "
@@ -65,13 +72,15 @@ def run(args: argparse.Namespace) -> int:
 
 def _fit_detectors(args: argparse.Namespace) -> list[str]:
     """Fit the feature-space detectors on ``--fit`` and write their records into ``--out``: their specs."""
-    from assurance.cli.fit_monitor import write_json
-    from assurance.cli.system_options import assessed
-    from assurance.dataio.layouts import iter_samples
-    from assurance.fitting.detectors import FAMILIES, detector_document, fit_detector_body
-    from assurance.fitting.learned_monitor import collect_candidates
-    from assurance.fitting.network_identity import network_record
-    from el.segmentation.contract import labels_of
+    from assurance.fitting.detectors import (
+        FAMILIES,
+        detector_document,
+        fit_detector_body,
+    )  # deferred: pulls in pandas, scipy; keeps benchmark --help light
+    from assurance.fitting.learned_monitor import (
+        FeatureSettings,
+        collect_candidates,
+    )  # deferred: pulls in scipy; keeps benchmark --help light
 
     system = assessed(args)
     segmenter = system.segmenter(working_width=system.core.working_width)
@@ -79,7 +88,7 @@ def _fit_detectors(args: argparse.Namespace) -> list[str]:
     if len(scenes) < 5:
         raise CommandError(f"--fit {args.fit}: {len(scenes)} labelled scenes; at least 5 are needed (every 5th is "
                            "held out for the thresholds)")
-    kw = {"core": system.core, "progress": not args.quiet}
+    kw = {"features": FeatureSettings(core=system.core), "progress": not args.quiet}
     train = collect_candidates(args.fit, segmenter, samples=[s for i, s in enumerate(scenes) if i % 5 != 4],
                                desc="fit scenes", **kw)
     held = collect_candidates(args.fit, segmenter, samples=scenes[4::5], desc="held-out scenes", **kw)
@@ -99,9 +108,8 @@ def _fit_detectors(args: argparse.Namespace) -> list[str]:
 def _run_campaign(args: argparse.Namespace) -> Path:
     """Run the benchmark campaign on ``--data`` into ``--out``/run with ``uav-el campaign`` itself: its checks,
     its signing, its readouts."""
-    from assurance.campaign.presets import preset_config
-    from assurance.cli import campaign
-    from assurance.cli.system_options import assessed
+    from assurance.campaign.presets import preset_config  # deferred: pandas, scipy; keeps benchmark --help light
+    from assurance.cli import campaign  # deferred: pulls in pandas, scipy (cli.campaign); keeps benchmark --help light
 
     args.out.mkdir(parents=True, exist_ok=True)
     assess = assessed(args)
@@ -136,10 +144,14 @@ def short_name(name: str) -> str:
 
 
 def _compare(args: argparse.Namespace, run_dir: Path) -> int:
-    from assurance.analysis.benchmark import benchmark_table, block_measure, write_benchmark
-    from assurance.analysis.sweep import SweepError
-    from assurance.analysis.sweep_report import scored_monitors
-    from assurance.campaign.readouts import RunError, load_table
+    from assurance.analysis.benchmark import (
+        benchmark_table,
+        block_measure,
+        write_benchmark,
+    )  # deferred: pulls in pandas, scipy; keeps benchmark --help light
+    from assurance.analysis.sweep import SweepError  # deferred: pulls in pandas; keeps benchmark --help light
+    from assurance.analysis.sweep_report import scored_monitors  # deferred: pandas; keeps benchmark --help light
+    from assurance.campaign.readouts import load_table  # deferred: pulls in pandas; keeps benchmark --help light
 
     if not run_dir.is_dir():
         raise CommandError(f"{run_dir}: no such run folder")
@@ -166,8 +178,6 @@ def _compare(args: argparse.Namespace, run_dir: Path) -> int:
 
 
 def _specs(args: argparse.Namespace, have: list[str]) -> list[str]:
-    from el.monitors import monitor_name
-
     out = []
     for spec in args.monitors:
         try:
@@ -180,9 +190,7 @@ def _specs(args: argparse.Namespace, have: list[str]) -> list[str]:
 def _deployed(args: Any) -> str | None:
     """The system's deployed configuration's name, as its campaign names it (what a better monitor is compared
     with); None when it cannot be told."""
-    from assurance.campaign.presets import preset_config
-    from assurance.cli.system_options import assessed
-    from el.monitors.calibration import load_calibration
+    from assurance.campaign.presets import preset_config  # deferred: pandas, scipy; keeps benchmark --help light
 
     try:
         spec, card = assessed(args).deployed()

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from assurance.cli.arguments import model_option
 from assurance.cli.fit_monitor import write_json
+from assurance.cli.system_options import assessed
 from assurance.errors import CommandError
 
 HELP = ("calibrate a monitor's threshold on held-out scenes: P(accept an unsafe candidate) <= --miss-rate "
@@ -33,9 +34,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from assurance.campaign.perturbation_plan import fit_levels
-    from assurance.cli.system_options import assessed
-    from assurance.fitting.calibration import CalibrationScenes, ThresholdRule, calibrate_on_data
+    from assurance.campaign.perturbation_plan import fit_levels  # deferred: pandas, scipy; keeps calibrate --help light
+    from assurance.fitting.calibration import (
+        CalibrationScenes,
+        ThresholdRule,
+        calibrate_on_data,
+    )  # deferred: pandas, scipy; keeps calibrate --help light
 
     system = assessed(args)
     data = system.data("val", args.data)

@@ -6,7 +6,10 @@ import argparse
 import sys
 from pathlib import Path
 
-from assurance.errors import CommandError
+from assurance.attest import AttestationError
+from assurance.attest.keys import load_trusted_keys
+from assurance.cli.system_options import run_system
+from assurance.errors import CommandError, DamagedRunError, RunError
 
 HELP = ("write the evidence report (HTML, PDF, JSON) of a campaign run; exit 1 when a requirement failed, "
         "when the requirement results are not bound to this run, code and registry or contradict the run, or "
@@ -67,7 +70,7 @@ def refuse_out_inside_run(out: Path, *runs: Path) -> None:
     ``results.csv``, ``SHA256SUMS`` and its pages there, which would change the run's files (``--out
     RUN/shards/report`` adds a shard folder the run's index and signature do not know: the run is damaged).
     CommandError (exit 2) naming both folders."""
-    from assurance.campaign import readouts
+    from assurance.campaign import readouts  # deferred: pulls in pandas (readouts); keeps evidence --help light
 
     target = out.resolve()
     for run_dir in runs:
@@ -82,11 +85,12 @@ def refuse_out_inside_run(out: Path, *runs: Path) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from assurance.campaign.readouts import DamagedRunError, RunError
-    from assurance.cli.system_options import run_system
-    from assurance.evidence import generate
-    from assurance.evidence.options import ReportOptions
-    from assurance.requirements import RegistryError, read_targets_file
+    from assurance.evidence import generate  # deferred: pulls in pandas, scipy; keeps evidence --help light
+    from assurance.evidence.options import ReportOptions  # deferred: pandas, scipy; keeps evidence --help light
+    from assurance.requirements import (
+        RegistryError,
+        read_targets_file,
+    )  # deferred: pulls in pandas, scipy; keeps evidence --help light
 
     if args.baseline_requirements and not args.baseline:
         raise CommandError("--baseline-requirements needs --baseline")
@@ -97,16 +101,13 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError("--boot must be >= 1")
     refuse_out_inside_run(Path(args.out), *(Path(r) for r in (args.run, args.baseline) if r))
     if args.waivers:  # read (bounded) before any work: a FIFO or a bad file is refused at once
-        from assurance.evidence.waivers import load_waivers
+        from assurance.evidence.waivers import load_waivers  # deferred: pandas, scipy; keeps evidence --help light
 
         load_waivers(args.waivers)
     if args.templates and not Path(args.templates).is_dir():
         raise CommandError(f"--templates {args.templates}: not a folder")
     if args.template_seconds is not None and not 0 < args.template_seconds <= 3600:  # NaN fails both
         raise CommandError(f"--template-seconds {args.template_seconds}: must be in (0, 3600]")
-    from assurance.attest import AttestationError
-    from assurance.attest.keys import load_trusted_keys
-
     try:
         trusted = load_trusted_keys(args.trusted_keys)
     except AttestationError as exc:

@@ -7,6 +7,10 @@ import json
 from pathlib import Path
 
 from assurance.errors import CommandError
+from el.base.imageio import read_image
+from el.segmentation.factory import is_weights_file
+from el.segmentation.onnx_engine import onnxruntime
+from el.segmentation.weights import DEFAULT_WEIGHTS
 
 HELP = "export the segmentation network to ONNX (opset stated), checked against torch under ONNX Runtime"
 
@@ -24,9 +28,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from assurance.fitting.network.onnx_export import DEFAULT_OPSET, export_onnx
-    from el.segmentation.factory import is_weights_file
-    from el.segmentation.onnx_engine import onnxruntime
+    from assurance.fitting.network.onnx_export import (
+        DEFAULT_OPSET,
+        export_onnx,
+    )  # deferred: pulls in torch; keeps export-onnx --help light
 
     onnxruntime()  # the one-line install hint before anything is loaded
     if args.out.suffix != ".onnx":
@@ -34,15 +39,11 @@ def run(args: argparse.Namespace) -> int:
     if args.model and not (is_weights_file(args.model) and str(args.model).endswith(".pt")):
         raise CommandError(f"--model {args.model}: a project .pt weights file expected (with its card beside it)")
     if args.beside:
-        weights = Path(args.model) if args.model else None
-        if weights is None:
-            from el.segmentation.weights import DEFAULT_WEIGHTS as weights
+        weights = Path(args.model) if args.model else DEFAULT_WEIGHTS
         if args.out.resolve() != weights.with_suffix(".onnx").resolve():
             raise CommandError(f"{args.out}: with --beside, --out must be {weights.with_suffix('.onnx')}")
     frame = None
     if args.frame:
-        from el.base.imageio import read_image
-
         frame = read_image(args.frame)
     result = export_onnx(args.model or None, args.out, opset=args.opset or DEFAULT_OPSET, frame=frame,
                          beside=args.beside)

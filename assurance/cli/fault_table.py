@@ -46,7 +46,7 @@ def _case_logs_hidden(hide: bool) -> Iterator[None]:
 def run(args: argparse.Namespace) -> int:
     import torch
 
-    from assurance.fault_injection import table as fi
+    from assurance.fault_injection import table as fi  # deferred: pandas, weasyprint; keeps fault-table --help light
 
     if args.list:
         for c in fi.CASES:

@@ -8,7 +8,9 @@ import sys
 
 from assurance.cli.arguments import fit_split_options
 from assurance.cli.fit_monitor import write_json
+from assurance.cli.system_options import assessed, train_val_dirs
 from assurance.errors import CommandError
+from assurance.fitting.network_identity import network_record
 from el.monitors.gates import GATES
 
 HELP = ("fit the frame gate (a candidate of el.monitors.gates reading the frame pass's own features) on training "
@@ -37,10 +39,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from assurance.campaign.perturbation_plan import fit_levels
-    from assurance.cli.system_options import assessed, train_val_dirs
-    from assurance.fitting.frame_gate_fit import DEFAULT_QUANTILE, fit_gate, parse_scenes
-    from assurance.fitting.network_identity import network_record
+    from assurance.campaign.perturbation_plan import fit_levels  # deferred: pandas, scipy; keeps fit-gate --help light
+    from assurance.fitting.frame_gate_fit import (
+        DEFAULT_QUANTILE,
+        GateSettings,
+        fit_gate,
+        parse_scenes,
+    )  # deferred: pulls in scipy; keeps fit-gate --help light
 
     system = assessed(args)
     levels = fit_levels(system)  # a system file's own [odd] perturbations; None: the shipped gate's six
@@ -54,10 +59,10 @@ def run(args: argparse.Namespace) -> int:
     try:
         segmenter = system.segmenter(working_width=width)
         quantile = DEFAULT_QUANTILE if args.quantile is None else args.quantile
-        doc = fit_gate(args.data, args.val, segmenter, kind=args.kind, quantile=quantile,
-                       train_scenes=args.train_scenes, val_scenes=args.val_scenes,
-                       weights=network_record(segmenter, system.model), features=args.features,
-                       progress=not (args.no_progress or getattr(args, "quiet", False)), perturbations=levels)
+        settings = GateSettings(kind=args.kind, quantile=quantile, features=args.features, perturbations=levels)
+        doc = fit_gate(args.data, args.val, segmenter, settings=settings, train_scenes=args.train_scenes,
+                       val_scenes=args.val_scenes, weights=network_record(segmenter, system.model),
+                       progress=not (args.no_progress or getattr(args, "quiet", False)))
     except ValueError as exc:
         raise CommandError(str(exc)) from None
     write_json(args.out, doc, indent=None)

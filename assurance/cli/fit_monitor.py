@@ -11,8 +11,11 @@ import json
 from pathlib import Path
 
 from assurance.cli.arguments import model_option
+from assurance.cli.system_options import assessed
 from assurance.errors import CommandError
 from assurance.files import atomic_write_bytes
+from assurance.fitting.network_identity import network_record
+from el.segmentation.contract import MC_DROPOUT, has_capability
 
 HELP = ("train the learned candidate monitor (logistic regression on candidate features) on a split, select it "
         "on --val, and write its JSON model (no pickle, SHA-256 checked at load)")
@@ -37,9 +40,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
-    from assurance.cli.system_options import assessed
-    from assurance.fitting.learned_monitor import FeatureSettings, Selection, fit_learned_monitor
-    from assurance.fitting.network_identity import network_record
+    from assurance.fitting.learned_monitor import (
+        FeatureSettings,
+        Selection,
+        fit_learned_monitor,
+    )  # deferred: pulls in scipy; keeps fit-monitor --help light
 
     system = assessed(args)
     args.data = system.data("train", args.data)
@@ -74,8 +79,6 @@ def run(args: argparse.Namespace) -> int:
 
 def _check_mcd(n: int, segmenter: object, where: str) -> None:
     """Refuse ``--mcd N`` (N > 0) on a network without MC dropout: one line naming the system file."""
-    from el.segmentation.contract import MC_DROPOUT, has_capability
-
     if n > 0 and not has_capability(segmenter, MC_DROPOUT):
         raise CommandError(f"--mcd {n}: the network of {where} offers no MC dropout samples (an ONNX file has none); "
                            "fit the monitor without MC-dropout features (--mcd 0)")

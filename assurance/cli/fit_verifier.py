@@ -11,7 +11,10 @@ import shlex
 import sys
 
 from assurance.cli.arguments import fit_split_options
+from assurance.cli.system_options import assessed, train_val_dirs
 from assurance.errors import CommandError
+from assurance.fitting.network_identity import network_record
+from el.monitors.learned import LearnedMonitor
 
 HELP = ("train the candidate verifier (a small CNN of its own on the full-resolution pixels around each candidate; "
         "diverse from the segmentation network) on the training split, select it on --val, and write its record and "
@@ -49,10 +52,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from assurance.cli.system_options import assessed, train_val_dirs
-    from assurance.fitting.network_identity import network_record
-    from assurance.fitting.verifier_fit import fit_verifier
-    from assurance.fitting.verifier_train import TrainConfig
+    from assurance.fitting.verifier_fit import (
+        VerifierFitOptions,
+        fit_verifier,
+    )  # deferred: pulls in torch; keeps fit-verifier --help light
+    from assurance.fitting.verifier_train import TrainConfig  # deferred: torch; keeps fit-verifier --help light
 
     system = assessed(args)
     train_val_dirs(args, system.file)
@@ -65,16 +69,14 @@ def run(args: argparse.Namespace) -> int:
         segmenter = system.segmenter(working_width=system.core.working_width)
         learned = None
         if args.fuse_learned is not None:
-            from el.monitors.learned import LearnedMonitor
-
             learned = LearnedMonitor(labels=system.labels, model=args.fuse_learned or None)
             learned.check_network(segmenter)
-        doc = fit_verifier(args.data, args.val, segmenter, args.out, cfg=cfg, core=system.core, jitter=args.jitter,
-                           recall=args.recall, images=args.images, learned=learned,
-                           weights=network_record(segmenter, system.model),
-                           command=shlex.join(["uav-el", *sys.argv[1:]]) if sys.argv[1:2] == ["fit-verifier"]
-                           else None, pretrained=not args.no_pretrained,
-                           progress=not (args.no_progress or getattr(args, "quiet", False)))
+        options = VerifierFitOptions(
+            core=system.core, jitter=args.jitter, recall=args.recall, images=args.images, learned=learned,
+            weights=network_record(segmenter, system.model),
+            command=shlex.join(["uav-el", *sys.argv[1:]]) if sys.argv[1:2] == ["fit-verifier"] else None,
+            pretrained=not args.no_pretrained, progress=not (args.no_progress or getattr(args, "quiet", False)))
+        doc = fit_verifier(args.data, args.val, segmenter, args.out, cfg=cfg, options=options)
     except ValueError as exc:
         raise CommandError(str(exc)) from None
     b = doc["body"]

@@ -14,6 +14,9 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from assurance.attest import AttestationError
+from assurance.attest.keys import load_signing_key, load_trusted_keys
+from assurance.cli.system_options import run_system
 from assurance.errors import CommandError
 
 HELP = ("compare flight logs (uav-el land --log, el.flight.flightlog) with the certification run of their system: "
@@ -36,8 +39,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def _system(args: argparse.Namespace, run: Path) -> Any:
     """The run's system file (its signed manifest's), or the one given when it is the same file."""
-    from assurance.campaign.readouts import read_manifest
-    from assurance.cli.system_options import run_system
+    from assurance.campaign.readouts import read_manifest  # deferred: pulls in pandas; keeps in-service --help light
 
     system = run_system(args, run)
     recorded = (read_manifest(run).get("system") or {}).get("sha256")
@@ -48,9 +50,6 @@ def _system(args: argparse.Namespace, run: Path) -> Any:
 
 
 def _keys(args: argparse.Namespace, out: Path) -> tuple[Any, Any]:
-    from assurance.attest import AttestationError
-    from assurance.attest.keys import load_signing_key, load_trusted_keys
-
     try:
         return load_signing_key(args.signing_key, outside=out), load_trusted_keys(args.trusted_keys)
     except AttestationError as exc:
@@ -70,7 +69,7 @@ def _print_log_checks(checks: dict[str, Any]) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from assurance.inservice.assess import assess
+    from assurance.inservice.assess import assess  # deferred: pulls in pandas, scipy; keeps in-service --help light
 
     run_dir, out = Path(args.run), Path(args.out)
     if not (run_dir / "manifest.json").is_file():

@@ -5,7 +5,10 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from assurance.attest import AttestationError
+from assurance.attest.keys import load_signing_key, public_pem
 from assurance.errors import CommandError
+from assurance.files import atomic_write_text
 
 HELP = ("show the Ed25519 key that signs campaigns and requirement results (its fingerprint; --public prints the "
         "public key an auditor passes to uav-el evidence --trusted-keys); creates your key file on first use")
@@ -18,10 +21,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from assurance.attest import AttestationError
-    from assurance.attest.keys import load_signing_key, public_pem
-    from assurance.files import atomic_write_text
-
     try:
         key = load_signing_key(args.signing_key)
     except AttestationError as exc:

@@ -19,15 +19,19 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from assurance.campaign.gt_pipeline import decide_from_label_file
+from assurance.cli.system_options import assessed, system_of
 from assurance.dataio.uavid import image_size, read_image, write_image
 from assurance.errors import CommandError
 from assurance.files import atomic_write_bytes
 from el.base.decision import Decision
 from el.base.imageio import MAX_PIXELS, check_max_pixels
+from el.flight.flightlog import FlightLog
 from el.flight.kernel import FramePose, frame_core
-from el.flight.pipeline import DEFAULT_TIME_BUDGET_S
+from el.flight.pipeline import DEFAULT_TIME_BUDGET_S, EmergencyLanding, FrameFile, PipelineConfig
 from el.geometry.camera import CAMERAS, MAX_ROLL_DEG, Pose, geometry_problem
 from el.geometry.config import MODES, CoreConfig, make_intrinsics
+from el.monitors.calibration import load_calibration
 
 HELP = "decide where to land for one frame (model pipeline, or the ground-truth pipeline with --labels)"
 
@@ -152,8 +156,6 @@ def check_outputs(args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from assurance.campaign.gt_pipeline import decide_from_label_file
-
     check_outputs(args)
 
     if args.labels is None:
@@ -166,7 +168,6 @@ def run(args: argparse.Namespace) -> int:
             raise CommandError(f"two images given ({args.image_arg} and {image_path}): give one")
         image_path = Path(args.image_arg)
 
-    from assurance.cli.system_options import system_of
     system = system_of(args)
     config, pose = config_from_args(args, system.core(), system.poses(),
                                     system.label)
@@ -186,9 +187,6 @@ def run_model(args: argparse.Namespace) -> int:
     """The model pipeline (el.flight.pipeline): the system's network, monitor and frame gate built once, the frame
     decoded
     once, then segmentation -> frame gate -> candidates -> monitored walk."""
-    from assurance.cli.system_options import assessed
-    from el.flight.pipeline import EmergencyLanding, FrameFile
-
     if args.image is not None:
         raise CommandError("--image is for the ground-truth pipeline; give the image as IMAGE")
     check_max_pixels(args.max_pixels)
@@ -221,7 +219,6 @@ def _flight_log(args: argparse.Namespace, system: Any) -> Any:
     """The flight log ``--log`` names (appended to), the system file's SHA-256 its identity; None without it."""
     if args.log is None:
         return None
-    from el.flight.flightlog import FlightLog
 
     if not args.log.parent.is_dir():  # said here in one line; the flight function would log it as well
         raise CommandError(f"{args.log}: cannot open the flight log: no folder {args.log.parent}")
@@ -236,15 +233,12 @@ def _monitor_of(args: argparse.Namespace, system: Any) -> tuple[str | None, Path
     pair (a card given without a spec deploys the card's own monitor)."""
     if args.monitor is None and args.calibration is None:
         return system.deployed()
-    from el.flight.pipeline import PipelineConfig
 
     monitor, calibration = args.monitor or system.monitor or PipelineConfig().monitor, \
         args.calibration or system.calibration
     if calibration is not None and not args.monitor:
         own = args.calibration is None and system.file.names_monitor  # the system's pair: its spec on its card
         if not own:
-            from el.monitors.calibration import load_calibration
-
             monitor = load_calibration(calibration).monitor  # a bad card: its one line, exit 2
     return monitor, calibration
 
@@ -266,8 +260,7 @@ def _write_outputs(args: argparse.Namespace, decision: Decision, *, image, label
             atomic_write_bytes(args.json, (decision.to_json() + "\n").encode("utf-8"))
             print(f"decision written to {args.json}")
         if args.overlay is not None:
-            from assurance.cli.system_options import system_of
-            from assurance.evidence.overlay import draw_decision
+            from assurance.evidence.overlay import draw_decision  # deferred: pulls in pandas; keeps land --help light
 
             palette = system_of(args).labels()  # the label map's own palette
             write_image(args.overlay, draw_decision(decision, image=image, labels=labels, label_set=palette))

@@ -13,6 +13,9 @@ from assurance.errors import CommandError
 from assurance.fitting.card_audit import audit, describe_audit, record_audit
 from assurance.fitting.card_audit import fmt_figure as _fmt
 from assurance.progress import progress
+from el.classes.labels import CLASS_NAMES
+from el.segmentation.protocol import EvalProtocol
+from el.segmentation.weights import DEFAULT_WEIGHTS, WeightsError, read_card
 
 HELP = "print the segmentation model card; --verify recomputes its figures from the weights and data"
 
@@ -50,8 +53,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _print_card(card: dict[str, Any], path: Path) -> None:
-    from el.classes.labels import CLASS_NAMES
-
     print(f"weights:      {path}")
     print(f"sha256:       {card['weights_sha256']}")
     print(f"parameters:   {card.get('parameters')}")
@@ -92,8 +93,6 @@ def _print_card(card: dict[str, Any], path: Path) -> None:
 
 def describe_frames(protocol: dict[str, Any]) -> str:
     """How the card has frames segmented, as a parenthesis ('' for the frame alone, as it is)."""
-    from el.segmentation.protocol import EvalProtocol
-
     try:
         read = EvalProtocol.from_dict(protocol)
     except ValueError as exc:
@@ -115,7 +114,10 @@ def _auroc(audit_result: dict[str, Any]) -> float | None:
 
 
 def _reissue(path: Path, args: argparse.Namespace) -> int:
-    from assurance.fitting.network.card import reissue_card
+    from assurance.fitting.network.card import (
+        ProtocolChanges,
+        reissue_card,
+    )  # deferred: pulls in torch; keeps model-card --help light
 
     if args.verify:
         raise CommandError("--reissue and --verify do not go together: re-issue first, then verify")
@@ -123,10 +125,10 @@ def _reissue(path: Path, args: argparse.Namespace) -> int:
         raise CommandError("--reissue needs --data: the validation scenes to recompute the figures on")
     try:
         flip = None if args.frame_flip is None else args.frame_flip == "on"
+        changes = ProtocolChanges(frame_flip=flip, hd_patches=args.hd_patches, frame_scales=args.frame_scales,
+                                  frame_pooling=args.frame_pooling)
         card = reissue_card(path, val_dir=args.data, train_dir=args.train, threads=args.threads,
-                            progress=functools.partial(progress, enabled=not args.quiet), frame_flip=flip,
-                            hd_patches=args.hd_patches, frame_scales=args.frame_scales,
-                            frame_pooling=args.frame_pooling)
+                            progress=functools.partial(progress, enabled=not args.quiet), changes=changes)
     except ValueError as exc:
         raise CommandError(str(exc)) from exc
     ev, before = card["evaluation"], card["evaluation"]["reissued"]
@@ -141,8 +143,6 @@ def _reissue(path: Path, args: argparse.Namespace) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    from el.segmentation.weights import DEFAULT_WEIGHTS, read_card
-
     path = args.weights or DEFAULT_WEIGHTS
     for given, flag in ((args.frame_flip, "--frame-flip"), (args.hd_patches, "--hd-patches"),
                         (args.frame_scales, "--frame-scales"), (args.frame_pooling, "--frame-pooling")):
@@ -155,8 +155,6 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if not args.verify:
         if not path.exists():
-            from el.segmentation.weights import WeightsError
-
             raise WeightsError(f"{path}: weights file not found")
         card = read_card(path)
         if args.json:
@@ -164,7 +162,7 @@ def run(args: argparse.Namespace) -> int:
         else:
             _print_card(card, path)
         return 0
-    from assurance.fitting.network.card import verify_card  # torch (the train extra): only to recompute figures
+    from assurance.fitting.network.card import verify_card  # deferred: torch; keeps model-card --help light
 
     result = verify_card(path, val_dir=args.data, train_dir=args.train, threads=args.threads,
                          iou_tol=args.tolerance, progress=functools.partial(progress, enabled=not args.quiet))

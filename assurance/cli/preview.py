@@ -5,7 +5,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from assurance.cli.system_options import system_of
+from assurance.dataio.layouts import iter_samples, read_sample_labels
+from assurance.dataio.uavid import read_image, write_image
 from assurance.errors import CommandError
+from assurance.scenes.preview import make_preview
 
 HELP = "Write a preview PNG of a dataset (any layout): image | colour labels side by side, with a legend."
 
@@ -21,11 +25,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from assurance.cli.system_options import system_of
-    from assurance.dataio.layouts import iter_samples, read_sample_labels
-    from assurance.dataio.uavid import read_image, write_image
-    from assurance.scenes.preview import make_preview
-
     labels = system_of(args).labels()  # the system's classes: its palette and its legend
 
     if args.out.suffix.lower() != ".png":

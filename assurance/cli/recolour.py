@@ -7,6 +7,8 @@ import json
 from pathlib import Path
 
 from assurance.errors import CommandError
+from assurance.scenes.recolour import recolour_dataset
+from el.classes.labels import load_label_set
 
 HELP = ("copy a UAVid-layout data set with its label maps re-coloured into another label set's palette "
         "(images, meta and poses copied unchanged); classes are matched by a name map")
@@ -26,9 +28,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from assurance.scenes.recolour import recolour_dataset
-    from el.classes.labels import load_label_set
-
     if not args.data.is_dir():
         raise CommandError(f"--data {args.data}: no such folder")
     mapping = None

@@ -6,7 +6,9 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from assurance.errors import CommandError
+from assurance.errors import CommandError, RunError
+from assurance.files import atomic_write_bytes
+from el.segmentation.factory import load_model
 
 HELP = ("replay a campaign at every threshold of its monitors (unsafe landings, G*, default share, miss and FP "
         "rates per perturbation) from the recorded scores; --choose picks the threshold with the fewest unsafe "
@@ -36,10 +38,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from assurance.analysis.criteria import criterion_line, sweep_by_criterion
-    from assurance.analysis.sweep import SweepError
-    from assurance.analysis.sweep_report import write_sweep
-    from assurance.campaign.readouts import RunError, load_table
+    from assurance.analysis.criteria import (
+        criterion_line,
+        sweep_by_criterion,
+    )  # deferred: pulls in pandas, scipy; keeps sweep --help light
+    from assurance.analysis.sweep import SweepError  # deferred: pulls in pandas; keeps sweep --help light
+    from assurance.analysis.sweep_report import write_sweep  # deferred: pandas, matplotlib; keeps sweep --help light
+    from assurance.campaign.readouts import load_table  # deferred: pulls in pandas; keeps sweep --help light
 
     run_dir = Path(args.run)
     if not run_dir.is_dir():
@@ -59,8 +64,6 @@ def run(args: argparse.Namespace) -> int:
     md = write_sweep(out, table, choices, note=criterion_line(args.criterion, args.recall))
     if gate is not None:
         md += gate_section(run_dir, Path(args.data), gate, images, candidates, choices[0], out)
-        from assurance.files import atomic_write_bytes
-
         atomic_write_bytes(out / "sweep.md", md.encode())
     if args.choose:
         print(md)
@@ -72,15 +75,14 @@ def run(args: argparse.Namespace) -> int:
 
 def run_model(run_dir: Path) -> str | None:
     """The model spec a campaign run scored with, from its manifest (None: the shipped weights)."""
-    from assurance.campaign import readouts
+    from assurance.campaign import readouts  # deferred: pulls in pandas (readouts); keeps sweep --help light
 
     return readouts.read_manifest(run_dir).get("config", {}).get("weights")
 
 
 def bound_gate(path: str, run_dir: Path) -> tuple[str, Any, Any]:
     """(path, gate, the run's model) for a gate fitted on the network the run segmented with; else exit 2."""
-    from assurance.analysis.ood_replay import load_gate
-    from el.segmentation.factory import load_model
+    from assurance.analysis.ood_replay import load_gate  # deferred: pulls in pandas, scipy; keeps sweep --help light
 
     try:
         gate = load_gate(path)
@@ -96,9 +98,11 @@ def gate_section(run_dir: Path, data: Path, bound: tuple[str, Any, Any], images,
     ood_distances-<gate sha256>.csv)."""
     import pandas as pd
 
-    from assurance.analysis.ood_replay import frame_distances, gate_effect
-    from assurance.analysis.sweep import monitor_rows, replay
-    from assurance.files import atomic_write_bytes
+    from assurance.analysis.ood_replay import (
+        frame_distances,
+        gate_effect,
+    )  # deferred: pulls in pandas, scipy; keeps sweep --help light
+    from assurance.analysis.sweep import monitor_rows, replay  # deferred: pulls in pandas; keeps sweep --help light
 
     gate, loaded, model = bound
     cache = out / f"ood_distances-{loaded.sha256[:12]}.csv"

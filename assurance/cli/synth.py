@@ -8,7 +8,9 @@ import sys
 from pathlib import Path
 
 from assurance.errors import CommandError
-from assurance.scenes.generate import ViewPlan
+from assurance.scenes import write_dataset
+from assurance.scenes.generate import ViewPlan, scene_complete
+from assurance.workers import bounded_jobs
 from el.geometry.camera import CAMERAS, Pose
 from el.geometry.config import make_intrinsics
 
@@ -81,9 +83,6 @@ def view_from_args(args: argparse.Namespace, size: tuple[int, int]) -> ViewPlan:
 
 
 def run(args: argparse.Namespace) -> int:
-    from assurance.scenes import write_dataset
-    from assurance.scenes.generate import scene_complete
-
     size = parse_size(args.size)
     view = view_from_args(args, size)
     if args.scenes < 1:
@@ -92,7 +91,6 @@ def run(args: argparse.Namespace) -> int:
         raise CommandError(f"--seed must be >= 0 and --seed + --scenes <= 1000000, got {args.seed} + {args.scenes}")
     if args.jobs < 1:
         raise CommandError(f"--jobs must be at least 1, got {args.jobs}")
-    from assurance.workers import bounded_jobs
 
     args.jobs = bounded_jobs(args.jobs, warn=lambda m: print(f"uav-el synth: warning: {m}", file=sys.stderr))
     if args.out.exists() and not args.out.is_dir():

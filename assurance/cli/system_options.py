@@ -5,7 +5,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from assurance.errors import CommandError, RunError
 from assurance.system import SystemFile, default_system
+from assurance.system.loader import system_from_record
 from assurance.system.system import System
 from el.base import userfiles
 
@@ -13,8 +15,6 @@ from el.base import userfiles
 def train_val_dirs(args: argparse.Namespace, system: SystemFile) -> None:
     """Resolve ``args.data`` and ``args.val`` (the options, else the system file's ``[data]`` train and val) and
     refuse a folder that is not there (one line naming it)."""
-    from assurance.errors import CommandError
-
     args.data = system.data("train", args.data)
     args.val = system.data("val", args.val)
     for d in (args.data, args.val):
@@ -74,8 +74,7 @@ def _changed_since(recorded: SystemFile) -> str | None:
 
 def _recorded_system(run: Path) -> SystemFile | None:
     """The system file the run's signed manifest records, None when it records the default (or none)."""
-    from assurance.campaign.readouts import RunError, read_manifest
-    from assurance.system.loader import system_from_record
+    from assurance.campaign.readouts import read_manifest  # deferred: pulls in pandas; keeps the commands' --help light
 
     try:
         recorded = read_manifest(run).get("system") or {}

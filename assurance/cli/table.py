@@ -7,13 +7,24 @@ from pathlib import Path
 from typing import Any
 
 from assurance.analysis.findings import findings, findings_markdown
+from assurance.analysis.headline import (
+    REPRODUCIBILITY,
+    HeadlineError,
+    current_block,
+    headline_differences,
+    headline_markdown,
+    write_block,
+)
 from assurance.analysis.reference import load_reference
 from assurance.analysis.scores import auroc_markdown, auroc_table
 from assurance.analysis.table import compare, compare_markdown, results_table, to_markdown, write_csv
 from assurance.campaign import readouts
+from assurance.campaign.integrity import verify_run
+from assurance.campaign.readouts import read_manifest
 from assurance.campaign.stages import monitor_costs, monitor_costs_markdown, stage_table, stages_markdown, wall_seconds
 from assurance.errors import CommandError
 from assurance.files import atomic_write_bytes
+from assurance.requirements import load_registry
 
 HELP = "print and write the results table of a campaign run (CSV and Markdown, paper's Table I layout)"
 
@@ -35,9 +46,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     import sys
-
-    from assurance.campaign.integrity import verify_run
-    from assurance.campaign.readouts import read_manifest
 
     if args.boot < 1:
         raise CommandError("--boot must be >= 1")
@@ -79,8 +87,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _headline(run: str, df: Any) -> str:
-    from assurance.analysis.headline import HeadlineError, headline_markdown
-
     try:
         return headline_markdown(run, df, **release_parameters())
     except HeadlineError as exc:
@@ -89,8 +95,6 @@ def _headline(run: str, df: Any) -> str:
 
 def write_readme(run: str, df: Any, readme: str) -> str:
     """Write the headline block into ``readme``; the file's name."""
-    from assurance.analysis.headline import HeadlineError, write_block
-
     block = _headline(run, df)
     try:
         changed = write_block(readme, block)
@@ -105,8 +109,6 @@ def check_readme(run: str, df: Any, readme: str) -> int:
     machine (``assurance.analysis.headline.REPRODUCIBILITY``: the figures that differ are printed), else 1 with
     what differs and both versions printed."""
     import sys
-
-    from assurance.analysis.headline import REPRODUCIBILITY, HeadlineError, current_block, headline_differences
 
     block = _headline(run, df)
     try:
@@ -129,7 +131,5 @@ def check_readme(run: str, df: Any, readme: str) -> int:
 
 def release_parameters() -> dict[str, Any]:
     """The registry parameters the headline is judged with (deployed monitor, calibration card)."""
-    from assurance.requirements import load_registry
-
     p = load_registry().parameters
     return {"deployed": p["deployed_monitor"], "calibration_card": p.get("calibration_card")}

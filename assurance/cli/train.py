@@ -11,9 +11,14 @@ from typing import Any
 from tqdm import tqdm
 
 from assurance.cli.arguments import frame_scales
+from assurance.dataio.layouts import iter_samples
 from assurance.errors import CommandError
+from assurance.fitting.network import data as D
 from assurance.fitting.training_curve import curve_path, write_training_curve
 from assurance.progress import progress
+from el.geometry.config import check_seed
+from el.segmentation.protocol import EvalProtocol
+from el.segmentation.weights import WeightsError, read_card
 
 HELP = "train the segmentation network (seeded, resumable) and write its weights and model card"
 
@@ -105,22 +110,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from assurance.dataio.layouts import iter_samples
-    from assurance.fitting.network import data as D
-    from assurance.fitting.network.train_config import TrainConfig, steps_for_epochs
-    from assurance.fitting.network.training import train
-    from el.segmentation.architectures import arch_from_dict
-    from el.segmentation.protocol import EvalProtocol
+    from assurance.fitting.network.train_config import (
+        TrainConfig,
+        steps_for_epochs,
+    )  # deferred: pulls in torch; keeps train --help light
+    from assurance.fitting.network.training import (
+        RunOptions,
+        resolve_device,
+        train,
+    )  # deferred: pulls in torch; keeps train --help light
+    from el.segmentation.architectures import arch_from_dict  # deferred: pulls in torch; keeps train --help light
 
     if args.threads is not None and args.threads < 1:
         raise CommandError(f"--threads must be >= 1, got {args.threads}")
     if args.prefetch is not None and args.prefetch < 0:
         raise CommandError(f"--prefetch must be >= 0, got {args.prefetch}")
-    from el.geometry.config import check_seed
-
     check_seed(args.seed, "--seed")
-    from assurance.fitting.network.training import resolve_device
-
     try:
         device = resolve_device(args.device)
     except ValueError as exc:
@@ -156,13 +161,13 @@ def run(args: argparse.Namespace) -> int:
     # tqdm.write keeps log lines apart from a progress bar on the same stream.
     log = None if args.quiet else (lambda msg: tqdm.write(msg, file=sys.stderr))
     bar = functools.partial(progress, enabled=not args.quiet)
-    card = train(args.data, args.out, val_dir=args.val, config=config, resume=args.resume, cache_dir=cache_dir,
-                 checkpoint_file=args.checkpoint, threads=args.threads, init_weights=args.init, device=device,
-                 prefetch=prefetch, progress=bar, log=log, stop_at=args.stop_at,
+    options = RunOptions(resume=args.resume, cache_dir=cache_dir, checkpoint_file=args.checkpoint, threads=args.threads,
+                         init_weights=args.init, device=device, stop_at=args.stop_at, prefetch=prefetch)
+    card = train(args.data, args.out, val_dir=args.val, config=config, options=options, progress=bar, log=log,
                  on_eval=lambda history: write_training_curve(history, curve_path(args.out)))
     _print_summary(card, args.out, config.steps)
     if args.val is not None and not args.no_audit:
-        from assurance.fitting.card_audit import record_audit
+        from assurance.fitting.card_audit import record_audit  # deferred: pandas, scipy; keeps train --help light
 
         record_audit(args.out, args.val, args.threads, args.quiet)
     return 0
@@ -170,13 +175,14 @@ def run(args: argparse.Namespace) -> int:
 
 def _architecture(args: argparse.Namespace) -> tuple[Any, str | None]:
     """The network to train (``--arch``, or the ``--init`` parent's) and the parent's SHA-256 (None: none)."""
-    from el.segmentation.architectures import arch_from_dict, default_arch
+    from el.segmentation.architectures import (
+        arch_from_dict,
+        default_arch,
+    )  # deferred: pulls in torch; keeps train --help light
 
     arch = default_arch(args.arch or "lite0")
     if args.init is None:
         return arch, None
-    from el.segmentation.weights import WeightsError, read_card
-
     try:
         init_card = read_card(args.init)
     except WeightsError as exc:

@@ -14,7 +14,13 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from assurance.attest import AttestationError
+from assurance.attest.keys import load_signing_key, load_trusted_keys
+from assurance.cli.system_options import run_system
+from assurance.code_identity import install_root
 from assurance.errors import CommandError
+from assurance.requirements.suite import SUITE_DIR
+from assurance.system import default_system
 
 log = logging.getLogger(__name__)
 
@@ -41,9 +47,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def pytest_args(args: argparse.Namespace, out: Path) -> list[str]:
     """The pytest command line of the session (what ``uav-el verify`` runs)."""
-    from assurance.code_identity import install_root
-    from assurance.requirements.suite import SUITE_DIR
-
     argv = [str(SUITE_DIR), *[str(Path(t).resolve()) for t in args.tests], "-m", "requirements",
             "-p", "no:cacheprovider", "--rootdir", str(install_root()),
             "--uav-el-run", str(Path(args.run).resolve()), "--uav-el-report", str(out / "requirements.json"),
@@ -64,8 +67,6 @@ def _judge_the_runs_system(args: argparse.Namespace, run: Path) -> None:
     """Without a system file given (or found in the working directory), the system judged is the run's own, as its
     signed manifest records it (``evidence`` takes the same): its waivers are the ones the results are signed with,
     never the shipped system's. Says which system it judges (stderr)."""
-    from assurance.cli.system_options import run_system
-
     given = getattr(args, "system_file", None)
     system = run_system(args, run)  # says which system it judges
     if (given is None or given.default) and not system.default:
@@ -77,7 +78,7 @@ def _check_system(args: argparse.Namespace, run: Path) -> None:
     system = getattr(args, "system_file", None)
     if system is None or system.default:
         return
-    from assurance.campaign.readouts import read_manifest
+    from assurance.campaign.readouts import read_manifest  # deferred: pulls in pandas; keeps verify --help light
 
     recorded = (read_manifest(run).get("system") or {}).get("sha256")  # bounded: the applicant's run
     if recorded and recorded != system.sha256:
@@ -90,9 +91,12 @@ def _warn_weaker(args: argparse.Namespace) -> None:
     now, naming each parameter."""
     if not (args.registry or args.targets):
         return
-    from assurance.evidence.gate import weakening_problems
-    from assurance.requirements import RegistryError, load_registry, read_targets_file
-    from assurance.system import default_system
+    from assurance.evidence.gate import weakening_problems  # deferred: pandas, scipy; keeps verify --help light
+    from assurance.requirements import (
+        RegistryError,
+        load_registry,
+        read_targets_file,
+    )  # deferred: pulls in pandas, scipy; keeps verify --help light
 
     system = getattr(args, "system_file", None) or default_system()
     try:
@@ -142,9 +146,10 @@ def run(args: argparse.Namespace) -> int:
 def _signer_and_campaign(args: argparse.Namespace, run: Path) -> tuple[Any, Any]:
     """The signing key, and the run's signed campaign statement verified against the trusted keys (exit 4 when
     it does not verify: results about a run nobody trusted signing are not evidence)."""
-    from assurance.attest import AttestationError
-    from assurance.attest.keys import load_signing_key, load_trusted_keys
-    from assurance.campaign.attestation import UnattestedRunError, check_run_attestation
+    from assurance.campaign.attestation import (
+        UnattestedRunError,
+        check_run_attestation,
+    )  # deferred: pulls in pandas; keeps verify --help light
 
     try:
         key = load_signing_key(args.signing_key, outside=run)
@@ -159,8 +164,7 @@ def _signer_and_campaign(args: argparse.Namespace, run: Path) -> tuple[Any, Any]
 
 def _sign(args: argparse.Namespace, run: Path, out: Path, key: Any, campaign: Any) -> Path:
     """Sign the results with what they were judged on (the pins the evidence step compares)."""
-    from assurance.requirements.attestation import sign_session_results
-    from assurance.system import default_system
+    from assurance.requirements.attestation import sign_session_results  # deferred: pandas; keeps verify --help light
 
     if not (out / "requirements.json").is_file():
         raise CommandError(f"{out / 'requirements.json'}: the test session wrote no results")

@@ -25,6 +25,7 @@ from assurance.dataio.poses import POSES_FILE, read_poses
 from assurance.dataio.uavid import META_DIR, Sample, check_same_size
 from el.base import userfiles
 from el.base.errors import DataError
+from el.base.imageio import image_size
 from el.classes.labels import LabelSet
 
 LAYOUTS = ("uavid", "semantic-drone", "aeroscapes", "pairs")
@@ -348,8 +349,6 @@ def _grey_values(path: Path) -> np.ndarray:
     """The pixel values (H, W) uint8 of an 8-bit grey or palette label map (palette indices, not colours); an RGB
     file whose three channels agree is read as grey. Size refused above the pixel limit before decoding."""
     from PIL import Image, UnidentifiedImageError
-
-    from el.base.imageio import image_size
 
     image_size(path)  # DataError: missing, or above the pixel limit (from the header)
     try:

@@ -130,8 +130,6 @@ def read_meta(path: str | Path) -> dict[str, Any]:
     ``/dev``): data folders are not signed, so one may be a FIFO or a link to ``/dev/zero``. ``FileNotFoundError``
     when there is none; ``ValueError`` (``UserFileError``) naming the file when it is refused, not JSON or not an
     object."""
-    from el.base import userfiles
-
     p = Path(path)
     if not p.exists() and not p.is_symlink():
         raise FileNotFoundError(f"{p}: no such file")

@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from assurance import requirements as rq
+from el.base.safeyaml import safe_load
 
 KINDS = {"G": "Goal", "S": "Strategy", "Sn": "Solution", "C": "Context", "A": "Assumption", "J": "Justification"}
 """gsn2x's element prefixes (the id's part before the first '-')."""
@@ -265,8 +266,6 @@ def to_yaml(nodes: Mapping[str, Node]) -> str:
 
 def from_yaml(text: str) -> dict[str, Node]:
     """Read a gsn2x YAML argument back (ValueError for one that is not a mapping of elements with a text)."""
-    from el.base.safeyaml import safe_load
-
     doc = safe_load(text)
     if not isinstance(doc, dict):
         raise ValueError("a GSN argument is a mapping of element ids")

@@ -6,14 +6,20 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from assurance.analysis.issre import issre_frame
+from assurance.analysis.table import _scenario_order
 from assurance.evidence.acceptance import domain_source
 from assurance.evidence.amlas import amlas_index, entry
 from assurance.evidence.argument import ArgumentInputs, build_argument, check_structure, to_gsn2x, to_yaml
 from assurance.evidence.gsn_svg import argument_pages
 from assurance.evidence.hazards import hazard_view, load_hazards
 from assurance.evidence.model_log import model_log
+from assurance.evidence.navigation import anchor, req_anchor
 from assurance.evidence.records import data_record, monitor_files
 from assurance.evidence.render import rel, write_text
+from assurance.evidence.text import ci, fmt
+from el.base.hashing import sha256_file
+from el.segmentation.weights import card_path
 
 ARGUMENT_FILE = "argument.gsn.yaml"
 ISSRE_FILE = "issre.csv"
@@ -21,10 +27,6 @@ ISSRE_FILE = "issre.csv"
 
 def issre_view(inp: Any, n_boot: int) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
     """The ISSRE 2022 figures of the run (written to ``issre.csv``): the table's records and the report's rows."""
-    from assurance.analysis.issre import issre_frame
-    from assurance.analysis.table import _scenario_order
-    from assurance.evidence.text import ci, fmt
-
     cfg = inp.manifest["config"]
     order = [(p, s, m) for p, s in _scenario_order(cfg) for m in cfg["monitors"]]
     frame = issre_frame(inp.images, inp.candidates, n_boot=n_boot, order=order)
@@ -43,9 +45,6 @@ def issre_view(inp: Any, n_boot: int) -> tuple[list[dict[str, Any]], list[dict[s
 
 def package_entries(inp: Any, record: dict[str, Any]) -> list[dict[str, Any]]:
     """AMLAS index entries of the data and model records, the model and monitor cards and the report's files."""
-    from el.base.hashing import sha256_file
-    from el.segmentation.weights import card_path
-
     def sha(path: Path) -> str:
         return sha256_file(path) if path.is_file() else ""
 
@@ -118,8 +117,6 @@ def argument_links(nodes: dict[str, Any], rids: Any, log: Any) -> dict[str, str]
     """Argument element -> the report's anchor it stands for: a requirement's goal, its waiver and its test
     evidence -> the requirement's row; its campaign-check evidence -> the check; a hazard's goal -> the hazard;
     a strategy -> its page; the AMLAS elements -> the AMLAS index; the context -> its section."""
-    from assurance.evidence.navigation import anchor, req_anchor
-
     reqs, hazards = set(rids), {h.id for h in log.hazards}
     out = dict(FIXED_LINKS)
     for nid, node in nodes.items():

@@ -119,8 +119,8 @@ def _criterion_rows(table: pd.DataFrame) -> list[dict[str, Any]]:
 
 def _ranking(blocks: pd.DataFrame) -> dict[str, Any]:
     """Friedman + Nemenyi recomputed from the blocks table, and the critical-difference diagram drawn here."""
-    from assurance.analysis.ranking import cd_figure, rank_monitors
-    from assurance.evidence.plots import data_uri
+    from assurance.analysis.ranking import cd_figure, rank_monitors  # deferred: matplotlib, off verify/land paths
+    from assurance.evidence.plots import data_uri  # deferred: matplotlib, off verify/land paths
 
     try:
         r = rank_monitors(blocks)

@@ -12,14 +12,22 @@ from typing import Any
 from assurance import requirements as rq
 from assurance.analysis.table import results_table, write_csv
 from assurance.campaign import readouts
+from assurance.campaign.attestation import UnattestedRunError, check_run_attestation
 from assurance.campaign.integrity import RunCheck, verify_run
 from assurance.campaign.label_pin import label_problems
 from assurance.campaign.model_files import changed_model_files
+from assurance.campaign.perturbation_plan import default_plan, system_plan
+from assurance.campaign.presets import preset_config
+from assurance.dataio.layouts import data_source
+from assurance.evidence.domain_section import frame_gate_view, mark_outside, odd_rows
+from assurance.evidence.facts import report_facts
+from assurance.evidence.gallery import Scenes, decision_examples, perturbation_gallery
 from assurance.evidence.gate import GATE_CLASS, Gate, requirement_results, weakening_problems
 from assurance.evidence.identity import identity
 from assurance.evidence.matrix import check_problems, check_view, matrix, run_checks
 from assurance.evidence.options import ReportOptions
 from assurance.evidence.render import TEMPLATES_DIR, fault_case_count, faults_table, rel
+from assurance.evidence.safe_strips import safe_class_strips
 from assurance.evidence.sections import (
     domain,
     limitations,
@@ -31,6 +39,9 @@ from assurance.evidence.sections import (
     unsafe_picks,
 )
 from assurance.evidence.text import STATE_CLASS, pct
+from el.base.hashing import sha256_file
+from el.classes.labels import UAVID
+from el.flight.pipeline import DEPLOYED_GATE
 
 
 @dataclass
@@ -84,8 +95,6 @@ def read_inputs(run: Path, out: Path, options: ReportOptions) -> Inputs:
     check = verify_run(run).raise_if_damaged()
     attestation = None
     if trusted is not None:
-        from assurance.campaign.attestation import UnattestedRunError, check_run_attestation
-
         attestation = check_run_attestation(run, trusted)
         if not attestation.ok:
             raise UnattestedRunError(run, attestation.problems)
@@ -95,8 +104,6 @@ def read_inputs(run: Path, out: Path, options: ReportOptions) -> Inputs:
         verify_run(baseline).raise_if_damaged()
     images = readouts.load_table(run, "images")
     candidates = readouts.load_table(run, "candidates")
-    from assurance.evidence.facts import report_facts
-
     facts = report_facts(system, man, images, size=readouts.input_size(images), waivers=waivers)
     reg = reg.for_system(facts.texts)  # the texts about the system assessed: its camera, pose, domain, classes
     table = results_table(run, n_boot=n_boot)
@@ -164,16 +171,18 @@ def system_view(inp: Inputs) -> dict[str, Any] | None:
 
 def _ships_gate(man: Mapping[str, Any]) -> bool:
     """Whether the run deployed the shipped frame gate (whose validation study the package carries)."""
-    from el.base.hashing import sha256_file
-    from el.flight.pipeline import DEPLOYED_GATE
-
     gate = (man.get("config") or {}).get("gate") or {}
     return bool(gate) and DEPLOYED_GATE.is_file() and gate.get("sha256") == sha256_file(DEPLOYED_GATE)
 
 
 def _plots(inp: Inputs) -> list[dict[str, str]]:
     """The report's figures (none for an empty results table)."""
-    from assurance.evidence.plots import gains_figure, monitor_metrics_figure, overhead_figure, roc_figure
+    from assurance.evidence.plots import (
+        gains_figure,
+        monitor_metrics_figure,
+        overhead_figure,
+        roc_figure,
+    )  # deferred: matplotlib, off verify/land paths
 
     table, deployed, monitors = inp.table, inp.deployed, list(inp.manifest["config"]["monitors"])
     if not len(table):
@@ -217,10 +226,6 @@ def results_signature_row(inp: Inputs) -> dict[str, str]:
 
 def campaign_context(inp: Inputs) -> dict[str, Any]:
     """The run's part of the context: identity, operating domain, pictures, plots, results and limitations."""
-    from assurance.dataio.layouts import data_source
-    from assurance.evidence.domain_section import frame_gate_view, mark_outside, odd_rows
-    from assurance.evidence.gallery import Scenes, decision_examples, perturbation_gallery
-
     man, images, candidates, reg = inp.manifest, inp.images, inp.candidates, inp.registry
     own = inp.system is not None and not inp.system.default
     identity_rows, ident = identity(inp, templates=TEMPLATES_DIR,
@@ -262,10 +267,8 @@ def campaign_context(inp: Inputs) -> dict[str, Any]:
 def _safe_strips(inp: Inputs, scenes: Any, keys: list[str]) -> dict[str, Any]:
     """What each safe class of the system's label set covers in the run's own frames (first page:
     ``assurance.evidence.safe_strips``)."""
-    from assurance.evidence.safe_strips import safe_class_strips
-
     if inp.system is None:
-        from el.classes.labels import UAVID as labels
+        labels = UAVID
     else:
         labels = inp.system.labels()
     return safe_class_strips(scenes.samples, keys, labels)
@@ -343,8 +346,6 @@ def images_per_perturbation(inp: Inputs) -> int:
 def decisive_images(inp: Inputs) -> int:
     """The images per perturbation from which the run size no longer limits a requirement: the release preset's for
     the shipped system, else the fewest that can show the unsafe-landing bound (``rq.images_needed``)."""
-    from assurance.campaign.presets import preset_config
-
     release = preset_config("release").images
     if (inp.system is None or inp.system.default) and release is not None:
         return release
@@ -408,8 +409,6 @@ def _decide_command(inp: Inputs) -> dict[str, str]:
     ``assurance.campaign.perturbation_plan.system_plan``; ``--perturbations`` only when the registry requires one the
     file does not bring), named when they are not the shipped six, into a new run folder beside this one (a
     campaign into this one would resume it, and refuses another configuration)."""
-    from assurance.campaign.perturbation_plan import default_plan, system_plan
-
     if inp.system is None or inp.system.default:
         return {"command": "make release-evidence", "about": "about 12 minutes on 2 cores"}
     need = decisive_images(inp)

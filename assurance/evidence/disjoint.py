@@ -9,7 +9,13 @@ import json
 from pathlib import Path
 from typing import Any
 
+from assurance.dataio.layouts import DataSpec, iter_samples
+from assurance.dataio.poses import read_meta
 from assurance.evidence.render import ROOT
+from assurance.fitting.learned_monitor import split_digest
+from assurance.scenes.generate import split_of_seed
+from el.base.errors import DataError
+from el.base.hashing import sha256_file
 
 
 def read_frames(source: Any, cache: dict[str, dict[str, Any]] | None = None) -> dict[str, Any]:
@@ -28,17 +34,10 @@ def read_frames(source: Any, cache: dict[str, dict[str, Any]] | None = None) -> 
 
 def spec_of(source: Any) -> dict[str, Any]:
     """A data source as data: a spec's keys, or a folder's path alone."""
-    from assurance.dataio.layouts import DataSpec
-
     return source.to_dict() if isinstance(source, DataSpec) else {"path": str(source)}
 
 
 def _read_frames(source: Any) -> dict[str, Any]:
-    from assurance.dataio.layouts import iter_samples
-    from assurance.fitting.learned_monitor import split_digest
-    from el.base.errors import DataError
-    from el.base.hashing import sha256_file
-
     try:
         samples = list(iter_samples(source, require_labels=False))
     except (DataError, OSError, ValueError) as exc:
@@ -58,8 +57,6 @@ def _read_frames(source: Any) -> dict[str, Any]:
 def frame_metas(samples: list[Any]) -> list[dict[str, Any]]:
     """The scene meta JSON of the samples that have one (this toolkit's scenes), each read bounded
     (``assurance.dataio.poses.read_meta``); none for data without it."""
-    from assurance.dataio.poses import read_meta
-
     out = []
     for s in samples:
         try:
@@ -83,8 +80,6 @@ def seeds_of(metas: list[dict[str, Any]]) -> list[int]:
 def source_of(folder: str | Path, spec: dict[str, Any] | None) -> Any:
     """What to read: the folder (its layout detected), or a ``DataSpec`` of the spec's keys at the folder (the
     folder alone when the keys do not make one)."""
-    from assurance.dataio.layouts import DataSpec
-
     if not spec:
         return Path(folder)
     try:
@@ -136,8 +131,6 @@ def disjointness(test_metas: list[dict[str, Any]], test_sha: str, test_source: A
     data: seed ranges, data-set hashes, and, where the development data are on this machine, scene seeds and image
     contents, set by set (a split list's frames only). Each check: what, result, detail; one that could not run
     says ``not checked`` and why."""
-    from assurance.scenes.generate import split_of_seed
-
     cache = {} if cache is None else cache
     checks = []
     seeds = seeds_of(test_metas)

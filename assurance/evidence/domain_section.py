@@ -7,6 +7,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+from assurance.campaign.perturbation_plan import outside_scenarios
 from el.geometry.odd import OUTSIDE_ODD, OperatingDomain
 
 
@@ -99,8 +100,6 @@ OUTSIDE_MARK = "(outside the declared domain)"
 def mark_outside(view: dict[str, Any], table: Any, man: Mapping[str, Any]) -> dict[str, Any]:
     """The results view (``sections.results_view``: one row per ``table`` record, in order) with each scenario the
     run evaluated outside its declared domain marked (``assurance.campaign.perturbation_plan.outside_scenarios``)."""
-    from assurance.campaign.perturbation_plan import outside_scenarios
-
     outside = outside_scenarios(man)
     if not outside or not len(table):
         return view

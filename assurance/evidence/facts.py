@@ -18,7 +18,17 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from el.base.records import record_body
+from assurance.campaign.presets import preset_config
+from assurance.dataio.layouts import data_source, resolve
+from assurance.dataio.poses import POSES_FILE
+from assurance.evidence.render import rel
+from assurance.requirements.system_facts import facts_of_file
+from assurance.system import default_system
+from el.base.hashing import sha256_file
+from el.base.records import body_sha256, record_body
+from el.geometry.camera import MIN_DEPRESSION_DEG, NUM_STRIPES, Pose
+from el.geometry.config import CoreConfig
+from el.monitors.gates.features import WHAT
 
 NOT_DECLARED = "not declared"
 POLICIES = {"nominal": "the nominal pose for every frame", "sidecar": "each frame's own pose where it has one, else "
@@ -106,9 +116,6 @@ def stripes_text(core: Mapping[str, Any], frames: Any, size: tuple[int, int] | N
     """Which image stripes may hold a landing (``el.geometry.camera.CameraGeometry.unreachable_stripes``) at the poses
     and
     sizes of the evaluated frames (else the nominal pose at ``size``)."""
-    from el.geometry.camera import MIN_DEPRESSION_DEG, NUM_STRIPES, Pose
-    from el.geometry.config import CoreConfig
-
     try:
         cfg = CoreConfig.from_dict(dict(core))
         cases = {(int(w), int(h), float(a), float(p)) for w, h, a, p in zip(
@@ -134,9 +141,6 @@ def stripes_text(core: Mapping[str, Any], frames: Any, size: tuple[int, int] | N
 def poses_file(data: Mapping[str, Any] | None) -> str:
     """Where the run's frames took their own poses from (``assurance.dataio.layouts``): the ``poses`` file its
     ``[data]`` table names, a flat layout's ``ROOT/poses.csv``, or a UAVid split's per-sequence ``poses.csv``."""
-    from assurance.dataio.layouts import data_source, resolve
-    from assurance.dataio.poses import POSES_FILE
-
     data = data or {}
     spec = data.get("spec") or {}
     if spec.get("poses"):
@@ -178,8 +182,6 @@ def pose_source_text(config: Mapping[str, Any], frames: Any, data: Mapping[str, 
 def gate_features(doc: Mapping[str, Any] | None) -> str:
     """What a frame gate file says it is: its kind and the features it reads (the file's own ``features.what``,
     else ``el.monitors.gates.features.WHAT`` of its tap)."""
-    from el.monitors.gates.features import WHAT
-
     doc = doc or {}
     features = doc.get("features") or {}
     tap = str(features.get("tap") or "?")
@@ -203,9 +205,6 @@ def frame_gate_text(config: Mapping[str, Any]) -> str:
 def gate_identity(path: str | None, recorded: Any, body: Mapping[str, Any] | None) -> str:
     """The gate file's SHA-256 (the one the AMLAS index shows) when its body is still the one the run recorded
     (``recorded``: the record's body hash); else the recorded body hash, labelled as such."""
-    from el.base.hashing import sha256_file
-    from el.base.records import body_sha256
-
     body_hash = f"record body SHA-256 {str(recorded)[:16]}, as the run recorded it"
     if not path or body is None or not Path(path).is_file():
         return body_hash + "; the file is not readable here"
@@ -223,8 +222,6 @@ def waivers_text(waivers: Any, shipped: bool) -> str:
     if not waivers:
         return "none" if shipped else ("none (the system file names no [waivers] file; the shipped waivers document "
                                        "the shipped system only)")
-    from assurance.evidence.render import rel
-
     return f"{rel(waivers)}" + (" (the shipped system's)" if shipped else "")
 
 
@@ -232,9 +229,6 @@ def report_facts(system: Any, manifest: Mapping[str, Any], images: Any = None, *
                  size: tuple[int, int] | None = None, waivers: Any = None) -> ReportFacts:
     """The report's facts of ``system`` (an ``assurance.system.SystemFile``; None: the embedded default) and the
     run (its signed ``manifest`` and ``images`` readouts; ``size``: the evaluated frames' size)."""
-    from assurance.requirements.system_facts import facts_of_file
-    from assurance.system import default_system
-
     file = system if system is not None else default_system()
     shipped = bool(file.default)
     cfg = manifest.get("config") or {}
@@ -243,8 +237,6 @@ def report_facts(system: Any, manifest: Mapping[str, Any], images: Any = None, *
     own = own_pose_span(frames)
     release = None
     if shipped:
-        from assurance.campaign.presets import preset_config
-
         release = preset_config("release").images
     return ReportFacts(
         shipped=shipped, system=file.label, texts=facts_of_file(file),

@@ -23,6 +23,7 @@ from assurance.campaign.readouts import image_size
 from assurance.campaign.task import frame_identity, task_seed
 from assurance.dataio.layouts import DataSpec, iter_samples
 from assurance.dataio.uavid import Sample, read_image
+from assurance.evidence.overlay import draw_decision
 from assurance.perturbations import perturb
 
 GALLERY_SEVERITY = 3
@@ -114,8 +115,6 @@ def decision_record(image_row: Any, cands: Any) -> dict[str, Any]:
 
 def draw(scenes: Scenes, image_row: Any, cands: Any, *, width: int = 480) -> tuple[str, bool]:
     """(JPEG data URI of the decision drawn on its perturbed image, whether the real image was used)."""
-    from assurance.evidence.overlay import draw_decision
-
     record = decision_record(image_row, cands)
     hd = scenes.image(str(image_row["key"]), str(image_row["perturbation"]), int(image_row["severity"]))
     if hd is not None and (hd.shape[1], hd.shape[0]) != (record["input"]["width"], record["input"]["height"]):

@@ -24,7 +24,10 @@ from typing import Any
 
 from assurance import requirements as rq
 from assurance.campaign.integrity import RunCheck, code_sha256
+from assurance.evidence.navigation import clean_message
 from assurance.evidence.waivers import DEFAULT_MAX_WAIVER_DAYS, load_waivers, waiver_expired, waiver_problems
+from assurance.requirements.weakening import registry_weakenings
+from assurance.system import default_system
 
 GATE_CLASS = {"FAILED": "failed", "WAIVED": "failed", "INCOMPLETE": "not-verified", "PASSED": "verified"}
 DEVIATION = "deviation from the certification basis"
@@ -108,9 +111,6 @@ def requirement_results(registry: rq.Registry, path: Path | None, run: Path, war
 def weakening_problems(registry: rq.Registry, system: Any = None) -> list[str]:
     """How ``registry`` (with its targets) is weaker than the system's: the packaged registry with the system
     file's ``[targets]`` (the shipped system when None). Each line fails the gate and names the parameter."""
-    from assurance.requirements.weakening import registry_weakenings
-    from assurance.system import default_system
-
     system = system or default_system()
     reference = rq.load_registry(None).with_targets(system.targets(), source=f"{system.label} [targets]")
     return [f"weaker than the system's requirements: {w}" for w in registry_weakenings(reference, registry)]
@@ -151,8 +151,6 @@ def failure_detail(res: rq.RequirementResult, limit: int = 400) -> str:
     first = next((t for t in res.tests if t.outcome in rq.FAILING and t.message), None)
     if first is None:
         return ""
-    from assurance.evidence.navigation import clean_message
-
     line = clean_message(first.message.strip().splitlines()[0].removeprefix("Failed: ").strip())
     return line if len(line) <= limit else line[: limit - 4].rsplit(" ", 1)[0] + " ..."  # cut at a word
 

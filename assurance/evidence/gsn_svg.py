@@ -12,6 +12,7 @@ from typing import Any
 from xml.sax.saxutils import escape
 
 from assurance.evidence.argument import Node
+from assurance.evidence.navigation import anchor
 
 FONT, LINE, PAD, GAP_X, GAP_Y, MAX_LINES = 10, 12.5, 6, 36, 8, 4
 WIDTH = {"Goal": 250, "Strategy": 230, "Solution": 270, "Context": 250, "Assumption": 230, "Justification": 250}
@@ -181,8 +182,6 @@ QUOTE = {'"': "&quot;"}
 
 def gsn_anchor(nid: str) -> str:
     """The HTML id of an argument element where the report draws it developed."""
-    from assurance.evidence.navigation import anchor
-
     return anchor("gsn", nid)
 
 

@@ -11,6 +11,8 @@ from typing import Any
 
 from assurance import requirements as rq
 from el.base.errors import DataError
+from el.base.hashing import sha256_file
+from el.base.safeyaml import load_file
 
 SEVERITIES = ("catastrophic", "hazardous", "major", "minor")
 
@@ -58,9 +60,6 @@ def load_hazards(path: str | Path | None, registry: rq.Registry) -> HazardLog:
     """Read and validate the hazard log against its schema and ``registry`` (every mitigation a known requirement,
     unique hazard ids); HazardLogError naming the file and the first problem."""
     import jsonschema
-
-    from el.base.hashing import sha256_file
-    from el.base.safeyaml import load_file
 
     path = Path(path) if path else default_hazards_path()
     try:

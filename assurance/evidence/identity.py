@@ -16,9 +16,13 @@ from assurance import __version__
 from assurance import requirements as rq
 from assurance.analysis.table import results_table
 from assurance.campaign import readouts
-from assurance.campaign.integrity import RunCheck, tree_sha256
+from assurance.campaign.integrity import tree_sha256
+from assurance.code_identity import code_identity
+from assurance.evidence.navigation import anchor, short_name
 from assurance.evidence.text import STATE_CLASS, fmt, to_float
+from el.base.errors import WeightsError
 from el.base.hashing import sha256_file
+from el.segmentation.onnx_engine import file_identity
 
 HIGHER_IS_BETTER = {"g_cm": True, "g_rm": True, "g_star": True, "mcc": True, "f1": True, "precision": True,
                     "recall": True, "fp_rate": False, "overhead_s": False, "unsafe_landing_rate": False,
@@ -29,9 +33,6 @@ HIGHER_IS_BETTER = {"g_cm": True, "g_rm": True, "g_star": True, "mcc": True, "f1
 
 def _file_identity(path: str) -> str | None:
     """A weights file's identity now: an ONNX file's external data included (None: it cannot be read)."""
-    from el.base.errors import WeightsError
-    from el.segmentation.onnx_engine import file_identity
-
     try:
         return file_identity(path)
     except WeightsError:
@@ -46,13 +47,13 @@ def _targets_text(registry: rq.Registry, origins: Mapping[str, str] | None) -> s
                       for k, v in registry.targets.items()) + f" (from {registry.targets_source})")
 
 
-def identity(run: Path, man: Mapping[str, Any], registry: rq.Registry, req_path: Path | None,
-              req_doc: Mapping[str, Any] | None, csv_path: Path, templates: Path,
-              check: RunCheck, origins: Mapping[str, str] | None = None) -> tuple[list[dict], dict]:
-    """What was assessed: (the report's identity rows, the same facts for evidence.json); ``origins``: where the
-    system file sets each of its requirement parameters (``assurance.system.build.target_origins``)."""
-    from assurance.code_identity import code_identity
-
+def identity(inp: Any, *, templates: Path, origins: Mapping[str, str] | None = None) -> tuple[list[dict], dict]:
+    """What was assessed: (the report's identity rows, the same facts for evidence.json), from what the report read
+    (``inp``: ``assurance.evidence.context.Inputs``: the run, its manifest and check, the registry, the requirement
+    results, the results table); ``templates``: the report's template folder, hashed; ``origins``: where the system
+    file sets each of its requirement parameters (``assurance.system.build.target_origins``)."""
+    run, man, registry, check = inp.run, inp.manifest, inp.registry, inp.check
+    req_path, req_doc, csv_path = inp.req_path, inp.req_doc, inp.csv_path
     weights = man.get("weights") or {}
     wpath = weights.get("path")
     current = ""
@@ -207,8 +208,6 @@ def baseline_view(baseline: Path, man: Mapping[str, Any], ident: Mapping[str, An
 def changed_tests(before: rq.RequirementResult, now: rq.RequirementResult) -> list[dict[str, str]]:
     """The claiming tests of a requirement whose outcome differs from the baseline's (added and removed ones too),
     each with its anchor in the report's test list (none for a removed test)."""
-    from assurance.evidence.navigation import anchor, short_name
-
     old = {t.nodeid: t.outcome for t in before.tests}
     new = {t.nodeid: t.outcome for t in now.tests}
     return [{"name": short_name(n), "anchor": anchor("test", n) if n in new else "",

@@ -14,6 +14,9 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import quote
 
+from assurance import requirements as rq
+from el.base.userfiles import UserFileError, read_text
+
 _UNSAFE = re.compile(r"[^A-Za-z0-9_.-]+")
 _REPEATED = re.compile(r"(?<![\w-])([A-Za-z][^:\n]{1,59}: )(?:\1)+")
 MAX_SUMMARY = 160
@@ -61,8 +64,6 @@ def _function_lines(path: Path, cache: dict[Path, dict[str, int]]) -> dict[str, 
     """``name`` / ``Class::name`` -> line of each test function of a Python file (empty when unreadable)."""
     if path in cache:
         return cache[path]
-    from el.base.userfiles import UserFileError, read_text
-
     lines: dict[str, int] = {}
     try:
         tree = ast.parse(read_text(path, what="test source", max_bytes=MAX_SOURCE_BYTES))
@@ -122,8 +123,6 @@ def tests_view(results: Mapping[str, Any], req_doc: Mapping[str, Any] | None, ou
 
 def outcome_class(outcome: str) -> str:
     """The colour class of a test outcome."""
-    from assurance import requirements as rq
-
     return "verified" if outcome in rq.PASSING else "failed" if outcome in rq.FAILING else "not-verified"
 
 

@@ -18,6 +18,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
+from assurance.analysis.scores import auroc, roc_curve
+
 WIDTH_IN = 6.9  # the A4 text width (about 175 mm)
 DPI = 130
 COLOURS = {"g_cm": "#9aa5b1", "g_rm": "#e8a33d", "g_star": "#2a7ab9",
@@ -197,8 +199,6 @@ def overhead_figure(images: Any, monitors: list[str], budget_s: float, deployed:
 def roc_figure(candidates: Any, monitors: list[str], deployed: str, perturbation: str = "none") -> str | None:
     """ROC curves of the monitors' scores (unsafe candidates as positives) under one perturbation, with each
     configuration's operating point (its threshold) marked; None when the run holds no scores."""
-    from assurance.analysis.scores import auroc, roc_curve
-
     if candidates is None or len(candidates) == 0 or "score" not in candidates.columns:
         return None
     sub = candidates[candidates["perturbation"] == perturbation]

@@ -19,6 +19,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from assurance.dataio.layouts import DataSpec, data_source
+from assurance.dataio.poses import read_meta
 from assurance.evidence.disjoint import (
     disjoint_summary,
     disjointness,
@@ -32,8 +34,12 @@ from assurance.evidence.disjoint import (
 )
 from assurance.evidence.facts import NOT_DECLARED
 from assurance.evidence.render import ROOT, rel
+from assurance.paths import card_path as calibration_path
 from assurance.scenes.generate import SPLIT_BASE
 from el.base.records import record_body
+from el.classes.labels import UAVID
+from el.monitors.spec import parse_monitor_spec
+from el.segmentation.weights import card_path
 
 GENERATOR = "assurance.scenes"
 """The ``generator`` this toolkit's scene generator writes into each scene's meta JSON."""
@@ -47,8 +53,6 @@ def scene_meta(folder: str | Path) -> list[dict[str, Any]]:
     """The meta JSON of every scene of a UAVid-layout folder (none for data without it), each read bounded
     (``assurance.dataio.poses.read_meta``: a FIFO, ``/dev/zero`` or an oversized file there is passed over, never
     read: data folders are not signed)."""
-    from assurance.dataio.poses import read_meta
-
     out = []
     for p in sorted(Path(folder).glob("*/meta/*.json")):
         try:
@@ -72,8 +76,6 @@ def _balance(metas: list[dict[str, Any]]) -> str:
 def _card_balance(freqs: Any, package: bool) -> str:
     """The training class frequencies of a model card: named by the UAVid classes for the package's own card (its
     network's), else by channel (a card records no class names)."""
-    from el.classes.labels import UAVID
-
     if not freqs:
         return ""
     named = package and len(UAVID.names) == len(freqs)
@@ -218,8 +220,6 @@ def provenance_data(system: Any) -> list[tuple[str, str, Any, str]]:
     ``validation_data``): (role, letter, source, problem), each a folder (its layout detected) or a table like a
     ``[data]`` split's (``path``, ``layout``, ``split``, ...: ``assurance.dataio.layouts.DataSpec``), its path
     resolved against the file's folder; ``problem``: why a table cannot be read (empty when it can)."""
-    from assurance.dataio.layouts import DataSpec
-
     out: list[tuple[str, str, Any, str]] = []
     if system is None or getattr(system, "default", False):
         return out
@@ -287,9 +287,6 @@ def data_record(manifest: dict[str, Any], facts: Any = None, calibration_card: A
     """The data-management record of a run: its test data (the split it read, in its layout), the development data
     of the system's models (their cards and the system file's ``[model.provenance]``; ``system``: that file), the
     disjointness checks and what they show."""
-    from assurance.dataio.layouts import data_source
-    from el.segmentation.weights import card_path
-
     cache: dict[str, Any] = {}
     data = manifest.get("data") or {}
     folder = Path(data["path"]) if data.get("path") else None
@@ -320,8 +317,6 @@ def model_cards(manifest: dict[str, Any], calibration_card: Any = None) -> tuple
     monitor's record (the packaged one for a plain ``learned`` spec, else its ``model=`` file), the calibration card
     the requirements judge (``calibration_card``), the frame gate the run deployed. Nothing of the shipped system
     that the run did not use."""
-    from el.segmentation.weights import card_path
-
     wpath = (manifest.get("weights") or {}).get("path")
     card = record_body(card_path(wpath)) if wpath else None
     found = monitor_files(manifest, calibration_card)
@@ -330,9 +325,6 @@ def model_cards(manifest: dict[str, Any], calibration_card: Any = None) -> tuple
 
 def monitor_files(manifest: dict[str, Any], calibration_card: Any = None) -> dict[str, Path]:
     """The monitor files the run used, by role (``learned.json``, ``calibration.json``, ``frame_gate.json``)."""
-    from assurance.paths import card_path as calibration_path
-    from el.monitors.spec import parse_monitor_spec
-
     cfg = manifest.get("config") or {}
     base = ROOT / "el" / "monitors" / "data"
     found: dict[str, Path | None] = {}

@@ -7,6 +7,14 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from assurance.evidence import bounded as limits
+from assurance.evidence.linking import CSP, SCRIPT, link_ids, script_hash
+from assurance.evidence.navigation import req_anchor
+from assurance.evidence.outline import SECTIONS, outline
+from assurance.evidence.sanitise import bounded_clean
+from assurance.files import atomic_write_bytes
+from el.base.userfiles import UserFileError, read_text
+
 ROOT = Path(__file__).resolve().parents[2]
 """The project root (paths under it are written relative to it)."""
 
@@ -25,7 +33,7 @@ FAULTS_CSV = "faults.csv"
 
 def faults_table(out: Path, warnings: list[str]) -> list[dict[str, str]] | None:
     """The fault-injection table (``uav-el fault-table``) found next to the report, for its appendix."""
-    from assurance.fault_injection.table import read_table
+    from assurance.fault_injection.table import read_table  # deferred: WeasyPrint, onnxruntime, off verify/land paths
 
     path = out / FAULTS_CSV
     if not path.is_file():
@@ -40,7 +48,7 @@ def faults_table(out: Path, warnings: list[str]) -> list[dict[str, str]] | None:
 def fault_case_count() -> int:
     """How many fault-injection cases this toolkit replays (``uav-el fault-table`` without ``--quick``): the
     appendix says when the table next to the report holds fewer (a slice, ``make demo``)."""
-    from assurance.fault_injection.table import CASES
+    from assurance.fault_injection.table import CASES  # deferred: WeasyPrint, onnxruntime, off verify/land paths
 
     return len(CASES)
 
@@ -78,8 +86,6 @@ def bounded_loader(supplied: Sequence[Path], packaged: Path = TEMPLATES_DIR) -> 
 
     from jinja2 import BaseLoader, TemplateNotFound
     from jinja2.loaders import split_template_path
-
-    from el.base.userfiles import read_text
 
     class BoundedLoader(BaseLoader):
         reads: dict[str, str]
@@ -135,8 +141,6 @@ def _render(env: Any, name: str, context: Mapping[str, Any]) -> str:
     from jinja2 import TemplateSyntaxError
     from jinja2.exceptions import SecurityError
 
-    from el.base.userfiles import UserFileError
-
     try:
         return env.get_template(name).render(**context)
     except UserFileError as exc:  # a supplied template that is no regular file, or too big: never read
@@ -186,9 +190,6 @@ def _render_supplied(folder: Path, name: str, context: Mapping[str, Any], second
     """One supplied template rendered and cleaned in a bounded child (:mod:`assurance.evidence.bounded`;
     :func:`assurance.evidence.sanitise.bounded_clean`, ``own_ids`` its sections' anchors): its clean markup and
     the files it read (path relative to the folder -> SHA-256)."""
-    from assurance.evidence import bounded
-    from assurance.evidence.sanitise import bounded_clean
-
     def work() -> tuple[str, dict[str, str]]:
         env = environment(folder)
         try:
@@ -206,9 +207,9 @@ def _render_supplied(folder: Path, name: str, context: Mapping[str, Any], second
         return clean, dict(env.loader.reads)
 
     try:
-        return bounded.run_bounded(work, what=f"{folder / name}: report template", seconds=seconds or bounded.SECONDS,
-                                   memory_bytes=bounded.MEMORY_BYTES)
-    except bounded.BoundedRenderError as exc:
+        return limits.run_bounded(work, what=f"{folder / name}: report template", seconds=seconds or limits.SECONDS,
+                                  memory_bytes=limits.MEMORY_BYTES)
+    except limits.BoundedRenderError as exc:
         raise TemplateError(str(exc)) from None
 
 
@@ -240,10 +241,6 @@ def render_report(context: Mapping[str, Any], templates: str | Path | None = Non
     import os
 
     from markupsafe import Markup
-
-    from assurance.evidence.linking import CSP, SCRIPT, link_ids, script_hash
-    from assurance.evidence.navigation import req_anchor
-    from assurance.evidence.outline import SECTIONS, outline
 
     context = {**outline(context), **context}  # the sections of the registry, unless the caller lists its own
     folder = _supplied_folder(templates)
@@ -344,8 +341,6 @@ def write_pdf(html: str, path: Path, attachments: Sequence[Path] = (), served: S
         return f"PDF not written: WeasyPrint cannot be loaded ({type(exc).__name__}: {exc}); {PDF_HINT}"
     from weasyprint import Attachment
 
-    from assurance.evidence import bounded as limits
-
     tmp = path.with_name(f".{path.name}.tmp")
 
     def layout() -> list[str]:
@@ -403,6 +398,4 @@ def write_csv_rows(path: Path, rows: Sequence[Mapping[str, str]], columns: Seque
 
 def write_text(path: Path, text: str) -> None:
     """Write UTF-8 text atomically."""
-    from assurance.files import atomic_write_bytes
-
     atomic_write_bytes(path, text.encode("utf-8"))

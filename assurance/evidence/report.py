@@ -11,6 +11,7 @@ from typing import Any
 
 from assurance import requirements as rq
 from assurance.analysis.headline import REPRODUCIBILITY
+from assurance.campaign.integrity import code_sha256
 from assurance.evidence.acceptance import acceptance_rows, domain_source
 from assurance.evidence.auditor import ARGUMENT_FILE, ISSRE_FILE, auditor_context, auditor_document
 from assurance.evidence.benchmark_section import read_benchmark
@@ -27,8 +28,8 @@ from assurance.evidence.context import (
 )
 from assurance.evidence.gate import DEVIATION, EvidenceReport, Gate, decide_gate
 from assurance.evidence.identity import baseline_view
-from assurance.evidence.matrix import TRACE_COLUMNS, traceability_rows
-from assurance.evidence.navigation import anchor, req_anchor
+from assurance.evidence.matrix import TRACE_COLUMNS, artefact_users, link_hazards, traceability_rows
+from assurance.evidence.navigation import anchor, code_statement, files_view, req_anchor, tests_view
 from assurance.evidence.render import (
     FAULTS_CSV,
     TemplateError,
@@ -40,7 +41,10 @@ from assurance.evidence.render import (
 )
 from assurance.evidence.signatures import check_results_signature
 from assurance.evidence.text import jsonable
+from assurance.inservice.section import read_in_service
+from assurance.requirements.basis import class_category, deviations
 from el.base.hashing import sha256_file
+from el.classes.labels import UAVID
 
 EVIDENCE_FORMAT = "uav-el-evidence/1"
 log = logging.getLogger(__name__)
@@ -157,10 +161,6 @@ def _finish(files: _Files, document: dict[str, Any]) -> None:
 def navigation_context(inp: Inputs, context: dict[str, Any], pdf: bool) -> dict[str, Any]:
     """The report's navigation (``assurance.evidence.navigation``): the tests with their sources, the files
     beside the report, the hazards of each requirement's row; the anchors linking them both ways."""
-    from assurance.campaign.integrity import code_sha256
-    from assurance.evidence.matrix import artefact_users, link_hazards
-    from assurance.evidence.navigation import code_statement, files_view, tests_view
-
     tests = tests_view(inp.results, inp.req_doc, inp.out)
     link_hazards(context["matrix"], context["hazards"])
     for r in context["requirements"]:
@@ -181,8 +181,6 @@ def _system_settings(system: Any, waivers: Any, templates: Any, targets: Any, ta
     ``system_templates`` asks for them: an applicant-side convenience an auditor's report never takes unasked), and
     its deviations from the certification basis (``assurance.requirements.basis``) with the auditor's
     acceptances."""
-    from assurance.requirements.basis import deviations
-
     if system is None:
         return waivers, templates, targets, targets_source, deviations({}, accepted) if accepted else []
     waivers = system.waivers(str(waivers) if waivers else None)
@@ -196,13 +194,10 @@ def _system_settings(system: Any, waivers: Any, templates: Any, targets: Any, ta
 
 def _label_classes(system: Any) -> list[dict[str, str]]:
     """The label set's classes as the first page lists them: name, forbidden or safe, hazard category."""
-    from el.classes.labels import UAVID
-
     if system is None:
         labels = UAVID
     else:
         labels = system.labels()
-    from assurance.requirements.basis import class_category
 
     def category(c: Any) -> str:  # the category the basis judges it by: a well-known name's is pinned
         judged, pinned = class_category(c)
@@ -270,9 +265,7 @@ def generate(run: str | Path, out: str | Path, options: ReportOptions | None = N
         o.accepted_deviations, o.benchmark
     run, out = Path(run), Path(out)
     bench = read_benchmark(benchmark) if benchmark else None  # read first: a bad folder stops before any work
-    from assurance.inservice.section import read_in_service  # ``in_service``: an uav-el in-service --out folder
-
-    service = read_in_service(o.in_service, trusted) if o.in_service else None
+    service = read_in_service(o.in_service, trusted) if o.in_service else None  # an uav-el in-service --out folder
     waivers, templates, targets, targets_source, basis = _system_settings(
         system, waivers, templates, targets, targets_source, accepted_deviations, o.system_templates)
     inp = read_inputs(run, out, replace(o, waivers=waivers, templates=templates, targets=targets,

@@ -22,6 +22,11 @@ from typing import Any
 import cv2
 import numpy as np
 
+from assurance.dataio.layouts import read_sample_labels
+from assurance.dataio.uavid import read_image
+from assurance.evidence.gallery import jpeg_uri
+from assurance.requirements.basis import class_category
+
 SAMPLE_FRAMES = 8
 """How many of the run's frames are read to find each safe class (evenly spaced over the sorted keys)."""
 FRAMES_PER_CLASS = 3
@@ -60,9 +65,6 @@ def tint(image: np.ndarray, mask: np.ndarray) -> np.ndarray:
 
 
 def _read_frame(sample: Any, labels: Any, width: int) -> _Frame | None:
-    from assurance.dataio.layouts import read_sample_labels
-    from assurance.dataio.uavid import read_image
-
     if sample.label_path is None:
         return None
     try:
@@ -83,8 +85,6 @@ def _read_frame(sample: Any, labels: Any, width: int) -> _Frame | None:
 def _category(c: Any) -> str:
     """The category the basis judges a class by, as the strip's caption says it: a well-known name's pinned one (and
     what the set declared, when it differs), else the declared one, else ``unknown: none declared``."""
-    from assurance.requirements.basis import class_category
-
     judged, pinned = class_category(c)
     if pinned is not None:
         return f"{pinned}, pinned" + (f"; declared {c.category}" if c.category not in (None, pinned) else "")
@@ -100,8 +100,6 @@ def safe_class_strips(samples: dict[str, Any], keys: Sequence[str], labels: Any,
     evaluated; ``labels``: the system's label set. One strip per safe class, in id order: ``{"name", "category",
     "hazard", "share", "frames": [{"key", "uri", "share"}]}`` (``share``: the class's share of the pixels of the
     frames read, as text); a class found in no frame read has no picture and says so."""
-    from assurance.evidence.gallery import jpeg_uri
-
     chosen = evenly_spaced([k for k in keys if k in samples], sample_frames)
     frames = [f for k in chosen if (f := _read_frame(samples[k], labels, width)) is not None]
     total = sum(f.pixels for f in frames)

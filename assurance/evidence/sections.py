@@ -11,14 +11,14 @@ from typing import Any
 from assurance import requirements as rq
 from assurance.analysis.metrics import clopper_pearson_upper
 from assurance.campaign.task import scenario_pairs
+from assurance.dataio.poses import read_meta
 from assurance.evidence.text import ci, fmt, pct, to_float
 from assurance.perturbations import PERTURBATIONS, SEVERITIES, TRAITS
+from el.monitors import PAPER_GRID
 
 
 def scene_types(scenes: Any, keys: Sequence[str]) -> tuple[str, bool]:
     """What the scenes were (styles and lighting from their meta JSON), and whether they are synthetic."""
-    from assurance.dataio.poses import read_meta
-
     styles: Counter[str] = Counter()
     lights: Counter[str] = Counter()
     synthetic = False
@@ -176,8 +176,6 @@ def sample_size(table: Any, registry: rq.Registry, n_boot: int) -> list[str]:
 def limitations(man: Mapping[str, Any], registry: rq.Registry, results: Mapping[str, rq.RequirementResult],
                  synthetic: bool, table: Any, facts: Any) -> list[str]:
     """What the evidence does not cover: synthetic scenes, geometry, timings, what was not evaluated or verified."""
-    from el.monitors import PAPER_GRID
-
     cfg = man["config"]
     out = []
     if synthetic:

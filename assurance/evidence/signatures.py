@@ -7,14 +7,12 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from assurance.requirements.attestation import results_pins
+from assurance.requirements.attestation import check_results_attestation, results_pins
 
 
 def results_signature_problems(inp: Any, waivers: str | Path | None,
                                trusted: Mapping[str, Any]) -> tuple[dict[str, Any], list[str]]:
     """(the signed predicate, gate problems) of the report's requirement results; none when there are none."""
-    from assurance.requirements.attestation import check_results_attestation
-
     if inp.req_path is None:
         return {}, []
     junit = inp.req_path.with_name("junit.xml")

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from assurance import __version__
+from el.base import safeyaml
 
 WAIVER_FIELDS = ("id", "reason", "tracked_by", "owner", "expires")
 
@@ -27,8 +28,6 @@ def load_waivers(path: str | Path) -> dict[str, dict[str, str]]:
     entry without one of the fields, an expiry that is neither, or a requirement waived twice.
     """
     import yaml
-
-    from el.base import safeyaml
 
     path = Path(path)
     try:  # a regular file of at most 1 MiB (a FIFO or a device refused before any read), no aliases, dates as text
@@ -62,8 +61,6 @@ def _version_tuple(text: str) -> tuple[int, ...]:
 def _text_dates_loader() -> type:
     """The bounded YAML loader keeping dates as written (``2026-02-30`` would fail inside the YAML parser, naming
     neither the file nor the waiver; :func:`_expiry` reads the text)."""
-    from el.base import safeyaml
-
     class TextDates(safeyaml.BoundedSafeLoader):
         pass
 

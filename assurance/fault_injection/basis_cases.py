@@ -15,15 +15,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from assurance.fault_injection.case import Case, first_image
+from assurance.fault_injection.case import Case, first_image, prepare
 from assurance.fault_injection.trust import _evidence, _system
+from el.classes.labels import UAVID
+from el.segmentation.onnx_engine import SHIPPED_DIR, have_onnxruntime, read_onnx
 
 
 def _road_safe(ws: Path) -> list[str]:
     """A label set declaring UAVid's road safe (hazard score 0): flown, it would land on roads."""
     import yaml
-
-    from el.classes.labels import UAVID
 
     doc = UAVID.to_dict()
     road = next(c for c in doc["classes"] if c["name"] == "road")
@@ -49,8 +49,6 @@ def _external_net(ws: Path, name: str, location: str = "weights.bin") -> Path:
     import onnx
     import torch
 
-    from el.classes.labels import UAVID
-
     folder = ws / name
     folder.mkdir(exist_ok=True)
     path = folder / "net.onnx"
@@ -67,8 +65,6 @@ def _external_net(ws: Path, name: str, location: str = "weights.bin") -> Path:
 
 
 def _onnx_system(ws: Path, name: str, path: Path, pin: str | None) -> Path:
-    from el.classes.labels import UAVID
-
     names = ", ".join(f'"{n}"' for n in UAVID.names)
     sha = f'sha256 = "{pin}"\n' if pin else ""
     return _system(ws, name, f'[model]\npath = "{path}"\n{sha}[model.onnx]\nclass_names = [{names}]\n')
@@ -82,8 +78,6 @@ def _flip_first_byte(path: Path) -> None:
 
 def _swapped_external_weights(ws: Path) -> list[str]:
     """An ONNX network whose weights live in ``weights.bin`` beside it, pinned by the system file, then swapped."""
-    from el.segmentation.onnx_engine import read_onnx
-
     path = _external_net(ws, "external-net")
     pin = read_onnx(path).sha256
     _flip_first_byte(path.parent / "weights.bin")  # the swap, after pinning: the .onnx file itself is unchanged
@@ -104,8 +98,6 @@ def _external_outside_folder(ws: Path) -> list[str]:
 
 def _external_swapped_after_run(ws: Path) -> list[str]:
     """A campaign flown on an ONNX network with external weights, whose ``weights.bin`` is swapped after the run."""
-    from assurance.fault_injection.case import prepare
-
     path = _external_net(ws, "after-run-net")
     system = _onnx_system(ws, "sys-after-run", path, None)
     run = ws / "run-onnx-external"
@@ -122,8 +114,6 @@ def _shipped_export_on_photo(ws: Path) -> list[str]:
     import cv2
     import numpy as np
 
-    from el.segmentation.onnx_engine import SHIPPED_DIR
-
     photo = ws / "photograph.png"
     rng = np.random.default_rng(0)
     cv2.imwrite(str(photo), cv2.GaussianBlur((rng.random((180, 320, 3)) * 255).astype(np.uint8), (0, 0), 3))
@@ -133,8 +123,6 @@ def _shipped_export_on_photo(ws: Path) -> list[str]:
 
 def _uavid_doc(**road: object) -> dict:
     """UAVid's label set as a document, its road updated with ``road``."""
-    from el.classes.labels import UAVID
-
     doc = UAVID.to_dict()
     next(c for c in doc["classes"] if c["name"] == "road").update(road)
     return doc
@@ -150,9 +138,6 @@ def _write_labels(path: Path, doc: dict) -> Path:
 def _label_set_swapped_back(ws: Path) -> list[str]:
     """A campaign flown with a label set file declaring road safe (the tiny network's classes mapped onto it one to
     one), the honest file put back under the same name after the run: the readouts were judged with road safe."""
-    from assurance.fault_injection.case import prepare
-    from el.classes.labels import UAVID
-
     labels = ws / "labels-pinned.yaml"
     names = ", ".join(f'{n} = "{n}"' for n in UAVID.names)
     system = _system(ws, "sys-label-pin", f'[model]\npath = "tiny.pt"\nclass_map = {{ {names} }}\n'
@@ -191,8 +176,6 @@ def _loose_bound(ws: Path, name: str, *accept: str) -> list[str]:
 
 def onnxruntime_available() -> bool:
     """Whether ONNX Runtime can be imported (the shipped network's export can run)."""
-    from el.segmentation.onnx_engine import have_onnxruntime
-
     return have_onnxruntime()
 
 

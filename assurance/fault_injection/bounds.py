@@ -19,6 +19,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 from assurance.fault_injection.case import Case, campaign_argv, copy_run, first_image, save_tiny_weights
+from el.flight.pipeline import DEPLOYED_CALIBRATION, DEPLOYED_MONITOR
+from el.monitors.calibration import card_document
 
 YAML_BOMB = "".join(f"l{i}: &l{i} [" + ", ".join([f"*l{i - 1}" if i else '"lol"'] * 9) + "]\n" for i in range(9))
 
@@ -185,9 +187,6 @@ def _seed(ws: Path) -> list[str]:
 
 def _card_threshold(ws: Path) -> list[str]:
     """A system deploying the shipped spec on the shipped card re-hashed at another threshold (0.9)."""
-    from el.flight.pipeline import DEPLOYED_CALIBRATION, DEPLOYED_MONITOR
-    from el.monitors.calibration import card_document
-
     body = dict(json.loads(DEPLOYED_CALIBRATION.read_text())["body"])
     body.update(threshold=0.9, spec="learned:walk=score,threshold=0.9")
     (ws / "card-0.9.json").write_text(json.dumps(card_document(body)))

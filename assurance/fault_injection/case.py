@@ -12,6 +12,9 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from assurance.campaign import readouts
+from el.base.hashing import sha256_file
+
 CliMain = Callable[[list[str]], int]  # ``assurance.cli.main``: argv -> exit code
 
 
@@ -91,9 +94,6 @@ def copy_run(ws: Path, name: str) -> tuple[Path, list[Path]]:
 def reseal_shard(run: Path, name: str) -> None:
     """Re-hash an edited shard in its own SHA256SUMS and the run's index, as a forger (or a test that needs odd
     readouts that still verify) would: only a signed statement over the files still tells the edit."""
-    from assurance.campaign import readouts
-    from el.base.hashing import sha256_file
-
     folder = Path(run) / readouts.SHARDS / name
     sums = {f: sha256_file(folder / f) for f in readouts.shard_files()}
     (folder / readouts.SUMS).write_text("".join(f"{h}  {f}\n" for f, h in sums.items()), encoding="utf-8")
@@ -104,9 +104,9 @@ def save_tiny_weights(path: Path, *, nan: bool = False) -> Path:
     """A tiny randomly-initialised CNN (seed 0) and its card; ``nan``: every parameter NaN."""
     import torch
 
-    from assurance.fitting.network.weights_io import save_weights
-    from el.segmentation.architectures import build_model
-    from el.segmentation.model import ArchConfig
+    from assurance.fitting.network.weights_io import save_weights  # deferred: imports torch (the train extra)
+    from el.segmentation.architectures import build_model  # deferred: imports torch (the train extra)
+    from el.segmentation.model import ArchConfig  # deferred: imports torch (the train extra)
 
     torch.manual_seed(0)
     model = build_model(ArchConfig(widths=(8, 8, 8), decoder_channels=8))

@@ -13,7 +13,10 @@ import json
 import shutil
 from pathlib import Path
 
-from assurance.fault_injection.case import Case, campaign_argv, copy_run, prepare
+from assurance.code_identity import install_root
+from assurance.fault_injection.case import Case, campaign_argv, copy_run, prepare, save_tiny_weights
+from assurance.requirements.registry import default_registry_path
+from el.flight.pipeline import PipelineConfig
 
 
 def _verified(ws: Path, run: Path | None = None, name: str = "ver", *extra: object) -> Path:
@@ -43,8 +46,6 @@ def _uncollectable(ws: Path) -> list[str]:
 
 
 def _weak_registry_file(ws: Path) -> Path:
-    from assurance.requirements import default_registry_path
-
     text = default_registry_path().read_text(encoding="utf-8")
     path = ws / "weak-registry.yaml"
     path.write_text(text.replace("unsafe_landing_bound: 0.05", "unsafe_landing_bound: 0.999")
@@ -98,8 +99,6 @@ def _resign(path: Path, **body: object) -> None:
 
 def _resigned_monitor(ws: Path) -> list[str]:
     """A run made with a learned monitor file, which is then made to accept every candidate and re-hashed."""
-    from assurance.code_identity import install_root
-
     model = ws / "learned-copy.json"
     shutil.copy(install_root() / "el/monitors/data/learned.json", model)
     run = ws / "run-learned"
@@ -113,8 +112,6 @@ def _resigned_monitor(ws: Path) -> list[str]:
 
 def _changed_weights(ws: Path) -> list[str]:
     """The run's network weights replaced after the run by others, with their own matching card."""
-    from assurance.fault_injection.case import save_tiny_weights
-
     weights, run = ws / "tiny-swapped.pt", ws / "run-swapped"
     shutil.copy(ws / "tiny.pt", weights)
     shutil.copy(ws / "tiny.json", weights.with_suffix(".json"))
@@ -125,8 +122,6 @@ def _changed_weights(ws: Path) -> list[str]:
 
 def _training_split(ws: Path) -> list[str]:
     """EL-R16 asked of two training-split scenes, with the deployed monitor and its calibration card."""
-    from el.flight.pipeline import PipelineConfig
-
     data, run = ws / "data-train", ws / "run-train"
     prepare(["synth", "--out", data, "--split", "train", "--scenes", "2", "--size", "320x180", "--no-progress"])
     argv = campaign_argv(ws, run, data=data)

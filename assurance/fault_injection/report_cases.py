@@ -15,6 +15,7 @@ import json
 from collections.abc import Callable
 from pathlib import Path
 
+from assurance.attest.key_paths import default_key_path
 from assurance.fault_injection.case import Case
 
 
@@ -207,8 +208,6 @@ def _key_linked(ws: Path) -> list[str]:
     import os
     import shutil
 
-    from assurance.attest.key_paths import default_key_path
-
     folder = _folder(ws, "hardlink", _section('<pre>{% include "notes.txt" %}</pre>'))
     (folder / "notes.txt").unlink(missing_ok=True)
     key = default_key_path()
@@ -223,8 +222,6 @@ def _key_linked(ws: Path) -> list[str]:
 
 def _key_not_shown(ws: Path) -> str | None:
     """No report, and no line of the key anywhere in --out; the link removed (the key has one link again)."""
-    from assurance.attest.key_paths import default_key_path
-
     (ws / "templates-hardlink" / "notes.txt").unlink(missing_ok=True)
     secret = default_key_path().read_text("ascii").splitlines()[1]
     out = ws / "rep-hardlink"

@@ -9,6 +9,7 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
+from assurance.attest.keys import create_key, public_pem
 from assurance.fault_injection.case import Case, copy_run, reseal_shard
 
 
@@ -36,8 +37,6 @@ def _resealed_shard(ws: Path) -> list[str]:
 
 def _untrusted_key(ws: Path) -> list[str]:
     """The auditor trusts another key than the one that signed the run."""
-    from assurance.attest.keys import create_key, public_pem
-
     other = create_key(ws / "other-key.pem")
     pub = ws / "other-key.pub"
     pub.write_text(public_pem(other.public))

@@ -19,6 +19,9 @@ import shutil
 from collections.abc import Sequence
 from pathlib import Path
 
+from assurance import requirements as rq
+from assurance.campaign.integrity import code_sha256, verify_run
+from assurance.dataio.uavid import read_image, write_image
 from assurance.fault_injection.applicant import APPLICANT_CASES
 from assurance.fault_injection.bounds import BOUNDS_CASES
 from assurance.fault_injection.case import Case, CliMain, run_cli, save_tiny_weights, use_cli, write_small_frame_system
@@ -28,6 +31,7 @@ from assurance.fault_injection.case import first_image as _image
 from assurance.fault_injection.flightlog_cases import FLIGHTLOG_CASES
 from assurance.fault_injection.gate import GATE_CASES
 from assurance.fault_injection.signing import SIGNING_CASES
+from assurance.files import atomic_write_bytes
 
 COLUMNS = ("case", "injected", "command", "expected", "observed", "outcome", "result")
 CSV_NAME, MD_NAME = "faults.csv", "faults.md"
@@ -72,9 +76,6 @@ def _run_system_sha(run: Path) -> str | None:
 
 def _forged_requirements(ws: Path) -> list[str]:
     """Results bound to this run, code and registry, with every state set to "verified" by hand."""
-    from assurance import requirements as rq
-    from assurance.campaign.integrity import code_sha256, verify_run
-
     reg = rq.load_registry(None)
     doc = {"format": rq.RESULTS_FORMAT,
            "context": {"run": str(ws / "run"), "run_digest": verify_run(ws / "run").digest,
@@ -154,7 +155,6 @@ def _unreadable_image(ws: Path) -> list[str]:
 
 def _wrong_shape_labels(ws: Path) -> list[str]:
     labels = sorted((ws / "data").glob("*/Labels/*.png"))[0]
-    from assurance.dataio.uavid import read_image, write_image
 
     small = ws / "labels-small.png"
     write_image(small, read_image(labels)[:90, :160])
@@ -275,8 +275,6 @@ def read_table(path: str | Path) -> list[dict[str, str]]:
 
 def write_table(rows: Sequence[dict[str, str]], csv_path: str | Path) -> tuple[Path, Path]:
     """Write ``faults.csv`` and ``faults.md`` (beside it) atomically."""
-    from assurance.files import atomic_write_bytes
-
     csv_path = Path(csv_path)
     md_path = csv_path.with_suffix(".md")
     atomic_write_bytes(csv_path, to_csv(rows).encode("utf-8"))

@@ -23,7 +23,12 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from assurance.fault_injection.case import Case, campaign_argv, copy_run, first_image
+from assurance.attest.keys import create_key, load_signing_key
+from assurance.campaign.attestation import sign_run
+from assurance.fault_injection.case import Case, campaign_argv, copy_run, first_image, reseal_shard
+from el.base.records import body_sha256
+from el.classes.labels import PRESET_DIR
+from el.flight.pipeline import DEPLOYED_CALIBRATION, DEPLOYED_GATE
 
 SMALL_FRAMES = '[odd]\nimage_width = [64, 7680]\nimage_height = [36, 4320]\n'  # the workspace's 320x180 scenes
 
@@ -93,8 +98,6 @@ def _nan_target(ws: Path) -> list[str]:
 
 def _readable_key(ws: Path) -> list[str]:
     """A signing key of mode 0644 (ssh refuses such a key)."""
-    from assurance.attest.keys import create_key
-
     key = ws / "readable-key.pem"
     if not key.exists():
         create_key(key)
@@ -118,9 +121,6 @@ def _version_waiver(ws: Path) -> list[str]:
 
 def _missing_tasks(ws: Path) -> list[str]:
     """A copy of the run whose manifest names a task outside the data, re-signed with the applicant's key."""
-    from assurance.attest.keys import load_signing_key
-    from assurance.campaign.attestation import sign_run
-
     run, _ = copy_run(ws, "run-missing-tasks")
     man = json.loads((run / "manifest.json").read_text(encoding="utf-8"))
     man["shard_order"] = [*man["shard_order"], "none-s3__seq00_999999-0000000000000000"]
@@ -130,8 +130,6 @@ def _missing_tasks(ws: Path) -> list[str]:
 
 
 def _resealed(src: Path, dst: Path, **body: object) -> Path:
-    from el.base.records import body_sha256
-
     doc = json.loads(src.read_text(encoding="utf-8"))
     doc["body"].update(body)
     doc["sha256"] = body_sha256(doc["body"])
@@ -141,16 +139,12 @@ def _resealed(src: Path, dst: Path, **body: object) -> Path:
 
 def _gate_1e300(ws: Path) -> list[str]:
     """The shipped frame gate re-hashed at threshold 1e300 (it passes every frame), named by a system file."""
-    from el.flight.pipeline import DEPLOYED_GATE
-
     gate = _resealed(Path(DEPLOYED_GATE), ws / "gate-1e300.json", threshold=1e300)
     return _land(ws, _system(ws, "sys-gate", f'[monitor]\ngate = "{gate.name}"\n'))
 
 
 def _card_1e300(ws: Path) -> list[str]:
     """The shipped calibration card re-hashed at threshold 1e300 (it accepts every candidate)."""
-    from el.flight.pipeline import DEPLOYED_CALIBRATION
-
     card = _resealed(Path(DEPLOYED_CALIBRATION), ws / "card-1e300.json", threshold=1e300,
                      spec="learned:walk=score,threshold=1e+300")
     return ["land", str(first_image(ws)), "--system", str(_system(ws, "sys-card", f'[monitor]\ncalibration = '
@@ -168,9 +162,6 @@ def _fifo_template(ws: Path) -> list[str]:
 
 def _resigned_manifest(ws: Path, name: str, edit: Callable[[dict[str, Any]], None]) -> Path:
     """A copy of the run whose manifest ``edit`` changed, re-signed with the applicant's key (as T15)."""
-    from assurance.attest.keys import load_signing_key
-    from assurance.campaign.attestation import sign_run
-
     run, _ = copy_run(ws, name)
     man = json.loads((run / "manifest.json").read_text(encoding="utf-8"))
     edit(man)
@@ -244,10 +235,6 @@ def _many_rows(ws: Path) -> list[str]:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    from assurance.attest.keys import load_signing_key
-    from assurance.campaign.attestation import sign_run
-    from assurance.fault_injection.case import reseal_shard
-
     run, shards = copy_run(ws, "run-many-rows")
     pq.write_table(pa.table({"key": pa.array(["seq00/000000"] * 200_000), "rank": pa.array(range(200_000))}),
                    shards[0] / "candidates.parquet", compression="zstd")
@@ -299,8 +286,6 @@ def _feb30_waiver(ws: Path) -> list[str]:
 
 def _hierarchy_link_outside(ws: Path) -> list[str]:
     """A label set (UAVid's, copied) naming ``hierarchy: tree.yaml``, a symbolic link to a file outside its folder."""
-    from el.classes.labels import PRESET_DIR
-
     folder = ws / "labels-link"
     folder.mkdir(exist_ok=True)
     outside = ws / "outside-tree.yaml"

@@ -30,28 +30,60 @@ from __future__ import annotations
 import datetime as _dt
 import hashlib
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from assurance.analysis.criteria import candidate_threshold
 from assurance.analysis.guarantee import _check_rates, calibrate_threshold, min_unsafe_needed
+from assurance.campaign.run import CampaignConfig, Task, plan, run_task
+from assurance.fitting.network_identity import network_record
 from assurance.paths import shown_path
+from assurance.progress import progress as bar
+from assurance.system.model import load_model_spec
+from el.base.hashing import sha256_file
+from el.geometry.config import CoreConfig
+from el.monitors import build_monitor
 from el.monitors.calibration import CalibrationError, card_document
 from el.monitors.spec import THRESHOLD, parse_monitor_spec
+from el.segmentation.contract import labels_of
 
-__all__ = ["CalibrationError", "calibrate_threshold", "calibration_body",
+__all__ = ["CalibrationError", "CalibrationScenes", "ThresholdRule", "calibrate_threshold", "calibration_body",
            "min_unsafe_needed"]
 
 
-def calibration_body(scores: Any, unsafe: Any, *, monitor: str, miss_rate: float, confidence: float,
-                     split: dict[str, Any], weights: dict[str, Any],
-                     monitor_model: str | None = None, criterion: str = "guarantee",
-                     recall: float = 0.95) -> dict[str, Any]:
+@dataclass(frozen=True, kw_only=True)
+class ThresholdRule:
+    """How a card's threshold is chosen: by ``criterion`` (``guarantee``: an unsafe candidate accepted with
+    probability at most ``miss_rate``, with ``confidence`` over the calibration sample; a benchmark criterion of
+    ``assurance.analysis.criteria`` gives no guarantee, ``tnr-at-recall`` keeping ``recall`` of the unsafe ones).
+    :func:`calibrate_on_data` checks the rates."""
+
+    miss_rate: float
+    confidence: float
+    criterion: str = "guarantee"
+    recall: float = 0.95
+
+
+@dataclass(frozen=True, kw_only=True)
+class CalibrationScenes:
+    """The scenes a monitor is calibrated on: the first ``images`` of the folder (None: all), the core model's
+    configuration (``core``; None: ``CoreConfig()``), and ``perturbations`` ((name, severity): a system's declared
+    ones, ``assurance.campaign.perturbation_plan.fit_levels``; None: clean only)."""
+
+    images: int | None = None
+    core: Any = None
+    perturbations: Sequence[tuple[str, int]] | None = None
+
+
+def calibration_body(scores: Any, unsafe: Any, *, monitor: str, rule: ThresholdRule, split: dict[str, Any],
+                     weights: dict[str, Any], monitor_model: str | None = None) -> dict[str, Any]:
     """The card body: the calibrated threshold from the candidates' scores and truths, with what it rests on
-    (``monitor_model``: the SHA-256 of the monitor's fitted model file, if it has one) and the criterion that
-    chose it (``assurance.analysis.criteria``; another than ``guarantee`` gives no guarantee: see
-    :func:`criterion_body`)."""
+    (``monitor_model``: the SHA-256 of the monitor's fitted model file, if it has one) and the rule that chose it
+    (:class:`ThresholdRule`; a criterion other than ``guarantee`` gives no guarantee: see :func:`criterion_body`)."""
+    miss_rate, confidence, criterion, recall = rule.miss_rate, rule.confidence, rule.criterion, rule.recall
     base = parse_monitor_spec(monitor)
     if base is None:
         raise CalibrationError("'none' has no threshold to calibrate")
@@ -88,8 +120,6 @@ def criterion_body(s: np.ndarray, y: np.ndarray, monitor: str, criterion: str, r
                    split: dict[str, Any], weights: dict[str, Any], monitor_model: str | None) -> dict[str, Any]:
     """A card whose threshold a benchmark criterion chose (``f1``, ``g-mean``, ``tnr-at-recall``): the same fields,
     with ``miss_rate``, ``confidence``, ``bound`` and ``order_statistic_k`` None (no guarantee) and the criterion."""
-    from assurance.analysis.criteria import candidate_threshold
-
     try:
         threshold, note = candidate_threshold(criterion, s, y, recall=recall)
     except ValueError as exc:
@@ -121,27 +151,23 @@ def _scenarios(perturbations: Sequence[tuple[str, int]] | None) -> dict[str, Any
     return {"perturbations": ("none", *levels), "severities": (3,), "severity_caps": caps or None}
 
 
-def calibrate_on_data(data: str | Path, monitor: str, *, miss_rate: float, confidence: float,
-                      weights: str | dict[str, Any] | None = None, images: int | None = None, segmenter: Any = None,
-                      core: Any = None, progress: bool = False, criterion: str = "guarantee",
-                      recall: float = 0.95, perturbations: Sequence[tuple[str, int]] | None = None) -> dict[str, Any]:
-    """Score every candidate of the scenes in ``data`` with ``monitor`` and calibrate it: the card document.
+def calibrate_on_data(data: str | Path, monitor: str, *, rule: ThresholdRule, scenes: CalibrationScenes | None = None,
+                      weights: str | dict[str, Any] | None = None, segmenter: Any = None,
+                      progress: bool = False) -> dict[str, Any]:
+    """Score every candidate of the scenes in ``data`` with ``monitor`` and calibrate it by ``rule``: the card
+    document.
 
     The candidates, their truth and the scores come from the campaign's own task code, so a calibrated threshold
-    means on test readouts what it meant here. The scenes are clean (perturbation ``none``), or, with
-    ``perturbations`` ((name, severity): a system's declared ones, ``assurance.campaign.perturbation_plan.
-    fit_levels``), clean and under each of those.
+    means on test readouts what it meant here. ``scenes`` (:class:`CalibrationScenes`; None: its defaults): which
+    scenes, the core model's configuration, and the perturbations: the scenes are clean (perturbation ``none``), or,
+    with ``perturbations``, clean and under each of those.
     """
-    from assurance.campaign.run import CampaignConfig, Task, plan, run_task
-    from assurance.fitting.network_identity import network_record
-    from el.base.hashing import sha256_file
-    from el.geometry.config import CoreConfig
-
-    _check_rates(miss_rate, confidence)
+    scenes = scenes or CalibrationScenes()
+    images, core, perturbations = scenes.images, scenes.core, scenes.perturbations
+    _check_rates(rule.miss_rate, rule.confidence)
     base = parse_monitor_spec(monitor)
     if base is None:
         raise CalibrationError("'none' has no threshold to calibrate")
-    from el.monitors import build_monitor
 
     config = CampaignConfig(**_scenarios(perturbations), monitors=(base.base.name,), images=images, weights=weights,
                             core=core or CoreConfig())
@@ -150,14 +176,10 @@ def calibrate_on_data(data: str | Path, monitor: str, *, miss_rate: float, confi
         raise CalibrationError(f"{data}: no labelled scenes to calibrate on")
     loaded = segmenter is None
     if loaded:
-        from assurance.system.model import load_model_spec
-
         segmenter = load_model_spec(weights)
     network = network_record(segmenter, weights, loaded=loaded)  # an unidentified network is refused here
-    from el.segmentation.contract import labels_of
 
     monitor_model = build_monitor(base.base.name, labels=labels_of(segmenter)).model_sha256  # missing/altered: fails
-    from assurance.progress import progress as bar
 
     scores, unsafe, faults = [], [], []
     for task in bar(tasks, total=len(tasks), desc="calibration scenes", enabled=progress):
@@ -173,11 +195,10 @@ def calibrate_on_data(data: str | Path, monitor: str, *, miss_rate: float, confi
         for f in (sample.image_path, sample.label_path):
             h.update(f"{Path(f).relative_to(data)}:{sha256_file(f)}\n".encode())
     body = calibration_body(
-        scores, unsafe, monitor=base.base.name, miss_rate=miss_rate, confidence=confidence,
+        scores, unsafe, monitor=base.base.name, rule=rule,
         split={"path": shown_path(data), "images": len(samples), "sha256": h.hexdigest(),
                "perturbation": ", ".join(p if p == "none" else f"{p} s{s}" for p, s in config.scenarios())},
-        weights=network,
-        monitor_model=monitor_model, criterion=criterion, recall=recall,
+        weights=network, monitor_model=monitor_model,
     )
     return card_document(body)
 

@@ -9,7 +9,11 @@ import functools
 from pathlib import Path
 from typing import Any
 
+from assurance.fitting.candidate_audit import candidate_audit
+from assurance.fitting.separation import describe_separation
 from assurance.progress import progress
+from el.segmentation.factory import load_model
+from el.segmentation.weights import read_card
 
 
 def fmt_figure(value: Any) -> str:
@@ -27,18 +31,12 @@ def describe_audit(a: dict[str, Any]) -> str:
         text += ("; mostly " + ", ".join(f"{name} in {n}" for name, n in causes.items())
                  + f"; median forbidden share of an unsafe disc {fmt_figure(a.get('median_forbidden_share'))}")
     if a.get("separation"):
-        from assurance.fitting.separation import describe_separation
-
         text += "\n              separation: " + describe_separation(a["separation"])
     return text
 
 
 def audit(path: Path, data: Path | None, threads: int | None, quiet: bool) -> dict[str, Any]:
     """The candidate audit of a weights file on its validation data (or ``data``)."""
-    from assurance.fitting.candidate_audit import candidate_audit
-    from el.segmentation.factory import load_model
-    from el.segmentation.weights import read_card
-
     card = read_card(path)
     # Where the card's figures come from (a re-issued card: this machine's copy), else the training's val.
     evaluated_on = (card.get("evaluation") or {}).get("data")
@@ -52,8 +50,7 @@ def audit(path: Path, data: Path | None, threads: int | None, quiet: bool) -> di
 
 def record_audit(path: Path, data: Path | None, threads: int | None, quiet: bool) -> dict[str, Any]:
     """Run the candidate audit, write it into the card's ``candidates`` section and print it."""
-    from assurance.fitting.network.weights_io import write_card
-    from el.segmentation.weights import read_card
+    from assurance.fitting.network.weights_io import write_card  # deferred: imports torch (the train extra)
 
     result = audit(path, data, threads, quiet)
     card = read_card(path)

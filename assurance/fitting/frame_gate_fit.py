@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import datetime as _dt
 from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -24,8 +25,10 @@ from assurance.dataio.layouts import as_spec, iter_samples
 from assurance.fitting.gate_frames import in_domain, scene_images, training_frames, validation_frames
 from assurance.fitting.learned_monitor import split_sha256
 from assurance.paths import shown_path
+from assurance.progress import progress as bar
 from el.monitors.frame_gate import check_frame_stats, frame_gate_document
 from el.monitors.gates import GATES, WHAT
+from el.segmentation.contract import segment_frame
 
 # the shipped gate's: the smallest meeting the policy in both validation folds (docs/results.md)
 DEFAULT_QUANTILE = 0.997
@@ -52,8 +55,6 @@ def parse_scenes(text: str | None) -> tuple[int, int | None]:
 
 def tap_of(segmenter: Any, rgb: np.ndarray) -> Any:
     """The frame pass's statistics of ``rgb`` (``FrameTap``); ValueError when the network returned none."""
-    from el.segmentation.contract import segment_frame
-
     tap = segment_frame(segmenter, rgb, stats=True).stats
     if tap is None:
         raise ValueError(f"the segmentation model {type(segmenter).__name__} segmented a frame but returned no frame "
@@ -82,8 +83,6 @@ def embed(gate: Any, segmenter: Any, frames: Iterable[tuple[int, str, np.ndarray
           progress: bool, features: str | None = None) -> np.ndarray:
     """The gate's features (n, d) of ``frames``, each read from the frame pass's own tap (``features``: which;
     None: the gate's default)."""
-    from assurance.progress import progress as bar
-
     check_frame_stats(segmenter, "frame gate")
     which = features or gate.FEATURES[0]
     rows = []
@@ -115,18 +114,35 @@ def _capped(domain: Sequence[tuple[str, int]]) -> str:
     return f" (at most the declared maximum: {', '.join(low)})" if low else ""
 
 
-def fit_gate(data: str | Path, val: str | Path, segmenter: Any, *, kind: str = "mahalanobis",
-             quantile: float = DEFAULT_QUANTILE, train_scenes: str | None = None, val_scenes: str | None = None,
-             weights: dict[str, Any], progress: bool = False, features: str = "auto",
-             perturbations: Sequence[tuple[str, int]] | None = None) -> dict[str, Any]:
-    """The gate document: fitted on ``data``, thresholded at ``quantile`` of ``val`` (``uav-el fit-gate``);
-    ``features``: :data:`CHOICES` (what the Mahalanobis and kNN gates read); ``perturbations``: the in-domain ones
-    as (name, top severity) (a system's declared ones, ``assurance.campaign.perturbation_plan.fit_levels``; None:
-    the shipped gate's six). ValueError (one line) for a network that keeps no frame statistics."""
-    if kind not in GATES:
-        raise ValueError(f"unknown gate kind {kind!r}; known: {', '.join(sorted(GATES))}")
-    if not 0.0 < quantile < 1.0:
-        raise ValueError(f"quantile must lie in (0, 1), got {quantile!r}")
+@dataclass(frozen=True, kw_only=True)
+class GateSettings:
+    """What gate :func:`fit_gate` fits: its ``kind`` (``el.monitors.gates.GATES``), the ``quantile`` of the validation
+    frames' scores its threshold is, the ``features`` it reads (:data:`CHOICES`: what the Mahalanobis and kNN gates
+    read), and the in-domain ``perturbations`` as (name, top severity) (a system's declared ones,
+    ``assurance.campaign.perturbation_plan.fit_levels``; None: the shipped gate's six). Kind and quantile are
+    checked when built."""
+
+    kind: str = "mahalanobis"
+    quantile: float = DEFAULT_QUANTILE
+    features: str = "auto"
+    perturbations: Sequence[tuple[str, int]] | None = None
+
+    def __post_init__(self) -> None:
+        if self.kind not in GATES:
+            raise ValueError(f"unknown gate kind {self.kind!r}; known: {', '.join(sorted(GATES))}")
+        if not 0.0 < self.quantile < 1.0:
+            raise ValueError(f"quantile must lie in (0, 1), got {self.quantile!r}")
+
+
+def fit_gate(data: str | Path, val: str | Path, segmenter: Any, *, settings: GateSettings | None = None,
+             train_scenes: str | None = None, val_scenes: str | None = None, weights: dict[str, Any],
+             progress: bool = False) -> dict[str, Any]:
+    """The gate document: fitted on ``data``, thresholded on ``val`` as ``settings`` say (:class:`GateSettings`;
+    None: its defaults) (``uav-el fit-gate``); ``train_scenes``, ``val_scenes``: which scenes of each
+    (:func:`parse_scenes`). ValueError (one line) for a network that keeps no frame statistics."""
+    settings = settings or GateSettings()
+    kind, quantile = settings.kind, settings.quantile
+    features, perturbations = settings.features, settings.perturbations
     gate = GATES[kind]
     t_first, t_count = parse_scenes(train_scenes)
     v_first, v_count = parse_scenes(val_scenes)

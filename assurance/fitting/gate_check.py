@@ -18,6 +18,7 @@ import numpy as np
 from assurance.fitting.gate_frames import scene_images, validation_frames
 from el.monitors.frame_gate import bind_frame_gate, load_frame_gate
 from el.segmentation.contract import segment_frame
+from el.segmentation.factory import load_model
 
 
 def check(gate_path: str | Path, data: str | Path, segmenter: Any) -> dict[str, dict[str, float]]:
@@ -32,8 +33,6 @@ def check(gate_path: str | Path, data: str | Path, segmenter: Any) -> dict[str, 
 
 
 def main(argv: list[str] | None = None) -> int:
-    from el.segmentation.factory import load_model
-
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("gate")
     p.add_argument("data")

@@ -23,8 +23,12 @@ import numpy as np
 
 from assurance.dataio.layouts import DataSpec, iter_samples
 from assurance.dataio.uavid import read_image
+from assurance.files import atomic_write_bytes
 from assurance.perturbations import perturb
+from assurance.progress import progress
 from assurance.system.build import DEFAULT_IMAGE_SIZE
+from el.segmentation.contract import segment_frame
+from el.segmentation.factory import load_model
 
 IN_DOMAIN = ("none", "brightness", "fog", "motion_blur", "shifted_pixels", "pixel_trap")
 SIZE = DEFAULT_IMAGE_SIZE  # the deployed camera's frame: the release and test scenes' size
@@ -204,10 +208,6 @@ def collect(root: Path, segmenter: Any, out: Path, **limits: Any) -> Path:
 
     import skimage.data  # noqa: F401  (the photographs' package: fail before tapping, not after an hour)
 
-    from assurance.files import atomic_write_bytes
-    from assurance.progress import progress
-    from el.segmentation.contract import segment_frame
-
     old = load(out) if out.is_file() else {k: np.asarray([]) for k in KEYS}
     rows: dict[str, list[Any]] = {k: list(old[k]) for k in KEYS}
     done = frozenset(str(s) for s in rows["set"])
@@ -235,8 +235,6 @@ def load(path: Path) -> dict[str, np.ndarray]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from el.segmentation.factory import load_model
-
     root, out = (Path(a) for a in (argv or sys.argv[1:])[:2])
     collect(root, load_model(None), out)
     print(out)

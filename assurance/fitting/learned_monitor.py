@@ -31,7 +31,9 @@ import numpy as np
 from assurance.campaign.truth import true_hazard
 from assurance.dataio.layouts import iter_samples, read_sample_labels
 from assurance.dataio.uavid import Sample, read_image
+from assurance.fitting.network_identity import network_record
 from assurance.paths import shown_path
+from assurance.progress import progress as bar
 from el.base.hashing import sha256_file
 from el.classes.labels import LabelSet
 from el.geometry.config import CoreConfig
@@ -42,6 +44,29 @@ from el.monitors.patches import extract_patch
 from el.segmentation.contract import labels_of
 
 DEFAULT_CS: tuple[float, ...] = (0.01, 0.1, 1.0, 10.0)
+
+
+@dataclass(frozen=True, kw_only=True)
+class FeatureSettings:
+    """How candidates and their features are computed: the core model's configuration that proposes them (``core``;
+    None: ``CoreConfig()``), the patch around each (``margin``, ``max_side``), the MC-dropout features (``mcd_n``
+    samples, 0: none, at keep probability ``mcd_rho``) and the samples' ``seed`` (candidate k draws ``seed + k``)."""
+
+    core: CoreConfig | None = None
+    margin: float = 0.25
+    max_side: int | None = None
+    mcd_n: int = 0
+    mcd_rho: float = 0.9
+    seed: int = 0
+
+
+@dataclass(frozen=True, kw_only=True)
+class Selection:
+    """How the model is chosen on the held-out candidates: the L2 strengths ``cs`` tried (the best held-out AUROC
+    wins) and the ``recall`` of unsafe candidates its threshold keeps."""
+
+    cs: Sequence[float] = DEFAULT_CS
+    recall: float = 0.95
 
 
 @dataclass
@@ -70,15 +95,15 @@ def split_digest(files: Iterable[tuple[str | Path, str]]) -> str:
     return h.hexdigest()
 
 
-def collect_candidates(data: str | Path, segmenter: Any, *, core: CoreConfig | None = None, margin: float = 0.25,
-                       max_side: int | None = None, mcd_n: int = 0, mcd_rho: float = 0.9, seed: int = 0,
+def collect_candidates(data: str | Path, segmenter: Any, *, features: FeatureSettings | None = None,
                        images: int | None = None, samples: Sequence[Sample] | None = None,
                        progress: bool = False, desc: str = "scenes") -> CandidateSet:
-    """Features and truth of every candidate of the clean scenes of ``data`` (or of ``samples`` in it); ``progress``
-    shows a bar (``desc``) on stderr."""
-    from assurance.progress import progress as bar
-
-    core = core or CoreConfig()
+    """Features and truth of every candidate of the clean scenes of ``data`` (or of ``samples`` in it), computed as
+    ``features`` says (None: :class:`FeatureSettings`' defaults); ``progress`` shows a bar (``desc``) on stderr."""
+    features = features or FeatureSettings()
+    core = features.core or CoreConfig()
+    margin, max_side, mcd_n, mcd_rho, seed = (features.margin, features.max_side, features.mcd_n, features.mcd_rho,
+                                              features.seed)
     if samples is None:
         samples = list(iter_samples(data, require_labels=True))[:images]
     if not samples:
@@ -128,12 +153,14 @@ def _auroc(y: np.ndarray, p: np.ndarray) -> float | None:
     return float(roc_auc_score(y, p)) if 0 < y.sum() < y.size else None
 
 
-def fit_learned_body(train: CandidateSet, val: CandidateSet, *, cs: Sequence[float] = DEFAULT_CS,
-                     recall: float = 0.95, mcd_n: int = 0, mcd_rho: float = 0.9,
-                     weights: dict[str, Any] | None = None, splits: dict[str, Any] | None = None,
-                     labels: LabelSet) -> dict[str, Any]:
-    """The model body: ``C`` by held-out AUROC, the recall threshold on the held-out part, what it rests on;
-    ``labels``: the label set the candidates' features were computed in (their per-class names)."""
+def fit_learned_body(train: CandidateSet, val: CandidateSet, *, selection: Selection | None = None,
+                     features: FeatureSettings | None = None, weights: dict[str, Any] | None = None,
+                     splits: dict[str, Any] | None = None, labels: LabelSet) -> dict[str, Any]:
+    """The model body: ``C`` by held-out AUROC, the recall threshold on the held-out part (``selection``; None: its
+    defaults), what it rests on; ``features``: how the candidates' features were computed (their MC-dropout part;
+    None: none); ``labels``: the label set they were computed in (their per-class names)."""
+    selection, features = selection or Selection(), features or FeatureSettings()
+    cs, recall, mcd_n, mcd_rho = selection.cs, selection.recall, features.mcd_n, features.mcd_rho
     import sklearn
 
     for name, part in (("training", train), ("held-out", val)):
@@ -170,18 +197,17 @@ def fit_learned_body(train: CandidateSet, val: CandidateSet, *, cs: Sequence[flo
 
 
 def fit_learned_monitor(data: str | Path, segmenter: Any, *, val: str | Path | None = None,
-                        core: CoreConfig | None = None, margin: float = 0.25, max_side: int | None = None,
-                        mcd_n: int = 0, mcd_rho: float = 0.9, cs: Sequence[float] = DEFAULT_CS,
-                        recall: float = 0.95, images: int | None = None,
-                        weights: dict[str, Any] | None = None, progress: bool = False) -> dict[str, Any]:
+                        features: FeatureSettings | None = None, selection: Selection | None = None,
+                        images: int | None = None, weights: dict[str, Any] | None = None,
+                        progress: bool = False) -> dict[str, Any]:
     """Train on the candidates of ``data``, select on ``val`` (else every 5th scene of ``data``): the JSON document.
 
-    ``weights``: the network record (default: the one ``segmenter`` reports; ValueError if it reports none)."""
-    from assurance.fitting.network_identity import network_record
-
+    ``features``: how the candidates' features are computed (:class:`FeatureSettings`); ``selection``: how ``C`` and
+    the threshold are chosen (:class:`Selection`); None: their defaults. ``weights``: the network record (default: the
+    one ``segmenter`` reports; ValueError if it reports none)."""
+    features = features or FeatureSettings()
     weights = weights if weights is not None else network_record(segmenter, loaded=False)
-    kw = {"core": core, "margin": margin, "max_side": max_side, "mcd_n": mcd_n, "mcd_rho": mcd_rho,
-          "progress": progress}
+    kw = {"features": features, "progress": progress}
     scenes = list(iter_samples(data, require_labels=True))[:images]
     if val is None:
         held = scenes[4::5]
@@ -196,8 +222,8 @@ def fit_learned_monitor(data: str | Path, segmenter: Any, *, val: str | Path | N
         held_out = collect_candidates(val, segmenter, images=images, desc="held-out scenes", **kw)
         splits = {"train": shown_path(data), "held_out": shown_path(val)}
     labels = labels_of(segmenter)
-    body = fit_learned_body(train, held_out, cs=cs, recall=recall, mcd_n=mcd_n, mcd_rho=mcd_rho,
-                            weights=weights, splits=splits, labels=labels)
+    body = fit_learned_body(train, held_out, selection=selection, features=features, weights=weights, splits=splits,
+                            labels=labels)
     body["labels"] = labels.name  # the label set whose classes the features read (the flight code builds it so)
-    body["patch"] = {"margin": margin, "max_side": max_side}
+    body["patch"] = {"margin": features.margin, "max_side": features.max_side}
     return model_document(body)

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +25,7 @@ import numpy as np
 from assurance.campaign.truth import true_hazard
 from assurance.dataio.layouts import iter_samples, read_sample_labels
 from assurance.dataio.uavid import Sample, read_image
+from assurance.progress import progress as bar
 from el.base.decision import Disc
 from el.classes.labels import LabelSet
 from el.geometry.config import CoreConfig
@@ -84,11 +85,25 @@ def jittered(disc: Disc, rng: np.random.Generator, n: int, width: int, height: i
     return out
 
 
-def scene_crops(rgb: np.ndarray, ids: np.ndarray, segmenter: Any, *, core: CoreConfig, labels: LabelSet,
-                size: int, margin: float, grid: int, jitter: int, rng: np.random.Generator, scene: int,
-                candidates: Sequence[Any] | None = None) -> CropSet:
+@dataclass(frozen=True, kw_only=True)
+class CropSettings:
+    """How a scene's crops are cut: the core model's configuration that proposes the candidates (``core``; None:
+    ``CoreConfig()``), the crop's side ``size`` (px) and ``margin`` around the disc, the auxiliary target's
+    ``grid`` (cells a side) and ``jitter``, the discs mined around each candidate."""
+
+    core: CoreConfig | None = None
+    size: int = 96
+    margin: float = 0.5
+    grid: int = 24
+    jitter: int = 0
+
+
+def scene_crops(rgb: np.ndarray, ids: np.ndarray, segmenter: Any, *, labels: LabelSet, settings: CropSettings,
+                rng: np.random.Generator, scene: int, candidates: Sequence[Any] | None = None) -> CropSet:
     """The crops of one scene's candidates (``candidates``: the core model's, found here when None) and of
-    ``jitter`` mined discs per candidate."""
+    ``settings.jitter`` mined discs per candidate."""
+    core = settings.core or CoreConfig()
+    size, margin, grid, jitter = settings.size, settings.margin, settings.grid, settings.jitter
     height, width = rgb.shape[:2]
     if candidates is None:
         candidates = run_core(segmenter.predict_frame(rgb), (width, height), core, labels=labels).candidates
@@ -111,14 +126,13 @@ def scene_crops(rgb: np.ndarray, ids: np.ndarray, segmenter: Any, *, core: CoreC
                    np.array([(d.x, d.y, d.radius_px) for d, _, _ in discs], np.float64).reshape(-1, 3))
 
 
-def collect_crops(data: str | Path, segmenter: Any, *, core: CoreConfig | None = None, size: int = 96,
-                  margin: float = 0.5, grid: int = 24, jitter: int = 0, seed: int = 0,
+def collect_crops(data: str | Path, segmenter: Any, *, settings: CropSettings | None = None, seed: int = 0,
                   samples: Sequence[Sample] | None = None, images: int | None = None,
                   progress: bool = False, desc: str = "scenes") -> CropSet:
-    """Every candidate crop of the clean scenes of ``data`` (and ``jitter`` mined discs per candidate)."""
-    from assurance.progress import progress as bar
-
-    core = core or CoreConfig()
+    """Every candidate crop of the clean scenes of ``data`` (and ``settings.jitter`` mined discs per candidate), cut
+    as ``settings`` says (None: :class:`CropSettings`'s defaults)."""
+    settings = settings or CropSettings()
+    settings = replace(settings, core=settings.core or CoreConfig())
     if samples is None:
         samples = list(iter_samples(data, require_labels=True))[:images]
     if not samples:
@@ -130,6 +144,5 @@ def collect_crops(data: str | Path, segmenter: Any, *, core: CoreConfig | None =
         rgb, ids = read_image(s.image_path), read_sample_labels(s, labels)
         if ids.shape != rgb.shape[:2]:
             raise ValueError(f"{s.label_path}: label size {ids.shape} differs from the image {rgb.shape[:2]}")
-        parts.append(scene_crops(rgb, ids, segmenter, core=core, labels=labels, size=size, margin=margin,
-                                 grid=grid, jitter=jitter, rng=rng, scene=i))
+        parts.append(scene_crops(rgb, ids, segmenter, labels=labels, settings=settings, rng=rng, scene=i))
     return CropSet.concat(parts)

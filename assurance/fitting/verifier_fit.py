@@ -17,23 +17,85 @@ import io
 import json
 import warnings
 from collections.abc import Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from assurance.dataio.layouts import iter_samples
+from assurance.dataio.uavid import read_image
 from assurance.files import atomic_write_bytes
 from assurance.fitting.learned_monitor import recall_threshold, split_sha256
-from assurance.fitting.verifier_data import CropSet, collect_crops
+from assurance.fitting.network_identity import network_record
+from assurance.fitting.verifier_data import CropSet, CropSettings, collect_crops
 from assurance.fitting.verifier_net import VerifierNet
 from assurance.fitting.verifier_train import TrainConfig, TrainResult, auroc, predict, to_size, train_verifier
 from el.base.hashing import sha256_bytes
 from el.base.records import signed_document
+from el.landing.core import run_core
+from el.monitors.base import CandidateContext
 from el.monitors.verifier import VERIFIER_FORMAT, fused_score
+from el.segmentation.contract import labels_of
+from el.segmentation.lite import pretrained_provenance
+from el.segmentation.onnx_engine import open_session
 
 FUSION_WEIGHTS: tuple[float, ...] = (0.25, 0.4, 0.5, 0.6, 0.75, 0.9)
 OPSET = 17
 MAX_DIFF = 1e-3
+
+
+@dataclass(frozen=True, kw_only=True)
+class VerifierFitOptions:
+    """What :func:`fit_verifier` takes besides its data and training configuration: the core model's configuration
+    (``core``: the candidates), ``jitter`` discs mined around each training candidate, the ``recall`` of held-out
+    unsafe candidates the threshold keeps, the first ``images`` scenes of each split (None: all), the learned model to
+    fuse with (``learned``; None: no fusion), the network's record (``weights``; None: the one the segmenter
+    reports), the ``command`` recorded, whether the encoder starts from ImageNet's weights (``pretrained``), and
+    progress bars."""
+
+    core: Any = None
+    jitter: int = 3
+    recall: float = 0.95
+    images: int | None = None
+    learned: Any = None
+    weights: dict[str, Any] | None = None
+    command: str | None = None
+    pretrained: bool = True
+    progress: bool = False
+
+
+@dataclass(frozen=True)
+class OnnxExport:
+    """The exported network as the record names it: its file (beside the record), its SHA-256, and the largest
+    difference of P(unsafe) between ONNX Runtime and torch (:func:`check_export`)."""
+
+    file: str
+    sha256: str
+    max_diff: float
+
+
+@dataclass(frozen=True, kw_only=True)
+class HeldOutChoice:
+    """What the held-out split chose with: the verifier's P(unsafe) of its candidates (``p``), the ``recall`` of
+    unsafe ones the threshold keeps, and the fusion with the learned monitor (:func:`choose_fusion`; None: none)."""
+
+    p: np.ndarray
+    recall: float
+    fusion: dict[str, Any] | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class VerifierSources:
+    """What a verifier record rests on: the ``splits`` (folders, and their hashes under ``*_sha256``), the
+    segmentation network's record (``weights``), the ``command``, the label set's name (``labels``) and the
+    encoder's ImageNet provenance (``imagenet``; empty: a random start)."""
+
+    splits: dict[str, Any]
+    weights: dict[str, Any]
+    command: str | None
+    labels: str
+    imagenet: dict[str, Any]
 
 
 def export_onnx(model: VerifierNet) -> bytes:
@@ -62,8 +124,6 @@ def export_onnx(model: VerifierNet) -> bytes:
 def check_export(data: bytes, model: VerifierNet, crops: np.ndarray) -> float:
     """The largest difference of P(unsafe) between ONNX Runtime and torch on ``crops``; ValueError above
     :data:`MAX_DIFF`."""
-    from el.segmentation.onnx_engine import open_session
-
     session = open_session(data, "verifier export", 1)
     x = np.ascontiguousarray(crops.transpose(0, 3, 1, 2), np.float32) / np.float32(255.0)
     z = np.asarray(session.run(["logit"], {"crops": x})[0], np.float64)
@@ -92,40 +152,33 @@ def choose_fusion(y: np.ndarray, p_verifier: np.ndarray, p_learned: np.ndarray, 
             "held_out": held_out_figures(y, p, threshold), "learned_alone_auroc": auroc(y, p_learned)}
 
 
-def verifier_body(result: TrainResult, cfg: TrainConfig, train: CropSet, held: CropSet, *, onnx_name: str,
-                  onnx_sha256: str, export_diff: float, p_held: np.ndarray, recall: float,
-                  splits: dict[str, Any], weights: dict[str, Any], command: str | None,
-                  fusion: dict[str, Any] | None, labels: str, provenance: dict[str, Any]) -> dict[str, Any]:
+def verifier_body(result: TrainResult, cfg: TrainConfig, train: CropSet, held: CropSet, *, export: OnnxExport,
+                  choice: HeldOutChoice, sources: VerifierSources) -> dict[str, Any]:
     """The record's body (``el.monitors.verifier.VerifierModel``)."""
+    p_held, recall, splits = choice.p, choice.recall, sources.splits
     y = held.unsafe[held.is_candidate]
     threshold = recall_threshold(p_held, y, recall)
     return {
-        "onnx": {"file": onnx_name, "sha256": onnx_sha256, "opset": OPSET, "max_diff_vs_torch": export_diff},
+        "onnx": {"file": export.file, "sha256": export.sha256, "opset": OPSET, "max_diff_vs_torch": export.max_diff},
         "crop": {"size": cfg.size, "margin": cfg.margin}, "threshold": threshold,
         "criterion": {"name": "tnr-at-recall", "recall": recall, "on": "held-out core-model candidates"},
         "network": {"name": "VerifierNet", "encoder": "EfficientNet-Lite0 stem + blocks 0-10 (ImageNet start)",
                     "parameters": int(sum(p.numel() for p in result.model.parameters())),
-                    "imagenet_weights": provenance},
+                    "imagenet_weights": sources.imagenet},
         "training": {"crops": int(train.unsafe.size), "unsafe": int(train.unsafe.sum()),
                      "candidates": int(train.is_candidate.sum()),
                      "mined": int((~train.is_candidate).sum()), "config": dict(cfg.__dict__),
                      "steps_run": result.steps_run, "selected_step": result.best_step,
                      "seconds": round(result.seconds, 1), "curve": result.curve, "sha256": splits.get("train_sha256")},
         "held_out": {**held_out_figures(y, p_held, threshold), "sha256": splits.get("held_out_sha256")},
-        "fusion": fusion, "splits": {k: v for k, v in splits.items() if not k.endswith("sha256")},
-        "weights": weights, "labels": labels, "command": command,
+        "fusion": choice.fusion, "splits": {k: v for k, v in splits.items() if not k.endswith("sha256")},
+        "weights": sources.weights, "labels": sources.labels, "command": sources.command,
         "created": _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC"),
     }
 
 
 def learned_scores(data: str | Path, segmenter: Any, learned: Any, *, core: Any, images: int | None) -> np.ndarray:
     """The learned monitor's scores of the core model's candidates of ``data``, in the crops' order."""
-    from assurance.dataio.layouts import iter_samples
-    from assurance.dataio.uavid import read_image
-    from el.landing.core import run_core
-    from el.monitors.base import CandidateContext
-    from el.segmentation.contract import labels_of
-
     out: list[float] = []
     for s in list(iter_samples(data, require_labels=True))[:images]:
         rgb = read_image(s.image_path)
@@ -147,20 +200,17 @@ def write_verifier(out: Path, body: dict[str, Any], onnx: bytes) -> dict[str, An
 
 
 def fit_verifier(data: str | Path, val: str | Path, segmenter: Any, out: Path, *, cfg: TrainConfig,
-                 core: Any = None, jitter: int = 3, recall: float = 0.95, images: int | None = None,
-                 learned: Any = None, weights: dict[str, Any] | None = None, command: str | None = None,
-                 pretrained: bool = True, progress: bool = False, log: Any = print) -> dict[str, Any]:
-    """Collect, train, select on ``val``, export, write ``out`` (and its ONNX beside it): the document."""
-    from assurance.dataio.layouts import iter_samples
-    from assurance.fitting.network_identity import network_record
-    from el.segmentation.contract import labels_of
-    from el.segmentation.lite import pretrained_provenance
-
-    weights = weights if weights is not None else network_record(segmenter, loaded=False)
-    kw = {"core": core, "size": 128 if cfg.size <= 128 else cfg.size, "margin": cfg.margin, "progress": progress}
-    train = collect_crops(data, segmenter, jitter=jitter, images=images, desc="training scenes", **kw)
-    held = collect_crops(val, segmenter, jitter=0, images=images, desc="held-out scenes", **kw)
-    result = train_verifier(train, held, cfg, pretrained=pretrained, log=log)
+                 options: VerifierFitOptions | None = None, log: Any = print) -> dict[str, Any]:
+    """Collect, train, select on ``val``, export, write ``out`` (and its ONNX beside it): the document.
+    ``options``: :class:`VerifierFitOptions` (None: its defaults)."""
+    o = options or VerifierFitOptions()
+    core, recall, images, learned = o.core, o.recall, o.images, o.learned
+    weights = o.weights if o.weights is not None else network_record(segmenter, loaded=False)
+    cut = CropSettings(core=core, size=128 if cfg.size <= 128 else cfg.size, margin=cfg.margin)
+    kw = {"images": images, "progress": o.progress}
+    train = collect_crops(data, segmenter, settings=replace(cut, jitter=o.jitter), desc="training scenes", **kw)
+    held = collect_crops(val, segmenter, settings=cut, desc="held-out scenes", **kw)
+    result = train_verifier(train, held, cfg, pretrained=o.pretrained, log=log)
     sel = held.is_candidate
     crops = to_size(held.crops[sel], cfg.size)
     p_held = predict(result.model, crops)
@@ -174,9 +224,10 @@ def fit_verifier(data: str | Path, val: str | Path, segmenter: Any, out: Path, *
     splits = {"train": str(data), "held_out": str(val),
               "train_sha256": split_sha256(list(iter_samples(data, require_labels=True))[:images], data),
               "held_out_sha256": split_sha256(list(iter_samples(val, require_labels=True))[:images], val)}
-    body = verifier_body(result, cfg, train, held, onnx_name=out.with_suffix(".onnx").name,
-                         onnx_sha256=sha256_bytes(onnx), export_diff=diff, p_held=p_held, recall=recall,
-                         splits=splits, weights=weights, command=command, fusion=fusion,
-                         labels=labels_of(segmenter).name,
-                         provenance=pretrained_provenance() if pretrained else {})
+    body = verifier_body(result, cfg, train, held,
+                         export=OnnxExport(out.with_suffix(".onnx").name, sha256_bytes(onnx), diff),
+                         choice=HeldOutChoice(p=p_held, recall=recall, fusion=fusion),
+                         sources=VerifierSources(splits=splits, weights=weights, command=o.command,
+                                                 labels=labels_of(segmenter).name,
+                                                 imagenet=pretrained_provenance() if o.pretrained else {}))
     return write_verifier(out, body, onnx)

@@ -14,9 +14,14 @@ from pathlib import Path
 from typing import Any
 
 from assurance.campaign import readouts
+from assurance.campaign.attestation import UnattestedRunError, check_run_attestation
+from assurance.campaign.integrity import verify_run
+from assurance.code_identity import code_identity
 from assurance.inservice import compare as cmp
 from assurance.inservice import report, spi
 from assurance.inservice.reader import read_logs
+from assurance.requirements import load_registry
+from el.base.hashing import sha256_file
 
 
 @dataclass(frozen=True)
@@ -35,8 +40,6 @@ class Assessment:
 
 def _titles() -> dict[str, str]:
     """Requirement id -> title, from the shipped registry (the claims a breach names)."""
-    from assurance.requirements import load_registry
-
     return {r.id: r.title for r in load_registry()}
 
 
@@ -57,9 +60,6 @@ def assess(logs: Sequence[str | Path], run: str | Path, out: str | Path, *, syst
 
     Raises ``DamagedRunError`` (exit 4) for a damaged or unattested run, ``OtherSystemError`` or
     ``RunMismatchError`` (one line, exit 2) for logs of another system or configuration."""
-    from assurance.campaign.attestation import UnattestedRunError, check_run_attestation
-    from assurance.campaign.integrity import verify_run
-
     run = Path(run)
     check = verify_run(run).raise_if_damaged()
     attested = check_run_attestation(run, trusted)
@@ -77,8 +77,6 @@ def assess(logs: Sequence[str | Path], run: str | Path, out: str | Path, *, syst
     cert = cmp.certified(run, monitor, budget_s=system.time_budget_s)
     comparison = cmp.compare(summary, cert, conf=float(settings["confidence"]), odd=odd)
     results = spi.judge(comparison, settings)
-    from el.base.hashing import sha256_file
-
     envelope = run / "campaign.dsse.json"
     run_info = {"path": str(run.resolve()), "digest": check.digest, "signed_by": attested.keyid,
                 "campaign_attestation_sha256": sha256_file(envelope) if envelope.is_file() else None}
@@ -91,8 +89,6 @@ def assess(logs: Sequence[str | Path], run: str | Path, out: str | Path, *, syst
     json_path, html_path = report.write_report(out, doc, figures)
     signed = None
     if key is not None:
-        from assurance.code_identity import code_identity
-
         pins = {"run_digest": check.digest, "campaign_attestation_sha256": run_info["campaign_attestation_sha256"],
                 **identity, "monitor": monitor, "logs": [{k: f[k] for k in ("path", "sha256", "records", "damaged")}
                                                          for f in summary.files],

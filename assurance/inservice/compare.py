@@ -37,6 +37,8 @@ from scipy import stats
 from assurance.analysis.intervals import clopper_pearson_interval
 from assurance.campaign import readouts
 from assurance.inservice.reader import DECISION_STAGES, LogSummary, reason_kind
+from el.base import records, userfiles
+from el.base.hashing import sha256_file
 
 MIN_DRIFT_N = 10
 """Scores needed on each side before a two-sample test is run (fewer: undecided)."""
@@ -67,14 +69,10 @@ def gate_file_sha256(path: Any, body_sha256: Any) -> str | None:
     the file is not readable here or its body differs."""
     if not path or not body_sha256:
         return None
-    from el.base import userfiles
-    from el.base.hashing import sha256_file
-    from el.base.records import body_sha256 as digest
-
     try:
         doc = json.loads(userfiles.read_text(Path(path), what="frame gate", max_bytes=userfiles.MAX_RECORD_BYTES))
         body = doc.get("body", doc) if isinstance(doc, dict) else None
-        same = isinstance(body, dict) and digest(body) == body_sha256
+        same = isinstance(body, dict) and records.body_sha256(body) == body_sha256
         return sha256_file(Path(path)) if same else None
     except (OSError, ValueError, TypeError):
         return None

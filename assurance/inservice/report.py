@@ -15,6 +15,7 @@ import io
 import json
 import math
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -73,10 +74,25 @@ def _finite(x: float | None) -> float | None:
     return None if x is None or not math.isfinite(x) else float(x)
 
 
-def document(*, run: Mapping[str, Any], identity: Mapping[str, Any], monitor: str, summary: LogSummary,
-             comparison: Mapping[str, Any], spis: Sequence[Any], settings: Mapping[str, Any], system: str,
-             undermined: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
-    """The JSON document of an in-service comparison (see the module docstring)."""
+@dataclass(frozen=True, kw_only=True)
+class Judgement:
+    """What the comparison of the logs with the run found: the measurements compared (``comparison``,
+    ``assurance.inservice.compare.compare``), each SPI's result (``spis``), the ``[in_service]`` settings they were
+    judged with, and the claims a breach undermines (``undermined``)."""
+
+    comparison: Mapping[str, Any]
+    spis: Sequence[Any]
+    settings: Mapping[str, Any]
+    undermined: Sequence[Mapping[str, Any]]
+
+
+def document(*, run: Mapping[str, Any], identity: Mapping[str, Any], monitor: str, system: str, summary: LogSummary,
+             judgement: Judgement) -> dict[str, Any]:
+    """The JSON document of an in-service comparison (see the module docstring): the run (``run``: where, its digest,
+    its signer; ``identity``: the system and configuration it certified), the flown ``monitor``, the ``system``
+    file's label, the logs read (``summary``) and what the comparison found (``judgement``)."""
+    comparison, spis, settings, undermined = (judgement.comparison, judgement.spis, judgement.settings,
+                                              judgement.undermined)
     breached = [r.name for r in spis if r.verdict == "breach"]
     times = [w.start_s for w in summary.timeline.windows] + [w.end_s for w in summary.timeline.windows]
     return {

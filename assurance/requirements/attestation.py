@@ -17,6 +17,9 @@ from assurance.attest import AttestationError
 from assurance.attest.dsse import read_envelope, write_envelope
 from assurance.attest.keys import SigningKey
 from assurance.attest.statement import make_statement, open_statement, sign_statement, subject_problems
+from assurance.campaign.attestation import ATTESTATION as CAMPAIGN
+from assurance.campaign.readouts import MAX_RUN_JSON_BYTES, read_manifest
+from el.base import userfiles
 from el.base.hashing import sha256_file
 
 KIND = "requirements"
@@ -30,8 +33,6 @@ def results_pins(run: Path, manifest: Mapping[str, Any], registry: Mapping[str, 
                  waivers: str | Path | None) -> dict[str, Any]:
     """The values a results statement pins (``PINNED``) for ``run``; ``registry``: the registry's ``sha256`` and
     ``parameters_sha256`` (as a results file records them, or from the report's loaded registry)."""
-    from assurance.campaign.attestation import ATTESTATION as CAMPAIGN
-
     envelope = Path(run) / CAMPAIGN
     return {"run_digest": run_digest,
             "campaign_attestation_sha256": sha256_file(envelope) if envelope.is_file() else None,
@@ -49,8 +50,6 @@ def sign_session_results(run: str | Path, out: str | Path, key: SigningKey, *, w
 
     run, out = Path(run), Path(out)
     results = out / "requirements.json"
-    from assurance.campaign.readouts import MAX_RUN_JSON_BYTES, read_manifest
-    from el.base import userfiles
 
     doc = json.loads(userfiles.read_text(results, what="requirement results", max_bytes=MAX_RUN_JSON_BYTES))
     ctx, reg = doc.get("context") or {}, doc.get("registry") or {}

@@ -30,7 +30,11 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, replace
 from typing import Any
 
+from assurance.campaign.label_pin import label_set_sha256
+from assurance.requirements.registry import load_registry
+from assurance.requirements.weakening import STRONGER, _weaker
 from el.classes.class_names import class_key, pinned_category
+from el.classes.labels import label_presets, load_label_set
 
 SYSTEM_CHOICES = ("deployed_monitor", "calibration_card", "forbidden_categories")
 """Parameters that name parts of the system assessed rather than a target: not compared with the basis."""
@@ -166,8 +170,6 @@ def _rgb_text(rgb: Iterable[int]) -> str:
 def well_known_forbidden_colours() -> dict[tuple[int, int, int], list[str]]:
     """Colour -> ``"CLASS (SET)"`` of every forbidden class of the well-known label sets: the packaged presets
     (``el.classes.labels.label_presets``: UAVid, Semantic Drone), read with their own checks."""
-    from el.classes.labels import label_presets, load_label_set
-
     out: dict[tuple[int, int, int], list[str]] = {}
     for preset in label_presets():
         labels = load_label_set(preset)
@@ -198,8 +200,6 @@ def colour_deviations(labels: Any, must_forbid: Iterable[str] = ()) -> list[Devi
 def _basis_accepts(labels: Any, accepted: Iterable[str]) -> dict[str, str]:
     """``{class:NAME: why}`` of the safe ``unknown`` classes of ``labels`` the basis itself accepts: its registry's
     ``safe_unknown_accepted`` entries ``SHA256:NAME`` naming this set's content SHA-256."""
-    from assurance.campaign.label_pin import label_set_sha256
-
     entries = [str(e).partition(":") for e in accepted or ()]
     if not entries:
         return {}
@@ -272,9 +272,6 @@ def deviations(targets: Mapping[str, Any] | None, accepted: Iterable[str] = (), 
     (:func:`label_deviations`); ``accepted``: the auditor's acceptances, ``NAME=VALUE`` each (a deviation is
     accepted only when VALUE is the system's value, :func:`value_matches`). A plain NAME, or a name the system does
     not deviate on, is a ``ValueError`` (a typo must not pass silently)."""
-    from assurance.requirements.registry import load_registry
-    from assurance.requirements.weakening import STRONGER, _weaker
-
     basis = load_registry(None)
     effective = basis.with_targets(dict(targets or {}), source="the system's targets").parameters
     found = []

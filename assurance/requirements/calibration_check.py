@@ -5,6 +5,9 @@ from __future__ import annotations
 
 from typing import Any
 
+from assurance.analysis.intervals import BOUND_MISSED, decide_rate_bound
+from assurance.requirements import records as rq
+
 
 def check_calibrated_miss_rate(candidates: Any, card: Any, perturbation: str = "none",
                                run_models: dict[str, str] | None = None, run_network: Any = False, *,
@@ -24,9 +27,6 @@ def check_calibrated_miss_rate(candidates: Any, card: Any, perturbation: str = "
     manifest's ``data``): a run on the card's own calibration scenes, or on scenes whose meta declare a split
     other than ``test``, judges nothing (insufficient).
     """
-    from assurance.analysis.intervals import BOUND_MISSED, decide_rate_bound
-    from assurance.requirements import records as rq
-
     if card.body.get("miss_rate") is None or card.body.get("confidence") is None:
         chosen = (card.body.get("criterion") or {}).get("name", "another criterion")
         return rq.Evidence(f"miss rate of the calibrated monitor ({card.spec})", rq.INSUFFICIENT,

@@ -7,10 +7,14 @@ of the requirement tests and of the evidence report's checks.
 
 from __future__ import annotations
 
+from assurance.paths import card_path
 from assurance.requirements import checks as ck
 from assurance.requirements import determinism
+from assurance.requirements.calibration_check import check_calibrated_miss_rate
 from assurance.requirements.catalogue import CheckContext, check
+from assurance.requirements.domain_checks import check_outside_domain
 from assurance.requirements.records import INSUFFICIENT, Evidence
+from el.monitors.calibration import load_calibration
 
 
 @check("EL-R04")
@@ -94,10 +98,6 @@ def pose_error_margin(ctx: CheckContext) -> Evidence:
 @check("EL-R16", parameters=("calibration_card", "calibration_min_unsafe"))
 def calibrated_miss_rate(ctx: CheckContext) -> Evidence:
     """The calibrated monitor's miss rate on the test split is within its card's (no card: not verified)."""
-    from assurance.paths import card_path
-    from assurance.requirements.calibration_check import check_calibrated_miss_rate
-    from el.monitors.calibration import load_calibration
-
     card = ctx.parameters.get("calibration_card")
     if not card:
         return Evidence("miss rate of the calibrated monitor", INSUFFICIENT,
@@ -113,6 +113,4 @@ def calibrated_miss_rate(ctx: CheckContext) -> Evidence:
 @check("EL-R17")
 def outside_domain(ctx: CheckContext) -> Evidence:
     """No frame outside the run's declared operating domain ends in a landing; frames outside counted."""
-    from assurance.requirements.domain_checks import check_outside_domain
-
     return check_outside_domain(ctx.images, (ctx.manifest or {}).get("config", {}).get("odd"))

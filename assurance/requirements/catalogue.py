@@ -15,6 +15,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from assurance.analysis.table import results_table
+from assurance.campaign import readouts
 from assurance.requirements.records import Evidence
 
 ARTEFACTS: tuple[str, ...] = ("results_table", "report")
@@ -55,36 +57,26 @@ class CheckContext:
     @property
     def manifest(self) -> dict[str, Any]:
         """The run's manifest."""
-        from assurance.campaign import readouts
-
         return self._get("manifest", lambda: readouts.read_manifest(self.run))
 
     @property
     def images(self) -> Any:
         """The run's images readouts (one row per image and configuration)."""
-        from assurance.campaign import readouts
-
         return self._get("images", lambda: readouts.load_table(self.run, "images"))
 
     @property
     def candidates(self) -> Any:
         """The run's candidates readouts (one row per candidate and configuration)."""
-        from assurance.campaign import readouts
-
         return self._get("candidates", lambda: readouts.load_table(self.run, "candidates"))
 
     @property
     def table(self) -> Any:
         """The run's results table (``n_boot`` bootstrap resamples)."""
-        from assurance.analysis.table import results_table
-
         return self._get("table", lambda: results_table(self.run, n_boot=self.n_boot))
 
     @property
     def input_size(self) -> tuple[int, int] | None:
         """(W, H) of the run's input images (its first evaluated image); None when no image was evaluated."""
-        from assurance.campaign import readouts
-
         return readouts.input_size(self.images)
 
 

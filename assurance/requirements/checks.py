@@ -16,8 +16,11 @@ from typing import Any
 
 import numpy as np
 
+from assurance.analysis.intervals import BOUND_MET, BOUND_MISSED, clopper_pearson_upper, decide_rate_bound
 from assurance.requirements.records import FAIL, INSUFFICIENT, PASS, Evidence
 from el.flight.kernel import REFUSALS
+from el.geometry.camera import required_beta, working_size
+from el.geometry.config import CoreConfig
 from el.monitors.spec import walk_of
 from el.monitors.walk import walk_order
 
@@ -201,8 +204,6 @@ def images_needed_at(rate: float, bound: float, conf: float = 0.95, limit: int =
     >>> images_needed_at(0.0, 0.05), images_needed_at(0.06, 0.05)
     (59, None)
     """
-    from assurance.analysis.metrics import clopper_pearson_upper
-
     if not 0 <= rate < bound:
         return None
 
@@ -237,8 +238,6 @@ def _bound_verdict(k: int, n: int, bound: float, conf: float) -> tuple[str, Any]
     Failed at any size when the lower bound exceeds ``bound``; in between, failed when the sample was large enough
     for zero unsafe landings to show ``bound`` (the acceptance criterion could be met and was not), else undecided.
     """
-    from assurance.analysis.intervals import BOUND_MET, BOUND_MISSED, clopper_pearson_upper, decide_rate_bound
-
     d = decide_rate_bound(k, n, bound, conf)
     if d.verdict == BOUND_MET:
         return PASS, d
@@ -338,9 +337,6 @@ def pose_margin(core: Any, size: tuple[int, int], pose_error: Mapping[str, float
 
     ``core``: a CoreConfig or its dict (``CoreConfig.to_dict``); ``size``: the input image (W, H).
     """
-    from el.geometry.camera import required_beta, working_size
-    from el.geometry.config import CoreConfig
-
     cfg = core if isinstance(core, CoreConfig) else CoreConfig.from_dict(dict(core))
     w, h = working_size(int(size[0]), int(size[1]), cfg.working_width)
     geo = cfg.geometry(w, h)  # with the core's reach_m: beta is judged over the rows it plans on

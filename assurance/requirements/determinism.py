@@ -13,8 +13,20 @@ from typing import Any
 
 import numpy as np
 
+from assurance.analysis.metrics import ScenarioMetrics, rows_to_frame
+from assurance.analysis.table import image_readouts, results_table
+from assurance.campaign import readouts
+from assurance.campaign.run import CampaignConfig, execute, monitor_models, plan
+from assurance.campaign.run import manifest as make_manifest
+from assurance.dataio.layouts import data_source
 from assurance.perturbations import TRAITS
 from assurance.requirements.records import FAIL, INSUFFICIENT, PASS, Evidence
+from assurance.system.model import load_model_spec
+from el.classes.labels import UAVID, LabelSet
+from el.geometry.config import CoreConfig
+from el.segmentation.contract import weights_sha256_of
+from el.segmentation.factory import load_model
+from el.segmentation.onnx_engine import file_identity
 
 TIMING_COLUMNS: frozenset[str] = frozenset({
     "read_s", "perturb_s", "segmentation_s", "candidates_s", "monitoring_s", "total_s", "overhead_s", "seconds",
@@ -28,10 +40,6 @@ def check_table_recomputation(run: str | Path, *, n_boot: int = 500) -> Evidence
     """EL-R11: the results table recomputed from the readouts is the same whatever the order in which
     the shards are read, and equals the run's stored ``results.csv`` (if any), timing columns aside."""
     import pandas as pd
-
-    from assurance.analysis.metrics import ScenarioMetrics, rows_to_frame
-    from assurance.analysis.table import image_readouts, results_table
-    from assurance.campaign import readouts
 
     run = Path(run)
     name = "results table recomputed from the readouts"
@@ -74,9 +82,6 @@ def check_table_recomputation(run: str | Path, *, n_boot: int = 500) -> Evidence
 
 def _campaign_config(man: Mapping[str, Any]) -> Any:
     """The CampaignConfig a run's manifest records."""
-    from assurance.campaign.run import CampaignConfig
-    from el.geometry.config import CoreConfig
-
     cfg_d = dict(man["config"])
     cfg_d["core"] = CoreConfig.from_dict(cfg_d["core"])
     for k in ("perturbations", "severities", "monitors"):
@@ -87,8 +92,6 @@ def _campaign_config(man: Mapping[str, Any]) -> Any:
 def _run_labels(source: Any) -> Any:
     """The label set of a run's network: a system file's model records it; the shipped network and a weights file
     of the project's own architecture segment into UAVid's classes."""
-    from el.classes.labels import UAVID, LabelSet
-
     if isinstance(source, Mapping) and source.get("labels"):
         return LabelSet.from_dict(source["labels"])
     return UAVID
@@ -96,10 +99,6 @@ def _run_labels(source: Any) -> Any:
 
 def _replan(man: Mapping[str, Any], config: Any, own_model: bool) -> list[Any] | str:
     """The run's tasks planned again on its data folder, or why they cannot be (data or weights gone or changed)."""
-    from assurance.campaign.run import manifest as make_manifest
-    from assurance.campaign.run import plan
-    from assurance.dataio.layouts import data_source
-
     data = data_source(man["data"])  # the run's [data] table when it had one
     if not Path(data).is_dir():
         return f"insufficient evidence: the run's data folder {data} is gone"
@@ -107,9 +106,6 @@ def _replan(man: Mapping[str, Any], config: Any, own_model: bool) -> list[Any] |
     named = (man.get("weights") or {}).get("model")
     source = getattr(config, "weights", None)
     if not own_model and isinstance(source, Mapping):  # a system file's model: it must load as it did
-        from assurance.system.model import load_model_spec
-        from el.segmentation.contract import weights_sha256_of
-
         try:
             now = weights_sha256_of(load_model_spec(source))
         except Exception as exc:
@@ -117,9 +113,6 @@ def _replan(man: Mapping[str, Any], config: Any, own_model: bool) -> list[Any] |
         if now != man["weights"].get("sha256"):
             return "insufficient evidence: the run's model reports other weights than in the run"
     elif not own_model and named:  # a model registered by name: it must still load and report the same weights
-        from el.segmentation.contract import weights_sha256_of
-        from el.segmentation.factory import load_model
-
         try:
             now = weights_sha256_of(load_model(named))
         except Exception as exc:
@@ -127,8 +120,6 @@ def _replan(man: Mapping[str, Any], config: Any, own_model: bool) -> list[Any] |
         if now != man["weights"].get("sha256"):
             return f"insufficient evidence: the model {named!r} reports other weights than in the run"
     elif not own_model:
-        from el.segmentation.onnx_engine import file_identity
-
         if not weights or not Path(weights).is_file():
             return f"insufficient evidence: the run's weights {weights} are gone"
         try:
@@ -137,7 +128,6 @@ def _replan(man: Mapping[str, Any], config: Any, own_model: bool) -> list[Any] |
             return f"insufficient evidence: the run's weights {weights} cannot be read now: {exc}"
         if now_sha != man["weights"].get("sha256"):
             return f"insufficient evidence: the weights file {weights} changed since the run"
-    from assurance.campaign.run import monitor_models
 
     try:
         models = monitor_models(config.monitors, _run_labels(source))
@@ -162,8 +152,6 @@ def _differing_columns(stored: Any, again: Any) -> list[str]:
     Columns the code added since the run (in ``readouts.COLUMNS`` but not in the stored table, e.g. the
     image width and height) are left out, so a run recorded before them can still be re-run.
     """
-    from assurance.campaign import readouts
-
     added = [c for c in again.columns if c not in stored.columns and c in set().union(*readouts.COLUMNS.values())]
     again = again.drop(columns=added)
     if list(stored.columns) != list(again.columns):
@@ -189,9 +177,6 @@ def check_rerun(run: str | Path, *, shards: int = 1, work_dir: str | Path, threa
     The tasks re-run are the first ones (sorted shard names) of a perturbation that draws random numbers,
     so the per-image seeding is exercised too. ``segmenter`` replaces the model of the manifest's weights.
     """
-    from assurance.campaign import readouts
-    from assurance.campaign.run import execute
-
     run = Path(run)
     man = readouts.read_manifest(run)
     config = _campaign_config(man)

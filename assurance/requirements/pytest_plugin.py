@@ -45,6 +45,9 @@ from typing import Any
 
 import pytest
 
+from assurance import requirements as rq  # the package's names load on first use (its __getattr__), not here
+from assurance.files import atomic_write_bytes
+
 MARKER = "requirements"
 DEFAULT_REPORT = Path("reports") / "requirements.json"
 TARGETS_ENV = "UAV_EL_TARGETS"
@@ -124,7 +127,7 @@ def _bind(config: pytest.Config) -> None:
     if hasattr(config, "workerinput") or config.stash.get(_BOUND, False):
         return
     config.stash[_BOUND] = True
-    from assurance.requirements import binding
+    from assurance.requirements import binding  # deferred: loads pandas and the campaign readouts; plugin stays light
 
     run = binding.run_path(config.getoption("uav_el_run", None), str(config.getini("uav_el_run") or ""),
                            _ini_base(config))
@@ -165,19 +168,17 @@ def set_targets(config: pytest.Config, targets: Any, *, source: str = "set_targe
 def registry(config: pytest.Config) -> Any:
     """The session's validated requirement registry with the session's targets applied (loaded once;
     UsageError if the registry or a target is invalid)."""
-    from assurance.requirements import RegistryError, TargetError, load_registry, read_targets_file
-
     reg = config.stash.get(_REGISTRY, None)
     if reg is None:
         try:
             bound = config.stash.get(_TARGETS, None)
             if bound is None and _targets_file(config):
                 path = _targets_file(config)
-                bound = (read_targets_file(path), str(Path(path).resolve()))
+                bound = (rq.read_targets_file(path), str(Path(path).resolve()))
             targets, source = bound or ({}, None)
-            reg = load_registry(_setting(config, "requirements_registry", "uav_el_registry"), targets=targets,
-                                targets_source=source)
-        except (RegistryError, TargetError) as exc:
+            reg = rq.load_registry(_setting(config, "requirements_registry", "uav_el_registry"), targets=targets,
+                                   targets_source=source)
+        except (rq.RegistryError, rq.TargetError) as exc:
             raise pytest.UsageError(f"requirement registry: {exc}") from None
         config.stash[_REGISTRY] = reg
     return reg
@@ -280,11 +281,9 @@ class _Recorder:
         if path is None:
             return
         _bind(config)  # a report is always bound to its run (or records that there is none)
-        from assurance.requirements import results_document
-
         results = session_results(config)
         context = dict(config.stash[_CONTEXT])
-        from assurance.code_identity import code_identity
+        from assurance.code_identity import code_identity  # deferred: imports el; every pytest session loads the plugin
 
         code = code_identity()
         context.setdefault("run_digest", None)  # the evidence gate refuses results bound to no run
@@ -292,10 +291,8 @@ class _Recorder:
                        rootdir=str(config.rootpath),
                        args=list(config.invocation_params.args), markexpr=config.getoption("markexpr", "") or "",
                        python=sys.version.split()[0], pytest=pytest.__version__)
-        doc = results_document(registry(config), results, context=context,
-                               collection_errors=config.stash[_ERRORS], exitstatus=int(exitstatus))
-        from assurance.files import atomic_write_bytes
-
+        doc = rq.results_document(registry(config), results, context=context,
+                                  collection_errors=config.stash[_ERRORS], exitstatus=int(exitstatus))
         atomic_write_bytes(path, (json.dumps(doc, indent=2, sort_keys=False, allow_nan=False) + "\n").encode())
         config.stash[_WRITTEN] = (path, doc["summary"], results)
 
@@ -339,28 +336,24 @@ def _crash_message(report: Any, limit: int = 2000) -> str:
 
 def outcome_of(nodeid: str, reports: list[Any]) -> Any:
     """One TestOutcome from the setup / call / teardown reports of a test."""
-    from assurance.requirements import TestOutcome
-
     duration = float(sum(getattr(r, "duration", 0.0) for r in reports))
     for r in reports:
         if r.failed:
             kind = "failed" if r.when == "call" else "error"
-            return TestOutcome(nodeid, kind, duration, _crash_message(r))
+            return rq.TestOutcome(nodeid, kind, duration, _crash_message(r))
     for r in reports:
         if r.skipped:
             if hasattr(r, "wasxfail"):
-                return TestOutcome(nodeid, "xfailed", duration, f"expected failure: {r.wasxfail}".rstrip(": "))
-            return TestOutcome(nodeid, "skipped", duration, _skip_reason(r))
+                return rq.TestOutcome(nodeid, "xfailed", duration, f"expected failure: {r.wasxfail}".rstrip(": "))
+            return rq.TestOutcome(nodeid, "skipped", duration, _skip_reason(r))
     call = [r for r in reports if r.when == "call"]
     if call and call[0].passed:
-        return TestOutcome(nodeid, "xpassed" if hasattr(call[0], "wasxfail") else "passed", duration)
-    return TestOutcome(nodeid, "not run", duration)
+        return rq.TestOutcome(nodeid, "xpassed" if hasattr(call[0], "wasxfail") else "passed", duration)
+    return rq.TestOutcome(nodeid, "not run", duration)
 
 
 def session_results(config: pytest.Config) -> dict[str, Any]:
     """Every requirement's RequirementResult for this session so far."""
-    from assurance.requirements import TestOutcome, evaluate
-
     reg = registry(config)
     claims = dict(config.stash[_CLAIMS])
     deselected = config.stash[_DESELECTED]
@@ -375,8 +368,8 @@ def session_results(config: pytest.Config) -> dict[str, Any]:
         if nodeid in seen or not ids:
             continue
         outcome = "deselected" if nodeid in deselected else "not run"
-        pairs.append((ids, TestOutcome(nodeid, outcome, 0.0, "")))
-    return evaluate(reg, pairs)
+        pairs.append((ids, rq.TestOutcome(nodeid, outcome, 0.0, "")))
+    return rq.evaluate(reg, pairs)
 
 
 def _report_path(config: pytest.Config) -> Path | None:

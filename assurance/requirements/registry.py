@@ -19,6 +19,7 @@ from typing import Any
 
 import yaml
 
+from assurance.requirements.system_facts import TEMPLATE_FACTS, check_facts, shipped_facts
 from assurance.requirements.targets import (
     REQUIRED_TARGETS,
     TargetError,
@@ -208,8 +209,6 @@ def _build(path: Path, sha: str, sources: dict[str, str], defaults: dict[str, An
            targets: dict[str, Any], source: str | None, facts: Mapping[str, str] | None = None) -> Registry:
     """The registry with ``targets`` (already validated) over ``defaults``, its texts rendered from the result
     and the system's ``facts`` (the shipped system's when None)."""
-    from assurance.requirements.system_facts import TEMPLATE_FACTS, check_facts, shipped_facts
-
     params = {**defaults, **targets}
     facts = check_facts(dict(facts) if facts else shipped_facts())
     # a fact is a value, substituted once into the registry's texts: its own braces are never read as placeholders

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from assurance.requirements.registry import Registry
+from el.base import userfiles
 
 VERIFIED, FAILED, NOT_VERIFIED = "verified", "failed", "not verified"
 STATES: tuple[str, ...] = (VERIFIED, FAILED, NOT_VERIFIED)
@@ -139,8 +140,6 @@ def load_results(path: str | Path, registry: Registry) -> tuple[dict[str, Requir
     Requirements of the registry absent from the file are "not verified" ("not in the test results");
     ids in the file that the registry lacks are ignored (listed in ``doc['ignored_ids']``).
     """
-    from el.base import userfiles
-
     path = Path(path)
     if not path.exists() and not path.is_symlink():
         raise FileNotFoundError(f"{path}: requirement results not found (run: uav-el verify RUN --out DIR)")

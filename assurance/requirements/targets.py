@@ -19,6 +19,7 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
+from el.base import userfiles
 from el.base.errors import UavElError
 
 
@@ -145,8 +146,6 @@ def _same_kind(value: Any, default: Any) -> bool:
 
 def read_targets_file(path: str | Path) -> dict[str, Any]:
     """A JSON object of target overrides (``--uav-el-targets FILE.json``); TargetError naming the file otherwise."""
-    from el.base import userfiles
-
     path = Path(path)
     try:  # a regular file of at most 1 MiB (a FIFO or a device refused before any read), nested at most 32 deep
         text = userfiles.read_text(path, what="targets file", max_bytes=userfiles.MAX_SETTINGS_BYTES)

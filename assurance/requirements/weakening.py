@@ -14,6 +14,9 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
+from assurance.paths import card_path
+from el.base.hashing import sha256_file
+
 LOWER, HIGHER, SUPERSET, SUBSET, EQUAL, EACH_HIGHER = "lower", "higher", "superset", "subset", "equal", "each higher"
 
 STRONGER: dict[str, str] = {
@@ -43,9 +46,6 @@ _WORD = {LOWER: "higher (looser)", HIGHER: "lower (looser)", SUPERSET: "missing"
 
 def _card_identity(value: Any) -> Any:
     """A calibration card compared by content (its SHA-256), wherever its path points; None for none."""
-    from assurance.paths import card_path
-    from el.base.hashing import sha256_file
-
     path = card_path(value)
     if path is None:
         return None

@@ -101,7 +101,7 @@ def _row_of_buildings(b: Builder, a0: float, a1: float, b0: float, b1: float, *,
         x, y = b.to_world(ca, cb)
         if pitched and w < l:
             w, l, ang = l, w, ang + math.pi / 2
-        props.add_building(b, x, y, w - 0.02, l - 0.02, ang, h, pitched=pitched)
+        props.add_building(b, x, y, w - 0.02, l - 0.02, ang, h, style=props.BuildingStyle(pitched=pitched))
         s += ln
 
 
@@ -262,7 +262,7 @@ def lawn(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
         if b.free_rect_local(ca - bw / 2 - 1, ca + bw / 2 + 1, cb - bl / 2 - 1, cb + bl / 2 + 1):
             x, y = b.to_world(ca, cb)
             props.add_building(b, x, y, bw, bl, b.phi, float(rng.uniform(4, 9)),
-                               pitched=rng.random() < st.pitched_prob)
+                               style=props.BuildingStyle(pitched=rng.random() < st.pitched_prob))
     if rng.random() < 0.4:
         blob_region(b, float(rng.uniform(a0, a1)), float(rng.uniform(b0, b1)), float(rng.uniform(3, 10)),
                     float(rng.uniform(2, 6)), CLUTTER, Look("soil", pick(rng, pal.soil, 0.1)))
@@ -341,7 +341,7 @@ def industrial(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None:
             continue
         x, y = b.to_world(ca, cb)
         props.add_building(b, x, y, w, l, b.phi, float(np.clip(rng.uniform(*st.building_height), 4.0, 16.0)),
-                           pitched=rng.random() < 0.15, industrial=True)
+                           style=props.BuildingStyle(pitched=rng.random() < 0.15, industrial=True))
     add_object_lookalikes(b, "industrial", a0, a1, b0, b1)
     scatter_clutter(b, a0, a1, b0, b1, int(rng.integers(2, 12)), ["container", "pallets", "dumpster", "container"])
     for _ in range(int(rng.integers(0, 4))):

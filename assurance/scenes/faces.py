@@ -41,6 +41,20 @@ class FaceArrays:
     roof: np.ndarray  # bool: a building's flat top (receives per-pixel roof shadows)
 
 
+@dataclass(frozen=True)
+class FaceLight:
+    """How a face is lit: its ``lambert`` term (the sun on it), the object-level ``shadow`` amount, its ambient
+    occlusion ``ao``, and ``roof``: a building's flat top, which receives per-pixel roof shadows."""
+
+    lambert: float = 0.0
+    shadow: float = 0.0
+    ao: float = 1.0
+    roof: bool = False
+
+
+NO_LIGHT = FaceLight()
+
+
 class FaceTable:
     """Collects faces while drawing; ``arrays()`` freezes them into lookup tables."""
 
@@ -52,13 +66,12 @@ class FaceTable:
     def __len__(self) -> int:
         return len(self._rows) + 1
 
-    def add(self, kind: int, label: int, look: Look, *, lambert: float = 0.0, shadow: float = 0.0,
-            ao: float = 1.0, z: float = 0.0, offset: tuple[float, float] = (0.0, 0.0),
-            plane: np.ndarray | None = None, canopy: tuple[float, float, float, float] | None = None,
-            roof: bool = False) -> int:
-        """Register a face; returns its id (>= 1)."""
+    def add(self, kind: int, label: int, look: Look, *, light: FaceLight = NO_LIGHT, z: float = 0.0,
+            offset: tuple[float, float] = (0.0, 0.0), plane: np.ndarray | None = None,
+            canopy: tuple[float, float, float, float] | None = None) -> int:
+        """Register a face lit as ``light`` says; returns its id (>= 1)."""
         fid = len(self._rows) + 1
-        self._rows.append((kind, label, look, lambert, shadow, ao, z, offset, roof))
+        self._rows.append((kind, label, look, light.lambert, light.shadow, light.ao, z, offset, light.roof))
         if plane is not None:
             self._planes[fid] = plane
         if canopy is not None:

@@ -20,6 +20,7 @@ import numpy as np
 from assurance.dataio.poses import POSES_FILE, read_meta, write_poses
 from assurance.dataio.uavid import sample_paths, write_image
 from assurance.files import atomic_write_bytes
+from assurance.progress import progress
 from assurance.scenes.builder import Builder
 from assurance.scenes.layout import build_city
 from assurance.scenes.rand import Rand
@@ -27,6 +28,7 @@ from assurance.scenes.renderer import render
 from assurance.scenes.styles import ALL_STYLES, HELD_OUT_STYLES, LIGHTINGS, Style, choose_style, get_style
 from assurance.scenes.view import coverage_domain, visible_ground
 from assurance.scenes.world import Sun, World
+from assurance.workers import die_with_parent
 from el.classes.labels import CLASS_NAMES, NUM_CLASSES, PALETTE
 from el.geometry.camera import HEIGHT_M, PITCH_DEG, CameraGeometry, Intrinsics, Pose, check_geometry
 
@@ -258,8 +260,6 @@ def _write_job(args: tuple[str, int, int, str, tuple[int, int], ViewPlan | None]
 
 def _iterate(items: Iterator[str], total: int, desc: str, enabled: bool) -> Iterator[str]:
     """Progress on stderr when enabled: a bar on a terminal, plain lines otherwise (``assurance.progress``)."""
-    from assurance.progress import progress
-
     yield from progress(items, total=total, desc=desc, enabled=enabled)
 
 
@@ -296,8 +296,6 @@ def _render_all(todo: list[Any], split: str, progress: bool, jobs: int) -> None:
         for _ in _iterate(results, total=len(todo), desc=f"synth {split}", enabled=progress):
             pass
     else:
-        from assurance.workers import die_with_parent
-
         with ProcessPoolExecutor(max_workers=jobs, initializer=die_with_parent, initargs=(os.getpid(),)) as pool:
             for _ in _iterate(pool.map(_write_job, todo), total=len(todo), desc=f"synth {split}", enabled=progress):
                 pass

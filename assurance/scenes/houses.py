@@ -80,7 +80,8 @@ def _house_lot(b: Builder, s0: float, s1: float, t0: float, t1: float, facing: i
     bw, bl = hw, hd
     if pitched and rng.random() < 0.35:
         bw, bl, ang = hd, hw, ang + math.pi / 2
-    props.add_building(b, x, y, bw, bl, ang, h, pitched=pitched, equipment=rng.random() < 0.3)
+    props.add_building(b, x, y, bw, bl, ang, h,
+                       style=props.BuildingStyle(pitched=pitched, equipment=rng.random() < 0.3))
     # hedges on the lot sides, trees and extras in the back
     if rng.random() < 0.2:
         side_len = min(depth - 2, setback + hd + float(rng.uniform(0, 8)))

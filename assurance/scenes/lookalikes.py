@@ -140,7 +140,8 @@ def low_building(b: Builder, a0: float, a1: float, b0: float, b1: float) -> None
                "grass": pal.grass}[kind]
     x, y = b.to_world(ca, cb)
     props.add_building(b, x, y, w, l, b.phi + float(rng.choice([0.0, math.pi / 2])), float(rng.uniform(2.4, 4.0)),
-                       roof=Look(kind, pick(rng, colours, 0.1)), parapet=False, equipment=False)
+                       style=props.BuildingStyle(roof=Look(kind, pick(rng, colours, 0.1)), parapet=False,
+                                                 equipment=False))
 
 
 def stray_cars(b: Builder, a0: float, a1: float, b0: float, b1: float, n: int) -> None:

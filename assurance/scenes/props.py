@@ -7,6 +7,7 @@ a heading (rad) and randomises its size and colours from the builder's style pal
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -63,11 +64,26 @@ def facade_look(b: Builder, *, industrial: bool = False, height: float = 10.0) -
                 cell=(su, sv, float(rng.uniform(0.16, 0.34)), float(rng.uniform(0.16, 0.3))))
 
 
+@dataclass(frozen=True, kw_only=True)
+class BuildingStyle:
+    """How a building is built, besides where and how big: a ``pitched`` roof (its ridge along the width), an
+    ``industrial`` look, rooftop ``equipment`` and a ``parapet`` on a large flat roof (each drawn, not certain), and
+    ``roof``: an appearance instead of the drawn one (look-alike sheds)."""
+
+    pitched: bool = False
+    industrial: bool = False
+    equipment: bool = True
+    roof: Look | None = None
+    parapet: bool = True
+
+
 def add_building(b: Builder, cx: float, cy: float, w: float, l: float, angle: float, h: float, *,
-                 pitched: bool = False, industrial: bool = False, equipment: bool = True,
-                 roof: Look | None = None, parapet: bool = True) -> Block:
-    """A building block (ridge along ``w`` when pitched) with rooftop equipment on flat roofs;
-    ``roof`` overrides the drawn roof appearance (look-alike sheds)."""
+                 style: BuildingStyle | None = None) -> Block:
+    """A building block (ridge along ``w`` when pitched) with rooftop equipment on flat roofs, built as ``style``
+    says (None: :class:`BuildingStyle`'s defaults)."""
+    style = style or BuildingStyle()
+    pitched, industrial, equipment, roof, parapet = (style.pitched, style.industrial, style.equipment, style.roof,
+                                                     style.parapet)
     rng = b.rng
     gable = 0.0
     if pitched:
@@ -276,45 +292,47 @@ def add_clutter(b: Builder, x: float, y: float, heading: float, kind: str) -> No
     rng, pal = b.rng, b.palette
     w = b.world
 
-    def box(dx: float, dy: float, bw: float, bl: float, z0: float, h: float, top: Look, side: Look | None = None,
-            label: int = CLUTTER) -> None:
-        ox, oy = _rot(dx, dy, heading)
+    def box(size: tuple[float, float, float], top: Look, side: Look | None = None, *, z0: float = 0.0,
+            at: tuple[float, float] = (0.0, 0.0), label: int = CLUTTER) -> None:
+        """A box of ``size`` (width, length, height) from height ``z0``, ``at`` (dx, dy) from the object."""
+        bw, bl, h = size
+        ox, oy = _rot(at[0], at[1], heading)
         w.add_block(Block(x + ox, y + oy, bw, bl, heading, z0, h, label, top, side or top, kind="clutter"))
 
     col = pick(rng, pal.clutter, 0.12, 0.03)
     if kind == "bench":
-        box(0, 0, 1.8, 0.55, 0.0, 0.45, Look("wood", pick(rng, ((0.50, 0.36, 0.24), (0.40, 0.40, 0.40)), 0.1)))
+        box((1.8, 0.55, 0.45), Look("wood", pick(rng, ((0.50, 0.36, 0.24), (0.40, 0.40, 0.40)), 0.1)))
     elif kind == "bin":
-        box(0, 0, 0.6, 0.6, 0.0, 1.0, Look("metal", pick(rng, ((0.2, 0.22, 0.24), (0.3, 0.4, 0.3)), 0.1)))
+        box((0.6, 0.6, 1.0), Look("metal", pick(rng, ((0.2, 0.22, 0.24), (0.3, 0.4, 0.3)), 0.1)))
     elif kind == "lamp":
         grey = Look("metal", pick(rng, ((0.35, 0.35, 0.37), (0.55, 0.55, 0.55)), 0.1))
         height = rng.uniform(6, 9)
-        box(0, 0, 0.18, 0.18, 0.0, height, grey)
-        box(0.6, 0, 1.2, 0.3, height, 0.25, grey)
+        box((0.18, 0.18, height), grey)
+        box((1.2, 0.3, 0.25), grey, z0=height, at=(0.6, 0))
     elif kind == "bollard":
-        box(0, 0, 0.2, 0.2, 0.0, 0.9, Look("metal", (0.3, 0.3, 0.3)))
+        box((0.2, 0.2, 0.9), Look("metal", (0.3, 0.3, 0.3)))
     elif kind == "kiosk":
-        box(0, 0, rng.uniform(2.5, 4.0), rng.uniform(2.0, 3.0), 0.0, rng.uniform(2.4, 3.0), Look("metal", col),
+        box((rng.uniform(2.5, 4.0), rng.uniform(2.0, 3.0), rng.uniform(2.4, 3.0)), Look("metal", col),
             Look("facade", col, cell_rgb=(0.3, 0.35, 0.4), cell=(1.2, 100.0, 0.4, 0.5)))
     elif kind == "umbrella":
         fabric = Look("fabric", pick(rng, ((0.85, 0.85, 0.82), (0.7, 0.2, 0.2), (0.2, 0.35, 0.6),
                                            (0.9, 0.75, 0.3), (0.3, 0.5, 0.3)), 0.08))
         size = rng.uniform(2.2, 3.5)
-        box(0, 0, 0.08, 0.08, 0.0, 2.2, Look("metal", (0.4, 0.4, 0.4)))
-        box(0, 0, size, size, 2.2, 0.35, fabric)
+        box((0.08, 0.08, 2.2), Look("metal", (0.4, 0.4, 0.4)))
+        box((size, size, 0.35), fabric, z0=2.2)
     elif kind == "container":
-        box(0, 0, 6.06, 2.44, 0.0, 2.6, Look("metal_wall", col), Look("metal_wall", col))
+        box((6.06, 2.44, 2.6), Look("metal_wall", col), Look("metal_wall", col))
     elif kind == "dumpster":
-        box(0, 0, rng.uniform(1.8, 3.5), rng.uniform(1.3, 2.0), 0.0, rng.uniform(1.1, 1.6),
+        box((rng.uniform(1.8, 3.5), rng.uniform(1.3, 2.0), rng.uniform(1.1, 1.6)),
             Look("metal", pick(rng, pal.car + pal.clutter, 0.1)))
     elif kind == "pallets":
-        box(0, 0, rng.uniform(1.0, 2.5), rng.uniform(1.0, 2.0), 0.0, rng.uniform(0.4, 1.6), Look("wood", col))
+        box((rng.uniform(1.0, 2.5), rng.uniform(1.0, 2.0), rng.uniform(0.4, 1.6)), Look("wood", col))
     elif kind == "shed":
         # a garden shed is a (small) building
-        box(0, 0, rng.uniform(2.0, 3.5), rng.uniform(2.0, 3.0), 0.0, rng.uniform(2.0, 2.6),
+        box((rng.uniform(2.0, 3.5), rng.uniform(2.0, 3.0), rng.uniform(2.0, 2.6)),
             roof_look(b, pitched=False), Look("wood", col), label=BUILDING)
     elif kind == "play":
-        box(0, 0, rng.uniform(1.0, 3.0), rng.uniform(1.0, 2.5), 0.0, rng.uniform(0.8, 2.5),
+        box((rng.uniform(1.0, 3.0), rng.uniform(1.0, 2.5), rng.uniform(0.8, 2.5)),
             Look("metal", pick(rng, ((0.8, 0.3, 0.2), (0.2, 0.5, 0.8), (0.9, 0.8, 0.2)), 0.1)))
     else:
         raise ValueError(f"unknown clutter kind {kind!r}")

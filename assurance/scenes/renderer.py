@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from assurance.scenes.faces import CANOPY, GROUND, HORIZONTAL, PLANAR, FaceTable
+from assurance.scenes.faces import CANOPY, GROUND, HORIZONTAL, PLANAR, FaceLight, FaceTable
 from assurance.scenes.geom import clip_to_box, convex_hull
 from assurance.scenes.order import draw_order
 from assurance.scenes.shade import ShadeInputs, shade
@@ -131,7 +131,7 @@ def _draw_ground(world: World, cam: _Camera, face_map: np.ndarray, table: FaceTa
                 polys.append(c)
         if not polys:
             continue
-        fid = table.add(GROUND, reg.label, reg.look, lambert=lam)
+        fid = table.add(GROUND, reg.label, reg.look, light=FaceLight(lambert=lam))
         for c in polys:
             pix, _ = cam.project(np.concatenate([c, np.zeros((len(c), 1))], axis=1))
             fill_polygon(face_map, pix, int(fid))
@@ -246,13 +246,13 @@ def _draw_solids(world: World, cam: _Camera, face_map: np.ndarray, table: FaceTa
             sh = amount.get(t, 0.0) if isinstance(amount, dict) else amount
             if not gabled and t == 4:
                 roof = blk.kind == "building"
-                fid = table.add(HORIZONTAL, blk.label, blk.top, lambert=float(lam[t][i]),
-                                shadow=0.0 if roof else sh, z=blk.z0 + blk.h, offset=off, roof=roof)
+                fid = table.add(HORIZONTAL, blk.label, blk.top, z=blk.z0 + blk.h, offset=off,
+                                light=FaceLight(lambert=float(lam[t][i]), shadow=0.0 if roof else sh, roof=roof))
                 if roof:
                     roofs.append((fid, i))
             else:
-                fid = table.add(PLANAR, blk.label, blk.top if t >= 4 else blk.side, lambert=float(lam[t][i]),
-                                shadow=sh, ao=0.85 if t < 4 else 1.0, offset=off, plane=planes[t][i])
+                fid = table.add(PLANAR, blk.label, blk.top if t >= 4 else blk.side, offset=off, plane=planes[t][i],
+                                light=FaceLight(lambert=float(lam[t][i]), shadow=sh, ao=0.85 if t < 4 else 1.0))
             fill_polygon(face_map, pix[i, tmpl], int(fid), convex=True)
     return roofs
 
@@ -308,8 +308,8 @@ def _draw_crown(crown, ci: int, data: tuple[np.ndarray, ...], cam: _Camera, face
         half = np.maximum((hi - lo) / 2, 0.5)
         sh = float(shadow[bi]) if isinstance(shadow, np.ndarray) else float(shadow)
         off = ((ci * 7.77 + bi * 3.3) % 50.0, (ci * 5.13 + bi * 1.7) % 50.0)
-        fid = table.add(CANOPY, crown.label, crown.look, shadow=sh, z=float(crown.blobs[bi, 2]), offset=off,
-                        canopy=(float(centre[0]), float(centre[1]), float(half[0]), float(half[1])))
+        fid = table.add(CANOPY, crown.label, crown.look, light=FaceLight(shadow=sh), z=float(crown.blobs[bi, 2]),
+                        offset=off, canopy=(float(centre[0]), float(centre[1]), float(half[0]), float(half[1])))
         fill_polygon(face_map, _leafy_outline(centre, half, ci * 31 + bi), int(fid))
 
 

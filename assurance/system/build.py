@@ -12,10 +12,14 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from el.classes.labels import UAVID, LabelSet
+from assurance.dataio.layouts import DataSpec
+from assurance.perturbations import PERTURBATIONS
+from el.classes.labels import UAVID, LabelSet, load_label_set
 from el.geometry.camera import CAMERAS, Intrinsics, Pose, SafetyParams
 from el.geometry.config import CoreConfig
 from el.geometry.odd import OperatingDomain
+from el.monitors.calibration import CalibrationError, check_card_spec, load_calibration
+from el.segmentation.onnx_model import OnnxContract
 
 if TYPE_CHECKING:  # only named in annotations: loader's SystemFile reads its sections through this module
     from assurance.system.loader import SystemFile
@@ -28,8 +32,6 @@ def label_set(system: SystemFile) -> LabelSet:
     """The system's label set: ``[labels] preset`` or ``file`` (with ``ignore_rgb`` when given)."""
     if "labels" in system._cache:
         return system._cache["labels"]
-    from el.classes.labels import load_label_set
-
     preset, file = system.get("labels.preset"), system.path_of("labels.file")
     if preset is not None and file is not None:
         raise system.error("labels", "give either preset or file, not both")
@@ -155,8 +157,6 @@ def odd(system: SystemFile) -> OperatingDomain:
         if not system.sets("odd.aspect"):
             values["aspect"] = [round(width / height / 1.05, 6), round(width / height * 1.05, 6)]
     perturbations = dict(system.get("odd.perturbations") or {})
-    from assurance.perturbations import PERTURBATIONS
-
     unknown = sorted(set(perturbations) - set(PERTURBATIONS))
     if unknown:
         raise system.error("odd.perturbations", f"unknown perturbation(s) {', '.join(unknown)}; known: "
@@ -217,8 +217,6 @@ def _check_model_keys(system: SystemFile, kind: str) -> None:
                                                      "(here or as [model] classes)")
     if names is not None and classes is not None and list(names) != list(classes):
         raise system.error("model.classes", f"{list(classes)} differs from [model.onnx] class_names {list(names)}")
-    from el.segmentation.onnx_model import OnnxContract
-
     try:
         OnnxContract.from_dict({**contract, "class_names": names or classes})
     except (TypeError, ValueError) as exc:
@@ -244,7 +242,7 @@ def model_source(system: SystemFile) -> dict[str, Any]:
 
 def monitor_spec(system: SystemFile) -> str | None:
     """The deployed monitor's spec (``[monitor] spec``; the shipped one by default)."""
-    from el.flight.pipeline import DEPLOYED_MONITOR
+    from el.flight.pipeline import DEPLOYED_MONITOR  # deferred: pulls in scipy; keeps the commands' --help light
 
     return str(system.get("monitor.spec", DEPLOYED_MONITOR))
 
@@ -253,7 +251,7 @@ def deployed_card(system: SystemFile) -> Path | None:
     """The calibration card of the deployed monitor: ``[monitor] calibration`` when the file also names the
     monitor, the shipped card when it names neither (the shipped pair), else None (a system naming only a card
     deploys the card's own spec; one naming only a monitor has no card, as in :func:`targets`)."""
-    from el.flight.pipeline import DEPLOYED_CALIBRATION
+    from el.flight.pipeline import DEPLOYED_CALIBRATION  # deferred: pulls in scipy; keeps the commands' --help light
 
     if not system.sets("monitor.spec"):
         return None if system.sets("monitor.calibration") else DEPLOYED_CALIBRATION
@@ -267,8 +265,6 @@ def check_deployed_calibration(system: SystemFile) -> None:
     card = deployed_card(system)
     if card is None:
         return
-    from el.monitors.calibration import CalibrationError, check_card_spec, load_calibration
-
     try:
         check_card_spec(load_calibration(card), monitor_spec(system))
     except CalibrationError as exc:
@@ -286,8 +282,6 @@ def data_root(system: SystemFile, split: str, given: str | Path | None = None) -
         raise system.error(f"data.{split}", f"not set; give the {split} data with --data or in [data] {split}")
     source: Any = system.path_of(f"data.{split}")
     if isinstance(value, Mapping):
-        from assurance.dataio.layouts import DataSpec
-
         try:
             source = DataSpec.from_dict({**value, "path": system.path_of(f"data.{split}.path")})
         except ValueError as exc:

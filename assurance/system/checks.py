@@ -15,9 +15,17 @@ import os
 from collections.abc import Collection
 from pathlib import Path
 
+from assurance.perturbations import PERTURBATIONS
 from assurance.system import build
 from assurance.system.loader import SystemFile
+from assurance.system.sense import check_fitted
+from el.base.errors import WeightsError
+from el.base.hashing import sha256_file
 from el.base.userfiles import not_regular
+from el.geometry.camera import CameraGeometry
+from el.geometry.camera import check_geometry as check_camera_geometry
+from el.monitors import parse_monitor_spec
+from el.segmentation.onnx_engine import read_onnx
 
 
 def check_system(system: SystemFile, *, writes: Collection[str] = ()) -> None:
@@ -41,14 +49,10 @@ def check_system(system: SystemFile, *, writes: Collection[str] = ()) -> None:
         raise system.error("report.templates", f"{templates}: {there}")
     perturbations = system.get("targets.required_perturbations")
     if perturbations is not None:
-        from assurance.perturbations import PERTURBATIONS
-
         unknown = [p for p in perturbations if p not in PERTURBATIONS]
         if unknown:
             raise system.error("targets.required_perturbations",
                                f"unknown {unknown[0]!r}; known: {', '.join(PERTURBATIONS)}")
-    from assurance.system.sense import check_fitted
-
     check_fitted(system, labels)  # the gate's and the card's thresholds where their fits' scores lie
 
 
@@ -56,13 +60,11 @@ def check_geometry(system: SystemFile) -> None:
     """The camera, nominal pose and image size must give a geometry the flat-ground model handles: every
     reachable row sees the ground at a finite footprint, and some stripe is within reach (``reach_m``): a
     nominal pose with none could never land (every decision the default action)."""
-    from el.geometry.camera import CameraGeometry, check_geometry
-
     intr, pose, width_height = build.intrinsics(system), build.nominal_pose(system), build.image_size(system)
     build.safety(system)
     geometry = CameraGeometry(width=width_height[0], height=width_height[1], intrinsics=intr, pose=pose)
     try:
-        check_geometry(geometry)
+        check_camera_geometry(geometry)
     except ValueError as exc:
         raise system.error("camera", str(exc)) from None
     if geometry.first_reachable_row >= geometry.height:
@@ -77,8 +79,6 @@ def check_geometry(system: SystemFile) -> None:
 def check_model(system: SystemFile, names: tuple[str, ...]) -> None:
     """The model section: a consistent kind, an existing file with the stated SHA-256, a class map onto the
     system's classes."""
-    from el.base.hashing import sha256_file
-
     kind = build.model_kind(system)
     path = system.path_of("model.path")
     if path is not None:
@@ -112,9 +112,6 @@ def check_model(system: SystemFile, names: tuple[str, ...]) -> None:
 
 def _identity(system: SystemFile, kind: str, path: Path) -> str:
     """An ONNX file's identity: its SHA-256, its external data files' included (``el.segmentation.onnx_engine``)."""
-    from el.base.errors import WeightsError
-    from el.segmentation.onnx_engine import read_onnx
-
     try:
         return read_onnx(path).sha256
     except WeightsError as exc:
@@ -123,8 +120,6 @@ def _identity(system: SystemFile, kind: str, path: Path) -> str:
 
 def check_monitor(system: SystemFile) -> None:
     """The monitor spec parses (a registered or built-in monitor)."""
-    from el.monitors import parse_monitor_spec
-
     spec = system.get("monitor.spec")
     if spec is None:
         return

@@ -14,15 +14,16 @@ from typing import Any
 
 from el.base.errors import WeightsError
 from el.classes.labels import LabelSet
+from el.segmentation import factory
+from el.segmentation.class_map import MappedModel
+from el.segmentation.contract import OutputClasses, labels_of, weights_sha256_of
+from el.segmentation.onnx_model import OnnxContract, load_onnx_model
 
 
 def build_model(source: Mapping[str, Any], *, threads: int | None = None, device: str = "cpu",
                 working_width: int | None = None) -> Any:
     """The model of ``source``; ``WeightsError`` naming the system file and the problem. ``working_width``
     (a command's option) wins over the source's (``[model] working_width``)."""
-    from el.segmentation.contract import OutputClasses, labels_of
-    from el.segmentation.factory import load_model
-
     labels = LabelSet.from_dict(dict(source["labels"]))
     kind, where = source["kind"], source.get("system", "system file")
     width = working_width if working_width is not None else source.get("working_width")
@@ -31,7 +32,7 @@ def build_model(source: Mapping[str, Any], *, threads: int | None = None, device
         model = _onnx(source, None if class_map else labels, threads, width)
     else:
         spec = {"builtin": None, "pt": source.get("path"), "plugin": source.get("name")}[kind]
-        model = load_model(spec, threads=threads, device=device, working_width=width)
+        model = factory.load_model(spec, threads=threads, device=device, working_width=width)
         _check_hash(model, source, where)
         _check_width(model, source, where, width)
         model = _named(model, source, where)
@@ -39,8 +40,6 @@ def build_model(source: Mapping[str, Any], *, threads: int | None = None, device
     if not class_map and isinstance(own, OutputClasses) and set(own.names) == set(labels.names):
         class_map = {n: n for n in own.names}  # named channels that are the system's classes, in another order
     if class_map:
-        from el.segmentation.class_map import MappedModel
-
         try:
             model = MappedModel(model, dict(class_map), labels, unreachable=tuple(source.get("unreachable") or ()))
         except ValueError as exc:
@@ -59,18 +58,12 @@ def load_model_spec(spec: Any, *, threads: int | None = None, device: str = "cpu
     system file's model source (a mapping, :func:`build_model`)."""
     if isinstance(spec, Mapping):
         return build_model(spec, threads=threads, device=device, working_width=working_width)
-    from el.segmentation.factory import load_model
-
-    return load_model(spec, threads=threads, device=device, working_width=working_width)
+    return factory.load_model(spec, threads=threads, device=device, working_width=working_width)
 
 
 def _onnx(source: Mapping[str, Any], labels: LabelSet | None, threads: int | None, width: int | None) -> Any:
     """An ONNX model: its contract from the file's ``[model.onnx]`` (its channels named there or by
     ``[model] classes``) or the file's metadata; the system's ``labels``, or None for its own classes (a map)."""
-    try:
-        from el.segmentation.onnx_model import OnnxContract, load_onnx_model
-    except ImportError as exc:  # pragma: no cover - the module ships with the package
-        raise WeightsError(f"ONNX models are not supported by this installation: {exc}") from None
     where = source.get("system", "system file")
     contract = dict(source.get("onnx") or {})
     kwargs: dict[str, Any] = {"sha256": source.get("sha256"), "threads": threads, "labels": labels,
@@ -88,8 +81,6 @@ def _onnx(source: Mapping[str, Any], labels: LabelSet | None, threads: int | Non
 
 def _check_hash(model: Any, source: Mapping[str, Any], where: str) -> None:
     """A plugin's reported weights hash must be the one the system file states (files were checked at load)."""
-    from el.segmentation.contract import weights_sha256_of
-
     want = source.get("sha256")
     if want and source["kind"] == "plugin":
         have = weights_sha256_of(model)
@@ -112,8 +103,6 @@ def _check_width(model: Any, source: Mapping[str, Any], where: str, width: int |
 def _named(model: Any, source: Mapping[str, Any], where: str) -> Any:
     """``[model] classes`` for a model that is not ONNX: the names of its output channels. A model that states
     its label set must have these classes in this order; one that states none gets them."""
-    from el.segmentation.contract import OutputClasses
-
     classes = source.get("classes")
     if not classes:
         return model

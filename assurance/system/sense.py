@@ -24,7 +24,11 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from el.base.errors import CalibrationError, FrameGateError
 from el.classes.labels import LabelSet
+from el.monitors import build_monitor
+from el.monitors.calibration import load_calibration
+from el.monitors.frame_gate import load_frame_gate
 
 
 def _number(value: Any) -> float | None:
@@ -36,8 +40,6 @@ def _number(value: Any) -> float | None:
 def gate_problem(path: Path) -> str | None:
     """Why the frame gate at ``path`` makes no sense (one line naming the file), None when it does. The file is read
     with its own loader (``el.monitors.frame_gate.load_frame_gate``: format, hash, kind, statistics)."""
-    from el.monitors.frame_gate import load_frame_gate
-
     gate = load_frame_gate(path)  # FrameGateError (a ValueError) naming the file when it cannot be used
     body, threshold = gate.body, gate.threshold
     val = body.get("validation") if isinstance(body.get("validation"), Mapping) else {}
@@ -60,8 +62,6 @@ def gate_problem(path: Path) -> str | None:
 def gate_refusal(path: Path) -> str | None:
     """:func:`gate_problem`, with a gate that cannot be used at all (unreadable, a FIFO, altered, inconsistent) its
     loader's line: why the gate at ``path`` is refused, None when it is not."""
-    from el.base.errors import FrameGateError
-
     try:
         return gate_problem(path)
     except FrameGateError as exc:
@@ -71,8 +71,6 @@ def gate_refusal(path: Path) -> str | None:
 def card_problem(path: Path, labels: LabelSet) -> str | None:
     """Why the calibration card at ``path`` makes no sense (one line naming the file), None when it does. Read with
     its own loader (``el.monitors.calibration.load_calibration``: format, hash, spec at the threshold)."""
-    from el.monitors.calibration import load_calibration
-
     card = load_calibration(path)  # CalibrationError (a ValueError) naming the file when it cannot be used
     body, threshold = card.body, card.threshold
     for key, lo_open in (("miss_rate", True), ("confidence", True), ("bound", False)):
@@ -115,8 +113,6 @@ def _counts_problem(counts: Mapping[str, Any], k: Any) -> str | None:
 def _score_range(monitor: str, labels: LabelSet) -> tuple[float, float] | None:
     """The scores the card's monitor can give (its class's ``SCORE_RANGE``), None when it cannot be built here (the
     command that runs it names why) or declares none."""
-    from el.monitors import build_monitor
-
     try:
         built = build_monitor(monitor, labels=labels)
     except (ValueError, TypeError, OSError):
@@ -129,8 +125,6 @@ def check_fitted(system: Any, labels: LabelSet, *, gate: Path | None = None) -> 
     """Refuse a system whose frame gate (``[monitor] gate``, or ``gate`` given on the command line) or calibration
     card (``[monitor] calibration``) makes no sense: ``SystemFileError`` naming the system file, the key and the
     fitted file. A file that cannot be read at all is the same error (its loader's line)."""
-    from el.base.errors import CalibrationError, FrameGateError
-
     gate_key = "monitor.gate"
     if gate is None and system.get(gate_key) is not None and str(system.get(gate_key)) != "none":
         gate = system.path_of(gate_key)

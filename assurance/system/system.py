@@ -18,9 +18,14 @@ from typing import Any
 
 from assurance.system import build
 from assurance.system.loader import SystemFile, SystemFileError
+from assurance.system.model import load_model_spec
+from assurance.system.sense import gate_refusal
+from el.base.errors import WeightsError
 from el.classes.labels import UAVID, LabelSet
 from el.geometry.config import CoreConfig
 from el.geometry.odd import OperatingDomain
+from el.monitors.calibration import load_calibration
+from el.segmentation.onnx_engine import read_onnx, shipped_export_source
 
 NO_GATE = "none"
 
@@ -56,7 +61,7 @@ class System:
         Every section is read and checked here (``SystemFileError`` naming the file and the key); the calibration
         card is read when the deployed pair is (:meth:`deployed`): ``uav-el calibrate`` may be about to write it. The
         frame gate it ends up with is checked for sense (``assurance.system.sense``), a ``--gate`` as a file's is."""
-        from el.flight.pipeline import DEFAULT_TIME_BUDGET_S
+        from el.flight.pipeline import DEFAULT_TIME_BUDGET_S  # deferred: scipy; keeps the commands' --help light
 
         labels = build.label_set(file)
         shipped = model is None and build.model_kind(file) == "builtin" and not file.get("model.class_map") \
@@ -89,8 +94,6 @@ class System:
 
     def segmenter(self, *, threads: int | None = None, working_width: int | None = None) -> Any:
         """The system's network, loaded (a ``WeightsError`` naming the file when it cannot be)."""
-        from assurance.system.model import load_model_spec
-
         return load_model_spec(self.model, threads=threads, working_width=working_width)
 
     def deployed(self) -> tuple[str, Path | None]:
@@ -98,8 +101,6 @@ class System:
         threshold); a file naming only a card deploys the card's own monitor."""
         build.check_deployed_calibration(self.file)
         if self.calibration is not None and not self.file.sets("monitor.spec"):
-            from el.monitors.calibration import load_calibration
-
             return load_calibration(self.calibration).monitor, self.calibration
         return self.monitor, self.calibration
 
@@ -107,7 +108,7 @@ class System:
         """The flight configuration of the deployed system (``el.flight.pipeline.PipelineConfig``): its CM
         configuration,
         monitor at its card's threshold, frame gate, declared domain and time budget; ``overrides`` win."""
-        from el.flight.pipeline import PipelineConfig
+        from el.flight.pipeline import PipelineConfig  # deferred: pulls in scipy; keeps the commands' --help light
 
         monitor, card = self.deployed()
         values: dict[str, Any] = {"core": self.core, "monitor": monitor or None,
@@ -122,7 +123,7 @@ def _gate(file: SystemFile, given: str | Path | None, *, shipped: bool) -> Path 
     """The frame gate: ``given`` (a command line's ``--gate``), else ``[monitor] gate`` (``none``: no gate), else
     the shipped gate (``el.flight.pipeline.DEPLOYED_GATE``) on the shipped network: a gate is bound to its network, so
     another network needs its own (``uav-el fit-gate``)."""
-    from el.flight.pipeline import DEPLOYED_GATE
+    from el.flight.pipeline import DEPLOYED_GATE  # deferred: pulls in scipy; keeps the commands' --help light
 
     if given is not None:
         return None if str(given) == NO_GATE else Path(given)
@@ -136,9 +137,6 @@ def _shipped_export(model: Any) -> bool:
     """Whether a system file's model is the shipped network's packaged ONNX export (the very file, by its SHA-256,
     as the package's engine record names it) with no class map: on the shipped classes it carries the shipped frame
     gate."""
-    from el.base.errors import WeightsError
-    from el.segmentation.onnx_engine import read_onnx, shipped_export_source
-
     if not isinstance(model, dict) or model.get("kind") != "onnx" or model.get("class_map") or model.get("classes"):
         return False
     path = model.get("path")
@@ -157,8 +155,6 @@ def _checked_gate(file: SystemFile, given: str | Path | None, gate: Path | None)
     cannot be read (a FIFO, a device: the bounded reader's line). The system file's gate was checked when the file
     was loaded; a ``--gate`` (``given``) had no such check, so a re-hashed gate passing every frame flew. A path
     with nothing at it is left to the command that loads the gate, whose loader names it (one line, exit 2)."""
-    from assurance.system.sense import gate_refusal
-
     if gate is None or not os.path.lexists(gate):
         return gate
     why = gate_refusal(gate)

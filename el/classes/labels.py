@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from el.base import safeyaml, userfiles
 from el.base.errors import LabelColourError
 from el.classes.label_tables import (  # noqa: F401  (LabelClass, IgnoreLabel, MAX_CLASSES re-exported: part of the seam)
     IGNORE_COUNTS_AS,
@@ -333,8 +334,6 @@ def load_label_set(source: str | Path) -> LabelSet:
     as ``el/monitors/hierarchy.yaml``), relative to the label set file. ValueError naming the file.
     """
     import yaml
-
-    from el.base import safeyaml, userfiles
 
     p = Path(source)
     if p.suffix.lower() not in (".yaml", ".yml", ".json"):

@@ -42,6 +42,9 @@ import numpy as np
 
 from el.base.decision import Decision, _finite
 from el.base.hashing import sha256_file
+from el.geometry.camera import Pose
+from el.geometry.odd import OUTSIDE_ODD, OperatingDomain
+from el.monitors.frame_gate import OUT_OF_DOMAIN
 
 FORMAT = "uav-el-flight-log/2"
 """The record format: a reader refuses records of another major version (2: the hash chain, ``prev_sha256``;
@@ -79,9 +82,6 @@ def domain_verdict(decision: Decision) -> dict[str, Any]:
     """Whether the decision's frame was inside the declared domain its configuration records (``config.odd``):
     ``outside`` (the flight's own ``outside_odd`` reason, or its pose and size found outside here), ``inside``,
     ``not_declared`` (no domain configured) or ``unknown`` (no pose or size recorded: a frame never read)."""
-    from el.geometry.camera import Pose
-    from el.geometry.odd import OUTSIDE_ODD, OperatingDomain
-
     reason = decision.reason
     if reason.startswith(OUTSIDE_ODD):
         return {"verdict": "outside", "reason": _text(reason)}
@@ -111,7 +111,6 @@ def _gate(decision: Decision) -> dict[str, Any] | None:
     gate = decision.input.get("frame_gate")
     if not isinstance(gate, Mapping):
         return None
-    from el.monitors.frame_gate import OUT_OF_DOMAIN
 
     return {"kind": _text(gate.get("kind")), "score": _num(gate.get("score")),
             "threshold": _num(gate.get("threshold")), "refused": decision.reason.startswith(OUT_OF_DOMAIN)}

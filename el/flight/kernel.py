@@ -82,6 +82,39 @@ def build_parts(segmenter: Any, core: CoreConfig, *, labels: LabelSet | None = N
                  gate=gate, fault=fault, record=dict(record or {}), nominal_size=nominal_size)
 
 
+@dataclass(frozen=True)
+class FramePose:
+    """The pose a frame is planned at, as its caller gives it: ``pose`` (None: the nominal ``parts.core.pose``),
+    where it came from (``source``, :data:`POSE_SOURCES`; the decision records ``nominal`` without a pose) and
+    ``roll_deg`` (not modelled: checked within the flat-ground model's tolerance). Checked when the kernel reads it:
+    a bad one is the decision's ``fault: pose: ...``, never an exception."""
+
+    pose: Pose | None = None
+    source: str = "frame"
+    roll_deg: float = 0.0
+
+
+@dataclass(frozen=True, kw_only=True)
+class WalkPlan:
+    """How :func:`conclude` walks the judged candidates (``el.monitors.walk.walk_candidates``): the order
+    (``walk``), ``evaluate_all`` (every candidate judged, even past the one selected: the readouts), and the steps
+    run ``before`` and ``after`` each judgement (the flight loop's deadline)."""
+
+    walk: str = HAZARD
+    evaluate_all: bool = False
+    before: Step | None = None
+    after: Step | None = None
+
+
+@dataclass(frozen=True)
+class DecisionRecords:
+    """The decision's records, filled in place: ``info`` (its ``input``) and ``timings``. A caller that gives them
+    reads them while the decision runs (the flight loop's hard stop, from another thread)."""
+
+    info: dict[str, Any] = field(default_factory=dict)
+    timings: dict[str, float] = field(default_factory=dict)
+
+
 @dataclass
 class Frame:
     """What the kernel saw of one frame: its size and pose, the segmentation, the candidates, and ``stop``, the
@@ -124,22 +157,23 @@ def _fault(stage: str, exc: BaseException, info: dict[str, Any]) -> str:
     return f"fault: {stage}: {type(exc).__name__}: {exc}"
 
 
-def prepare(read: Reader, parts: Parts, *, pose: Pose | None = None, pose_source: str = "frame", roll_deg: float = 0.0,
-            budget: Deadline | None = None, clock: Clock = time.perf_counter, evaluate: bool = False,
-            raise_faults: bool = False, info: dict[str, Any] | None = None,
-            timings: dict[str, float] | None = None) -> Frame:
+def prepare(read: Reader, parts: Parts, *, pose: FramePose | None = None, budget: Deadline | None = None,
+            clock: Clock = time.perf_counter, evaluate: bool = False, raise_faults: bool = False,
+            records: DecisionRecords | None = None) -> Frame:
     """Run the stages up to the candidates; never raises (a fault is ``Frame.stop``) unless ``raise_faults`` (a
     campaign records a fault of its task with the exception itself).
 
-    ``pose`` (and ``roll_deg``, not modelled: checked within the flat-ground model's tolerance): the frame's pose;
-    None is the nominal ``parts.core.pose``. ``pose_source``: where ``pose`` came from (:data:`POSE_SOURCES`; the
-    decision records ``nominal`` without one). ``budget``: checked between the stages. ``evaluate``: past a refusal
-    (declared domain, frame gate) the later stages still run, for the readouts. ``info`` and ``timings``: the
-    decision's records, filled in place (a caller that stops the decision from another thread reads them).
+    ``pose``: the frame's pose, where it came from and its roll (:class:`FramePose`; None: the nominal pose).
+    ``budget``: checked between the stages. ``evaluate``: past a refusal (declared domain, frame gate) the later
+    stages still run, for the readouts. ``records``: the decision's ``info`` and ``timings``, filled in place (a
+    caller that stops the decision from another thread reads them; None: new ones).
     """
     budget = budget or Deadline(clock, None)
-    frame = Frame(info={} if info is None else info, timings={} if timings is None else timings, core=parts.core)
+    pose = pose or FramePose()
+    records = records or DecisionRecords()
+    frame = Frame(info=records.info, timings=records.timings, core=parts.core)
     info, timings = frame.info, frame.timings
+    roll_deg = pose.roll_deg
 
     def settle(reason: str) -> None:
         frame.stop = frame.stop or reason
@@ -153,8 +187,8 @@ def prepare(read: Reader, parts: Parts, *, pose: Pose | None = None, pose_source
         frame.size, frame.rgb = (int(rgb.shape[1]), int(rgb.shape[0])), rgb
         timings["read_s"] = clock() - t
         frame.stage = "pose"
-        frame.core = frame_core(parts.core, pose)
-        info["pose"] = pose_record(frame.core.pose, source="nominal" if pose is None else pose_source)
+        frame.core = frame_core(parts.core, pose.pose)
+        info["pose"] = pose_record(frame.core.pose, source="nominal" if pose.pose is None else pose.source)
         if roll_deg:
             info["pose"]["roll_deg"] = float(roll_deg)  # not modelled: a pose error within MAX_ROLL_DEG
         if parts.fault:
@@ -202,21 +236,22 @@ def prepare(read: Reader, parts: Parts, *, pose: Pose | None = None, pose_source
     return frame
 
 
-def conclude(frame: Frame, parts: Parts, judge: Judge | None, *, walk: str = HAZARD, budget: Deadline | None = None,
-             clock: Clock = time.perf_counter, evaluate_all: bool = False, before: Step | None = None,
-             after: Step | None = None) -> tuple[Decision, WalkOutcome | None]:
-    """Walk the frame's candidates with ``judge`` (None: no monitor, the CM's top candidate) to its decision; a
-    frame that stopped before the walk is the default action for its reason. Returns the decision and the walk's
-    outcome (None: no walk). Never raises: a fault of the judge or the deadline is the default action. The frame
-    is left as it is (a campaign concludes it once per configuration)."""
+def conclude(frame: Frame, parts: Parts, judge: Judge | None, *, walk: WalkPlan | None = None,
+             budget: Deadline | None = None, clock: Clock = time.perf_counter) -> tuple[Decision, WalkOutcome | None]:
+    """Walk the frame's candidates with ``judge`` (None: no monitor, the CM's top candidate) to its decision, as
+    ``walk`` says (:class:`WalkPlan`; None: the hazard walk, lazy, no steps around the judgements); a frame that
+    stopped before the walk is the default action for its reason. Returns the decision and the walk's outcome (None:
+    no walk). Never raises: a fault of the judge or the deadline is the default action. The frame is left as it is
+    (a campaign concludes it once per configuration)."""
     budget = budget or Deadline(clock, None)
+    walk = walk or WalkPlan()
     if frame.stop:
         return default(frame, parts, frame.stop, budget), None
     timings = dict(frame.timings)
     t = clock()
     try:
-        outcome = walk_candidates(len(frame.candidates), judge, walk, evaluate_all=evaluate_all, before=before,
-                                  after=after)
+        outcome = walk_candidates(len(frame.candidates), judge, walk.walk, evaluate_all=walk.evaluate_all,
+                                  before=walk.before, after=walk.after)
         judged = [c if v is None else replace(c, monitor=v)
                   for c, v in zip(frame.candidates, outcome.verdicts, strict=True)]
         timings["monitoring_s"] = clock() - t
@@ -253,18 +288,15 @@ def default(frame: Frame, parts: Parts, reason: str, budget: Deadline, *, candid
                     default_area=area, timings=timings, input=frame.info, config=parts.record)
 
 
-def decide_frame(read: Reader, parts: Parts, judge: Judge | None, *, walk: str = HAZARD, pose: Pose | None = None,
-                 pose_source: str = "frame", roll_deg: float = 0.0, budget: Deadline | None = None,
-                 clock: Clock = time.perf_counter, evaluate_all: bool = False, before: Step | None = None,
-                 after: Step | None = None, info: dict[str, Any] | None = None,
-                 timings: dict[str, float] | None = None) -> Decision:
-    """One frame through the kernel: :func:`prepare` then :func:`conclude`; never raises."""
+def decide_frame(read: Reader, parts: Parts, judge: Judge | None, *, walk: WalkPlan | None = None,
+                 pose: FramePose | None = None, budget: Deadline | None = None, clock: Clock = time.perf_counter,
+                 records: DecisionRecords | None = None) -> Decision:
+    """One frame through the kernel: :func:`prepare` (``pose``, ``records``) then :func:`conclude` (``walk``); never
+    raises."""
     budget = budget or Deadline(clock, None)
-    frame = prepare(read, parts, pose=pose, pose_source=pose_source, roll_deg=roll_deg, budget=budget, clock=clock,
-                    info=info, timings=timings)
-    return conclude(frame, parts, judge, walk=walk, budget=budget, clock=clock, evaluate_all=evaluate_all,
-                    before=before, after=after)[0]
+    frame = prepare(read, parts, pose=pose, budget=budget, clock=clock, records=records)
+    return conclude(frame, parts, judge, walk=walk, budget=budget, clock=clock)[0]
 
 
-__all__ = ["NOMINAL_SIZE", "POSE_SOURCES", "REFUSALS", "Frame", "Parts", "build_parts", "conclude", "decide_frame",
-           "default", "frame_core", "pose_record", "prepare"]
+__all__ = ["NOMINAL_SIZE", "POSE_SOURCES", "REFUSALS", "DecisionRecords", "Frame", "FramePose", "Parts", "WalkPlan",
+           "build_parts", "conclude", "decide_frame", "default", "frame_core", "pose_record", "prepare"]

@@ -29,16 +29,29 @@ from el.base.hashing import sha256_bytes
 from el.base.imageio import MAX_PIXELS, check_max_pixels, read_image_hashed
 from el.base.rgb import check_rgb
 from el.classes.labels import UAVID
-from el.flight.kernel import Frame, Parts, build_parts, conclude, default, frame_core, prepare
+from el.flight.kernel import (
+    DecisionRecords,
+    Frame,
+    FramePose,
+    Parts,
+    WalkPlan,
+    build_parts,
+    conclude,
+    default,
+    frame_core,
+    prepare,
+)
 from el.geometry.camera import Pose
 from el.geometry.config import CoreConfig, check_seed
 from el.geometry.odd import OperatingDomain
 from el.monitors import CandidateContext, Monitor, build_monitor, monitor_name, parse_monitor_spec
+from el.monitors.calibration import check_card_monitor, check_card_spec, load_calibration
 from el.monitors.capabilities import check_monitor_capabilities
 from el.monitors.frame_gate import load_frame_gate
 from el.monitors.patch_judge import batch_judge
 from el.monitors.walk import HAZARD, SCORE, Judge, Step
 from el.segmentation.contract import check_model, labels_of
+from el.segmentation.factory import load_model
 
 Clock = Callable[[], float]
 DEFAULT_TIME_BUDGET_S = 10.0
@@ -215,8 +228,6 @@ class EmergencyLanding:
         self.labels = UAVID
         try:
             if segmenter is None:
-                from el.segmentation.factory import load_model
-
                 self.segmenter = load_model(weights, working_width=self.config.core.working_width)
             else:
                 check_model(segmenter)
@@ -317,13 +328,13 @@ class EmergencyLanding:
         """The kernel's decision, with ``budget`` checked between stages and (as the active deadline) inside them;
         ``pose``: the frame's pose and where it came from."""
         parts = self.parts
-        frame = prepare(lambda record: self._read(image, record), parts, pose=pose[0], pose_source=pose[1],
-                        budget=budget, clock=self.clock, info=info, timings=timings)
+        frame = prepare(lambda record: self._read(image, record), parts, pose=FramePose(pose[0], pose[1]),
+                        budget=budget, clock=self.clock, records=DecisionRecords(info, timings))
         if isinstance(image, FrameFile) and "read_s" in frame.timings:
             frame.timings["read_s"] += image.read_s  # decoded before the call (FrameFile.read)
         judge, before, after = self._judge(frame, budget)
-        return conclude(frame, parts, judge, walk=self.walk, budget=budget, clock=self.clock,
-                        evaluate_all=self.config.evaluate_all, before=before, after=after)[0]
+        walk = WalkPlan(walk=self.walk, evaluate_all=self.config.evaluate_all, before=before, after=after)
+        return conclude(frame, parts, judge, walk=walk, budget=budget, clock=self.clock)[0]
 
     # -- stages ----------------------------------------------------------------------------------
     def _read(self, image: np.ndarray | str | Path | FrameFile, info: dict[str, Any]) -> np.ndarray:
@@ -389,8 +400,6 @@ def check_monitor_bindings(monitor: Monitor | None, spec: str | None, calibratio
         check_monitor_capabilities(monitor, segmenter)
     card = calibration or (DEPLOYED_CALIBRATION if is_deployed(spec) else None)
     if card:
-        from el.monitors.calibration import check_card_monitor, check_card_spec, load_calibration
-
         loaded = load_calibration(card)
         check_card_spec(loaded, spec)  # the spec's own threshold, if any, is the card's
         check_card_monitor(loaded, monitor)
@@ -412,7 +421,6 @@ def calibrated_spec(monitor: str | None, calibration: str | None) -> str | None:
     equal it where ``monitor`` carries a threshold)."""
     if not calibration:
         return monitor
-    from el.monitors.calibration import check_card_spec, load_calibration
 
     card = load_calibration(calibration)
     check_card_spec(card, monitor)  # the card's monitor, at no threshold of its own or at the card's

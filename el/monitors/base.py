@@ -20,7 +20,7 @@ import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Hashable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
+from typing import Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -29,9 +29,7 @@ from el.base.decision import Candidate, Disc, MonitorVerdict
 from el.classes.labels import LabelSet
 from el.monitors.patch_batch import check_batched
 from el.monitors.patches import Patch, extract_patch, validate_patch_params
-
-if TYPE_CHECKING:
-    from el.monitors.spec import GenericSpec, MonitorSpec
+from el.monitors.spec import THRESHOLD, GenericSpec, MonitorSpec
 
 Clock = Callable[[], float]
 
@@ -394,8 +392,6 @@ class PatchMonitor(Monitor):
     def generic_spec(self, kind: str, **params: Any) -> GenericSpec:
         """The spec of a registered monitor: its parameters (None ones left out), then the threshold
         when it is not the default (so one configuration has one name)."""
-        from el.monitors.spec import THRESHOLD, GenericSpec
-
         items = [(k, v) for k, v in params.items() if v is not None]
         if self.threshold != self.DEFAULT_THRESHOLD:
             items.append((THRESHOLD, self.threshold))

@@ -15,6 +15,8 @@ from __future__ import annotations
 from typing import Any
 
 from el.base.errors import UavElError
+from el.monitors.learned import LearnedMonitor
+from el.monitors.mcd import MCDMonitor
 from el.segmentation.contract import MC_DROPOUT, TRUNK_FEATURES, has_capability
 
 WHAT = {MC_DROPOUT: "MC dropout samples (mc_dropout)", TRUNK_FEATURES: "the network's trunk features (model.trunk)"}
@@ -35,8 +37,6 @@ def required_capabilities(monitor: Any) -> tuple[str, ...]:
     declared = getattr(monitor, "required_capabilities", None)
     if declared is not None:
         return tuple(declared)
-    from el.monitors.learned import LearnedMonitor
-    from el.monitors.mcd import MCDMonitor
 
     if isinstance(monitor, MCDMonitor) or (isinstance(monitor, LearnedMonitor) and monitor.model.mcd_n > 0):
         return (MC_DROPOUT,)

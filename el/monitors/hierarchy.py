@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from el.base import safeyaml
+from el.base import safeyaml, userfiles
 from el.classes.labels import UAVID, LabelSet
 
 HIERARCHY_FILE = "hierarchy.yaml"
@@ -155,8 +155,6 @@ class ClassHierarchy:
     def from_yaml(cls, path: str | Path, *, labels: LabelSet) -> ClassHierarchy:
         """Load a hierarchy file: ``root: NAME`` and ``children: {parent: [children]}``, read through the bounded
         reader (``el.base.userfiles``: a regular file of at most 1 MiB; a FIFO or a device refused before any read)."""
-        from el.base import userfiles
-
         text = userfiles.read_text(path, what="hierarchy file", max_bytes=safeyaml.MAX_YAML_BYTES)
         return cls._from_text(text, str(path), labels=labels)
 

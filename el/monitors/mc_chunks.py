@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -37,21 +38,30 @@ def can_chunk(segmenter: Any) -> bool:
                 and hasattr(model, "logit_stride"))
 
 
-def mc_samples(segmenter: Any, rgb_patch: np.ndarray, n: int, keep_prob: float, seed: int, *,
-               window: tuple[int, int, int, int] | None = None, between: Between | None = None,
-               chunk: int = MC_CHUNK, clock: Callable[[], float] = time.perf_counter) -> np.ndarray:
-    """``n`` MC-dropout softmax samples (n, 8, h, w) of a patch (h, w: the window's, when given).
+@dataclass(frozen=True, kw_only=True)
+class Chunking:
+    """How a draw is cut: ``chunk`` samples at a time, ``between(seconds)`` called after each chunk but the last with
+    the time that chunk took on ``clock`` (it raises to abandon the draw: a budget about to run out; None: no call).
+    ``chunk`` is checked when a draw is cut (ValueError below 1)."""
 
-    ``between(seconds)`` is called after each chunk but the last with the time that chunk took; it
-    raises to abandon the draw (a budget about to run out).
-    """
+    chunk: int = MC_CHUNK
+    between: Between | None = None
+    clock: Callable[[], float] = time.perf_counter
+
+
+def mc_samples(segmenter: Any, rgb_patch: np.ndarray, n: int, keep_prob: float, seed: int, *,
+               window: tuple[int, int, int, int] | None = None, chunking: Chunking | None = None) -> np.ndarray:
+    """``n`` MC-dropout softmax samples (n, 8, h, w) of a patch (h, w: the window's, when given), drawn in chunks as
+    ``chunking`` says (:class:`Chunking`; None: its defaults)."""
+    chunking = chunking or Chunking()
+    chunk, between, clock = chunking.chunk, chunking.between, chunking.clock
     kw: dict[str, Any] = {} if window is None else {"window": window}
     if n <= chunk or float(keep_prob) == 1.0 or not can_chunk(segmenter):
         return segmenter.mc_dropout(rgb_patch, n, keep_prob, seed, **kw)
     import torch
 
-    from el.segmentation.inference import softmax_classes
-    from el.segmentation.model import MCSpec, upsample_logits
+    from el.segmentation.inference import softmax_classes  # deferred: imports torch (the train extra)
+    from el.segmentation.model import MCSpec, upsample_logits  # deferred: imports torch, as above
 
     if chunk < 1:
         raise ValueError(f"chunk must be >= 1, got {chunk!r}")

@@ -23,7 +23,7 @@ from el.monitors.base import (
     validate_samples,
 )
 from el.monitors.lhd import LHDMonitor, take_disc
-from el.monitors.mc_chunks import Between, mc_samples
+from el.monitors.mc_chunks import Between, Chunking, mc_samples
 from el.monitors.patches import Patch, accepts_keyword, disc_box
 from el.monitors.spec import MonitorSpec, validate_n, validate_rho
 
@@ -124,8 +124,8 @@ class MCDMonitor(PatchMonitor):
         if window is None or not accepts_keyword(segmenter.mc_dropout, "window"):
             window, box_mask = None, patch.disc_mask
         if trunk is None:
-            return mc_samples(segmenter, patch.rgb, n, self.rho, seed, window=window, between=self.between,
-                              clock=self.clock), box_mask
+            return mc_samples(segmenter, patch.rgb, n, self.rho, seed, window=window,
+                              chunking=Chunking(between=self.between, clock=self.clock)), box_mask
         shared: dict[str, Any] = {"features": trunk}
         if window is None:
             return segmenter.mc_dropout(patch.rgb, n, self.rho, seed, **shared), box_mask

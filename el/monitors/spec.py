@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from itertools import product
 from typing import Any
 
+from el.monitors.registry import monitor_entry
 from el.monitors.walk import HAZARD, check_walk
 
 NONE = "none"
@@ -277,8 +278,6 @@ def _key_values(text: str, kind: str, tail: str, allowed: tuple[str, ...]) -> di
 
 
 def _parse_registered(text: str, kind: str, tail: str) -> GenericSpec:
-    from el.monitors.registry import monitor_entry
-
     try:
         entry = monitor_entry(kind)
     except ValueError as err:  # unknown, or a plugin that failed to load

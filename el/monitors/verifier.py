@@ -34,8 +34,10 @@ from el.base.errors import LearnedModelError
 from el.base.records import HashedRecord
 from el.classes.labels import LabelSet
 from el.monitors.base import CandidateContext, Clock, Monitor, batch_arguments
+from el.monitors.learned import LearnedMonitor
 from el.monitors.spec import GenericSpec
 from el.monitors.verifier_crop import candidate_crop
+from el.segmentation.onnx_engine import open_session, read_checked, run_session
 
 VERIFIER_FORMAT = "uav-el-verifier/1"
 DEFAULT_VERIFIER = Path(__file__).resolve().parent / "data" / "verifier.json"
@@ -81,8 +83,6 @@ def load_verifier(path: str | Path | None = None) -> VerifierModel:
     LearnedModelError
         One line naming the file and the problem (missing, altered, inconsistent, its network missing or altered).
     """
-    from el.segmentation.onnx_engine import read_checked
-
     p = Path(path) if path else DEFAULT_VERIFIER
     hint = " (train one with: uav-el fit-verifier --system uav-el.toml --out FILE)"
     body, digest = VerifierModel.read_body(p, hint=hint)
@@ -125,8 +125,6 @@ class VerifierSession:
     """The verifier's network under ONNX Runtime: crops (n, S, S, 3) uint8 -> P(unsafe) (n,). Picklable."""
 
     def __init__(self, model: VerifierModel, threads: int | None = 1) -> None:
-        from el.segmentation.onnx_engine import open_session
-
         self.model, self.threads = model, threads
         self._session = open_session(model.onnx, model.onnx_path, threads)
         self._input = self._session.get_inputs()[0].name
@@ -139,8 +137,6 @@ class VerifierSession:
         self.__init__(state["model"], state["threads"])  # type: ignore[misc]
 
     def probabilities(self, crops: np.ndarray) -> np.ndarray:
-        from el.segmentation.onnx_engine import run_session
-
         if crops.ndim != 4 or crops.shape[1:] != (self.model.size, self.model.size, 3) or crops.dtype != np.uint8:
             raise ValueError(f"verifier crops must be (n, {self.model.size}, {self.model.size}, 3) uint8, "
                              f"got {crops.shape} {crops.dtype}")
@@ -152,6 +148,13 @@ class VerifierSession:
         if not np.isfinite(z).all():
             raise ValueError("verifier: non-finite logits")
         return 1.0 / (1.0 + np.exp(-np.clip(z, -500.0, 500.0)))
+
+
+def _patch_keywords(*, margin: float = 0.25, max_side: int | None = None,
+                    clock: Clock = time.perf_counter) -> dict[str, Any]:
+    """The patch keywords a registered monitor takes (``el.monitors.registry.MonitorEntry``), with their defaults;
+    TypeError for another keyword."""
+    return {"margin": margin, "max_side": max_side, "clock": clock}
 
 
 class VerifierMonitor(Monitor):
@@ -166,32 +169,33 @@ class VerifierMonitor(Monitor):
     SCORE_RANGE: ClassVar[tuple[float, float]] = (0.0, 1.0)
 
     def __init__(self, *, labels: LabelSet, model: str | None = None, fuse: str = "none",
-                 threshold: float | None = None, margin: float = 0.25, max_side: int | None = None,
-                 clock: Clock = time.perf_counter, learned: str | None = None, threads: int | None = 1) -> None:
+                 threshold: float | None = None, learned: str | None = None, threads: int | None = 1,
+                 **common: Any) -> None:
+        """``common``: the patch keywords every registered monitor takes (``margin``, ``max_side``, ``clock``; see
+        :func:`_patch_keywords`): the clock times the verifier, and all three go to the learned monitor it fuses
+        with. ``threads``: ONNX Runtime's threads for the verifier's network."""
+        common = _patch_keywords(**common)
         if fuse not in FUSE_CHOICES:
             raise ValueError(f"verifier: fuse must be one of {', '.join(FUSE_CHOICES)}, got {fuse!r}")
-        self.labels, self.model_path, self.fuse, self.clock = labels, model, fuse, clock
+        self.labels, self.model_path, self.fuse, self.clock = labels, model, fuse, common["clock"]
         self.record = load_verifier(model)
         self.learned_path = learned
         self.learned = None
         default = self.record.threshold
         if fuse == "learned":
-            self.learned, default = self._learned(learned, labels, margin, max_side, clock)
+            self.learned, default = self._learned(learned, labels, common)
         elif learned is not None:
             raise ValueError("verifier: learned=FILE is read only with fuse=learned")
         self.DEFAULT_THRESHOLD = default  # type: ignore[misc]  # per file, not per class
         super().__init__(threshold=threshold)
         self.session = VerifierSession(self.record, threads)
 
-    def _learned(self, path: str | None, labels: LabelSet, margin: float, max_side: int | None, clock: Clock
-                 ) -> tuple[Any, float]:
-        from el.monitors.learned import LearnedMonitor
-
+    def _learned(self, path: str | None, labels: LabelSet, common: dict[str, Any]) -> tuple[Any, float]:
         fusion = self.record.fusion
         if fusion is None:
             raise LearnedModelError(f"{self.record.path}: no fusion with the learned monitor recorded "
                                     "(fit it with uav-el fit-verifier)")
-        learned = LearnedMonitor(labels=labels, model=path, margin=margin, max_side=max_side, clock=clock)
+        learned = LearnedMonitor(labels=labels, model=path, **common)
         if learned.model_sha256 != fusion.get("learned_sha256"):
             raise LearnedModelError(f"{self.record.path}: fused with learned model "
                                     f"{str(fusion.get('learned_sha256'))[:12]}..., but {learned.model.path} is "

@@ -28,8 +28,11 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
+from el.base import torch_extra
 from el.base.errors import WeightsError
 from el.segmentation.contract import OutputClasses, check_model
+from el.segmentation.onnx_model import load_onnx_model
+from el.segmentation.onnx_segmenter import OnnxSegmenter
 
 ENTRY_POINT_GROUP = "uav_el.models"
 SHIPPED = "shipped"
@@ -81,8 +84,6 @@ def load_model(spec: str | Path | None = None, *, threads: int | None = None, de
     if kind == SHIPPED_KIND:
         return _segmenter(None, threads, device, working_width)
     if kind == FILE and is_onnx_file(spec):
-        from el.segmentation.onnx_model import load_onnx_model
-
         width = {} if working_width is None else {"working_width": working_width}
         model = load_onnx_model(spec, threads=threads, **width)  # type: ignore[arg-type]
         if isinstance(model.labels, OutputClasses):  # no label set says what its classes mean: no guessing
@@ -117,16 +118,11 @@ def load_model(spec: str | Path | None = None, *, threads: int | None = None, de
 def _segmenter(path: str | Path | None, threads: int | None, device: str, working_width: int | None) -> Any:
     """The ``Segmenter`` of a weights file (None: the shipped one); without torch (the optional heavy dependency, the
     ``train`` extra) its checked ONNX export under ONNX Runtime (``el.segmentation.onnx_segmenter``), same decisions."""
-    from el.base.torch_extra import have_torch
-
     width = {} if working_width is None else {"working_width": working_width}
-    if not have_torch():
-        from el.base.torch_extra import TorchMissing, missing_line
-        from el.segmentation.onnx_segmenter import OnnxSegmenter
-
+    if not torch_extra.have_torch():  # looked up at each call (tests stand in for a light install through it)
         if device != "cpu":
-            raise TorchMissing(missing_line(f"device {device!r}"))
+            raise torch_extra.TorchMissing(torch_extra.missing_line(f"device {device!r}"))
         return OnnxSegmenter.load(path, threads=threads, **width)
-    from el.segmentation.inference import Segmenter
+    from el.segmentation.inference import Segmenter  # deferred: imports torch (the train extra); light installs lack it
 
     return Segmenter.load(path, threads=threads, device=device, **width)

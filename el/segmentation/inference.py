@@ -37,7 +37,6 @@ seeded inside ``torch.random.fork_rng`` so that the global RNG is left untouched
 from __future__ import annotations
 
 import threading
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -54,9 +53,9 @@ from el.segmentation.frame_tap import FrameTap, frame_tap
 from el.segmentation.lazy_trunk import LazyTrunk as _LazyTrunk
 from el.segmentation.lazy_trunk import resolve as _resolve
 from el.segmentation.model import MCDropout, upsample_logits
+from el.segmentation.onnx_engine import engine_for
 from el.segmentation.patch_passes import PatchPasses
-from el.segmentation.pooling import check_pooling
-from el.segmentation.protocol import EvalProtocol, card_protocol, check_frame_scales
+from el.segmentation.protocol import EvalProtocol, FrameOptions, card_protocol
 from el.segmentation.weights import DEFAULT_WEIGHTS, card_path, load_weights
 
 _check_rgb = check_frame_rgb
@@ -131,17 +130,17 @@ class Segmenter(FramePasses, PatchPasses):
         The model card of the weights (identity for reports).
     working_width : int
         Width of the working resolution (1024; the height keeps the aspect ratio).
-    frame_flip : bool
-        Segment frames as the mean softmax of the frame and its left-right mirror image (about
-        3x the time of one frame on 2 CPU cores; patches and MC dropout are unaffected). :meth:`load` takes it
-        from the card's evaluation protocol, so the deployed network is the one the card measured.
-    frame_scales : sequence of float
-        Factors (1 to 2) by which the frame at the working resolution is enlarged before the network (bilinear);
-        each softmax is brought back to the working resolution (area averaging) and they are averaged.
-        ``(1.0,)``: the frame as it is. Like ``frame_flip``, :meth:`load` takes it from the card.
-    frame_pooling : str
-        How such a softmax comes back to the working resolution: ``"area"`` (footprint mean) or
-        ``"conservative"`` (a forbidden class any source pixel shows is kept, :mod:`el.segmentation.pooling`).
+    frames : el.segmentation.protocol.FrameOptions, optional
+        How frames are segmented (None: the frame alone, ``FrameOptions()``). :meth:`load` takes them from the
+        card's evaluation protocol, so the deployed network is the one the card measured:
+
+        - ``frame_flip``: the mean softmax of the frame and its left-right mirror image (about 3x the time of one
+          frame on 2 CPU cores; patches and MC dropout are unaffected);
+        - ``frame_scales``: factors (1 to 2) by which the frame at the working resolution is enlarged before the
+          network (bilinear); each softmax is brought back to the working resolution and they are averaged.
+          ``(1.0,)``: the frame as it is;
+        - ``frame_pooling``: how such a softmax comes back to the working resolution: ``"area"`` (footprint mean)
+          or ``"conservative"`` (a forbidden class any source pixel shows is kept, :mod:`el.segmentation.pooling`).
     labels : LabelSet
         The classes the network's outputs are (required; :meth:`load` takes them from the card's
         ``labels`` entry, UAVid for a card without one). The core model and the monitors read them
@@ -164,8 +163,7 @@ class Segmenter(FramePasses, PatchPasses):
     labels: LabelSet
 
     def __init__(self, model: nn.Module, *, threads: int | None = None, device: str | torch.device = "cpu",
-                 card: dict[str, Any] | None = None, working_width: int = 1024, frame_flip: bool = False,
-                 frame_scales: Sequence[float] = (1.0,), frame_pooling: str = "area",
+                 card: dict[str, Any] | None = None, working_width: int = 1024, frames: FrameOptions | None = None,
                  labels: LabelSet, engine: Any = None) -> None:
         if not isinstance(model, nn.Module):
             raise ValueError(f"model must be a torch.nn.Module, got {type(model).__name__}")
@@ -179,11 +177,9 @@ class Segmenter(FramePasses, PatchPasses):
         self.model = model.to(self.device).eval()
         self.card = dict(card or {})
         self.working_width = int(working_width)
-        if not isinstance(frame_flip, bool):
-            raise ValueError(f"frame_flip must be true or false, got {frame_flip!r}")
-        self.frame_flip = frame_flip
-        self.frame_scales = check_frame_scales(frame_scales)
-        self.frame_pooling = check_pooling(frame_pooling)
+        frames = frames or FrameOptions()  # checked when built
+        self.frame_flip, self.frame_scales = frames.frame_flip, frames.frame_scales
+        self.frame_pooling = frames.frame_pooling
         if not isinstance(labels, LabelSet):
             raise ValueError(f"labels must be a LabelSet, got {type(labels).__name__}")
         self.labels = labels
@@ -204,8 +200,6 @@ class Segmenter(FramePasses, PatchPasses):
         without them: the frame alone). The label set is the card's ``labels`` entry
         (:meth:`el.classes.labels.LabelSet.from_dict`) when it has one, else UAVid.
         """
-        from el.segmentation.onnx_engine import engine_for
-
         model, card = load_weights(weights_path, device=device)
         labels = UAVID
         if card.get("labels") is not None:
@@ -218,12 +212,12 @@ class Segmenter(FramePasses, PatchPasses):
             weights_path if weights_path is not None else DEFAULT_WEIGHTS, card.get("weights_sha256"), threads)
         # the card's working_width is the evaluation's; the flight code keeps its own
         return cls(model, threads=threads, device=device, card=card, labels=labels, working_width=working_width,
-                   engine=engine, **card_protocol(card).frame_options())
+                   engine=engine, frames=card_protocol(card).frames())
 
     @classmethod
     def for_protocol(cls, model: nn.Module, protocol: EvalProtocol, **kwargs: Any) -> Segmenter:
         """A segmenter of ``model`` that segments frames as an evaluation protocol says (training, card figures)."""
-        return cls(model, working_width=protocol.working_width, **protocol.frame_options(), **kwargs)
+        return cls(model, working_width=protocol.working_width, frames=protocol.frames(), **kwargs)
 
     def __getstate__(self) -> dict[str, Any]:  # picklable (for worker processes): the lock is recreated
         state = self.__dict__.copy()

@@ -9,6 +9,7 @@ import numpy as np
 import torch
 
 from el.segmentation.batching import unit_nchw
+from el.segmentation.onnx_engine import unflatten_features
 
 
 class LazyTrunk:
@@ -22,8 +23,6 @@ class LazyTrunk:
         self.segmenter, self.rgb_patch, self.value, self.logits = segmenter, rgb_patch, None, None
 
     def _onnx_pass(self) -> None:
-        from el.segmentation.onnx_engine import unflatten_features
-
         seg = self.segmenter
         logits, trunk = seg.engine.with_trunk(unit_nchw([self.rgb_patch]))
         self.logits = torch.from_numpy(logits)

@@ -28,6 +28,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from el.base.hashing import sha256_file
 from el.classes.labels import NUM_CLASSES
 from el.segmentation.model import MCDropout, MCSpec, TrunkHeadNet
 
@@ -124,8 +125,6 @@ def pretrained_weights_path() -> Path:
 def pretrained_provenance(path: str | Path | None = None) -> dict[str, str]:
     """What the model card records of the encoder's ImageNet weights: package, version, file, SHA-256."""
     from importlib.metadata import PackageNotFoundError, version
-
-    from el.base.hashing import sha256_file
 
     path = Path(path) if path is not None else pretrained_weights_path()
     try:

@@ -32,7 +32,7 @@ import numpy as np
 from el.base import userfiles
 from el.base.deadline import stop_at_deadline
 from el.base.errors import BudgetExceeded, WeightsError
-from el.base.hashing import sha256_bytes
+from el.base.hashing import sha256_bytes, sha256_file
 
 ENGINE_ENV = "UAV_EL_ENGINE"
 ENGINES = ("auto", "torch", "onnx")
@@ -130,7 +130,6 @@ def file_identity(path: str | Path) -> str:
     external data included), the plain SHA-256 otherwise; ``WeightsError`` for an ONNX file that cannot be read."""
     if str(path).lower().endswith(".onnx"):
         return read_onnx(path).sha256
-    from el.base.hashing import sha256_file
 
     return sha256_file(path)
 
@@ -202,8 +201,6 @@ def _inline(tensor: Any, model: Path, blobs: dict[str, bytes]) -> None:
     location = info.get("location", "")
     target, rel = _confined(model, location)
     if rel not in blobs:
-        from el.base import userfiles
-
         try:  # bounded, and confined to the model's folder (``_confined`` checked the name; this what it opens)
             blobs[rel] = userfiles.read_bytes(target, what="external data file", max_bytes=userfiles.MAX_MODEL_BYTES,
                                               within=model.parent, hard_links=True)

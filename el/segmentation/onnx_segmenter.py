@@ -27,6 +27,7 @@ from el.classes.labels import UAVID, LabelSet
 from el.segmentation.batching import unit_nchw
 from el.segmentation.frame_passes import FramePasses, check_finite, check_frame_rgb
 from el.segmentation.frame_tap import FrameTap, frame_tap
+from el.segmentation.onnx_engine import ENGINE_ENV, _checked_engine, engine_choice, onnxruntime, record_path
 from el.segmentation.patch_passes import PatchPasses
 from el.segmentation.pooling import check_pooling
 from el.segmentation.protocol import card_protocol, check_frame_scales
@@ -77,8 +78,6 @@ class OnnxSegmenter(FramePasses, PatchPasses):
              working_width: int = 1024) -> OnnxSegmenter:
         """The shipped network (``el/segmentation/weights/model.pt``'s card and its export ``model.onnx``) or another
         weights file's; ``WeightsError`` (``TorchMissing`` when only torch could run it) naming the problem."""
-        from el.segmentation.onnx_engine import ENGINE_ENV, _checked_engine, engine_choice, onnxruntime, record_path
-
         path, _, card = checked_weights(weights_path)
         if engine_choice() == "torch":
             raise TorchMissing(missing_line(f"{ENGINE_ENV}=torch"))

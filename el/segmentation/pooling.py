@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from el.base.torch_extra import require_torch
 from el.classes.labels import LabelSet
 
 POOLINGS = ("area", "conservative")
@@ -49,8 +50,6 @@ def downsample_probs(probs: np.ndarray, size: tuple[int, int], pooling: str = "a
     if c != labels.num_classes:
         raise ValueError(f"conservative pooling needs the {labels.num_classes} classes, got {c}")
     # torch: the optional heavy dependency (the train extra), imported only for conservative pooling
-    from el.base.torch_extra import require_torch
-
     torch = require_torch("conservative frame pooling")
     F = torch.nn.functional
     forbidden, safe = list(labels.forbidden_ids), list(labels.safe_ids)

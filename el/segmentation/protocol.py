@@ -51,9 +51,14 @@ class EvalProtocol:
         return {**asdict(self), **self.frame_options()}
 
     def frame_options(self) -> dict[str, Any]:
-        """How frames are segmented, as :class:`~el.segmentation.inference.Segmenter` keywords (JSON-ready)."""
+        """How frames are segmented (:data:`FRAME_OPTIONS`), JSON-ready."""
         return {"frame_flip": self.frame_flip, "frame_scales": list(self.frame_scales),
                 "frame_pooling": self.frame_pooling}
+
+    def frames(self) -> FrameOptions:
+        """How frames are segmented, as :class:`~el.segmentation.inference.Segmenter` takes it."""
+        return FrameOptions(frame_flip=self.frame_flip, frame_scales=self.frame_scales,
+                            frame_pooling=self.frame_pooling)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> EvalProtocol:
@@ -84,6 +89,24 @@ def check_frame_scales(scales: Any) -> tuple[float, ...]:
         raise ValueError(f"frame_scales must be a list of 1 to 4 distinct factors in [1, {MAX_FRAME_SCALE:g}], "
                          f"got {scales!r}")
     return out
+
+
+@dataclass(frozen=True, kw_only=True)
+class FrameOptions:
+    """How a segmenter segments a frame (:data:`FRAME_OPTIONS`, as :class:`EvalProtocol` records them):
+    ``frame_flip`` (the mean softmax of the frame and its mirror image), ``frame_scales`` (the factors the working
+    frame is enlarged by before the network, their softmax brought back and averaged) and ``frame_pooling`` (how
+    it comes back: ``area`` or ``conservative``). Checked when built (ValueError naming the option)."""
+
+    frame_flip: bool = False
+    frame_scales: tuple[float, ...] = (1.0,)
+    frame_pooling: str = "area"
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.frame_flip, bool):
+            raise ValueError(f"frame_flip must be true or false, got {self.frame_flip!r}")
+        object.__setattr__(self, "frame_scales", check_frame_scales(self.frame_scales))
+        object.__setattr__(self, "frame_pooling", check_pooling(self.frame_pooling))
 
 
 def card_protocol(card: dict[str, Any]) -> EvalProtocol:

@@ -18,8 +18,10 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from el.base import userfiles
 from el.base.errors import WeightsError
 from el.base.hashing import sha256_bytes, sha256_file  # noqa: F401  (re-exported)
+from el.base.torch_extra import require_torch
 
 if TYPE_CHECKING:
     import torch
@@ -41,7 +43,6 @@ def read_card(weights_path: str | Path) -> dict[str, Any]:
     path = card_path(weights_path)
     if not path.is_file():
         raise WeightsError(f"{path}: model card not found (expected next to {Path(weights_path).name})")
-    from el.base import userfiles
 
     try:  # bounded: a link to /proc or a device, a file over 64 MiB is refused unread
         card = json.loads(userfiles.read_text(path, what="model card", max_bytes=userfiles.MAX_RECORD_BYTES))
@@ -68,7 +69,6 @@ def checked_weights(weights_path: str | Path | None = None) -> tuple[Path, bytes
     if not path.is_file():
         raise WeightsError(f"{path}: not a file")
     card = read_card(path)
-    from el.base import userfiles
 
     try:  # bounded: a link to /proc/self/pagemap is a "regular file" that reads for hundreds of GB
         data = userfiles.read_bytes(path, what="weights file", max_bytes=userfiles.MAX_MODEL_BYTES,
@@ -105,10 +105,8 @@ def load_weights(weights_path: str | Path | None = None, *, device: str | torch.
     Returns ``(model in eval mode, card)``. Raises WeightsError when the weights file or its card
     is missing, the hash does not match, or the state dict does not fit the recorded architecture.
     """
-    from el.base.torch_extra import require_torch  # torch: the optional heavy dependency, imported only here
-
-    torch = require_torch("loading a .pt weights file")
-    from el.segmentation.architectures import build_model
+    torch = require_torch("loading a .pt weights file")  # torch: the optional heavy dependency, imported only here
+    from el.segmentation.architectures import build_model  # deferred: imports torch at load (the train extra)
 
     path, data, card = checked_weights(weights_path)
     try:

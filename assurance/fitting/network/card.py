@@ -122,21 +122,32 @@ def _refit_baseline(train_manifest: D.Manifest, val_set: list[D.Prepared], param
                              max_iter=int(params.get("max_iter", 300)))
 
 
+@dataclass(frozen=True, kw_only=True)
+class ProtocolChanges:
+    """What a re-issued card changes in its recorded evaluation protocol (each None: as recorded). ``frame_flip``
+    changes how frames are segmented, in the figures and in deployment, since :meth:`Segmenter.load` follows the
+    card's protocol, and so does ``frame_scales`` (the sizes the working frame is fed at) and ``frame_pooling`` (how
+    their softmax comes back); ``hd_patches`` sets the HD validation patches per frame (more patches: a steadier HD
+    figure). Checked as the protocol is (``el.segmentation.protocol.EvalProtocol``) when the card is re-issued."""
+
+    frame_flip: bool | None = None
+    hd_patches: int | None = None
+    frame_scales: Sequence[float] | None = None
+    frame_pooling: str | None = None
+
+
 def reissue_card(weights_path: str | Path | None = None, *, val_dir: str | Path, train_dir: str | Path | None = None,
                  threads: int | None = None, progress: Callable[..., Iterable] | None = None,
-                 frame_flip: bool | None = None, hd_patches: int | None = None,
-                 frame_scales: Sequence[float] | None = None,
-                 frame_pooling: str | None = None) -> dict[str, Any]:
+                 changes: ProtocolChanges | None = None) -> dict[str, Any]:
     """Recompute the card's evaluation (and, with ``train_dir``, the baseline) on these folders; write it.
 
     The training record (what the network was trained and selected on) is kept; the evaluation names
-    the data it was computed on and keeps the figures it replaces under ``reissued``. ``frame_flip``
-    (None: as recorded) changes how frames are segmented, in the figures and in deployment, since
-    :meth:`Segmenter.load` follows the card's protocol, and so does ``frame_scales`` (None: as
-    recorded; the sizes the working frame is fed at) and ``frame_pooling`` (how their softmax comes
-    back); ``hd_patches`` (None: as recorded) sets the HD validation patches per frame (more patches:
-    a steadier HD figure). Returns the card.
+    the data it was computed on and keeps the figures it replaces under ``reissued``. ``changes``: what changes in
+    the recorded protocol (:class:`ProtocolChanges`; None: nothing). Returns the card.
     """
+    changes = changes or ProtocolChanges()
+    frame_flip, hd_patches = changes.frame_flip, changes.hd_patches
+    frame_scales, frame_pooling = changes.frame_scales, changes.frame_pooling
     path = Path(weights_path) if weights_path is not None else DEFAULT_WEIGHTS
     model, card = load_weights(path)
     old = card.get("evaluation")

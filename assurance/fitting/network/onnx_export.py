@@ -29,6 +29,10 @@ from typing import Any
 import numpy as np
 
 from assurance.files import atomic_write_bytes
+from assurance.scenes.generate import generate_scene
+from el.base.hashing import sha256_bytes
+from el.geometry.camera import working_size
+from el.segmentation.factory import load_model
 from el.segmentation.inference import Segmenter
 from el.segmentation.onnx_engine import engine_record, flatten_features, open_session, record_path
 from el.segmentation.onnx_model import META_CONTRACT, META_LABELS, META_OPSET, META_SOURCE, OnnxContract
@@ -74,8 +78,6 @@ def trunk_output_names(module: Any) -> list[str]:
 
 
 def _as_segmenter(model: Any) -> Segmenter:
-    from el.segmentation.factory import load_model
-
     seg = model if isinstance(model, Segmenter) else load_model(model)
     if not isinstance(seg, Segmenter):
         raise ValueError(f"model {model!r} is not a project torch network (a .pt with its card, or the shipped one)")
@@ -126,11 +128,7 @@ def check_frame(frame: np.ndarray | None, working_width: int) -> np.ndarray:
     """The check frame at the working resolution: the one given, or a rendered synthetic scene (seed 1)."""
     import cv2
 
-    from el.geometry.camera import working_size
-
     if frame is None:
-        from assurance.scenes.generate import generate_scene
-
         frame = generate_scene(1, size=(working_width, working_size(16 * 64, 9 * 64, working_width)[1])).image
     w, h = working_size(frame.shape[1], frame.shape[0], working_width)
     return frame if frame.shape[:2] == (h, w) else cv2.resize(frame, (w, h), interpolation=cv2.INTER_AREA)
@@ -164,7 +162,6 @@ def export_onnx(model: Any, out_path: str | Path, *, opset: int = DEFAULT_OPSET,
             raise ValueError(f"ONNX export differs from torch on a {c['size'][0]}x{c['size'][1]} input: "
                              f"{c['argmax_differ_not_tie']} pixels with another class, largest logit "
                              f"difference {c['max_logit_diff']:.3g} (nothing written)")
-    from el.base.hashing import sha256_bytes
 
     digest = sha256_bytes(data)
     atomic_write_bytes(out_path, data)

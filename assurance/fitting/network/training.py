@@ -14,7 +14,7 @@ then cosine decay. Augmentation: :data:`assurance.fitting.network.data.AUGMENTAT
 evaluation perturbations (brightness, fog, motion blur, shifted rows, dead rows).
 
 Every ``checkpoint_every`` steps the model, optimiser, scheduler and step are written atomically to
-the checkpoint file (default ``<weights>.ckpt``); ``resume=True`` continues from there. With
+the checkpoint file (default ``<weights>.ckpt``); ``RunOptions(resume=True)`` continues from there. With
 validation data the network is evaluated every ``eval_every`` steps (mIoU at working resolution and
 on HD patches) and the best one is written to the weights file with its model card; the card is
 completed at the end (data hashes, seeds, timing, figures, confusion matrices and the per-pixel
@@ -74,22 +74,12 @@ def training_loss(model: torch.nn.Module, batches: tuple, weights: torch.Tensor,
     return torch.stack(losses).mean()
 
 
-def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Path | None = None,
-          config: TrainConfig | None = None, resume: bool = False, cache_dir: str | Path | None = None,
-          checkpoint_file: str | Path | None = None, threads: int | None = None,
-          init_weights: str | Path | None = None, device: str | torch.device = "cpu", prefetch: int = 0,
-          stop_at: int | None = None,
-          progress: Progress | None = None, log: Log | None = None,
-          on_eval: Callable[[list[dict[str, Any]]], None] | None = None) -> dict[str, Any]:
-    """Train on a UAVid-layout folder, write the weights and their model card; returns the card.
+@dataclass(frozen=True, kw_only=True)
+class RunOptions:
+    """How a training run proceeds, besides what shapes it (:class:`TrainConfig`, recorded in the checkpoint).
 
     Parameters
     ----------
-    train_dir, val_dir : folder
-        UAVid-layout datasets (labels required). Without ``val_dir`` no model selection happens: the
-        final network is written and the card has no evaluation.
-    weights_path : file
-        The weights file to write (its card goes next to it).
     resume : bool
         Continue from the checkpoint (same configuration and data required). Without it, an existing
         checkpoint is an error rather than silently overwritten.
@@ -114,6 +104,35 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
     prefetch : int
         Threads that draw the next steps' mini-batches while the current one trains (0: none). The
         batches are a pure function of ``(seed, step)``, so this changes speed only.
+    """
+
+    resume: bool = False
+    cache_dir: str | Path | None = None
+    checkpoint_file: str | Path | None = None
+    threads: int | None = None
+    init_weights: str | Path | None = None
+    device: str | torch.device = "cpu"
+    stop_at: int | None = None
+    prefetch: int = 0
+
+
+def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Path | None = None,
+          config: TrainConfig | None = None, options: RunOptions | None = None, progress: Progress | None = None,
+          log: Log | None = None, on_eval: Callable[[list[dict[str, Any]]], None] | None = None) -> dict[str, Any]:
+    """Train on a UAVid-layout folder, write the weights and their model card; returns the card.
+
+    Parameters
+    ----------
+    train_dir, val_dir : folder
+        UAVid-layout datasets (labels required). Without ``val_dir`` no model selection happens: the
+        final network is written and the card has no evaluation.
+    weights_path : file
+        The weights file to write (its card goes next to it).
+    config : TrainConfig, optional
+        What shapes the run (None: the defaults).
+    options : RunOptions, optional
+        How the run proceeds: resume, cache, checkpoint, threads, warm start, device, early stop, prefetch
+        (None: the defaults).
     progress : callable, optional
         ``progress(iterable, total=..., desc=...)`` wrapper (a progress bar).
     log : callable, optional
@@ -123,13 +142,15 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
         the training curve.
     """
     config = config or TrainConfig()
+    o = options or RunOptions()
+    resume, cache_dir, threads = o.resume, o.cache_dir, o.threads
     weights_path = Path(weights_path)
     say = log or (lambda _msg: None)
-    device = resolve_device(device)
+    device = resolve_device(o.device)
     if threads is not None:
         torch.set_num_threads(threads)
     io_threads = threads or torch.get_num_threads()
-    ckpt_path = _checkpoint_target(weights_path, checkpoint_file, resume)
+    ckpt_path = _checkpoint_target(weights_path, o.checkpoint_file, resume)
 
     started = time.perf_counter()
     data_ids, train_set, val_set, state = _load_data(train_dir, val_dir, config, ckpt_path if resume else None,
@@ -138,13 +159,13 @@ def train(train_dir: str | Path, weights_path: str | Path, *, val_dir: str | Pat
     freq = D.class_frequencies(train_set)
     weights = torch.from_numpy(D.class_weights(freq))
 
-    model, parent, encoder_init = _build_model(config, init_weights, device, say)
+    model, parent, encoder_init = _build_model(config, o.init_weights, device, say)
     optimizer, scheduler, early, run = _optimiser(model, config, state, device, say)
-    end = _end_step(config, stop_at, run.step, ckpt_path)
+    end = _end_step(config, o.stop_at, run.step, ckpt_path)
     card_base = functools.partial(_card_base, config, data_ids, freq, weights, parent, encoder_init, device, end)
     fit = _Fit(config, device, model, optimizer, scheduler, early, weights.to(device), weights_path, ckpt_path,
-               data_ids, card_base)
-    _run_steps(fit, run, train_set, val_set, end, prefetch=prefetch, progress=progress, on_eval=on_eval, say=say)
+               data_ids, card_base, o.prefetch)
+    _run_steps(fit, run, train_set, val_set, end, progress=progress, on_eval=on_eval, say=say)
     card = _final_card(model, run, config, weights_path, card_base(), val_set, device, say)
     card["training"].update(_run_record(run, model, config, end, prep_seconds))
     if config.baseline_pixels and val_set:
@@ -188,6 +209,7 @@ class _Fit:
     ckpt_path: Path
     data_ids: dict[str, Any]
     card_base: Callable[[], dict[str, Any]]
+    prefetch: int = 0  # threads drawing the next steps' mini-batches (RunOptions.prefetch)
 
 
 def _optimiser(model: torch.nn.Module, config: TrainConfig, state: dict[str, Any] | None, device: torch.device,
@@ -205,8 +227,7 @@ def _optimiser(model: torch.nn.Module, config: TrainConfig, state: dict[str, Any
 
 
 def _run_steps(fit: _Fit, run: _RunState, train_set: list[D.Prepared], val_set: list[D.Prepared], end: int, *,
-               prefetch: int, progress: Progress | None, on_eval: Callable[[list[dict[str, Any]]], None] | None,
-               say: Log) -> None:
+               progress: Progress | None, on_eval: Callable[[list[dict[str, Any]]], None] | None, say: Log) -> None:
     """Optimise steps ``run.step`` to ``end``, evaluating (and selecting) every ``evaluation_interval`` steps
     and at the end, and checkpointing every ``checkpoint_every`` steps, after an improvement and at the end."""
     config = fit.config
@@ -214,7 +235,8 @@ def _run_steps(fit: _Fit, run: _RunState, train_set: list[D.Prepared], val_set: 
     window: list[float] = []
     steps = range(run.step, end)
     iterator = progress(steps, total=len(steps), desc="train") if progress is not None else steps
-    draws = prefetched(lambda s: sample_batch(train_set, config, s), steps, workers=prefetch, depth=2 * prefetch)
+    draws = prefetched(lambda s: sample_batch(train_set, config, s), steps, workers=fit.prefetch,
+                       depth=2 * fit.prefetch)
     fit.model.train()
     for step, batches in zip(iterator, draws, strict=True):
         loss, seconds = _optimise(fit, batches, step)

@@ -10,16 +10,17 @@ import pytest
 from assurance import requirements as rq
 from el.base.errors import WeightsError
 from el.base.torch_extra import have_torch
+from el.classes.labels import ids_to_colors
 from el.flight.pipeline import EmergencyLanding, PipelineConfig
+from el.geometry.camera import SafetyParams
 from el.geometry.config import CoreConfig
 from el.segmentation.factory import load_model
+from el.segmentation.weights import DEFAULT_WEIGHTS, load_weights
 
 
 @pytest.mark.requirements("EL-R14")
 @pytest.mark.parametrize("size", [(3840, 2160), (4096, 2160)])
 def test_declared_beta_covers_the_declared_pose_error_box(size, requirement_registry):
-    from el.geometry.camera import SafetyParams
-
     p = requirement_registry.parameters  # the targets: R, beta and the pose-error box
     core = CoreConfig(safety=SafetyParams(radius_m=p["radius_m"], beta=p["beta"]))
     ev = rq.check_pose_margin(core, size, p["pose_error"], {"radius_m": p["radius_m"], "beta": p["beta"]})
@@ -29,16 +30,12 @@ def test_declared_beta_covers_the_declared_pose_error_box(size, requirement_regi
 
 @pytest.mark.requirements("EL-R14")
 def test_a_too_small_beta_is_caught():
-    from el.geometry.camera import SafetyParams
-
     ev = rq.check_pose_margin(CoreConfig(safety=SafetyParams(beta=1.2)), (3840, 2160), {"height": 0.2, "pitch": 0.2})
     assert ev.status == rq.FAIL and "1.2 <" in ev.summary
 
 
 @pytest.mark.requirements("EL-R14")
 def test_a_run_planned_with_other_safety_params_does_not_judge_the_targets():
-    from el.geometry.camera import SafetyParams
-
     core = CoreConfig(safety=SafetyParams(radius_m=2.0, beta=1.7))
     ev = rq.check_pose_margin(core, (3840, 2160), {"height": 0.2, "pitch": 0.2}, {"radius_m": 2.5, "beta": 1.7})
     assert ev.status == rq.INSUFFICIENT and "planned with R = 2 m" in ev.summary and "declare R = 2.5 m" in ev.summary
@@ -49,8 +46,6 @@ def test_a_run_planned_with_other_safety_params_does_not_judge_the_targets():
 def _scene() -> np.ndarray:
     """A small colour-coded label image (low vegetation, a road, a building): any frame will do, the model
     fails before it is used."""
-    from el.classes.labels import ids_to_colors
-
     ids = np.full((144, 256), 5, np.uint8)
     ids[:, 80:86] = 2
     ids[:48, 160:192] = 1
@@ -62,8 +57,6 @@ def shipped_copy(tmp_path_factory):
     """A copy of the shipped weights with their card and checked ONNX export: what any install loads (torch runs the
     weights; a base install, without torch, runs the export, ``el.segmentation.onnx_segmenter``)."""
     import shutil
-
-    from el.segmentation.weights import DEFAULT_WEIGHTS
 
     folder = tmp_path_factory.mktemp("weights")
     for name in ("model.pt", "model.json", "model.onnx", "model.onnx.json"):
@@ -90,8 +83,6 @@ def test_altered_weights_are_refused_before_use(shipped_copy, tmp_path):
         load_model(bad)
     assert "altered.pt" in str(exc.value)
     if have_torch():  # the torch loader itself checks too
-        from el.segmentation.weights import load_weights
-
         with pytest.raises(WeightsError, match="SHA-256 mismatch"):
             load_weights(bad)
 
