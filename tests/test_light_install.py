@@ -185,6 +185,7 @@ TORCH_ONLY = {
     "assurance.fitting.network.weights_io", "el.segmentation.architectures", "el.segmentation.inference",
     "el.segmentation.lazy_trunk", "el.segmentation.lite", "el.segmentation.model",
     "assurance.fitting.verifier_fit", "assurance.fitting.verifier_net", "assurance.fitting.verifier_train",
+    "assurance.cli.train_run",
 }
 """The modules that import torch when imported: the networks' definitions, the torch segmenter and training. Every
 other module of el and assurance imports without torch (the base install), torch imported lazily where needed."""

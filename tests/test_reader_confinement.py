@@ -293,7 +293,7 @@ def test_the_verify_session_is_rooted_in_the_toolkit_not_the_working_folder(tmp_
     not read), no argument naming the working folder."""
     import argparse
 
-    from assurance.cli.verify import pytest_args
+    from assurance.cli.verify_run import pytest_args
     from assurance.code_identity import install_root
 
     monkeypatch.chdir(tmp_path)

@@ -19,7 +19,8 @@ import importlib
 import logging
 import os
 import sys
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from types import ModuleType
 
 from assurance import __version__
 from assurance.attest.key_paths import protect_signing_keys
@@ -216,8 +217,21 @@ def build_parser(commands: Sequence[str] | None = None) -> argparse.ArgumentPars
         _add_verbosity(p)
         if name in SYSTEM_COMMANDS:
             p.add_argument("--system", metavar="FILE", default=None, help=SYSTEM_HELP)
-        p.set_defaults(_run=module.run)
+        p.set_defaults(_run=_runner(module))
     return parser
+
+
+def _runner(module: ModuleType) -> Callable[[argparse.Namespace], int]:
+    """The command's ``run``: its own module's, or that of the module it names in ``WORK`` (a command whose work
+    needs pandas, scipy or torch keeps its options apart, so that its ``--help`` imports none of them)."""
+    work = getattr(module, "WORK", None)
+    if work is None:
+        return module.run
+
+    def run(args: argparse.Namespace) -> int:
+        return importlib.import_module(work).run(args)
+
+    return run
 
 
 KEEPS_STDOUT_WHEN_QUIET = ("model-card", "keys")

@@ -20,6 +20,7 @@ from assurance.system import build
 from assurance.system.loader import SystemFile, SystemFileError
 from assurance.system.model import load_model_spec
 from assurance.system.sense import gate_refusal
+from el.base.deadline import DEFAULT_TIME_BUDGET_S
 from el.base.errors import WeightsError
 from el.classes.labels import UAVID, LabelSet
 from el.geometry.config import CoreConfig
@@ -61,8 +62,6 @@ class System:
         Every section is read and checked here (``SystemFileError`` naming the file and the key); the calibration
         card is read when the deployed pair is (:meth:`deployed`): ``uav-el calibrate`` may be about to write it. The
         frame gate it ends up with is checked for sense (``assurance.system.sense``), a ``--gate`` as a file's is."""
-        from el.flight.pipeline import DEFAULT_TIME_BUDGET_S  # deferred: scipy; keeps the commands' --help light
-
         labels = build.label_set(file)
         shipped = model is None and build.model_kind(file) == "builtin" and not file.get("model.class_map") \
             and labels == UAVID

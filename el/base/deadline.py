@@ -32,6 +32,8 @@ from typing import Any
 from el.base.errors import BudgetExceeded
 
 Clock = Callable[[], float]
+DEFAULT_TIME_BUDGET_S = 10.0
+"""A decision's time budget in seconds where its system states none ([targets] time_budget_s)."""
 _ACTIVE: contextvars.ContextVar[Deadline | None] = contextvars.ContextVar("uav_el_deadline", default=None)
 WALL_CLOCKS: tuple[Clock, ...] = (time.perf_counter, time.monotonic)
 """Clocks whose seconds a ``threading.Timer`` keeps (monotonic, real time): only on them is a stop armed by time."""

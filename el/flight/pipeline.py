@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from el.base.deadline import Deadline, active, run_with_deadline
+from el.base.deadline import DEFAULT_TIME_BUDGET_S, Deadline, active, run_with_deadline
 from el.base.decision import Decision, Disc, MonitorVerdict
 from el.base.errors import BudgetExceeded
 from el.base.hashing import sha256_bytes
@@ -54,7 +54,6 @@ from el.segmentation.contract import check_model, labels_of
 from el.segmentation.factory import load_model
 
 Clock = Callable[[], float]
-DEFAULT_TIME_BUDGET_S = 10.0
 DEPLOYED_MONITOR = "learned:walk=score,threshold=0.8563253044730293"
 """The shipped runtime monitor, chosen on the validation split (docs/results.md, docs/monitors.md): the learned
 candidate monitor (``el/monitors/data/learned.json``), candidates walked by its score (``el.monitors.walk``),
