@@ -27,6 +27,7 @@ API: dict[str, str] = {
     "UAVID": "el.classes.labels", "load_label_set": "el.classes.labels", "Intrinsics": "el.geometry.camera",
     "Pose": "el.geometry.camera", "SafetyParams": "el.geometry.camera", "CoreConfig": "el.geometry.config",
     "OperatingDomain": "el.geometry.odd", "Monitor": "el.monitors", "build_monitor": "el.monitors",
+    "GateFile": "el.monitors.frame_gate",
     "load_model": "el.segmentation", "read_image": "el.base.imageio",
 }
 """Each public name -> the module defining it."""

@@ -264,6 +264,7 @@ def test_land_builds_each_part_and_decodes_the_frame_once(main, scene, tmp_path,
 
     import el.base.imageio
     import el.flight.pipeline
+    import el.monitors.frame_gate
     from assurance.system.system import System
 
     calls: collections.Counter = collections.Counter()
@@ -274,7 +275,7 @@ def test_land_builds_each_part_and_decodes_the_frame_once(main, scene, tmp_path,
 
     count(System, "segmenter", "model")
     count(el.flight.pipeline, "build_monitor", "monitor")
-    count(el.flight.pipeline, "load_frame_gate", "gate")
+    count(el.monitors.frame_gate, "load_frame_gate", "gate")  # GateFile.load reads through it
     count(el.base.imageio, "_decode_frame", "decode")
     _, image = scene
     out, ov = tmp_path / "d.json", tmp_path / "ov.png"

@@ -21,7 +21,7 @@ def test_the_embedded_default_is_the_shipped_system():
     assert system.shipped_network and system.labels == UAVID and system.gate == DEPLOYED_GATE
     assert system.deployed() == (DEPLOYED_MONITOR, None)  # held to the shipped card by check_monitor_bindings
     config = system.flight_config()
-    assert config.gate == str(DEPLOYED_GATE) and config.monitor == DEPLOYED_MONITOR
+    assert config.gate.path == str(DEPLOYED_GATE) and config.monitor == DEPLOYED_MONITOR
     assert config.odd == system.odd and config.core == system.core and config.time_budget_s == system.budget_s
 
 

@@ -20,8 +20,7 @@ from assurance.dataio.uavid import Sample
 from el.base.decision import Candidate
 from el.base.errors import DataError
 from el.geometry.camera import Pose, check_geometry
-from el.geometry.odd import OperatingDomain
-from el.monitors.frame_gate import FrameGate, load_frame_gate
+from el.monitors.frame_gate import FrameGate, GateFile
 
 _GATES: dict[tuple[str, str], FrameGate] = {}  # per worker: each gate file read once
 
@@ -60,24 +59,15 @@ def frame_truth(sample: Sample, labels: Any, shape: tuple[int, ...]) -> tuple[An
     return labels, ids
 
 
-def outside_odd(odd: dict[str, Any] | None, pose: Pose, size: tuple[int, int]) -> str | None:
-    """The ``outside_odd`` reason of a frame under the campaign's declared domain (None: inside, or none declared)."""
-    return None if odd is None else OperatingDomain.from_dict(odd).outside(pose, size)
-
-
-def frame_gate(gate: dict[str, str] | None, segmenter: Any) -> FrameGate | None:
+def frame_gate(gate: GateFile | None, segmenter: Any) -> FrameGate | None:
     """The campaign's frame gate (read once per worker), refused (ValueError, a fault of the task) when its file
     changed since the run recorded it or it was fitted on another network (``el.flight.kernel.build_parts`` binds
     it)."""
-    if not gate:
+    if gate is None:
         return None
-    key = (gate["path"], gate["sha256"])
+    key = (gate.path, gate.sha256)
     if key not in _GATES:
-        loaded = load_frame_gate(gate["path"])
-        if loaded.sha256 != gate["sha256"]:
-            raise ValueError(f"{gate['path']}: frame gate changed since the run recorded it (body SHA-256 "
-                             f"{loaded.sha256[:12]}..., recorded {gate['sha256'][:12]}...)")
-        _GATES[key] = loaded
+        _GATES[key] = gate.load()
     _GATES[key].check_network(segmenter)
     return _GATES[key]
 

@@ -119,12 +119,12 @@ def fit_levels(system: Any) -> tuple[tuple[str, int], ...] | None:
 
 
 def domain_record(perturbations: Sequence[str], scenarios: Iterable[tuple[str, int]],
-                  odd: Mapping[str, Any] | None) -> dict[str, dict[str, Any]] | None:
+                  odd: OperatingDomain | Mapping[str, Any] | None) -> dict[str, dict[str, Any]] | None:
     """The manifest's ``perturbation_domain``: per perturbation run, its declared maximum (None: not declared), the
-    severities run and whether all of them lie inside the declared domain (``odd``: its record; None: no record)."""
+    severities run and whether all of them lie inside the declared domain (``odd``, or its record; None: none)."""
     if odd is None:
         return None
-    domain = OperatingDomain.from_dict(odd)
+    domain = odd if isinstance(odd, OperatingDomain) else OperatingDomain.from_dict(odd)
     out: dict[str, dict[str, Any]] = {
         name: {"declared_max": domain.perturbations.get(name), "severities": [], "inside": True}
         for name in perturbations}

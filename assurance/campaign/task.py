@@ -32,7 +32,6 @@ from assurance.campaign.frames import (
     frame_pose_of,
     frame_truth,
     gate_columns,
-    outside_odd,
 )
 from assurance.campaign.judging import _timed, judge_candidates
 from assurance.campaign.truth import true_hazard
@@ -46,6 +45,7 @@ from el.geometry.config import CoreConfig, check_seed
 from el.geometry.odd import OperatingDomain
 from el.landing.core import default_area
 from el.monitors import DEMO_GRID, build_monitor, parse_monitor_spec
+from el.monitors.frame_gate import GateFile
 from el.monitors.spec import walk_of
 from el.monitors.walk import walk_candidates
 from el.segmentation.contract import labels_of
@@ -82,9 +82,11 @@ class CampaignConfig:
     weights: str | dict[str, Any] | None = None  # None: the shipped weights; a dict: a system file's model
     core: CoreConfig = field(default_factory=CoreConfig)
     poses: str = "nominal"  # which pose plans each frame: assurance.dataio.poses.POLICIES
-    # the declared operating domain (el.geometry.odd.OperatingDomain.to_dict()); None: none
-    odd: dict[str, Any] | None = None
-    gate: dict[str, str] | None = None  # the frame gate {"path", "sha256"} (el.monitors.frame_gate); None: none
+    # the declared operating domain (a manifest's record, OperatingDomain.to_dict(), is read back to one); None: none
+    odd: OperatingDomain | None = None
+    # the frame gate, pinned to the body SHA-256 the run records (a manifest's {"path", "sha256"} is read back to
+    # one): the flight's type (el.monitors.frame_gate.GateFile); None: none
+    gate: GateFile | None = None
     time_budget_s: float | None = None  # the flight's deadline (with the task's clock); None: none, so that the
     # readouts do not depend on the machine's speed
     severity_caps: dict[str, int] | None = None  # per perturbation, a declared maximum below the severities (it runs
@@ -114,7 +116,11 @@ class CampaignConfig:
             raise ValueError(f"images must be >= 1, got {self.images}")
         check_seed(self.seed)
         check_policy(self.poses)
-        outside_odd(self.odd, self.core.pose, (1920, 1080))  # a malformed declaration fails here
+        if self.odd is not None and not isinstance(self.odd, OperatingDomain):
+            object.__setattr__(self, "odd", OperatingDomain.from_dict(self.odd))  # a malformed record fails here
+        object.__setattr__(self, "gate", GateFile.of(self.gate))
+        if self.gate is not None and self.gate.sha256 is None:
+            raise ValueError(f"gate {self.gate.path}: a campaign pins its frame gate's body SHA-256")
         bad_caps = {p: c for p, c in (self.severity_caps or {}).items()
                     if p not in PERTURBATIONS or isinstance(c, bool) or not isinstance(c, int) or not 1 <= c <= 5}
         if bad_caps:
@@ -128,6 +134,8 @@ class CampaignConfig:
         """The manifest's ``config``; ``poses`` only when not nominal, so a nominal run records as before."""
         d = asdict(self)
         d["core"] = self.core.to_dict()
+        d["odd"] = None if self.odd is None else self.odd.to_dict()
+        d["gate"] = None if self.gate is None else self.gate.to_dict()
         if self.poses == "nominal":
             del d["poses"]
         for key in ("odd", "gate", "time_budget_s", "severity_caps"):
@@ -173,8 +181,7 @@ def task_parts(config: CampaignConfig, segmenter: Any, labels: Any) -> Parts:
     """The flight kernel's parts for a campaign's frames (``el.flight.kernel.build_parts``, as flight builds them): its
     network, label set, CM configuration, declared domain and frame gate (read once per worker, refused when its file
     changed, it was fitted on another network or the network returns no frame statistics)."""
-    odd = None if config.odd is None else OperatingDomain.from_dict(config.odd)
-    return build_parts(segmenter, config.core, labels=labels, odd=odd, gate=frame_gate(config.gate, segmenter))
+    return build_parts(segmenter, config.core, labels=labels, odd=config.odd, gate=frame_gate(config.gate, segmenter))
 
 
 def run_task(task: Task, config: CampaignConfig, segmenter: Any, *, clock: Callable[[], float] = time.perf_counter,

@@ -20,7 +20,7 @@ from assurance.errors import CommandError
 from assurance.workers import bounded_jobs
 from el.monitors import build_monitor
 from el.monitors.calibration import check_card_monitor, load_calibration
-from el.monitors.frame_gate import load_frame_gate
+from el.monitors.frame_gate import GateFile, load_frame_gate
 
 HELP = "run or resume an evaluation campaign (perturbations x test images x monitor configurations)"
 
@@ -83,8 +83,7 @@ def run(args: argparse.Namespace) -> int:
         severities=tuple(args.severities) if args.severities else None,
         monitors=monitors,
         images=args.images, weights=system.model, seed=args.seed,
-        poses=args.poses or system.poses, odd=system.odd.to_dict(),
-        gate=None if gate is None else {"path": gate.path, "sha256": gate.sha256},
+        poses=args.poses or system.poses, odd=system.odd, gate=GateFile.of(gate),
     )
     for line in outside_lines(domain_record(config.perturbations, config.scenarios(), config.odd), plan,
                               system.label):

@@ -47,7 +47,7 @@ from el.geometry.odd import OperatingDomain
 from el.monitors import CandidateContext, Monitor, build_monitor, monitor_name, parse_monitor_spec
 from el.monitors.calibration import check_card_monitor, check_card_spec, load_calibration
 from el.monitors.capabilities import check_monitor_capabilities
-from el.monitors.frame_gate import load_frame_gate
+from el.monitors.frame_gate import GateFile
 from el.monitors.patch_judge import batch_judge
 from el.monitors.walk import HAZARD, SCORE, Judge, Step
 from el.segmentation.contract import check_model, labels_of
@@ -133,10 +133,12 @@ class PipelineConfig:
     max_pixels : int
         Largest frame accepted, in pixels (:data:`el.base.imageio.MAX_PIXELS`, 8K plus a quarter by default): a file
         whose header claims more is refused before decoding (default action, the reason naming the file).
-    gate : path or None
+    gate : GateFile, path or None
         A frame gate (``uav-el fit-gate``, ``el.monitors.frame_gate``) scoring the frame pass's own statistics: a
         frame above its threshold ends in the default action (``out_of_domain: frame gate ...``); its score and
-        threshold are in every decision's ``input.frame_gate`` (null: no gate). A bad gate file is a fault.
+        threshold are in every decision's ``input.frame_gate`` (null: no gate). A bad gate file, or a pinned one
+        whose body changed, is a fault. A path is read as an unpinned ``GateFile``, the type the campaign's
+        configuration pins to the hash its run records.
     odd : OperatingDomain or None
         The declared operating domain (``el.geometry.odd``): a frame whose pose or size is outside it ends in the
         default action with reason ``outside_odd: <dimension> ...`` (a decision, not a fault). None: no
@@ -152,13 +154,14 @@ class PipelineConfig:
     patch_max_side: int | None = None
     nominal_size: tuple[int, int] = (3840, 2160)
     calibration: str | None = None
-    gate: str | None = None
+    gate: GateFile | None = None
     odd: OperatingDomain | None = None
     max_pixels: int = MAX_PIXELS
     hard_stop: bool = True
 
     def __post_init__(self) -> None:
         parse_monitor_spec(self.monitor)  # a bad spec fails here, before any image
+        object.__setattr__(self, "gate", GateFile.of(self.gate))
         check_max_pixels(self.max_pixels)
         if self.time_budget_s is not None and not (math.isfinite(self.time_budget_s) and self.time_budget_s > 0):
             raise ValueError(f"time_budget_s must be a positive number of seconds or None, got {self.time_budget_s!r}")
@@ -181,7 +184,7 @@ class PipelineConfig:
             "patch_max_side": self.patch_max_side,
             "core": self.core.to_dict(),
             **({"calibration": self.calibration} if self.calibration else {}),
-            **({"gate": self.gate} if self.gate else {}),
+            **({"gate": self.gate.path} if self.gate else {}),
             **({"odd": self.odd.to_dict()} if self.odd is not None else {}),
             **({"max_pixels": self.max_pixels} if self.max_pixels != MAX_PIXELS else {}),
             **({} if self.hard_stop else {"hard_stop": False}),
@@ -246,7 +249,7 @@ class EmergencyLanding:
         gate = None
         if self.config.gate:
             try:
-                gate = load_frame_gate(self.config.gate)
+                gate = self.config.gate.load()
             except Exception as exc:
                 self._refuse("frame_gate", exc)
         self.parts = self._parts(gate if self.segmenter is not None else None)  # no network: no gate to bind

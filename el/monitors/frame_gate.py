@@ -15,6 +15,7 @@ action, the reason recorded). The file binds the gate to the network it was fitt
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
@@ -135,6 +136,39 @@ def load_frame_gate(path: str | Path) -> FrameGate:
     return FrameGate(str(p), digest, body, params)
 
 
+@dataclass(frozen=True)
+class GateFile:
+    """Which frame gate a configuration deploys: its file, and the body SHA-256 it must have (None: whatever the
+    file holds when it is read). One type for the flight's ``PipelineConfig.gate`` and the campaign's
+    ``CampaignConfig.gate`` (which pins the hash its run recorded)."""
+
+    path: str
+    sha256: str | None = None
+
+    @classmethod
+    def of(cls, value: GateFile | FrameGate | str | Path | Mapping[str, Any] | None) -> GateFile | None:
+        """The gate file a configuration is given: a path (unpinned), a loaded gate or a run's ``{"path",
+        "sha256"}`` record (pinned); None or empty: no gate."""
+        if value is None or isinstance(value, GateFile):
+            return value
+        if isinstance(value, FrameGate):
+            return cls(value.path, value.sha256)
+        if isinstance(value, Mapping):
+            return cls(str(value["path"]), value.get("sha256")) if value else None
+        return cls(str(value)) if str(value) else None
+
+    def to_dict(self) -> dict[str, str | None]:
+        return {"path": self.path, "sha256": self.sha256}
+
+    def load(self) -> FrameGate:
+        """The gate, read and checked (``load_frame_gate``); FrameGateError when a pinned file's body changed."""
+        gate = load_frame_gate(self.path)
+        if self.sha256 is not None and gate.sha256 != self.sha256:
+            raise FrameGateError(f"{self.path}: frame gate changed since the run recorded it (body SHA-256 "
+                                 f"{gate.sha256[:12]}..., recorded {self.sha256[:12]}...)")
+        return gate
+
+
 def returns_frame_stats(model: Any) -> bool:
     """Whether a segmentation model returns its frame pass's statistics for a frame gate (``FRAME_STATS``: the
     shipped ``Segmenter``, an ``OnnxModel``, a ``MappedModel`` over either)."""
@@ -169,5 +203,5 @@ def judge_frame(gate: FrameGate, stats: Any, info: dict[str, Any]) -> str | None
     return gate.reason(score)
 
 
-__all__ = ["FRAME_GATE_FORMAT", "OUT_OF_DOMAIN", "FrameGate", "bind_frame_gate", "check_frame_stats",
+__all__ = ["FRAME_GATE_FORMAT", "OUT_OF_DOMAIN", "FrameGate", "GateFile", "bind_frame_gate", "check_frame_stats",
            "frame_gate_document", "judge_frame", "load_frame_gate", "returns_frame_stats"]
