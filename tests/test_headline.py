@@ -38,3 +38,25 @@ def test_headline_block_round_trip_and_mismatch(tiny_campaign, tmp_path):
     readme.write_text("no markers\n")
     with pytest.raises(HeadlineError, match="headline markers"):
         current_block(readme)
+
+
+def test_a_run_reproduces_the_readme_or_a_recorded_run_of_another_instruction_set(tmp_path):
+    """The README's table, then each table of docs/headline-runs/ beside it: the first one the run reproduces."""
+    from assurance.analysis.headline import ALTERNATES, reference_blocks, reproduced
+
+    head = "| perturbation | a | b | c | d | e | f | g |\n|---|---|---|---|---|---|---|---|\n"
+    row = ("| fog | {} of 70 | 28 of 70 | 0.400 (0.505) | +0.272 | +0.052 [-0.007, +0.112] | +0.325 [+0.232, +0.437] "
+           "| 0.451 / 0.207 |\n")
+    readme, other = head + row.format(32), head + row.format(31)
+    (tmp_path / "README.md").write_text(f"{BEGIN}\n{readme}{END}\n")
+    refs = reference_blocks(tmp_path / "README.md")
+    assert [name for name, _ in refs] == ["README.md"]
+    assert reproduced(readme, refs) == ("README.md", {})
+    match, differences = reproduced(other, refs)
+    assert match is None and "must be equal" in differences["README.md"][0]
+    (tmp_path / ALTERNATES).mkdir(parents=True)
+    (tmp_path / ALTERNATES / "avx2.md").write_text(f"# the AVX2 run\n\n{BEGIN}\n{other}{END}\n")
+    refs = reference_blocks(tmp_path / "README.md")
+    match, differences = reproduced(other, refs)
+    assert match == "docs/headline-runs/avx2.md" and list(differences) == ["README.md"]
+    assert reproduced(head + row.format(30), refs)[0] is None

@@ -143,6 +143,35 @@ def headline_differences(expected: str, found: str, tolerance: Reproducibility =
     return out
 
 
+ALTERNATES = Path("docs") / "headline-runs"
+"""Beside a README, the headline tables of release runs on other instruction sets (one file each, with the markers):
+ONNX Runtime's convolutions differ in their last bits between AVX2 and AVX-512, and a few perturbed frames get
+other candidates (docs/results.md, "Reproducibility across machines")."""
+
+
+def reference_blocks(readme: str | Path) -> list[tuple[str, str]]:
+    """(name, block) of each headline a release run may reproduce: the README's, then each recorded run of another
+    instruction set (:data:`ALTERNATES` beside it)."""
+    readme = Path(readme)
+    out = [(readme.name, current_block(readme))]
+    for path in sorted((readme.parent / ALTERNATES).glob("*.md")):
+        out.append((str(path.relative_to(readme.parent)), current_block(path)))
+    return out
+
+
+def reproduced(found: str, references: list[tuple[str, str]], tolerance: Reproducibility = REPRODUCIBILITY
+               ) -> tuple[str | None, dict[str, list[str]]]:
+    """The name of the first reference block the run's ``found`` reproduces within ``tolerance`` (None: none), and
+    what differs from each reference it does not reproduce."""
+    differences: dict[str, list[str]] = {}
+    for name, block in references:
+        lines = headline_differences(block, found, tolerance)
+        if not lines:
+            return name, differences
+        differences[name] = lines
+    return None, differences
+
+
 def current_block(path: str | Path) -> str:
     """The block between the README's markers, as written."""
     return _split(Path(path).read_text(encoding="utf-8"), Path(path))[1].strip("\n") + "\n"
