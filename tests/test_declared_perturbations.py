@@ -90,7 +90,7 @@ def test_a_declared_maximum_below_three_caps_the_severity_unless_severities_are_
     assert demo.to_dict()["severity_caps"] == {"gaussian_noise": 2}
     asked = preset_config("demo", plan=plan, severities=(3,))
     assert asked.severity_caps is None and asked.scenarios() == [("none", 3), ("gaussian_noise", 3)]
-    record = domain_record(asked.perturbations, asked.scenarios(), system.odd.to_dict())
+    record = domain_record(asked.perturbations, asked.scenarios(), system.odd)
     assert record["gaussian_noise"] == {"declared_max": 2, "severities": [3], "inside": False}
     assert fit_levels(system) == (("none", 3), ("gaussian_noise", 2))
 

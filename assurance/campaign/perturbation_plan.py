@@ -119,18 +119,17 @@ def fit_levels(system: Any) -> tuple[tuple[str, int], ...] | None:
 
 
 def domain_record(perturbations: Sequence[str], scenarios: Iterable[tuple[str, int]],
-                  odd: OperatingDomain | Mapping[str, Any] | None) -> dict[str, dict[str, Any]] | None:
+                  odd: OperatingDomain | None) -> dict[str, dict[str, Any]] | None:
     """The manifest's ``perturbation_domain``: per perturbation run, its declared maximum (None: not declared), the
-    severities run and whether all of them lie inside the declared domain (``odd``, or its record; None: none)."""
+    severities run and whether all of them lie inside the declared domain ``odd`` (None: none declared)."""
     if odd is None:
         return None
-    domain = odd if isinstance(odd, OperatingDomain) else OperatingDomain.from_dict(odd)
     out: dict[str, dict[str, Any]] = {
-        name: {"declared_max": domain.perturbations.get(name), "severities": [], "inside": True}
+        name: {"declared_max": odd.perturbations.get(name), "severities": [], "inside": True}
         for name in perturbations}
     for name, sev in scenarios:
         out[name]["severities"].append(int(sev))
-        out[name]["inside"] = out[name]["inside"] and domain.covers(name, int(sev))
+        out[name]["inside"] = out[name]["inside"] and odd.covers(name, int(sev))
     return out
 
 
