@@ -118,7 +118,7 @@ def test_the_shipped_verifier_is_bound_to_the_shipped_network_and_learned_model(
     from el.segmentation.weights import DEFAULT_WEIGHTS, read_card
 
     record = load_verifier()
-    assert record.size == 64 and record.body["weights"]["sha256"] == read_card(DEFAULT_WEIGHTS)["weights_sha256"]
+    assert record.size == 256 and record.body["weights"]["sha256"] == read_card(DEFAULT_WEIGHTS)["weights_sha256"]
     assert record.body["held_out"]["candidates"] > 0 and record.body["training"]["sha256"]
     fused = VerifierMonitor(labels=UAVID, fuse="learned")
     assert fused.name == "verifier:fuse=learned"

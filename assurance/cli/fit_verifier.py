@@ -26,14 +26,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--steps", type=int, default=3000, help="training steps (default: %(default)s)")
     p.add_argument("--minutes", type=float, help="stop training after this many minutes (default: no limit)")
     p.add_argument("--batch", type=int, default=64, help="crops per step (default: %(default)s)")
-    p.add_argument("--size", type=int, default=64, help="crop side in pixels, a multiple of 16 (default: %(default)s)")
+    p.add_argument("--size", type=int, default=256,
+                   help="crop side in pixels, a multiple of 16, large enough for the ground's texture to show "
+                        "(a paver of a 4K frame survives 256 px, not 64; default: %(default)s)")
     p.add_argument("--margin", type=float, default=0.5,
                    help="context around the disc, in radii (default: %(default)s)")
     p.add_argument("--jitter", type=int, default=3, help="mined discs around each training candidate "
                                                          "(default: %(default)s)")
     p.add_argument("--lr", type=float, default=1e-3, help="learning rate of the head (default: %(default)s)")
     p.add_argument("--eval-every", type=int, default=250, help="held-out AUROC every N steps (default: %(default)s)")
-    p.add_argument("--views", type=int, default=2,
+    p.add_argument("--views", type=int, default=1,
                    help="views of each training crop through the frozen encoder, the first as it is, the others "
                         "augmented (default: %(default)s)")
     p.add_argument("--frozen", choices=("encoder", "low"), default="encoder",
