@@ -92,3 +92,21 @@ def test_fit_verifier_command_is_listed_and_checks_its_options(tmp_path, capsys)
     assert main(["fit-verifier", "--data", str(tmp_path / "nope"), "--val", str(tmp_path),
                  "--out", str(tmp_path / "v.json")]) == 2
     assert "no such folder" in capsys.readouterr().err
+
+
+def test_the_command_line_defaults_are_the_training_configurations():
+    """`uav-el fit-verifier` without options trains as TrainConfig() says (the shipped recipe: 256 px, one view)."""
+    import argparse
+    from dataclasses import fields
+
+    from assurance.cli.fit_verifier import add_arguments
+    from assurance.fitting.verifier_train import TrainConfig
+
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    cfg = TrainConfig()
+    for f in fields(TrainConfig):
+        default = parser.get_default(f.name)
+        if default is not None:
+            assert default == getattr(cfg, f.name), f.name
+    assert (cfg.size, cfg.views) == (256, 1)

@@ -32,7 +32,9 @@ FROZEN_BLOCKS = TAP_8 + 2  # the stem and blocks 0..4 (down to 1/8) keep their I
 
 @dataclass(frozen=True, kw_only=True)
 class TrainConfig:
-    size: int = 64
+    """How the verifier trains; the defaults are the shipped verifier's recipe and ``uav-el fit-verifier``'s."""
+
+    size: int = 256  # a paver of a 4K frame still shows at 256 px, not at 64 (docs/results.md)
     margin: float = 0.5
     steps: int = 3000
     batch: int = 64
@@ -41,7 +43,7 @@ class TrainConfig:
     weight_decay: float = 1e-4
     aux_weight: float = 0.5
     eval_every: int = 250
-    views: int = 2
+    views: int = 1
     frozen: str = "encoder"  # "encoder": every encoder block keeps its ImageNet weights; "low": down to 1/8 only
     minutes: float | None = None
     seed: int = 0
