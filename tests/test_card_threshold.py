@@ -19,6 +19,7 @@ from el.segmentation.weights import DEFAULT_WEIGHTS, read_card
 
 WW = 128
 SHIPPED_T = load_calibration(DEPLOYED_CALIBRATION).threshold
+BASE = load_calibration(DEPLOYED_CALIBRATION).monitor  # the deployed spec without its threshold
 
 
 class Shipped(OracleSegmenter):
@@ -32,7 +33,7 @@ class Shipped(OracleSegmenter):
 def _resealed_card(path, threshold: float):
     """The shipped card at another threshold, re-hashed (a card that checks, calibrating another threshold)."""
     body = dict(json.loads(DEPLOYED_CALIBRATION.read_text())["body"])
-    body.update(threshold=threshold, spec=f"learned:walk=score,threshold={threshold!r}")
+    body.update(threshold=threshold, spec=f"{BASE},threshold={threshold!r}")
     path.write_text(json.dumps(card_document(body)))
     return path
 
@@ -45,13 +46,13 @@ def _decide(**config):
 def test_a_spec_runs_with_its_card_only_at_the_card_s_threshold(tmp_path):
     card = load_calibration(DEPLOYED_CALIBRATION)
     check_card_spec(card, DEPLOYED_MONITOR)  # the shipped pair
-    check_card_spec(card, "learned:walk=score")  # no threshold of its own: it runs at the card's
+    check_card_spec(card, BASE)  # no threshold of its own: it runs at the card's
     with pytest.raises(CalibrationError) as err:
-        check_card_spec(card, "learned:walk=score,threshold=0.5")
+        check_card_spec(card, f"{BASE},threshold=0.5")
     line = str(err.value)
     assert "\n" not in line and str(DEPLOYED_CALIBRATION) in line
-    assert "'learned:walk=score,threshold=0.5' has threshold 0.5" in line and f"threshold {SHIPPED_T!r}" in line
-    with pytest.raises(CalibrationError, match="calibrates 'learned:walk=score', not 'lhd'"):
+    assert f"'{BASE},threshold=0.5' has threshold 0.5" in line and f"threshold {SHIPPED_T!r}" in line
+    with pytest.raises(CalibrationError, match=f"calibrates '{BASE}', not 'lhd'"):
         check_card_spec(card, "lhd")
     with pytest.raises(CalibrationError, match="not 'none'"):
         check_card_spec(card, None)
@@ -59,7 +60,7 @@ def test_a_spec_runs_with_its_card_only_at_the_card_s_threshold(tmp_path):
 
 def test_in_flight_a_spec_off_its_card_s_threshold_is_the_default_action(tmp_path, monkeypatch):
     assert not _decide().reason.startswith("fault"), "the shipped pair flies"
-    d = _decide(monitor="learned:walk=score,threshold=0.5", calibration=str(DEPLOYED_CALIBRATION))
+    d = _decide(monitor=f"{BASE},threshold=0.5", calibration=str(DEPLOYED_CALIBRATION))
     assert d.action == "default" and d.reason.startswith("fault: monitor: CalibrationError")
     assert "has threshold 0.5" in d.reason and repr(SHIPPED_T) in d.reason
     # the deployed spec with its card swapped for one re-hashed at another threshold
@@ -95,7 +96,7 @@ def test_the_command_line_refuses_a_deployed_spec_off_its_card_s_threshold(tmp_p
         assert f"has threshold {SHIPPED_T!r}" in err[0] and "card has threshold 0.9" in err[0], err[0]
     assert not (tmp_path / "run").exists()
     # a card given on the command line with a spec of its own threshold: the same line, from the card
-    assert main(["land", str(image), "--monitor", "learned:walk=score,threshold=0.5", "--calibration",
+    assert main(["land", str(image), "--monitor", f"{BASE},threshold=0.5", "--calibration",
                  str(DEPLOYED_CALIBRATION)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "has threshold 0.5" in err[0] and str(DEPLOYED_CALIBRATION) in err[0], err
@@ -107,6 +108,6 @@ def test_a_system_whose_spec_matches_its_card_or_that_has_no_card_is_not_refused
 
     system_build.check_deployed_calibration(default_system())  # the shipped pair
     card = _resealed_card(tmp_path / "card.json", 0.9)
-    system_build.check_deployed_calibration(load_system(_system(tmp_path, "learned:walk=score,threshold=0.9", card)))
+    system_build.check_deployed_calibration(load_system(_system(tmp_path, f"{BASE},threshold=0.9", card)))
     (tmp_path / "only.toml").write_text('[monitor]\nspec = "lhd:threshold=0.3"\n')
     assert system_build.deployed_card(load_system(tmp_path / "only.toml")) is None

@@ -51,12 +51,59 @@ def test_a_run_reproduces_the_readme_or_a_recorded_run_of_another_instruction_se
     (tmp_path / "README.md").write_text(f"{BEGIN}\n{readme}{END}\n")
     refs = reference_blocks(tmp_path / "README.md")
     assert [name for name, _ in refs] == ["README.md"]
-    assert reproduced(readme, refs) == ("README.md", {})
-    match, differences = reproduced(other, refs)
-    assert match is None and "must be equal" in differences["README.md"][0]
+    assert reproduced(readme, refs).match == "README.md"
+    found = reproduced(other, refs)
+    assert found.match is None and "must be equal" in found.differences["README.md"][0]
     (tmp_path / ALTERNATES).mkdir(parents=True)
     (tmp_path / ALTERNATES / "avx2.md").write_text(f"# the AVX2 run\n\n{BEGIN}\n{other}{END}\n")
     refs = reference_blocks(tmp_path / "README.md")
-    match, differences = reproduced(other, refs)
-    assert match == "docs/headline-runs/avx2.md" and list(differences) == ["README.md"]
-    assert reproduced(head + row.format(30), refs)[0] is None
+    found = reproduced(other, refs)
+    assert found.match == "docs/headline-runs/avx2.md" and list(found.differences) == ["README.md"]
+    assert not found.across
+    assert reproduced(head + row.format(30), refs).match is None
+
+
+HEADER = ("Deployed configuration `m`; model sha256 `0d3dab88c2b0`; 70 test scenes per perturbation (severity 3); "
+          "run on a CPU of instruction set `{}`.\n\n| perturbation | a | b | c | d | e | f | g |\n"
+          "|---|---|---|---|---|---|---|---|\n")
+FOG = "| fog | {} of 70 | {} of 70 | {} | +0.272 | +0.052 [-0.007, +0.112] | +0.325 [+0.232, +0.437] | {} |\n"
+
+
+def test_on_an_instruction_set_with_no_recorded_table_the_counts_may_differ_by_a_few_decisions():
+    """A run on AVX-512 against a README recorded on AVX2 (and nothing recorded for AVX-512): the counts within 5 of
+    70; an altered table, or a run of the README's own instruction set, is held to the exact counts."""
+    from assurance.analysis.headline import ACROSS_INSTRUCTION_SETS, instruction_set_of, reproduced
+
+    readme = HEADER.format("avx2") + FOG.format(31, 28, "0.400 (0.505)", "0.451 / 0.207")
+    refs = [("README.md", readme)]
+    assert instruction_set_of(readme) == "avx2" and instruction_set_of(FOG) is None
+    moved = FOG.format(32, 31, "0.443 (0.548)", "0.429 / 0.209")  # the two machines measured (docs/results.md)
+    found = reproduced(HEADER.format("avx512") + moved, refs)
+    assert found.match == "README.md" and found.across
+    assert reproduced(HEADER.format("avx2") + moved, refs).match is None  # its own instruction set: exact
+    far = FOG.format(31, 22, "0.314 (0.414)", "0.451 / 0.207")  # 6 fewer unsafe landings than recorded
+    found = reproduced(HEADER.format("avx512") + far, refs)
+    assert found.match is None
+    assert found.differences["README.md (another instruction set, avx2)"] == [
+        f"fog: column 3 28 of 70 against 22 of 70 (within {ACROSS_INSTRUCTION_SETS.counts} of 70)",
+        f"fog: column 4 0.400 (0.505) against 0.314 (0.414) (within {ACROSS_INSTRUCTION_SETS.counts} of 70)"]
+    recorded = [*refs, ("docs/headline-runs/avx512.md", HEADER.format("avx512") + FOG.format(31, 28, "0.400 (0.505)",
+                                                                                               "0.451 / 0.207"))]
+    assert reproduced(HEADER.format("avx512") + moved, recorded).match is None  # recorded there: exact
+    rate = FOG.format(31, 28, "0.443 (0.505)", "0.451 / 0.207")  # the rate altered, not the count
+    assert reproduced(HEADER.format("avx512") + rate, refs).match is None
+
+
+def test_the_run_manifest_names_its_instruction_set(tmp_path, monkeypatch):
+    import platform
+
+    from assurance.campaign.manifest import instruction_set
+
+    info = tmp_path / "cpuinfo"
+    monkeypatch.setattr(platform, "machine", lambda: "x86_64")
+    for flags, isa in (("fpu sse2 avx avx2 fma", "avx2"), ("sse2 avx2 avx512f avx512bw", "avx512"), ("sse2", "x86-64")):
+        info.write_text(f"processor\t: 0\nflags\t\t: {flags}\n")
+        assert instruction_set(info) == isa
+    assert instruction_set(tmp_path / "absent") == "x86-64"
+    monkeypatch.setattr(platform, "machine", lambda: "aarch64")
+    assert instruction_set(info) == "aarch64"

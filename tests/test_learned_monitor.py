@@ -323,6 +323,11 @@ def test_the_deployed_default_is_checked_against_the_deployed_card(splits, tmp_p
     assert "fitted on network" in EmergencyLanding(config, segmenter=RoadBlindFrame(WW)).fault  # no hash: refused
     monkeypatch.setattr(learned, "DEFAULT_MODEL", swapped)
     d = EmergencyLanding(config, segmenter=shipped).decide(image)
+    # the deployed verifier pins the learned model it is fused with; a plain learned spec, its card's model
+    assert d.action == "default" and d.reason.startswith("fault: monitor") and "fused with learned model" in d.reason
+    alone = PipelineConfig(core=CORE, time_budget_s=None, monitor="learned:walk=score",
+                           calibration=str(DEFAULT_MODEL.with_name("learned_calibration.json")))
+    d = EmergencyLanding(alone, segmenter=shipped).decide(image)
     assert d.action == "default" and d.reason.startswith("fault: monitor") and "recalibrate" in d.reason
 
 

@@ -54,8 +54,8 @@ def test_shipped_records_are_bound_to_the_shipped_network():
 
 
 @pytest.mark.parametrize("other", [OTHER, None])
-def test_the_deployed_learned_monitor_refuses_another_network_in_flight(other):
-    d = _decide(Network(other))  # the default configuration: the deployed learned monitor and its card
+def test_the_deployed_monitor_refuses_another_network_in_flight(other):
+    d = _decide(Network(other))  # the default configuration: the deployed monitor (verifier and learned) and its card
     assert d.action == "default" and d.reason.startswith("fault: monitor: LearnedModelError")
     assert "fitted on network 0d3dab88c2b0" in d.reason and "refit" in d.reason
     with pytest.raises(LearnedModelError):
@@ -84,7 +84,7 @@ def test_the_command_line_refuses_another_network_with_exit_2(tiny_campaign, tmp
     image = next((tiny_campaign["data"]).glob("**/Images/*.png"))
     weights = str(tiny_campaign["weights"])  # a real weights file with its card: another network
     cases = [
-        ["land", str(image), "--weights", weights],  # the deployed learned monitor
+        ["land", str(image), "--weights", weights],  # the deployed monitor
         ["land", str(image), "--weights", weights, "--monitor", "lhd", "--gate", str(SHIPPED_GATE)],
         ["campaign", "--data", str(tiny_campaign["data"]), "--out", str(tmp_path / "run"), "--weights", weights,
          "--monitors", "lhd", "--calibration", str(DEPLOYED_CALIBRATION), "--quiet"],

@@ -365,7 +365,7 @@ def test_provenance_and_licence(case):
     provenance = system.get("data.provenance")
     assert test["provenance"] == (f"{provenance} (declared: [data] provenance)" if provenance else "not declared")
     for row in doc["data_record"]["datasets"][1:]:  # development data: the package's own, or declared, or nothing
-        if row["record"] in ("model card", "learned.json", "calibration.json", "frame_gate.json"):
+        if row["record"] in ("model card", "learned.json", "verifier.json", "calibration.json", "frame_gate.json"):
             assert system.default and row["licence"] == LICENCE_SYNTHETIC, row
         else:
             assert row["licence"] == f"{system.get('model.provenance.licence')} (declared in the system file)", row
@@ -544,6 +544,7 @@ def test_monitor_files_are_the_runs(case):
         assert "el/monitors/data/calibration.json" in used
     else:
         assert "el/monitors/data" not in html and "learned.json" not in html and "frame_gate.json" not in html
+        assert "verifier.json" not in html
     assert "trunk statistics" not in html
     assert case["page"].row("cover", "Frame gate").startswith("none: ")  # none of these runs deployed a gate
 

@@ -254,8 +254,9 @@ def test_a_resealed_gate_or_card_threshold_outside_its_fit_is_refused_at_load(tm
     path = system_file(tmp_path, f'[monitor]\ngate = "{gate.name}"\n', "gate.toml")
     assert main(["land", "--system", str(path), str(tmp_path / "x.png")]) == 2
     one_line(capsys, "monitor.gate", "gate.json: threshold 1e+300 lies above the highest score")
+    monitor = json.loads(Path(DEPLOYED_CALIBRATION).read_text())["body"]["monitor"]
     card = _resealed(Path(DEPLOYED_CALIBRATION), tmp_path / "card.json", threshold=1e300,
-                     spec="learned:walk=score,threshold=1e+300")
+                     spec=f"{monitor},threshold=1e+300")
     path = system_file(tmp_path, f'[monitor]\ncalibration = "{card.name}"\n', "card.toml")
     assert main(["land", "--system", str(path), str(tmp_path / "x.png")]) == 2
     one_line(capsys, "monitor.calibration", "card.json: threshold 1e+300 lies outside the score range [0, 1]")

@@ -74,8 +74,27 @@ def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *,
         "code": code_identity(),
         "versions": {"python": sys.version.split()[0], "numpy": np.__version__,
                      "torch": torch_version(), "onnxruntime": _dist_version("onnxruntime"),
-                     "platform": platform.platform()},
+                     "platform": platform.platform(), "instruction_set": instruction_set()},
     }
+
+
+def instruction_set(cpuinfo: str | Path = "/proc/cpuinfo") -> str:
+    """The widest vector instruction set the CPU offers ONNX Runtime's kernels: ``avx512``, ``avx2``, ``x86-64``,
+    else the machine name (``aarch64``, ...). Kernels chosen per instruction set differ in their last bits, so a
+    release run's headline is recorded per instruction set (``assurance.analysis.headline``)."""
+    machine = platform.machine().lower()
+    if machine not in ("x86_64", "amd64"):
+        return machine or "unknown"
+    try:
+        text = Path(cpuinfo).read_text(encoding="utf-8", errors="replace")
+    except OSError:
+        return "x86-64"
+    flags = set()
+    for line in text.splitlines():
+        if line.startswith("flags"):
+            flags = set(line.partition(":")[2].split())
+            break
+    return "avx512" if "avx512f" in flags else "avx2" if "avx2" in flags else "x86-64"
 
 
 def _perturbation_domain(config: CampaignConfig) -> dict[str, Any]:

@@ -8,9 +8,11 @@ from typing import Any
 
 from assurance.analysis.findings import findings, findings_markdown
 from assurance.analysis.headline import (
+    ACROSS_INSTRUCTION_SETS,
     REPRODUCIBILITY,
     HeadlineError,
     headline_markdown,
+    instruction_set_of,
     reference_blocks,
     reproduced,
     write_block,
@@ -106,8 +108,9 @@ def write_readme(run: str, df: Any, readme: str) -> str:
 
 def check_readme(run: str, df: Any, readme: str) -> int:
     """0 when ``readme`` shows the run's headline table, exactly or within the tolerance of a run made on another
-    machine (``assurance.analysis.headline.REPRODUCIBILITY``: the figures that differ are printed), or a recorded
-    run of another instruction set does (``docs/headline-runs/`` beside it), else 1 with
+    machine of the same instruction set (``assurance.analysis.headline.REPRODUCIBILITY``: the figures that differ
+    are printed), or a recorded run of another instruction set does (``docs/headline-runs/`` beside it), or, on an
+    instruction set no table was recorded on, one of them does within ``ACROSS_INSTRUCTION_SETS``; else 1 with
     what differs and both versions printed."""
     import sys
 
@@ -120,21 +123,29 @@ def check_readme(run: str, df: Any, readme: str) -> int:
     if shown == block:
         print(f"{readme}: the headline table matches {run}")
         return 0
-    match, differences = reproduced(block, references, REPRODUCIBILITY)
-    if match == Path(readme).name:
-        print(f"{readme}: the headline table matches {run} within the tolerance of another machine "
-              f"({REPRODUCIBILITY.decisions} decision per perturbation; docs/results.md), not exactly:\n"
-              f"--- README\n{shown}--- run\n{block}", end="")
+    found = reproduced(block, references, REPRODUCIBILITY)
+    versions = f"--- README\n{shown}--- run\n{block}"
+    if found.across:
+        isa, other = instruction_set_of(block), instruction_set_of(dict(references)[found.match])
+        print(f"{readme}: {run} ran on instruction set {isa!r}, on which no headline table was recorded; it "
+              f"reproduces {found.match} (recorded on {other!r}) within {ACROSS_INSTRUCTION_SETS.counts} decisions "
+              f"per perturbation (docs/results.md); record this machine's with `uav-el table {run} --readme "
+              f"docs/headline-runs/{isa}.md` (a file holding the README's two markers):\n{versions}", end="")
         return 0
-    if match is not None:
-        print(f"{readme}: {run} reproduces {match}, the headline table recorded on another instruction set "
-              f"({'exactly' if dict(references)[match] == block else 'within the tolerance'}; "
-              f"docs/results.md), not the README's:\n--- README\n{shown}--- run\n{block}", end="")
+    if found.match == Path(readme).name:
+        print(f"{readme}: the headline table matches {run} within the tolerance of another machine "
+              f"({REPRODUCIBILITY.decisions} decision per perturbation; docs/results.md), not exactly:\n{versions}",
+              end="")
+        return 0
+    if found.match is not None:
+        print(f"{readme}: {run} reproduces {found.match}, the headline table recorded on another instruction set "
+              f"({'exactly' if dict(references)[found.match] == block else 'within the tolerance'}; "
+              f"docs/results.md), not the README's:\n{versions}", end="")
         return 0
     print(f"{readme}: the headline table differs from {run} (and so does each recorded run of another instruction "
           f"set); run `uav-el table {run} --readme {readme}`\n"
-          + "".join(f"  {name}: {d}\n" for name, lines in differences.items() for d in lines)
-          + f"--- README\n{shown}--- run\n{block}", file=sys.stderr)
+          + "".join(f"  {name}: {d}\n" for name, lines in found.differences.items() for d in lines)
+          + versions, file=sys.stderr)
     return 1
 
 

@@ -63,6 +63,7 @@ def package_entries(inp: Any, record: dict[str, Any]) -> list[dict[str, Any]]:
                 entry("X", "Internal test results: validation figures of the model card", str(rel(card)), sha(card))]
     used = monitor_files(inp.manifest, inp.registry.parameters.get("calibration_card"))
     for name, letter, what in (("learned.json", "V", "Learned runtime monitor"),
+                               ("verifier.json", "V", "Candidate verifier (its ONNX network beside it)"),
                                ("frame_gate.json", "V", "Frame gate (out-of-domain frames)"),
                                ("calibration.json", "X", "Calibration card of the deployed monitor")):
         if name in used:

@@ -64,6 +64,15 @@ def monitor_rows(monitors: dict[str, dict[str, Any]]) -> list[dict[str, str]]:
                      f"({_pct(sel.get('held_out_auroc'))}), threshold for recall {sel.get('recall_target')} "
                      f"(held-out recall {_pct(sel.get('held_out_recall'))}); network SHA-256 "
                      f"{str((learned.get('weights') or {}).get('sha256', ''))[:16]}"})
+    verifier = monitors.get("verifier.json")
+    if verifier:
+        crop, net, fusion = verifier.get("crop") or {}, verifier.get("network") or {}, verifier.get("fusion") or {}
+        fused = (f"; fused with the learned monitor (weight {fusion.get('weight')}, held-out AUROC "
+                 f"{_pct((fusion.get('held_out') or {}).get('auroc'))})" if fusion else "")
+        rows.append({"item": "Candidate verifier", "value": f"{net.get('name')} ({net.get('encoder')}) on "
+                     f"{crop.get('size')} px crops of the disc and {crop.get('margin')} radii around it; held-out "
+                     f"AUROC {_pct((verifier.get('held_out') or {}).get('auroc'))}{fused}; network SHA-256 "
+                     f"{str((verifier.get('weights') or {}).get('sha256', ''))[:16]}"})
     cal = monitors.get("calibration.json")
     if cal:
         rows.append({"item": "Calibration card", "value": f"{cal.get('monitor')}: {cal.get('method')}; "

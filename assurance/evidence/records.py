@@ -169,6 +169,15 @@ def _card_set(name: str, role: str, letter: str, d: dict[str, Any], *, card: _Ca
                 scenes=scenes, **more)
 
 
+def _fitted_balance(d: dict[str, Any]) -> str:
+    """The unsafe share of a fitted monitor's set: of its candidates, or (a verifier's training) of its crops, the
+    candidates' and the mined discs'."""
+    if d.get("crops"):
+        return (f"{d.get('unsafe')} unsafe of {d.get('crops')} crops ({d.get('candidates')} candidates, "
+                f"{d.get('mined')} mined discs)")
+    return f"{d.get('unsafe')} unsafe of {d.get('candidates')} candidates"
+
+
 def development_sets(card: dict[str, Any] | None, monitors: dict[str, dict[str, Any]],
                      package: dict[str, bool] | None = None, facts: Any = None,
                      cache: dict[str, Any] | None = None) -> list[dict[str, Any]]:
@@ -187,16 +196,15 @@ def development_sets(card: dict[str, Any] | None, monitors: dict[str, dict[str, 
             rows.append(_card_set(f"{split} ({d.get('path')})", role, letter, d, card=_Card("model card", ours),
                                   **common, seeds=f"the {split} seed range of uav-el synth (from {SPLIT_BASE[split]})"
                                   if ours else "", balance=_card_balance(freqs, ours) if split == "train" else ""))
-    learned = monitors.get("learned.json") or {}
-    splits = learned.get("splits") or {}
-    for key, role, letter in (("training", "learned monitor training", "N"),
-                              ("held_out", "learned monitor selection", "O")):
-        d = learned.get(key) or {}
-        if d:
-            where = splits.get("train" if key == "training" else "held_out")
-            rows.append(_card_set(f"{where or '?'}", role, letter, {**d, "path": where},
-                                  card=_Card("learned.json", package.get("learned.json", False)), **common,
-                                  balance=f"{d.get('unsafe')} unsafe of {d.get('candidates')} candidates"))
+    for name, what in (("learned.json", "learned monitor"), ("verifier.json", "candidate verifier")):
+        fitted = monitors.get(name) or {}
+        splits = fitted.get("splits") or {}
+        for key, role, letter in (("training", f"{what} training", "N"), ("held_out", f"{what} selection", "O")):
+            d = fitted.get(key) or {}
+            if isinstance(d, dict) and d:
+                where = splits.get("train" if key == "training" else "held_out")
+                rows.append(_card_set(f"{where or '?'}", role, letter, {**d, "path": where},
+                                      card=_Card(name, package.get(name, False)), **common, balance=_fitted_balance(d)))
     split = (monitors.get("calibration.json") or {}).get("split") or {}
     if split:
         rows.append(_card_set(str(split.get("path")), "monitor calibration (threshold)", "O", split,
@@ -324,15 +332,24 @@ def model_cards(manifest: dict[str, Any], calibration_card: Any = None) -> tuple
 
 
 def monitor_files(manifest: dict[str, Any], calibration_card: Any = None) -> dict[str, Path]:
-    """The monitor files the run used, by role (``learned.json``, ``calibration.json``, ``frame_gate.json``)."""
+    """The monitor files the run used, by role (``learned.json``, ``verifier.json``, ``calibration.json``,
+    ``frame_gate.json``); a verifier fused with the learned monitor uses both files."""
     cfg = manifest.get("config") or {}
     base = ROOT / "el" / "monitors" / "data"
     found: dict[str, Path | None] = {}
     for spec in cfg.get("monitors") or ():
         parsed = parse_monitor_spec(spec)
+        params = dict(getattr(parsed, "params", ()))  # the paper's specs (MonitorSpec) name no file
         if parsed is not None and parsed.kind == "learned":  # a learned spec is a registry (generic) spec
-            model = dict(parsed.params).get("model")
+            model = params.get("model")
             found["learned.json"] = Path(model).with_suffix(".json") if model else base / "learned.json"
+        elif parsed is not None and parsed.kind == "verifier":
+            model = params.get("model")
+            found["verifier.json"] = Path(model) if model else base / "verifier.json"
+            if params.get("fuse") == "learned":
+                learned = params.get("learned")
+                found.setdefault("learned.json", Path(learned).with_suffix(".json") if learned
+                                 else base / "learned.json")
     cal = calibration_path(calibration_card) if calibration_card else None
     found["calibration.json"] = cal
     gate = (cfg.get("gate") or {}).get("path")

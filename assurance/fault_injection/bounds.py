@@ -188,7 +188,7 @@ def _seed(ws: Path) -> list[str]:
 def _card_threshold(ws: Path) -> list[str]:
     """A system deploying the shipped spec on the shipped card re-hashed at another threshold (0.9)."""
     body = dict(json.loads(DEPLOYED_CALIBRATION.read_text())["body"])
-    body.update(threshold=0.9, spec="learned:walk=score,threshold=0.9")
+    body.update(threshold=0.9, spec=f"{body['monitor']},threshold=0.9")
     (ws / "card-0.9.json").write_text(json.dumps(card_document(body)))
     system = ws / "system-card.toml"
     system.write_text(f'[monitor]\nspec = "{DEPLOYED_MONITOR}"\ncalibration = "card-0.9.json"\n')

@@ -187,7 +187,7 @@ CASES: tuple[Case, ...] = (
     Case("H8-altered-weights", "one byte of the weights file flipped", _altered_weights, 2, "SHA-256 mismatch"),
     Case("H8-pickled-weights", "weights file holding a pickle that runs a shell command (card re-hashed)",
          _pickled_weights, 2, "refused: the file holds pickled objects"),
-    Case("H9-foreign-network", "land with the deployed learned monitor and its card on another network's weights",
+    Case("H9-foreign-network", "land with the deployed monitor and its card on another network's weights",
          lambda ws: ["land", _image(ws), "--weights", ws / "tiny.pt"], 2, "fitted on network"),
     Case("B1-unreadable-image", "land on a file that is not an image", _unreadable_image, 2),
     Case("B2-wrong-shape-labels", "land --labels of another size than --image", _wrong_shape_labels, 2),

@@ -145,8 +145,9 @@ def _gate_1e300(ws: Path) -> list[str]:
 
 def _card_1e300(ws: Path) -> list[str]:
     """The shipped calibration card re-hashed at threshold 1e300 (it accepts every candidate)."""
+    monitor = json.loads(Path(DEPLOYED_CALIBRATION).read_text())["body"]["monitor"]
     card = _resealed(Path(DEPLOYED_CALIBRATION), ws / "card-1e300.json", threshold=1e300,
-                     spec="learned:walk=score,threshold=1e+300")
+                     spec=f"{monitor},threshold=1e+300")
     return ["land", str(first_image(ws)), "--system", str(_system(ws, "sys-card", f'[monitor]\ncalibration = '
                                                                               f'"{card.name}"\n'))]
 

@@ -54,9 +54,10 @@ from el.segmentation.contract import check_model, labels_of
 from el.segmentation.factory import load_model
 
 Clock = Callable[[], float]
-DEPLOYED_MONITOR = "learned:walk=score,threshold=0.8563253044730293"
-"""The shipped runtime monitor, chosen on the validation split (docs/results.md, docs/monitors.md): the learned
-candidate monitor (``el/monitors/data/learned.json``), candidates walked by its score (``el.monitors.walk``),
+DEPLOYED_MONITOR = "verifier:fuse=learned,walk=score,threshold=0.7838111631339154"
+"""The shipped runtime monitor, chosen on the validation split (docs/results.md, docs/monitors.md): the candidate
+verifier (``el/monitors/data/verifier.json``, a CNN of its own on the candidate's pixels) fused with the learned
+candidate monitor (``el/monitors/data/learned.json``), candidates walked by the fused score (``el.monitors.walk``),
 at the threshold of its calibration card :data:`DEPLOYED_CALIBRATION` (a test checks they agree)."""
 DEPLOYED_CALIBRATION = Path(__file__).resolve().parents[1] / "monitors" / "data" / "calibration.json"
 DEPLOYED_GATE: Path | None = Path(__file__).resolve().parents[1] / "monitors" / "data" / "frame_gate.json"
