@@ -491,3 +491,21 @@ def test_train_cli_warm_start_takes_the_parents_architecture(datasets, tmp_path,
     rc = uav_el(["train", "--data", str(train_dir), "--out", str(tmp_path / "d.pt"),
                  "--init", str(tmp_path / "nope.pt")])
     assert rc == 2 and "nope" in capsys.readouterr().err
+
+
+def test_a_recomputed_candidate_audit_reproduces_the_counts_exactly_and_the_auroc_within_the_tolerance():
+    """Another CPU's last bits may move the separation AUROC a little; the counts must be the card's."""
+    from assurance.cli.model_card import audit_agreement
+
+    def audit(auroc, candidates=1392):
+        return {"images": 70, "candidates": candidates, "unsafe": 222, "images_without_candidate": 1,
+                "separation": {"scores": {"max_forbidden_probability": {"auroc": auroc}}}}
+
+    assert audit_agreement(audit(0.7073), audit(0.7073), 0.002) == (True, "candidate audit: 222 of 1392 unsafe, "
+                                                                          "as recorded")
+    ok, line = audit_agreement(audit(0.7073), audit(0.7083), 0.002)
+    assert ok and "recorded 0.707300, recomputed 0.7083, within --tolerance 0.002" in line
+    ok, line = audit_agreement(audit(0.7073), audit(0.7173), 0.002)
+    assert not ok and "separation AUROC recorded 0.707300, recomputed 0.7173" in line
+    ok, line = audit_agreement(audit(0.7073), audit(0.7073, candidates=1393), 0.002)
+    assert not ok and "candidates=1392" in line and "candidates=1393" in line
