@@ -28,11 +28,12 @@ def model_option(p: argparse.ArgumentParser) -> None:
                         "system file; the shipped one without)")
 
 
-def fit_split_options(p: argparse.ArgumentParser) -> None:
-    """``--data``, ``--val`` and ``--out`` of a frame-gate fit (``system_options.train_val_dirs`` resolves the
-    folders), and the model (``model_option``)."""
+def fit_split_options(p: argparse.ArgumentParser, out: str = "gate file to write (JSON)") -> None:
+    """``--data``, ``--val`` and ``--out`` of a fit on train and validation splits (a frame gate's, a verifier's;
+    ``system_options.train_val_dirs`` resolves the folders), and the model (``model_option``); ``out``: what
+    ``--out`` writes."""
     p.add_argument("--data", help="training scenes (e.g. data/train); default: the system file's [data] train")
     p.add_argument("--val", help="validation scenes for the threshold (e.g. data/val); default: the system file's "
                                  "[data] val")
-    p.add_argument("--out", required=True, type=Path, help="gate file to write (JSON)")
+    p.add_argument("--out", required=True, type=Path, help=out)
     model_option(p)
