@@ -27,7 +27,7 @@ CONFIGS = ("none", "lhd", "lhd+ch:tau=0.25", "lhd+mcd:n=10,rho=0.9", "lhd+mcd:n=
            DEPLOYED_MONITOR)
 LABELS = {"none": "CM only", "lhd": "CM + LHD", "lhd+ch:tau=0.25": "CM + LHD + CH (0.25)",
           "lhd+mcd:n=10,rho=0.9": "CM + LHD + MCD n=10", "lhd+mcd:n=30,rho=0.9": "CM + LHD + MCD n=30",
-          DEPLOYED_MONITOR: "CM + learned, score walk (deployed)"}
+          DEPLOYED_MONITOR: f"CM + deployed ({DEPLOYED_MONITOR.partition(',threshold')[0]})"}
 
 
 def peak_rss_mb() -> float:

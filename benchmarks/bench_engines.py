@@ -41,7 +41,7 @@ from el.segmentation.onnx_engine import ENGINE_ENV
 CONFIGS: dict[str, tuple[str, bool, str]] = {
     "none": ("none", False, "CM only"),
     "lhd": ("lhd", False, "CM + LHD"),
-    "deployed": (DEPLOYED_MONITOR, False, "deployed (learned, score walk)"),
+    "deployed": (DEPLOYED_MONITOR, False, f"deployed ({DEPLOYED_MONITOR.partition(',threshold')[0]})"),
     "batched": (DEPLOYED_MONITOR, True, "deployed, patches batched (check_many)"),
 }
 ENGINES = ("torch", "onnx")

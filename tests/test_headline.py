@@ -107,3 +107,24 @@ def test_the_run_manifest_names_its_instruction_set(tmp_path, monkeypatch):
     assert instruction_set(tmp_path / "absent") == "x86-64"
     monkeypatch.setattr(platform, "machine", lambda: "aarch64")
     assert instruction_set(info) == "aarch64"
+
+
+def test_across_instruction_sets_a_table_made_to_look_safer_fails_on_its_total():
+    """Each deployed count 4 lower (within 5 of a cell) is 24 fewer unsafe landings of 420: beyond the total's 6."""
+    from assurance.analysis.headline import reproduced
+
+    counts = {"none": (9, 6), "brightness": (25, 21), "fog": (31, 25), "motion_blur": (27, 19),
+              "shifted_pixels": (9, 7), "pixel_trap": (5, 8)}
+
+    def table(isa, shift=0, moved=()):
+        rows = "".join(f"| {p} | {cm} of 70 | {dep + shift + (p in moved)} of 70 | r | +0.1 | +0.1 [+0.0, +0.2] "
+                       f"| +0.1 [+0.0, +0.2] | 0.2 / 0.1 |\n" for p, (cm, dep) in counts.items())
+        return HEADER.format(isa) + rows
+
+    refs = [("README.md", table("avx2"))]
+    assert reproduced(table("avx512", moved=("fog", "shifted_pixels")), refs).across  # two decisions moved
+    found = reproduced(table("avx512", shift=-4), refs)
+    assert found.match is None
+    assert "column 3: 86 against 62 unsafe landings over the perturbations (within 6)" in \
+        found.differences["README.md (another instruction set, avx2)"]
+    assert reproduced(table("av\\x512", shift=0), refs).across  # a name the pattern would read as an escape

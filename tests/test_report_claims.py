@@ -491,6 +491,8 @@ def test_the_ml_argument_names_the_deployed_monitor(case):
     deployed = case["doc"]["parameters"]["deployed_monitor"]
     if deployed.startswith("learned"):
         assert "segmentation network and learned runtime monitor" in html
+    elif deployed.startswith("verifier:fuse=learned"):  # the shipped system's
+        assert "segmentation network and candidate verifier fused with the learned runtime monitor" in html
     else:
         assert "learned runtime monitor" not in html
         assert f"segmentation network and deployed runtime monitor {deployed.split(':')[0]}" in html

@@ -40,12 +40,14 @@ class Reproducibility:
     bootstrap bounds, by at most 1/n of n scenes: the gains (G_CM, G_RM, G* and their 95% bounds) may differ by
     ``decisions / n + rounding``, recall and FP rate (pooled over the candidates) by ``rate``. ``counts``: how many
     unsafe landings per perturbation and column may differ (0: the header, the unsafe-landing counts, their rates
-    and one-sided bounds must be equal: the safety claim itself is reproduced exactly or the check fails)."""
+    and one-sided bounds must be equal: the safety claim itself is reproduced exactly or the check fails), and
+    ``total`` how far a count column's sum over the perturbations may move (a table made to look safer moves it)."""
 
     decisions: int = 1
     rounding: float = 0.001
     rate: float = 0.01
     counts: int = 0
+    total: int = 0
 
     def gain(self, n: int) -> float:
         """The tolerance of a gain over ``n`` scenes."""
@@ -54,23 +56,24 @@ class Reproducibility:
     def text(self, n: int) -> str:
         """What the report's "Reproduce" section says a rerun on another machine gives, for ``n`` scenes per
         perturbation."""
-        return (f"On another machine of the same instruction set (the headline names it) these commands must give the "
-                f"same unsafe-landing counts, rates and bounds; a decision may now and then land on another candidate "
-                f"(ONNX Runtime's CPU kernels, chosen per instruction set, differ in their last bits), so the safety "
-                f"gains may differ by up to {self.gain(n):.3f} (one moved decision of {n} per perturbation, plus "
-                f"rounding) and recall and FP rate by up to {self.rate:.2f}. On another instruction set, with no "
-                f"table recorded for it, the unsafe-landing counts may differ by up to "
-                f"{ACROSS_INSTRUCTION_SETS.counts} of {n} per perturbation (docs/results.md, \"Reproducibility "
-                f"across machines\").")
+        return (f"On another machine of the same instruction set (the run's manifest names it: "
+                f"versions.instruction_set) these commands must give the same unsafe-landing counts, rates and bounds; "
+                f"a decision may now and then land on another candidate (ONNX Runtime's CPU kernels, chosen per "
+                f"instruction set, differ in their last bits), so the safety gains may differ by up to "
+                f"{self.gain(n):.3f} (one moved decision of {n} per perturbation, plus rounding) and recall and FP "
+                f"rate by up to {self.rate:.2f}; on another instruction set a few decisions more may move "
+                f"(docs/results.md, \"Reproducibility across machines\").")
 
 
 REPRODUCIBILITY = Reproducibility()
 """The tolerance the README headline test (``tests/test_readme_headline.py``) and ``uav-el table --check-readme``
 judge a run made on another machine of the same instruction set with."""
-ACROSS_INSTRUCTION_SETS = Reproducibility(decisions=5, rate=0.05, counts=5)
-"""The tolerance a run on an instruction set with no recorded table is judged with, against a table recorded on
-another: up to 5 decisions of a perturbation on other candidates (the two instruction sets measured so far differed
-by up to 3 of 70, docs/results.md). It catches an altered table, not a last-bit difference."""
+ACROSS_INSTRUCTION_SETS = Reproducibility(decisions=5, rate=0.05, counts=5, total=6)
+"""The tolerance the README's headline (70 scenes per perturbation) judges a run on an instruction set with no
+recorded table with, against a table recorded on another: up to 5 decisions of a perturbation on other candidates,
+and a count column's sum over the six perturbations within 6 (the two instruction sets measured so far differed by
+up to 3 of 70 in a cell and 3 of 420 in a sum, docs/results.md). It catches a table made to look safer, not a
+last-bit difference."""
 _NUMBER = re.compile(r"[+-]?\d+(?:\.\d+)?")
 _ISA = re.compile(r"a CPU of instruction set `([^`]+)`")
 
@@ -131,7 +134,8 @@ def headline_differences(expected: str, found: str, tolerance: Reproducibility =
     a, b = expected.strip("\n").splitlines(), found.strip("\n").splitlines()
     if len(a) != len(b):
         return [f"{len(a)} lines against {len(b)}"]
-    out = []
+    out: list[str] = []
+    sums = {1: [0, 0], 2: [0, 0]}  # the two unsafe-landing count columns, summed over the perturbations
     for old, new in zip(a, b, strict=True):
         if not (old.startswith("| ") and new.startswith("| ")) or old.startswith("| perturbation"):
             if old != new:
@@ -143,6 +147,9 @@ def headline_differences(expected: str, found: str, tolerance: Reproducibility =
             continue
         pert = cells_a[0].strip()
         n = int(_NUMBER.findall(cells_a[1])[-1])
+        for col, total in sums.items():
+            total[0] += int(_NUMBER.findall(cells_a[col])[0])
+            total[1] += int(_NUMBER.findall(cells_b[col])[0])
         for col, (x, y) in enumerate(zip(cells_a, cells_b, strict=True)):
             exact = tolerance.counts == 0 or col == 0 or (col == 3 and cells_a[2] == cells_b[2])
             if col < 4 and exact:  # the unsafe counts, the rate and its bound (which follow the deployed count)
@@ -161,6 +168,9 @@ def headline_differences(expected: str, found: str, tolerance: Reproducibility =
             xs, ys = [float(v) for v in _NUMBER.findall(x)], [float(v) for v in _NUMBER.findall(y)]
             if len(xs) != len(ys) or any(abs(u - v) > tol + 1e-9 for u, v in zip(xs, ys, strict=True)):
                 out.append(f"{pert}: column {col + 1} {x.strip()} against {y.strip()} (tolerance {tol:.4f})")
+    if tolerance.counts:
+        out += [f"column {col + 1}: {x} against {y} unsafe landings over the perturbations (within {tolerance.total})"
+                for col, (x, y) in sums.items() if abs(x - y) > tolerance.total]
     return out
 
 
@@ -216,7 +226,8 @@ def reproduced(found: str, references: list[tuple[str, str]], tolerance: Reprodu
         other = instruction_set_of(block)
         if other is None:
             continue
-        lines = headline_differences(block, _ISA.sub(f"a CPU of instruction set `{other}`", found), across)
+        renamed = _ISA.sub(lambda _m, other=other: f"a CPU of instruction set `{other}`", found)
+        lines = headline_differences(block, renamed, across)
         if not lines:
             return Reproduction(name, True, differences)
         differences[f"{name} (another instruction set, {other})"] = lines

@@ -98,11 +98,16 @@ AMLAS_STAGES = ((1, "ML safety assurance scoping"), (2, "ML safety requirements 
 
 
 def monitor_words(spec: Any) -> str:
-    """The deployed runtime monitor by its kind (``learned:walk=...`` -> the learned one, ``lhd+ch:tau=0.25`` ->
-    ``lhd+ch``), as the argument names it beside the network."""
-    kind = str(spec or "").split(":", 1)[0].strip()
+    """The deployed runtime monitor by its kind (``learned:walk=...`` -> the learned one, ``verifier:fuse=learned``
+    -> the verifier fused with it, ``lhd+ch:tau=0.25`` -> ``lhd+ch``), as the argument names it beside the
+    network."""
+    kind, _, params = str(spec or "").partition(":")
+    kind = kind.strip()
     if kind == "learned":
         return "learned runtime monitor"
+    if kind == "verifier":
+        fused = "fuse=learned" in params.split(",")
+        return "candidate verifier fused with the learned runtime monitor" if fused else "candidate verifier"
     return f"deployed runtime monitor {kind}" if kind and kind != "none" else "no runtime monitor deployed"
 
 

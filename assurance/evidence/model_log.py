@@ -62,7 +62,7 @@ def monitor_rows(monitors: dict[str, dict[str, Any]]) -> list[dict[str, str]]:
         sel = learned.get("selection") or {}
         rows.append({"item": "Learned monitor", "value": f"{learned.get('model')}; C chosen by held-out AUROC "
                      f"({_pct(sel.get('held_out_auroc'))}), threshold for recall {sel.get('recall_target')} "
-                     f"(held-out recall {_pct(sel.get('held_out_recall'))}); network SHA-256 "
+                     f"(held-out recall {_pct(sel.get('held_out_recall'))}); fitted on segmentation network "
                      f"{str((learned.get('weights') or {}).get('sha256', ''))[:16]}"})
     verifier = monitors.get("verifier.json")
     if verifier:
@@ -71,7 +71,8 @@ def monitor_rows(monitors: dict[str, dict[str, Any]]) -> list[dict[str, str]]:
                  f"{_pct((fusion.get('held_out') or {}).get('auroc'))})" if fusion else "")
         rows.append({"item": "Candidate verifier", "value": f"{net.get('name')} ({net.get('encoder')}) on "
                      f"{crop.get('size')} px crops of the disc and {crop.get('margin')} radii around it; held-out "
-                     f"AUROC {_pct((verifier.get('held_out') or {}).get('auroc'))}{fused}; network SHA-256 "
+                     f"AUROC {_pct((verifier.get('held_out') or {}).get('auroc'))}{fused}; its ONNX network "
+                     f"{str((verifier.get('onnx') or {}).get('sha256', ''))[:16]}, fitted on segmentation network "
                      f"{str((verifier.get('weights') or {}).get('sha256', ''))[:16]}"})
     cal = monitors.get("calibration.json")
     if cal:

@@ -1,9 +1,10 @@
 """The score walk's judge over one batched judgement of the frame: what the flight loop plugs into ``el.monitors.walk``.
 
-A score walk (``learned:walk=score``, the deployed monitor) judges every candidate of the frame before it picks
-one, so nothing is lost by judging them together: :func:`batch_judge` returns a judge that, at its first call,
-asks ``monitor.check_many`` for every candidate (a patch monitor then segments their HD patches in few batched
-passes, ``el.monitors.patch_batch``) and afterwards serves each candidate's verdict from that batch. The
+A score walk (``learned:walk=score``; the deployed ``verifier:fuse=learned,walk=score``) judges every candidate
+of the frame before it picks one, so nothing is lost by judging them together: :func:`batch_judge` returns a
+judge that, at its first call, asks ``monitor.check_many`` for every candidate (a patch monitor then segments
+their HD patches in few batched passes, ``el.monitors.patch_batch``) and afterwards serves each candidate's
+verdict from that batch. The
 verdicts live in the judge's closure, built for one frame: nothing outlives the decision, so no verdict can be
 served for another frame. A hazard walk stops at the first accepted candidate and keeps the per-candidate judge.
 """
