@@ -105,8 +105,9 @@ def test_the_run_manifest_names_its_instruction_set(tmp_path, monkeypatch):
         info.write_text(f"processor\t: 0\nflags\t\t: {flags}\n")
         assert instruction_set(info) == isa
     assert instruction_set(tmp_path / "absent") == "x86-64"
-    monkeypatch.setattr(platform, "machine", lambda: "aarch64")
-    assert instruction_set(info) == "aarch64"
+    for name in ("aarch64", "arm64"):
+        monkeypatch.setattr(platform, "machine", lambda name=name: name)
+        assert instruction_set(info) == "aarch64"
 
 
 def test_across_instruction_sets_a_table_made_to_look_safer_fails_on_its_total():
@@ -128,3 +129,10 @@ def test_across_instruction_sets_a_table_made_to_look_safer_fails_on_its_total()
     assert "column 3: 86 against 62 unsafe landings over the perturbations (within 6)" in \
         found.differences["README.md (another instruction set, avx2)"]
     assert reproduced(table("av\\x512", shift=0), refs).across  # a name the pattern would read as an escape
+    edited = table("avx2").replace("| fog | 31 of 70 | 25 of 70 | r |", "| fog | 31 of 70 | 20 of 70 | 0.357 (0.462) |")
+    from assurance.analysis.headline import inconsistencies
+
+    assert inconsistencies(edited) == ["fog: rate 0.357 is not 20 of 70"] and inconsistencies(table("avx2")) == []
+    found = reproduced(table("avx512"), [("README.md", edited)])
+    assert found.match is None and found.differences["README.md (another instruction set, avx2)"] == [
+        "fog: rate 0.357 is not 20 of 70"]

@@ -84,7 +84,7 @@ def instruction_set(cpuinfo: str | Path = "/proc/cpuinfo") -> str:
     release run's headline is recorded per instruction set (``assurance.analysis.headline``)."""
     machine = platform.machine().lower()
     if machine not in ("x86_64", "amd64"):
-        return machine or "unknown"
+        return {"arm64": "aarch64"}.get(machine, machine) or "unknown"  # one CPU family, two names
     try:
         text = Path(cpuinfo).read_text(encoding="utf-8", errors="replace")
     except OSError:

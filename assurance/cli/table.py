@@ -129,8 +129,9 @@ def check_readme(run: str, df: Any, readme: str) -> int:
         isa, other = instruction_set_of(block), instruction_set_of(dict(references)[found.match])
         print(f"{readme}: {run} ran on instruction set {isa!r}, on which no headline table was recorded; it "
               f"reproduces {found.match} (recorded on {other!r}) within {ACROSS_INSTRUCTION_SETS.counts} decisions "
-              f"per perturbation (docs/results.md); record this machine's with `uav-el table {run} --readme "
-              f"docs/headline-runs/{isa}.md` (a file holding the README's two markers):\n{versions}", end="")
+              f"per perturbation and {ACROSS_INSTRUCTION_SETS.total} in all (docs/results.md); record this machine's "
+              f"with `uav-el table {run} --readme docs/headline-runs/{isa}.md` (a file holding the README's two "
+              f"markers):\n{versions}", end="")
         return 0
     if found.match == Path(readme).name:
         print(f"{readme}: the headline table matches {run} within the tolerance of another machine "
