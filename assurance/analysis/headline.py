@@ -125,6 +125,13 @@ def _split(text: str, path: Path) -> tuple[str, str, str]:
     return head, body, tail
 
 
+def _outside(x: str, y: str, tols: list[float]) -> bool:
+    """Whether cell ``y``'s numbers differ in number from cell ``x``'s, or lie farther from them than ``tols`` (one
+    per number, in order; numbers past the last are not compared)."""
+    xs, ys = [float(v) for v in _NUMBER.findall(x)], [float(v) for v in _NUMBER.findall(y)]
+    return len(xs) != len(ys) or any(abs(u - v) > t + 1e-9 for u, v, t in zip(xs, ys, tols, strict=False))
+
+
 def headline_differences(expected: str, found: str, tolerance: Reproducibility = REPRODUCIBILITY) -> list[str]:
     """What keeps the headline block ``found`` (a run's) from reproducing ``expected`` (the README's) within
     ``tolerance``: one line per differing figure, naming the perturbation, the column and both values (empty: it
@@ -159,15 +166,12 @@ def headline_differences(expected: str, found: str, tolerance: Reproducibility =
             if col < 4:  # counts within ``counts`` decisions, the rate with them, its bound half as far again
                 tols = ([tolerance.counts, 0] if col < 3 else
                         [tolerance.counts / n + tolerance.rounding, 1.5 * tolerance.counts / n + tolerance.rounding])
-                xs, ys = [float(v) for v in _NUMBER.findall(x)], [float(v) for v in _NUMBER.findall(y)]
-                if len(xs) != len(ys) or any(abs(u - v) > t + 1e-9 for u, v, t in zip(xs, ys, tols, strict=False)):
-                    out.append(f"{pert}: column {col + 1} {x.strip()} against {y.strip()} "
-                               f"(within {tolerance.counts} of {n})")
-                continue
-            tol = tolerance.gain(n) if col < 7 else tolerance.rate
-            xs, ys = [float(v) for v in _NUMBER.findall(x)], [float(v) for v in _NUMBER.findall(y)]
-            if len(xs) != len(ys) or any(abs(u - v) > tol + 1e-9 for u, v in zip(xs, ys, strict=True)):
-                out.append(f"{pert}: column {col + 1} {x.strip()} against {y.strip()} (tolerance {tol:.4f})")
+                note = f"within {tolerance.counts} of {n}"
+            else:
+                tol = tolerance.gain(n) if col < 7 else tolerance.rate
+                tols, note = [tol] * len(_NUMBER.findall(x)), f"tolerance {tol:.4f}"
+            if _outside(x, y, tols):
+                out.append(f"{pert}: column {col + 1} {x.strip()} against {y.strip()} ({note})")
     if tolerance.counts:
         out += [f"column {col + 1}: {x} against {y} unsafe landings over the perturbations (within {tolerance.total})"
                 for col, (x, y) in sums.items() if abs(x - y) > tolerance.total]
