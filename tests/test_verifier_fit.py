@@ -110,3 +110,23 @@ def test_the_command_line_defaults_are_the_training_configurations():
         if default is not None:
             assert default == getattr(cfg, f.name), f.name
     assert (cfg.size, cfg.views) == (256, 1)
+
+
+def test_a_deep_verifier_reads_the_1_32_features_trains_on_them_and_exports():
+    """``deep``: the frozen pass yields three levels, the head reads all of them, and the export flies as trained."""
+    from assurance.fitting.verifier_fit import check_export, export_onnx
+    from assurance.fitting.verifier_net import VerifierNet
+    from assurance.fitting.verifier_train import TrainConfig, frozen_session, low_features, train_verifier
+
+    rng = np.random.default_rng(3)
+    train, held = _crops(32, rng), _crops(16, rng)
+    net = VerifierNet(size=32, margin=0.5, width=8, deep=True).eval()
+    x = train.crops[:3].transpose(0, 3, 1, 2).astype(np.float32) / 255.0
+    levels = low_features(frozen_session(net, encoder=True, threads=1), x)
+    assert [tuple(f.shape[1:]) for f in levels] == [(40, 4, 4), (112, 2, 2), (320, 1, 1)]
+    with pytest.raises(ValueError, match="multiple of 32"):
+        TrainConfig(size=48, deep=True)
+    cfg = TrainConfig(size=32, steps=2, batch=8, eval_every=2, threads=1, deep=True)
+    result = train_verifier(train, held, cfg, pretrained=False, log=lambda s: None)
+    assert result.model.depth == 16 and result.model.lat32 is not None
+    assert check_export(export_onnx(result.model), result.model, held.crops[:4]) < 1e-3

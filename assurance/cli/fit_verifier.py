@@ -41,6 +41,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--frozen", choices=("encoder", "low"), default="encoder",
                    help="encoder: every encoder block keeps its ImageNet weights and the head learns (fast on 2 "
                         "cores); low: the blocks from 1/8 to 1/16 learn too (default: %(default)s)")
+    p.add_argument("--deep", action=argparse.BooleanOptionalAction, default=False,
+                   help="the encoder goes on to 1/32 (EfficientNet-Lite0's blocks 11-15, its most semantic "
+                        "features; the crop side then a multiple of 32; default: %(default)s)")
     p.add_argument("--recall", type=float, default=0.95,
                    help="threshold: the largest with this recall of unsafe held-out candidates (0.95)")
     p.add_argument("--fuse-learned", metavar="FILE", nargs="?", const="",
@@ -67,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         cfg = TrainConfig(size=args.size, margin=args.margin, steps=args.steps, batch=args.batch, lr=args.lr,
                           eval_every=args.eval_every, minutes=args.minutes, seed=args.seed, threads=args.threads,
-                          views=args.views, frozen=args.frozen)
+                          views=args.views, frozen=args.frozen, deep=args.deep)
         segmenter = system.segmenter(working_width=system.core.working_width)
         learned = None
         if args.fuse_learned is not None:

@@ -87,7 +87,8 @@ class HeldOutChoice:
 
 @dataclass(frozen=True, kw_only=True)
 class VerifierSources:
-    """What a verifier record rests on: the ``splits`` (folders, and their hashes under ``*_sha256``), the
+    """What a verifier record rests on: the ``splits`` (folders; their hashes under ``*_sha256`` and scene counts
+    under ``*_images``), the
     segmentation network's record (``weights``), the ``command``, the label set's name (``labels``) and the
     encoder's ImageNet provenance (``imagenet``; empty: a random start)."""
 
@@ -162,16 +163,20 @@ def verifier_body(result: TrainResult, cfg: TrainConfig, train: CropSet, held: C
         "onnx": {"file": export.file, "sha256": export.sha256, "opset": OPSET, "max_diff_vs_torch": export.max_diff},
         "crop": {"size": cfg.size, "margin": cfg.margin}, "threshold": threshold,
         "criterion": {"name": "tnr-at-recall", "recall": recall, "on": "held-out core-model candidates"},
-        "network": {"name": "VerifierNet", "encoder": "EfficientNet-Lite0 stem + blocks 0-10 (ImageNet start)",
+        "network": {"name": "VerifierNet", "encoder": f"EfficientNet-Lite0 stem + blocks 0-{result.model.depth - 1} "
+                                                      f"({'ImageNet' if sources.imagenet else 'random'} start)",
                     "parameters": int(sum(p.numel() for p in result.model.parameters())),
                     "imagenet_weights": sources.imagenet},
         "training": {"crops": int(train.unsafe.size), "unsafe": int(train.unsafe.sum()),
                      "candidates": int(train.is_candidate.sum()),
                      "mined": int((~train.is_candidate).sum()), "config": dict(cfg.__dict__),
                      "steps_run": result.steps_run, "selected_step": result.best_step,
-                     "seconds": round(result.seconds, 1), "curve": result.curve, "sha256": splits.get("train_sha256")},
-        "held_out": {**held_out_figures(y, p_held, threshold), "sha256": splits.get("held_out_sha256")},
-        "fusion": choice.fusion, "splits": {k: v for k, v in splits.items() if not k.endswith("sha256")},
+                     "seconds": round(result.seconds, 1), "curve": result.curve, "sha256": splits.get("train_sha256"),
+                     "images": splits.get("train_images")},
+        "held_out": {**held_out_figures(y, p_held, threshold), "sha256": splits.get("held_out_sha256"),
+                     "images": splits.get("held_out_images")},
+        "fusion": choice.fusion,
+        "splits": {k: v for k, v in splits.items() if not k.endswith(("_sha256", "_images"))},
         "weights": sources.weights, "labels": sources.labels, "command": sources.command,
         "created": _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%d %H:%M:%S UTC"),
     }
@@ -221,9 +226,11 @@ def fit_verifier(data: str | Path, val: str | Path, segmenter: Any, out: Path, *
         p_learned = learned_scores(val, segmenter, learned, core=core, images=images)
         fusion = choose_fusion(held.unsafe[sel], p_held, p_learned, learned_sha256=learned.model_sha256,
                                recall=recall)
+    train_samples = list(iter_samples(data, require_labels=True))[:images]
+    held_samples = list(iter_samples(val, require_labels=True))[:images]
     splits = {"train": str(data), "held_out": str(val),
-              "train_sha256": split_sha256(list(iter_samples(data, require_labels=True))[:images], data),
-              "held_out_sha256": split_sha256(list(iter_samples(val, require_labels=True))[:images], val)}
+              "train_sha256": split_sha256(train_samples, data), "held_out_sha256": split_sha256(held_samples, val),
+              "train_images": len(train_samples), "held_out_images": len(held_samples)}
     body = verifier_body(result, cfg, train, held,
                          export=OnnxExport(out.with_suffix(".onnx").name, sha256_bytes(onnx), diff),
                          choice=HeldOutChoice(p=p_held, recall=recall, fusion=fusion),

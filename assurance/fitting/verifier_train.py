@@ -15,7 +15,7 @@ from __future__ import annotations
 import copy
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -45,6 +45,7 @@ class TrainConfig:
     eval_every: int = 250
     views: int = 1
     frozen: str = "encoder"  # "encoder": every encoder block keeps its ImageNet weights; "low": down to 1/8 only
+    deep: bool = False  # the encoder goes on to 1/32 (VerifierNet's ``deep``)
     minutes: float | None = None
     seed: int = 0
     threads: int = 2
@@ -53,8 +54,8 @@ class TrainConfig:
         for name in ("size", "steps", "batch", "eval_every", "threads", "views"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
-        if self.size % 16:
-            raise ValueError(f"size must be a multiple of 16, got {self.size}")
+        if self.size % (32 if self.deep else 16):
+            raise ValueError(f"size must be a multiple of {32 if self.deep else 16}, got {self.size}")
         if self.frozen not in ("encoder", "low"):
             raise ValueError(f"frozen must be 'encoder' or 'low', got {self.frozen!r}")
 
@@ -131,8 +132,9 @@ def auroc(y: np.ndarray, p: np.ndarray) -> float:
 
 def frozen_session(model: VerifierNet, *, encoder: bool, threads: int) -> Any:
     """The frozen part of ``model`` under ONNX Runtime: float crops (n, 3, S, S) in [0, 1] -> the 1/8 features and,
-    when the whole ``encoder`` is frozen, the 1/16 ones. ONNX Runtime runs EfficientNet's depthwise convolutions
-    about nine times faster than torch on a CPU, and this pass is most of a training run's time."""
+    when the whole ``encoder`` is frozen, the coarser ones (:meth:`VerifierNet.mid`). ONNX Runtime runs
+    EfficientNet's depthwise convolutions about nine times faster than torch on a CPU, and this pass is most of a
+    training run's time."""
     import io
     import warnings
 
@@ -145,11 +147,11 @@ def frozen_session(model: VerifierNet, *, encoder: bool, threads: int) -> Any:
 
         def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, ...]:
             f8 = self.net.low(x)
-            return (f8, self.net.mid(f8)) if encoder else (f8,)
+            return (f8, *self.net.mid(f8)) if encoder else (f8,)
 
     model.eval()
     buf = io.BytesIO()
-    names = ["f8", "f16"] if encoder else ["f8"]
+    names = ["f8", "f16", "f32"][:3 if model.deep else 2] if encoder else ["f8"]
     with warnings.catch_warnings():  # the TorchScript exporter's deprecation notices
         warnings.simplefilter("ignore")
         torch.onnx.export(Frozen(model), (torch.rand(2, 3, model.size, model.size),), buf, input_names=["crops"],
@@ -157,24 +159,26 @@ def frozen_session(model: VerifierNet, *, encoder: bool, threads: int) -> Any:
     return open_session(buf.getvalue(), "the verifier's frozen encoder", threads)
 
 
-def low_features(session: Any, x: np.ndarray, *, batch: int = 64) -> tuple[torch.Tensor, torch.Tensor | None]:
+def low_features(session: Any, x: np.ndarray, *, batch: int = 64) -> list[torch.Tensor]:
     """The frozen part's features (:func:`frozen_session`) of float crops (n, 3, S, S) in [0, 1], as float16: the
-    1/8 features (n, 40, S/8, S/8) and, when the whole encoder is frozen, the 1/16 ones (n, 112, S/16, S/16)."""
+    1/8 features (n, 40, S/8, S/8) and, when the whole encoder is frozen, the 1/16 ones (n, 112, S/16, S/16) and
+    with ``deep`` the 1/32 ones (n, 320, S/32, S/32)."""
     names = [o.name for o in session.get_outputs()]
-    f8s, f16s = [], []
+    parts: list[list[torch.Tensor]] = [[] for _ in names]
     for i in range(0, len(x), batch):
         out = session.run(names, {"crops": np.ascontiguousarray(x[i:i + batch], np.float32)})
-        f8s.append(torch.from_numpy(out[0]).half())
-        if len(out) > 1:
-            f16s.append(torch.from_numpy(out[1]).half())
-    return torch.cat(f8s), (torch.cat(f16s) if f16s else None)
+        for part, f in zip(parts, out, strict=True):
+            part.append(torch.from_numpy(f).half())
+    return [torch.cat(part) for part in parts]
 
 
 def cached_views(session: Any, crops: CropSet, cfg: TrainConfig, rng: np.random.Generator,
-                 log: Callable[[str], None]) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor, np.ndarray]:
+                 log: Callable[[str], None]) -> tuple[list[torch.Tensor], torch.Tensor, np.ndarray]:
     """Every training crop in ``cfg.views`` views (the first as it is, the others augmented), through the frozen part
-    once: their 1/8 features, aux targets and truth. The frozen part never changes, so each view is computed once."""
-    feats, mids, auxes, ys = [], [], [], []
+    once: their features (:func:`low_features`), aux targets and truth. The frozen part never changes, so each view
+    is computed once."""
+    feats: list[list[torch.Tensor]] = []
+    auxes, ys = [], []
     plain = to_size(crops.crops, cfg.size)
     g = cfg.size // 8
     for v in range(cfg.views):
@@ -186,14 +190,11 @@ def cached_views(session: Any, crops: CropSet, cfg: TrainConfig, rng: np.random.
                 a = (a > 1e-3).astype(np.float32)
             else:
                 x, a = augment(crops.crops[part], crops.aux[part], cfg.size, rng)
-            f8, f16 = low_features(session, x)
-            feats.append(f8)
-            mids.append(f16)
+            feats.append(low_features(session, x))
             auxes.append(torch.from_numpy(a))
             ys.append(crops.unsafe[part])
         log(f"view {v + 1} of {cfg.views} through the frozen encoder")
-    return (torch.cat(feats), None if mids[0] is None else torch.cat(mids),  # type: ignore[arg-type]
-            torch.cat(auxes), np.concatenate(ys))
+    return [torch.cat(level) for level in zip(*feats, strict=True)], torch.cat(auxes), np.concatenate(ys)
 
 
 def _optimiser(model: VerifierNet, cfg: TrainConfig) -> torch.optim.Optimizer:
@@ -208,15 +209,17 @@ def _optimiser(model: VerifierNet, cfg: TrainConfig) -> torch.optim.Optimizer:
     return torch.optim.AdamW([g for g in groups if g["params"]], weight_decay=cfg.weight_decay)
 
 
-def _forward(model: VerifierNet, f8: torch.Tensor, f16: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor]:
-    return model.high(f8.float()) if f16 is None else model.head(f8.float(), f16.float())
+def _forward(model: VerifierNet, feats: Sequence[torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
+    """The logit and map from cached features: the 1/8 ones alone (the rest of the encoder trains) or all levels."""
+    levels = [f.float() for f in feats]
+    return model.high(levels[0]) if len(levels) == 1 else model.head(*levels)
 
 
 @torch.inference_mode()
-def _held_out_auroc(model: VerifierNet, f8: torch.Tensor, f16: torch.Tensor | None, y: np.ndarray) -> float:
+def _held_out_auroc(model: VerifierNet, feats: Sequence[torch.Tensor], y: np.ndarray) -> float:
     model.eval()
-    p = torch.cat([torch.sigmoid(_forward(model, f8[i:i + 512], None if f16 is None else f16[i:i + 512])[0])
-                   for i in range(0, len(f8), 512)])
+    p = torch.cat([torch.sigmoid(_forward(model, [f[i:i + 512] for f in feats])[0])
+                   for i in range(0, len(feats[0]), 512)])
     return auroc(y, p.double().numpy())
 
 
@@ -225,20 +228,20 @@ def train_verifier(train: CropSet, val: CropSet, cfg: TrainConfig, *, pretrained
     """Train on ``train`` (every crop), select on ``val``'s core-model candidates by AUROC.
 
     The stem and the blocks down to 1/8 keep their ImageNet weights; each training crop goes through them once per
-    view, under ONNX Runtime (:func:`cached_views`), and the steps train the rest (the 1/16 blocks and the head) on
+    view, under ONNX Runtime (:func:`cached_views`), and the steps train the rest (the coarser blocks and the head) on
     those features."""
     torch.manual_seed(cfg.seed)
     torch.set_num_threads(cfg.threads)
     rng = np.random.default_rng(cfg.seed)
-    model = VerifierNet(size=cfg.size, margin=cfg.margin)
+    model = VerifierNet(size=cfg.size, margin=cfg.margin, deep=cfg.deep)
     if pretrained:
         model.load_imagenet()
     t0 = time.perf_counter()
     session = frozen_session(model, encoder=cfg.frozen == "encoder", threads=cfg.threads)
-    feats, mids, aux_t, y = cached_views(session, train, cfg, rng, log)
+    feats, aux_t, y = cached_views(session, train, cfg, rng, log)
     vsel = val.is_candidate
-    vfeats, vmids = low_features(session, to_size(val.crops[vsel], cfg.size).transpose(0, 3, 1, 2)
-                                 .astype(np.float32) / 255.0)
+    vfeats = low_features(session, to_size(val.crops[vsel], cfg.size).transpose(0, 3, 1, 2).astype(np.float32)
+                          / 255.0)
     vy = val.unsafe[vsel]
     opt = _optimiser(model, cfg)
     base = [g["lr"] for g in opt.param_groups]
@@ -253,7 +256,7 @@ def train_verifier(train: CropSet, val: CropSet, cfg: TrainConfig, *, pretrained
         for g, lr in zip(opt.param_groups, base, strict=True):
             g["lr"] = lr * (min(1.0, step / 50) * 0.5 * (1.0 + math.cos(math.pi * frac)))
         idx = torch.from_numpy(rng.integers(0, len(y), cfg.batch))
-        logit, aux = _forward(model, feats[idx], None if mids is None else mids[idx])
+        logit, aux = _forward(model, [f[idx] for f in feats])
         loss = F.binary_cross_entropy_with_logits(logit, yt[idx], pos_weight=pos_weight)
         loss = loss + cfg.aux_weight * F.binary_cross_entropy_with_logits(aux[:, 0], aux_t[idx])
         opt.zero_grad(set_to_none=True)
@@ -261,7 +264,7 @@ def train_verifier(train: CropSet, val: CropSet, cfg: TrainConfig, *, pretrained
         opt.step()
         out_of_time = cfg.minutes is not None and time.perf_counter() - t0 > 60.0 * cfg.minutes
         if step % cfg.eval_every == 0 or step == cfg.steps or out_of_time:
-            score = _held_out_auroc(model, vfeats, vmids, vy)
+            score = _held_out_auroc(model, vfeats, vy)
             best.curve.append({"step": step, "loss": loss.item(), "val_auroc": score,
                                "seconds": time.perf_counter() - t0})
             log(f"step {step}: loss {loss.item():.4f}, held-out AUROC {score:.4f} ({time.perf_counter() - t0:.0f} s)")
