@@ -122,13 +122,19 @@ def export_onnx(model: VerifierNet) -> bytes:
     return buf.getvalue()
 
 
+def onnx_probabilities(data: bytes, crops: np.ndarray, *, threads: int = 1, batch: int = 64) -> np.ndarray:
+    """P(unsafe) of crops (n, S, S, 3) uint8 from the exported network under ONNX Runtime (what flies): (n,)."""
+    session = open_session(data, "verifier export", threads)
+    z = [np.asarray(session.run(["logit"], {"crops": np.ascontiguousarray(crops[i:i + batch].transpose(0, 3, 1, 2),
+                                                                          np.float32) / np.float32(255.0)})[0],
+                    np.float64) for i in range(0, len(crops), batch)]
+    return 1.0 / (1.0 + np.exp(-np.concatenate(z))) if z else np.zeros(0)
+
+
 def check_export(data: bytes, model: VerifierNet, crops: np.ndarray) -> float:
     """The largest difference of P(unsafe) between ONNX Runtime and torch on ``crops``; ValueError above
     :data:`MAX_DIFF`."""
-    session = open_session(data, "verifier export", 1)
-    x = np.ascontiguousarray(crops.transpose(0, 3, 1, 2), np.float32) / np.float32(255.0)
-    z = np.asarray(session.run(["logit"], {"crops": x})[0], np.float64)
-    diff = float(np.abs(1.0 / (1.0 + np.exp(-z)) - predict(model, crops)).max()) if len(crops) else 0.0
+    diff = float(np.abs(onnx_probabilities(data, crops) - predict(model, crops)).max()) if len(crops) else 0.0
     if diff > MAX_DIFF:
         raise ValueError(f"verifier export: ONNX Runtime differs from torch by {diff:.2e} (> {MAX_DIFF:g})")
     return diff
@@ -218,9 +224,9 @@ def fit_verifier(data: str | Path, val: str | Path, segmenter: Any, out: Path, *
     result = train_verifier(train, held, cfg, pretrained=o.pretrained, log=log)
     sel = held.is_candidate
     crops = to_size(held.crops[sel], cfg.size)
-    p_held = predict(result.model, crops)
     onnx = export_onnx(result.model)
     diff = check_export(onnx, result.model, crops[:64])
+    p_held = onnx_probabilities(onnx, crops, threads=cfg.threads)  # the threshold is the flying network's
     fusion = None
     if learned is not None:
         p_learned = learned_scores(val, segmenter, learned, core=core, images=images)
