@@ -29,7 +29,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--size", type=int, default=256,
                    help="crop side in pixels, a multiple of 16, large enough for the ground's texture to show "
                         "(a paver of a 4K frame survives 256 px, not 64; default: %(default)s)")
-    p.add_argument("--margin", type=float, default=0.5,
+    p.add_argument("--margin", type=float, default=1.0,
                    help="context around the disc, in radii (default: %(default)s)")
     p.add_argument("--jitter", type=int, default=3, help="mined discs around each training candidate "
                                                          "(default: %(default)s)")
@@ -41,9 +41,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--frozen", choices=("encoder", "low"), default="encoder",
                    help="encoder: every encoder block keeps its ImageNet weights and the head learns (fast on 2 "
                         "cores); low: the blocks from 1/8 to 1/16 learn too (default: %(default)s)")
-    p.add_argument("--deep", action=argparse.BooleanOptionalAction, default=False,
+    p.add_argument("--deep", action=argparse.BooleanOptionalAction, default=True,
                    help="the encoder goes on to 1/32 (EfficientNet-Lite0's blocks 11-15, its most semantic "
-                        "features; the crop side then a multiple of 32; default: %(default)s)")
+                        "features; the crop side then a multiple of 32); --no-deep stops at 1/16 (default: deep)")
     p.add_argument("--recall", type=float, default=0.95,
                    help="threshold: the largest with this recall of unsafe held-out candidates (0.95)")
     p.add_argument("--fuse-learned", metavar="FILE", nargs="?", const="",

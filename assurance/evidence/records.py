@@ -13,7 +13,6 @@ development data it declares); else they are "not declared". The facts about the
 from __future__ import annotations
 
 import os
-import re
 from collections import Counter
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -170,13 +169,6 @@ def _card_set(name: str, role: str, letter: str, d: dict[str, Any], *, card: _Ca
                 scenes=scenes, **more)
 
 
-def _split_folder(text: Any) -> Any:
-    """The folder a fitted monitor's ``splits`` entry names: the entry, or where it reads ``FOLDER (a note)`` and
-    FOLDER is what it names (the shipped verifier's: ``data/train (synthetic train split, scenes 0-299)``), FOLDER."""
-    m = re.fullmatch(r"(\S[^()]*?) \(([^()]*)\)", str(text)) if text else None
-    return m.group(1) if m and not Path(str(text)).exists() else text
-
-
 def _fitted_balance(d: dict[str, Any]) -> str:
     """The unsafe share of a fitted monitor's set: of its candidates, or (a verifier's training) of its crops, the
     candidates' and the mined discs'."""
@@ -210,7 +202,7 @@ def development_sets(card: dict[str, Any] | None, monitors: dict[str, dict[str, 
         for key, role, letter in (("training", f"{what} training", "N"), ("held_out", f"{what} selection", "O")):
             d = fitted.get(key) or {}
             if isinstance(d, dict) and d:
-                where = _split_folder(splits.get("train" if key == "training" else "held_out"))
+                where = splits.get("train" if key == "training" else "held_out")
                 rows.append(_card_set(f"{where or '?'}", role, letter, {**d, "path": where},
                                       card=_Card(name, package.get(name, False)), **common, balance=_fitted_balance(d)))
     split = (monitors.get("calibration.json") or {}).get("split") or {}

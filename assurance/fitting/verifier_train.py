@@ -35,7 +35,7 @@ class TrainConfig:
     """How the verifier trains; the defaults are the shipped verifier's recipe and ``uav-el fit-verifier``'s."""
 
     size: int = 256  # a paver of a 4K frame still shows at 256 px, not at 64 (docs/results.md)
-    margin: float = 0.5
+    margin: float = 1.0  # a radius of context around the disc (docs/results.md)
     steps: int = 3000
     batch: int = 64
     lr: float = 1e-3
@@ -45,7 +45,7 @@ class TrainConfig:
     eval_every: int = 250
     views: int = 1
     frozen: str = "encoder"  # "encoder": every encoder block keeps its ImageNet weights; "low": down to 1/8 only
-    deep: bool = False  # the encoder goes on to 1/32 (VerifierNet's ``deep``)
+    deep: bool = True  # the encoder goes on to 1/32 (VerifierNet's ``deep``)
     minutes: float | None = None
     seed: int = 0
     threads: int = 2
