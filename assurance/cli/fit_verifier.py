@@ -40,7 +40,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "augmented (default: %(default)s)")
     p.add_argument("--frozen", choices=("encoder", "low"), default="encoder",
                    help="encoder: every encoder block keeps its ImageNet weights and the head learns (fast on 2 "
-                        "cores); low: the blocks from 1/8 to 1/16 learn too (default: %(default)s)")
+                        "cores); low: the blocks after 1/8 learn too (default: %(default)s)")
     p.add_argument("--deep", action=argparse.BooleanOptionalAction, default=True,
                    help="the encoder goes on to 1/32 (EfficientNet-Lite0's blocks 11-15, its most semantic "
                         "features; the crop side then a multiple of 32); --no-deep stops at 1/16 (default: deep)")
