@@ -13,8 +13,10 @@ stops at ``steps`` or after ``minutes``, whichever comes first.
 from __future__ import annotations
 
 import copy
+import io
 import math
 import time
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -26,6 +28,7 @@ import torch.nn.functional as F
 
 from assurance.fitting.verifier_data import CropSet
 from assurance.fitting.verifier_net import TAP_8, VerifierNet
+from el.segmentation.onnx_engine import open_session
 
 FROZEN_BLOCKS = TAP_8 + 2  # the stem and blocks 0..4 (down to 1/8) keep their ImageNet weights (of encoder_modules)
 
@@ -135,10 +138,6 @@ def frozen_session(model: VerifierNet, *, encoder: bool, threads: int) -> Any:
     when the whole ``encoder`` is frozen, the coarser ones (:meth:`VerifierNet.mid`). ONNX Runtime runs
     EfficientNet's depthwise convolutions about nine times faster than torch on a CPU, and this pass is most of a
     training run's time."""
-    import io
-    import warnings
-
-    from el.segmentation.onnx_engine import open_session
 
     class Frozen(torch.nn.Module):
         def __init__(self, net: VerifierNet) -> None:
