@@ -13,9 +13,7 @@ same way. Nothing is chosen on a test split: the caller gives training and held-
 from __future__ import annotations
 
 import datetime as _dt
-import io
 import json
-import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -30,7 +28,16 @@ from assurance.fitting.learned_monitor import recall_threshold, split_sha256
 from assurance.fitting.network_identity import network_record
 from assurance.fitting.verifier_data import CropSet, CropSettings, collect_crops
 from assurance.fitting.verifier_net import VerifierNet
-from assurance.fitting.verifier_train import TrainConfig, TrainResult, auroc, predict, to_size, train_verifier
+from assurance.fitting.verifier_train import (
+    OPSET,
+    TrainConfig,
+    TrainResult,
+    auroc,
+    onnx_bytes,
+    predict,
+    to_size,
+    train_verifier,
+)
 from el.base.hashing import sha256_bytes
 from el.base.records import signed_document
 from el.landing.core import run_core
@@ -41,7 +48,6 @@ from el.segmentation.lite import pretrained_provenance
 from el.segmentation.onnx_engine import open_session
 
 FUSION_WEIGHTS: tuple[float, ...] = (0.25, 0.4, 0.5, 0.6, 0.75, 0.9)
-OPSET = 17
 MAX_DIFF = 1e-3
 
 
@@ -112,14 +118,7 @@ def export_onnx(model: VerifierNet) -> bytes:
             return self.net(x)[0]
 
     model.eval()
-    buf = io.BytesIO()
-    x = torch.rand(2, 3, model.size, model.size)
-    with warnings.catch_warnings():  # the TorchScript exporter's deprecation notices
-        warnings.simplefilter("ignore")
-        torch.onnx.export(LogitOnly(model), (x,), buf, input_names=["crops"], output_names=["logit"],
-                          dynamic_axes={"crops": {0: "batch"}, "logit": {0: "batch"}}, opset_version=OPSET,
-                          dynamo=False)
-    return buf.getvalue()
+    return onnx_bytes(LogitOnly(model), model.size, ["logit"])
 
 
 def onnx_probabilities(data: bytes, crops: np.ndarray, *, threads: int = 1, batch: int = 64) -> np.ndarray:

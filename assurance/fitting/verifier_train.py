@@ -149,13 +149,23 @@ def frozen_session(model: VerifierNet, *, encoder: bool, threads: int) -> Any:
             return (f8, *self.net.mid(f8)) if encoder else (f8,)
 
     model.eval()
-    buf = io.BytesIO()
     names = ["f8", "f16", "f32"][:3 if model.deep else 2] if encoder else ["f8"]
+    return open_session(onnx_bytes(Frozen(model), model.size, names), "the verifier's frozen encoder", threads)
+
+
+OPSET = 17
+
+
+def onnx_bytes(module: torch.nn.Module, size: int, outputs: list[str]) -> bytes:
+    """The ONNX bytes of ``module`` on crops (B, 3, ``size``, ``size``) named ``crops``, its outputs named
+    ``outputs``, the batch dimension free (the TorchScript exporter, opset :data:`OPSET`)."""
+    buf = io.BytesIO()
     with warnings.catch_warnings():  # the TorchScript exporter's deprecation notices
         warnings.simplefilter("ignore")
-        torch.onnx.export(Frozen(model), (torch.rand(2, 3, model.size, model.size),), buf, input_names=["crops"],
-                          output_names=names, dynamic_axes={"crops": {0: "batch"}}, opset_version=17, dynamo=False)
-    return open_session(buf.getvalue(), "the verifier's frozen encoder", threads)
+        torch.onnx.export(module, (torch.rand(2, 3, size, size),), buf, input_names=["crops"], output_names=outputs,
+                          dynamic_axes={"crops": {0: "batch"}, **{o: {0: "batch"} for o in outputs}},
+                          opset_version=OPSET, dynamo=False)
+    return buf.getvalue()
 
 
 def low_features(session: Any, x: np.ndarray, *, batch: int = 64) -> list[torch.Tensor]:
