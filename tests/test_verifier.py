@@ -80,6 +80,23 @@ def test_monitor_scores_a_frame_in_one_batch_as_torch_does(tiny):
     assert t.name.endswith("threshold=0.25")
 
 
+def test_fitting_scores_held_out_crops_with_the_session_that_flies(tiny):
+    import pickle
+
+    from assurance.fitting.verifier_fit import onnx_probabilities
+
+    path, _ = tiny
+    m = VerifierMonitor(labels=UAVID, model=str(path))
+    crops = np.random.default_rng(1).integers(0, 256, (5, 32, 32, 3), dtype=np.uint8)
+    at_once = m.session.probabilities(crops)
+    assert onnx_probabilities(load_verifier(path).onnx, crops, batch=2) == pytest.approx(at_once, abs=1e-6)
+    again = pickle.loads(pickle.dumps(m.session))  # campaign workers get it pickled
+    assert again.probabilities(crops) == pytest.approx(at_once, abs=1e-6) and again.source == m.session.source
+    assert m.session.probabilities(crops[:0]).shape == (0,)
+    with pytest.raises(ValueError, match="uint8"):
+        m.session.probabilities(crops.astype(np.float32))
+
+
 def test_record_and_network_are_checked(tiny, tmp_path):
     path, _ = tiny
     assert load_verifier(path).size == 32

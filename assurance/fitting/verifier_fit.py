@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from assurance.dataio.layouts import iter_samples
-from assurance.dataio.uavid import read_image
+from assurance.dataio.uavid import Sample, read_image
 from assurance.files import atomic_write_bytes
 from assurance.fitting.learned_monitor import recall_threshold, split_sha256
 from assurance.fitting.network_identity import network_record
@@ -42,10 +42,9 @@ from el.base.hashing import sha256_bytes
 from el.base.records import signed_document
 from el.landing.core import run_core
 from el.monitors.base import CandidateContext
-from el.monitors.verifier import VERIFIER_FORMAT, fused_score
+from el.monitors.verifier import VERIFIER_FORMAT, VerifierSession, fused_score
 from el.segmentation.contract import labels_of
 from el.segmentation.lite import pretrained_provenance
-from el.segmentation.onnx_engine import open_session
 
 FUSION_WEIGHTS: tuple[float, ...] = (0.25, 0.4, 0.5, 0.6, 0.75, 0.9)
 MAX_DIFF = 1e-3
@@ -122,12 +121,9 @@ def export_onnx(model: VerifierNet) -> bytes:
 
 
 def onnx_probabilities(data: bytes, crops: np.ndarray, *, threads: int = 1, batch: int = 64) -> np.ndarray:
-    """P(unsafe) of crops (n, S, S, 3) uint8 from the exported network under ONNX Runtime (what flies): (n,)."""
-    session = open_session(data, "verifier export", threads)
-    z = [np.asarray(session.run(["logit"], {"crops": np.ascontiguousarray(crops[i:i + batch].transpose(0, 3, 1, 2),
-                                                                          np.float32) / np.float32(255.0)})[0],
-                    np.float64) for i in range(0, len(crops), batch)]
-    return 1.0 / (1.0 + np.exp(-np.concatenate(z))) if z else np.zeros(0)
+    """P(unsafe) of crops (n, S, S, 3) uint8 from the exported network, through the flying code's session: (n,)."""
+    return VerifierSession(data, crops.shape[1], source="verifier export", threads=threads).probabilities(
+        crops, batch=batch)
 
 
 def check_export(data: bytes, model: VerifierNet, crops: np.ndarray) -> float:
@@ -187,10 +183,10 @@ def verifier_body(result: TrainResult, cfg: TrainConfig, train: CropSet, held: C
     }
 
 
-def learned_scores(data: str | Path, segmenter: Any, learned: Any, *, core: Any, images: int | None) -> np.ndarray:
-    """The learned monitor's scores of the core model's candidates of ``data``, in the crops' order."""
+def learned_scores(samples: Sequence[Sample], segmenter: Any, learned: Any, *, core: Any) -> np.ndarray:
+    """The learned monitor's scores of the core model's candidates of ``samples``, in the crops' order."""
     out: list[float] = []
-    for s in list(iter_samples(data, require_labels=True))[:images]:
+    for s in samples:
         rgb = read_image(s.image_path)
         probs = segmenter.predict_frame(rgb)
         size = (rgb.shape[1], rgb.shape[0])
@@ -217,9 +213,12 @@ def fit_verifier(data: str | Path, val: str | Path, segmenter: Any, out: Path, *
     core, recall, images, learned = o.core, o.recall, o.images, o.learned
     weights = o.weights if o.weights is not None else network_record(segmenter, loaded=False)
     cut = CropSettings(core=core, size=128 if cfg.size <= 128 else cfg.size, margin=cfg.margin)
-    kw = {"images": images, "progress": o.progress}
-    train = collect_crops(data, segmenter, settings=replace(cut, jitter=o.jitter), desc="training scenes", **kw)
-    held = collect_crops(val, segmenter, settings=cut, desc="held-out scenes", **kw)
+    train_samples = list(iter_samples(data, require_labels=True))[:images]  # each split listed once
+    held_samples = list(iter_samples(val, require_labels=True))[:images]
+    train = collect_crops(data, segmenter, settings=replace(cut, jitter=o.jitter), samples=train_samples,
+                          desc="training scenes", progress=o.progress)
+    held = collect_crops(val, segmenter, settings=cut, samples=held_samples, desc="held-out scenes",
+                         progress=o.progress)
     result = train_verifier(train, held, cfg, pretrained=o.pretrained, log=log)
     sel = held.is_candidate
     crops = to_size(held.crops[sel], cfg.size)
@@ -228,11 +227,9 @@ def fit_verifier(data: str | Path, val: str | Path, segmenter: Any, out: Path, *
     p_held = onnx_probabilities(onnx, crops, threads=cfg.threads)  # the threshold is the flying network's
     fusion = None
     if learned is not None:
-        p_learned = learned_scores(val, segmenter, learned, core=core, images=images)
+        p_learned = learned_scores(held_samples, segmenter, learned, core=core)
         fusion = choose_fusion(held.unsafe[sel], p_held, p_learned, learned_sha256=learned.model_sha256,
                                recall=recall)
-    train_samples = list(iter_samples(data, require_labels=True))[:images]
-    held_samples = list(iter_samples(val, require_labels=True))[:images]
     splits = {"train": str(data), "held_out": str(val),
               "train_sha256": split_sha256(train_samples, data), "held_out_sha256": split_sha256(held_samples, val),
               "train_images": len(train_samples), "held_out_images": len(held_samples)}

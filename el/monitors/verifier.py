@@ -122,32 +122,41 @@ def fused_score(p_verifier: np.ndarray, p_learned: np.ndarray, weight: float) ->
 
 
 class VerifierSession:
-    """The verifier's network under ONNX Runtime: crops (n, S, S, 3) uint8 -> P(unsafe) (n,). Picklable."""
+    """A verifier network under ONNX Runtime: crops (n, S, S, 3) uint8 -> P(unsafe) (n,). Built from the ONNX bytes
+    and crop size alone, so the fitting scores its held-out crops with the code that flies. Picklable."""
 
-    def __init__(self, model: VerifierModel, threads: int | None = 1) -> None:
-        self.model, self.threads = model, threads
-        self._session = open_session(model.onnx, model.onnx_path, threads)
+    def __init__(self, onnx: bytes, size: int, *, source: str = "verifier", threads: int | None = 1) -> None:
+        self.onnx, self.size, self.source, self.threads = onnx, size, source, threads
+        self._session = open_session(onnx, source, threads)
         self._input = self._session.get_inputs()[0].name
         self._output = self._session.get_outputs()[0].name
 
+    @classmethod
+    def of(cls, model: VerifierModel, threads: int | None = 1) -> VerifierSession:
+        """The session of a verifier file's network."""
+        return cls(model.onnx, model.size, source=str(model.onnx_path), threads=threads)
+
     def __getstate__(self) -> dict[str, Any]:
-        return {"model": self.model, "threads": self.threads}
+        return {"onnx": self.onnx, "size": self.size, "source": self.source, "threads": self.threads}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
-        self.__init__(state["model"], state["threads"])  # type: ignore[misc]
+        self.__init__(state["onnx"], state["size"], source=state["source"], threads=state["threads"])  # type: ignore[misc]
 
-    def probabilities(self, crops: np.ndarray) -> np.ndarray:
-        if crops.ndim != 4 or crops.shape[1:] != (self.model.size, self.model.size, 3) or crops.dtype != np.uint8:
-            raise ValueError(f"verifier crops must be (n, {self.model.size}, {self.model.size}, 3) uint8, "
+    def probabilities(self, crops: np.ndarray, *, batch: int | None = None) -> np.ndarray:
+        """P(unsafe) of ``crops``; ``batch``: run at most that many crops at a time (a frame's crops run at once)."""
+        if crops.ndim != 4 or crops.shape[1:] != (self.size, self.size, 3) or crops.dtype != np.uint8:
+            raise ValueError(f"verifier crops must be (n, {self.size}, {self.size}, 3) uint8, "
                              f"got {crops.shape} {crops.dtype}")
-        if len(crops) == 0:
-            return np.zeros(0)
-        x = np.ascontiguousarray(crops.transpose(0, 3, 1, 2), np.float32) / np.float32(255.0)
-        (z,) = run_session(self._session, [self._output], {self._input: x}, "verifier")
-        z = np.asarray(z, np.float64).reshape(len(crops))
+        step = batch or max(len(crops), 1)
+        z = np.concatenate([self._logits(crops[i:i + step]) for i in range(0, len(crops), step)] or [np.zeros(0)])
         if not np.isfinite(z).all():
             raise ValueError("verifier: non-finite logits")
         return 1.0 / (1.0 + np.exp(-np.clip(z, -500.0, 500.0)))
+
+    def _logits(self, crops: np.ndarray) -> np.ndarray:
+        x = np.ascontiguousarray(crops.transpose(0, 3, 1, 2), np.float32) / np.float32(255.0)
+        (z,) = run_session(self._session, [self._output], {self._input: x}, "verifier")
+        return np.asarray(z, np.float64).reshape(len(crops))
 
 
 def _patch_keywords(*, margin: float = 0.25, max_side: int | None = None,
@@ -188,7 +197,7 @@ class VerifierMonitor(Monitor):
             raise ValueError("verifier: learned=FILE is read only with fuse=learned")
         self.DEFAULT_THRESHOLD = default  # type: ignore[misc]  # per file, not per class
         super().__init__(threshold=threshold)
-        self.session = VerifierSession(self.record, threads)
+        self.session = VerifierSession.of(self.record, threads)
 
     def _learned(self, path: str | None, labels: LabelSet, common: dict[str, Any]) -> tuple[Any, float]:
         fusion = self.record.fusion
