@@ -13,6 +13,7 @@ verifier learns from pixels and ground truth.
 
 from __future__ import annotations
 
+import contextlib
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
@@ -66,13 +67,13 @@ class CropSet:
             raise ValueError("no crops to join")
         out = {k: np.empty((sum(len(getattr(p, k)) for p in parts), *getattr(parts[0], k).shape[1:]),
                            getattr(parts[0], k).dtype) for k in cls.__dataclass_fields__}
-        at = 0
+        at = dict.fromkeys(out, 0)  # per field: spilled crops (collect_crops) are empty here
         while parts:
             part = parts.pop(0)
-            n = len(part.crops)
             for k, v in out.items():
-                v[at:at + n] = getattr(part, k)
-            at += n
+                src = getattr(part, k)
+                v[at[k]:at[k] + len(src)] = src
+                at[k] += len(src)
         return cls(**out)
 
 
@@ -141,9 +142,11 @@ def scene_crops(rgb: np.ndarray, ids: np.ndarray, segmenter: Any, *, labels: Lab
 
 def collect_crops(data: str | Path, segmenter: Any, *, settings: CropSettings | None = None, seed: int = 0,
                   samples: Sequence[Sample] | None = None, images: int | None = None,
-                  progress: bool = False, desc: str = "scenes") -> CropSet:
+                  progress: bool = False, desc: str = "scenes", spill: Path | None = None) -> CropSet:
     """Every candidate crop of the clean scenes of ``data`` (and ``settings.jitter`` mined discs per candidate), cut
-    as ``settings`` says (None: :class:`CropSettings`'s defaults)."""
+    as ``settings`` says (None: :class:`CropSettings`'s defaults). ``spill``: a file the crops are written to scene
+    by scene and read back from (memory-mapped, read-only), so a large training split (about 200 kB a crop at
+    256 px) lies on disk, not in memory."""
     settings = settings or CropSettings()
     settings = replace(settings, core=settings.core or CoreConfig())
     if samples is None:
@@ -153,9 +156,18 @@ def collect_crops(data: str | Path, segmenter: Any, *, settings: CropSettings | 
     labels = labels_of(segmenter)
     rng = np.random.default_rng(seed)
     parts = []
-    for i, s in enumerate(bar(samples, total=len(samples), desc=desc, enabled=progress)):
-        rgb, ids = read_image(s.image_path), read_sample_labels(s, labels)
-        if ids.shape != rgb.shape[:2]:
-            raise ValueError(f"{s.label_path}: label size {ids.shape} differs from the image {rgb.shape[:2]}")
-        parts.append(scene_crops(rgb, ids, segmenter, labels=labels, settings=settings, rng=rng, scene=i))
-    return CropSet.concat(parts)
+    with open(spill, "wb") if spill is not None else contextlib.nullcontext() as sink:
+        for i, s in enumerate(bar(samples, total=len(samples), desc=desc, enabled=progress)):
+            rgb, ids = read_image(s.image_path), read_sample_labels(s, labels)
+            if ids.shape != rgb.shape[:2]:
+                raise ValueError(f"{s.label_path}: label size {ids.shape} differs from the image {rgb.shape[:2]}")
+            part = scene_crops(rgb, ids, segmenter, labels=labels, settings=settings, rng=rng, scene=i)
+            if sink is not None:
+                sink.write(np.ascontiguousarray(part.crops).tobytes())
+                part = replace(part, crops=part.crops[:0])
+            parts.append(part)
+    out = CropSet.concat(parts)
+    if spill is None or not len(out.unsafe):
+        return out
+    shape = (len(out.unsafe), *out.crops.shape[1:])
+    return replace(out, crops=np.memmap(spill, dtype=np.uint8, mode="r", shape=shape))

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import json
+import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -215,11 +216,13 @@ def fit_verifier(data: str | Path, val: str | Path, segmenter: Any, out: Path, *
     cut = CropSettings(core=core, size=128 if cfg.size <= 128 else cfg.size, margin=cfg.margin)
     train_samples = list(iter_samples(data, require_labels=True))[:images]  # each split listed once
     held_samples = list(iter_samples(val, require_labels=True))[:images]
-    train = collect_crops(data, segmenter, settings=replace(cut, jitter=o.jitter), samples=train_samples,
-                          desc="training scenes", progress=o.progress)
-    held = collect_crops(val, segmenter, settings=cut, samples=held_samples, desc="held-out scenes",
-                         progress=o.progress)
-    result = train_verifier(train, held, cfg, pretrained=o.pretrained, log=log)
+    with tempfile.TemporaryDirectory(prefix="uav-el-verifier-") as tmp:  # the training crops lie on disk
+        train = collect_crops(data, segmenter, settings=replace(cut, jitter=o.jitter), samples=train_samples,
+                              desc="training scenes", progress=o.progress, spill=Path(tmp) / "train-crops.u8")
+        held = collect_crops(val, segmenter, settings=cut, samples=held_samples, desc="held-out scenes",
+                             progress=o.progress)
+        result = train_verifier(train, held, cfg, pretrained=o.pretrained, log=log)
+        train.crops = train.crops[:0].copy()  # the mapping closes before its folder goes
     sel = held.is_candidate
     crops = to_size(held.crops[sel], cfg.size)
     onnx = export_onnx(result.model)
