@@ -85,6 +85,27 @@ def test_the_blocks_to_1_16_learn_when_only_the_low_part_is_frozen():
         TrainConfig(frozen="none")
 
 
+def test_spilled_training_crops_are_the_crops_held_in_memory(tiny_campaign, tmp_path):
+    """``collect_crops(spill=FILE)``: the crops written to disk scene by scene and mapped back read-only are the
+    ones kept in memory, and so are the truth, scenes and discs joined beside them."""
+    from conftest import TINY_WW
+    from helpers import OracleSegmenter
+
+    from assurance.fitting.verifier_data import CropSettings, collect_crops
+    from el.geometry.config import CoreConfig
+
+    settings = CropSettings(core=CoreConfig(n_star=6, working_width=TINY_WW), size=32, jitter=1)
+    kept = collect_crops(tiny_campaign["data"], OracleSegmenter(TINY_WW), settings=settings)
+    spilled = collect_crops(tiny_campaign["data"], OracleSegmenter(TINY_WW), settings=settings,
+                            spill=tmp_path / "crops.u8")
+    assert len(kept.unsafe) > 10 and kept.is_candidate.any() and (~kept.is_candidate).any()
+    assert isinstance(spilled.crops, np.memmap) and not spilled.crops.flags.writeable
+    assert (tmp_path / "crops.u8").stat().st_size == kept.crops.nbytes
+    for name in kept.__dataclass_fields__:
+        assert np.array_equal(getattr(kept, name), getattr(spilled, name)), name
+    assert set(kept.scene) == set(range(10))
+
+
 def test_fit_verifier_command_is_listed_and_checks_its_options(tmp_path, capsys):
     from assurance.cli import COMMANDS, main
 
