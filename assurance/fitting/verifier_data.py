@@ -164,7 +164,7 @@ def collect_crops(data: str | Path, segmenter: Any, *, settings: CropSettings | 
             part = scene_crops(rgb, ids, segmenter, labels=labels, settings=settings, rng=rng, scene=i)
             if sink is not None:
                 sink.write(np.ascontiguousarray(part.crops).tobytes())
-                part = replace(part, crops=part.crops[:0])
+                part = replace(part, crops=np.empty((0, *part.crops.shape[1:]), np.uint8))  # not a view: frees
             parts.append(part)
     out = CropSet.concat(parts)
     if spill is None or not len(out.unsafe):
