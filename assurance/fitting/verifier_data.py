@@ -141,8 +141,8 @@ def scene_crops(rgb: np.ndarray, ids: np.ndarray, segmenter: Any, *, labels: Lab
 
 
 def collect_crops(data: str | Path, segmenter: Any, *, settings: CropSettings | None = None, seed: int = 0,
-                  samples: Sequence[Sample] | None = None, images: int | None = None,
-                  progress: bool = False, desc: str = "scenes", spill: Path | None = None) -> CropSet:
+                  samples: Sequence[Sample] | None = None, progress: bool = False, desc: str = "scenes",
+                  spill: Path | None = None) -> CropSet:
     """Every candidate crop of the clean scenes of ``data`` (and ``settings.jitter`` mined discs per candidate), cut
     as ``settings`` says (None: :class:`CropSettings`'s defaults). ``spill``: a file the crops are written to scene
     by scene and read back from (memory-mapped, read-only), so a large training split (about 200 kB a crop at
@@ -150,7 +150,7 @@ def collect_crops(data: str | Path, segmenter: Any, *, settings: CropSettings | 
     settings = settings or CropSettings()
     settings = replace(settings, core=settings.core or CoreConfig())
     if samples is None:
-        samples = list(iter_samples(data, require_labels=True))[:images]
+        samples = list(iter_samples(data, require_labels=True))
     if not samples:
         raise ValueError(f"{data}: no labelled scenes")
     labels = labels_of(segmenter)
