@@ -115,6 +115,27 @@ def test_fit_verifier_command_is_listed_and_checks_its_options(tmp_path, capsys)
     assert "no such folder" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("kw, match", [({"margin": -1.0}, "margin"), ({"margin": 50.0}, "margin"),
+                                       ({"lr": float("nan")}, "lr"), ({"lr": 0.0}, "lr"), ({"minutes": 0.0}, "minutes"),
+                                       ({"size": 7}, "multiple of 32"), ({"steps": 0}, "steps")])
+def test_training_settings_out_of_range_are_refused(kw, match):
+    """A negative or huge margin (a crop window that grows as its square), a learning rate that is not a positive
+    number, a zero time limit: refused before any crop is cut."""
+    from assurance.fitting.verifier_train import TrainConfig
+
+    with pytest.raises(ValueError, match=match):
+        TrainConfig(**kw)
+
+
+@pytest.mark.parametrize("kw, match", [({"jitter": -1}, "jitter"), ({"images": 0}, "images"),
+                                       ({"recall": 1.0}, "recall")])
+def test_fit_options_out_of_range_are_refused(kw, match):
+    from assurance.fitting.verifier_fit import VerifierFitOptions
+
+    with pytest.raises(ValueError, match=match):
+        VerifierFitOptions(**kw)
+
+
 def test_the_command_line_defaults_are_the_training_configurations():
     """`uav-el fit-verifier` without options trains as TrainConfig() says (the shipped recipe: 256 px, one view)."""
     import argparse

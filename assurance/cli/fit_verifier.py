@@ -30,7 +30,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="crop side in pixels, a multiple of 16, large enough for the ground's texture to show "
                         "(a paver of a 4K frame survives 256 px, not 64; default: %(default)s)")
     p.add_argument("--margin", type=float, default=1.0,
-                   help="context around the disc, in radii (default: %(default)s)")
+                   help="context around the disc, in radii, 0 to 4 (default: %(default)s)")
     p.add_argument("--jitter", type=int, default=3, help="mined discs around each training candidate "
                                                          "(default: %(default)s)")
     p.add_argument("--lr", type=float, default=1e-3, help="learning rate of the head (default: %(default)s)")

@@ -70,6 +70,14 @@ class VerifierFitOptions:
     pretrained: bool = True
     progress: bool = False
 
+    def __post_init__(self) -> None:
+        if self.jitter < 0:
+            raise ValueError(f"jitter (mined discs per candidate) must be >= 0, got {self.jitter}")
+        if not 0.0 < self.recall < 1.0:
+            raise ValueError(f"recall must lie in (0, 1), got {self.recall}")
+        if self.images is not None and self.images < 1:
+            raise ValueError(f"images (scenes of each split) must be >= 1, got {self.images}")
+
 
 @dataclass(frozen=True)
 class OnnxExport:

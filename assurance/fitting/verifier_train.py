@@ -30,6 +30,7 @@ from assurance.fitting.verifier_data import CropSet
 from assurance.fitting.verifier_net import TAP_8, VerifierNet
 from el.segmentation.onnx_engine import open_session
 
+MAX_MARGIN = 4.0  # radii of context: beyond it a crop is mostly not the candidate, and its window grows as (1+m)^2
 FROZEN_BLOCKS = TAP_8 + 2  # the stem and blocks 0..4 (down to 1/8) keep their ImageNet weights (of encoder_modules)
 
 
@@ -59,6 +60,12 @@ class TrainConfig:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
         if self.size % (32 if self.deep else 16):
             raise ValueError(f"size must be a multiple of {32 if self.deep else 16}, got {self.size}")
+        if not 0.0 <= self.margin <= MAX_MARGIN:
+            raise ValueError(f"margin must lie in [0, {MAX_MARGIN:g}] radii, got {self.margin}")
+        if not (math.isfinite(self.lr) and self.lr > 0.0):
+            raise ValueError(f"lr must be a positive number, got {self.lr}")
+        if self.minutes is not None and not self.minutes > 0.0:
+            raise ValueError(f"minutes must be > 0, got {self.minutes}")
         if self.frozen not in ("encoder", "low"):
             raise ValueError(f"frozen must be 'encoder' or 'low', got {self.frozen!r}")
 
