@@ -172,3 +172,28 @@ def test_a_deep_verifier_reads_the_1_32_features_trains_on_them_and_exports():
     result = train_verifier(train, held, cfg, pretrained=False, log=lambda s: None)
     assert result.model.depth == 16 and result.model.lat32 is not None
     assert check_export(export_onnx(result.model), result.model, held.crops[:4]) < 1e-3
+
+
+def test_more_fuse_layers_widen_what_each_cell_of_the_map_sees_and_export():
+    """``fuse_layers``: that many 3x3 convolutions over the fused 1/8 map; a cell's logit then depends on cells two
+    away (with one layer it cannot), and the exported network flies as trained."""
+    import torch
+
+    from assurance.fitting.verifier_fit import check_export, export_onnx
+    from assurance.fitting.verifier_train import TrainConfig, train_verifier
+
+    rng = np.random.default_rng(4)
+    train, held = _crops(32, rng), _crops(16, rng)
+    cfg = TrainConfig(size=32, steps=2, batch=8, eval_every=2, threads=1, deep=True, fuse_layers=3)
+    model = train_verifier(train, held, cfg, pretrained=False, log=lambda s: None).model
+    assert sum(isinstance(m, torch.nn.Conv2d) and m.kernel_size == (3, 3) for m in model.fuse) == 3
+    f8 = torch.zeros(1, 40, 4, 4)
+    probe = f8.clone()
+    probe[0, :, 0, 0] = 5.0  # a change two cells from (2, 2)
+    with torch.no_grad():
+        lat = [torch.zeros(1, 112, 2, 2), torch.zeros(1, 320, 1, 1)]
+        changed = [(model.head(x, *lat)[1][0, 0, 2, 2]).item() for x in (f8, probe)]
+    assert changed[0] != changed[1]
+    assert check_export(export_onnx(model), model, held.crops[:4]) < 1e-3
+    with pytest.raises(ValueError, match="fuse_layers"):
+        TrainConfig(fuse_layers=0)

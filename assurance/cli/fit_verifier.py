@@ -44,6 +44,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--deep", action=argparse.BooleanOptionalAction, default=True,
                    help="the encoder goes on to 1/32 (EfficientNet-Lite0's blocks 11-15, its most semantic "
                         "features; the crop side then a multiple of 32); --no-deep stops at 1/16 (default: deep)")
+    p.add_argument("--fuse-layers", type=int, default=1,
+                   help="3x3 convolutions over the fused 1/8 feature map, 1 to 6: more let each cell compare its "
+                        "texture with its neighbours' (a street paved like the square it crosses; default: "
+                        "%(default)s)")
     p.add_argument("--recall", type=float, default=0.95,
                    help="threshold: the largest with this recall of unsafe held-out candidates (0.95)")
     p.add_argument("--fuse-learned", metavar="FILE", nargs="?", const="",
@@ -70,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         cfg = TrainConfig(size=args.size, margin=args.margin, steps=args.steps, batch=args.batch, lr=args.lr,
                           eval_every=args.eval_every, minutes=args.minutes, seed=args.seed, threads=args.threads,
-                          views=args.views, frozen=args.frozen, deep=args.deep)
+                          views=args.views, frozen=args.frozen, deep=args.deep, fuse_layers=args.fuse_layers)
         segmenter = system.segmenter(working_width=system.core.working_width)
         learned = None
         if args.fuse_learned is not None:

@@ -26,6 +26,7 @@ from el.segmentation.lite import Lite0Encoder, load_imagenet_encoder
 ENCODER_BLOCKS = 11  # blocks 0..10 of EfficientNet-Lite0: down to 1/16 (112 channels)
 DEEP_BLOCKS = 16  # with ``deep``: blocks 11..15 too, down to 1/32 (320 channels)
 TAP_8 = 4  # the last block at 1/8 (40 channels); the last at 1/16 (112 channels) ends the encoder
+MAX_FUSE_LAYERS = 6  # 3x3 convolutions over the fused 1/8 map: each lets a cell see one more cell around it
 STD_FLOOR = 0.02  # of the [0, 1] pixel range: a flat crop is not blown up into noise
 
 
@@ -43,22 +44,27 @@ class VerifierNet(nn.Module):
     ``size``: the crop side S (a multiple of 32 with ``deep``, else of 16); ``margin``: the crop's margin around the
     disc, as a fraction of its radius (which pixels of the map lie in the disc); ``width``: channels of the fused
     map; ``deep``: the encoder goes on to 1/32 (blocks 11-15, 320 channels, ImageNet's most semantic features), whose
-    map joins the fused one and whose mean joins the pooled features.
+    map joins the fused one and whose mean joins the pooled features; ``fuse_layers``: 3x3 convolutions over the
+    fused 1/8 map (more let a cell compare its texture with its neighbours', as a shared street's crosswise
+    paving differs from the square it crosses).
     """
 
-    def __init__(self, *, size: int = 96, margin: float = 0.5, width: int = 64, deep: bool = False) -> None:
+    def __init__(self, *, size: int = 96, margin: float = 0.5, width: int = 64, deep: bool = False,
+                 fuse_layers: int = 1) -> None:
         super().__init__()
         if size % (32 if deep else 16):
             raise ValueError(f"size must be a multiple of {32 if deep else 16}, got {size}")
-        self.size, self.margin, self.width, self.deep = size, margin, width, deep
+        if not 1 <= fuse_layers <= MAX_FUSE_LAYERS:
+            raise ValueError(f"fuse_layers must lie in 1..{MAX_FUSE_LAYERS}, got {fuse_layers}")
+        self.size, self.margin, self.width, self.deep, self.fuse_layers = size, margin, width, deep, fuse_layers
         enc = Lite0Encoder()
         self.stem = nn.Sequential(enc._conv_stem, enc._bn0)
         self.blocks = nn.ModuleList(enc._blocks[:self.depth])
         self.lat8 = nn.Conv2d(40, width, 1)
         self.lat16 = nn.Conv2d(112, width, 1)
         self.lat32 = nn.Conv2d(320, width, 1) if deep else None
-        self.fuse = nn.Sequential(nn.Conv2d(width, width, 3, padding=1, bias=False), nn.BatchNorm2d(width),
-                                  nn.ReLU(inplace=True))
+        self.fuse = nn.Sequential(*(m for _ in range(fuse_layers) for m in (
+            nn.Conv2d(width, width, 3, padding=1, bias=False), nn.BatchNorm2d(width), nn.ReLU(inplace=True))))
         self.aux = nn.Conv2d(width, 1, 1)
         self.cls = nn.Sequential(nn.Dropout(0.2), nn.Linear((4 if deep else 3) * width + 1, 1))
         g = size // 8

@@ -27,7 +27,7 @@ import torch
 import torch.nn.functional as F
 
 from assurance.fitting.verifier_data import CropSet
-from assurance.fitting.verifier_net import TAP_8, VerifierNet
+from assurance.fitting.verifier_net import MAX_FUSE_LAYERS, TAP_8, VerifierNet
 from el.segmentation.onnx_engine import open_session
 
 MAX_MARGIN = 4.0  # radii of context: beyond it a crop is mostly not the candidate, and its window grows as (1+m)^2
@@ -50,6 +50,7 @@ class TrainConfig:
     views: int = 1
     frozen: str = "encoder"  # "encoder": every encoder block keeps its ImageNet weights; "low": down to 1/8 only
     deep: bool = True  # the encoder goes on to 1/32 (VerifierNet's ``deep``)
+    fuse_layers: int = 1  # 3x3 convolutions over the fused 1/8 map (VerifierNet's ``fuse_layers``)
     minutes: float | None = None
     seed: int = 0
     threads: int = 2
@@ -66,6 +67,8 @@ class TrainConfig:
             raise ValueError(f"lr must be a positive number, got {self.lr}")
         if self.minutes is not None and not self.minutes > 0.0:
             raise ValueError(f"minutes must be > 0, got {self.minutes}")
+        if not 1 <= self.fuse_layers <= MAX_FUSE_LAYERS:
+            raise ValueError(f"fuse_layers must lie in 1..{MAX_FUSE_LAYERS}, got {self.fuse_layers}")
         if self.frozen not in ("encoder", "low"):
             raise ValueError(f"frozen must be 'encoder' or 'low', got {self.frozen!r}")
 
@@ -259,7 +262,7 @@ def train_verifier(train: CropSet, val: CropSet, cfg: TrainConfig, *, pretrained
     torch.manual_seed(cfg.seed)
     torch.set_num_threads(cfg.threads)
     rng = np.random.default_rng(cfg.seed)
-    model = VerifierNet(size=cfg.size, margin=cfg.margin, deep=cfg.deep)
+    model = VerifierNet(size=cfg.size, margin=cfg.margin, deep=cfg.deep, fuse_layers=cfg.fuse_layers)
     if pretrained:
         model.load_imagenet()
     t0 = time.perf_counter()
@@ -304,5 +307,5 @@ def train_verifier(train: CropSet, val: CropSet, cfg: TrainConfig, *, pretrained
 
 
 def state_summary(model: VerifierNet) -> dict[str, Any]:
-    return {"size": model.size, "margin": model.margin, "width": model.width,
+    return {"size": model.size, "margin": model.margin, "width": model.width, "fuse_layers": model.fuse_layers,
             "parameters": int(sum(p.numel() for p in model.parameters()))}
