@@ -113,6 +113,11 @@ def test_fit_verifier_command_is_listed_and_checks_its_options(tmp_path, capsys)
     assert main(["fit-verifier", "--data", str(tmp_path / "nope"), "--val", str(tmp_path),
                  "--out", str(tmp_path / "v.json")]) == 2
     assert "no such folder" in capsys.readouterr().err
+    for option, value, says in (("--fuse-layers", "7", "fuse_layers"), ("--jitter", "-1", "jitter"),
+                                ("--images", "0", "images"), ("--margin", "5", "margin")):
+        assert main(["fit-verifier", "--data", str(tmp_path), "--val", str(tmp_path), "--out", str(tmp_path / "v.json"),
+                     option, value]) == 2, option
+        assert says in capsys.readouterr().err, option
 
 
 @pytest.mark.parametrize("kw, match", [({"margin": -1.0}, "margin"), ({"margin": 50.0}, "margin"),
@@ -180,6 +185,7 @@ def test_more_fuse_layers_widen_what_each_cell_of_the_map_sees_and_export():
     import torch
 
     from assurance.fitting.verifier_fit import check_export, export_onnx
+    from assurance.fitting.verifier_net import VerifierNet
     from assurance.fitting.verifier_train import TrainConfig, train_verifier
 
     rng = np.random.default_rng(4)
@@ -190,10 +196,26 @@ def test_more_fuse_layers_widen_what_each_cell_of_the_map_sees_and_export():
     f8 = torch.zeros(1, 40, 4, 4)
     probe = f8.clone()
     probe[0, :, 0, 0] = 5.0  # a change two cells from (2, 2)
-    with torch.no_grad():
-        lat = [torch.zeros(1, 112, 2, 2), torch.zeros(1, 320, 1, 1)]
-        changed = [(model.head(x, *lat)[1][0, 0, 2, 2]).item() for x in (f8, probe)]
-    assert changed[0] != changed[1]
+    lat = [torch.zeros(1, 112, 2, 2), torch.zeros(1, 320, 1, 1)]
+
+    def cell(net: VerifierNet, x: torch.Tensor) -> float:
+        with torch.no_grad():
+            return net.head(x, *lat)[1][0, 0, 2, 2].item()
+
+    assert cell(model, f8) != cell(model, probe)
+    one = VerifierNet(size=32, margin=0.5, deep=True).eval()  # one layer: (2, 2) sees only (1..3, 1..3)
+    assert cell(one, f8) == cell(one, probe)
     assert check_export(export_onnx(model), model, held.crops[:4]) < 1e-3
-    with pytest.raises(ValueError, match="fuse_layers"):
-        TrainConfig(fuse_layers=0)
+    for bad in (0, 7, 2.5, True):
+        with pytest.raises(ValueError, match="fuse_layers"):
+            TrainConfig(fuse_layers=bad)
+
+
+def test_one_fuse_layer_is_the_network_the_shipped_verifier_was_trained_as():
+    """The default keeps the fused map's single 3x3 layer under the same state-dict names, so a network trained
+    before ``fuse_layers`` existed loads unchanged."""
+    from assurance.fitting.verifier_net import VerifierNet
+
+    keys = [k for k in VerifierNet(size=32).state_dict() if k.startswith("fuse")]
+    assert keys == ["fuse.0.weight", "fuse.1.weight", "fuse.1.bias", "fuse.1.running_mean", "fuse.1.running_var",
+                    "fuse.1.num_batches_tracked"]

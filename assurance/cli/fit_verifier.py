@@ -72,6 +72,7 @@ def run(args: argparse.Namespace) -> int:
     if not 0.0 < args.recall < 1.0:
         raise CommandError(f"--recall must lie in (0, 1), got {args.recall}")
     try:
+        VerifierFitOptions(jitter=args.jitter, recall=args.recall, images=args.images)  # before the network loads
         cfg = TrainConfig(size=args.size, margin=args.margin, steps=args.steps, batch=args.batch, lr=args.lr,
                           eval_every=args.eval_every, minutes=args.minutes, seed=args.seed, threads=args.threads,
                           views=args.views, frozen=args.frozen, deep=args.deep, fuse_layers=args.fuse_layers)

@@ -175,6 +175,7 @@ def verifier_body(result: TrainResult, cfg: TrainConfig, train: CropSet, held: C
         "criterion": {"name": "tnr-at-recall", "recall": recall, "on": "held-out core-model candidates"},
         "network": {"name": "VerifierNet", "encoder": f"EfficientNet-Lite0 stem + blocks 0-{result.model.depth - 1} "
                                                       f"({'ImageNet' if sources.imagenet else 'random'} start)",
+                    "fuse_layers": result.model.fuse_layers,
                     "parameters": int(sum(p.numel() for p in result.model.parameters())),
                     "imagenet_weights": sources.imagenet},
         "training": {"crops": int(train.unsafe.size), "unsafe": int(train.unsafe.sum()),

@@ -54,7 +54,7 @@ class VerifierNet(nn.Module):
         super().__init__()
         if size % (32 if deep else 16):
             raise ValueError(f"size must be a multiple of {32 if deep else 16}, got {size}")
-        if not 1 <= fuse_layers <= MAX_FUSE_LAYERS:
+        if isinstance(fuse_layers, bool) or not isinstance(fuse_layers, int) or not 1 <= fuse_layers <= MAX_FUSE_LAYERS:
             raise ValueError(f"fuse_layers must lie in 1..{MAX_FUSE_LAYERS}, got {fuse_layers}")
         self.size, self.margin, self.width, self.deep, self.fuse_layers = size, margin, width, deep, fuse_layers
         enc = Lite0Encoder()

@@ -28,9 +28,9 @@ import torch.nn.functional as F
 
 from assurance.fitting.verifier_data import CropSet
 from assurance.fitting.verifier_net import MAX_FUSE_LAYERS, TAP_8, VerifierNet
+from el.monitors.verifier_crop import MAX_MARGIN
 from el.segmentation.onnx_engine import open_session
 
-MAX_MARGIN = 4.0  # radii of context: beyond it a crop is mostly not the candidate, and its window grows as (1+m)^2
 FROZEN_BLOCKS = TAP_8 + 2  # the stem and blocks 0..4 (down to 1/8) keep their ImageNet weights (of encoder_modules)
 
 
@@ -67,7 +67,8 @@ class TrainConfig:
             raise ValueError(f"lr must be a positive number, got {self.lr}")
         if self.minutes is not None and not self.minutes > 0.0:
             raise ValueError(f"minutes must be > 0, got {self.minutes}")
-        if not 1 <= self.fuse_layers <= MAX_FUSE_LAYERS:
+        if isinstance(self.fuse_layers, bool) or not isinstance(self.fuse_layers, int) \
+                or not 1 <= self.fuse_layers <= MAX_FUSE_LAYERS:
             raise ValueError(f"fuse_layers must lie in 1..{MAX_FUSE_LAYERS}, got {self.fuse_layers}")
         if self.frozen not in ("encoder", "low"):
             raise ValueError(f"frozen must be 'encoder' or 'low', got {self.frozen!r}")

@@ -36,7 +36,7 @@ from el.classes.labels import LabelSet
 from el.monitors.base import CandidateContext, Clock, Monitor, batch_arguments
 from el.monitors.learned import LearnedMonitor
 from el.monitors.spec import GenericSpec
-from el.monitors.verifier_crop import candidate_crop
+from el.monitors.verifier_crop import MAX_MARGIN, candidate_crop
 from el.segmentation.onnx_engine import open_session, read_checked, run_session
 
 VERIFIER_FORMAT = "uav-el-verifier/1"
@@ -94,8 +94,8 @@ def load_verifier(path: str | Path | None = None) -> VerifierModel:
             raise ValueError(f"the ONNX file must lie beside the record (a plain name), got {name!r}")
         if not (8 <= size <= 512 and size % 16 == 0):
             raise ValueError(f"crop size must be a multiple of 16 in [16, 512], got {size}")
-        if not (0.0 <= margin <= 4.0 and math.isfinite(threshold)):
-            raise ValueError("crop margin must lie in [0, 4] and the threshold be finite")
+        if not (0.0 <= margin <= MAX_MARGIN and math.isfinite(threshold)):
+            raise ValueError(f"crop margin must lie in [0, {MAX_MARGIN:g}] and the threshold be finite")
         fusion = body.get("fusion")
         if fusion is not None and not (0.0 <= float(fusion["weight"]) <= 1.0):
             raise ValueError("fusion weight must lie in [0, 1]")

@@ -18,6 +18,9 @@ import numpy as np
 from el.base.decision import Candidate, Disc
 from el.monitors.patches import _as_disc, validate_rgb
 
+MAX_MARGIN = 4.0  # radii of context around the disc: beyond it a crop is mostly not the candidate, and its window
+# (and the work to cut it) grows as (1 + margin)^2
+
 
 def crop_window(disc: Disc, margin: float) -> tuple[int, int, int, int]:
     """``(x0, y0, x1, y1)`` (end exclusive, may leave the image): the integer square holding the disc's centre
