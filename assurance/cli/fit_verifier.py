@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import shlex
 import sys
+from dataclasses import replace
 
 from assurance.cli.arguments import fit_split_options
 from assurance.cli.system_options import assessed, train_val_dirs
@@ -69,10 +70,11 @@ def run(args: argparse.Namespace) -> int:
 
     system = assessed(args)
     train_val_dirs(args, system.file)
-    if not 0.0 < args.recall < 1.0:
-        raise CommandError(f"--recall must lie in (0, 1), got {args.recall}")
     try:
-        VerifierFitOptions(jitter=args.jitter, recall=args.recall, images=args.images)  # before the network loads
+        options = VerifierFitOptions(  # checked before the network loads
+            core=system.core, jitter=args.jitter, recall=args.recall, images=args.images,
+            command=shlex.join(["uav-el", *sys.argv[1:]]) if sys.argv[1:2] == ["fit-verifier"] else None,
+            pretrained=not args.no_pretrained, progress=not (args.no_progress or getattr(args, "quiet", False)))
         cfg = TrainConfig(size=args.size, margin=args.margin, steps=args.steps, batch=args.batch, lr=args.lr,
                           eval_every=args.eval_every, minutes=args.minutes, seed=args.seed, threads=args.threads,
                           views=args.views, frozen=args.frozen, deep=args.deep, fuse_layers=args.fuse_layers)
@@ -81,11 +83,7 @@ def run(args: argparse.Namespace) -> int:
         if args.fuse_learned is not None:
             learned = LearnedMonitor(labels=system.labels, model=args.fuse_learned or None)
             learned.check_network(segmenter)
-        options = VerifierFitOptions(
-            core=system.core, jitter=args.jitter, recall=args.recall, images=args.images, learned=learned,
-            weights=network_record(segmenter, system.model),
-            command=shlex.join(["uav-el", *sys.argv[1:]]) if sys.argv[1:2] == ["fit-verifier"] else None,
-            pretrained=not args.no_pretrained, progress=not (args.no_progress or getattr(args, "quiet", False)))
+        options = replace(options, learned=learned, weights=network_record(segmenter, system.model))
         doc = fit_verifier(args.data, args.val, segmenter, args.out, cfg=cfg, options=options)
     except ValueError as exc:
         raise CommandError(str(exc)) from None

@@ -30,6 +30,12 @@ MAX_FUSE_LAYERS = 6  # 3x3 convolutions over the fused 1/8 map: each lets a cell
 STD_FLOOR = 0.02  # of the [0, 1] pixel range: a flat crop is not blown up into noise
 
 
+def check_fuse_layers(n: object) -> None:
+    """Refuse a count of fused-map layers that is not an integer in 1..:data:`MAX_FUSE_LAYERS`."""
+    if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= MAX_FUSE_LAYERS:
+        raise ValueError(f"fuse_layers must lie in 1..{MAX_FUSE_LAYERS}, got {n}")
+
+
 def standardise(x: torch.Tensor) -> torch.Tensor:
     """Each crop (B, 3, S, S) minus its mean per channel, over its spread (all channels, at least
     :data:`STD_FLOOR`)."""
@@ -54,8 +60,7 @@ class VerifierNet(nn.Module):
         super().__init__()
         if size % (32 if deep else 16):
             raise ValueError(f"size must be a multiple of {32 if deep else 16}, got {size}")
-        if isinstance(fuse_layers, bool) or not isinstance(fuse_layers, int) or not 1 <= fuse_layers <= MAX_FUSE_LAYERS:
-            raise ValueError(f"fuse_layers must lie in 1..{MAX_FUSE_LAYERS}, got {fuse_layers}")
+        check_fuse_layers(fuse_layers)
         self.size, self.margin, self.width, self.deep, self.fuse_layers = size, margin, width, deep, fuse_layers
         enc = Lite0Encoder()
         self.stem = nn.Sequential(enc._conv_stem, enc._bn0)

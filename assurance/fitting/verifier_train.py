@@ -27,7 +27,7 @@ import torch
 import torch.nn.functional as F
 
 from assurance.fitting.verifier_data import CropSet
-from assurance.fitting.verifier_net import MAX_FUSE_LAYERS, TAP_8, VerifierNet
+from assurance.fitting.verifier_net import TAP_8, VerifierNet, check_fuse_layers
 from el.monitors.verifier_crop import MAX_MARGIN
 from el.segmentation.onnx_engine import open_session
 
@@ -67,9 +67,7 @@ class TrainConfig:
             raise ValueError(f"lr must be a positive number, got {self.lr}")
         if self.minutes is not None and not self.minutes > 0.0:
             raise ValueError(f"minutes must be > 0, got {self.minutes}")
-        if isinstance(self.fuse_layers, bool) or not isinstance(self.fuse_layers, int) \
-                or not 1 <= self.fuse_layers <= MAX_FUSE_LAYERS:
-            raise ValueError(f"fuse_layers must lie in 1..{MAX_FUSE_LAYERS}, got {self.fuse_layers}")
+        check_fuse_layers(self.fuse_layers)
         if self.frozen not in ("encoder", "low"):
             raise ValueError(f"frozen must be 'encoder' or 'low', got {self.frozen!r}")
 
@@ -305,8 +303,3 @@ def train_verifier(train: CropSet, val: CropSet, cfg: TrainConfig, *, pretrained
     best.seconds, best.steps_run = time.perf_counter() - t0, step
     best.model.eval()
     return best
-
-
-def state_summary(model: VerifierNet) -> dict[str, Any]:
-    return {"size": model.size, "margin": model.margin, "width": model.width, "fuse_layers": model.fuse_layers,
-            "parameters": int(sum(p.numel() for p in model.parameters()))}
