@@ -180,6 +180,11 @@ def test_cli_fit_monitor_and_land_fail_loud(splits, tmp_path, capsys, monkeypatc
     assert json.loads(out.read_text())["body"]["weights"]["sha256"] == RoadBlindFrame.weights_sha256  # its own
     assert main(["fit-monitor", "--data", str(tmp_path / "nope"), "--out", str(out)]) == 2
     assert len(capsys.readouterr().err.strip().splitlines()) == 1
+    for recall in ("1", "nan"):  # refused by the selection's own check, the one fit-verifier's options share
+        assert main(["fit-monitor", "--data", str(train), "--val", str(val), "--out", str(out),
+                     "--recall", recall]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "recall must lie in (0, 1)" in err[0]
     image = next(val.glob("**/Images/*.png"))
     assert main(["land", str(image), "--monitor", f"learned:model={tmp_path / 'none.json'}"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
@@ -341,3 +346,13 @@ def test_a_card_with_a_malformed_model_record_is_refused(tmp_path):
         path.write_text(json.dumps(card_document(dict(body, monitor_model=bad))))
         with pytest.raises(CalibrationError, match="monitor_model must be"):
             load_calibration(path)
+
+
+@pytest.mark.parametrize("kw, match", [({"recall": 0.0}, "recall"), ({"recall": float("nan")}, "recall"),
+                                       ({"cs": ()}, "L2"), ({"cs": (1.0, -0.1)}, "L2")])
+def test_a_selection_out_of_range_is_refused(kw, match):
+    from assurance.fitting.learned_monitor import Selection
+
+    with pytest.raises(ValueError, match=match):
+        Selection(**kw)
+

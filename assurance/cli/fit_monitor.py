@@ -53,8 +53,10 @@ def run(args: argparse.Namespace) -> int:
     for d in (args.data, args.val):
         if d is not None and not Path(d).is_dir():
             raise CommandError(f"{d}: no such folder")
-    if not 0.0 < args.recall < 1.0:
-        raise CommandError(f"--recall must lie in (0, 1), got {args.recall}")
+    try:
+        selection = Selection(recall=args.recall)  # checked before the network loads
+    except ValueError as exc:
+        raise CommandError(str(exc)) from None
     if args.mcd < 0:
         raise CommandError(f"--mcd must be >= 0, got {args.mcd}")
     core = system.core if args.working_width is None else replace(system.core, working_width=args.working_width)
@@ -63,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
         _check_mcd(args.mcd, segmenter, system.label)
         doc = fit_learned_monitor(args.data, segmenter, val=args.val,
                                   features=FeatureSettings(core=core, mcd_n=args.mcd),
-                                  selection=Selection(recall=args.recall), images=args.images,
+                                  selection=selection, images=args.images,
                                   weights=network_record(segmenter, system.model), progress=not args.quiet)
     except ValueError as exc:
         raise CommandError(str(exc)) from None

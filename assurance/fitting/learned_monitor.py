@@ -68,6 +68,18 @@ class Selection:
     cs: Sequence[float] = DEFAULT_CS
     recall: float = 0.95
 
+    def __post_init__(self) -> None:
+        check_recall(self.recall)
+        if not self.cs or not all(math.isfinite(c) and c > 0 for c in self.cs):
+            raise ValueError(f"L2 strengths must be positive and finite, got {list(self.cs)}")
+
+
+def check_recall(recall: float) -> None:
+    """Refuse a recall of held-out unsafe candidates outside (0, 1) (NaN included): a threshold keeping all or none
+    of them is no threshold."""
+    if not 0.0 < recall < 1.0:
+        raise ValueError(f"recall must lie in (0, 1), got {recall}")
+
 
 @dataclass
 class CandidateSet:

@@ -25,7 +25,7 @@ import numpy as np
 from assurance.dataio.layouts import iter_samples
 from assurance.dataio.uavid import Sample, read_image
 from assurance.files import atomic_write_bytes
-from assurance.fitting.learned_monitor import recall_threshold, split_sha256
+from assurance.fitting.learned_monitor import check_recall, recall_threshold, split_sha256
 from assurance.fitting.network_identity import network_record
 from assurance.fitting.verifier_data import CropSet, CropSettings, collect_crops
 from assurance.fitting.verifier_net import VerifierNet
@@ -73,8 +73,7 @@ class VerifierFitOptions:
     def __post_init__(self) -> None:
         if self.jitter < 0:
             raise ValueError(f"jitter (mined discs per candidate) must be >= 0, got {self.jitter}")
-        if not 0.0 < self.recall < 1.0:
-            raise ValueError(f"recall must lie in (0, 1), got {self.recall}")
+        check_recall(self.recall)
         if self.images is not None and self.images < 1:
             raise ValueError(f"images (scenes of each split) must be >= 1, got {self.images}")
 
