@@ -29,6 +29,44 @@ def test_aux_target_and_mined_discs():
     assert dist[0] <= 0.5 and 0.5 <= dist[1] <= 1.5 and all(0.0 <= m.x <= 100 and 0.0 <= m.y <= 100 for m in moved)
 
 
+def test_lookalike_discs_lie_on_valid_ground_within_their_radius_of_forbidden_ground():
+    """A look-alike disc is centred on ground the core model found valid, with a forbidden ground-truth pixel within
+    its radius (on the working grid); none where nothing is valid or nothing is forbidden, and never more than asked."""
+    from types import SimpleNamespace
+
+    from conftest import TINY_H, TINY_W, TINY_WW
+
+    from assurance.fitting.verifier_data import lookalike_discs
+    from el.geometry.config import CoreConfig
+    from el.landing.candidates import row_radii
+
+    core = CoreConfig(working_width=TINY_WW)
+    w, h = TINY_WW, TINY_WW * TINY_H // TINY_W
+    radii = row_radii(core.geometry(w, h), core.safety, core.mode)
+    forbidden = np.zeros((TINY_H, TINY_W), bool)
+    forbidden[:, 200:204] = True  # a thin road on the right
+    valid = np.zeros((h, w), bool)
+    valid[:, 60:] = np.isfinite(radii)[:, None]
+    result = SimpleNamespace(working_size=(w, h), input_size=(TINY_W, TINY_H), valid=valid)
+    discs = lookalike_discs(result, forbidden, core, np.random.default_rng(0), 12)
+    assert len(discs) == 12 and len({(d.x, d.y) for d in discs}) == 12
+    road_x = 202.0
+    for d in discs:
+        assert d.x >= 60 * TINY_W / w and abs(d.x - road_x) < d.radius_px + 2 * TINY_W / w
+    assert lookalike_discs(result, np.zeros_like(forbidden), core, np.random.default_rng(0), 12) == []
+    nothing_valid = SimpleNamespace(working_size=(w, h), input_size=(TINY_W, TINY_H), valid=np.zeros_like(valid))
+    assert lookalike_discs(nothing_valid, forbidden, core, np.random.default_rng(0), 3) == []
+    few = lookalike_discs(result, forbidden, core, np.random.default_rng(0), 10**6)
+    assert 12 < len(few) < int(valid.sum())  # every near cell once, the far ones never
+    from assurance.fitting.verifier_data import CropSettings, scene_crops
+    from el.classes.labels import UAVID
+
+    with pytest.raises(ValueError, match="look-alike"):  # given candidates carry no valid ground to draw from
+        scene_crops(np.zeros((TINY_H, TINY_W, 3), np.uint8), np.zeros((TINY_H, TINY_W), np.int64), None,
+                    labels=UAVID, settings=CropSettings(core=core, size=32, lookalikes=1),
+                    rng=np.random.default_rng(0), scene=0, candidates=[])
+
+
 def _crops(n: int, rng: np.random.Generator):
     from assurance.fitting.verifier_data import CropSet
 
@@ -114,6 +152,7 @@ def test_fit_verifier_command_is_listed_and_checks_its_options(tmp_path, capsys)
                  "--out", str(tmp_path / "v.json")]) == 2
     assert "no such folder" in capsys.readouterr().err
     for option, value, says in (("--fuse-layers", "7", "fuse_layers"), ("--jitter", "-1", "jitter"),
+                                ("--lookalikes", "-2", "lookalikes"),
                                 ("--images", "0", "images"), ("--margin", "5", "margin")):
         assert main(["fit-verifier", "--data", str(tmp_path), "--val", str(tmp_path), "--out", str(tmp_path / "v.json"),
                      option, value]) == 2, option
@@ -133,6 +172,7 @@ def test_training_settings_out_of_range_are_refused(kw, match):
 
 
 @pytest.mark.parametrize("kw, match", [({"jitter": -1}, "jitter"), ({"images": 0}, "images"),
+                                       ({"lookalikes": -1}, "lookalikes"),
                                        ({"recall": 1.0}, "recall")])
 def test_fit_options_out_of_range_are_refused(kw, match):
     from assurance.fitting.verifier_fit import VerifierFitOptions

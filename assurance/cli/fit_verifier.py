@@ -34,6 +34,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="context around the disc, in radii, 0 to 4 (default: %(default)s)")
     p.add_argument("--jitter", type=int, default=3, help="mined discs around each training candidate "
                                                          "(default: %(default)s)")
+    p.add_argument("--lookalikes", type=int, default=0, metavar="N",
+                   help="look-alike discs drawn per training scene where the network finds the ground valid but "
+                        "the ground truth puts a forbidden pixel within the radius (default: %(default)s)")
     p.add_argument("--lr", type=float, default=1e-3, help="learning rate of the head (default: %(default)s)")
     p.add_argument("--eval-every", type=int, default=250, help="held-out AUROC every N steps (default: %(default)s)")
     p.add_argument("--views", type=int, default=1,
@@ -72,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
     train_val_dirs(args, system.file)
     try:
         options = VerifierFitOptions(  # checked before the network loads
-            core=system.core, jitter=args.jitter, recall=args.recall, images=args.images,
+            core=system.core, jitter=args.jitter, lookalikes=args.lookalikes, recall=args.recall, images=args.images,
             command=shlex.join(["uav-el", *sys.argv[1:]]) if sys.argv[1:2] == ["fit-verifier"] else None,
             pretrained=not args.no_pretrained, progress=not (args.no_progress or getattr(args, "quiet", False)))
         cfg = TrainConfig(size=args.size, margin=args.margin, steps=args.steps, batch=args.batch, lr=args.lr,

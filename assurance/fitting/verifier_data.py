@@ -7,8 +7,12 @@ labelled
 definition the campaign judges by), with a dense auxiliary target: the share of forbidden ground-truth pixels
 under each cell of a coarse grid over the crop. Hard look-alikes are mined around the candidates: ``jitter`` more
 discs per candidate, moved from it by up to three radii (the core model found the ground there safe-looking too),
-each with its own truth. Nothing here reads the segmentation network's output besides where the candidates lie: the
-verifier learns from pixels and ground truth.
+each with its own truth; and ``lookalikes`` discs per scene are drawn where the core model finds the ground valid (no
+forbidden class within the radius, by the network) but the ground truth puts a forbidden pixel within it: the
+look-alikes the network paints safe (a shared street paved like its square, a gravel track), of which the core
+model's own candidates hold only the few its clustering happens to pick. Nothing here reads the segmentation
+network's output besides where the candidates and the valid ground lie: the verifier learns from pixels and ground
+truth.
 """
 
 from __future__ import annotations
@@ -30,18 +34,21 @@ from assurance.progress import progress as bar
 from el.base.decision import Disc
 from el.classes.labels import LabelSet
 from el.geometry.config import CoreConfig
-from el.landing.core import run_core
+from el.landing.candidates import row_radii
+from el.landing.core import CoreResult, run_core
 from el.monitors.verifier_crop import candidate_crop, crop_window, padded_window
 from el.segmentation.contract import labels_of
 
 JITTER_RANGES: tuple[tuple[float, float], ...] = ((0.0, 0.5), (0.5, 1.5), (1.5, 3.0))  # in radii
+LOOKALIKE_RANK = -2
 
 
 @dataclass
 class CropSet:
     """Crops (n, size, size, 3) uint8, their truth (n,) bool, auxiliary targets (n, g, g) float32, the scene of
-    each, whether each is a core-model candidate (else a mined disc), its hazard rank in its frame (-1 for a
-    mined disc), and the disc (x, y, r) in full-resolution pixels."""
+    each, whether each is a core-model candidate (else a mined disc), its hazard rank in its frame (-1 for a disc
+    mined around a candidate, :data:`LOOKALIKE_RANK` for a look-alike disc), and the disc (x, y, r) in
+    full-resolution pixels."""
 
     crops: np.ndarray
     unsafe: np.ndarray
@@ -85,6 +92,33 @@ def aux_target(forbidden: np.ndarray, disc: Disc, *, margin: float, grid: int) -
     return cv2.resize(window, (grid, grid), interpolation=cv2.INTER_AREA)
 
 
+def lookalike_discs(result: CoreResult, forbidden: np.ndarray, core: CoreConfig, rng: np.random.Generator,
+                    n: int) -> list[Disc]:
+    """Up to ``n`` discs centred on working pixels the core model found valid (``result.valid``) within their safety
+    radius of a forbidden ground-truth pixel (``forbidden``, full resolution): drawn uniformly among them, without
+    replacement; in full-resolution pixels, each of its row's radius. The ground truth is read on the working grid
+    (a cell is forbidden when any pixel under it is), so a drawn disc's own truth is computed again at full
+    resolution."""
+    (w, h), (width, height) = result.working_size, result.input_size
+    if n <= 0 or result.valid is None or not result.valid.any():
+        return []
+    radii = row_radii(core.geometry(w, h), core.safety, core.mode)
+    cells = cv2.resize(forbidden.astype(np.float32), (w, h), interpolation=cv2.INTER_AREA) > 0
+    if not cells.any():
+        return []
+    dist = cv2.distanceTransform((~cells).astype(np.uint8), cv2.DIST_L2, 5)
+    with np.errstate(invalid="ignore"):
+        near = result.valid & (dist < radii[:, None])
+    rows, cols = np.nonzero(near)
+    if not rows.size:
+        return []
+    pick = np.sort(rng.choice(rows.size, size=min(n, rows.size), replace=False))
+    sx, sy = width / w, height / h
+    scale = min(sx, sy)
+    return [Disc(float((cols[k] + 0.5) * sx), float((rows[k] + 0.5) * sy), float(radii[rows[k]] * scale))
+            for k in pick]
+
+
 def jittered(disc: Disc, rng: np.random.Generator, n: int, width: int, height: int) -> list[Disc]:
     """``n`` discs of the candidate's radius moved from it by a distance drawn in :data:`JITTER_RANGES` (in turn),
     their centres inside the image."""
@@ -103,30 +137,40 @@ def jittered(disc: Disc, rng: np.random.Generator, n: int, width: int, height: i
 class CropSettings:
     """How a scene's crops are cut: the core model's configuration that proposes the candidates (``core``; None:
     ``CoreConfig()``), the crop's side ``size`` (px) and ``margin`` around the disc, the auxiliary target's
-    ``grid`` (cells a side) and ``jitter``, the discs mined around each candidate."""
+    ``grid`` (cells a side), ``jitter``, the discs mined around each candidate, and ``lookalikes``, the look-alike
+    discs drawn per scene (:func:`lookalike_discs`)."""
 
     core: CoreConfig | None = None
     size: int = 96
     margin: float = 0.5
     grid: int = 24
     jitter: int = 0
+    lookalikes: int = 0
 
 
 def scene_crops(rgb: np.ndarray, ids: np.ndarray, segmenter: Any, *, labels: LabelSet, settings: CropSettings,
                 rng: np.random.Generator, scene: int, candidates: Sequence[Any] | None = None) -> CropSet:
-    """The crops of one scene's candidates (``candidates``: the core model's, found here when None) and of
-    ``settings.jitter`` mined discs per candidate."""
+    """The crops of one scene's candidates (``candidates``: the core model's, found here when None), of
+    ``settings.jitter`` mined discs per candidate and of ``settings.lookalikes`` look-alike discs (these need the
+    core model's valid ground: ``candidates`` None)."""
     core = settings.core or CoreConfig()
     size, margin, grid, jitter = settings.size, settings.margin, settings.grid, settings.jitter
     height, width = rgb.shape[:2]
+    result = None
     if candidates is None:
-        candidates = run_core(segmenter.predict_frame(rgb), (width, height), core, labels=labels).candidates
+        result = run_core(segmenter.predict_frame(rgb), (width, height), core, labels=labels)
+        candidates = result.candidates
+    elif settings.lookalikes:
+        raise ValueError("look-alike discs need the core model's valid ground: pass no candidates")
     forbidden = labels.forbidden_mask(ids)
     discs: list[tuple[Disc, bool, int]] = []
     for k, cand in enumerate(candidates):
         disc = Disc(float(cand.x), float(cand.y), float(cand.radius_px))
         discs.append((disc, True, k))
         discs += [(d, False, -1) for d in jittered(disc, rng, jitter, width, height)]
+    if result is not None and settings.lookalikes:
+        drawn = lookalike_discs(result, forbidden, core, rng, settings.lookalikes)
+        discs += [(d, False, LOOKALIKE_RANK) for d in drawn]
     n = len(discs)
     crops = np.zeros((n, size, size, 3), np.uint8)
     aux = np.zeros((n, grid, grid), np.float32)

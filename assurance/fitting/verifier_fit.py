@@ -27,7 +27,7 @@ from assurance.dataio.uavid import Sample, read_image
 from assurance.files import atomic_write_bytes
 from assurance.fitting.learned_monitor import check_recall, recall_threshold, split_sha256
 from assurance.fitting.network_identity import network_record
-from assurance.fitting.verifier_data import CropSet, CropSettings, collect_crops
+from assurance.fitting.verifier_data import LOOKALIKE_RANK, CropSet, CropSettings, collect_crops
 from assurance.fitting.verifier_net import VerifierNet
 from assurance.fitting.verifier_train import (
     OPSET,
@@ -54,7 +54,8 @@ MAX_DIFF = 1e-3
 @dataclass(frozen=True, kw_only=True)
 class VerifierFitOptions:
     """What :func:`fit_verifier` takes besides its data and training configuration: the core model's configuration
-    (``core``: the candidates), ``jitter`` discs mined around each training candidate, the ``recall`` of held-out
+    (``core``: the candidates), ``jitter`` discs mined around each training candidate, ``lookalikes`` look-alike
+    discs drawn per training scene (``assurance.fitting.verifier_data.lookalike_discs``), the ``recall`` of held-out
     unsafe candidates the threshold keeps, the first ``images`` scenes of each split (None: all), the learned model to
     fuse with (``learned``; None: no fusion), the network's record (``weights``; None: the one the segmenter
     reports), the ``command`` recorded, whether the encoder starts from ImageNet's weights (``pretrained``), and
@@ -62,6 +63,7 @@ class VerifierFitOptions:
 
     core: Any = None
     jitter: int = 3
+    lookalikes: int = 0
     recall: float = 0.95
     images: int | None = None
     learned: Any = None
@@ -73,6 +75,8 @@ class VerifierFitOptions:
     def __post_init__(self) -> None:
         if self.jitter < 0:
             raise ValueError(f"jitter (mined discs per candidate) must be >= 0, got {self.jitter}")
+        if self.lookalikes < 0:
+            raise ValueError(f"lookalikes (look-alike discs per scene) must be >= 0, got {self.lookalikes}")
         check_recall(self.recall)
         if self.images is not None and self.images < 1:
             raise ValueError(f"images (scenes of each split) must be >= 1, got {self.images}")
@@ -179,7 +183,8 @@ def verifier_body(result: TrainResult, cfg: TrainConfig, train: CropSet, held: C
                     "imagenet_weights": sources.imagenet},
         "training": {"crops": int(train.unsafe.size), "unsafe": int(train.unsafe.sum()),
                      "candidates": int(train.is_candidate.sum()),
-                     "mined": int((~train.is_candidate).sum()), "config": dict(cfg.__dict__),
+                     "mined": int((~train.is_candidate).sum()),
+                     "lookalikes": int((train.rank == LOOKALIKE_RANK).sum()), "config": dict(cfg.__dict__),
                      "steps_run": result.steps_run, "selected_step": result.best_step,
                      "seconds": round(result.seconds, 1), "curve": result.curve, "sha256": splits.get("train_sha256"),
                      "images": splits.get("train_images")},
@@ -225,7 +230,8 @@ def fit_verifier(data: str | Path, val: str | Path, segmenter: Any, out: Path, *
     train_samples = list(iter_samples(data, require_labels=True))[:images]  # each split listed once
     held_samples = list(iter_samples(val, require_labels=True))[:images]
     with tempfile.TemporaryDirectory(prefix="uav-el-verifier-") as tmp:  # the training crops lie on disk
-        train = collect_crops(data, segmenter, settings=replace(cut, jitter=o.jitter), samples=train_samples,
+        mined = replace(cut, jitter=o.jitter, lookalikes=o.lookalikes)
+        train = collect_crops(data, segmenter, settings=mined, samples=train_samples,
                               desc="training scenes", progress=o.progress, spill=Path(tmp) / "train-crops.u8")
         held = collect_crops(val, segmenter, settings=cut, samples=held_samples, desc="held-out scenes",
                              progress=o.progress)
