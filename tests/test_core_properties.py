@@ -23,7 +23,7 @@ from el.geometry.camera import CameraGeometry, working_size
 from el.geometry.config import CoreConfig
 from el.landing import candidates as cand
 from el.landing import regions as reg
-from el.landing.core import probs_from_labels, reachable_working_row, run_core
+from el.landing.core import full_resolution, probs_from_labels, reachable_working_row, run_core
 
 SETTINGS = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 # (full width, full height, working width): scale 2, scale 2, and a non-integer scale
@@ -131,9 +131,7 @@ def assert_valid_pixels_safe_at_full_resolution(ids: np.ndarray, cfg: CoreConfig
     rows, cols = np.nonzero(vp.valid)
     if rows.size == 0:
         return 0
-    sx, sy = W / w, H / h
-    xs, ys = (cols + 0.5) * sx, (rows + 0.5) * sy
-    rs = radii[rows] * min(sx, sy)
+    xs, ys, rs = full_resolution(rows, cols, radii[rows], (w, h), (W, H))  # the candidates' and look-alikes' mapping
     assert (xs - rs >= -1e-9).all() and (xs + rs <= W + 1e-9).all()
     assert (ys - rs >= -1e-9).all() and (ys + rs <= H + 1e-9).all()
     assert (np.floor(ys) >= CameraGeometry(width=W, height=H).first_reachable_row).all()
@@ -308,8 +306,10 @@ def test_run_core_reports_stage_timings_and_full_resolution_geometry():
     assert set(result.timings) == {"valid_s", "regions_s", "representatives_s", "ranking_s", "total_s"}
     assert result.input_size == (256, 144) and result.working_size == (128, 72)
     assert result.candidates and result.stats["candidates"] == len(result.candidates)
-    for c in result.candidates:  # centres of working pixels, scaled by 2
+    for c in result.candidates:  # centres of working pixels, scaled by 2, each of its row's radius
         assert (c.x / 2 - 0.5) == pytest.approx(round(c.x / 2 - 0.5))
+        assert c.radius_px == pytest.approx(2 * result.radii[int(c.y / 2)])
+    assert result.radii.shape == (72,) and np.isfinite(result.radii).all() and (result.radii > 0).all()
 
 
 def test_schema_accepts_monitored_decisions_and_rejects_broken_ones():

@@ -47,16 +47,17 @@ def test_lookalike_discs_lie_on_valid_ground_within_their_radius_of_forbidden_gr
     forbidden[:, 200:204] = True  # a thin road on the right
     valid = np.zeros((h, w), bool)
     valid[:, 60:] = np.isfinite(radii)[:, None]
-    result = SimpleNamespace(working_size=(w, h), input_size=(TINY_W, TINY_H), valid=valid)
-    discs = lookalike_discs(result, forbidden, core, np.random.default_rng(0), 12)
+    result = SimpleNamespace(working_size=(w, h), input_size=(TINY_W, TINY_H), valid=valid, radii=radii)
+    discs = lookalike_discs(result, forbidden, np.random.default_rng(0), 12)
     assert len(discs) == 12 and len({(d.x, d.y) for d in discs}) == 12
     road_x = 202.0
     for d in discs:
         assert d.x >= 60 * TINY_W / w and abs(d.x - road_x) < d.radius_px + 2 * TINY_W / w
-    assert lookalike_discs(result, np.zeros_like(forbidden), core, np.random.default_rng(0), 12) == []
-    nothing_valid = SimpleNamespace(working_size=(w, h), input_size=(TINY_W, TINY_H), valid=np.zeros_like(valid))
-    assert lookalike_discs(nothing_valid, forbidden, core, np.random.default_rng(0), 3) == []
-    few = lookalike_discs(result, forbidden, core, np.random.default_rng(0), 10**6)
+    assert lookalike_discs(result, np.zeros_like(forbidden), np.random.default_rng(0), 12) == []
+    nothing_valid = SimpleNamespace(working_size=(w, h), input_size=(TINY_W, TINY_H), valid=np.zeros_like(valid),
+                                    radii=radii)
+    assert lookalike_discs(nothing_valid, forbidden, np.random.default_rng(0), 3) == []
+    few = lookalike_discs(result, forbidden, np.random.default_rng(0), 10**6)
     assert 12 < len(few) < int(valid.sum())  # every near cell once, the far ones never
     from assurance.fitting.verifier_data import CropSettings, scene_crops
     from el.classes.labels import UAVID
@@ -161,10 +162,12 @@ def test_fit_verifier_command_is_listed_and_checks_its_options(tmp_path, capsys)
 
 @pytest.mark.parametrize("kw, match", [({"margin": -1.0}, "margin"), ({"margin": 50.0}, "margin"),
                                        ({"lr": float("nan")}, "lr"), ({"lr": 0.0}, "lr"), ({"minutes": 0.0}, "minutes"),
-                                       ({"size": 7}, "multiple of 32"), ({"steps": 0}, "steps")])
+                                       ({"size": 7}, "multiple of 32"), ({"steps": 0}, "steps"),
+                                       ({"augment": "fog"}, "augment"), ({"augment": "optics"}, "views >= 2")])
 def test_training_settings_out_of_range_are_refused(kw, match):
     """A negative or huge margin (a crop window that grows as its square), a learning rate that is not a positive
-    number, a zero time limit: refused before any crop is cut."""
+    number, a zero time limit, an augmentation set that is not one or that has no augmented view to change: refused
+    before any crop is cut."""
     from assurance.fitting.verifier_train import TrainConfig
 
     with pytest.raises(ValueError, match=match):
@@ -179,6 +182,24 @@ def test_fit_options_out_of_range_are_refused(kw, match):
 
     with pytest.raises(ValueError, match=match):
         VerifierFitOptions(**kw)
+
+
+def test_the_optics_augmentation_changes_the_pixels_not_the_targets_and_repeats_with_its_seed():
+    """``augment="optics"`` (lens, codec, exposure) gives crops in [0, 1] that differ from the colour set's drawn
+    from the same seed, and the same crops again from the same seed; most draws change a crop."""
+    from assurance.fitting.verifier_train import augment, optics
+
+    data = _crops(8, np.random.default_rng(5))
+    crops, aux = data.crops, data.aux
+    x_c, a_c = augment(crops, aux, 32, np.random.default_rng(1))
+    x_o, a_o = augment(crops, aux, 32, np.random.default_rng(1), kind="optics")
+    again, _ = augment(crops, aux, 32, np.random.default_rng(1), kind="optics")
+    assert x_o.shape == x_c.shape == (8, 3, 32, 32) and 0.0 <= x_o.min() and x_o.max() <= 1.0
+    assert np.array_equal(x_o, again) and not np.allclose(x_o, x_c)
+    assert a_o.shape == a_c.shape
+    img = crops[0]
+    changed = [not np.array_equal(optics(img, np.random.default_rng(s)), img) for s in range(8)]
+    assert sum(changed) >= 6  # each of four steps with probability 1/2: all skipped 1 time in 16
 
 
 def test_the_command_line_defaults_are_the_training_configurations():

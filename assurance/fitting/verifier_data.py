@@ -34,8 +34,7 @@ from assurance.progress import progress as bar
 from el.base.decision import Disc
 from el.classes.labels import LabelSet
 from el.geometry.config import CoreConfig
-from el.landing.candidates import row_radii
-from el.landing.core import CoreResult, run_core
+from el.landing.core import CoreResult, full_resolution, run_core
 from el.monitors.verifier_crop import candidate_crop, crop_window, padded_window
 from el.segmentation.contract import labels_of
 
@@ -92,17 +91,16 @@ def aux_target(forbidden: np.ndarray, disc: Disc, *, margin: float, grid: int) -
     return cv2.resize(window, (grid, grid), interpolation=cv2.INTER_AREA)
 
 
-def lookalike_discs(result: CoreResult, forbidden: np.ndarray, core: CoreConfig, rng: np.random.Generator,
-                    n: int) -> list[Disc]:
+def lookalike_discs(result: CoreResult, forbidden: np.ndarray, rng: np.random.Generator, n: int) -> list[Disc]:
     """Up to ``n`` discs centred on working pixels the core model found valid (``result.valid``) within their safety
     radius of a forbidden ground-truth pixel (``forbidden``, full resolution): drawn uniformly among them, without
-    replacement; in full-resolution pixels, each of its row's radius. The ground truth is read on the working grid
-    (a cell is forbidden when any pixel under it is), so a drawn disc's own truth is computed again at full
-    resolution."""
+    replacement; in full-resolution pixels, each of its row's radius (``result.radii``, mapped as the candidates
+    are). The ground truth is read on the working grid (a cell is forbidden when any pixel under it is), so a drawn
+    disc's own truth is computed again at full resolution."""
     (w, h), (width, height) = result.working_size, result.input_size
     if n <= 0 or result.valid is None or not result.valid.any():
         return []
-    radii = row_radii(core.geometry(w, h), core.safety, core.mode)
+    radii = result.radii
     cells = cv2.resize(forbidden.astype(np.float32), (w, h), interpolation=cv2.INTER_AREA) > 0
     if not cells.any():
         return []
@@ -113,10 +111,8 @@ def lookalike_discs(result: CoreResult, forbidden: np.ndarray, core: CoreConfig,
     if not rows.size:
         return []
     pick = np.sort(rng.choice(rows.size, size=min(n, rows.size), replace=False))
-    sx, sy = width / w, height / h
-    scale = min(sx, sy)
-    return [Disc(float((cols[k] + 0.5) * sx), float((rows[k] + 0.5) * sy), float(radii[rows[k]] * scale))
-            for k in pick]
+    x, y, r = full_resolution(rows[pick], cols[pick], radii[rows[pick]], (w, h), (width, height))
+    return [Disc(float(a), float(b), float(c)) for a, b, c in zip(x, y, r, strict=True)]
 
 
 def jittered(disc: Disc, rng: np.random.Generator, n: int, width: int, height: int) -> list[Disc]:
@@ -169,7 +165,7 @@ def scene_crops(rgb: np.ndarray, ids: np.ndarray, segmenter: Any, *, labels: Lab
         discs.append((disc, True, k))
         discs += [(d, False, -1) for d in jittered(disc, rng, jitter, width, height)]
     if result is not None and settings.lookalikes:
-        drawn = lookalike_discs(result, forbidden, core, rng, settings.lookalikes)
+        drawn = lookalike_discs(result, forbidden, rng, settings.lookalikes)
         discs += [(d, False, LOOKALIKE_RANK) for d in drawn]
     n = len(discs)
     crops = np.zeros((n, size, size, 3), np.uint8)

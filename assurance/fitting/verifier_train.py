@@ -5,7 +5,9 @@ forbidden when any ground-truth pixel under it is). The stem and the blocks down
 so each training crop goes through them once per view (the first view as it is, the others augmented), under ONNX
 Runtime, and the steps train the rest on those features: training fits on 2 CPU cores. Augmentations are none of
 the evaluation's perturbations (no brightness, fog, blur, shifted or dead rows): a horizontal flip, a small zoom and
-shift, a colour balance and saturation change, and light sensor noise. Selection: the step with the best AUROC of
+shift, a colour balance and saturation change, and light sensor noise; ``augment="optics"`` adds what another lens,
+codec or exposure gives (a lower resolution, a slight defocus, JPEG artefacts, a tone curve), so the verifier does not
+rest on the finest texture alone. Selection: the step with the best AUROC of
 the held-out split's core-model candidates (never the test split), evaluated every ``eval_every`` steps; training
 stops at ``steps`` or after ``minutes``, whichever comes first.
 """
@@ -31,6 +33,7 @@ from assurance.fitting.verifier_net import TAP_8, VerifierNet, check_fuse_layers
 from el.monitors.verifier_crop import MAX_MARGIN
 from el.segmentation.onnx_engine import open_session
 
+AUGMENTS = ("colour", "optics")  # colour: flip, zoom, colour balance, noise; optics: and lens, codec and exposure
 FROZEN_BLOCKS = TAP_8 + 2  # the stem and blocks 0..4 (down to 1/8) keep their ImageNet weights (of encoder_modules)
 
 
@@ -51,6 +54,7 @@ class TrainConfig:
     frozen: str = "encoder"  # "encoder": every encoder block keeps its ImageNet weights; "low": down to 1/8 only
     deep: bool = True  # the encoder goes on to 1/32 (VerifierNet's ``deep``)
     fuse_layers: int = 1  # 3x3 convolutions over the fused 1/8 map (VerifierNet's ``fuse_layers``)
+    augment: str = "colour"  # the augmented views' set (AUGMENTS); the first view is never augmented
     minutes: float | None = None
     seed: int = 0
     threads: int = 2
@@ -70,6 +74,11 @@ class TrainConfig:
         check_fuse_layers(self.fuse_layers)
         if self.frozen not in ("encoder", "low"):
             raise ValueError(f"frozen must be 'encoder' or 'low', got {self.frozen!r}")
+        if self.augment not in AUGMENTS:
+            raise ValueError(f"augment must be one of {', '.join(AUGMENTS)}, got {self.augment!r}")
+        if self.augment != "colour" and self.views < 2:
+            raise ValueError(f"augment {self.augment!r} changes the augmented views, and there are none: "
+                             "it needs views >= 2 (the first view is the crop as it is)")
 
 
 @dataclass
@@ -91,10 +100,35 @@ def to_size(crops: np.ndarray, size: int) -> np.ndarray:
         np.zeros((0, size, size, 3), np.uint8)
 
 
-def augment(crops: np.ndarray, aux: np.ndarray, size: int, rng: np.random.Generator
+def optics(img: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """What another lens, codec or exposure does to a crop (uint8 RGB, s x s), each with probability one half: a
+    lower resolution (down to 50-90% and back), a slight isotropic defocus (sigma 0.4-1.5 px), JPEG artefacts
+    (quality 35-90) and a tone curve (gamma 0.7-1.4). None is an evaluation perturbation (those are an additive
+    brightness, fog, a vertical motion blur of 10-50 px, shifted rows and dead pixels); the defocus and the
+    vertical blur are both blurs, which docs/results.md weighs where it reports what this set gives."""
+    s = img.shape[0]
+    if rng.random() < 0.5:
+        small = max(8, round(s * rng.uniform(0.5, 0.9)))
+        img = cv2.resize(cv2.resize(img, (small, small), interpolation=cv2.INTER_AREA), (s, s),
+                         interpolation=cv2.INTER_LINEAR)
+    if rng.random() < 0.5:
+        img = cv2.GaussianBlur(img, (0, 0), rng.uniform(0.4, 1.5))
+    if rng.random() < 0.5:
+        ok, buf = cv2.imencode(".jpg", img[..., ::-1], [cv2.IMWRITE_JPEG_QUALITY, int(rng.integers(35, 91))])
+        if ok:
+            img = cv2.imdecode(buf, cv2.IMREAD_COLOR)[..., ::-1]
+    if rng.random() < 0.5:
+        gamma = math.exp(rng.uniform(math.log(0.7), math.log(1.4)))
+        lut = np.clip(np.round(255.0 * (np.arange(256) / 255.0) ** gamma), 0, 255).astype(np.uint8)
+        img = cv2.LUT(np.ascontiguousarray(img), lut)
+    return np.ascontiguousarray(img)
+
+
+def augment(crops: np.ndarray, aux: np.ndarray, size: int, rng: np.random.Generator, *, kind: str = "colour"
             ) -> tuple[np.ndarray, np.ndarray]:
     """A training batch: crops (n, s, s, 3) uint8 and their aux maps (n, g, g) -> float (n, 3, size, size) in
-    [0, 1] and (n, size/8, size/8) aux targets (flip, zoom and shift applied to both alike)."""
+    [0, 1] and (n, size/8, size/8) aux targets (flip, zoom and shift applied to both alike); ``kind`` "optics" adds
+    :func:`optics` (the aux targets stay: none of it moves a pixel)."""
     n, s = crops.shape[:2]
     g = size // 8
     out = np.empty((n, size, size, 3), np.float32)
@@ -112,6 +146,8 @@ def augment(crops: np.ndarray, aux: np.ndarray, size: int, rng: np.random.Genera
                            borderMode=cv2.BORDER_REFLECT)
         if rng.random() < 0.5:
             img, a = img[:, ::-1], a[:, ::-1]
+        if kind == "optics":
+            img = optics(img, rng)
         x = img.astype(np.float32) / 255.0
         x = x * rng.uniform(0.92, 1.08, size=3).astype(np.float32)  # colour balance
         grey = x.mean(axis=2, keepdims=True)
@@ -212,7 +248,7 @@ def cached_views(session: Any, crops: CropSet, cfg: TrainConfig, rng: np.random.
                 a = np.stack([cv2.resize(t, (g, g), interpolation=cv2.INTER_AREA) for t in crops.aux[part]])
                 a = (a > 1e-3).astype(np.float32)
             else:
-                x, a = augment(crops.crops[part], crops.aux[part], cfg.size, rng)
+                x, a = augment(crops.crops[part], crops.aux[part], cfg.size, rng, kind=cfg.augment)
             out = low_features(session, x)
             levels = levels or [torch.empty((n, *f.shape[1:]), dtype=f.dtype) for f in out]
             k = len(x)

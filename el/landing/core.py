@@ -49,6 +49,7 @@ class CoreResult:
     working_size, input_size : (width, height) of the working map and of the input image.
     first_reachable_row : first reachable full-resolution row.
     valid : (h, w) bool working-resolution valid pixels (for drawing and analysis).
+    radii : (h,) float working-resolution safety radius of each row (R_px; the valid-pixel stage's).
     """
 
     candidates: list[Candidate]
@@ -59,6 +60,7 @@ class CoreResult:
     input_size: tuple[int, int]
     first_reachable_row: int
     valid: np.ndarray = field(repr=False)
+    radii: np.ndarray = field(repr=False)
 
 
 def check_probs(probs: np.ndarray, input_size: tuple[int, int], working_width: int | None = None, *,
@@ -201,6 +203,7 @@ def run_core(
         input_size=(W, H),
         first_reachable_row=full_first,
         valid=vp.valid,
+        radii=vp.radii,
     )
 
 
@@ -226,20 +229,28 @@ def _ranked_candidates(probs: np.ndarray, vp: cand.ValidPixels, rows: np.ndarray
     hazard = ranking.combined_hazard(h_s, h_d, config.alpha)
     order = ranking.rank_order(hazard, rows, cols)
     kept = cand.prune_overlaps(rows, cols, r, order, config.overlap_max)
-    sx, sy = W / w, H / h
-    scale = min(sx, sy)
+    x, y, radius = full_resolution(rows, cols, r, (w, h), input_size)
     return [
         Candidate(
             rank=rank,
-            x=float((cols[k] + 0.5) * sx),
-            y=float((rows[k] + 0.5) * sy),
-            radius_px=float(r[k] * scale),
+            x=float(x[k]),
+            y=float(y[k]),
+            radius_px=float(radius[k]),
             hazard=float(hazard[k]),
             hazard_semantic=float(h_s[k]),
             hazard_distance=float(h_d[k]),
         )
         for rank, k in enumerate(kept)
     ]
+
+
+def full_resolution(rows: np.ndarray, cols: np.ndarray, radii: np.ndarray, working_size: tuple[int, int],
+                    input_size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Working-map cells (``rows``, ``cols``) and their radii (working px) -> full-resolution centres (x, y) and
+    radii: a cell's centre scaled by each axis, a radius by the smaller scale (the one mapping of both)."""
+    (w, h), (W, H) = working_size, input_size
+    sx, sy = W / w, H / h
+    return (np.asarray(cols) + 0.5) * sx, (np.asarray(rows) + 0.5) * sy, np.asarray(radii) * min(sx, sy)
 
 
 def default_area(width: int, height: int, config: CoreConfig | None = None) -> Disc:
