@@ -188,6 +188,7 @@ def test_cli_campaign_and_table(tmp_path, data, weights, capsys):
     out = capsys.readouterr().out
     assert "pixel_trap" in out and "ours / paper" in out
     assert "Does the core model beat the default action" in out and "Where the time went" in out
+    assert "What no monitor can prevent" in out and "| none (s3) | 2 |" in out
     assert (run / "results.csv").is_file() and (run / "results.md").is_file()
     stages = stage_table(run)
     assert stages["tasks"].eq(4).all()  # 2 perturbations x 2 images, one row per task not per monitor

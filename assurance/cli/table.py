@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from assurance.analysis.findings import findings, findings_markdown
+from assurance.analysis.floor import floor_markdown, monitor_floor
 from assurance.analysis.headline import (
     ACROSS_INSTRUCTION_SETS,
     REPRODUCIBILITY,
@@ -58,8 +59,9 @@ def run(args: argparse.Namespace) -> int:
               "run the same `uav-el campaign` command to complete it)", file=sys.stderr)
     if check.legacy:
         print(f"warning: {args.run}: written before shard hashes; its readouts cannot be verified", file=sys.stderr)
-    candidates = readouts.load_table(args.run, "candidates")  # read once: the results and the AUROC tables
-    df = results_table(args.run, n_boot=args.boot, candidates=candidates)
+    images = readouts.load_table(args.run, "images")  # each read once: the results, AUROC and floor tables
+    candidates = readouts.load_table(args.run, "candidates")
+    df = results_table(args.run, n_boot=args.boot, images=images, candidates=candidates)
     if args.check_readme:
         return check_readme(args.run, df, args.check_readme)
     faulted = int(df.drop_duplicates(["perturbation", "severity"])["faults"].sum()) if len(df) else 0
@@ -76,6 +78,11 @@ def run(args: argparse.Namespace) -> int:
         md += "\n### The paper's findings, asked of both tables\n\n" + findings_markdown(findings(df, load_reference()))
     md += "\n### Monitor scores: AUROC (unsafe candidates as positives, 95% bootstrap interval over images)\n\n"
     md += auroc_markdown(auroc_table(candidates, n_boot=min(args.boot, 1000)))
+    md += ("\n### What no monitor can prevent\n\nA perfect monitor lands on a truly safe candidate where the frame "
+           "has one and takes the default action elsewhere; where the default area is unsafe too, it lands unsafely. "
+           "Those frames are the floor under every configuration's unsafe landings above "
+           "(`assurance.analysis.floor`):\n\n")
+    md += floor_markdown(monitor_floor(images, candidates))
     md += "\n### Where the time went\n\n" + stages_markdown(stage_table(args.run), wall_seconds(args.run))
     md += "\nMonitoring time per candidate, by configuration:\n\n" + monitor_costs_markdown(monitor_costs(args.run))
     atomic_write_bytes(out / "results.md", md.encode())

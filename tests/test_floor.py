@@ -1,0 +1,45 @@
+"""The floor under every monitor's unsafe landings (assurance.analysis.floor)."""
+
+import numpy as np
+import pandas as pd
+
+from assurance.analysis.floor import floor_markdown, monitor_floor
+
+
+def _tables():
+    """Five frames under one perturbation, two configurations each: a safe candidate (A), every candidate unsafe with
+    the default area unsafe (B) or safe (D), no candidate with the default area unsafe (C), a faulted frame (E)."""
+    frames = {"A": (1.0, [True, False]), "B": (1.5, [True, True]), "C": (1.0, []), "D": (0.2, [True]),
+              "E": (1.0, [True])}
+    images, candidates = [], []
+    for monitor in ("m1", "m2"):
+        for key, (h_default, unsafe) in frames.items():
+            images.append({"perturbation": "fog", "severity": 3, "key": key, "monitor": monitor,
+                           "fault": "boom" if key == "E" and monitor == "m2" else "", "h_default": h_default})
+            candidates += [{"perturbation": "fog", "severity": 3, "key": key, "monitor": monitor, "rank": k,
+                            "true_unsafe": u} for k, u in enumerate(unsafe)]
+    return pd.DataFrame(images), pd.DataFrame(candidates)
+
+
+def test_the_floor_counts_frames_with_no_safe_way_out_and_leaves_faulted_frames_out():
+    images, candidates = _tables()
+    floor = monitor_floor(images, candidates)
+    assert floor.to_dict("records") == [{"perturbation": "fog", "severity": 3, "images": 4, "no_candidate": 1,
+                                         "all_unsafe": 2, "floor": 2}]
+    assert "| fog (s3) | 4 | 1 | 2 | 2 (0.500) |" in floor_markdown(floor)
+    assert monitor_floor(images.iloc[:0], candidates.iloc[:0]).empty
+
+
+def test_no_configuration_of_a_campaign_lands_unsafely_less_often_than_the_floor(tiny_campaign):
+    """On a real run: every configuration's unsafe landings are at least the floor, per perturbation, and
+    ``uav-el table`` prints it."""
+    from assurance.campaign import readouts
+
+    run = tiny_campaign["run"]
+    images, candidates = readouts.load_table(run, "images"), readouts.load_table(run, "candidates")
+    floor = monitor_floor(images, candidates).set_index(["perturbation", "severity"])
+    assert len(floor) == images.drop_duplicates(["perturbation", "severity"]).shape[0]
+    unsafe = images.groupby(["perturbation", "severity", "monitor"])["decision_unsafe"].sum()
+    for (pert, sev, _), n in unsafe.items():
+        assert n >= floor.loc[(pert, sev), "floor"]
+    assert np.all(floor["floor"] <= floor["images"])
