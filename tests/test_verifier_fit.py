@@ -163,7 +163,9 @@ def test_fit_verifier_command_is_listed_and_checks_its_options(tmp_path, capsys)
 @pytest.mark.parametrize("kw, match", [({"margin": -1.0}, "margin"), ({"margin": 50.0}, "margin"),
                                        ({"lr": float("nan")}, "lr"), ({"lr": 0.0}, "lr"), ({"minutes": 0.0}, "minutes"),
                                        ({"size": 7}, "multiple of 32"), ({"steps": 0}, "steps"),
-                                       ({"augment": "fog"}, "augment"), ({"augment": "optics"}, "views >= 2")])
+                                       ({"augment": "fog"}, "augment"), ({"augment": "optics"}, "views >= 2"),
+                                       ({"rank_weight": -1.0}, "rank_weight"),
+                                       ({"rank_weight": float("nan")}, "rank_weight")])
 def test_training_settings_out_of_range_are_refused(kw, match):
     """A negative or huge margin (a crop window that grows as its square), a learning rate that is not a positive
     number, a zero time limit, an augmentation set that is not one or that has no augmented view to change: refused
@@ -200,6 +202,25 @@ def test_the_optics_augmentation_changes_the_pixels_not_the_targets_and_repeats_
     img = crops[0]
     changed = [not np.array_equal(optics(img, np.random.default_rng(s)), img) for s in range(8)]
     assert sum(changed) >= 6  # each of four steps with probability 1/2: all skipped 1 time in 16
+
+
+def test_ranking_pairs_are_an_unsafe_and_a_safe_crop_of_one_scene_and_train():
+    """The ranking loss's pairs: an unsafe crop and a safe one of the same scene, every such pair reachable, none
+    from a scene without both; a few steps with the loss train and select as without it."""
+    from assurance.fitting.verifier_train import ScenePairs, TrainConfig, train_verifier
+
+    scene = np.array([0, 0, 0, 1, 1, 2, 2, 2])
+    unsafe = np.array([1, 0, 0, 1, 1, 0, 1, 0], bool)
+    pairs = ScenePairs(scene, unsafe)
+    drawn = {tuple(map(int, p)) for p in pairs.draw(np.random.default_rng(0), 400)}
+    assert len(pairs) == 2 and drawn == {(0, 1), (0, 2), (6, 5), (6, 7)}  # scene 1 has no safe crop
+    assert len(ScenePairs(np.zeros(3, int), np.zeros(3, bool))) == 0
+    assert len(ScenePairs(np.zeros(3, int), np.ones(3, bool))) == 0
+    rng = np.random.default_rng(0)
+    train, held = _crops(48, rng), _crops(24, rng)
+    cfg = TrainConfig(size=32, steps=4, batch=8, eval_every=2, threads=1, rank_weight=1.0)
+    result = train_verifier(train, held, cfg, pretrained=False, log=lambda s: None)
+    assert result.steps_run == 4 and result.best_step in (2, 4) and math.isfinite(result.curve[-1]["loss"])
 
 
 def test_the_command_line_defaults_are_the_training_configurations():

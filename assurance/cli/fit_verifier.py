@@ -46,6 +46,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the augmented views' set: colour (a flip, a small zoom, colour balance, saturation, sensor "
                         "noise) or optics (and a lower resolution, a slight defocus, JPEG artefacts, a tone curve); "
                         "needs --views 2 or more for optics (default: %(default)s)")
+    p.add_argument("--rank-weight", type=float, default=0.0, metavar="W",
+                   help="weight of a ranking loss within each training scene: every unsafe crop scored above every "
+                        "safe one of its scene, the order the score walk lands by (default: %(default)s, none)")
     p.add_argument("--frozen", choices=("encoder", "low"), default="encoder",
                    help="encoder: every encoder block keeps its ImageNet weights and the head learns (fast on 2 "
                         "cores); low: the blocks after 1/8 learn too (default: %(default)s)")
@@ -84,8 +87,8 @@ def run(args: argparse.Namespace) -> int:
             pretrained=not args.no_pretrained, progress=not (args.no_progress or getattr(args, "quiet", False)))
         cfg = TrainConfig(size=args.size, margin=args.margin, steps=args.steps, batch=args.batch, lr=args.lr,
                           eval_every=args.eval_every, minutes=args.minutes, seed=args.seed, threads=args.threads,
-                          views=args.views, augment=args.augment, frozen=args.frozen, deep=args.deep,
-                          fuse_layers=args.fuse_layers)
+                          views=args.views, augment=args.augment, rank_weight=args.rank_weight, frozen=args.frozen,
+                          deep=args.deep, fuse_layers=args.fuse_layers)
         segmenter = system.segmenter(working_width=system.core.working_width)
         learned = None
         if args.fuse_learned is not None:

@@ -55,6 +55,7 @@ class TrainConfig:
     deep: bool = True  # the encoder goes on to 1/32 (VerifierNet's ``deep``)
     fuse_layers: int = 1  # 3x3 convolutions over the fused 1/8 map (VerifierNet's ``fuse_layers``)
     augment: str = "colour"  # the augmented views' set (AUGMENTS); the first view is never augmented
+    rank_weight: float = 0.0  # weight of the within-scene ranking loss (:class:`ScenePairs`); 0: none
     minutes: float | None = None
     seed: int = 0
     threads: int = 2
@@ -69,6 +70,8 @@ class TrainConfig:
             raise ValueError(f"margin must lie in [0, {MAX_MARGIN:g}] radii, got {self.margin}")
         if not (math.isfinite(self.lr) and self.lr > 0.0):
             raise ValueError(f"lr must be a positive number, got {self.lr}")
+        if not (math.isfinite(self.rank_weight) and self.rank_weight >= 0.0):
+            raise ValueError(f"rank_weight must be a number >= 0, got {self.rank_weight}")
         if self.minutes is not None and not self.minutes > 0.0:
             raise ValueError(f"minutes must be > 0, got {self.minutes}")
         check_fuse_layers(self.fuse_layers)
@@ -261,6 +264,33 @@ def cached_views(session: Any, crops: CropSet, cfg: TrainConfig, rng: np.random.
     return levels, auxes, ys
 
 
+class ScenePairs:
+    """Pairs (unsafe crop, safe crop) of one scene, the orders the score walk needs right (it lands on the frame's
+    lowest-scored candidate, ``el.monitors.walk``), drawn without listing them: a scene's pairs grow as the square
+    of its crops. A draw takes an unsafe crop whose scene has a safe one, then one of those safe crops, uniformly."""
+
+    def __init__(self, scene: np.ndarray, unsafe: np.ndarray) -> None:
+        scene, unsafe = np.asarray(scene), np.asarray(unsafe, bool)
+        safe = np.flatnonzero(~unsafe)
+        self.safe = safe[np.argsort(scene[safe], kind="stable")]
+        scenes, self.start, self.count = np.unique(scene[self.safe], return_index=True, return_counts=True)
+        bad = np.flatnonzero(unsafe)
+        pos = np.searchsorted(scenes, scene[bad])
+        ok = (pos < len(scenes)) & (scenes[np.minimum(pos, max(len(scenes) - 1, 0))] == scene[bad]) if len(scenes) \
+            else np.zeros(len(bad), bool)
+        self.bad, self.pos = bad[ok], pos[ok]
+
+    def __len__(self) -> int:
+        return len(self.bad)
+
+    def draw(self, rng: np.random.Generator, k: int) -> np.ndarray:
+        """(k, 2) crop indices (unsafe, safe), both of one scene."""
+        i = rng.integers(0, len(self.bad), k)
+        p = self.pos[i]
+        j = self.safe[self.start[p] + (rng.random(k) * self.count[p]).astype(np.int64)]
+        return np.stack([self.bad[i], j], axis=1)
+
+
 def _optimiser(model: VerifierNet, cfg: TrainConfig) -> torch.optim.Optimizer:
     frozen = len(model.encoder_modules()) if cfg.frozen == "encoder" else FROZEN_BLOCKS
     for mod in model.encoder_modules()[:frozen]:
@@ -312,6 +342,7 @@ def train_verifier(train: CropSet, val: CropSet, cfg: TrainConfig, *, pretrained
     pos = float(y.mean())
     pos_weight = torch.tensor((1.0 - pos) / max(pos, 1e-6))
     yt = torch.from_numpy(y.astype(np.float32))
+    pairs = ScenePairs(train.scene, train.unsafe) if cfg.rank_weight else None
     best = TrainResult(copy.deepcopy(model), 0, -1.0)
     step = 0
     for step in range(1, cfg.steps + 1):
@@ -323,6 +354,11 @@ def train_verifier(train: CropSet, val: CropSet, cfg: TrainConfig, *, pretrained
         logit, aux = _forward(model, [f[idx] for f in feats])
         loss = F.binary_cross_entropy_with_logits(logit, yt[idx], pos_weight=pos_weight)
         loss = loss + cfg.aux_weight * F.binary_cross_entropy_with_logits(aux[:, 0], aux_t[idx])
+        if pairs is not None and len(pairs):  # an unsafe crop above a safe one of its scene, in any of the views
+            pick = pairs.draw(rng, max(1, cfg.batch // 2))
+            pick = pick + len(train.unsafe) * rng.integers(0, cfg.views, pick.shape)
+            lp = _forward(model, [f[torch.from_numpy(pick.reshape(-1))] for f in feats])[0].view(-1, 2)
+            loss = loss + cfg.rank_weight * F.softplus(lp[:, 1] - lp[:, 0]).mean()
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
