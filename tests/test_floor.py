@@ -43,3 +43,14 @@ def test_no_configuration_of_a_campaign_lands_unsafely_less_often_than_the_floor
     for (pert, sev, _), n in unsafe.items():
         assert n >= floor.loc[(pert, sev), "floor"]
     assert np.all(floor["floor"] <= floor["images"])
+
+
+def test_the_evidence_names_the_floor_among_its_limitations_only_when_there_is_one():
+    from assurance.evidence.sections import floor_limitation
+
+    images, candidates = _tables()
+    text = floor_limitation(monitor_floor(images, candidates))
+    assert len(text) == 1 and "in 2 of the 4 frames judged (2 of 4 fog (s3))" in text[0]
+    safe = candidates.assign(true_unsafe=False)
+    assert floor_limitation(monitor_floor(images[images["key"] != "C"], safe)) == []
+    assert floor_limitation(None) == []

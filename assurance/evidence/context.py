@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any
 
 from assurance import requirements as rq
+from assurance.analysis.floor import monitor_floor
 from assurance.analysis.table import results_table, write_csv
 from assurance.campaign import readouts
 from assurance.campaign.attestation import UnattestedRunError, check_run_attestation
@@ -30,6 +31,7 @@ from assurance.evidence.render import TEMPLATES_DIR, fault_case_count, faults_ta
 from assurance.evidence.safe_strips import safe_class_strips
 from assurance.evidence.sections import (
     domain,
+    floor_limitation,
     limitations,
     pick_examples,
     results_view,
@@ -475,7 +477,7 @@ def template_context(inp: Inputs, gate: Gate, campaign: dict[str, Any], base: di
         "n_unsafe_pictures": campaign["n_unsafe_pictures"],
         "scenes_error": campaign["scenes_error"],
         "limitations": limitations(inp.manifest, reg, results, campaign["synthetic"], inp.table, inp.facts)
-        + _design_time_scope(inp),
+        + floor_limitation(monitor_floor(inp.images, inp.candidates)) + _design_time_scope(inp),
         "baseline": base,
         "commands": commands(inp),
         "faults": faults_table(inp.out, inp.warnings), "fault_cases": fault_case_count(),

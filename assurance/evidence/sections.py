@@ -215,6 +215,20 @@ def limitations(man: Mapping[str, Any], registry: rq.Registry, results: Mapping[
     return out
 
 
+def floor_limitation(floor: Any) -> list[str]:
+    """The sentence on what no monitor can prevent (``assurance.analysis.floor.monitor_floor``'s table), when any
+    frame is on the floor: there every decision is unsafe, so no monitor, however good, would have saved it."""
+    if floor is None or not len(floor) or not int(floor["floor"].sum()):
+        return []
+    parts = [f"{int(r.floor)} of {int(r.images)} {r.perturbation} (s{int(r.severity)})"
+             for r in floor.itertuples() if int(r.floor)]
+    return [f"What no monitor can prevent: in {int(floor['floor'].sum())} of the {int(floor['images'].sum())} frames "
+            f"judged ({'; '.join(parts)}) no candidate is truly safe (or there is none) and the default area is "
+            "unsafe too, so every configuration, a perfect monitor included, lands unsafely there. The unsafe "
+            "landings in the results count them; fewer needs a better network, more candidates or another default "
+            "action, not a better monitor."]
+
+
 def pick_examples(images: Any, deployed: str) -> list[tuple[Any, str]]:
     """Example decisions of the deployed monitor (a run without it: its first configuration): a top-ranked
     landing, a landing after rejections, a default."""
