@@ -15,7 +15,8 @@ def _tables():
     for monitor in ("m1", "m2"):
         for key, (h_default, unsafe) in frames.items():
             images.append({"perturbation": "fog", "severity": 3, "key": key, "monitor": monitor,
-                           "fault": "boom" if key == "E" and monitor == "m2" else "", "h_default": h_default})
+                           "fault": "boom" if key == "E" and monitor == "m2" else "", "h_default": h_default,
+                           "candidates": len(unsafe)})
             candidates += [{"perturbation": "fog", "severity": 3, "key": key, "monitor": monitor, "rank": k,
                             "true_unsafe": u} for k, u in enumerate(unsafe)]
     return pd.DataFrame(images), pd.DataFrame(candidates)

@@ -24,23 +24,16 @@ def monitor_floor(images: pd.DataFrame, candidates: pd.DataFrame) -> pd.DataFram
     whose default area is unsafe too, the unsafe landings a perfect monitor would make."""
     if not len(images):
         return pd.DataFrame(columns=COLUMNS)
-    faulted = images[images["fault"].fillna("").astype(str) != ""][FRAME].drop_duplicates()
-    frames = images.drop_duplicates(FRAME)[[*FRAME, "h_default"]]
-    if len(faulted):
-        frames = frames.merge(faulted, on=FRAME, how="left", indicator=True)
-        frames = frames[frames["_merge"] == "left_only"].drop(columns="_merge")
-    if len(candidates):
-        safe = (~candidates["true_unsafe"].astype(bool)).groupby([candidates[c] for c in FRAME]).any()
-        counts = candidates.drop_duplicates([*FRAME, "rank"]).groupby(FRAME).size()
-        per = pd.DataFrame({"any_safe": safe, "n": counts}).reset_index()
-        frames = frames.merge(per, on=FRAME, how="left")
-    else:
-        frames = frames.assign(any_safe=False, n=0)
-    frames["n"] = frames["n"].fillna(0).astype(int)
-    frames["any_safe"] = frames["any_safe"].astype("boolean").fillna(False).astype(bool)
-    frames["no_candidate"] = frames["n"] == 0
-    frames["all_unsafe"] = (frames["n"] > 0) & ~frames["any_safe"]
-    frames["floor"] = ~frames["any_safe"] & (frames["h_default"].astype(float) >= 1.0)
+    faulted = images["fault"].fillna("").astype(str) != ""
+    frames = images.assign(faulted=faulted).groupby(FRAME).agg(
+        h_default=("h_default", "first"), n=("candidates", "first"), faulted=("faulted", "any"))
+    frames = frames[~frames["faulted"]]
+    safe = (~candidates["true_unsafe"].astype(bool)).groupby([candidates[c] for c in FRAME]).any() \
+        if len(candidates) else pd.Series(dtype=bool)
+    any_safe = safe.reindex(frames.index, fill_value=False).astype(bool)
+    n = frames["n"].fillna(0).astype(int)
+    frames = frames.assign(no_candidate=n == 0, all_unsafe=(n > 0) & ~any_safe,
+                           floor=~any_safe & (frames["h_default"].astype(float) >= 1.0)).reset_index()
     out = frames.groupby(["perturbation", "severity"], sort=True).agg(
         images=("key", "size"), no_candidate=("no_candidate", "sum"), all_unsafe=("all_unsafe", "sum"),
         floor=("floor", "sum")).reset_index()

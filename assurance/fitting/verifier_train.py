@@ -275,10 +275,8 @@ class ScenePairs:
         self.safe = safe[np.argsort(scene[safe], kind="stable")]
         scenes, self.start, self.count = np.unique(scene[self.safe], return_index=True, return_counts=True)
         bad = np.flatnonzero(unsafe)
-        pos = np.searchsorted(scenes, scene[bad])
-        ok = (pos < len(scenes)) & (scenes[np.minimum(pos, max(len(scenes) - 1, 0))] == scene[bad]) if len(scenes) \
-            else np.zeros(len(bad), bool)
-        self.bad, self.pos = bad[ok], pos[ok]
+        self.bad = bad[np.isin(scene[bad], scenes)]  # scenes with a safe crop
+        self.pos = np.searchsorted(scenes, scene[self.bad])
 
     def __len__(self) -> int:
         return len(self.bad)
