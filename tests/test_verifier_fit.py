@@ -124,6 +124,49 @@ def test_the_blocks_to_1_16_learn_when_only_the_low_part_is_frozen():
         TrainConfig(frozen="none")
 
 
+def test_the_anchor_keeps_the_learning_blocks_features_near_their_starting_ones():
+    """``anchor``: the learning blocks' features start at their ImageNet ones (gap nought: batch norms in eval mode)
+    and a strong pull keeps them nearer than none does, at a learning rate that moves them; the gap is logged;
+    the whole encoder frozen, there is nothing to anchor, and it is refused."""
+    import torch
+
+    from assurance.fitting.verifier_net import VerifierNet
+    from assurance.fitting.verifier_train import (
+        TrainConfig,
+        _anchored_forward,
+        as_input,
+        frozen_session,
+        low_features,
+        train_verifier,
+    )
+
+    rng = np.random.default_rng(4)
+    train, held = _crops(32, rng), _crops(16, rng)
+    start = VerifierNet(size=32, margin=1.0, deep=True)
+    start.load_imagenet()
+    start.eval()
+    x = as_input(train.crops[:16])
+    gaps = {}
+    for anchor in (0.0, 100.0):
+        cfg = TrainConfig(size=32, steps=6, batch=8, eval_every=6, threads=1, frozen="low", lr=0.01,
+                          encoder_lr_scale=1.0, anchor=anchor)
+        result = train_verifier(train, held, cfg, log=lambda s: None)
+        assert [c["step"] for c in result.curve] == [6] and ("anchor_gap" in result.curve[0]) == bool(anchor)
+        final = result.model  # the last step's: the only one evaluated
+        with torch.no_grad():
+            ref = start.mid(start.low(x))[0]
+            got = final.eval().mid(final.low(x))[0]
+        gaps[anchor] = float((got - ref).pow(2).mean() / ref.var())
+    assert gaps[100.0] < 0.8 * gaps[0.0]
+    f8, *targets = low_features(frozen_session(start, encoder=True, threads=1), x.numpy())
+    assert not start.training  # the export left it as it found it
+    scales = [float(t.float().var()) for t in targets]
+    assert float(_anchored_forward(start, f8, targets, scales)[2]) < 1e-4  # the pull starts at nought
+    for kw in ({"anchor": 1.0}, {"anchor": -1.0, "frozen": "low"}, {"anchor": float("nan"), "frozen": "low"}):
+        with pytest.raises(ValueError, match="anchor"):
+            TrainConfig(**kw)
+
+
 def test_spilled_training_crops_are_the_crops_held_in_memory(tiny_campaign, tmp_path):
     """``collect_crops(spill=FILE)``: the crops written to disk scene by scene and mapped back read-only are the
     ones kept in memory, and so are the truth, scenes and discs joined beside them."""

@@ -52,6 +52,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--frozen", choices=("encoder", "low"), default="encoder",
                    help="encoder: every encoder block keeps its ImageNet weights and the head learns (fast on 2 "
                         "cores); low: the blocks after 1/8 learn too (default: %(default)s)")
+    p.add_argument("--anchor", type=float, default=0.0, metavar="W",
+                   help="with --frozen low: weight of a pull of the learning blocks' features towards their ImageNet "
+                        "features, so fine-tuning keeps what those are robust to (default: %(default)s, none)")
     p.add_argument("--deep", action=argparse.BooleanOptionalAction, default=True,
                    help="the encoder goes on to 1/32 (EfficientNet-Lite0's blocks 11-15, its most semantic "
                         "features; the crop side then a multiple of 32); --no-deep stops at 1/16 (default: deep)")
@@ -88,6 +91,7 @@ def run(args: argparse.Namespace) -> int:
         cfg = TrainConfig(size=args.size, margin=args.margin, steps=args.steps, batch=args.batch, lr=args.lr,
                           eval_every=args.eval_every, minutes=args.minutes, seed=args.seed, threads=args.threads,
                           views=args.views, augment=args.augment, rank_weight=args.rank_weight, frozen=args.frozen,
+                          anchor=args.anchor,
                           deep=args.deep, fuse_layers=args.fuse_layers)
         segmenter = system.segmenter(working_width=system.core.working_width)
         learned = None

@@ -56,6 +56,7 @@ class TrainConfig:
     fuse_layers: int = 1  # 3x3 convolutions over the fused 1/8 map (VerifierNet's ``fuse_layers``)
     augment: str = "colour"  # the augmented views' set (AUGMENTS); the first view is never augmented
     rank_weight: float = 0.0  # weight of the within-scene ranking loss (:class:`ScenePairs`); 0: none
+    anchor: float = 0.0  # with frozen "low": weight of the pull of the learning blocks' features to ImageNet's; 0: none
     minutes: float | None = None
     seed: int = 0
     threads: int = 2
@@ -72,6 +73,11 @@ class TrainConfig:
             raise ValueError(f"lr must be a positive number, got {self.lr}")
         if not (math.isfinite(self.rank_weight) and self.rank_weight >= 0.0):
             raise ValueError(f"rank_weight must be a number >= 0, got {self.rank_weight}")
+        if not (math.isfinite(self.anchor) and self.anchor >= 0.0):
+            raise ValueError(f"anchor must be a number >= 0, got {self.anchor}")
+        if self.anchor and self.frozen != "low":
+            raise ValueError("anchor pulls the learning encoder blocks to their ImageNet features: it needs frozen "
+                             "'low' (with the whole encoder frozen they never move)")
         if self.minutes is not None and not self.minutes > 0.0:
             raise ValueError(f"minutes must be > 0, got {self.minutes}")
         check_fuse_layers(self.fuse_layers)
@@ -198,7 +204,8 @@ def frozen_session(model: VerifierNet, *, encoder: bool, threads: int) -> Any:
 
     model.eval()
     names = ["f8", "f16", "f32"][:3 if model.deep else 2] if encoder else ["f8"]
-    return open_session(onnx_bytes(Frozen(model), model.size, names), "the verifier's frozen encoder", threads)
+    frozen = Frozen(model).eval()  # the export restores the wrapper's mode, and with it the model's: eval
+    return open_session(onnx_bytes(frozen, model.size, names), "the verifier's frozen encoder", threads)
 
 
 OPSET = 17
@@ -307,6 +314,19 @@ def _forward(model: VerifierNet, feats: Sequence[torch.Tensor]) -> tuple[torch.T
     return model.high(levels[0]) if len(levels) == 1 else model.head(*levels)
 
 
+def _anchored_forward(model: VerifierNet, f8: torch.Tensor, targets: Sequence[torch.Tensor],
+                      scales: Sequence[float]) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The logit and map from the 1/8 features through the learning blocks, and the anchor: the mean squared gap
+    between those blocks' features and their ImageNet ones (``targets``), per level over its ImageNet variance
+    (``scales``), averaged over the levels (the blocks' batch norms in eval mode, so it starts at nought).
+    Fine-tuning forgets what ImageNet's features are robust to (docs/results.md measured a motion-blurred AUROC of
+    0.82 fall to 0.70); the anchor keeps the features near them."""
+    mid = model.mid(f8.float())
+    logit, aux = model.head(f8.float(), *mid)
+    gaps = [F.mse_loss(f, t.float()) / s for f, t, s in zip(mid, targets, scales, strict=True)]
+    return logit, aux, torch.stack(gaps).mean()
+
+
 @torch.inference_mode()
 def _held_out_auroc(model: VerifierNet, feats: Sequence[torch.Tensor], y: np.ndarray) -> float:
     model.eval()
@@ -329,11 +349,16 @@ def train_verifier(train: CropSet, val: CropSet, cfg: TrainConfig, *, pretrained
     if pretrained:
         model.load_imagenet()
     t0 = time.perf_counter()
-    session = frozen_session(model, encoder=cfg.frozen == "encoder", threads=cfg.threads)
+    session = frozen_session(model, encoder=cfg.frozen == "encoder" or bool(cfg.anchor), threads=cfg.threads)
     feats, aux_t, y = cached_views(session, train, cfg, rng, log)
     vsel = val.is_candidate
     vfeats = low_features(session, to_size(val.crops[vsel], cfg.size).transpose(0, 3, 1, 2).astype(np.float32)
                           / 255.0)
+    targets: list[torch.Tensor] = []
+    scales: list[float] = []
+    if cfg.anchor:  # the ImageNet features of the learning blocks are targets, not inputs
+        feats, targets, vfeats = feats[:1], feats[1:], vfeats[:1]
+        scales = [max(float(t[:4096].float().var()), 1e-6) for t in targets]
     vy = val.unsafe[vsel]
     opt = _optimiser(model, cfg)
     base = [g["lr"] for g in opt.param_groups]
@@ -345,12 +370,21 @@ def train_verifier(train: CropSet, val: CropSet, cfg: TrainConfig, *, pretrained
     step = 0
     for step in range(1, cfg.steps + 1):
         model.train()
+        if targets:  # the encoder's batch norms keep ImageNet's statistics: the anchor compares like with like
+            for block in model.blocks:
+                block.eval()
         frac = step / cfg.steps
         for g, lr in zip(opt.param_groups, base, strict=True):
             g["lr"] = lr * (min(1.0, step / 50) * 0.5 * (1.0 + math.cos(math.pi * frac)))
         idx = torch.from_numpy(rng.integers(0, len(y), cfg.batch))
-        logit, aux = _forward(model, [f[idx] for f in feats])
+        gap = None
+        if targets:
+            logit, aux, gap = _anchored_forward(model, feats[0][idx], [t[idx] for t in targets], scales)
+        else:
+            logit, aux = _forward(model, [f[idx] for f in feats])
         loss = F.binary_cross_entropy_with_logits(logit, yt[idx], pos_weight=pos_weight)
+        if gap is not None:
+            loss = loss + cfg.anchor * gap
         loss = loss + cfg.aux_weight * F.binary_cross_entropy_with_logits(aux[:, 0], aux_t[idx])
         if pairs is not None and len(pairs):  # an unsafe crop above a safe one of its scene, in any of the views
             pick = pairs.draw(rng, max(1, cfg.batch // 2))
@@ -363,9 +397,13 @@ def train_verifier(train: CropSet, val: CropSet, cfg: TrainConfig, *, pretrained
         out_of_time = cfg.minutes is not None and time.perf_counter() - t0 > 60.0 * cfg.minutes
         if step % cfg.eval_every == 0 or step == cfg.steps or out_of_time:
             score = _held_out_auroc(model, vfeats, vy)
-            best.curve.append({"step": step, "loss": loss.item(), "val_auroc": score,
-                               "seconds": time.perf_counter() - t0})
-            log(f"step {step}: loss {loss.item():.4f}, held-out AUROC {score:.4f} ({time.perf_counter() - t0:.0f} s)")
+            point = {"step": step, "loss": loss.item(), "val_auroc": score, "seconds": time.perf_counter() - t0}
+            if gap is not None:
+                point["anchor_gap"] = gap.item()
+            best.curve.append(point)
+            extra = "" if gap is None else f", anchor gap {gap.item():.4f}"
+            log(f"step {step}: loss {loss.item():.4f}{extra}, held-out AUROC {score:.4f} "
+                f"({time.perf_counter() - t0:.0f} s)")
             if score > best.best_auroc:
                 best.model, best.best_step, best.best_auroc = copy.deepcopy(model), step, score
         if out_of_time:
