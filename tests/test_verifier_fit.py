@@ -272,7 +272,7 @@ def test_the_command_line_defaults_are_the_training_configurations():
     from dataclasses import fields
 
     from assurance.cli.fit_verifier import add_arguments
-    from assurance.fitting.verifier_train import TrainConfig
+    from assurance.fitting.verifier_train import AUGMENTS, FROZEN, TrainConfig
 
     parser = argparse.ArgumentParser()
     add_arguments(parser)
@@ -282,6 +282,8 @@ def test_the_command_line_defaults_are_the_training_configurations():
         if default is not None:
             assert default == getattr(cfg, f.name), f.name
     assert (cfg.size, cfg.views) == (256, 1)
+    choices = {a.dest: tuple(a.choices) for a in parser._actions if a.choices}
+    assert choices["frozen"] == FROZEN and choices["augment"] == AUGMENTS  # the command offers what training takes
 
 
 def test_a_deep_verifier_reads_the_1_32_features_trains_on_them_and_exports():

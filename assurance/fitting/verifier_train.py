@@ -33,6 +33,7 @@ from assurance.fitting.verifier_net import TAP_8, VerifierNet, check_fuse_layers
 from el.monitors.verifier_crop import MAX_MARGIN
 from el.segmentation.onnx_engine import open_session
 
+FROZEN = ("encoder", "low")  # encoder: every encoder block keeps its ImageNet weights; low: down to 1/8 only
 AUGMENTS = ("colour", "optics")  # colour: flip, zoom, colour balance, noise; optics: and lens, codec and exposure
 FROZEN_BLOCKS = TAP_8 + 2  # the stem and blocks 0..4 (down to 1/8) keep their ImageNet weights (of encoder_modules)
 
@@ -81,8 +82,8 @@ class TrainConfig:
         if self.minutes is not None and not self.minutes > 0.0:
             raise ValueError(f"minutes must be > 0, got {self.minutes}")
         check_fuse_layers(self.fuse_layers)
-        if self.frozen not in ("encoder", "low"):
-            raise ValueError(f"frozen must be 'encoder' or 'low', got {self.frozen!r}")
+        if self.frozen not in FROZEN:
+            raise ValueError(f"frozen must be one of {', '.join(FROZEN)}, got {self.frozen!r}")
         if self.augment not in AUGMENTS:
             raise ValueError(f"augment must be one of {', '.join(AUGMENTS)}, got {self.augment!r}")
         if self.augment != "colour" and self.views < 2:
