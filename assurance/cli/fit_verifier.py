@@ -25,7 +25,9 @@ HELP = ("train the candidate verifier (a small CNN of its own on the full-resolu
 def add_arguments(p: argparse.ArgumentParser) -> None:
     fit_split_options(p, out="verifier file to write (JSON; its ONNX network is written beside it)")
     p.add_argument("--steps", type=int, default=3000, help="training steps (default: %(default)s)")
-    p.add_argument("--minutes", type=float, help="stop training after this many minutes (default: no limit)")
+    p.add_argument("--minutes", type=float,
+                   help="stop training after this many minutes; the learning rate still decays over --steps, so a "
+                        "run cut short ends before its rate is low (default: no limit)")
     p.add_argument("--batch", type=int, default=64, help="crops per step (default: %(default)s)")
     p.add_argument("--size", type=int, default=256,
                    help="crop side in pixels, a multiple of 16, large enough for the ground's texture to show "
