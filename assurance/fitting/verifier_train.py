@@ -203,9 +203,8 @@ def frozen_session(model: VerifierNet, *, encoder: bool, threads: int) -> Any:
             f8 = self.net.low(x)
             return (f8, *self.net.mid(f8)) if encoder else (f8,)
 
-    model.eval()
     names = ["f8", "f16", "f32"][:3 if model.deep else 2] if encoder else ["f8"]
-    frozen = Frozen(model).eval()  # the export restores the wrapper's mode, and with it the model's: eval
+    frozen = Frozen(model).eval()  # the model too; the export restores the wrapper's mode, and with it the model's
     return open_session(onnx_bytes(frozen, model.size, names), "the verifier's frozen encoder", threads)
 
 
@@ -322,8 +321,9 @@ def _anchored_forward(model: VerifierNet, f8: torch.Tensor, targets: Sequence[to
     (``scales``), averaged over the levels (the blocks' batch norms in eval mode, so it starts at nought).
     Fine-tuning forgets what ImageNet's features are robust to (docs/results.md measured a motion-blurred AUROC of
     0.82 fall to 0.70); the anchor keeps the features near them."""
-    mid = model.mid(f8.float())
-    logit, aux = model.head(f8.float(), *mid)
+    f8 = f8.float()
+    mid = model.mid(f8)
+    logit, aux = model.head(f8, *mid)
     gaps = [F.mse_loss(f, t.float()) / s for f, t, s in zip(mid, targets, scales, strict=True)]
     return logit, aux, torch.stack(gaps).mean()
 
