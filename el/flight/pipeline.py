@@ -54,7 +54,7 @@ from el.segmentation.contract import check_model, labels_of
 from el.segmentation.factory import load_model
 
 Clock = Callable[[], float]
-DEPLOYED_MONITOR = "verifier:fuse=learned,walk=score,threshold=0.810833523275059"
+DEPLOYED_MONITOR = "verifier:fuse=learned,walk=score,threshold=0.8971373147264656"
 """The shipped runtime monitor, chosen on the validation split (docs/results.md, docs/monitors.md): the candidate
 verifier (``el/monitors/data/verifier.json``, a CNN of its own on the candidate's pixels) fused with the learned
 candidate monitor (``el/monitors/data/learned.json``), candidates walked by the fused score (``el.monitors.walk``),
