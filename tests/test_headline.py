@@ -138,48 +138,42 @@ def test_across_instruction_sets_a_table_made_to_look_safer_fails_on_its_total()
         "fog: rate 0.357 is not 20 of 70"]
 
 
-MEASURED_AVX2 = (
-    'Deployed configuration `verifier:fuse=learned,walk=score,threshold=0.810833523275059`, calibration c'
-    'ard `calibration.json` (sha256 `51516bde5ba4`); model sha256 `0d3dab88c2b0`; 70 test scenes per pert'
-    'urbation (severity 3); run on a CPU of instruction set `avx2`.\n'
-    '\n'
-    '| perturbation | unsafe landings, CM alone | unsafe landings, deployed | rate (one-sided 95% bound) '
-    '| G_CM | G_RM [95%] | G* [95%] | recall / FP rate |\n'
-    '|---|---|---|---|---|---|---|---|\n'
-    '| none | 9 of 70 | 6 of 70 | 0.086 (0.162) | +0.569 | -0.015 [-0.066, +0.045] | +0.554 [+0.454, +0.6'
-    '42] | 0.197 / 0.026 |\n'
-    '| brightness | 25 of 70 | 17 of 70 | 0.243 (0.342) | +0.302 | +0.077 [+0.017, +0.152] | +0.378 [+0.2'
-    '85, +0.473] | 0.128 / 0.006 |\n'
-    '| fog | 31 of 70 | 24 of 70 | 0.343 (0.447) | +0.272 | +0.104 [+0.053, +0.168] | +0.376 [+0.280, +0.'
-    '487] | 0.444 / 0.055 |\n'
-    '| motion_blur | 27 of 70 | 16 of 70 | 0.229 (0.326) | +0.286 | +0.132 [+0.059, +0.215] | +0.418 [+0.'
-    '307, +0.515] | 0.507 / 0.139 |\n'
-    '| shifted_pixels | 9 of 70 | 5 of 70 | 0.071 (0.144) | +0.561 | -0.001 [-0.054, +0.066] | +0.560 [+0'
-    '.460, +0.645] | 0.559 / 0.153 |\n'
-    '| pixel_trap | 5 of 70 | 5 of 70 | 0.071 (0.144) | +0.614 | -0.060 [-0.100, -0.021] | +0.554 [+0.461'
-    ', +0.637] | 0.170 / 0.047 |\n'
-)
-MEASURED_AVX512 = (
-    'Deployed configuration `verifier:fuse=learned,walk=score,threshold=0.810833523275059`, calibration c'
-    'ard `calibration.json` (sha256 `51516bde5ba4`); model sha256 `0d3dab88c2b0`; 70 test scenes per pert'
-    'urbation (severity 3); run on a CPU of instruction set `avx512`.\n'
-    '\n'
-    '| perturbation | unsafe landings, CM alone | unsafe landings, deployed | rate (one-sided 95% bound) '
-    '| G_CM | G_RM [95%] | G* [95%] | recall / FP rate |\n'
-    '|---|---|---|---|---|---|---|---|\n'
-    '| none | 9 of 70 | 6 of 70 | 0.086 (0.162) | +0.569 | -0.015 [-0.066, +0.045] | +0.554 [+0.454, +0.6'
-    '42] | 0.197 / 0.026 |\n'
-    '| brightness | 25 of 70 | 17 of 70 | 0.243 (0.342) | +0.301 | +0.077 [+0.017, +0.152] | +0.378 [+0.2'
-    '85, +0.473] | 0.128 / 0.006 |\n'
-    '| fog | 32 of 70 | 26 of 70 | 0.371 (0.476) | +0.263 | +0.084 [+0.040, +0.155] | +0.347 [+0.251, +0.'
-    '458] | 0.365 / 0.054 |\n'
-    '| motion_blur | 27 of 70 | 16 of 70 | 0.229 (0.326) | +0.286 | +0.132 [+0.059, +0.215] | +0.418 [+0.'
-    '307, +0.515] | 0.507 / 0.139 |\n'
-    '| shifted_pixels | 9 of 70 | 6 of 70 | 0.086 (0.162) | +0.558 | +0.011 [-0.037, +0.071] | +0.569 [+0'
-    '.465, +0.659] | 0.579 / 0.142 |\n'
-    '| pixel_trap | 7 of 70 | 7 of 70 | 0.100 (0.180) | +0.598 | -0.056 [-0.106, -0.008] | +0.542 [+0.443'
-    ', +0.629] | 0.201 / 0.044 |\n'
-)
+MEASURED_HEADER = ("Deployed configuration `verifier:fuse=learned,walk=score,threshold=0.810833523275059`, calibration "
+                   "card `calibration.json` (sha256 `51516bde5ba4`); model sha256 `0d3dab88c2b0`; 70 test scenes per "
+                   "perturbation (severity 3); run on a CPU of instruction set `{}`.\n\n"
+                   "| perturbation | unsafe landings, CM alone | unsafe landings, deployed | "
+                   "rate (one-sided 95% bound) | G_CM | G_RM [95%] | G* [95%] | recall / FP rate |\n"
+                   "|---|---|---|---|---|---|---|---|\n")
+MEASURED_ROWS = {  # per perturbation: (CM alone, deployed, rate, G_CM, G_RM, G*, recall / FP) on AVX2, then AVX-512
+    "none": [("9", "6", "0.086 (0.162)", "+0.569", "-0.015 [-0.066, +0.045]", "+0.554 [+0.454, +0.642]",
+              "0.197 / 0.026")] * 2,
+    "brightness": [("25", "17", "0.243 (0.342)", g, "+0.077 [+0.017, +0.152]", "+0.378 [+0.285, +0.473]",
+                    "0.128 / 0.006") for g in ("+0.302", "+0.301")],
+    "fog": [("31", "24", "0.343 (0.447)", "+0.272", "+0.104 [+0.053, +0.168]", "+0.376 [+0.280, +0.487]",
+             "0.444 / 0.055"),
+            ("32", "26", "0.371 (0.476)", "+0.263", "+0.084 [+0.040, +0.155]", "+0.347 [+0.251, +0.458]",
+             "0.365 / 0.054")],
+    "motion_blur": [("27", "16", "0.229 (0.326)", "+0.286", "+0.132 [+0.059, +0.215]", "+0.418 [+0.307, +0.515]",
+                     "0.507 / 0.139")] * 2,
+    "shifted_pixels": [("9", "5", "0.071 (0.144)", "+0.561", "-0.001 [-0.054, +0.066]", "+0.560 [+0.460, +0.645]",
+                        "0.559 / 0.153"),
+                       ("9", "6", "0.086 (0.162)", "+0.558", "+0.011 [-0.037, +0.071]", "+0.569 [+0.465, +0.659]",
+                        "0.579 / 0.142")],
+    "pixel_trap": [("5", "5", "0.071 (0.144)", "+0.614", "-0.060 [-0.100, -0.021]", "+0.554 [+0.461, +0.637]",
+                    "0.170 / 0.047"),
+                   ("7", "7", "0.100 (0.180)", "+0.598", "-0.056 [-0.106, -0.008]", "+0.542 [+0.443, +0.629]",
+                    "0.201 / 0.044")],
+}
+
+
+def measured_table(which: int) -> str:
+    """The headline of the fused verifier at 0.811 as measured on AVX2 (0) and AVX-512 (1) (docs/results.md)."""
+    rows = "".join(f"| {p} | {r[0]} of 70 | {r[1]} of 70 | {' | '.join(r[2:])} |\n"
+                   for p, pair in MEASURED_ROWS.items() for r in [pair[which]])
+    return MEASURED_HEADER.format(("avx2", "avx512")[which]) + rows
+
+
+MEASURED_AVX2, MEASURED_AVX512 = measured_table(0), measured_table(1)
 
 def test_across_instruction_sets_the_measured_pair_reproduces_each_other():
     """The release runs of one configuration (the fused verifier at 0.811) on AVX2 and AVX-512 (docs/results.md):
