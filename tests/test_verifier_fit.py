@@ -267,7 +267,7 @@ def test_ranking_pairs_are_an_unsafe_and_a_safe_crop_of_one_scene_and_train():
 
 
 def test_the_command_line_defaults_are_the_training_configurations():
-    """`uav-el fit-verifier` without options trains as TrainConfig() says (the shipped recipe: 256 px, one view)."""
+    """`uav-el fit-verifier` without options trains as TrainConfig() says (256 px, one view, the encoder frozen)."""
     import argparse
     from dataclasses import fields
 
