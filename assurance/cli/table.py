@@ -137,8 +137,8 @@ def check_readme(run: str, df: Any, readme: str) -> int:
         print(f"{readme}: {run} ran on instruction set {isa!r}, on which no headline table was recorded; it "
               f"reproduces {found.match} (recorded on {other!r}) within {ACROSS_INSTRUCTION_SETS.counts} decisions "
               f"per perturbation and {ACROSS_INSTRUCTION_SETS.total} in all (docs/results.md); record this machine's "
-              f"with `uav-el table {run} --readme docs/headline-runs/{isa}.md` (a file holding the README's two "
-              f"markers):\n{versions}", end="")
+              f"with `uav-el table {run} --readme docs/headline-runs/{isa}.md` (create it first, beside the README, "
+              f"holding the README's two markers):\n{versions}", end="")
         return 0
     if found.match == Path(readme).name:
         print(f"{readme}: the headline table matches {run} within the tolerance of another machine "
