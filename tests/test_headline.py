@@ -175,6 +175,7 @@ def measured_table(which: int) -> str:
 
 MEASURED_AVX2, MEASURED_AVX512 = measured_table(0), measured_table(1)
 
+
 def test_across_instruction_sets_the_measured_pair_reproduces_each_other():
     """The release runs of one configuration (the fused verifier at 0.811) on AVX2 and AVX-512 (docs/results.md):
     counts within 2 of 70, sums within 5, fog's recall 0.079 apart; each passes the looser check against the other."""

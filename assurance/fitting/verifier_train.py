@@ -41,7 +41,7 @@ FROZEN_BLOCKS = TAP_8 + 2  # the stem and blocks 0..4 (down to 1/8) keep their I
 @dataclass(frozen=True, kw_only=True)
 class TrainConfig:
     """How the verifier trains; the defaults are ``uav-el fit-verifier``'s (the shipped verifier's recipe is the
-    command its record carries: ``--frozen low --anchor 1.0 --batch 32 --steps 2400``)."""
+    command and configuration its record, ``verifier.json``, carries)."""
 
     size: int = 256  # a paver of a 4K frame still shows at 256 px, not at 64 (docs/results.md)
     margin: float = 1.0  # a radius of context around the disc (docs/results.md)
