@@ -4,6 +4,10 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -45,6 +49,31 @@ def test_same_seed_same_bytes(tmp_path):
         assert [f.read_bytes() for f in fa] == [f.read_bytes() for f in fb]
     a, b = generate_world(7), generate_world(8)
     assert (a.style, a.sun, len(a.blocks)) != (b.style, b.sun, len(b.blocks))
+
+
+# What an AVX2 machine runs where this one has AVX-512: OpenCV's dispatched kernels, NumPy's and Intel IPP's code paths.
+AVX2_LIKE = {"OPENCV_CPU_DISABLE": "AVX512F", "NPY_DISABLE_CPU_FEATURES": "X86_V4", "OPENCV_IPP": "avx2"}
+
+
+def _has_avx512() -> bool:
+    try:
+        return " avx512f" in Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return False
+
+
+@pytest.mark.skipif(not _has_avx512(), reason="needs a CPU with AVX-512 to run both code paths")
+def test_scene_bytes_do_not_depend_on_the_cpus_vector_units(tmp_path):
+    """An auditor regenerates a split on another machine and gets the same files (the card's data hashes hold): the
+    scenes a process with AVX-512 writes are the bytes one limited to AVX2 writes (NumPy's float32 log1p and power
+    differ in their last bits between the two, so the renderer must not lean on them)."""
+    def synth(out, env):
+        cmd = [sys.executable, "-m", "assurance", "synth", "--out", str(out), "--split", "val", "--scenes", "2",
+               "--seed", "3", "--size", "480x270", "-q"]
+        subprocess.run(cmd, check=True, env={**os.environ, **env}, capture_output=True, timeout=120)
+        return {f.relative_to(out).as_posix(): f.read_bytes() for f in sorted(out.rglob("*.png"))}
+    wide, narrow = synth(tmp_path / "wide", {}), synth(tmp_path / "narrow", AVX2_LIKE)
+    assert len(wide) == 4 and wide == narrow
 
 
 def test_every_class_appears_across_a_small_batch(batch):
