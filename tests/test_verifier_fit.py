@@ -306,6 +306,24 @@ def test_a_deep_verifier_reads_the_1_32_features_trains_on_them_and_exports():
     assert check_export(export_onnx(result.model), result.model, held.crops[:4]) < 1e-3
 
 
+def test_features_spilled_to_files_are_the_features_kept_in_memory(tmp_path):
+    """``spill``: the training crops' features go to memory-mapped files in the folder given, the same numbers as in
+    memory (a split too large for the machine's memory trains from the page cache)."""
+    from assurance.fitting.verifier_net import VerifierNet
+    from assurance.fitting.verifier_train import TrainConfig, cached_views, frozen_session
+
+    rng = np.random.default_rng(5)
+    train = _crops(20, rng)
+    cfg = TrainConfig(size=32, deep=True, frozen="encoder")
+    session = frozen_session(VerifierNet(size=32, margin=0.5, width=8, deep=True).eval(), encoder=True, threads=1)
+    kept, aux, y = cached_views(session, train, cfg, np.random.default_rng(0), lambda s: None)
+    spilled, aux2, y2 = cached_views(session, train, cfg, np.random.default_rng(0), lambda s: None, spill=tmp_path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["features-0.f16", "features-1.f16", "features-2.f16"]
+    assert len(kept) == 3 and all(torch.equal(a, b) for a, b in zip(kept, spilled, strict=True))
+    assert torch.equal(aux, aux2) and np.array_equal(y, y2)
+    assert (tmp_path / "features-0.f16").stat().st_size == kept[0].numel() * 2
+
+
 def test_more_fuse_layers_widen_what_each_cell_of_the_map_sees_and_export():
     """``fuse_layers``: that many 3x3 convolutions over the fused 1/8 map; a cell's logit then depends on cells two
     away (with one layer it cannot), and the exported network flies as trained."""

@@ -229,13 +229,13 @@ def fit_verifier(data: str | Path, val: str | Path, segmenter: Any, out: Path, *
     cut = CropSettings(core=core, size=128 if cfg.size <= 128 else cfg.size, margin=cfg.margin)
     train_samples = list(iter_samples(data, require_labels=True))[:images]  # each split listed once
     held_samples = list(iter_samples(val, require_labels=True))[:images]
-    with tempfile.TemporaryDirectory(prefix="uav-el-verifier-") as tmp:  # the training crops lie on disk
+    with tempfile.TemporaryDirectory(prefix="uav-el-verifier-") as tmp:  # the training crops and features lie on disk
         mined = replace(cut, jitter=o.jitter, lookalikes=o.lookalikes)
         train = collect_crops(data, segmenter, settings=mined, samples=train_samples,
                               desc="training scenes", progress=o.progress, spill=Path(tmp) / "train-crops.u8")
         held = collect_crops(val, segmenter, settings=cut, samples=held_samples, desc="held-out scenes",
                              progress=o.progress)
-        result = train_verifier(train, held, cfg, pretrained=o.pretrained, log=log)
+        result = train_verifier(train, held, cfg, pretrained=o.pretrained, log=log, spill=Path(tmp))
         train.crops = train.crops[:0].copy()  # the mapping closes before its folder goes
     sel = held.is_candidate
     crops = to_size(held.crops[sel], cfg.size)
