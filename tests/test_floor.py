@@ -2,6 +2,7 @@
 
 import numpy as np
 import pandas as pd
+import pytest
 
 from assurance.analysis.floor import floor_markdown, monitor_floor
 
@@ -16,9 +17,9 @@ def _tables():
         for key, (h_default, unsafe) in frames.items():
             images.append({"perturbation": "fog", "severity": 3, "key": key, "monitor": monitor,
                            "fault": "boom" if key == "E" and monitor == "m2" else "", "h_default": h_default,
-                           "candidates": len(unsafe)})
+                           "candidates": len(unsafe), "h_top": 1.0 if unsafe else float("nan")})
             candidates += [{"perturbation": "fog", "severity": 3, "key": key, "monitor": monitor, "rank": k,
-                            "true_unsafe": u} for k, u in enumerate(unsafe)]
+                            "true_unsafe": u, "true_hazard": 1.0 if u else 0.2} for k, u in enumerate(unsafe)]
     return pd.DataFrame(images), pd.DataFrame(candidates)
 
 
@@ -26,9 +27,15 @@ def test_the_floor_counts_frames_with_no_safe_way_out_and_leaves_faulted_frames_
     images, candidates = _tables()
     floor = monitor_floor(images, candidates)
     assert floor.to_dict("records") == [{"perturbation": "fog", "severity": 3, "images": 4, "no_candidate": 1,
-                                         "all_unsafe": 2, "floor": 2}]
-    assert "| fog (s3) | 4 | 1 | 2 | 2 (0.500) |" in floor_markdown(floor)
+                                         "all_unsafe": 2, "floor": 2, "perfect_g_rm": pytest.approx(0.4)}]
+    assert "| fog (s3) | 4 | 1 | 2 | 2 (0.500) | +0.400 |" in floor_markdown(floor)
     assert monitor_floor(images.iloc[:0], candidates.iloc[:0]).empty
+
+
+def test_without_true_hazards_the_most_a_monitor_can_add_is_unknown_not_nought():
+    images, candidates = _tables()
+    unknown = monitor_floor(images, candidates.drop(columns="true_hazard"))
+    assert np.isnan(unknown["perfect_g_rm"].item()) and "| n/a |" in floor_markdown(unknown)
 
 
 def test_no_configuration_of_a_campaign_lands_unsafely_less_often_than_the_floor(tiny_campaign):
@@ -44,6 +51,13 @@ def test_no_configuration_of_a_campaign_lands_unsafely_less_often_than_the_floor
     for (pert, sev, _), n in unsafe.items():
         assert n >= floor.loc[(pert, sev), "floor"]
     assert np.all(floor["floor"] <= floor["images"])
+    faulted = images.groupby(["perturbation", "severity", "key"])["fault"].transform(
+        lambda f: (f.fillna("").astype(str) != "").any())
+    judged = images[~faulted.astype(bool)]  # the frames the floor judges
+    gain = (readouts.core_hazard(judged) - judged["h_decision"]).groupby(
+        [judged["perturbation"], judged["severity"], judged["monitor"]]).mean()  # each configuration's G_RM
+    for (pert, sev, _), g in gain.items():  # no monitor adds more than the lowest hazard on offer allows
+        assert g <= floor.loc[(pert, sev), "perfect_g_rm"] + 1e-12
 
 
 def test_the_evidence_names_the_floor_among_its_limitations_only_when_there_is_one():

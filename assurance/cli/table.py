@@ -81,7 +81,9 @@ def run(args: argparse.Namespace) -> int:
     md += ("\n### What no monitor can prevent\n\nA perfect monitor lands on a truly safe candidate where the frame "
            "has one and takes the default action elsewhere; where the default area is unsafe too, it lands unsafely. "
            "Those frames are the floor under every configuration's unsafe landings above "
-           "(`assurance.analysis.floor`):\n\n")
+           "(`assurance.analysis.floor`). Nor can a monitor add more safety than the lowest true hazard on offer "
+           "(a candidate or the default area) allows: the last column is the G_RM of an oracle that lands there, "
+           "above which no configuration's G_RM can lie:\n\n")
     md += floor_markdown(monitor_floor(images, candidates))
     md += "\n### Where the time went\n\n" + stages_markdown(stage_table(args.run), wall_seconds(args.run))
     md += "\nMonitoring time per candidate, by configuration:\n\n" + monitor_costs_markdown(monitor_costs(args.run))
