@@ -19,6 +19,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from assurance.campaign import readouts
+
 __all__ = ["floor_markdown", "monitor_floor"]
 
 FRAME = ["perturbation", "severity", "key"]
@@ -52,13 +54,12 @@ def monitor_floor(images: pd.DataFrame, candidates: pd.DataFrame) -> pd.DataFram
 
 
 def _perfect_gain(frames: pd.DataFrame, candidates: pd.DataFrame) -> pd.Series:
-    """Per frame, ``H(c~)`` minus the lowest true hazard among its candidates and its default area."""
-    h_default = frames["h_default"].astype(float)
-    h_core = frames["h_top"].astype(float).fillna(h_default)
+    """Per frame, ``H(c~)`` (:func:`readouts.core_hazard`) minus the lowest true hazard among its candidates and its
+    default area."""
     if "true_hazard" not in candidates:
         return pd.Series(float("nan"), index=frames.index)
     lowest = candidates.groupby(FRAME)["true_hazard"].min().reindex(frames.index).astype(float)
-    return h_core - np.fmin(lowest, h_default)
+    return readouts.core_hazard(frames).astype(float) - np.fmin(lowest, frames["h_default"].astype(float))
 
 
 def floor_markdown(floor: pd.DataFrame) -> str:
