@@ -139,6 +139,10 @@ def test_monitor_tools_campaign_and_report_are_about_this_system(foreign, tmp_pa
     assert man["config"].get("gate"), "the campaign ran the system's frame gate"
     report = tmp_path / "report"
     main(["verify", str(run), "--out", str(report), "--system", str(system), "-k", "not rerun"])
+    from assurance import requirements as rq
+
+    rerun = rq.check_rerun(run, work_dir=tmp_path / "rerun")  # EL-R11 re-plans with the run's own classes
+    assert rerun.status == rq.PASS, rerun.message()
     main(["evidence", "--system", str(system), "--run", str(run), "--out", str(report), "--no-pdf", "--boot", "50"])
     from el.base.hashing import sha256_file
 

@@ -49,17 +49,11 @@ def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *,
     label set and class hierarchy the readouts are judged with (``assurance.campaign.label_pin.flown_labels``).
     """
     weights_record = _weights_record(config.weights, model)
-    files = sorted({t.sample.image_path for t in tasks} | {t.sample.label_path for t in tasks if t.sample.label_path}
-                   | _frame_files(tasks))
-    h = hashlib.sha256()
-    root = os.path.normpath(os.fspath(data))  # a [data] path holding ".." is spelled as the files found under it
-    for f in files:
-        h.update(f"{Path(os.path.relpath(os.path.normpath(f), root)).as_posix()}:{sha256_file(f)}\n".encode())
     return {
         "format": readouts.FORMAT_VERSION,
         "config": config.to_dict(),
         "data": {"path": str(Path(data).resolve()), "images": len({t.sample.key for t in tasks}),
-                 "sha256": h.hexdigest(), "splits": scene_splits(tasks), **_data_spec(data)},
+                 "sha256": data_sha256(data, tasks), "splits": scene_splits(tasks), **_data_spec(data)},
         "weights": weights_record,
         "monitor_models": monitor_models(config.monitors, labels_of(model)),
         "model_files": model_files(weights_record, config.monitors, labels_of(model)),
@@ -76,6 +70,18 @@ def manifest(data: str | Path, config: CampaignConfig, tasks: Sequence[Task], *,
                      "torch": torch_version(), "onnxruntime": _dist_version("onnxruntime"),
                      "platform": platform.platform(), "instruction_set": instruction_set()},
     }
+
+
+def data_sha256(data: str | Path, tasks: Sequence[Task]) -> str:
+    """The hash of a campaign's data: each image, label and per-frame file its tasks read, by its path relative to
+    the data folder (what a re-run compares, ``assurance.requirements.determinism``)."""
+    files = sorted({t.sample.image_path for t in tasks} | {t.sample.label_path for t in tasks if t.sample.label_path}
+                   | _frame_files(tasks))
+    h = hashlib.sha256()
+    root = os.path.normpath(os.fspath(data))  # a [data] path holding ".." is spelled as the files found under it
+    for f in files:
+        h.update(f"{Path(os.path.relpath(os.path.normpath(f), root)).as_posix()}:{sha256_file(f)}\n".encode())
+    return h.hexdigest()
 
 
 def instruction_set(cpuinfo: str | Path = "/proc/cpuinfo") -> str:

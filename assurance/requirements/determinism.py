@@ -16,8 +16,8 @@ import numpy as np
 from assurance.analysis.metrics import ScenarioMetrics, rows_to_frame
 from assurance.analysis.table import image_readouts, results_table
 from assurance.campaign import readouts
+from assurance.campaign.manifest import data_sha256
 from assurance.campaign.run import CampaignConfig, execute, monitor_models, plan
-from assurance.campaign.run import manifest as make_manifest
 from assurance.dataio.layouts import data_source
 from assurance.perturbations import TRAITS
 from assurance.requirements.records import FAIL, INSUFFICIENT, PASS, Evidence
@@ -138,7 +138,7 @@ def _replan(man: Mapping[str, Any], config: Any, own_model: bool) -> list[Any] |
                 f"{man.get('monitor_models') or 'none'}, now {models})")
     try:
         planned = plan(data, config)
-        data_sha = make_manifest(data, config, planned)["data"]["sha256"]
+        data_sha = data_sha256(data, planned)
     except Exception as exc:  # the data folder no longer reads as the campaign's data set
         return f"insufficient evidence: cannot re-plan the run on {data}: {exc}"
     if data_sha != man["data"]["sha256"]:
