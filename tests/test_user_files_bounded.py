@@ -174,6 +174,16 @@ def test_nan_and_infinity_in_a_system_file_are_refused_when_it_is_loaded(tmp_pat
     one_line(capsys, str(path), f"{key} = {value.lstrip('+')}: must be a finite number")
 
 
+@pytest.mark.parametrize("section, name, text", [("system", "name", "orchard \\u202eDELIAF\\u202c"),
+                                                 ("report", "title", "Evidence\\u200b report"),
+                                                 ("report", "organisation", "ACME\\u0007")])
+def test_invisible_characters_in_a_system_file_are_refused(tmp_path, capsys, section, name, text):
+    # a right-to-left override makes "DELIAF" display as "FAILED" on the report's first page
+    path = system_file(tmp_path, f'[{section}]\n{name} = "{text}"\n')
+    assert main(["land", "--system", str(path), str(tmp_path / "x.png")]) == 2
+    one_line(capsys, str(path), f"{section}.{name}: holds the invisible character U+")
+
+
 def test_a_nan_target_is_refused_before_a_campaign_starts(tmp_path, capsys):
     path = system_file(tmp_path, "[targets]\nunsafe_landing_bound = nan\n")
     out = tmp_path / "run"

@@ -273,6 +273,11 @@ def validate(doc: Mapping[str, Any], *, label: str) -> None:
     bad = userfiles.non_finite(dict(doc))
     if bad is not None:
         raise SystemFileError(f"{label}: {bad[0]} = {bad[1]}: must be a finite number")
+    hidden = userfiles.hidden_character(dict(doc))
+    if hidden is not None:
+        raise SystemFileError(f"{label}: {hidden[0]}: holds the invisible character {hidden[1]} (a control or "
+                              "format character, e.g. a right-to-left override, makes a text display other than "
+                              "it reads): remove it")
 
     validator = jsonschema.Draft202012Validator(schema())
     errors = sorted(validator.iter_errors(doc), key=lambda e: (list(map(str, e.absolute_path)), e.validator))

@@ -38,6 +38,7 @@ import math
 import os
 import re
 import stat
+import unicodedata
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, BinaryIO, TypeVar
@@ -439,3 +440,25 @@ def non_finite(doc: Any, prefix: str = "") -> tuple[str, float] | None:
         elif isinstance(node, list | tuple):
             stack.extend(reversed([(f"{key}[{i}]", v) for i, v in enumerate(node)]))
     return None
+
+
+def hidden_character(doc: Any, prefix: str = "") -> tuple[str, str] | None:
+    """The first (dotted key, ``U+XXXX``) of a parsed document whose keys or strings hold a control or format
+    character (Unicode categories Cc and Cf: a right-to-left override, a zero-width joiner; tab and line breaks
+    excepted), None when there is none. Such a character makes a text display other than it reads (``DELIAF``
+    shown as ``FAILED``), so a settings file whose texts reach a report may hold none."""
+    stack: list[tuple[str, Any]] = [(prefix, doc)]
+    while stack:
+        key, node = stack.pop()
+        texts = [node] if isinstance(node, str) else list(node) if isinstance(node, dict) else []
+        for text in texts:
+            bad = next((ch for ch in str(text) if ch not in "\t\n\r"
+                        and unicodedata.category(ch) in ("Cc", "Cf")), None)
+            if bad is not None:
+                return key or "(top level)", f"U+{ord(bad):04X}"
+        if isinstance(node, dict):
+            stack.extend(reversed([(f"{key}.{k}" if key else str(k), v) for k, v in node.items()]))
+        elif isinstance(node, list | tuple):
+            stack.extend(reversed([(f"{key}[{i}]", v) for i, v in enumerate(node)]))
+    return None
+
