@@ -155,5 +155,7 @@ def test_monitor_tools_campaign_and_report_are_about_this_system(foreign, tmp_pa
     assert "paved-area" in html and "roof" in html  # its forbidden classes, by name
     record = json.loads((report / "evidence.json").read_text())["data_record"]
     assert {"network training", "network validation"} <= {d["role"] for d in record["datasets"]}
+    fitted = [d for d in record["datasets"] if d["role"].startswith("learned monitor")]
+    assert len(fitted) == 2 and all(d["folder"] and not d["unread"] for d in fitted), fitted  # found from any folder
     shared = [c for c in record["disjoint"] if c["check"].startswith("no scene or image shared")]
     assert shared and all(c["result"] == "pass" for c in shared), shared  # its declared training data

@@ -478,6 +478,31 @@ def test_rerun_of_a_shard_reproduces_the_readouts(tiny_campaign, tmp_path):
     assert other.status == rq.FAIL
 
 
+def test_a_rerun_is_bounded_in_threads_and_time(tiny_campaign, tmp_path, monkeypatch):
+    """The manifest is the applicant's: a thread count it records is not obeyed beyond a bound, and a re-run that
+    does not end (a network looping without end) is stopped and reported, never a hang of the auditor's verify."""
+    import shutil
+    import time
+
+    from helpers import OracleSegmenter, sleep_a_minute
+
+    from assurance.requirements import determinism
+
+    run = tmp_path / "run"
+    shutil.copytree(tiny_campaign["run"], run)
+    man = json.loads((run / "manifest.json").read_text())
+    (run / "manifest.json").write_text(json.dumps({**man, "threads_per_worker": 3000}))
+    ev = rq.check_rerun(run, work_dir=tmp_path / "a", segmenter=OracleSegmenter(128))
+    assert ev.status == rq.INSUFFICIENT and "3000 threads per worker" in ev.message(), ev.message()
+
+    monkeypatch.setattr(determinism, "RERUN_SECONDS", 1.0)
+    monkeypatch.setattr(determinism, "execute", sleep_a_minute)
+    t = time.monotonic()
+    ev = rq.check_rerun(tiny_campaign["run"], work_dir=tmp_path / "b", segmenter=OracleSegmenter(128))
+    assert time.monotonic() - t < 30
+    assert ev.status == rq.INSUFFICIENT and "did not finish within 1 s" in ev.message(), ev.message()
+
+
 @pytest.mark.parametrize("edit,message", [
     (lambda d: d["requirements"][3].update(owner="me"), r"requirements\[3\] \(EL-R04\): unknown field\(s\) 'owner'"),
     (lambda d: d["requirements"][0]["verification"].update(kind="test"), r"field 'verification.kind'"),

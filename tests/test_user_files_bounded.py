@@ -184,6 +184,27 @@ def test_invisible_characters_in_a_system_file_are_refused(tmp_path, capsys, sec
     one_line(capsys, str(path), f"{section}.{name}: holds the invisible character U+")
 
 
+@pytest.mark.parametrize("manifest", ["[" * 100_000 + "]" * 100_000, "[]", '{"system": "x"}',
+                                      '{"system": {"default": false, "document": "x"}}'])
+def test_a_damaged_run_manifest_is_one_line_not_an_internal_error(tmp_path, capsys, manifest):
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "manifest.json").write_text(manifest)
+    for command in (["verify", str(run), "--out", str(tmp_path / "v")],
+                    ["evidence", "--run", str(run), "--out", str(tmp_path / "e"), "--no-pdf"]):
+        assert main(command) not in (0, 70)
+        one_line(capsys, str(run))
+
+
+def test_a_deeply_nested_envelope_is_refused_as_such(tmp_path):
+    from assurance.attest import AttestationError
+    from assurance.attest.dsse import read_envelope
+
+    (tmp_path / "campaign.dsse.json").write_text("[" * 100_000 + "]" * 100_000)
+    with pytest.raises(AttestationError, match="nested too deeply"):
+        read_envelope(tmp_path / "campaign.dsse.json")
+
+
 def test_a_nan_target_is_refused_before_a_campaign_starts(tmp_path, capsys):
     path = system_file(tmp_path, "[targets]\nunsafe_landing_bound = nan\n")
     out = tmp_path / "run"

@@ -13,6 +13,7 @@ from typing import Any
 
 from assurance.attest.dsse import AttestationError, sign_envelope, verify_envelope
 from assurance.attest.keys import SigningKey
+from el.base import userfiles
 
 STATEMENT_TYPE = "https://in-toto.io/Statement/v1"
 PREDICATE_BASE = "urn:uav-el-assurance:attestation:"
@@ -44,9 +45,11 @@ def open_statement(envelope: Mapping[str, Any], trusted: Mapping[str, Any], kind
     when the signature, the statement type or the predicate type is not what it must be."""
     payload, keyid = verify_envelope(envelope, trusted, where=where)
     try:
-        stmt = json.loads(payload)
+        stmt = userfiles.parse_bounded(json.loads, payload.decode("utf-8"), where=f"{where}: the signed payload")
     except (UnicodeDecodeError, json.JSONDecodeError):
         raise AttestationError(f"{where}: the signed payload is not JSON") from None
+    except userfiles.UserFileError as exc:
+        raise AttestationError(str(exc)) from None
     if not isinstance(stmt, dict) or stmt.get("_type") != STATEMENT_TYPE:
         raise AttestationError(f"{where}: not an in-toto Statement v1")
     if stmt.get("predicateType") != predicate_type(kind):

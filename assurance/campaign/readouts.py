@@ -293,7 +293,13 @@ def read_manifest(run_dir: str | Path) -> dict[str, Any]:
     path = Path(run_dir) / "manifest.json"
     if not path.is_file():
         raise RunError(f"{run_dir}: not a campaign run (no manifest.json)")
-    return json.loads(userfiles.read_text(path, what="run manifest", max_bytes=MAX_RUN_JSON_BYTES))
+    try:
+        man = userfiles.read_json(path, what="run manifest", max_bytes=MAX_RUN_JSON_BYTES)
+    except (userfiles.UserFileError, UnicodeDecodeError) as exc:
+        raise RunError(f"{path}: a damaged run manifest ({exc})") from None
+    if not isinstance(man, dict):
+        raise RunError(f"{path}: a damaged run manifest (not a JSON object)")
+    return man
 
 
 def core_hazard(images: pd.DataFrame) -> pd.Series:

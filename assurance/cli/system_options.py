@@ -7,7 +7,7 @@ from pathlib import Path
 
 from assurance.errors import CommandError, RunError
 from assurance.system import SystemFile, default_system
-from assurance.system.loader import system_from_record
+from assurance.system.loader import SystemFileError, system_from_record
 from assurance.system.system import System
 from el.base import userfiles
 
@@ -80,9 +80,12 @@ def _recorded_system(run: Path) -> SystemFile | None:
         recorded = read_manifest(run).get("system") or {}
     except (OSError, ValueError, RunError):
         return None  # the report's own run checks name what is wrong with the run
-    if recorded.get("default", True) or not recorded.get("document"):
-        return None
-    return system_from_record(recorded)
+    if not isinstance(recorded, dict) or recorded.get("default", True) or not recorded.get("document"):
+        return None  # what is not a record is no system: the report's run checks name the damage
+    try:
+        return system_from_record(recorded)
+    except SystemFileError as exc:
+        raise SystemFileError(f"{run / 'manifest.json'}: the system file it records: {exc}") from None
 
 
 def _say_judged(what: str) -> None:

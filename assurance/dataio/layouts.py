@@ -152,6 +152,13 @@ def as_spec(source: DataSource) -> DataSpec:
     return source if isinstance(source, DataSpec) else DataSpec(Path(source))
 
 
+def located(source: DataSource) -> dict[str, Any]:
+    """Where ``source`` is and how it is read, as a record: its spec with the absolute root (what a fitted file
+    keeps of its data, so the evidence report finds the frames again from any working directory)."""
+    spec = as_spec(source)
+    return {**spec.to_dict(), "path": spec.path.resolve().as_posix()}
+
+
 def data_source(record: Mapping[str, Any]) -> Path | DataSpec:
     """What a run read, from its manifest's ``data`` record: its spec when it recorded one, else its folder (also
     for a spec that does not read: the data's hash then tells whether the frames are the run's)."""

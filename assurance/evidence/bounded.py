@@ -69,12 +69,14 @@ def _child(work: Callable[[], Any], conn: Any, memory: int, seconds: float) -> N
 
 
 def run_bounded(work: Callable[[], Any], *, what: str, seconds: float = SECONDS,
-                memory_bytes: int = MEMORY_BYTES) -> Any:
-    """``work()`` run in a forked child under the limits; its result (picklable), or the exception it raised
-    (re-raised here), or :class:`BoundedRenderError` naming ``what`` when it ran out of time or memory or died."""
+                memory_bytes: int = MEMORY_BYTES, start: str = "fork") -> Any:
+    """``work()`` run in a child under the limits; its result (picklable), or the exception it raised (re-raised
+    here), or :class:`BoundedRenderError` naming ``what`` when it ran out of time or memory or died. ``start``:
+    ``fork`` (fast; ``work`` may be any callable) or ``spawn`` (a fresh interpreter, ``work`` picklable: for work
+    that runs thread pools, which a fork of a process already running them can deadlock)."""
     import multiprocessing
 
-    ctx = multiprocessing.get_context("fork")
+    ctx = multiprocessing.get_context(start)
     recv, send = ctx.Pipe(duplex=False)
     child = ctx.Process(target=_child, args=(work, send, memory_bytes, seconds), daemon=True)
     child.start()
@@ -86,7 +88,7 @@ def run_bounded(work: Callable[[], Any], *, what: str, seconds: float = SECONDS,
         try:
             kind, value = recv.recv()
         except (EOFError, OSError):
-            raise BoundedRenderError(f"{what}: refused: its rendering was stopped (the limits of {seconds:g} s "
+            raise BoundedRenderError(f"{what}: refused: it was stopped (the limits of {seconds:g} s "
                                      f"CPU time and {memory_bytes >> 20} MiB of memory)") from None
     finally:
         recv.close()

@@ -34,6 +34,7 @@ from assurance.evidence.sections import (
     floor_limitation,
     limitations,
     pick_examples,
+    required_beta,
     results_view,
     sample_size,
     scene_types,
@@ -245,11 +246,12 @@ def campaign_context(inp: Inputs) -> dict[str, Any]:
     picks, groups, n_unsafe = unsafe_picks(images) if len(ok) else ([], {}, 0)
     unsafe = decision_examples(scenes, images, candidates, picks, width=360, also=groups, compact=True)
     params = reg.parameters
+    need_beta = required_beta(man, images, readouts.input_size(images), params["pose_error"])
     return {
         "ident": ident, "synthetic": synthetic,
         "identity": identity_rows,
-        "domain": domain(man, reg, readouts.input_size(images), scene_text, len(keys), inp.facts),
-        "odd": odd_rows(man, images, reg.parameters["pose_error"]),
+        "domain": domain(man, reg, readouts.input_size(images), scene_text, len(keys), inp.facts, need_beta),
+        "odd": odd_rows(man, images, reg.parameters["pose_error"], need_beta),
         "frame_gates": frame_gate_view() if _ships_gate(man) else None,
         "gallery": perturbation_gallery(scenes, keys[0] if keys else None, gallery_perts),
         "gallery_key": keys[0] if keys else "",

@@ -24,9 +24,10 @@ PHYSICAL = {"height_m": (0.0, None), "pitch_deg": (0.0, 90.0)}
 """The physical range of a pose dimension (a pitch is at most 90 degrees below the horizon: straight down)."""
 
 
-def _margin(frames: Any, col: str, nominal: float, error: float, unit: str) -> str:
+def _margin(frames: Any, col: str, nominal: float, error: float, unit: str, short: str) -> str:
     """What the pose-error margin of beta covers: ``error`` around the nominal pose, or around each frame's own
-    pose when the frames were planned with their own (``pose_source``), clipped to the physical range."""
+    pose when the frames were planned with their own (``pose_source``), clipped to the physical range; ``short``:
+    why beta does not cover it (empty when it does)."""
     own = (frames[(frames["pose_source"].fillna("nominal") != "nominal") & frames[col].notna()]
            if frames is not None and "pose_source" in frames else None)
     floor, ceil = PHYSICAL[col]
@@ -35,12 +36,17 @@ def _margin(frames: Any, col: str, nominal: float, error: float, unit: str) -> s
     around = "each frame's own pose" if framed else f"the nominal {nominal:g}{unit}"
     a, b = max(floor, lo * (1 - error)), hi * (1 + error)
     b = min(ceil, b) if ceil is not None else b
-    return (f"; the safety coefficient beta absorbs {error:.0%} around {around} (the pose-error margin), i.e. "
-            f"{a:.3g} to {b:.3g}{unit}" + (" over the evaluated frames" if framed else ""))
+    span = f"{a:.3g} to {b:.3g}{unit}" + (" over the evaluated frames" if framed else "")
+    if short:
+        return f"; the pose-error margin of {error:.0%} around {around} ({span}) is NOT absorbed: {short}"
+    return f"; the safety coefficient beta absorbs {error:.0%} around {around} (the pose-error margin), i.e. {span}"
 
 
-def odd_rows(man: Mapping[str, Any], images: Any, pose_error: Mapping[str, float]) -> list[dict[str, str]]:
-    """One row per declared dimension (name, declared, evidence); empty when the run declares no domain."""
+def odd_rows(man: Mapping[str, Any], images: Any, pose_error: Mapping[str, float],
+             need: float | None = None) -> list[dict[str, str]]:
+    """One row per declared dimension (name, declared, evidence); empty when the run declares no domain. ``need``:
+    the beta the pose-error box requires (``sections.required_beta``; None: not known), so that a row says beta
+    absorbs the pose error only where it does."""
     record = man["config"].get("odd")
     if record is None:
         return []
@@ -49,12 +55,15 @@ def odd_rows(man: Mapping[str, Any], images: Any, pose_error: Mapping[str, float
     frames = ok.drop_duplicates(["perturbation", "severity", "key"]) if len(ok) else ok
     n = len(frames)
     nominal = man["config"]["core"]["pose"]
+    beta = ((man["config"]["core"].get("safety") or {}).get("beta"))
+    short = ("the beta it needs is not known (no evaluated image)" if need is None or beta is None else
+             f"beta = {float(beta):g} where {need:.3f} is required (EL-R14)" if need > float(beta) else "")
     rows = []
     for name, col, (lo, hi), unit, err in (("Height", "height_m", odd.height_m, " m", "height"),
                                            ("Pitch", "pitch_deg", odd.pitch_deg, " deg", "pitch")):
         seen = (f"{n} evaluated frames at {_span(frames[col], unit)} ({_within(frames[col], lo, hi)} inside)"
                 if n and col in frames else "no evaluated frame")
-        margin = _margin(frames if n and col in frames else None, col, nominal[col], pose_error[err], unit)
+        margin = _margin(frames if n and col in frames else None, col, nominal[col], pose_error[err], unit, short)
         rows.append({"name": name, "declared": f"{lo:g} to {hi:g}{unit}", "evidence": seen + margin})
     sizes = (sorted({(int(w), int(h)) for w, h in zip(frames["width"], frames["height"], strict=True)})
              if n else [])

@@ -202,8 +202,10 @@ def development_sets(card: dict[str, Any] | None, monitors: dict[str, dict[str, 
         for key, role, letter in (("training", f"{what} training", "N"), ("held_out", f"{what} selection", "O")):
             d = fitted.get(key) or {}
             if isinstance(d, dict) and d:
-                where = splits.get("train" if key == "training" else "held_out")
-                rows.append(_card_set(f"{where or '?'}", role, letter, {**d, "path": where},
+                split = "train" if key == "training" else "held_out"
+                where = splits.get(split)
+                spec = (splits.get("spec") or {}).get(split) if isinstance(splits.get("spec"), dict) else None
+                rows.append(_card_set(f"{where or '?'}", role, letter, {**d, "path": where, "spec": spec},
                                       card=_Card(name, package.get(name, False)), **common, balance=_fitted_balance(d)))
     split = (monitors.get("calibration.json") or {}).get("split") or {}
     if split:

@@ -46,14 +46,15 @@ def scene_types(scenes: Any, keys: Sequence[str]) -> tuple[str, bool]:
 
 
 def domain(man: Mapping[str, Any], registry: rq.Registry, size: tuple[int, int] | None, scene_text: str,
-           n_images: int, facts: Any) -> list[dict[str, str]]:
+           n_images: int, facts: Any, need: float | None) -> list[dict[str, str]]:
     """The operating domain the run covered: pose and where each frame's came from, camera, images, safety radius
-    and its margin, the stripes that may hold a landing, scenes (``facts``: ``assurance.evidence.facts``)."""
+    and its margin (``need``: the required beta, :func:`required_beta`), the stripes that may hold a landing,
+    scenes (``facts``: ``assurance.evidence.facts``)."""
     cfg = man["config"]
     core = cfg["core"]
     pose, safety = core["pose"], core["safety"]
     pe = registry.parameters["pose_error"]
-    need = rq.pose_margin(core, size, pe)[0]["required_beta"] if size is not None else None
+    where = " at the nominal pose and each frame's own" if getattr(facts, "own_poses", None) else ""
     rows = [
         *_pose_rows(pose, pe, facts),
         {"name": "Pose source", "value": facts.pose_source},
@@ -63,7 +64,8 @@ def domain(man: Mapping[str, Any], registry: rq.Registry, size: tuple[int, int] 
         {"name": "Safety radius", "value": f"R = {safety['radius_m']:g} m, beta = {safety['beta']:g}"},
         {"name": "Required beta",
          "value": (f"{need:.3f} for height and pitch each off by up to {pe['height']:.0%} / {pe['pitch']:.0%} "
-                   f"(el.geometry.camera.required_beta, worst case over the reachable rows): "
+                   f"(el.geometry.camera.required_beta, worst case over the reachable rows"
+                   f"{where}; EL-R14): "
                    f"{'covered' if need <= safety['beta'] else 'NOT covered'} by beta = {safety['beta']:g}")
          if need is not None else "n/a (no evaluated image)"},
         {"name": "Landing area", "value": f"{facts.stripes}; candidate discs wholly inside the image; mode "
@@ -76,6 +78,15 @@ def domain(man: Mapping[str, Any], registry: rq.Registry, size: tuple[int, int] 
                                    f"K-means seed {core['kmeans_seed']}"},
     ]
     return rows
+
+
+def required_beta(man: Mapping[str, Any], images: Any, size: tuple[int, int] | None,
+                  pose_error: Mapping[str, float]) -> float | None:
+    """The beta the pose-error box requires at the run's input size, worst over the nominal pose and each frame's
+    own (what EL-R14 compares beta with); None without an evaluated image."""
+    if size is None:
+        return None
+    return rq.worst_required_beta(man["config"]["core"], size, rq.own_poses(images), pose_error)
 
 
 def _pose_rows(pose: Mapping[str, Any], pe: Mapping[str, float], facts: Any) -> list[dict[str, str]]:

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from assurance.dataio.layouts import as_spec, iter_samples
+from assurance.dataio.layouts import iter_samples, located
 from assurance.fitting.gate_frames import in_domain, scene_images, training_frames, validation_frames
 from assurance.fitting.learned_monitor import split_sha256
 from assurance.paths import shown_path
@@ -98,8 +98,7 @@ def _split(path: str | Path, first: int, count: int | None) -> dict[str, Any]:
     """A split's record: as shown (``path``), where it is and how it was read (``spec``: the absolute root and the
     table's layout, split list, ...: the evidence report finds the frames there again), the scenes used, their hash."""
     samples = list(iter_samples(path, require_labels=False))[first:None if count is None else first + count]
-    spec = as_spec(path)
-    return {"path": shown_path(path), "spec": {**spec.to_dict(), "path": spec.path.resolve().as_posix()},
+    return {"path": shown_path(path), "spec": located(path),
             "scenes": [first, first + len(samples)], "sha256": split_sha256(samples, path, labels=False)}
 
 

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from assurance.campaign.truth import true_hazard
-from assurance.dataio.layouts import iter_samples, read_sample_labels
+from assurance.dataio.layouts import iter_samples, located, read_sample_labels
 from assurance.dataio.uavid import Sample, read_image
 from assurance.fitting.network_identity import network_record
 from assurance.paths import shown_path
@@ -228,11 +228,13 @@ def fit_learned_monitor(data: str | Path, segmenter: Any, *, val: str | Path | N
         train = collect_candidates(data, segmenter, samples=[s for i, s in enumerate(scenes) if i % 5 != 4],
                                    desc="training scenes", **kw)
         held_out = collect_candidates(data, segmenter, samples=held, desc="held-out scenes", **kw)
-        splits = {"train": shown_path(data), "held_out": f"every 5th scene of {shown_path(data)}"}
+        splits = {"train": shown_path(data), "held_out": f"every 5th scene of {shown_path(data)}",
+                  "spec": {"train": located(data), "held_out": located(data)}}
     else:
         train = collect_candidates(data, segmenter, samples=scenes, desc="training scenes", **kw)
         held_out = collect_candidates(val, segmenter, images=images, desc="held-out scenes", **kw)
-        splits = {"train": shown_path(data), "held_out": shown_path(val)}
+        splits = {"train": shown_path(data), "held_out": shown_path(val),
+                  "spec": {"train": located(data), "held_out": located(val)}}
     labels = labels_of(segmenter)
     body = fit_learned_body(train, held_out, selection=selection, features=features, weights=weights, splits=splits,
                             labels=labels)

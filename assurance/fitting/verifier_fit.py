@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from assurance.dataio.layouts import iter_samples
+from assurance.dataio.layouts import iter_samples, located
 from assurance.dataio.uavid import Sample, read_image
 from assurance.files import atomic_write_bytes
 from assurance.fitting.learned_monitor import check_recall, recall_threshold, split_sha256
@@ -247,7 +247,7 @@ def fit_verifier(data: str | Path, val: str | Path, segmenter: Any, out: Path, *
         p_learned = learned_scores(held_samples, segmenter, learned, core=core)
         fusion = choose_fusion(held.unsafe[sel], p_held, p_learned, learned_sha256=learned.model_sha256,
                                recall=recall)
-    splits = {"train": str(data), "held_out": str(val),
+    splits = {"train": str(data), "held_out": str(val), "spec": {"train": located(data), "held_out": located(val)},
               "train_sha256": split_sha256(train_samples, data), "held_out_sha256": split_sha256(held_samples, val),
               "train_images": len(train_samples), "held_out_images": len(held_samples)}
     body = verifier_body(result, cfg, train, held,

@@ -86,12 +86,7 @@ def pose_error_margin(ctx: CheckContext) -> Evidence:
         return Evidence("pose-error margin of beta", INSUFFICIENT,
                         "insufficient evidence: no evaluated image gives the input size")
     p = ctx.parameters
-    images = ctx.images
-    poses: list[tuple[float, float]] = []
-    if images is not None and {"height_m", "pitch_deg", "pose_source"} <= set(images.columns):
-        framed = images[(images["pose_source"] != "nominal") & images["height_m"].notna()]
-        poses = sorted(set(zip(framed["height_m"], framed["pitch_deg"], strict=True)))
-    return ck.check_pose_margins(ctx.manifest["config"]["core"], size, poses, p["pose_error"],
+    return ck.check_pose_margins(ctx.manifest["config"]["core"], size, ck.own_poses(ctx.images), p["pose_error"],
                                  {"radius_m": p["radius_m"], "beta": p["beta"]})
 
 

@@ -368,6 +368,23 @@ def check_pose_margin(core: Any, size: tuple[int, int], pose_error: Mapping[str,
     return Evidence("pose-error margin of beta", PASS if beta >= need else FAIL, verdict, (row,), tuple(row))
 
 
+def own_poses(images: Any) -> list[tuple[float, float]]:
+    """The distinct (height_m, pitch_deg) of the frames a run planned at their own pose (``pose_source`` not
+    nominal), from its images readouts; empty for a run at the nominal pose."""
+    if images is None or not {"height_m", "pitch_deg", "pose_source"} <= set(images.columns):
+        return []
+    framed = images[(images["pose_source"] != "nominal") & images["height_m"].notna()]
+    return sorted(set(zip(framed["height_m"], framed["pitch_deg"], strict=True)))
+
+
+def worst_required_beta(core: Any, size: tuple[int, int], poses: Any, pose_error: Mapping[str, float]) -> float:
+    """The largest beta the pose-error box requires over the nominal pose and each of ``poses`` (what EL-R14,
+    :func:`check_pose_margins`, compares beta with)."""
+    base = dict(core) if isinstance(core, Mapping) else core.to_dict()
+    framed = [{**base, "pose": {"height_m": float(h), "pitch_deg": float(p)}} for h, p in poses]
+    return max(pose_margin(c, size, pose_error)[1] for c in [base, *framed])
+
+
 def check_pose_margins(core: Any, size: tuple[int, int], poses: Any, pose_error: Mapping[str, float],
                        safety: Mapping[str, float] | None = None) -> Evidence:
     """EL-R14 over every pose a run planned at: the nominal one and each frame's own (``poses``: distinct

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -19,6 +20,7 @@ from assurance.campaign import readouts
 from assurance.campaign.manifest import data_sha256
 from assurance.campaign.run import CampaignConfig, execute, monitor_models, plan
 from assurance.dataio.layouts import data_source
+from assurance.evidence.bounded import BoundedRenderError, run_bounded
 from assurance.perturbations import TRAITS
 from assurance.requirements.records import FAIL, INSUFFICIENT, PASS, Evidence
 from assurance.system.model import load_model_spec
@@ -27,6 +29,14 @@ from el.geometry.config import CoreConfig
 from el.segmentation.contract import weights_sha256_of
 from el.segmentation.factory import load_model
 from el.segmentation.onnx_engine import file_identity
+
+MAX_THREADS = 256
+"""The most threads per worker a run may record: the re-run starts that many (a manifest's count is the applicant's)."""
+RERUN_SECONDS = 900.0
+"""Wall and CPU seconds one re-run shard may take: a release shard takes seconds; a network that loops without end
+is stopped, the re-run's evidence insufficient."""
+RERUN_MEMORY = 16 << 30
+"""Address space one re-run shard may add to what the process holds (16 GiB)."""
 
 TIMING_COLUMNS: frozenset[str] = frozenset({
     "read_s", "perturb_s", "segmentation_s", "candidates_s", "monitoring_s", "total_s", "overhead_s", "seconds",
@@ -192,10 +202,19 @@ def check_rerun(run: str | Path, *, shards: int = 1, work_dir: str | Path, threa
     work = Path(work_dir)
     (work / readouts.SHARDS).mkdir(parents=True, exist_ok=True)
     rows = []
-    threads = threads or man.get("threads_per_worker") or os.cpu_count() or 1
+    recorded = man.get("threads_per_worker")
+    if recorded is not None and not (isinstance(recorded, int) and 1 <= recorded <= MAX_THREADS):
+        return Evidence(_RERUN, INSUFFICIENT, f"insufficient evidence: the run records {recorded!r} threads per "
+                        f"worker: not a count from 1 to {MAX_THREADS}")
+    threads = threads or recorded or os.cpu_count() or 1
     max_rows = readouts.table_caps(man)[0]  # each table read bounded (a re-sealed shard of 100 M rows)
     for shard in pick:  # the campaign's own thread count: float sums depend on it
-        execute(tasks[shard], config, str(work), threads, segmenter)
+        try:  # the applicant's network runs here: in a child with a time and a memory limit, never a hang
+            run_bounded(partial(execute, tasks[shard], config, str(work), threads, segmenter),
+                        what=f"the re-run of shard {shard}", seconds=RERUN_SECONDS, memory_bytes=RERUN_MEMORY,
+                        start="spawn")  # a fork of a process that ran torch or ONNX Runtime threads can deadlock
+        except BoundedRenderError as exc:
+            return Evidence(_RERUN, INSUFFICIENT, f"insufficient evidence: {exc}")
         for table in readouts.TABLES:
             a = readouts.read_table_file(run / readouts.SHARDS / shard / f"{table}.parquet", max_rows=max_rows,
                                          within=run)

@@ -362,7 +362,10 @@ def system_from_record(record: Mapping[str, Any]) -> SystemFile:
         return default_system()
     path = Path(str(record.get("path") or "recorded-system.toml"))
     label = f"{path} (as recorded in the run)"
-    doc = dict(record.get("document") or {})
+    document = record.get("document") or {}
+    if not isinstance(document, Mapping):
+        raise SystemFileError(f"{label}: the recorded document is not a table of settings")
+    doc = dict(document)
     validate(doc, label=label)
     default = parse_system(_default_text(), label="the embedded default system")
     return SystemFile(path, str(record.get("sha256") or ""), doc, merge(default, doc), path.parent)
