@@ -139,6 +139,10 @@ def test_evidence_without_system_says_when_the_runs_file_has_changed(tmp_path, m
     cli.main(args)
     out = capsys.readouterr().out
     assert "(the run's own)" in out and f"note: {system} has changed since the run" in out, out
+    monkeypatch.chdir(system.parent)  # the edited file is uav-el.toml here: the run's recorded copy is still judged
+    cli.main(args)
+    out = capsys.readouterr().out
+    assert "(the run's own)" in out and "in the working directory is not the run's system file" in out, out
 
 
 def test_an_acceptance_names_a_class_as_class_names_are_compared():

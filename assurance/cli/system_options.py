@@ -39,22 +39,31 @@ def assessed(args: argparse.Namespace) -> System:
 
 
 def run_system(args: argparse.Namespace, run: Path) -> SystemFile:
-    """The system file a command about a run (``evidence``, ``verify``) judges: the one given (or found in the
-    working directory), else the run's own as its signed manifest records it (the document itself: no file at the
-    path the manifest names is read), else the embedded default. Says which one it judges, and why (stdout)."""
+    """The system file a command about a run (``evidence``, ``verify``, ``in-service``) judges: the one given with
+    ``--system``; else the run's own as its signed manifest records it (the document itself: no file at the path
+    the manifest names is read), also over a ``uav-el.toml`` found in the working directory (a note says when that
+    file is not the run's); else the file found there; else the embedded default. Says which one it judges, and
+    why (stdout)."""
     system = system_of(args)
-    if not system.default:
-        where = "given" if getattr(args, "system", None) else "found in the working directory"
-        _say_judged(f"{system.label} ({where})")
+    if not system.default and getattr(args, "system", None):
+        _say_judged(f"{system.label} (given)")
         return system
     found = _recorded_system(run)
     if found is None:
-        _say_judged("the embedded default (the shipped system; the run records no other)")
+        if not system.default:
+            _say_judged(f"{system.label} (found in the working directory; the run records no system file)")
+        else:
+            _say_judged("the embedded default (the shipped system; the run records no other)")
         return system
     _say_judged(f"{found.label} (the run's own)")
-    changed = _changed_since(found)
-    if changed:
-        print(changed)
+    if not system.default and system.sha256 != found.sha256:
+        print(f"note: {system.label} in the working directory is not the run's system file (SHA-256 "
+              f"{system.sha256[:12]}, the run's {found.sha256[:12]}): the run's recorded copy is judged; a new "
+              "campaign with that file makes the evidence of it")
+    else:
+        changed = _changed_since(found)
+        if changed:
+            print(changed)
     return found
 
 

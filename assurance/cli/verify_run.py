@@ -43,12 +43,12 @@ def pytest_args(args: argparse.Namespace, out: Path) -> list[str]:
 
 
 def _judge_the_runs_system(args: argparse.Namespace, run: Path) -> None:
-    """Without a system file given (or found in the working directory), the system judged is the run's own, as its
-    signed manifest records it (``evidence`` takes the same): its waivers are the ones the results are signed with,
-    never the shipped system's. Says which system it judges (stderr)."""
+    """Without a system file given, the system judged is the run's own, as its signed manifest records it (also over
+    a ``uav-el.toml`` in the working directory; ``evidence`` takes the same): its waivers are the ones the results
+    are signed with, never the shipped system's. Says which system it judges."""
     given = getattr(args, "system_file", None)
     system = run_system(args, run)  # says which system it judges
-    if (given is None or given.default) and not system.default:
+    if system is not given:
         args.system_file, args.system_from_run = system, True
 
 
