@@ -106,6 +106,9 @@ def test_a_required_perturbation_outside_the_domain_runs_marked_outside(tmp_path
     lines = outside_lines(domain_record(config.perturbations, config.scenarios(), config.odd), plan, "x.toml")
     assert len(lines) == 1 and lines[0].startswith("fog is outside the declared operating domain of x.toml")
     assert "required by [targets] required_perturbations" in lines[0]
+    basis = outside_lines(domain_record(config.perturbations, config.scenarios(), config.odd), plan, "x.toml",
+                          own_required=False)  # a file that sets none is held to the registry's: it says so
+    assert "required by the certification basis" in basis[0] and "[targets]" not in basis[0]
     assert fit_levels(required) == (("none", 3), ("gaussian_noise", 3))  # the gate and card: inside ones only
     assert system_plan(system) != plan
 

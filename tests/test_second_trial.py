@@ -188,3 +188,23 @@ def test_fit_gate_warns_when_its_quantile_is_the_validation_maximum():
 
     assert "at least 334 frames" in too_few_frames(0.997, 8)
     assert too_few_frames(0.997, 334) is None and too_few_frames(0.9, 10) is None
+
+
+def test_the_gallery_shows_each_perturbation_at_a_severity_it_ran():
+    """A system declaring fog up to 2 ran fog at severity 2: the gallery said 'fog, severity 3'."""
+    import numpy as np
+
+    from assurance.evidence.gallery import perturbation_gallery
+
+    class Frames:
+        samples = {"seq00/000000": None}
+        asked: list[tuple[str, int]] = []
+
+        def image(self, key, name, severity):
+            self.asked.append((name, severity))
+            return np.zeros((8, 8, 3), np.uint8)
+
+    frames = Frames()
+    shown = perturbation_gallery(frames, "seq00/000000", [("none", 3), ("fog", 2), ("fog", 1), ("motion_blur", 3)])
+    assert [g["caption"] for g in shown] == ["none (unperturbed)", "fog, severity 2", "motion_blur, severity 3"]
+    assert frames.asked == [("none", 3), ("fog", 2), ("motion_blur", 3)]

@@ -133,17 +133,21 @@ def domain_record(perturbations: Sequence[str], scenarios: Iterable[tuple[str, i
     return out
 
 
-def outside_lines(record: Mapping[str, Mapping[str, Any]] | None, plan: Sequence[Planned], where: str) -> list[str]:
+def outside_lines(record: Mapping[str, Mapping[str, Any]] | None, plan: Sequence[Planned], where: str, *,
+                  own_required: bool = True) -> list[str]:
     """One line per perturbation a campaign runs outside the declared domain of ``where`` (the system file): why it
-    runs (asked for, or required) and that the run marks it."""
+    runs (asked for, or required: by the file's ``[targets] required_perturbations`` when ``own_required``, else
+    by the packaged registry's) and that the run marks it."""
     needed = {p.name for p in plan if p.required}
+    by = ("[targets] required_perturbations" if own_required else
+          "the certification basis (the packaged registry's required_perturbations; the system file sets none)")
     out = []
     for name, rec in (record or {}).items():
         if rec["inside"]:
             continue
         why = ("not declared in its [odd] perturbations" if rec["declared_max"] is None else
                f"severity {max(rec['severities'])} is above its declared maximum {rec['declared_max']}")
-        runs = "required by [targets] required_perturbations" if name in needed else "asked for"
+        runs = f"required by {by}" if name in needed else "asked for"
         out.append(f"{name} is outside the declared operating domain of {where} ({why}): it runs ({runs}), and the "
                    "run marks it outside")
     return out

@@ -86,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
         poses=args.poses or system.poses, odd=system.odd, gate=GateFile.of(gate),
     )
     for line in outside_lines(domain_record(config.perturbations, config.scenarios(), config.odd), plan,
-                              system.label):
+                              system.label, own_required=system.file.required_perturbations is not None):
         print(f"uav-el campaign: {line}", file=sys.stderr)
     _say_scenes(data, config.images, args)
     try:

@@ -36,6 +36,7 @@ from assurance.evidence.sections import (
     pick_examples,
     required_beta,
     results_view,
+    run_scenarios,
     sample_size,
     scene_types,
     ub_label,
@@ -242,7 +243,6 @@ def campaign_context(inp: Inputs) -> dict[str, Any]:
     ok = images[images["fault"].fillna("") == ""] if len(images) else images
     keys = sorted(set(ok["key"])) if len(ok) else []
     scene_text, synthetic = scene_types(scenes, keys)
-    gallery_perts = list(man["config"]["perturbations"])  # only what the run perturbed
     picks, groups, n_unsafe = unsafe_picks(images) if len(ok) else ([], {}, 0)
     unsafe = decision_examples(scenes, images, candidates, picks, width=360, also=groups, compact=True)
     params = reg.parameters
@@ -253,7 +253,7 @@ def campaign_context(inp: Inputs) -> dict[str, Any]:
         "domain": domain(man, reg, readouts.input_size(images), scene_text, len(keys), inp.facts, need_beta),
         "odd": odd_rows(man, images, reg.parameters["pose_error"], need_beta),
         "frame_gates": frame_gate_view() if _ships_gate(man) else None,
-        "gallery": perturbation_gallery(scenes, keys[0] if keys else None, gallery_perts),
+        "gallery": perturbation_gallery(scenes, keys[0] if keys else None, run_scenarios(man["config"])),
         "gallery_key": keys[0] if keys else "",
         "safe_strips": _safe_strips(inp, scenes, keys),
         "examples": (decision_examples(scenes, images, candidates, pick_examples(images, inp.deployed))

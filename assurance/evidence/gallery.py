@@ -73,18 +73,23 @@ class Scenes:
         return hd
 
 
-def perturbation_gallery(scenes: Scenes, key: str | None, perturbations: Sequence[str], *,
+def perturbation_gallery(scenes: Scenes, key: str | None, scenarios: Sequence[tuple[str, int]], *,
                          width: int = 300) -> list[dict[str, str]]:
-    """One test image under each perturbation at severity 3: [{name, uri, caption}]."""
+    """One test image under each perturbation the run evaluated (``scenarios``: its (perturbation, severity)
+    pairs), at severity 3 where it ran at 3, else at the highest severity it ran at: [{name, uri, caption}]."""
     if key is None or key not in scenes.samples:
         return []
+    ran: dict[str, set[int]] = {}
+    for name, sev in scenarios:
+        ran.setdefault(str(name), set()).add(int(sev))
     out = []
-    for name in perturbations:
-        hd = scenes.image(key, name, GALLERY_SEVERITY)
+    for name, sevs in ran.items():
+        sev = GALLERY_SEVERITY if GALLERY_SEVERITY in sevs else max(sevs)
+        hd = scenes.image(key, name, sev)
         if hd is None:
             continue
         out.append({"name": name, "uri": jpeg_uri(hd, width),
-                    "caption": f"{name}, severity {GALLERY_SEVERITY}" if name != "none" else "none (unperturbed)"})
+                    "caption": f"{name}, severity {sev}" if name != "none" else "none (unperturbed)"})
     return out
 
 
