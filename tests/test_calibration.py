@@ -154,3 +154,24 @@ def test_campaign_with_the_card_and_the_el_r16_check(card, val, tmp_path):
     strict.body["miss_rate"] = 0.0
     assert check_calibrated_miss_rate(cands, strict).status == ("fail" if ev.rows[0]["accepted"] else "pass")
     assert check_calibrated_miss_rate(cands.drop(columns=["score"]).iloc[:0], c).status == "insufficient"
+
+
+@pytest.mark.parametrize("given, expected", [([], 0.9), (["--confidence", "0.99"], 0.99)])
+def test_calibrate_takes_the_confidence_of_the_system_files_targets(tmp_path, monkeypatch, given, expected):
+    """A system file's [targets] confidence is the card's unless --confidence says otherwise (it was 0.95 always)."""
+    from assurance import cli
+    from assurance.fitting import calibration
+
+    seen = {}
+
+    def capture(data, monitor, *, rule, **kwargs):
+        seen["confidence"] = rule.confidence
+        raise ValueError("stop here")
+
+    monkeypatch.setattr(calibration, "calibrate_on_data", capture)
+    (tmp_path / "val").mkdir()
+    system = tmp_path / "uav-el.toml"
+    system.write_text('format = "uav-el-system/1"\n[targets]\nconfidence = 0.9\n')
+    assert cli.main(["calibrate", "--system", str(system), "--data", str(tmp_path / "val"), "--monitor", "msp",
+                     "--out", str(tmp_path / "card.json"), *given]) == 2
+    assert seen["confidence"] == expected

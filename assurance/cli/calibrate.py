@@ -14,6 +14,10 @@ HELP = ("calibrate a monitor's threshold on held-out scenes: P(accept an unsafe 
         "with --confidence (order statistic + Clopper-Pearson)")
 
 
+DEFAULT_CONFIDENCE = 0.95
+"""The card's confidence when neither ``--confidence`` nor the system file's ``[targets] confidence`` sets one."""
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--data", help="labelled calibration scenes, a folder of a known layout (uavid, semantic-drone, "
                                   "aeroscapes: detected; e.g. data/val); default: the system file's [data] val (a "
@@ -22,7 +26,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--monitor", metavar="SPEC", help="monitor to calibrate, e.g. lhd, msp (default: the system "
                                                     "file's [monitor] spec)")
     p.add_argument("--miss-rate", type=float, default=0.05, help="largest P(accept an unsafe candidate) (0.05)")
-    p.add_argument("--confidence", type=float, default=0.95, help="confidence of the bound (0.95)")
+    p.add_argument("--confidence", type=float, help="confidence of the bound (default: the system file's [targets] "
+                                                    f"confidence, else {DEFAULT_CONFIDENCE})")
     p.add_argument("--criterion", default="guarantee", choices=("guarantee", "f1", "g-mean", "tnr-at-recall"),
                    help="how the threshold is chosen (recorded in the card): guarantee (default: the miss-rate bound "
                         "above), or the monitor benchmark's f1, g-mean, tnr-at-recall (largest threshold with recall "
@@ -49,7 +54,9 @@ def run(args: argparse.Namespace) -> int:
     if monitor is None:
         raise CommandError("give the monitor to calibrate with --monitor SPEC (or [monitor] spec in the system file)")
     try:
-        rule = ThresholdRule(miss_rate=args.miss_rate, confidence=args.confidence, criterion=args.criterion,
+        confidence = args.confidence if args.confidence is not None else \
+            float(system.file.targets().get("confidence", DEFAULT_CONFIDENCE))
+        rule = ThresholdRule(miss_rate=args.miss_rate, confidence=confidence, criterion=args.criterion,
                              recall=args.recall)
         scenes = CalibrationScenes(images=args.images, core=system.core,
                                    perturbations=fit_levels(system))  # its own [odd] perturbations; None: clean
