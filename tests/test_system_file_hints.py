@@ -35,6 +35,13 @@ def test_other_errors_get_no_hint(text):
     assert "inline table" not in str(err.value)
 
 
+def test_a_key_set_twice_is_named():
+    with pytest.raises(SystemFileError) as err:
+        parse_system('format = "uav-el-system/1"\n[odd]\nheight_m = [10, 60]\nheight_m = [10, 70]\n',
+                     label="uav-el.toml")
+    assert str(err.value).endswith(": odd.height_m is set twice (once is allowed)"), str(err.value)
+
+
 def test_hint_names_the_table_from_its_header_and_key():
     text = "[odd]\nperturbations = { fog = 3 # a comment {\n"
     assert toml_hint(text, "Unclosed inline table (at line 2, column 20)").endswith(

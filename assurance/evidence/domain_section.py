@@ -54,6 +54,10 @@ def odd_rows(man: Mapping[str, Any], images: Any, pose_error: Mapping[str, float
     ok = images[images["fault"].fillna("") == ""] if len(images) else images
     frames = ok.drop_duplicates(["perturbation", "severity", "key"]) if len(ok) else ok
     n = len(frames)
+    images_n = frames["key"].nunique() if n else 0
+    scenarios_n = len(frames.drop_duplicates(["perturbation", "severity"])) if n else 0
+    counted = (f" ({images_n} image{'s' if images_n != 1 else ''} x {scenarios_n} perturbation scenarios)"
+               if scenarios_n > 1 else "")
     nominal = man["config"]["core"]["pose"]
     beta = ((man["config"]["core"].get("safety") or {}).get("beta"))
     short = ("the beta it needs is not known (no evaluated image)" if need is None or beta is None else
@@ -61,8 +65,8 @@ def odd_rows(man: Mapping[str, Any], images: Any, pose_error: Mapping[str, float
     rows = []
     for name, col, (lo, hi), unit, err in (("Height", "height_m", odd.height_m, " m", "height"),
                                            ("Pitch", "pitch_deg", odd.pitch_deg, " deg", "pitch")):
-        seen = (f"{n} evaluated frames at {_span(frames[col], unit)} ({_within(frames[col], lo, hi)} inside)"
-                if n and col in frames else "no evaluated frame")
+        seen = (f"{n} evaluated frames{counted} at {_span(frames[col], unit)} ({_within(frames[col], lo, hi)} "
+                "inside)" if n and col in frames else "no evaluated frame")
         margin = _margin(frames if n and col in frames else None, col, nominal[col], pose_error[err], unit, short)
         rows.append({"name": name, "declared": f"{lo:g} to {hi:g}{unit}", "evidence": seen + margin})
     sizes = (sorted({(int(w), int(h)) for w, h in zip(frames["width"], frames["height"], strict=True)})

@@ -243,19 +243,22 @@ _HEADER = re.compile(r"^\s*\[\s*([^\[\]]+?)\s*\]\s*(?:#.*)?$")
 
 
 def toml_hint(text: str, message: str) -> str:
-    """A hint for ``tomllib``'s error ``message`` on ``text`` when its line opens an inline table it does not close
-    ("Invalid initial character for a key part" says nothing of why): TOML's ``{ ... }`` must fit on one line.
-    Empty for any other error."""
+    """A hint for ``tomllib``'s error ``message`` on ``text``: the key set twice ("Cannot overwrite a value" names
+    none), or a line that opens an inline table it does not close ("Invalid initial character for a key part" says
+    nothing of why: TOML's ``{ ... }`` must fit on one line). Empty for any other error."""
     at = _AT_LINE.search(message)
     lines = text.splitlines()
     if at is None or not 1 <= int(at.group(1)) <= len(lines):
         return ""
     n = int(at.group(1))
     code = _STRING.sub('""', lines[n - 1]).split("#", 1)[0]
-    if code.count("{") <= code.count("}"):
-        return ""
     key = code.split("=", 1)[0].strip() if "=" in code else ""
     header = next((m.group(1) for line in reversed(lines[:n - 1]) if (m := _HEADER.match(line))), "")
+    if message.startswith("Cannot overwrite a value") and (key or _HEADER.match(code)):
+        dotted = ".".join(part for part in (header, key) if part) if key else _HEADER.match(code).group(1)
+        return f": {dotted} is set twice (once is allowed)"
+    if code.count("{") <= code.count("}"):
+        return ""
     table = ".".join(part for part in (header, key) if part) or "section.sub"
     return f": an inline table {{ ... }} must fit on one line; use a [{table}] table instead"
 
