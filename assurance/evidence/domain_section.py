@@ -84,11 +84,11 @@ def odd_rows(man: Mapping[str, Any], images: Any, pose_error: Mapping[str, float
         sev = sorted(s for p, s in evaluated if p == pert)
         state = "covered" if level in sev else "NOT evaluated at the declared maximum"
         rows.append({"name": f"Perturbation {pert}", "declared": f"up to severity {level}",
-                     "evidence": f"evaluated at severit{'y' if len(sev) == 1 else 'ies'} "
-                                 f"{', '.join(map(str, sev)) or 'none'}: {state}"})
+                     "evidence": (f"evaluated at severit{'y' if len(sev) == 1 else 'ies'} {', '.join(map(str, sev))}: "
+                                  f"{state}") if sev else "not evaluated by this run"})
     beyond = sorted({f"{p} {s}" for p, s in evaluated if not odd.covers(p, s)})
     if beyond:
-        rows.append({"name": "Evaluated beyond", "declared": "outside the declared perturbations",
+        rows.append({"name": "Evaluated outside the domain", "declared": "not among the declared perturbations",
                      "evidence": ", ".join(beyond) + ": evaluated by the campaign, not covered by the declaration; "
                                  f"marked {OUTSIDE_MARK} in the results"})
     out = frames[frames["reason"].astype(str).str.startswith(OUTSIDE_ODD)] if n else frames
