@@ -190,7 +190,7 @@ def test_flight_code_never_imports_the_harness() -> None:
 
 
 LAYERS = (
-    ("base", ("(root)", "errors", "files", "paths", "progress", "workers", "code_identity", "perturbations",
+    ("base", ("(root)", "errors", "files", "paths", "progress", "workers", "bounded", "code_identity", "perturbations",
               "attest")),
     ("dataio", ("dataio",)),
     ("scenes", ("scenes",)),

@@ -120,7 +120,7 @@ def test_the_system_files_templates_are_used_only_when_asked(tiny_campaign, tmp_
     ('{% include "auditor_issre.html.j2" %}', "recurses"),
 ])
 def test_an_endless_or_greedy_template_is_refused_naming_it(body, said, tiny_campaign, tmp_path, monkeypatch, capsys):
-    from assurance.evidence import bounded
+    from assurance import bounded
 
     monkeypatch.setattr(bounded, "SECONDS", 4.0)
     mine = _folder(tmp_path, "auditor_issre.html.j2", f"<section id='issre'>{body}</section>")

@@ -100,7 +100,8 @@ def read_envelope(path: str | Path) -> dict:
     if p.stat().st_size > MAX_ENVELOPE_BYTES:
         raise AttestationError(f"{p}: {p.stat().st_size} bytes, more than an attestation may hold")
     try:  # bounded: a link to /proc (a "regular file" of size 0) or a file that grows is refused
-        data = userfiles.read_json(p, what="signed attestation", max_bytes=MAX_ENVELOPE_BYTES)
+        text = userfiles.read_text(p, what="signed attestation", max_bytes=MAX_ENVELOPE_BYTES)
+        data = userfiles.parse_bounded(json.loads, text, where=str(p))
     except userfiles.UserFileError as exc:
         raise AttestationError(str(exc)) from None
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:

@@ -61,7 +61,7 @@ def odd_rows(man: Mapping[str, Any], images: Any, pose_error: Mapping[str, float
     nominal = man["config"]["core"]["pose"]
     beta = ((man["config"]["core"].get("safety") or {}).get("beta"))
     short = ("the beta it needs is not known (no evaluated image)" if need is None or beta is None else
-             f"beta = {float(beta):g} where {need:.3f} is required (EL-R14)" if need > float(beta) else "")
+             f"beta = {float(beta):g} where {need:.3f} is required" if need > float(beta) else "")
     rows = []
     for name, col, (lo, hi), unit, err in (("Height", "height_m", odd.height_m, " m", "height"),
                                            ("Pitch", "pitch_deg", odd.pitch_deg, " deg", "pitch")):

@@ -7,7 +7,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from assurance.evidence import bounded as limits
+from assurance import bounded as limits
 from assurance.evidence.linking import CSP, SCRIPT, link_ids, script_hash
 from assurance.evidence.navigation import req_anchor
 from assurance.evidence.outline import SECTIONS, outline
@@ -187,7 +187,7 @@ def _unused_files(folder: Path) -> list[str]:
 
 def _render_supplied(folder: Path, name: str, context: Mapping[str, Any], seconds: float | None,
                      own_ids: Sequence[str]) -> tuple[str, dict[str, str]]:
-    """One supplied template rendered and cleaned in a bounded child (:mod:`assurance.evidence.bounded`;
+    """One supplied template rendered and cleaned in a bounded child (:mod:`assurance.bounded`;
     :func:`assurance.evidence.sanitise.bounded_clean`, ``own_ids`` its sections' anchors): its clean markup and
     the files it read (path relative to the folder -> SHA-256)."""
     def work() -> tuple[str, dict[str, str]]:

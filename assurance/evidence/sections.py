@@ -65,7 +65,7 @@ def domain(man: Mapping[str, Any], registry: rq.Registry, size: tuple[int, int] 
         {"name": "Required beta",
          "value": (f"{need:.3f} for height and pitch each off by up to {pe['height']:.0%} / {pe['pitch']:.0%} "
                    f"(el.geometry.camera.required_beta, worst case over the reachable rows"
-                   f"{where}; EL-R14): "
+                   f"{where}): "
                    f"{'covered' if need <= safety['beta'] else 'NOT covered'} by beta = {safety['beta']:g}")
          if need is not None else "n/a (no evaluated image)"},
         {"name": "Landing area", "value": f"{facts.stripes}; candidate discs wholly inside the image; mode "
@@ -83,7 +83,7 @@ def domain(man: Mapping[str, Any], registry: rq.Registry, size: tuple[int, int] 
 def required_beta(man: Mapping[str, Any], images: Any, size: tuple[int, int] | None,
                   pose_error: Mapping[str, float]) -> float | None:
     """The beta the pose-error box requires at the run's input size, worst over the nominal pose and each frame's
-    own (what EL-R14 compares beta with); None without an evaluated image."""
+    own (what the pose-margin requirement compares beta with); None without an evaluated image."""
     if size is None:
         return None
     return rq.worst_required_beta(man["config"]["core"], size, rq.own_poses(images), pose_error)

@@ -16,11 +16,11 @@ import numpy as np
 
 from assurance.analysis.metrics import ScenarioMetrics, rows_to_frame
 from assurance.analysis.table import image_readouts, results_table
+from assurance.bounded import BoundedRenderError, run_bounded
 from assurance.campaign import readouts
 from assurance.campaign.manifest import data_sha256
 from assurance.campaign.run import CampaignConfig, execute, monitor_models, plan
 from assurance.dataio.layouts import data_source
-from assurance.evidence.bounded import BoundedRenderError, run_bounded
 from assurance.perturbations import TRAITS
 from assurance.requirements.records import FAIL, INSUFFICIENT, PASS, Evidence
 from assurance.system.model import load_model_spec

@@ -1,11 +1,12 @@
-"""Run an applicant's report templates in a child process with a time and a memory limit.
+"""Run an applicant's work in a child process with a time and a memory limit: its report templates
+(``assurance.evidence.render``), the re-run of its network (``assurance.requirements.determinism``).
 
 Jinja2's sandbox keeps a template away from Python's internals, not from the machine's resources: two nested
 ``range(100000)`` loops never end, ``('x' * 10**10) | length`` asks for 10 GB, a template including itself
-recurses until Python stops it. The supplied sections are rendered in a forked child whose address space is
-capped (``RLIMIT_AS``: what it has at the fork plus :data:`MEMORY_BYTES`) and whose CPU time is capped
+recurses until Python stops it; an ONNX graph can loop without end. The work runs in a child whose address space is
+capped (``RLIMIT_AS``: what it has at the start plus :data:`MEMORY_BYTES`) and whose CPU time is capped
 (``RLIMIT_CPU``), and the parent kills it at :data:`SECONDS` of wall time. Whatever goes wrong in there comes
-back as one line naming the template (exit 2 at the command line), never as a hang or a crash of the report.
+back as one line naming the work (exit 2 at the command line), never as a hang or a crash of the caller.
 """
 
 from __future__ import annotations
