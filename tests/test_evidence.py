@@ -159,7 +159,10 @@ def test_every_unsafe_landing_is_drawn(report, hostile_run):
     _, doc, html = report
     images = readouts.load_table(hostile_run, "images")
     unsafe = images[images["decision_unsafe"].astype(bool)]
-    assert doc["unsafe_landings"] == len(unsafe) > 0  # fog fools the oracle: some landings are unsafe
+    assert doc["unsafe_landings"]["every_configuration"] == len(unsafe) > 0  # fog fools the oracle
+    deployed = doc["unsafe_landings"]["deployed_configuration"]
+    assert doc["unsafe_landings"]["deployed"] == (None if deployed not in set(images["monitor"]) else
+                                                  int(unsafe["monitor"].eq(deployed).sum()))
     groups = {(r.perturbation, r.key, r.selected) for r in unsafe.itertuples()}
     assert html.count('class="example unsafe compact"') == len(groups)
 

@@ -69,3 +69,10 @@ def test_the_evidence_names_the_floor_among_its_limitations_only_when_there_is_o
     safe = candidates.assign(true_unsafe=False)
     assert floor_limitation(monitor_floor(images[images["key"] != "C"], safe)) == []
     assert floor_limitation(None) == []
+    from assurance.evidence.sections import refused_frames
+
+    refused = images.assign(reason="outside_odd: image_width 320 px not in [1920, 1920] px")
+    assert refused_frames(refused) == refused.drop_duplicates(["perturbation", "severity", "key"]).shape[0]
+    said = floor_limitation(monitor_floor(refused, candidates), refused_frames(refused))[0]
+    assert "were refused before any landing (outside the declared domain or by the frame gate)" in said
+    assert refused_frames(images) == 0

@@ -183,3 +183,16 @@ def test_recolouring_refuses_what_would_change_the_truth(tmp_path, scenes, forei
     (tmp_path / "out" / "x").write_text("")
     with pytest.raises(DataError, match="not an empty folder"):
         recolour_dataset(src, tmp_path / "out", UAVID, foreign, TO_FOREIGN)
+
+
+def test_recolour_names_the_scene_meta_class_shares_in_the_target_classes(rendered, foreign):
+    """The report's class balance reads the scene meta: after recolour it named UAVid's classes for another set."""
+    import json
+
+    src, dst = rendered
+    labels = foreign
+    for before in sorted(src.rglob("meta/*.json")):
+        old = json.loads(before.read_text())["class_shares"]
+        new = json.loads((dst / before.relative_to(src)).read_text())["class_shares"]
+        assert set(new) <= set(labels.names) and set(new) != set(old)
+        assert abs(sum(new.values()) - sum(v for k, v in old.items() if TO_FOREIGN.get(k) in labels.names)) < 1e-9

@@ -123,7 +123,14 @@ def test_the_requirement_fails_when_a_landing_is_made_out_of_domain(tiny_campaig
     assert rows["Height"]["declared"] == "60 to 120 m"
     assert "6 evaluated frames (3 images x 2 perturbation scenarios) at 50 m (0 inside)" in rows["Height"]["evidence"]
     assert rows["Frames outside"]["evidence"] == "none: 3, fog: 3"
-    assert rows["Perturbation fog"]["evidence"].endswith(": covered")
+    assert rows["Perturbation fog"]["evidence"].endswith(": NOT covered: every frame of it was refused outside the "
+                                                         "declared domain")  # none judged inside it
+    assert "(0 of 6 inside" not in rows["Image size"]["evidence"] and "(6 of 6 inside" in rows["Image size"]["evidence"]
+    wide = {**high, "height_m": [10.0, 120.0]}  # the same frames inside: judged, so the declared fog is covered
+    judged = images(CampaignConfig(**base, odd=wide))
+    rows = {r["name"]: r for r in odd_rows({**man, "config": {**man["config"], "odd": wide}}, judged,
+                                           {"height": 0.2, "pitch": 0.2})}
+    assert rows["Perturbation fog"]["evidence"] == "evaluated at severity 3: covered"
     # the pose-error margin: absorbed by beta only where beta covers it (EL-R14's required beta)
     man["config"]["core"]["safety"] = {"radius_m": 2.5, "beta": 1.7}
     short = {r["name"]: r for r in odd_rows(man, refused, {"height": 0.2, "pitch": 0.2}, need=1.853)}

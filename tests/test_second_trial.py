@@ -208,3 +208,17 @@ def test_the_gallery_shows_each_perturbation_at_a_severity_it_ran():
     shown = perturbation_gallery(frames, "seq00/000000", [("none", 3), ("fog", 2), ("fog", 1), ("motion_blur", 3)])
     assert [g["caption"] for g in shown] == ["none (unperturbed)", "fog, severity 2", "motion_blur, severity 3"]
     assert frames.asked == [("none", 3), ("fog", 2), ("motion_blur", 3)]
+
+
+def test_a_default_action_outside_the_domain_is_not_told_as_the_monitors_rejection():
+    """Every frame of an auditor's trial was refused outside the declared domain; the card said 'all 2 of 11
+    candidates rejected' where the monitor had accepted an unsafe one."""
+    import pandas as pd
+
+    from assurance.evidence.gallery import walk_summary
+
+    cands = pd.DataFrame({"rank": [0, 1, 2, 3], "examined": [True, True, True, False],
+                          "accepted": [False, False, True, False], "reason": ["asphalt", "vehicle", "ok", ""]})
+    line = walk_summary(cands, -1, "outside_odd: image_width 320 px not in [1920, 1920] px")
+    assert line.startswith("the default action before any landing (outside_odd)") and "1 accepted" in line, line
+    assert walk_summary(cands, -1, "all_rejected").startswith("all 2 of 4 candidates rejected")

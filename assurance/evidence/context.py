@@ -34,6 +34,7 @@ from assurance.evidence.sections import (
     floor_limitation,
     limitations,
     pick_examples,
+    refused_frames,
     required_beta,
     results_view,
     run_scenarios,
@@ -259,6 +260,8 @@ def campaign_context(inp: Inputs) -> dict[str, Any]:
         "examples": (decision_examples(scenes, images, candidates, pick_examples(images, inp.deployed))
                      if len(ok) else []),
         "unsafe": unsafe, "n_unsafe": n_unsafe, "n_unsafe_pictures": len(unsafe),
+        "n_unsafe_deployed": int(((ok["monitor"] == inp.deployed) & ok["decision_unsafe"].astype(bool)).sum())
+        if len(ok) and (ok["monitor"] == inp.deployed).any() else None,  # None: the run flew no such configuration
         "scenes_error": scenes.error,
         "plots": _plots(inp),
         "results": mark_outside(results_view(inp.table, inp.deployed, float(params["unsafe_landing_bound"]),
@@ -476,10 +479,12 @@ def template_context(inp: Inputs, gate: Gate, campaign: dict[str, Any], base: di
         "gallery": campaign["gallery"], "gallery_key": campaign["gallery_key"],
         "safe_strips": campaign["safe_strips"],
         "examples": campaign["examples"], "unsafe": campaign["unsafe"], "n_unsafe": campaign["n_unsafe"],
+        "n_unsafe_deployed": campaign["n_unsafe_deployed"],
         "n_unsafe_pictures": campaign["n_unsafe_pictures"],
         "scenes_error": campaign["scenes_error"],
         "limitations": limitations(inp.manifest, reg, results, campaign["synthetic"], inp.table, inp.facts)
-        + floor_limitation(monitor_floor(inp.images, inp.candidates)) + _design_time_scope(inp),
+        + floor_limitation(monitor_floor(inp.images, inp.candidates), refused_frames(inp.images))
+        + _design_time_scope(inp),
         "baseline": base,
         "commands": commands(inp),
         "faults": faults_table(inp.out, inp.warnings), "fault_cases": fault_case_count(),

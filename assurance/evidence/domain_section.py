@@ -72,17 +72,23 @@ def odd_rows(man: Mapping[str, Any], images: Any, pose_error: Mapping[str, float
     sizes = (sorted({(int(w), int(h)) for w, h in zip(frames["width"], frames["height"], strict=True)})
              if n else [])
     shown = ", ".join(f"{w}x{h}" for w, h in sizes[:6]) + (" ..." if len(sizes) > 6 else "")
+    fits = int((frames["width"].between(*odd.image_width) & frames["height"].between(*odd.image_height)).sum()) \
+        if n else 0
     rows.append({"name": "Image size", "declared": f"width {odd.image_width[0]:g} to {odd.image_width[1]:g} px, "
                  f"height {odd.image_height[0]:g} to {odd.image_height[1]:g} px",
-                 "evidence": f"frames evaluated at {shown} (the network segments at its working width)"
-                 if sizes else "no evaluated frame"})
+                 "evidence": f"frames evaluated at {shown} ({fits} of {n} inside; the network segments at its working "
+                             "width)" if sizes else "no evaluated frame"})
     rows.append({"name": "Aspect", "declared": f"{odd.aspect[0]:g} to {odd.aspect[1]:g}",
                  "evidence": ", ".join(sorted({f"{w / h:.3f}" for w, h in sizes})) or "no evaluated frame"})
     evaluated = {(str(p), int(s)) for p, s in zip(frames["perturbation"], frames["severity"], strict=True)} \
         if n else set()
+    kept = frames[~frames["reason"].astype(str).str.startswith(OUTSIDE_ODD)] if n else frames
+    judged = {(str(p), int(s)) for p, s in zip(kept["perturbation"], kept["severity"], strict=True)} if n else set()
     for pert, level in odd.perturbations.items():
         sev = sorted(s for p, s in evaluated if p == pert)
-        state = "covered" if level in sev else "NOT evaluated at the declared maximum"
+        state = ("covered" if (pert, level) in judged else
+                 "NOT covered: every frame of it was refused outside the declared domain" if level in sev else
+                 "NOT evaluated at the declared maximum")
         rows.append({"name": f"Perturbation {pert}", "declared": f"up to severity {level}",
                      "evidence": (f"evaluated at severit{'y' if len(sev) == 1 else 'ies'} {', '.join(map(str, sev))}: "
                                   f"{state}") if sev else "not evaluated by this run"})

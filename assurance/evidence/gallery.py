@@ -25,6 +25,7 @@ from assurance.dataio.layouts import DataSpec, iter_samples
 from assurance.dataio.uavid import Sample, read_image
 from assurance.evidence.overlay import draw_decision
 from assurance.perturbations import perturb
+from el.monitors.walk import ALL_REJECTED
 
 GALLERY_SEVERITY = 3
 
@@ -149,14 +150,19 @@ def candidate_rows(cands: Any, *, selected_only: bool = False, unexamined: int =
     return rows
 
 
-def walk_summary(cands: Any, selected: int) -> str:
-    """What the walk did before the decision, in one line."""
+def walk_summary(cands: Any, selected: int, reason: str = ALL_REJECTED) -> str:
+    """What the walk did before the decision, in one line; ``reason``: the decision's (a default action taken before
+    any walk, outside the declared domain or refused by the frame gate, says so, not that the monitor rejected)."""
     n = len(cands)
     if n == 0:
         return "no candidate found"
     rejected = cands[cands["examined"].astype(bool) & ~cands["accepted"].astype(bool)].sort_values("rank")
     reasons = Counter(str(r) for r in rejected["reason"])
     common = f"; most frequent reason: {reasons.most_common(1)[0][0]}" if reasons else ""
+    if selected < 0 and reason != ALL_REJECTED:
+        accepted = int((cands["examined"].astype(bool) & cands["accepted"].astype(bool)).sum())
+        return (f"the default action before any landing ({reason.split(':', 1)[0]}); of the {n} candidates, judged "
+                f"for the readouts only, {accepted} accepted and {len(rejected)} rejected")
     if selected < 0:
         return f"all {len(rejected)} of {n} candidates rejected{common}"
     if selected == 0:
@@ -192,7 +198,7 @@ def decision_examples(scenes: Scenes, images: Any, candidates: Any, picks: Itera
             "candidates": rows,
             "more": (f"{len(cands) - len(rows)} more candidate(s) the walk did not reach"
                      if not compact and len(cands) > len(rows) else ""),
-            "walk": walk_summary(cands, sel),
+            "walk": walk_summary(cands, sel, str(row["reason"])),
         })
     return out
 

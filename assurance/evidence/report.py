@@ -114,6 +114,7 @@ class Outcome:
     files: _Files
     faults: bool
     n_unsafe: int
+    n_unsafe_deployed: int | None
     pdf_error: str | None
     exit_code: int
     basis: list[Any] | None = None
@@ -139,7 +140,8 @@ def evidence_document(inp: Inputs, gate: Gate, ident: dict[str, Any], base: dict
         "checks": {ev.requirement: {"name": ev.name, "status": ev.status, "summary": ev.summary,
                                     "rows": list(ev.rows)} for ev in inp.checks.values()},
         "results": inp.table.to_dict("records"),
-        "unsafe_landings": n_unsafe,
+        "unsafe_landings": {"every_configuration": n_unsafe, "deployed": outcome.n_unsafe_deployed,
+                            "deployed_configuration": inp.deployed},  # decisions onto unsafe ground, default included
         "baseline": base and {k: v for k, v in base.items() if k != "figures"},
         "warnings": inp.warnings,
         "files": {"html": rel(files.html), "pdf": None if pdf_error else rel(files.pdf), "csv": rel(files.csv),
@@ -293,6 +295,7 @@ def generate(run: str | Path, out: str | Path, options: ReportOptions | None = N
     def finish(pdf_error: str | None) -> int:
         exit_code = gate.exit_code(strict, pdf_error)
         outcome = Outcome(created=created, strict=strict, files=files, faults=faults, n_unsafe=campaign["n_unsafe"],
+                          n_unsafe_deployed=campaign["n_unsafe_deployed"],
                           pdf_error=pdf_error, exit_code=exit_code, basis=basis, templates=supplied)
         _finish(files, {**evidence_document(inp, gate, campaign["ident"], base, outcome),
                         **auditor_document(context)})

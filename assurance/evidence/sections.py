@@ -226,18 +226,36 @@ def limitations(man: Mapping[str, Any], registry: rq.Registry, results: Mapping[
     return out
 
 
-def floor_limitation(floor: Any) -> list[str]:
+REFUSED_PREFIXES = ("outside_odd", "out_of_domain")
+"""Reasons of a default action taken before any candidate is walked: outside the declared domain, or refused by the
+frame gate (``el.geometry.odd``, ``el.monitors.frame_gate``)."""
+
+
+def refused_frames(images: Any) -> int:
+    """How many judged frames (perturbation, severity, image) ended in the default action before any walk: outside
+    the declared domain or refused by the frame gate (the same for every configuration)."""
+    if images is None or not len(images) or "reason" not in images:
+        return 0
+    ok = images[images["fault"].fillna("") == ""].drop_duplicates(["perturbation", "severity", "key"])
+    return int(ok["reason"].astype(str).str.startswith(REFUSED_PREFIXES).sum())
+
+
+def floor_limitation(floor: Any, refused: int = 0) -> list[str]:
     """The sentence on what no monitor can prevent (``assurance.analysis.floor.monitor_floor``'s table), when any
-    frame is on the floor: there every decision is unsafe, so no monitor, however good, would have saved it."""
+    frame is on the floor: there every decision is unsafe, so no monitor, however good, would have saved it.
+    ``refused``: frames whose default action came before any walk (:func:`refused_frames`), said as the cause."""
     if floor is None or not len(floor) or not int(floor["floor"].sum()):
         return []
     parts = [f"{int(r.floor)} of {int(r.images)} {r.perturbation} (s{int(r.severity)})"
              for r in floor.itertuples() if int(r.floor)]
+    cause = ("fewer needs a better network, more candidates or another default action, not a better monitor" if not
+             refused else f"{refused} frame(s) judged were refused before any landing (outside the declared domain "
+             "or by the frame gate), where the default action is the design's answer; elsewhere fewer needs a "
+             "better network, more candidates or another default action, not a better monitor")
     return [f"What no monitor can prevent: in {int(floor['floor'].sum())} of the {int(floor['images'].sum())} frames "
             f"judged ({'; '.join(parts)}) no candidate is truly safe (or there is none) and the default area is "
             "unsafe too, so every configuration, a perfect monitor included, lands unsafely there. The unsafe "
-            "landings in the results count them; fewer needs a better network, more candidates or another default "
-            "action, not a better monitor."]
+            f"landings in the results count them; {cause}."]
 
 
 def pick_examples(images: Any, deployed: str) -> list[tuple[Any, str]]:

@@ -61,8 +61,9 @@ def camera_text(intrinsics: Any, pitch_deg: float, *, named: bool = True) -> str
 
 SHIPPED_PLATFORM = "small multirotor UAV with a parachute, over urban areas"
 """The shipped system's platform and the area it flies over (the paper's urban setting)."""
-PLATFORM = ("small multirotor UAV with a parachute (the default action's descent); the area flown over is not "
-            "declared (the system file has no key for it: see the scenes)")
+PLATFORM = ("not declared (the system file has no key for it); the method assumes a small multirotor UAV whose "
+            "default action is a descent under a parachute; the area flown over is not declared either: see the "
+            "scenes")
 """Another system's platform: the toolkit's assumption only, no area said of it."""
 
 SHIPPED_CONDITIONS = ("daylight; the six perturbations of ICRA22 at severity 3 (brightness, fog, motion blur, "

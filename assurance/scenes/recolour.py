@@ -11,6 +11,7 @@ target class would turn unsafe ground safe in the ground truth: refused unless `
 
 from __future__ import annotations
 
+import json
 import shutil
 from collections.abc import Mapping
 from pathlib import Path
@@ -20,6 +21,7 @@ import numpy as np
 
 from assurance.dataio.layouts import iter_samples, read_sample_labels, write_label_file
 from assurance.dataio.uavid import LABEL_DIR
+from assurance.files import atomic_write_bytes
 from el.base.errors import DataError
 from el.classes.labels import MAX_CLASSES, LabelSet
 
@@ -80,7 +82,8 @@ def recolour_dataset(src: str | Path, dst: str | Path, source_labels: LabelSet, 
                      mapping: Mapping[str, str] | None = None, *, allow_unsafe: bool = False) -> dict[str, Any]:
     """Copy the UAVid-layout data set ``src`` to ``dst`` with its label PNGs in ``target_labels``' palette.
 
-    Images, meta and other files are copied unchanged; ``dst`` must not exist or be empty. Returns
+    Images and other files are copied unchanged, scene meta with its class shares named in the target's classes
+    (:func:`_rename_shares`); ``dst`` must not exist or be empty. Returns
     ``{"labels": files rewritten, "pixels": {target class name: pixel count}}``. DataError (naming the
     file) for a label colour ``source_labels`` does not know; ValueError for a bad mapping (:func:`class_lut`).
     """
@@ -94,6 +97,10 @@ def recolour_dataset(src: str | Path, dst: str | Path, source_labels: LabelSet, 
         return [n for n in names if Path(folder).name == LABEL_DIR and n.lower().endswith(".png")]
 
     shutil.copytree(src, dst, ignore=skip_labels, dirs_exist_ok=True)
+    target_names = {c.id: c.name for c in target_labels.classes}
+    renamed = {c.name: target_names.get(int(lut[c.id])) for c in source_labels.classes}
+    for meta in sorted(dst.rglob("meta/*.json")):
+        _rename_shares(meta, renamed)
     counts = np.zeros(MAX_CLASSES, np.int64)
     for s in samples:
         assert s.label_path is not None
@@ -105,3 +112,23 @@ def recolour_dataset(src: str | Path, dst: str | Path, source_labels: LabelSet, 
     names = {**{c.id: c.name for c in target_labels.classes},
              **({} if target_labels.ignore is None else {target_labels.ignore.id: target_labels.ignore.name})}
     return {"labels": len(samples), "pixels": {names[i]: int(counts[i]) for i in np.flatnonzero(counts)}}
+
+
+def _rename_shares(path: Path, renamed: Mapping[str, str | None]) -> None:
+    """A scene meta file's ``class_shares`` under the target's class names (shares of classes mapped onto one added,
+    a class mapped onto the ignore colour dropped), so the report's class balance names the data's own classes; a
+    file that is not such a record is left as it is."""
+    try:
+        meta = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return
+    shares = meta.get("class_shares") if isinstance(meta, dict) else None
+    if not isinstance(shares, dict):
+        return
+    out: dict[str, float] = {}
+    for name, share in shares.items():
+        to = renamed.get(str(name))
+        if to is not None and isinstance(share, int | float):
+            out[to] = out.get(to, 0.0) + float(share)
+    atomic_write_bytes(path, (json.dumps({**meta, "class_shares": out}, separators=(",", ":")) + "\n").encode())
+
