@@ -64,6 +64,23 @@ def test_a_header_claiming_a_huge_frame_is_refused_before_decoding(tmp_path):
     assert main(["land", str(bomb), "--monitor", "lhd"]) == 2
 
 
+def test_exif_orientation_is_applied_when_the_metadata_runs_past_64_kib(tmp_path):
+    """A camera's EXIF (a thumbnail) and an ICC profile put the frame header past the first 64 KiB: the frame was
+    decided on sideways, silently."""
+    from PIL import Image
+
+    rgb = scene_image(scene_ids())
+    exif = Image.Exif()
+    exif[0x0112] = 6
+    exif[0x010E] = "x" * 58_000  # ImageDescription, as large as a thumbnail
+    path = tmp_path / "big.jpg"
+    Image.fromarray(rgb).save(path, quality=95, exif=exif.tobytes(), icc_profile=b"\0" * 70_000)
+    assert read_header(path.read_bytes()[:1 << 16]) is None  # the header lies past the first 64 KiB
+    got, meta = read_image_meta(path)
+    assert meta == {"exif_orientation": 6} and got.shape[:2] == (256, 144)
+    assert image_size(path) == (144, 256)
+
+
 def test_jpeg_header_and_exif_orientation_as_opencv_applies_it(tmp_path):
     from PIL import Image
 

@@ -299,3 +299,36 @@ def test_a_campaign_reads_a_semantic_drone_split_from_the_system_file(tmp_path):
 
     scenes = Scenes(again, man["config"]["seed"])  # the report's pictures: the run's frames, found from its spec
     assert not scenes.error and scenes.image("original_images/001", "none", 3).shape == (144, 256, 3)
+
+
+def test_camera_files_as_they_come_upper_case_suffixes_and_one_stem_twice(tmp_path):
+    """A pattern's *.jpg finds IMG_1.JPG too (it was skipped without a word); in the UAVid layout two images of one
+    frame (000000.png beside 000000.jpg) are refused naming both (one was dropped by directory order)."""
+    img = np.zeros((8, 8, 3), np.uint8)
+    (tmp_path / "flat" / "images").mkdir(parents=True)
+    for name in ("IMG_0.jpg", "IMG_1.JPG", "IMG_2.Jpg"):
+        write_image(tmp_path / "flat" / "images" / name, img)
+    found = list(iter_samples(DataSpec(tmp_path / "flat", images="images/*.jpg"), require_labels=False))
+    assert [s.image_path.name for s in found] == ["IMG_0.jpg", "IMG_1.JPG", "IMG_2.Jpg"]
+    write_sample(tmp_path / "uavid", "seq00", "000000", img, np.zeros((8, 8), np.uint8), labels=UAVID)
+    write_image(tmp_path / "uavid" / "seq00" / "Images" / "000000.jpg", img)
+    with pytest.raises(DataError, match=r"000000\.png: a second image of frame seq00/000000 \(the first: 000000\.jpg"):
+        list(iter_samples(tmp_path / "uavid"))
+
+
+def test_land_reads_a_label_file_of_class_ids_as_the_system_file_declares(tmp_path, capsys):
+    """``land --labels`` read colours only, and its hint asked for the label_encoding the system file already set."""
+    ids = np.zeros((360, 640), np.uint8)
+    ids[:, 320:] = UAVID.ids["road"]
+    (tmp_path / "data" / "masks").mkdir(parents=True)
+    label = tmp_path / "data" / "masks" / "f0.png"
+    cv2.imwrite(str(label), ids)
+    write_image(tmp_path / "data" / "f0.jpg", np.zeros((360, 640, 3), np.uint8))
+    system = tmp_path / "uav-el.toml"
+    system.write_text('format = "uav-el-system/1"\n[data.test]\npath = "data"\nimages = "*.jpg"\n'
+                      'labels = "masks/{stem}.png"\nlabel_encoding = "ids"\n')
+    out = tmp_path / "d.json"
+    assert cli.main(["land", "--labels", str(label), "--system", str(system), "--json", str(out)]) == 0
+    assert not json.loads(out.read_text())["reason"].startswith("fault")
+    assert cli.main(["land", "--labels", str(label), "--system", str(system), "--label-encoding", "rgb"]) == 2
+    assert "single-channel" in capsys.readouterr().err

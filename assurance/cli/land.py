@@ -32,6 +32,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--labels", type=Path, metavar="LABELS.png",
                         help="colour label map in the system's label palette ([labels]; UAVid's by default): run the "
                              "ground-truth pipeline on it")
+    parser.add_argument("--label-encoding", choices=("rgb", "ids"), help="how --labels holds its classes: rgb "
+                        "(the palette's colours) or ids (8-bit class ids); default: the system file's [data] "
+                        "label_encoding (test, else val, else train split), else rgb")
+    parser.add_argument("--id-offset", type=int, metavar="N", help="with --label-encoding ids: the value of class "
+                        "id 0 (default: the system file's, else 0)")
     parser.add_argument("--image", type=Path, metavar="IMAGE.png", help="image to draw the overlay on")
     parser.add_argument("--json", type=Path, metavar="OUT.json", help="write the decision as JSON")
     parser.add_argument("--overlay", type=Path, metavar="OUT.png", help="draw the decision into a PNG")

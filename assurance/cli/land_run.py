@@ -96,14 +96,29 @@ def run(args: argparse.Namespace) -> int:
                                     system.label)
     if args.labels.is_file():  # a missing file is the reader's one-line error
         check_frame_geometry(frame_core(config, pose), args.labels, args.roll)
+    encoding, offset = label_reading(system, args.label_encoding, args.id_offset)
     decision, ids = decide_from_label_file(args.labels, image_path=image_path, config=config,
                                            pose=FramePose(pose, "command_line", args.roll),
-                                           labels=system.labels(), odd=system.odd())
+                                           labels=system.labels(), odd=system.odd(), encoding=encoding,
+                                           id_offset=offset)
     image = read_image(image_path) if image_path is not None else None  # a bad image is an error too
 
     _write_outputs(args, decision, image=image, labels=ids)
     print(summary(decision))
     return 0
+
+
+def label_reading(system: Any, encoding: str | None, id_offset: int | None) -> tuple[str, int]:
+    """How a label file given alone is read: ``encoding`` and ``id_offset`` as given, else the system file's ``[data]``
+    splits' (test, else val, else train: the first that declares a ``label_encoding``), else colours."""
+    if encoding is None:
+        for split in ("test", "val", "train"):
+            spec = system.data(split) if system.declares_data(split) else None
+            if getattr(spec, "label_encoding", None):
+                encoding = spec.label_encoding
+                id_offset = id_offset if id_offset is not None else (getattr(spec, "id_offset", 0) or 0)
+                break
+    return encoding or "rgb", int(id_offset or 0)
 
 
 def run_model(args: argparse.Namespace) -> int:

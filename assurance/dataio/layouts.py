@@ -227,6 +227,21 @@ def iter_samples(source: DataSource, *, require_labels: bool = True, check_sizes
     return iter(found)
 
 
+_LITERAL_SUFFIX = re.compile(r"^(.*)\.([A-Za-z0-9]+)$")
+
+
+def _glob_any_case_suffix(root: Path, pattern: str) -> list[Path]:
+    """``root.glob(pattern)``, the literal extension of its last part matched in any case (``*.jpg`` finds
+    ``IMG_1.JPG`` too: cameras write both), as the layouts' suffix checks are."""
+    head, _, last = pattern.rpartition("/")
+    m = _LITERAL_SUFFIX.match(last)
+    if m is None or any(ch in m.group(2) for ch in "*?[]"):
+        return list(root.glob(pattern))
+    wide = f"{head}/{m.group(1)}.*" if head else f"{m.group(1)}.*"
+    ext = m.group(2).lower()
+    return [p for p in root.glob(wide) if p.suffix[1:].lower() == ext]
+
+
 def _pattern_samples(spec: DataSpec, require_labels: bool) -> list[Sample]:
     """The samples a spec's patterns find: images matching ``images`` that are no image's label map, each paired
     with the file ``labels`` names for it; sequence = the image's folder under the root (the layout's name, or
@@ -235,7 +250,8 @@ def _pattern_samples(spec: DataSpec, require_labels: bool) -> list[Sample]:
     if not root.is_dir():
         raise DataError(f"{root}: dataset folder not found")
     assert spec.images is not None
-    found = sorted(p for p in root.glob(spec.images) if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file())
+    found = sorted(p for p in _glob_any_case_suffix(root, spec.images)
+                   if p.suffix.lower() in IMAGE_SUFFIXES and p.is_file())
     label_of = {p: _label_path(root, p, spec.labels) for p in found} if spec.labels is not None else {}
     taken = set(label_of.values())
     images = [p for p in found if p not in taken]

@@ -103,7 +103,14 @@ def iter_samples(root: str | Path, *, require_labels: bool = True, check_sizes: 
         img_dir, lab_dir = seq / IMAGE_DIR, seq / LABEL_DIR
         if not img_dir.is_dir():
             raise DataError(f"{img_dir}: missing {IMAGE_DIR} folder")
-        images = {p.stem: p for p in img_dir.iterdir() if p.suffix.lower() in _EXTS}
+        images: dict[str, Path] = {}
+        for p in sorted(img_dir.iterdir()):
+            if p.suffix.lower() not in _EXTS:
+                continue
+            if p.stem in images:  # 000000.png beside 000000.jpg: which one is the frame?
+                raise DataError(f"{p}: a second image of frame {seq.name}/{p.stem} (the first: "
+                                f"{images[p.stem].name})")
+            images[p.stem] = p
         labels: dict[str, Path] = {}
         if lab_dir.is_dir():
             labels = {p.stem: p for p in lab_dir.iterdir() if p.suffix.lower() == ".png"}

@@ -22,7 +22,10 @@ from el.base.imageheader import PNG_SIGNATURE, Header, pil_size, read_header
 MAX_PIXELS = 7680 * 4320 * 5 // 4
 """Default pixel limit of a frame: an 8K frame (7680 x 4320, 33.2 Mpx) plus a quarter (41.5 Mpx, ~125 MB as
 RGB). Larger files are refused from their header; ``PipelineConfig.max_pixels`` and ``--max-pixels`` set it."""
-HEADER_BYTES = 1 << 16  # a JPEG's EXIF block (orientation) and frame header lie within the first 64 KiB
+HEADER_BYTES = 1 << 16  # a JPEG's EXIF block (orientation) and frame header mostly lie within the first 64 KiB
+MAX_HEADER_BYTES = 1 << 24
+"""How far a JPEG's markers are walked for its frame header when its metadata (EXIF with a thumbnail, XMP, an ICC
+profile) runs past :data:`HEADER_BYTES` (16 MiB: metadata segments are 64 KiB each)."""
 
 
 def check_max_pixels(value: object) -> int:
@@ -119,9 +122,12 @@ def _checked_header(path: Path, max_pixels: int) -> Header | None:
     try:
         with open(path, "rb") as f:
             head = f.read(HEADER_BYTES)
+            header = read_header(head)
+            if header is None and head[:2] == b"\xff\xd8" and len(head) == HEADER_BYTES:  # metadata past 64 KiB
+                head += f.read(MAX_HEADER_BYTES - HEADER_BYTES)
+                header = read_header(head)
     except OSError as exc:
         raise DataError(f"{path}: unreadable: {exc.strerror or exc}") from None
-    header = read_header(head)
     if header is not None:
         size = (header.width, header.height)
     else:
