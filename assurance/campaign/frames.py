@@ -55,7 +55,8 @@ def frame_truth(sample: Sample, labels: Any, shape: tuple[int, ...]) -> tuple[An
     key = file_key(sample.label_path, labels, sample.label_encoding, sample.id_offset)
     ids = cached("labels", key, lambda: read_sample_labels(sample, labels))
     if ids.shape != tuple(shape):
-        raise DataError(f"{sample.label_path}: label size differs from the image")
+        raise DataError(f"{sample.label_path}: label size {ids.shape[1]}x{ids.shape[0]} differs from image "
+                        f"{sample.image_path} ({shape[1]}x{shape[0]}, as read: EXIF orientation applied)")
     return labels, ids
 
 
