@@ -48,7 +48,7 @@ def _judge_the_runs_system(args: argparse.Namespace, run: Path) -> None:
     are signed with, never the shipped system's. Says which system it judges."""
     given = getattr(args, "system_file", None)
     system = run_system(args, run)  # says which system it judges
-    if system is not given:
+    if system is not given and not system.default:
         args.system_file, args.system_from_run = system, True
 
 
