@@ -222,3 +222,22 @@ def test_a_default_action_outside_the_domain_is_not_told_as_the_monitors_rejecti
     line = walk_summary(cands, -1, "outside_odd: image_width 320 px not in [1920, 1920] px")
     assert line.startswith("the default action before any landing (outside_odd)") and "1 accepted" in line, line
     assert walk_summary(cands, -1, "all_rejected").startswith("all 2 of 4 candidates rejected")
+
+
+def test_every_command_takes_no_progress(tmp_path, monkeypatch, capsys):
+    """fit-gate, fit-verifier and synth had --no-progress, fit-monitor and calibrate did not: every command takes it
+    now, and it turns the progress bars off for the command (worker processes included: the environment)."""
+    import os
+
+    from assurance import cli
+
+    for command in ("fit-monitor", "calibrate", "fit-gate", "campaign", "evidence", "verify"):
+        try:
+            code = cli.main([command, "--no-progress", "--system", str(tmp_path / "none.toml")])
+        except SystemExit as stop:  # argparse: a required option missing (never --no-progress unknown)
+            code = stop.code
+        assert code == 2 and "unrecognized arguments" not in capsys.readouterr().err, command
+    monkeypatch.delenv("UAV_EL_PROGRESS", raising=False)
+    with cli._no_progress(True):
+        assert os.environ["UAV_EL_PROGRESS"] == "none"
+    assert "UAV_EL_PROGRESS" not in os.environ

@@ -119,6 +119,9 @@ def _add_verbosity(p: argparse.ArgumentParser) -> None:
         p.add_argument("-q", dest="quiet", action="store_true", help="same as --quiet")
     else:
         p.add_argument("-q", "--quiet", action="count", default=0, help=QUIET_HELP)
+    if "--no-progress" not in p._option_string_actions:  # every command takes it (some had it, others not)
+        p.add_argument("--no-progress", dest="no_progress_bars", action="store_true",
+                       help="no progress bars; the output otherwise as usual")
 
 
 class _OneLine(logging.Formatter):
@@ -246,16 +249,8 @@ def _quieted(quiet: bool) -> Iterator[None]:
     if not quiet:
         yield
         return
-    before = os.environ.get(PROGRESS_ENV)
-    os.environ[PROGRESS_ENV] = "none"
-    try:
-        with open(os.devnull, "w") as sink, contextlib.redirect_stdout(sink):
-            yield
-    finally:
-        if before is None:
-            os.environ.pop(PROGRESS_ENV, None)
-        else:
-            os.environ[PROGRESS_ENV] = before
+    with _no_progress(True), open(os.devnull, "w") as sink, contextlib.redirect_stdout(sink):
+        yield
 
 
 def _run_command(args: argparse.Namespace) -> int:
@@ -266,8 +261,27 @@ def _run_command(args: argparse.Namespace) -> int:
         from assurance.system import find_system  # deferred: pulls in numpy, cv2; keeps uav-el --help, --version light
 
         args.system_file = find_system(args.system, writes=WRITES.get(args.command, ()))
-    with _quieted(bool(getattr(args, "quiet", False)) and args.command not in KEEPS_STDOUT_WHEN_QUIET):
+    with _quieted(bool(getattr(args, "quiet", False)) and args.command not in KEEPS_STDOUT_WHEN_QUIET), \
+            _no_progress(bool(getattr(args, "no_progress_bars", False))):
         return int(args._run(args) or 0)
+
+
+@contextlib.contextmanager
+def _no_progress(off: bool) -> Iterator[None]:
+    """``--no-progress`` on a command that has no option of its own: no progress bars (also in worker processes),
+    the output otherwise unchanged."""
+    if not off:
+        yield
+        return
+    before = os.environ.get(PROGRESS_ENV)
+    os.environ[PROGRESS_ENV] = "none"
+    try:
+        yield
+    finally:
+        if before is None:
+            os.environ.pop(PROGRESS_ENV, None)
+        else:
+            os.environ[PROGRESS_ENV] = before
 
 
 def main(argv: Sequence[str] | None = None) -> int:
