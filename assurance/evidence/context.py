@@ -260,8 +260,7 @@ def campaign_context(inp: Inputs) -> dict[str, Any]:
         "examples": (decision_examples(scenes, images, candidates, pick_examples(images, inp.deployed))
                      if len(ok) else []),
         "unsafe": unsafe, "n_unsafe": n_unsafe, "n_unsafe_pictures": len(unsafe),
-        "n_unsafe_deployed": int(((ok["monitor"] == inp.deployed) & ok["decision_unsafe"].astype(bool)).sum())
-        if len(ok) and (ok["monitor"] == inp.deployed).any() else None,  # None: the run flew no such configuration
+        "n_unsafe_deployed": _unsafe_of(ok, inp.deployed),
         "scenes_error": scenes.error,
         "plots": _plots(inp),
         "results": mark_outside(results_view(inp.table, inp.deployed, float(params["unsafe_landing_bound"]),
@@ -441,6 +440,12 @@ def _design_time_scope(inp: Inputs) -> list[str]:
             "toolkit's own small synthetic scenes (oblique Phantom-class camera, its own torch network), not on "
             f"this system's network, camera or label set ({inp.registry.facts.get('label_set', '')}); their "
             "'verified' says the code holds them, not that this system was measured against them."]
+
+
+def _unsafe_of(ok: Any, monitor: str) -> int | None:
+    """The unsafe decisions of one configuration among judged image rows; None when the run did not fly it."""
+    mine = ok[ok["monitor"] == monitor] if len(ok) else ok
+    return int(mine["decision_unsafe"].astype(bool).sum()) if len(mine) else None
 
 
 def template_context(inp: Inputs, gate: Gate, campaign: dict[str, Any], base: dict[str, Any] | None,

@@ -82,7 +82,8 @@ def odd_rows(man: Mapping[str, Any], images: Any, pose_error: Mapping[str, float
                  "evidence": ", ".join(sorted({f"{w / h:.3f}" for w, h in sizes})) or "no evaluated frame"})
     evaluated = {(str(p), int(s)) for p, s in zip(frames["perturbation"], frames["severity"], strict=True)} \
         if n else set()
-    kept = frames[~frames["reason"].astype(str).str.startswith(OUTSIDE_ODD)] if n else frames
+    refused = frames["reason"].astype(str).str.startswith(OUTSIDE_ODD) if n else None
+    kept = frames[~refused] if n else frames
     judged = {(str(p), int(s)) for p, s in zip(kept["perturbation"], kept["severity"], strict=True)} if n else set()
     for pert, level in odd.perturbations.items():
         sev = sorted(s for p, s in evaluated if p == pert)
@@ -97,7 +98,7 @@ def odd_rows(man: Mapping[str, Any], images: Any, pose_error: Mapping[str, float
         rows.append({"name": "Evaluated outside the domain", "declared": "not among the declared perturbations",
                      "evidence": ", ".join(beyond) + ": evaluated by the campaign, not covered by the declaration; "
                                  f"marked {OUTSIDE_MARK} in the results"})
-    out = frames[frames["reason"].astype(str).str.startswith(OUTSIDE_ODD)] if n else frames
+    out = frames[refused] if n else frames
     per = out.groupby("perturbation")["key"].nunique().to_dict() if len(out) else {}
     rows.append({"name": "Frames outside", "declared": "default action, reason outside_odd",
                  "evidence": ", ".join(f"{p}: {per.get(p, 0)}" for p in dict.fromkeys(frames["perturbation"]))

@@ -204,7 +204,8 @@ def development_sets(card: dict[str, Any] | None, monitors: dict[str, dict[str, 
             if isinstance(d, dict) and d:
                 split = "train" if key == "training" else "held_out"
                 where = splits.get(split)
-                spec = (splits.get("spec") or {}).get(split) if isinstance(splits.get("spec"), dict) else None
+                specs = splits.get("spec")
+                spec = specs.get(split) if isinstance(specs, dict) else None
                 rows.append(_card_set(f"{where or '?'}", role, letter, {**d, "path": where, "spec": spec},
                                       card=_Card(name, package.get(name, False)), **common, balance=_fitted_balance(d)))
     split = (monitors.get("calibration.json") or {}).get("split") or {}

@@ -14,7 +14,9 @@ from assurance.campaign.task import scenario_pairs
 from assurance.dataio.poses import read_meta
 from assurance.evidence.text import ci, fmt, pct, to_float
 from assurance.perturbations import PERTURBATIONS, SEVERITIES, TRAITS
+from el.geometry.odd import OUTSIDE_ODD
 from el.monitors import PAPER_GRID
+from el.monitors.frame_gate import OUT_OF_DOMAIN
 
 
 def scene_types(scenes: Any, keys: Sequence[str]) -> tuple[str, bool]:
@@ -226,7 +228,7 @@ def limitations(man: Mapping[str, Any], registry: rq.Registry, results: Mapping[
     return out
 
 
-REFUSED_PREFIXES = ("outside_odd", "out_of_domain")
+REFUSED_PREFIXES = (OUTSIDE_ODD, OUT_OF_DOMAIN)
 """Reasons of a default action taken before any candidate is walked: outside the declared domain, or refused by the
 frame gate (``el.geometry.odd``, ``el.monitors.frame_gate``)."""
 

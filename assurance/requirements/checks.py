@@ -377,23 +377,23 @@ def own_poses(images: Any) -> list[tuple[float, float]]:
     return sorted(set(zip(framed["height_m"], framed["pitch_deg"], strict=True)))
 
 
+def _pose_configs(core: Any, poses: Any) -> list[dict[str, Any]]:
+    """The core configuration (a CoreConfig or its dict) at the nominal pose, then at each of ``poses``."""
+    base = dict(core) if isinstance(core, Mapping) else core.to_dict()
+    return [base, *({**base, "pose": {"height_m": float(h), "pitch_deg": float(p)}} for h, p in poses)]
+
+
 def worst_required_beta(core: Any, size: tuple[int, int], poses: Any, pose_error: Mapping[str, float]) -> float:
     """The largest beta the pose-error box requires over the nominal pose and each of ``poses`` (what EL-R14,
     :func:`check_pose_margins`, compares beta with)."""
-    base = dict(core) if isinstance(core, Mapping) else core.to_dict()
-    framed = [{**base, "pose": {"height_m": float(h), "pitch_deg": float(p)}} for h, p in poses]
-    return max(pose_margin(c, size, pose_error)[1] for c in [base, *framed])
+    return max(pose_margin(c, size, pose_error)[1] for c in _pose_configs(core, poses))
 
 
 def check_pose_margins(core: Any, size: tuple[int, int], poses: Any, pose_error: Mapping[str, float],
                        safety: Mapping[str, float] | None = None) -> Evidence:
     """EL-R14 over every pose a run planned at: the nominal one and each frame's own (``poses``: distinct
     (height_m, pitch_deg) pairs from the images readouts); fails when beta falls short at any of them."""
-    base = dict(core) if isinstance(core, Mapping) else core.to_dict()
-    evidences = [check_pose_margin(base, size, pose_error, safety)]
-    for height, pitch in poses:
-        framed = {**base, "pose": {"height_m": float(height), "pitch_deg": float(pitch)}}
-        evidences.append(check_pose_margin(framed, size, pose_error, safety))
+    evidences = [check_pose_margin(c, size, pose_error, safety) for c in _pose_configs(core, poses)]
     rows = tuple(r for ev in evidences for r in ev.rows)
     rank = {FAIL: 0, INSUFFICIENT: 1, PASS: 2}
     worst = min(evidences, key=lambda ev: (rank.get(ev.status, 1),

@@ -97,7 +97,7 @@ def recolour_dataset(src: str | Path, dst: str | Path, source_labels: LabelSet, 
         return [n for n in names if Path(folder).name == LABEL_DIR and n.lower().endswith(".png")]
 
     shutil.copytree(src, dst, ignore=skip_labels, dirs_exist_ok=True)
-    target_names = {c.id: c.name for c in target_labels.classes}
+    target_names = {c.id: c.name for c in target_labels.classes}  # the ignore colour has none: its shares go
     renamed = {c.name: target_names.get(int(lut[c.id])) for c in source_labels.classes}
     for meta in sorted(dst.rglob("meta/*.json")):
         _rename_shares(meta, renamed)
@@ -109,7 +109,7 @@ def recolour_dataset(src: str | Path, dst: str | Path, source_labels: LabelSet, 
         counts += np.bincount(out.ravel(), minlength=MAX_CLASSES)
         write_label_file(dst / s.label_path.relative_to(src), out, target_labels, encoding=s.label_encoding,
                          id_offset=s.id_offset)  # in the source's own encoding
-    names = {**{c.id: c.name for c in target_labels.classes},
+    names = {**target_names,
              **({} if target_labels.ignore is None else {target_labels.ignore.id: target_labels.ignore.name})}
     return {"labels": len(samples), "pixels": {names[i]: int(counts[i]) for i in np.flatnonzero(counts)}}
 
@@ -131,4 +131,3 @@ def _rename_shares(path: Path, renamed: Mapping[str, str | None]) -> None:
         if to is not None and isinstance(share, int | float):
             out[to] = out.get(to, 0.0) + float(share)
     atomic_write_bytes(path, (json.dumps({**meta, "class_shares": out}, separators=(",", ":")) + "\n").encode())
-

@@ -254,9 +254,11 @@ def toml_hint(text: str, message: str) -> str:
     code = _STRING.sub('""', lines[n - 1]).split("#", 1)[0]
     key = code.split("=", 1)[0].strip() if "=" in code else ""
     header = next((m.group(1) for line in reversed(lines[:n - 1]) if (m := _HEADER.match(line))), "")
-    if message.startswith("Cannot overwrite a value") and (key or _HEADER.match(code)):
-        dotted = ".".join(part for part in (header, key) if part) if key else _HEADER.match(code).group(1)
-        return f": {dotted} is set twice (once is allowed)"
+    if message.startswith("Cannot overwrite a value"):
+        opened = _HEADER.match(code)  # a [table] header declared twice
+        dotted = ".".join(part for part in (header, key) if part) if key else opened.group(1) if opened else ""
+        if dotted:
+            return f": {dotted} is set twice (once is allowed)"
     if code.count("{") <= code.count("}"):
         return ""
     table = ".".join(part for part in (header, key) if part) or "section.sub"

@@ -39,7 +39,7 @@ import os
 import re
 import stat
 import unicodedata
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any, BinaryIO, TypeVar
 
@@ -426,19 +426,26 @@ def toml_nesting(text: str, *, limit: int = MAX_DEPTH) -> int:
     return deepest
 
 
-def non_finite(doc: Any, prefix: str = "") -> tuple[str, float] | None:
-    """The first (dotted key, value) of a parsed document holding NaN or an infinity, None when every number is
-    finite; iterative, keys in document order. A settings file means numbers: ``nan`` and ``inf`` in one are a
-    mistake or an attack (NaN compares false with every bound, so a range check alone lets it through)."""
+def _nodes(doc: Any, prefix: str = "") -> Iterator[tuple[str, Any]]:
+    """Every (dotted key, value) of a parsed document, the document itself first (key ``prefix``); iterative (a
+    deep one cannot exhaust the stack), keys in document order."""
     stack: list[tuple[str, Any]] = [(prefix, doc)]
     while stack:
         key, node = stack.pop()
-        if isinstance(node, float) and not math.isfinite(node):
-            return key or "(top level)", node
+        yield key, node
         if isinstance(node, dict):
             stack.extend(reversed([(f"{key}.{k}" if key else str(k), v) for k, v in node.items()]))
         elif isinstance(node, list | tuple):
             stack.extend(reversed([(f"{key}[{i}]", v) for i, v in enumerate(node)]))
+
+
+def non_finite(doc: Any, prefix: str = "") -> tuple[str, float] | None:
+    """The first (dotted key, value) of a parsed document holding NaN or an infinity, None when every number is
+    finite; iterative, keys in document order. A settings file means numbers: ``nan`` and ``inf`` in one are a
+    mistake or an attack (NaN compares false with every bound, so a range check alone lets it through)."""
+    for key, node in _nodes(doc, prefix):
+        if isinstance(node, float) and not math.isfinite(node):
+            return key or "(top level)", node
     return None
 
 
@@ -447,18 +454,11 @@ def hidden_character(doc: Any, prefix: str = "") -> tuple[str, str] | None:
     character (Unicode categories Cc and Cf: a right-to-left override, a zero-width joiner; tab and line breaks
     excepted), None when there is none. Such a character makes a text display other than it reads (``DELIAF``
     shown as ``FAILED``), so a settings file whose texts reach a report may hold none."""
-    stack: list[tuple[str, Any]] = [(prefix, doc)]
-    while stack:
-        key, node = stack.pop()
+    for key, node in _nodes(doc, prefix):
         texts = [node] if isinstance(node, str) else list(node) if isinstance(node, dict) else []
         for text in texts:
             bad = next((ch for ch in str(text) if ch not in "\t\n\r"
                         and unicodedata.category(ch) in ("Cc", "Cf")), None)
             if bad is not None:
                 return key or "(top level)", f"U+{ord(bad):04X}"
-        if isinstance(node, dict):
-            stack.extend(reversed([(f"{key}.{k}" if key else str(k), v) for k, v in node.items()]))
-        elif isinstance(node, list | tuple):
-            stack.extend(reversed([(f"{key}[{i}]", v) for i, v in enumerate(node)]))
     return None
-
